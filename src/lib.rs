@@ -1,0 +1,6 @@
+//! semsplat: lift 2D semantic labels into 3D Gaussian Splatting scenes on a Vulkan compute
+//! backend. See README.md for the architecture.
+
+pub mod gpu;
+pub mod scene;
+pub mod util;

@@ -1,0 +1,51 @@
+//! The `semsplat` command line. Each subcommand lives in `src/cli/<name>.rs`.
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+mod cli;
+
+#[derive(Parser)]
+#[command(
+    name = "semsplat",
+    version,
+    about = "Lift 2D semantic labels into 3D Gaussian Splatting scenes (Vulkan compute)",
+    long_about = "Lift 2D semantic labels into 3D Gaussian Splatting scenes on a Vulkan compute \
+                  backend. Runs on any Vulkan 1.2 device; without a GPU, install lavapipe with \
+                  tools/setup.sh. Select a device with SEMSPLAT_DEVICE=<index or name substring>."
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Show the Vulkan device semsplat would use and what it supports.
+    Info(cli::info::InfoArgs),
+    /// Measure GPU kernels (throughput from GPU timestamps) against CPU baselines.
+    #[command(subcommand)]
+    Bench(cli::bench::BenchCommand),
+    /// Summarize a PLY scene, a camera model or a label folder, and report problems.
+    Inspect(cli::inspect::InspectArgs),
+    /// Generate a procedural benchmark room with exact ground truth and label noise.
+    Synth(cli::synth::SynthArgs),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Info(args) => cli::info::run(args),
+        Command::Bench(cmd) => cli::bench::run(cmd),
+        Command::Inspect(args) => cli::inspect::run(args),
+        Command::Synth(args) => cli::synth::run(args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,1 @@
+//! Loading cameras from any supported format (detected from the path).

@@ -1,0 +1,1 @@
+//! Camera JSON: the INRIA cameras.json and semsplat's own camera JSON.

@@ -1,0 +1,1 @@
+//! COLMAP sparse models (cameras/images, .bin and .txt).

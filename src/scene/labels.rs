@@ -1,0 +1,1 @@
+//! Label maps (8/16-bit gray PNG) and palette-colored PNG output.

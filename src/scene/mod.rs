@@ -1,0 +1,15 @@
+//! Scene data: Gaussians, cameras, label maps, class tables, and synthetic benchmark rooms.
+
+pub mod camera;
+pub mod cameras;
+pub mod cameras_json;
+pub mod classes;
+pub mod colmap;
+pub mod gaussians;
+pub mod labels;
+pub mod ply;
+pub mod synth;
+
+pub use camera::{Camera, Split};
+pub use classes::{ClassInfo, ClassTable};
+pub use gaussians::{Gaussians, SemanticLogits};

@@ -1,0 +1,1 @@
+//! Procedural benchmark rooms with exact ground truth and label-noise models.
