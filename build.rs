@@ -48,7 +48,10 @@ fn compile(
     optimize: bool,
 ) -> Vec<u32> {
     let mut opts = shaderc::CompileOptions::new().unwrap();
-    opts.set_target_env(shaderc::TargetEnv::Vulkan, shaderc::EnvVersion::Vulkan1_2 as u32);
+    opts.set_target_env(
+        shaderc::TargetEnv::Vulkan,
+        shaderc::EnvVersion::Vulkan1_2 as u32,
+    );
     // rspirv-reflect fails on SPIR-V 1.6 (../shared/TOOLCHAIN.md): stay on 1.5.
     opts.set_target_spirv(shaderc::SpirvVersion::V1_5);
     opts.set_source_language(shaderc::SourceLanguage::GLSL);
@@ -62,7 +65,9 @@ fn compile(
     opts.set_include_callback(move |name, kind, requester, _depth| {
         let local = Path::new(requester).parent().map(|d| d.join(name));
         let candidates: Vec<PathBuf> = match kind {
-            shaderc::IncludeType::Relative => local.into_iter().chain([common.join(name)]).collect(),
+            shaderc::IncludeType::Relative => {
+                local.into_iter().chain([common.join(name)]).collect()
+            }
             shaderc::IncludeType::Standard => vec![common.join(name)],
         };
         for c in candidates {
@@ -73,10 +78,18 @@ fn compile(
                 });
             }
         }
-        Err(format!("include \"{name}\" not found (looked beside {requester} and in glsl/common/)"))
+        Err(format!(
+            "include \"{name}\" not found (looked beside {requester} and in glsl/common/)"
+        ))
     });
     let file = path.to_string_lossy();
-    match compiler.compile_into_spirv(source, shaderc::ShaderKind::Compute, &file, "main", Some(&opts)) {
+    match compiler.compile_into_spirv(
+        source,
+        shaderc::ShaderKind::Compute,
+        &file,
+        "main",
+        Some(&opts),
+    ) {
         Ok(artifact) => artifact.as_binary().to_vec(),
         // shaderc's message already reads "file:line: error: ...".
         Err(e) => fail(format!("GLSL compile error:\n{e}")),
@@ -102,13 +115,15 @@ fn main() {
 
     let mut shaders = Vec::new();
     find_shaders(&glsl, &mut shaders);
-    let compiler = shaderc::Compiler::new().unwrap_or_else(|e| fail(format!("shaderc: cannot create compiler: {e}")));
+    let compiler = shaderc::Compiler::new()
+        .unwrap_or_else(|e| fail(format!("shaderc: cannot create compiler: {e}")));
 
     let mut kernels = Vec::new();
     for path in &shaders {
         let rel = path.strip_prefix(&glsl).unwrap().with_extension("");
         let name = rel.to_string_lossy().replace('\\', "/");
-        let source = fs::read_to_string(path).unwrap_or_else(|e| fail(format!("{}: {e}", path.display())));
+        let source =
+            fs::read_to_string(path).unwrap_or_else(|e| fail(format!("{}: {e}", path.display())));
         let optimized = compile(&compiler, path, &source, &common, true);
         // The optimizer may drop debug names: take names from an unoptimized build, the
         // layout from the optimized one (unused bindings may vanish there).
@@ -116,21 +131,31 @@ fn main() {
 
         let refl = reflect(&name, &optimized);
         let names_refl = reflect(&name, &plain);
-        let sets = refl.get_descriptor_sets().unwrap_or_else(|e| fail(format!("{name}: {e:?}")));
-        let named = names_refl.get_descriptor_sets().unwrap_or_else(|e| fail(format!("{name}: {e:?}")));
+        let sets = refl
+            .get_descriptor_sets()
+            .unwrap_or_else(|e| fail(format!("{name}: {e:?}")));
+        let named = names_refl
+            .get_descriptor_sets()
+            .unwrap_or_else(|e| fail(format!("{name}: {e:?}")));
         let mut bindings = Vec::new();
         for (set, set_bindings) in &sets {
             if *set != 0 {
-                fail(format!("{name}: only descriptor set 0 is supported (found set {set})"));
+                fail(format!(
+                    "{name}: only descriptor set 0 is supported (found set {set})"
+                ));
             }
             for (binding, info) in set_bindings {
                 if info.binding_count != BindingCount::One {
-                    fail(format!("{name}: binding {binding} is an array; use one buffer per binding"));
+                    fail(format!(
+                        "{name}: binding {binding} is an array; use one buffer per binding"
+                    ));
                 }
                 let uniform = match info.ty {
                     DescriptorType::STORAGE_BUFFER => false,
                     DescriptorType::UNIFORM_BUFFER => true,
-                    other => fail(format!("{name}: binding {binding} has unsupported type {other:?}")),
+                    other => fail(format!(
+                        "{name}: binding {binding} has unsupported type {other:?}"
+                    )),
                 };
                 let bname = named
                     .get(set)
@@ -147,15 +172,25 @@ fn main() {
             .map(|p| p.offset + p.size)
             .unwrap_or(0);
         if push_constant_size > 128 {
-            fail(format!("{name}: push constants are {push_constant_size} bytes; 128 is the portable limit"));
+            fail(format!(
+                "{name}: push constants are {push_constant_size} bytes; 128 is the portable limit"
+            ));
         }
-        let workgroup_size = refl
-            .get_compute_group_size()
-            .unwrap_or_else(|| fail(format!("{name}: no fixed local_size (specialized sizes are not supported)")));
+        let workgroup_size = refl.get_compute_group_size().unwrap_or_else(|| {
+            fail(format!(
+                "{name}: no fixed local_size (specialized sizes are not supported)"
+            ))
+        });
 
         let spv_file = out_dir.join(format!("{}.spv", name.replace('/', "__")));
         fs::write(&spv_file, bytemuck_bytes(&optimized)).unwrap();
-        kernels.push(Kernel { name, spv_file, bindings, push_constant_size, workgroup_size });
+        kernels.push(Kernel {
+            name,
+            spv_file,
+            bindings,
+            push_constant_size,
+            workgroup_size,
+        });
     }
 
     let mut src = String::new();

@@ -1,6 +1,7 @@
 //! semsplat: lift 2D semantic labels into 3D Gaussian Splatting scenes on a Vulkan compute
 //! backend. See README.md for the architecture.
 
+pub mod bench;
 pub mod gpu;
 pub mod scene;
 pub mod util;

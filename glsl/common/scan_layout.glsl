@@ -1,0 +1,15 @@
+// Shared between the prefix-scan kernels and src/gpu/scan.rs: block size and the layout of
+// the scan's state buffer (element counts per level, then indirect dispatch arguments).
+#ifndef SCAN_LAYOUT_GLSL
+#define SCAN_LAYOUT_GLSL
+
+#define SCAN_WG_SIZE 256
+#define SCAN_ITEMS 8
+#define SCAN_BLOCK (SCAN_WG_SIZE * SCAN_ITEMS) // 2048 elements per workgroup
+#define SCAN_MAX_LEVELS 4
+
+// state[level]: element count at that level (level 0: the input).
+// state[SCAN_ARGS_OFFSET + 3 * level ..]: (workgroups, 1, 1) for that level.
+#define SCAN_ARGS_OFFSET 4
+
+#endif

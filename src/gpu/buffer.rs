@@ -1,0 +1,179 @@
+//! Buffers through gpu-allocator: device-local storage buffers, and staging buffers for
+//! uploads and downloads.
+
+use ash::vk;
+use bytemuck::Pod;
+use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
+use gpu_allocator::MemoryLocation;
+
+use super::context::Gpu;
+use super::error::{GpuError, GpuResult, VkContext};
+use super::recorder::Recorder;
+
+/// A GPU buffer. Device-local buffers can be bound to kernels, used as indirect dispatch
+/// arguments, and copied to and from.
+pub struct Buffer {
+    pub(crate) gpu: Gpu,
+    pub(crate) raw: vk::Buffer,
+    allocation: Option<Allocation>,
+    size: u64,
+    name: String,
+}
+
+impl Buffer {
+    /// Size in bytes.
+    pub fn size(&self) -> u64 {
+        self.size
+    }
+
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn mapped(&mut self) -> &mut [u8] {
+        let size = self.size as usize;
+        self.allocation
+            .as_mut()
+            .and_then(|a| a.mapped_slice_mut())
+            .map(|s| &mut s[..size])
+            .expect("staging buffers are host-mapped")
+    }
+}
+
+impl Drop for Buffer {
+    fn drop(&mut self) {
+        if let Some(a) = self.allocation.take() {
+            if let Some(alloc) = self.gpu.inner.allocator.lock().unwrap().as_mut() {
+                let _ = alloc.free(a);
+            }
+        }
+        // SAFETY: recorders wait for their submission before returning, so no command
+        // using this buffer is pending.
+        unsafe { self.gpu.device().destroy_buffer(self.raw, None) };
+    }
+}
+
+impl Gpu {
+    fn create_buffer(&self, name: &str, size: u64, location: MemoryLocation) -> GpuResult<Buffer> {
+        // Vulkan forbids empty buffers; a 4-byte one keeps n = 0 cases uniform.
+        let size = size.max(4);
+        let usage = match location {
+            MemoryLocation::GpuOnly => {
+                vk::BufferUsageFlags::STORAGE_BUFFER
+                    | vk::BufferUsageFlags::TRANSFER_SRC
+                    | vk::BufferUsageFlags::TRANSFER_DST
+                    | vk::BufferUsageFlags::INDIRECT_BUFFER
+            }
+            _ => vk::BufferUsageFlags::TRANSFER_SRC | vk::BufferUsageFlags::TRANSFER_DST,
+        };
+        let info = vk::BufferCreateInfo::default()
+            .size(size)
+            .usage(usage)
+            .sharing_mode(vk::SharingMode::EXCLUSIVE);
+        let device = self.device();
+        // SAFETY: valid create info; the buffer is destroyed on every error path below.
+        let raw = unsafe { device.create_buffer(&info, None) }.vk("vkCreateBuffer")?;
+        let requirements = unsafe { device.get_buffer_memory_requirements(raw) };
+        let allocation = self
+            .inner
+            .allocator
+            .lock()
+            .unwrap()
+            .as_mut()
+            .expect("allocator lives as long as the device")
+            .allocate(&AllocationCreateDesc {
+                name,
+                requirements,
+                location,
+                linear: true,
+                allocation_scheme: AllocationScheme::GpuAllocatorManaged,
+            });
+        let allocation = match allocation {
+            Ok(a) => a,
+            Err(source) => {
+                unsafe { device.destroy_buffer(raw, None) };
+                return Err(GpuError::Allocation {
+                    name: name.to_string(),
+                    size,
+                    source,
+                });
+            }
+        };
+        if let Err(e) =
+            unsafe { device.bind_buffer_memory(raw, allocation.memory(), allocation.offset()) }
+        {
+            unsafe { device.destroy_buffer(raw, None) };
+            if let Some(alloc) = self.inner.allocator.lock().unwrap().as_mut() {
+                let _ = alloc.free(allocation);
+            }
+            return Err(e).vk("vkBindBufferMemory");
+        }
+        Ok(Buffer {
+            gpu: self.clone(),
+            raw,
+            allocation: Some(allocation),
+            size,
+            name: name.to_string(),
+        })
+    }
+
+    /// A device-local buffer of `size` bytes (contents undefined).
+    pub fn buffer(&self, name: &str, size: u64) -> GpuResult<Buffer> {
+        self.create_buffer(name, size, MemoryLocation::GpuOnly)
+    }
+
+    /// A device-local buffer holding `data`.
+    pub fn buffer_from<T: Pod>(&self, name: &str, data: &[T]) -> GpuResult<Buffer> {
+        let buf = self.buffer(name, std::mem::size_of_val(data) as u64)?;
+        self.upload(&buf, 0, data)?;
+        Ok(buf)
+    }
+
+    /// Copies `data` into `dst` at byte `offset` through a staging buffer, and waits.
+    pub fn upload<T: Pod>(&self, dst: &Buffer, offset: u64, data: &[T]) -> GpuResult<()> {
+        let bytes: &[u8] = bytemuck::cast_slice(data);
+        if bytes.is_empty() {
+            return Ok(());
+        }
+        assert!(
+            offset + bytes.len() as u64 <= dst.size,
+            "upload past the end of {}",
+            dst.name
+        );
+        let mut staging = self.create_buffer(
+            "staging-upload",
+            bytes.len() as u64,
+            MemoryLocation::CpuToGpu,
+        )?;
+        staging.mapped()[..bytes.len()].copy_from_slice(bytes);
+        let mut rec = Recorder::new(self)?;
+        rec.copy(&staging, 0, dst, offset, bytes.len() as u64);
+        rec.submit_and_wait()?;
+        Ok(())
+    }
+
+    /// Reads `count` elements of type T from `src` starting at byte `offset`, and waits.
+    pub fn download<T: Pod>(&self, src: &Buffer, offset: u64, count: usize) -> GpuResult<Vec<T>> {
+        let len = (count * std::mem::size_of::<T>()) as u64;
+        if len == 0 {
+            return Ok(Vec::new());
+        }
+        assert!(
+            offset + len <= src.size,
+            "download past the end of {}",
+            src.name
+        );
+        let mut staging = self.create_buffer("staging-download", len, MemoryLocation::GpuToCpu)?;
+        let mut rec = Recorder::new(self)?;
+        rec.copy(src, offset, &staging, 0, len);
+        rec.host_barrier();
+        rec.submit_and_wait()?;
+        let bytes = &staging.mapped()[..len as usize];
+        Ok(bytemuck::pod_collect_to_vec(bytes))
+    }
+
+    /// Reads the whole buffer as elements of type T.
+    pub fn read<T: Pod>(&self, src: &Buffer) -> GpuResult<Vec<T>> {
+        self.download(src, 0, src.size as usize / std::mem::size_of::<T>())
+    }
+}

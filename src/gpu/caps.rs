@@ -1,0 +1,235 @@
+//! What a physical device is and supports, and which of our required features it lacks.
+
+use std::ffi::CStr;
+
+use ash::vk;
+use serde::Serialize;
+
+/// One memory heap.
+#[derive(Clone, Debug, Serialize)]
+pub struct Heap {
+    pub size_bytes: u64,
+    pub device_local: bool,
+}
+
+/// Properties and features of a physical device that semsplat cares about.
+#[derive(Clone, Debug, Serialize)]
+pub struct DeviceCaps {
+    pub name: String,
+    #[serde(serialize_with = "ser_type")]
+    pub device_type: vk::PhysicalDeviceType,
+    pub vendor_id: u32,
+    pub driver_name: String,
+    pub driver_info: String,
+    /// "major.minor.patch".
+    pub vulkan_version: String,
+    #[serde(skip)]
+    pub api_version: u32,
+    pub subgroup_size: u32,
+    pub min_subgroup_size: u32,
+    pub max_subgroup_size: u32,
+    pub float_atomic_add: bool,
+    #[serde(skip)]
+    pub has_atomic_float_ext: bool,
+    pub int64: bool,
+    pub int64_atomics: bool,
+    #[serde(skip)]
+    pub storage_8bit: bool,
+    pub timestamps: bool,
+    pub timestamp_period_ns: f64,
+    #[serde(skip)]
+    pub timestamp_valid_bits: u32,
+    pub max_storage_buffer_range: u64,
+    pub max_workgroup_count: [u32; 3],
+    pub max_shared_memory: u32,
+    pub heaps: Vec<Heap>,
+    #[serde(skip)]
+    pub compute_queue_family: Option<u32>,
+}
+
+fn ser_type<S: serde::Serializer>(t: &vk::PhysicalDeviceType, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_str(device_type_name(*t))
+}
+
+pub fn device_type_name(t: vk::PhysicalDeviceType) -> &'static str {
+    match t {
+        vk::PhysicalDeviceType::DISCRETE_GPU => "discrete GPU",
+        vk::PhysicalDeviceType::INTEGRATED_GPU => "integrated GPU",
+        vk::PhysicalDeviceType::VIRTUAL_GPU => "virtual GPU",
+        vk::PhysicalDeviceType::CPU => "CPU",
+        _ => "other",
+    }
+}
+
+fn cstr(bytes: &[std::ffi::c_char]) -> String {
+    // SAFETY: Vulkan fixed-size strings are NUL-terminated within the array.
+    unsafe { CStr::from_ptr(bytes.as_ptr()) }
+        .to_string_lossy()
+        .into_owned()
+}
+
+/// Subgroup operations every kernel may use.
+pub const REQUIRED_SUBGROUP_OPS: vk::SubgroupFeatureFlags = vk::SubgroupFeatureFlags::from_raw(
+    vk::SubgroupFeatureFlags::BASIC.as_raw()
+        | vk::SubgroupFeatureFlags::VOTE.as_raw()
+        | vk::SubgroupFeatureFlags::ARITHMETIC.as_raw()
+        | vk::SubgroupFeatureFlags::BALLOT.as_raw()
+        | vk::SubgroupFeatureFlags::SHUFFLE.as_raw(),
+);
+
+/// Reads a device's capabilities and lists the required features it lacks.
+pub fn probe_device(instance: &ash::Instance, pd: vk::PhysicalDevice) -> (DeviceCaps, Vec<String>) {
+    let mut missing = Vec::new();
+    // SAFETY (whole function): plain queries on a valid physical device.
+    let base = unsafe { instance.get_physical_device_properties(pd) };
+    let api = base.api_version;
+    let has_13 = vk::api_version_major(api) > 1 || vk::api_version_minor(api) >= 3;
+    let exts = unsafe { instance.enumerate_device_extension_properties(pd) }.unwrap_or_default();
+    let has_ext = |name: &CStr| {
+        exts.iter()
+            .any(|e| e.extension_name_as_c_str().is_ok_and(|n| n == name))
+    };
+    let has_atomic_float_ext = has_ext(ash::ext::shader_atomic_float::NAME);
+
+    let mut subgroup = vk::PhysicalDeviceSubgroupProperties::default();
+    let mut driver = vk::PhysicalDeviceDriverProperties::default();
+    let mut size_control = vk::PhysicalDeviceSubgroupSizeControlProperties::default();
+    {
+        let mut props = vk::PhysicalDeviceProperties2::default()
+            .push_next(&mut subgroup)
+            .push_next(&mut driver);
+        if has_13 {
+            props = props.push_next(&mut size_control);
+        }
+        unsafe { instance.get_physical_device_properties2(pd, &mut props) };
+    }
+
+    let mut atomic_float = vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT::default();
+    let mut v12 = vk::PhysicalDeviceVulkan12Features::default();
+    let mut v13 = vk::PhysicalDeviceVulkan13Features::default();
+    let base_features = {
+        let mut features = vk::PhysicalDeviceFeatures2::default().push_next(&mut v12);
+        if has_13 {
+            features = features.push_next(&mut v13);
+        }
+        if has_atomic_float_ext {
+            features = features.push_next(&mut atomic_float);
+        }
+        unsafe { instance.get_physical_device_features2(pd, &mut features) };
+        features.features
+    };
+
+    let families = unsafe { instance.get_physical_device_queue_family_properties(pd) };
+    // Prefer a compute family without graphics (async compute), else any with compute.
+    let compute_family = families
+        .iter()
+        .position(|f| {
+            f.queue_flags.contains(vk::QueueFlags::COMPUTE)
+                && !f.queue_flags.contains(vk::QueueFlags::GRAPHICS)
+        })
+        .or_else(|| {
+            families
+                .iter()
+                .position(|f| f.queue_flags.contains(vk::QueueFlags::COMPUTE))
+        })
+        .map(|i| i as u32);
+    let timestamp_valid_bits = compute_family
+        .map(|f| families[f as usize].timestamp_valid_bits)
+        .unwrap_or(0);
+
+    let mem = unsafe { instance.get_physical_device_memory_properties(pd) };
+    let heaps = mem.memory_heaps[..mem.memory_heap_count as usize]
+        .iter()
+        .map(|h| Heap {
+            size_bytes: h.size,
+            device_local: h.flags.contains(vk::MemoryHeapFlags::DEVICE_LOCAL),
+        })
+        .collect();
+
+    if !has_13 {
+        missing.push(format!(
+            "Vulkan 1.3 (device reports {}.{})",
+            vk::api_version_major(api),
+            vk::api_version_minor(api)
+        ));
+    }
+    if compute_family.is_none() {
+        missing.push("a compute queue".into());
+    }
+    if !has_ext(ash::khr::push_descriptor::NAME) {
+        missing.push("VK_KHR_push_descriptor".into());
+    }
+    if !subgroup
+        .supported_stages
+        .contains(vk::ShaderStageFlags::COMPUTE)
+    {
+        missing.push("subgroup operations in compute shaders".into());
+    } else if !subgroup
+        .supported_operations
+        .contains(REQUIRED_SUBGROUP_OPS)
+    {
+        missing.push("subgroup basic/vote/arithmetic/ballot/shuffle operations".into());
+    }
+    // Our kernels lay out per-subgroup scratch for subgroups of 4..=128 lanes.
+    if !(4..=128).contains(&subgroup.subgroup_size) {
+        missing.push(format!(
+            "a subgroup size within 4..=128 (device: {})",
+            subgroup.subgroup_size
+        ));
+    }
+    if has_13 && (v13.subgroup_size_control == 0 || v13.compute_full_subgroups == 0) {
+        missing.push("subgroupSizeControl with computeFullSubgroups".into());
+    }
+
+    let (min_sg, max_sg) = if has_13 {
+        (
+            size_control.min_subgroup_size,
+            size_control.max_subgroup_size,
+        )
+    } else {
+        (subgroup.subgroup_size, subgroup.subgroup_size)
+    };
+    let caps = DeviceCaps {
+        name: cstr(&base.device_name),
+        device_type: base.device_type,
+        vendor_id: base.vendor_id,
+        driver_name: cstr(&driver.driver_name),
+        driver_info: cstr(&driver.driver_info),
+        vulkan_version: format!(
+            "{}.{}.{}",
+            vk::api_version_major(api),
+            vk::api_version_minor(api),
+            vk::api_version_patch(api)
+        ),
+        api_version: api,
+        subgroup_size: subgroup.subgroup_size,
+        min_subgroup_size: min_sg,
+        max_subgroup_size: max_sg,
+        float_atomic_add: atomic_float.shader_buffer_float32_atomic_add != 0
+            && atomic_float.shader_buffer_float32_atomics != 0,
+        has_atomic_float_ext,
+        int64: base_features.shader_int64 != 0,
+        int64_atomics: base_features.shader_int64 != 0 && v12.shader_buffer_int64_atomics != 0,
+        storage_8bit: v12.storage_buffer8_bit_access != 0 && v12.shader_int8 != 0,
+        timestamps: base.limits.timestamp_compute_and_graphics != 0 && timestamp_valid_bits > 0,
+        timestamp_period_ns: base.limits.timestamp_period as f64,
+        timestamp_valid_bits,
+        max_storage_buffer_range: base.limits.max_storage_buffer_range as u64,
+        max_workgroup_count: base.limits.max_compute_work_group_count,
+        max_shared_memory: base.limits.max_compute_shared_memory_size,
+        heaps,
+        compute_queue_family: compute_family,
+    };
+    (caps, missing)
+}
+
+impl DeviceCaps {
+    /// Total size of device-local heaps.
+    pub fn device_local_bytes(&self) -> u64 {
+        self.heaps
+            .iter()
+            .filter(|h| h.device_local)
+            .map(|h| h.size_bytes)
+            .sum()
+    }
+}

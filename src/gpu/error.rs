@@ -1,0 +1,49 @@
+//! Errors from the Vulkan layer. Environment problems (no loader, no device, missing
+//! features) carry a message that says what is missing and how to get lavapipe.
+
+use ash::vk;
+use thiserror::Error;
+
+pub const SETUP_HINT: &str =
+    "install a Vulkan driver; on a machine without a GPU, `sudo bash tools/setup.sh` installs lavapipe (Mesa's CPU Vulkan driver)";
+
+#[derive(Debug, Error)]
+pub enum GpuError {
+    #[error("cannot load the Vulkan loader (libvulkan.so.1): {0}; {SETUP_HINT}")]
+    NoLoader(String),
+    #[error("no Vulkan device found; {SETUP_HINT}")]
+    NoDevice,
+    #[error("no usable Vulkan device:\n{0}\n{SETUP_HINT}")]
+    NoSuitableDevice(String),
+    #[error("SEMSPLAT_DEVICE={wanted:?} matches no device; devices are:\n{available}")]
+    DeviceNotFound { wanted: String, available: String },
+    #[error("the Vulkan validation layer (VK_LAYER_KHRONOS_validation) was requested but is not installed; {SETUP_HINT}")]
+    NoValidationLayer,
+    #[error("{what} failed: {result}")]
+    Vulkan {
+        what: &'static str,
+        result: vk::Result,
+    },
+    #[error("GPU memory allocation of {size} bytes for {name} failed: {source}")]
+    Allocation {
+        name: String,
+        size: u64,
+        #[source]
+        source: gpu_allocator::AllocationError,
+    },
+    #[error("{0}")]
+    Limit(String),
+}
+
+pub type GpuResult<T> = Result<T, GpuError>;
+
+/// Attaches a description to a raw Vulkan result.
+pub(crate) trait VkContext<T> {
+    fn vk(self, what: &'static str) -> GpuResult<T>;
+}
+
+impl<T> VkContext<T> for Result<T, vk::Result> {
+    fn vk(self, what: &'static str) -> GpuResult<T> {
+        self.map_err(|result| GpuError::Vulkan { what, result })
+    }
+}

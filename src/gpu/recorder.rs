@@ -1,0 +1,391 @@
+//! Command recording: dispatches (direct and indirect) with push descriptors bound by the
+//! names the kernel table reflected, barriers, copies, and a timestamp after every
+//! dispatch so each kernel's time can be read back after the submission.
+
+use ash::vk;
+
+use super::buffer::Buffer;
+use super::context::Gpu;
+use super::error::{GpuResult, VkContext};
+use super::kernel_table::KernelId;
+use super::timings::{Mark, Timings};
+
+/// Timestamps one command buffer can hold; later dispatches go untimed.
+const MAX_QUERIES: u32 = 4096;
+
+/// Records one command buffer; `submit_and_wait` runs it and returns the timings.
+pub struct Recorder {
+    gpu: Gpu,
+    pool: vk::CommandPool,
+    cmd: vk::CommandBuffer,
+    queries: Option<vk::QueryPool>,
+    /// Label of each timestamp after the first (kernel name or None for marks).
+    stamps: Vec<Option<&'static str>>,
+}
+
+impl Recorder {
+    /// Starts recording; timestamps are on when the device supports them.
+    pub fn new(gpu: &Gpu) -> GpuResult<Recorder> {
+        let device = gpu.device();
+        // SAFETY: objects are created from a valid device and destroyed in Drop.
+        unsafe {
+            let pool = device
+                .create_command_pool(
+                    &vk::CommandPoolCreateInfo::default()
+                        .queue_family_index(gpu.inner.queue_family)
+                        .flags(vk::CommandPoolCreateFlags::TRANSIENT),
+                    None,
+                )
+                .vk("vkCreateCommandPool")?;
+            let mut rec = Recorder {
+                gpu: gpu.clone(),
+                pool,
+                cmd: vk::CommandBuffer::null(),
+                queries: None,
+                stamps: vec![],
+            };
+            rec.cmd = device
+                .allocate_command_buffers(
+                    &vk::CommandBufferAllocateInfo::default()
+                        .command_pool(pool)
+                        .level(vk::CommandBufferLevel::PRIMARY)
+                        .command_buffer_count(1),
+                )
+                .vk("vkAllocateCommandBuffers")?[0];
+            device
+                .begin_command_buffer(
+                    rec.cmd,
+                    &vk::CommandBufferBeginInfo::default()
+                        .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
+                )
+                .vk("vkBeginCommandBuffer")?;
+            if gpu.caps().timestamps {
+                let qp = device
+                    .create_query_pool(
+                        &vk::QueryPoolCreateInfo::default()
+                            .query_type(vk::QueryType::TIMESTAMP)
+                            .query_count(MAX_QUERIES),
+                        None,
+                    )
+                    .vk("vkCreateQueryPool")?;
+                rec.queries = Some(qp);
+                device.cmd_reset_query_pool(rec.cmd, qp, 0, MAX_QUERIES);
+                device.cmd_write_timestamp(rec.cmd, vk::PipelineStageFlags::TOP_OF_PIPE, qp, 0);
+            }
+            Ok(rec)
+        }
+    }
+
+    pub fn gpu(&self) -> &Gpu {
+        &self.gpu
+    }
+
+    fn stamp(&mut self, label: Option<&'static str>) -> Option<Mark> {
+        let qp = self.queries?;
+        let index = self.stamps.len() as u32 + 1;
+        if index >= MAX_QUERIES {
+            return None;
+        }
+        // SAFETY: recording into our command buffer; the query index is in range.
+        unsafe {
+            self.gpu.device().cmd_write_timestamp(
+                self.cmd,
+                vk::PipelineStageFlags::BOTTOM_OF_PIPE,
+                qp,
+                index,
+            );
+        }
+        self.stamps.push(label);
+        Some(Mark(index))
+    }
+
+    /// A timestamp to measure spans with [`Timings::between`]; None without timestamps.
+    pub fn mark(&mut self) -> Option<Mark> {
+        self.stamp(None)
+    }
+
+    fn bind(
+        &mut self,
+        kernel: KernelId,
+        bindings: &[(&str, &Buffer)],
+        push: &[u8],
+    ) -> GpuResult<()> {
+        let k = self.gpu.kernel(kernel)?;
+        let info = k.info;
+        assert_eq!(
+            push.len(),
+            info.push_constant_size as usize,
+            "{}: push constants are {} bytes, kernel expects {}",
+            info.name,
+            push.len(),
+            info.push_constant_size
+        );
+        assert_eq!(
+            bindings.len(),
+            info.bindings.len(),
+            "{}: {} buffers given, kernel binds {:?}",
+            info.name,
+            bindings.len(),
+            info.bindings.iter().map(|b| b.name).collect::<Vec<_>>()
+        );
+        let max_range = self.gpu.caps().max_storage_buffer_range;
+        let infos: Vec<[vk::DescriptorBufferInfo; 1]> = info
+            .bindings
+            .iter()
+            .map(|b| {
+                let buf = bindings
+                    .iter()
+                    .find(|(n, _)| *n == b.name)
+                    .map(|(_, buf)| *buf)
+                    .unwrap_or_else(|| {
+                        panic!(
+                            "{}: no buffer given for binding '{}' (given: {:?})",
+                            info.name,
+                            b.name,
+                            bindings.iter().map(|(n, _)| *n).collect::<Vec<_>>()
+                        )
+                    });
+                assert!(
+                    buf.size() <= max_range,
+                    "{}: buffer '{}' is {} bytes, over the device's {}-byte binding limit",
+                    info.name,
+                    buf.name(),
+                    buf.size(),
+                    max_range
+                );
+                [vk::DescriptorBufferInfo::default()
+                    .buffer(buf.raw)
+                    .offset(0)
+                    .range(vk::WHOLE_SIZE)]
+            })
+            .collect();
+        let writes: Vec<_> = info
+            .bindings
+            .iter()
+            .zip(&infos)
+            .map(|(b, bi)| {
+                vk::WriteDescriptorSet::default()
+                    .dst_binding(b.binding)
+                    .descriptor_type(if b.uniform {
+                        vk::DescriptorType::UNIFORM_BUFFER
+                    } else {
+                        vk::DescriptorType::STORAGE_BUFFER
+                    })
+                    .buffer_info(bi)
+            })
+            .collect();
+        let device = self.gpu.device();
+        // SAFETY: recording into our command buffer with a pipeline that lives in the cache.
+        unsafe {
+            device.cmd_bind_pipeline(self.cmd, vk::PipelineBindPoint::COMPUTE, k.pipeline);
+            self.gpu.inner.push_descriptor.cmd_push_descriptor_set(
+                self.cmd,
+                vk::PipelineBindPoint::COMPUTE,
+                k.layout,
+                0,
+                &writes,
+            );
+            if !push.is_empty() {
+                device.cmd_push_constants(
+                    self.cmd,
+                    k.layout,
+                    vk::ShaderStageFlags::COMPUTE,
+                    0,
+                    push,
+                );
+            }
+        }
+        Ok(())
+    }
+
+    /// Dispatches `groups` workgroups of `kernel`, binding buffers by their GLSL names.
+    pub fn dispatch(
+        &mut self,
+        kernel: KernelId,
+        bindings: &[(&str, &Buffer)],
+        push: &[u8],
+        groups: [u32; 3],
+    ) -> GpuResult<()> {
+        if groups.contains(&0) {
+            return Ok(());
+        }
+        let limit = self.gpu.caps().max_workgroup_count;
+        assert!(
+            groups.iter().zip(limit).all(|(g, l)| *g <= l),
+            "{}: {groups:?} workgroups exceed the device limit {limit:?}",
+            kernel.info().name
+        );
+        self.bind(kernel, bindings, push)?;
+        // SAFETY: recording into our command buffer.
+        unsafe {
+            self.gpu
+                .device()
+                .cmd_dispatch(self.cmd, groups[0], groups[1], groups[2])
+        };
+        self.stamp(Some(kernel.info().name));
+        Ok(())
+    }
+
+    /// Dispatches with the workgroup count read from `args` at byte `offset`
+    /// (three u32: x, y, z), so counts computed on the GPU need no readback.
+    pub fn dispatch_indirect(
+        &mut self,
+        kernel: KernelId,
+        bindings: &[(&str, &Buffer)],
+        push: &[u8],
+        args: &Buffer,
+        offset: u64,
+    ) -> GpuResult<()> {
+        self.bind(kernel, bindings, push)?;
+        // SAFETY: recording into our command buffer; args has INDIRECT usage.
+        unsafe {
+            self.gpu
+                .device()
+                .cmd_dispatch_indirect(self.cmd, args.raw, offset)
+        };
+        self.stamp(Some(kernel.info().name));
+        Ok(())
+    }
+
+    /// Makes every earlier shader or transfer write visible to later shader, transfer and
+    /// indirect-argument reads.
+    pub fn barrier(&mut self) {
+        let mb = vk::MemoryBarrier::default()
+            .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)
+            .dst_access_mask(
+                vk::AccessFlags::SHADER_READ
+                    | vk::AccessFlags::SHADER_WRITE
+                    | vk::AccessFlags::INDIRECT_COMMAND_READ
+                    | vk::AccessFlags::TRANSFER_READ
+                    | vk::AccessFlags::TRANSFER_WRITE,
+            );
+        // SAFETY: recording into our command buffer.
+        unsafe {
+            self.gpu.device().cmd_pipeline_barrier(
+                self.cmd,
+                vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER,
+                vk::PipelineStageFlags::COMPUTE_SHADER
+                    | vk::PipelineStageFlags::DRAW_INDIRECT
+                    | vk::PipelineStageFlags::TRANSFER,
+                vk::DependencyFlags::empty(),
+                &[mb],
+                &[],
+                &[],
+            );
+        }
+    }
+
+    /// Makes transfer writes visible to the host after the fence.
+    pub(crate) fn host_barrier(&mut self) {
+        let mb = vk::MemoryBarrier::default()
+            .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+            .dst_access_mask(vk::AccessFlags::HOST_READ);
+        // SAFETY: recording into our command buffer.
+        unsafe {
+            self.gpu.device().cmd_pipeline_barrier(
+                self.cmd,
+                vk::PipelineStageFlags::TRANSFER,
+                vk::PipelineStageFlags::HOST,
+                vk::DependencyFlags::empty(),
+                &[mb],
+                &[],
+                &[],
+            );
+        }
+    }
+
+    /// Copies `size` bytes between buffers.
+    pub fn copy(
+        &mut self,
+        src: &Buffer,
+        src_offset: u64,
+        dst: &Buffer,
+        dst_offset: u64,
+        size: u64,
+    ) {
+        if size == 0 {
+            return;
+        }
+        let region = vk::BufferCopy {
+            src_offset,
+            dst_offset,
+            size,
+        };
+        // SAFETY: recording into our command buffer; callers keep ranges in bounds.
+        unsafe {
+            self.gpu
+                .device()
+                .cmd_copy_buffer(self.cmd, src.raw, dst.raw, &[region])
+        };
+    }
+
+    /// Fills `size` bytes (a multiple of 4) at `offset` with a repeated u32.
+    pub fn fill(&mut self, dst: &Buffer, offset: u64, size: u64, value: u32) {
+        if size == 0 {
+            return;
+        }
+        // SAFETY: recording into our command buffer.
+        unsafe {
+            self.gpu
+                .device()
+                .cmd_fill_buffer(self.cmd, dst.raw, offset, size, value)
+        };
+    }
+
+    /// Submits, waits for completion, and returns the per-kernel timings.
+    pub fn submit_and_wait(self) -> GpuResult<Timings> {
+        let device = self.gpu.device();
+        // SAFETY: the command buffer is fully recorded; we wait on the fence before reading
+        // queries or letting Drop free anything.
+        unsafe {
+            device
+                .end_command_buffer(self.cmd)
+                .vk("vkEndCommandBuffer")?;
+            let fence = device
+                .create_fence(&vk::FenceCreateInfo::default(), None)
+                .vk("vkCreateFence")?;
+            let cmds = [self.cmd];
+            let submit = vk::SubmitInfo::default().command_buffers(&cmds);
+            let submitted = {
+                let queue = self.gpu.inner.queue.lock().unwrap();
+                device.queue_submit(*queue, &[submit], fence)
+            };
+            let waited = submitted.and_then(|_| device.wait_for_fences(&[fence], true, u64::MAX));
+            device.destroy_fence(fence, None);
+            waited.vk("vkQueueSubmit/vkWaitForFences")?;
+
+            let mut raw = vec![0u64; self.stamps.len() + 1];
+            if let Some(qp) = self.queries {
+                device
+                    .get_query_pool_results(
+                        qp,
+                        0,
+                        &mut raw,
+                        vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT,
+                    )
+                    .vk("vkGetQueryPoolResults")?;
+            }
+            let bits = self.gpu.caps().timestamp_valid_bits;
+            let mask = if bits >= 64 {
+                u64::MAX
+            } else {
+                (1u64 << bits) - 1
+            };
+            let period = self.gpu.caps().timestamp_period_ns;
+            let ns: Vec<f64> = raw.iter().map(|t| (t & mask) as f64 * period).collect();
+            Ok(Timings::new(&ns, &self.stamps, self.queries.is_some()))
+        }
+    }
+}
+
+impl Drop for Recorder {
+    fn drop(&mut self) {
+        // SAFETY: submit_and_wait waited for the fence; an unsubmitted buffer is never pending.
+        unsafe {
+            if let Some(qp) = self.queries {
+                self.gpu.device().destroy_query_pool(qp, None);
+            }
+            self.gpu.device().destroy_command_pool(self.pool, None);
+        }
+    }
+}

@@ -1,0 +1,177 @@
+//! GPU exclusive prefix sum of u32 (reduce-then-scan; no workgroup waits on another, so it
+//! is correct on lavapipe). The element count is read from a GPU buffer.
+
+use bytemuck::{Pod, Zeroable};
+
+use super::buffer::Buffer;
+use super::context::Gpu;
+use super::count::GpuCount;
+use super::error::{GpuError, GpuResult};
+use super::kernel_table::ids;
+use super::recorder::Recorder;
+
+/// Elements per workgroup (glsl/common/scan_layout.glsl: SCAN_BLOCK).
+pub const SCAN_BLOCK: u64 = 2048;
+/// Levels the state buffer has room for (SCAN_MAX_LEVELS).
+const MAX_LEVELS: usize = 4;
+/// Word offset of the indirect arguments in the state buffer (SCAN_ARGS_OFFSET).
+const ARGS_OFFSET: u64 = 4;
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct SetupParams {
+    count_index: u32,
+    div: u32,
+    mul: u32,
+    levels: u32,
+    capacity: u32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct ReduceParams {
+    level: u32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct DownsweepParams {
+    level: u32,
+    has_offsets: u32,
+}
+
+/// A planned prefix scan for up to `capacity` elements, owning its scratch buffers.
+pub struct PrefixScan {
+    capacity: u64,
+    /// partials[l] holds the block sums of level l, i.e. the elements of level l + 1.
+    partials: Vec<Buffer>,
+    state: Buffer,
+}
+
+impl PrefixScan {
+    pub fn new(gpu: &Gpu, capacity: u64) -> GpuResult<PrefixScan> {
+        let caps = gpu.caps();
+        let max_groups = caps.max_workgroup_count[0] as u64;
+        let max_elems = (caps.max_storage_buffer_range / 4)
+            .min(max_groups * SCAN_BLOCK)
+            .min(u32::MAX as u64);
+        if capacity > max_elems {
+            return Err(GpuError::Limit(format!(
+                "prefix scan of {capacity} elements exceeds this device's limit of {max_elems}"
+            )));
+        }
+        let mut partials = Vec::new();
+        let mut n = capacity.max(1);
+        while n > SCAN_BLOCK {
+            n = n.div_ceil(SCAN_BLOCK);
+            partials.push(gpu.buffer("scan-partials", n * 4)?);
+        }
+        debug_assert!(partials.len() < MAX_LEVELS);
+        let state = gpu.buffer("scan-state", (ARGS_OFFSET + 3 * MAX_LEVELS as u64) * 4)?;
+        Ok(PrefixScan {
+            capacity,
+            partials,
+            state,
+        })
+    }
+
+    pub fn capacity(&self) -> u64 {
+        self.capacity
+    }
+
+    fn level_buffer<'a>(&'a self, input: &'a Buffer, level: usize) -> &'a Buffer {
+        if level == 0 {
+            input
+        } else {
+            &self.partials[level - 1]
+        }
+    }
+
+    /// Records `output[i] = input[0] + ... + input[i-1]` for the first `count` elements
+    /// (clamped to the capacity). `input` and `output` may be the same buffer.
+    pub fn record(
+        &self,
+        rec: &mut Recorder,
+        input: &Buffer,
+        output: &Buffer,
+        count: GpuCount,
+    ) -> GpuResult<()> {
+        let levels = self.partials.len() + 1;
+        let setup = SetupParams {
+            count_index: count.index,
+            div: count.div,
+            mul: count.mul,
+            levels: levels as u32,
+            capacity: self.capacity as u32,
+        };
+        rec.dispatch(
+            ids::SCAN_SETUP,
+            &[("count_src", count.buffer), ("state", &self.state)],
+            bytemuck::bytes_of(&setup),
+            [1, 1, 1],
+        )?;
+        rec.barrier();
+        let args_offset = |level: usize| (ARGS_OFFSET + 3 * level as u64) * 4;
+        for level in 0..levels - 1 {
+            let params = ReduceParams {
+                level: level as u32,
+            };
+            rec.dispatch_indirect(
+                ids::SCAN_REDUCE,
+                &[
+                    ("state", &self.state),
+                    ("src", self.level_buffer(input, level)),
+                    ("sums", &self.partials[level]),
+                ],
+                bytemuck::bytes_of(&params),
+                &self.state,
+                args_offset(level),
+            )?;
+            rec.barrier();
+        }
+        for level in (0..levels).rev() {
+            let top = level == levels - 1;
+            let dst = if level == 0 {
+                output
+            } else {
+                &self.partials[level - 1]
+            };
+            // The top level has no offsets; bind the state buffer as a stand-in.
+            let offsets = if top {
+                &self.state
+            } else {
+                &self.partials[level]
+            };
+            let params = DownsweepParams {
+                level: level as u32,
+                has_offsets: u32::from(!top),
+            };
+            rec.dispatch_indirect(
+                ids::SCAN_DOWNSWEEP,
+                &[
+                    ("state", &self.state),
+                    ("src", self.level_buffer(input, level)),
+                    ("dst", dst),
+                    ("offsets", offsets),
+                ],
+                bytemuck::bytes_of(&params),
+                &self.state,
+                args_offset(level),
+            )?;
+            rec.barrier();
+        }
+        Ok(())
+    }
+}
+
+/// Exclusive scan of `data` on the GPU (uploads, scans, downloads): for tests and tools.
+pub fn exclusive_scan(gpu: &Gpu, data: &[u32]) -> GpuResult<Vec<u32>> {
+    let scan = PrefixScan::new(gpu, data.len() as u64)?;
+    let buf = gpu.buffer_from("scan-data", data)?;
+    let count = gpu.buffer_from("scan-count", &[data.len() as u32])?;
+    let out = gpu.buffer("scan-out", data.len() as u64 * 4)?;
+    let mut rec = Recorder::new(gpu)?;
+    scan.record(&mut rec, &buf, &out, GpuCount::at(&count, 0))?;
+    rec.submit_and_wait()?;
+    gpu.download(&out, 0, data.len())
+}

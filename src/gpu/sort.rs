@@ -1,0 +1,184 @@
+//! GPU radix sort of u32 keys with u32 values: stable, sorting only the low `bits` bits,
+//! element count read from a GPU buffer. Each pass is count (per-block digit histogram),
+//! an exclusive scan of the digit-major histogram, and a stable scatter: reduce-then-scan,
+//! no workgroup waits on another, and every invocation's loops stay far below lavapipe's
+//! 65,535-iteration cap.
+
+use bytemuck::{Pod, Zeroable};
+
+use super::buffer::Buffer;
+use super::context::Gpu;
+use super::count::GpuCount;
+use super::error::{GpuError, GpuResult};
+use super::kernel_table::ids;
+use super::recorder::Recorder;
+use super::scan::PrefixScan;
+
+/// Elements per workgroup (glsl/common/sort_layout.glsl: SORT_BLOCK).
+pub const SORT_BLOCK: u64 = 4096;
+/// Digit width of a pass (RADIX_BITS) and digits per pass (RADIX).
+const RADIX_BITS: u32 = 4;
+const RADIX: u64 = 1 << RADIX_BITS;
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct SetupParams {
+    count_index: u32,
+    capacity: u32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct PassParams {
+    shift: u32,
+    bits: u32,
+}
+
+/// The digit passes for sorting the low `bits` bits: (shift, width) each, width <= 4. The
+/// number of passes is even so the result lands back in the caller's buffers without a
+/// copy; the widths are spread evenly (13 bits: 4+3+3+3).
+pub fn plan_passes(bits: u32) -> Vec<(u32, u32)> {
+    assert!(bits <= 32, "radix sort of {bits} bits: keys are 32-bit");
+    let mut passes = bits.div_ceil(RADIX_BITS);
+    if passes % 2 == 1 {
+        passes += 1;
+    }
+    let mut out = Vec::with_capacity(passes as usize);
+    let mut shift = 0;
+    for p in 0..passes {
+        let width = bits / passes + u32::from(p < bits % passes);
+        // A zero-width pass is a stable copy; keep its shift in range for bitfieldExtract.
+        out.push((shift.min(31), width));
+        shift += width;
+    }
+    out
+}
+
+/// A radix sorter for up to `capacity` pairs, owning its scratch buffers (reuse it).
+pub struct RadixSort {
+    capacity: u64,
+    tmp_keys: Buffer,
+    tmp_values: Buffer,
+    counts: Buffer,
+    state: Buffer,
+    scan: PrefixScan,
+}
+
+impl RadixSort {
+    pub fn new(gpu: &Gpu, capacity: u64) -> GpuResult<RadixSort> {
+        let caps = gpu.caps();
+        let max_groups = caps.max_workgroup_count[0] as u64;
+        let max_elems = (caps.max_storage_buffer_range / 4).min(max_groups * SORT_BLOCK);
+        if capacity > max_elems {
+            return Err(GpuError::Limit(format!(
+                "radix sort of {capacity} pairs exceeds this device's limit of {max_elems} \
+                 (one storage binding holds {} bytes)",
+                caps.max_storage_buffer_range
+            )));
+        }
+        let blocks = capacity.div_ceil(SORT_BLOCK).max(1);
+        Ok(RadixSort {
+            capacity,
+            tmp_keys: gpu.buffer("sort-tmp-keys", capacity * 4)?,
+            tmp_values: gpu.buffer("sort-tmp-values", capacity * 4)?,
+            counts: gpu.buffer("sort-counts", blocks * RADIX * 4)?,
+            state: gpu.buffer("sort-state", 16)?,
+            scan: PrefixScan::new(gpu, blocks * RADIX)?,
+        })
+    }
+
+    pub fn capacity(&self) -> u64 {
+        self.capacity
+    }
+
+    /// Records a stable sort of `keys` (with `values` alongside) by their low `bits` bits,
+    /// in place, for the first `count` elements (clamped to the capacity).
+    pub fn record(
+        &self,
+        rec: &mut Recorder,
+        keys: &Buffer,
+        values: &Buffer,
+        count: GpuCount,
+        bits: u32,
+    ) -> GpuResult<()> {
+        let passes = plan_passes(bits);
+        if passes.is_empty() {
+            return Ok(());
+        }
+        let setup = SetupParams {
+            count_index: count.index,
+            capacity: self.capacity as u32,
+        };
+        rec.dispatch(
+            ids::SORT_SETUP,
+            &[("count_src", count.buffer), ("state", &self.state)],
+            bytemuck::bytes_of(&setup),
+            [1, 1, 1],
+        )?;
+        rec.barrier();
+        for (p, &(shift, width)) in passes.iter().enumerate() {
+            let (src_k, src_v, dst_k, dst_v) = if p % 2 == 0 {
+                (keys, values, &self.tmp_keys, &self.tmp_values)
+            } else {
+                (&self.tmp_keys, &self.tmp_values, keys, values)
+            };
+            let params = PassParams { shift, bits: width };
+            rec.dispatch_indirect(
+                ids::SORT_COUNT,
+                &[
+                    ("state", &self.state),
+                    ("keys", src_k),
+                    ("counts", &self.counts),
+                ],
+                bytemuck::bytes_of(&params),
+                &self.state,
+                0,
+            )?;
+            rec.barrier();
+            // RADIX counters per block; state[0] holds the block count.
+            let histogram_len = GpuCount {
+                buffer: &self.state,
+                index: 0,
+                div: 1,
+                mul: RADIX as u32,
+            };
+            self.scan
+                .record(rec, &self.counts, &self.counts, histogram_len)?;
+            rec.dispatch_indirect(
+                ids::SORT_SCATTER,
+                &[
+                    ("state", &self.state),
+                    ("keys_in", src_k),
+                    ("values_in", src_v),
+                    ("keys_out", dst_k),
+                    ("values_out", dst_v),
+                    ("offsets", &self.counts),
+                ],
+                bytemuck::bytes_of(&params),
+                &self.state,
+                0,
+            )?;
+            rec.barrier();
+        }
+        Ok(())
+    }
+}
+
+/// Sorts pairs on the GPU (uploads, sorts, downloads): for tests and tools.
+pub fn sort_pairs(
+    gpu: &Gpu,
+    keys: &[u32],
+    values: &[u32],
+    bits: u32,
+) -> GpuResult<(Vec<u32>, Vec<u32>)> {
+    assert_eq!(keys.len(), values.len());
+    let n = keys.len();
+    let sorter = RadixSort::new(gpu, n as u64)?;
+    let k = gpu.buffer_from("sort-keys", keys)?;
+    let v = gpu.buffer_from("sort-values", values)?;
+    let count = gpu.buffer_from("sort-count", &[n as u32])?;
+    let mut rec = Recorder::new(gpu)?;
+    sorter.record(&mut rec, &k, &v, GpuCount::at(&count, 0), bits)?;
+    rec.submit_and_wait()?;
+    Ok((gpu.download(&k, 0, n)?, gpu.download(&v, 0, n)?))
+}
