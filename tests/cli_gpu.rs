@@ -1,0 +1,154 @@
+//! The GPU-facing commands end to end, and device choice, including the failure paths:
+//! no device, a device lacking a feature, an override that matches nothing.
+
+use std::process::Command;
+
+use semsplat::gpu::context::choose_device;
+use semsplat::gpu::{list_devices, GpuError};
+
+fn semsplat() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_semsplat"))
+}
+
+#[test]
+fn no_vulkan_device_is_one_clear_error() {
+    for args in [vec!["info"], vec!["bench", "sort", "--n", "100"]] {
+        let out = semsplat()
+            .args(&args)
+            .env("VK_DRIVER_FILES", "/nonexistent/icd.json")
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?} succeeded without a device");
+        assert!(
+            stderr.contains("no Vulkan device") && stderr.contains("tools/setup.sh"),
+            "{args:?}: {stderr}"
+        );
+        assert!(
+            !stderr.contains("panicked") && !stderr.contains("RUST_BACKTRACE"),
+            "{args:?}: {stderr}"
+        );
+        assert_eq!(
+            stderr.trim().lines().count(),
+            1,
+            "{args:?}: expected one line, got {stderr}"
+        );
+    }
+}
+
+#[test]
+fn device_override_that_matches_nothing_lists_the_devices() {
+    let out = semsplat()
+        .args(["bench", "sort", "--n", "100"])
+        .env("SEMSPLAT_DEVICE", "no-such-gpu")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("no-such-gpu") && stderr.contains("[0]"),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn device_choice_prefers_discrete_and_names_missing_features() {
+    let real = list_devices().unwrap();
+    let mut cpu = real[0].clone();
+    cpu.index = 0;
+    cpu.caps.device_type = ash::vk::PhysicalDeviceType::CPU;
+    cpu.missing.clear();
+    let mut discrete = cpu.clone();
+    discrete.index = 1;
+    discrete.caps.device_type = ash::vk::PhysicalDeviceType::DISCRETE_GPU;
+    discrete.caps.name = "Fancy GPU".into();
+    let cands = vec![cpu.clone(), discrete.clone()];
+    assert_eq!(choose_device(&cands, None).unwrap(), 1);
+    assert_eq!(choose_device(&cands, Some("0")).unwrap(), 0);
+    assert_eq!(choose_device(&cands, Some("fancy")).unwrap(), 1);
+
+    // A discrete GPU lacking a feature is skipped; chosen explicitly, it is an error that
+    // names what is missing.
+    discrete.missing = vec!["VK_KHR_push_descriptor".into()];
+    let cands = vec![cpu.clone(), discrete];
+    assert_eq!(choose_device(&cands, None).unwrap(), 0);
+    let err = choose_device(&cands, Some("1")).unwrap_err();
+    assert!(matches!(err, GpuError::NoSuitableDevice(_)));
+    let msg = err.to_string();
+    assert!(
+        msg.contains("VK_KHR_push_descriptor") && msg.contains("tools/setup.sh"),
+        "{msg}"
+    );
+
+    // No usable device at all.
+    cpu.missing = vec!["Vulkan 1.3 (device reports 1.1)".into()];
+    let err = choose_device(&[cpu], None).unwrap_err();
+    assert!(err.to_string().contains("Vulkan 1.3"), "{err}");
+    assert!(matches!(choose_device(&[], None), Err(GpuError::NoDevice)));
+}
+
+#[test]
+fn bench_sort_json_has_the_documented_fields() {
+    let out = semsplat()
+        .args([
+            "bench", "sort", "--n", "20000", "--bits", "13", "--iters", "2", "--json",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["n"], 20000);
+    assert_eq!(v["bits"], 13);
+    assert_eq!(v["verified"], true);
+    for key in ["gpu_pairs_per_s", "cpu_pairs_per_s", "ratio"] {
+        let x = v[key].as_f64().unwrap_or_else(|| panic!("{key} missing"));
+        assert!(x.is_finite() && x > 0.0, "{key} = {x}");
+    }
+    let ratio = v["gpu_pairs_per_s"].as_f64().unwrap() / v["cpu_pairs_per_s"].as_f64().unwrap();
+    assert!((ratio - v["ratio"].as_f64().unwrap()).abs() < 1e-9 * ratio);
+    assert!(!v["device"].as_str().unwrap().is_empty());
+    assert!(v["kernels"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|k| k["kernel"] == "sort/scatter"));
+}
+
+#[test]
+fn bench_sort_rejects_bad_bits() {
+    let out = semsplat()
+        .args(["bench", "sort", "--n", "10", "--bits", "33"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("33"));
+}
+
+#[test]
+fn info_json_lists_the_selected_device() {
+    let out = semsplat().args(["info", "--json"]).output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let devices = v.as_array().unwrap();
+    assert_eq!(devices.iter().filter(|d| d["selected"] == true).count(), 1);
+    let d = &devices[0];
+    for key in [
+        "name",
+        "driver_name",
+        "vulkan_version",
+        "subgroup_size",
+        "float_atomic_add",
+        "int64_atomics",
+        "heaps",
+    ] {
+        assert!(!d[key].is_null(), "{key} missing from {d}");
+    }
+}
