@@ -3,5 +3,6 @@
 
 pub mod bench;
 pub mod gpu;
+pub mod render;
 pub mod scene;
 pub mod util;

@@ -1,0 +1,65 @@
+// Shared by the rasterizer kernels and src/render/: tile size, the frame status layout, and
+// the per-Gaussian math of classic 3DGS as gsplat 1.5 does it (../shared/DESIGN.md).
+#ifndef RASTER_COMMON_GLSL
+#define RASTER_COMMON_GLSL
+
+#define TILE_SIZE 16
+#define TILE_PIXELS (TILE_SIZE * TILE_SIZE)
+#define ALPHA_MIN (1.0 / 255.0)
+#define ALPHA_MAX 0.999
+#define T_MIN 1e-4
+
+// Frame status buffer (u32 words), written on the GPU so no stage needs a readback.
+#define ST_VISIBLE 0          // visible Gaussians V
+#define ST_VISIBLE_PLUS1 1    // V + 1 (scan length with a trailing zero)
+#define ST_ISECT 2            // intersections kept (<= capacity)
+#define ST_ISECT_NEEDED 3     // intersections the frame produced
+#define ST_OVERFLOW 4         // 1 if the intersection buffer was too small
+#define ST_ARGS_VISIBLE 8     // (groups, 1, 1) over V + 1 invocations
+#define ST_ARGS_ISECT 12      // (groups, 1, 1) over the kept intersections
+#define ST_WORDS 16
+
+float sigmoid(float x) {
+    return 1.0 / (1.0 + exp(-x));
+}
+
+// Rotation matrix of a unit quaternion (w, x, y, z); GLSL matrices are column-major.
+mat3 quat_to_mat(vec4 q) {
+    float w = q.x, x = q.y, y = q.z, z = q.w;
+    return mat3(
+        1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y + w * z), 2.0 * (x * z - w * y),
+        2.0 * (x * y - w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z + w * x),
+        2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y));
+}
+
+// Real spherical harmonics up to degree 3 with the standard 3DGS constants and basis
+// order. coeff(k) returns the RGB coefficient k; dir is unit length.
+#define SH_C0 0.28209479177387814
+#define SH_C1 0.4886025119029199
+#define SH_EVAL(result, degree, dir, coeff)                                                   \
+    {                                                                                         \
+        result = SH_C0 * coeff(0);                                                            \
+        if (degree >= 1) {                                                                    \
+            float x = dir.x, y = dir.y, z = dir.z;                                            \
+            result += SH_C1 * (-y * coeff(1) + z * coeff(2) - x * coeff(3));                  \
+            if (degree >= 2) {                                                                \
+                float xx = x * x, yy = y * y, zz = z * z, xy = x * y, yz = y * z, xz = x * z; \
+                result += 1.0925484305920792 * xy * coeff(4)                                  \
+                        - 1.0925484305920792 * yz * coeff(5)                                  \
+                        + 0.31539156525252005 * (2.0 * zz - xx - yy) * coeff(6)               \
+                        - 1.0925484305920792 * xz * coeff(7)                                  \
+                        + 0.5462742152960396 * (xx - yy) * coeff(8);                          \
+                if (degree >= 3) {                                                            \
+                    result += -0.5900435899266435 * y * (3.0 * xx - yy) * coeff(9)            \
+                            + 2.890611442640554 * xy * z * coeff(10)                          \
+                            - 0.4570457994644658 * y * (4.0 * zz - xx - yy) * coeff(11)       \
+                            + 0.3731763325901154 * z * (2.0 * zz - 3.0 * xx - 3.0 * yy) * coeff(12) \
+                            - 0.4570457994644658 * x * (4.0 * zz - xx - yy) * coeff(13)       \
+                            + 1.445305721320277 * z * (xx - yy) * coeff(14)                   \
+                            - 0.5900435899266435 * x * (xx - 3.0 * yy) * coeff(15);           \
+                }                                                                             \
+            }                                                                                 \
+        }                                                                                     \
+    }
+
+#endif

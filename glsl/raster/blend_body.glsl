@@ -1,0 +1,198 @@
+// Forward blending of one 16x16 tile per workgroup (included by blend_rgb.comp with
+// SEM_CHUNK 0 and blend_sem.comp with SEM_CHUNK 16).
+//
+// Each workgroup loads its tile's Gaussians into shared memory in batches; a pixel stops at
+// the transmittance threshold, and the tile stops once every pixel is done (subgroup vote,
+// then a workgroup count). One dispatch covers a window of at most `window_len` entries of
+// each tile's list: per-pixel state (T, accumulators) is carried in a buffer between
+// windows, so no invocation comes near lavapipe's 65,535-iteration loop cap. Semantic
+// channels are processed SEM_CHUNK at a time (chunk_base), C being a run-time value.
+#extension GL_EXT_control_flow_attributes : require
+#extension GL_KHR_shader_subgroup_basic : require
+#extension GL_KHR_shader_subgroup_vote : require
+#include "raster_common.glsl"
+
+#define BATCH TILE_PIXELS
+// Carried state per pixel: T, r, g, b, depth sum, contributors, last, done, then sems.
+#define CARRY_BASE 8
+#define CARRY_STRIDE (CARRY_BASE + SEM_CHUNK)
+
+layout(local_size_x = TILE_PIXELS) in;
+
+layout(push_constant) uniform Params {
+    uvec4 dims;        // width height tiles_x channels
+    uvec4 window;      // window_start window_len chunk_base write_rgb
+    vec4 background;   // r g b -
+} pc;
+
+layout(set = 0, binding = 0) readonly buffer RangesBuf { uvec2 data[]; } tile_ranges;
+layout(set = 0, binding = 1) readonly buffer IdsBuf { uint data[]; } isect_ids;
+layout(set = 0, binding = 2) readonly buffer XyBuf { vec4 data[]; } xy_depth_opacity;
+layout(set = 0, binding = 3) readonly buffer ConicBuf { vec4 data[]; } conics;
+layout(set = 0, binding = 4) readonly buffer ColorBuf { vec4 data[]; } colors;
+layout(set = 0, binding = 5) buffer CarryBuf { float data[]; } carry;
+layout(set = 0, binding = 6) writeonly buffer RgbBuf { float data[]; } out_rgb;
+layout(set = 0, binding = 7) writeonly buffer AlphaBuf { float data[]; } out_alpha;
+layout(set = 0, binding = 8) writeonly buffer DepthBuf { float data[]; } out_depth;
+layout(set = 0, binding = 9) writeonly buffer FinalTBuf { float data[]; } out_final_t;
+layout(set = 0, binding = 10) writeonly buffer LastBuf { uint data[]; } out_last;
+layout(set = 0, binding = 11) writeonly buffer CountBuf { uint data[]; } out_n_contrib;
+#if SEM_CHUNK > 0
+layout(set = 0, binding = 12) readonly buffer SemBuf { float data[]; } sem_in;
+layout(set = 0, binding = 13) writeonly buffer SemOutBuf { float data[]; } out_sem;
+layout(set = 0, binding = 14) writeonly buffer SemNormBuf { float data[]; } out_sem_norm;
+shared float s_sem[BATCH * SEM_CHUNK];
+#endif
+
+shared vec4 s_xy_depth_opacity[BATCH];
+shared vec4 s_conic[BATCH];
+shared vec4 s_color[BATCH];
+shared uint s_done_subgroups;
+
+void main() {
+    uint width = pc.dims.x, height = pc.dims.y, channels = pc.dims.w;
+    uint window_start = pc.window.x, window_len = pc.window.y, chunk_base = pc.window.z;
+    bool write_rgb = pc.window.w != 0;
+    uint tile_id = gl_WorkGroupID.y * pc.dims.z + gl_WorkGroupID.x;
+    uint t = gl_SubgroupID * gl_SubgroupSize + gl_SubgroupInvocationID;
+    uint px = gl_WorkGroupID.x * TILE_SIZE + t % TILE_SIZE;
+    uint py = gl_WorkGroupID.y * TILE_SIZE + t / TILE_SIZE;
+    bool inside = px < width && py < height;
+    uint pix = py * width + px;
+    vec2 center = vec2(px, py) + 0.5;
+
+    uvec2 range = tile_ranges.data[tile_id];
+    uint len = range.y - range.x;
+    // Later windows only continue tiles that are longer; window 0 always writes (background).
+    if (window_start > 0 && window_start >= len) {
+        return;
+    }
+    uint start = range.x + window_start;
+    uint end = range.x + min(len, window_start + window_len);
+    bool last_window = window_start + window_len >= len;
+
+    float T = 1.0;
+    vec3 rgb = vec3(0.0);
+    float depth_sum = 0.0;
+    uint n_contrib = 0;
+    uint last = 0;
+    bool done = !inside;
+    float sem[SEM_CHUNK > 0 ? SEM_CHUNK : 1];
+    [[unroll]] for (uint k = 0; k < max(SEM_CHUNK, 1); k++) {
+        sem[k] = 0.0;
+    }
+    if (window_start > 0 && inside) {
+        uint c0 = pix * CARRY_STRIDE;
+        T = carry.data[c0];
+        rgb = vec3(carry.data[c0 + 1], carry.data[c0 + 2], carry.data[c0 + 3]);
+        depth_sum = carry.data[c0 + 4];
+        n_contrib = floatBitsToUint(carry.data[c0 + 5]);
+        last = floatBitsToUint(carry.data[c0 + 6]);
+        done = carry.data[c0 + 7] != 0.0;
+        [[unroll]] for (uint k = 0; k < SEM_CHUNK; k++) {
+            sem[k] = carry.data[c0 + CARRY_BASE + k];
+        }
+    }
+
+    for (uint b = start; b < end; b += BATCH) {
+        // Stop the tile once every pixel is done: one vote per subgroup, then a count.
+        if (t == 0) {
+            s_done_subgroups = 0;
+        }
+        barrier();
+        if (subgroupAll(done) && subgroupElect()) {
+            atomicAdd(s_done_subgroups, 1);
+        }
+        barrier();
+        if (s_done_subgroups == gl_NumSubgroups) {
+            break;
+        }
+        uint idx = b + t;
+        if (idx < end) {
+            uint g = isect_ids.data[idx];
+            s_xy_depth_opacity[t] = xy_depth_opacity.data[g];
+            s_conic[t] = conics.data[g];
+            s_color[t] = colors.data[g];
+#if SEM_CHUNK > 0
+            [[unroll]] for (uint k = 0; k < SEM_CHUNK; k++) {
+                uint c = chunk_base + k;
+                s_sem[t * SEM_CHUNK + k] = c < channels ? sem_in.data[g * channels + c] : 0.0;
+            }
+#endif
+        }
+        barrier();
+        uint count = min(BATCH, end - b);
+        for (uint j = 0; j < count && !done; j++) {
+            vec4 g = s_xy_depth_opacity[j];
+            vec3 con = s_conic[j].xyz;
+            vec2 d = g.xy - center;
+            float sigma = 0.5 * (con.x * d.x * d.x + con.z * d.y * d.y) + con.y * d.x * d.y;
+            if (sigma < 0.0) {
+                continue;
+            }
+            float alpha = min(ALPHA_MAX, g.w * exp(-sigma));
+            if (alpha < ALPHA_MIN) {
+                continue;
+            }
+            float next_t = T * (1.0 - alpha);
+            if (next_t <= T_MIN) {
+                done = true;
+                break;
+            }
+            float weight = alpha * T;
+            if (write_rgb) {
+                rgb += weight * s_color[j].rgb;
+                depth_sum += weight * g.z;
+            }
+#if SEM_CHUNK > 0
+            [[unroll]] for (uint k = 0; k < SEM_CHUNK; k++) {
+                sem[k] += weight * s_sem[j * SEM_CHUNK + k];
+            }
+#endif
+            T = next_t;
+            n_contrib++;
+            last = b + j;
+        }
+        barrier(); // the next batch overwrites the shared arrays
+    }
+
+    if (!inside) {
+        return;
+    }
+    if (!last_window) {
+        uint c0 = pix * CARRY_STRIDE;
+        carry.data[c0] = T;
+        carry.data[c0 + 1] = rgb.r;
+        carry.data[c0 + 2] = rgb.g;
+        carry.data[c0 + 3] = rgb.b;
+        carry.data[c0 + 4] = depth_sum;
+        carry.data[c0 + 5] = uintBitsToFloat(n_contrib);
+        carry.data[c0 + 6] = uintBitsToFloat(last);
+        carry.data[c0 + 7] = done ? 1.0 : 0.0;
+        [[unroll]] for (uint k = 0; k < SEM_CHUNK; k++) {
+            carry.data[c0 + CARRY_BASE + k] = sem[k];
+        }
+        return;
+    }
+    float acc_alpha = 1.0 - T;
+    if (write_rgb) {
+        vec3 c = rgb + T * pc.background.rgb;
+        out_rgb.data[3 * pix] = c.r;
+        out_rgb.data[3 * pix + 1] = c.g;
+        out_rgb.data[3 * pix + 2] = c.b;
+        out_alpha.data[pix] = acc_alpha;
+        out_depth.data[pix] = acc_alpha > 0.0 ? depth_sum / acc_alpha : 0.0;
+        out_final_t.data[pix] = T;
+        out_last.data[pix] = last;
+        out_n_contrib.data[pix] = n_contrib;
+    }
+#if SEM_CHUNK > 0
+    [[unroll]] for (uint k = 0; k < SEM_CHUNK; k++) {
+        uint c = chunk_base + k;
+        if (c < channels) {
+            out_sem.data[pix * channels + c] = sem[k];
+            out_sem_norm.data[pix * channels + c] = acc_alpha > 0.0 ? sem[k] / acc_alpha : 0.0;
+        }
+    }
+#endif
+}

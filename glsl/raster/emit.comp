@@ -1,0 +1,50 @@
+#version 460
+// Emits one (tile id, Gaussian id) pair per tile each visible Gaussian covers, in depth
+// order, so a stable sort by tile id leaves every tile's list sorted by depth. Pairs past
+// the buffer's capacity are dropped and the overflow is flagged for the host to grow it.
+#include "raster_common.glsl"
+
+layout(local_size_x = 256) in;
+
+layout(push_constant) uniform Params {
+    uint tiles_x;
+    uint capacity;
+} pc;
+
+layout(set = 0, binding = 0) buffer StatusBuf { uint data[]; } status;
+layout(set = 0, binding = 1) readonly buffer IdsBuf { uint data[]; } depth_ids;
+layout(set = 0, binding = 2) readonly buffer OffsetsBuf { uint data[]; } isect_offsets; // V + 1
+layout(set = 0, binding = 3) readonly buffer RectBuf { uvec4 data[]; } tile_rects;
+layout(set = 0, binding = 4) writeonly buffer KeysBuf { uint data[]; } isect_keys;
+layout(set = 0, binding = 5) writeonly buffer ValsBuf { uint data[]; } isect_ids;
+
+void main() {
+    uint j = gl_GlobalInvocationID.x;
+    uint v = status.data[ST_VISIBLE];
+    if (j > v) {
+        return;
+    }
+    if (j == v) {
+        uint needed = isect_offsets.data[v];
+        uint kept = min(needed, pc.capacity);
+        status.data[ST_ISECT] = kept;
+        status.data[ST_ISECT_NEEDED] = needed;
+        status.data[ST_OVERFLOW] = needed > pc.capacity ? 1 : 0;
+        status.data[ST_ARGS_ISECT + 0] = (kept + 255) / 256;
+        status.data[ST_ARGS_ISECT + 1] = 1;
+        status.data[ST_ARGS_ISECT + 2] = 1;
+        return;
+    }
+    uint g = depth_ids.data[j];
+    uint slot = isect_offsets.data[j];
+    uvec4 r = tile_rects.data[g];
+    for (uint ty = r.y; ty < r.w; ty++) {
+        for (uint tx = r.x; tx < r.z; tx++) {
+            if (slot < pc.capacity) {
+                isect_keys.data[slot] = ty * pc.tiles_x + tx;
+                isect_ids.data[slot] = g;
+            }
+            slot++;
+        }
+    }
+}

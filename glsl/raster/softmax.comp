@@ -1,0 +1,32 @@
+#version 460
+// Per-Gaussian softmax of the semantic logits, for the mode that blends probabilities
+// (paper 000's ablation) instead of raw logits.
+
+layout(local_size_x = 256) in;
+
+layout(push_constant) uniform Params {
+    uint n;
+    uint channels;
+} pc;
+
+layout(set = 0, binding = 0) readonly buffer LogitsBuf { float data[]; } logits;
+layout(set = 0, binding = 1) writeonly buffer ProbsBuf { float data[]; } probs;
+
+void main() {
+    uint i = gl_GlobalInvocationID.x;
+    if (i >= pc.n) {
+        return;
+    }
+    uint base = i * pc.channels;
+    float m = -3.402823466e38;
+    for (uint c = 0; c < pc.channels; c++) {
+        m = max(m, logits.data[base + c]);
+    }
+    float sum = 0.0;
+    for (uint c = 0; c < pc.channels; c++) {
+        sum += exp(logits.data[base + c] - m);
+    }
+    for (uint c = 0; c < pc.channels; c++) {
+        probs.data[base + c] = exp(logits.data[base + c] - m) / sum;
+    }
+}

@@ -1,0 +1,87 @@
+//! One rendered view, downloaded: images as row-major f32 arrays.
+
+use anyhow::Result;
+
+use super::StageTimes;
+use crate::gpu::{Buffer, Gpu};
+use crate::scene::Camera;
+
+/// Images of one view. Pixel (x, y) is index y * width + x; multi-channel images are
+/// pixel-major with the channel fastest.
+#[derive(Clone, Debug)]
+pub struct RenderedFrame {
+    pub width: u32,
+    pub height: u32,
+    /// Semantic channels C (0 when rendered without semantics).
+    pub channels: u32,
+    /// [H, W, 3], background included.
+    pub rgb: Vec<f32>,
+    /// [H, W]: accumulated alpha, 1 - final T.
+    pub alpha: Vec<f32>,
+    /// [H, W]: expected depth, sum(w z) / (1 - T); 0 where nothing was blended.
+    pub depth: Vec<f32>,
+    /// [H, W]: transmittance after the last blended Gaussian.
+    pub final_t: Vec<f32>,
+    /// [H, W]: position of the last blended Gaussian in the tile-sorted list.
+    pub last: Vec<u32>,
+    /// [H, W]: number of blended Gaussians.
+    pub n_contrib: Vec<u32>,
+    /// [H, W, C]: sum of alpha * T * s.
+    pub sem: Vec<f32>,
+    /// [H, W, C]: `sem / (1 - T)` (paper 000, Eq. 2); 0 where nothing was blended.
+    pub sem_norm: Vec<f32>,
+    /// Visible Gaussians and (tile, Gaussian) intersections in this frame.
+    pub visible: u32,
+    pub intersections: u32,
+    pub stages: StageTimes,
+}
+
+impl RenderedFrame {
+    pub(crate) fn download(
+        gpu: &Gpu,
+        cam: &Camera,
+        channels: u32,
+        [rgb, alpha, depth, final_t, last, n_contrib, sem, sem_norm]: [&Buffer; 8],
+        visible: u32,
+        intersections: u32,
+        stages: StageTimes,
+    ) -> Result<RenderedFrame> {
+        let p = cam.width as usize * cam.height as usize;
+        let c = channels as usize;
+        Ok(RenderedFrame {
+            width: cam.width,
+            height: cam.height,
+            channels,
+            rgb: gpu.download(rgb, 0, p * 3)?,
+            alpha: gpu.download(alpha, 0, p)?,
+            depth: gpu.download(depth, 0, p)?,
+            final_t: gpu.download(final_t, 0, p)?,
+            last: gpu.download(last, 0, p)?,
+            n_contrib: gpu.download(n_contrib, 0, p)?,
+            sem: gpu.download(sem, 0, p * c)?,
+            sem_norm: gpu.download(sem_norm, 0, p * c)?,
+            visible,
+            intersections,
+            stages,
+        })
+    }
+
+    /// Argmax class (compact index) per pixel, or None where nothing was blended or C = 0.
+    pub fn argmax_labels(&self) -> Vec<Option<u32>> {
+        let c = self.channels as usize;
+        (0..self.alpha.len())
+            .map(|i| {
+                if c == 0 || self.alpha[i] <= 0.0 {
+                    return None;
+                }
+                let s = &self.sem_norm[i * c..(i + 1) * c];
+                let best = s
+                    .iter()
+                    .enumerate()
+                    .max_by(|a, b| a.1.total_cmp(b.1))
+                    .map(|(k, _)| k as u32);
+                best
+            })
+            .collect()
+    }
+}

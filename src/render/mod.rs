@@ -1,0 +1,76 @@
+//! Rendering: the GPU rasterizer and its independent CPU reference.
+
+pub mod frame;
+pub mod gpu_scene;
+pub mod rasterizer;
+pub mod reference;
+
+pub use frame::RenderedFrame;
+pub use gpu_scene::GpuScene;
+pub use rasterizer::Rasterizer;
+
+use serde::Serialize;
+
+use crate::gpu::{Mark, Timings};
+
+/// What the semantic buffer blends (paper 000 and its softmax-before-blending ablation).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub enum SemanticMode {
+    /// Each Gaussian's raw logits.
+    #[default]
+    RawLogits,
+    /// softmax(logits) per Gaussian, before blending.
+    Softmax,
+}
+
+/// How to render a view.
+#[derive(Clone, Debug)]
+pub struct RenderOptions {
+    pub background: [f32; 3],
+    /// Gaussians whose center depth is <= near or >= far are culled.
+    pub near: f32,
+    pub far: f32,
+    /// Blend the semantic channels in this mode; None renders RGB only (and pays nothing
+    /// for semantics).
+    pub semantics: Option<SemanticMode>,
+}
+
+impl Default for RenderOptions {
+    fn default() -> Self {
+        RenderOptions {
+            background: [0.0; 3],
+            near: 0.01,
+            far: 1e10,
+            semantics: Some(SemanticMode::RawLogits),
+        }
+    }
+}
+
+/// GPU time per stage of one frame, in milliseconds (zero without timestamps).
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct StageTimes {
+    /// Projection, SH, visibility compaction.
+    pub project_ms: f64,
+    /// Depth sort of the visible Gaussians.
+    pub depth_sort_ms: f64,
+    /// Tile intersections: emission, stable sort by tile, tile ranges.
+    pub bin_ms: f64,
+    /// Forward blending (all semantic chunks and windows).
+    pub blend_ms: f64,
+}
+
+impl StageTimes {
+    pub(crate) fn from_marks(t: &Timings, m: &[Option<Mark>; 5]) -> StageTimes {
+        let ms = |a: usize, b: usize| t.between(m[a], m[b]).unwrap_or(0.0) * 1e-6;
+        StageTimes {
+            project_ms: ms(0, 1),
+            depth_sort_ms: ms(1, 2),
+            bin_ms: ms(2, 3),
+            blend_ms: ms(3, 4),
+        }
+    }
+
+    pub fn total_ms(&self) -> f64 {
+        self.project_ms + self.depth_sort_ms + self.bin_ms + self.blend_ms
+    }
+}
