@@ -1,11 +1,589 @@
-//! `semsplat inspect` (placeholder until the scene-formats work lands).
+//! `semsplat inspect`: summarize a PLY scene, a camera model, a label folder or a class table,
+//! and report problems (exit status 1 when any are found).
 
-use anyhow::{bail, Result};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
 use clap::Args;
+use serde_json::{json, Map, Value};
 
+use semsplat::scene::cameras::load_cameras;
+use semsplat::scene::cameras_json::{read_cameras_json_kind, CameraJsonKind};
+use semsplat::scene::classes::{read_class_table, ClassTable, IGNORE_U16};
+use semsplat::scene::colmap::{find_colmap_model, ColmapFormat};
+use semsplat::scene::labels::{list_label_pngs, read_label_png, LabelMap};
+use semsplat::scene::ply::{classes_sidecar_path, read_classes_sidecar, read_ply_unchecked};
+use semsplat::scene::{Camera, Gaussians, Split};
+
+const INSPECT_DETAILS: &str = "\
+PATH can be:
+  - a 3DGS PLY: Gaussian count, SH degree, bounds, opacity (after sigmoid) and scale (after exp)
+    ranges, semantic fields, per-class counts (named from <scene>.classes.json or --classes)
+  - cameras: a COLMAP model folder (or a dataset folder with sparse/0), an INRIA cameras.json,
+    or a semsplat camera JSON: count, resolutions, intrinsics ranges, splits
+  - a folder of PNG label maps (or one label PNG): sizes, class pixel shares, ignore share
+    (255 in 8-bit maps, 65535 in 16-bit maps); --cameras and --classes add consistency checks
+  - a class table JSON
+
+Problems found (NaN/Inf values, zero quaternions, unreadable or mismatched label maps, class ids
+missing from the class table, ...) are listed, and the exit status is then 1.
+File formats and conventions: docs/CONVENTIONS.md.";
+
+/// Arguments of `semsplat inspect` (the subcommand's one-line help lives in main.rs; the
+/// details are in `after_help` so both `-h` and `--help` show them).
 #[derive(Args)]
-pub struct InspectArgs {}
+#[command(after_help = INSPECT_DETAILS)]
+pub struct InspectArgs {
+    /// The PLY file, camera model or JSON, label folder or PNG, or class table to inspect.
+    pub path: PathBuf,
 
-pub fn run(_args: InspectArgs) -> Result<()> {
-    bail!("'inspect' is not implemented yet")
+    /// Print the summary as JSON on stdout (problems are in its "problems" list).
+    #[arg(long)]
+    pub json: bool,
+
+    /// Class table JSON used to name classes and to check that label ids are known.
+    /// For a PLY, defaults to its <scene>.classes.json sidecar when present.
+    #[arg(long, value_name = "FILE")]
+    pub classes: Option<PathBuf>,
+
+    /// Cameras to check a label folder against: every camera needs <name>.png of its size.
+    #[arg(long, value_name = "PATH")]
+    pub cameras: Option<PathBuf>,
+}
+
+/// What `inspect` found: ordered fields for printing, and the problems.
+struct Report {
+    kind: &'static str,
+    path: PathBuf,
+    fields: Vec<(&'static str, Value)>,
+    problems: Vec<String>,
+}
+
+impl Report {
+    fn new(kind: &'static str, path: &Path) -> Report {
+        Report {
+            kind,
+            path: path.to_owned(),
+            fields: Vec::new(),
+            problems: Vec::new(),
+        }
+    }
+
+    fn add(&mut self, key: &'static str, value: impl Into<Value>) {
+        self.fields.push((key, value.into()));
+    }
+
+    fn to_json(&self) -> Value {
+        let mut obj = Map::new();
+        obj.insert("kind".into(), self.kind.into());
+        obj.insert("path".into(), self.path.display().to_string().into());
+        for (k, v) in &self.fields {
+            obj.insert((*k).into(), v.clone());
+        }
+        obj.insert("problems".into(), self.problems.clone().into());
+        Value::Object(obj)
+    }
+
+    fn text(&self) -> String {
+        let mut out = format!("{} ({})\n", self.path.display(), self.kind);
+        for (k, v) in &self.fields {
+            value_text(&mut out, k, v, 1);
+        }
+        if self.problems.is_empty() {
+            out.push_str("no problems found\n");
+        } else {
+            out.push_str(&format!("problems ({}):\n", self.problems.len()));
+            for p in &self.problems {
+                out.push_str(&format!("  - {p}\n"));
+            }
+        }
+        out
+    }
+}
+
+fn value_text(out: &mut String, key: &str, v: &Value, depth: usize) {
+    let pad = "  ".repeat(depth);
+    match v {
+        Value::Object(map) if map.contains_key("min") && map.contains_key("max") => {
+            let mut line = format!(
+                "{pad}{key}: {} .. {}",
+                compact_text(&map["min"]),
+                compact_text(&map["max"])
+            );
+            if let Some(mean) = map.get("mean") {
+                line.push_str(&format!(" (mean {})", compact_text(mean)));
+            }
+            out.push_str(&line);
+            out.push('\n');
+        }
+        Value::Object(map) => {
+            out.push_str(&format!("{pad}{key}:\n"));
+            for (k, v) in map {
+                value_text(out, k, v, depth + 1);
+            }
+        }
+        Value::Array(items) if items.iter().any(|i| i.is_object()) => {
+            out.push_str(&format!("{pad}{key}:\n"));
+            for i in items {
+                out.push_str(&format!("{pad}  {}\n", compact_text(i)));
+            }
+        }
+        other => out.push_str(&format!("{pad}{key}: {}\n", compact_text(other))),
+    }
+}
+
+/// One-line text of a value; objects list `id`, `name` and `size` first.
+fn compact_text(v: &Value) -> String {
+    match v {
+        Value::String(s) => s.clone(),
+        Value::Number(n) => match n.as_f64() {
+            Some(f) if n.is_f64() => {
+                let s = format!("{:.6}", f + 0.0); // + 0.0 turns -0 into 0
+                s.trim_end_matches('0').trim_end_matches('.').to_owned()
+            }
+            _ => n.to_string(),
+        },
+        Value::Object(map) => {
+            let first = ["id", "name", "size"];
+            let keys = first
+                .iter()
+                .copied()
+                .filter(|k| map.contains_key(*k))
+                .chain(
+                    map.keys()
+                        .map(String::as_str)
+                        .filter(|k| !first.contains(k)),
+                );
+            let parts: Vec<String> = keys
+                .map(|k| format!("{k}: {}", compact_text(&map[k])))
+                .collect();
+            parts.join(", ")
+        }
+        Value::Array(items) => {
+            let parts: Vec<String> = items.iter().map(compact_text).collect();
+            parts.join(", ")
+        }
+        other => other.to_string(),
+    }
+}
+
+/// Prints to stdout; a closed pipe (`inspect ... | head`) is not an error.
+fn print_stdout(text: &str) -> Result<()> {
+    use std::io::Write;
+    match std::io::stdout().lock().write_all(text.as_bytes()) {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(e.into()),
+        _ => Ok(()),
+    }
+}
+
+pub fn run(args: InspectArgs) -> Result<()> {
+    let path = args.path.as_path();
+    if !path.exists() {
+        bail!("{} does not exist", path.display());
+    }
+    let table = args.classes.as_deref().map(read_class_table).transpose()?;
+    let report = inspect_path(path, table.as_ref(), args.cameras.as_deref())?;
+    if args.json {
+        print_stdout(&(serde_json::to_string_pretty(&report.to_json())? + "\n"))?;
+    } else {
+        print_stdout(&report.text())?;
+    }
+    if !report.problems.is_empty() {
+        bail!(
+            "{} problem(s) found in {}",
+            report.problems.len(),
+            path.display()
+        );
+    }
+    Ok(())
+}
+
+fn inspect_path(path: &Path, table: Option<&ClassTable>, cameras: Option<&Path>) -> Result<Report> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .unwrap_or_default();
+    if path.is_dir() {
+        if find_colmap_model(path).is_ok() {
+            return inspect_cameras(path);
+        }
+        let pngs = list_label_pngs(path)?;
+        if pngs.is_empty() {
+            bail!(
+                "{} is neither a COLMAP model (cameras/images .bin or .txt, or sparse/0) nor a \
+                 folder of PNG label maps",
+                path.display()
+            );
+        }
+        let files: Vec<(String, PathBuf)> = pngs.into_iter().collect();
+        return inspect_labels(path, "label folder", &files, table, cameras);
+    }
+    match ext.as_str() {
+        "ply" => inspect_ply(path, table),
+        "png" => {
+            let stem = path
+                .file_stem()
+                .and_then(|s| s.to_str())
+                .unwrap_or_default()
+                .to_owned();
+            inspect_labels(
+                path,
+                "label map",
+                &[(stem, path.to_owned())],
+                table,
+                cameras,
+            )
+        }
+        "json" if looks_like_class_table(path)? => inspect_class_table(path),
+        _ => inspect_cameras(path),
+    }
+}
+
+fn looks_like_class_table(path: &Path) -> Result<bool> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let Ok(value) = serde_json::from_str::<Value>(&text) else {
+        return Ok(false); // the camera reader gives the parse error
+    };
+    Ok(match &value {
+        Value::Object(o) => o.contains_key("classes") && !o.contains_key("format"),
+        Value::Array(items) => items
+            .first()
+            .is_some_and(|e| e.get("id").is_some() && e.get("img_name").is_none()),
+        _ => false,
+    })
+}
+
+// ---------------------------------------------------------------------------------------
+
+fn sigmoid(x: f32) -> f64 {
+    1.0 / (1.0 + (-(x as f64)).exp())
+}
+
+/// min/max/mean over the finite values.
+fn range(values: impl Iterator<Item = f64>) -> Value {
+    let (mut lo, mut hi, mut sum, mut n) = (f64::INFINITY, f64::NEG_INFINITY, 0.0, 0u64);
+    for v in values.filter(|v| v.is_finite()) {
+        lo = lo.min(v);
+        hi = hi.max(v);
+        sum += v;
+        n += 1;
+    }
+    if n == 0 {
+        return Value::Null;
+    }
+    json!({"min": lo, "max": hi, "mean": sum / n as f64})
+}
+
+fn inspect_ply(path: &Path, table: Option<&ClassTable>) -> Result<Report> {
+    let g = read_ply_unchecked(path)?;
+    let mut r = Report::new("3DGS PLY", path);
+    let sidecar = if table.is_none() {
+        read_classes_sidecar(path)?
+    } else {
+        None
+    };
+    let table = table.or(sidecar.as_ref());
+    r.add("gaussians", g.len());
+    r.add("sh_degree", g.sh_degree);
+    if !g.is_empty() {
+        let mut bmin = [f32::INFINITY; 3];
+        let mut bmax = [f32::NEG_INFINITY; 3];
+        for m in g.means.iter().filter(|m| m.iter().all(|v| v.is_finite())) {
+            for a in 0..3 {
+                bmin[a] = bmin[a].min(m[a]);
+                bmax[a] = bmax[a].max(m[a]);
+            }
+        }
+        if bmin[0].is_finite() {
+            r.add("bounds", json!({"min": bmin, "max": bmax}));
+        }
+        r.add(
+            "opacity",
+            range(g.opacity_logits.iter().map(|&o| sigmoid(o))),
+        );
+        r.add(
+            "scale",
+            range(g.log_scales.iter().flatten().map(|&s| (s as f64).exp())),
+        );
+    }
+    let mut semantic = Vec::new();
+    if g.class_ids.is_some() {
+        semantic.push("class".to_owned());
+    }
+    if g.class_conf.is_some() {
+        semantic.push("class_conf".to_owned());
+    }
+    if g.instance_ids.is_some() {
+        semantic.push("instance".to_owned());
+    }
+    if let Some(s) = &g.semantics {
+        semantic.push(format!(
+            "sem_0..sem_{} ({} channels)",
+            s.channels - 1,
+            s.channels
+        ));
+    }
+    r.add(
+        "semantic_fields",
+        if semantic.is_empty() {
+            vec!["none".to_owned()]
+        } else {
+            semantic
+        },
+    );
+    if let Some(ids) = &g.class_ids {
+        add_class_counts(&mut r, &g, ids, table);
+        if let Some(conf) = &g.class_conf {
+            r.add("class_conf", range(conf.iter().map(|&c| c as f64)));
+        }
+        if table.is_none() {
+            let sidecar = classes_sidecar_path(path);
+            r.add(
+                "class_names",
+                format!("no class table ({} not found)", sidecar.display()),
+            );
+        }
+    }
+    if let Some(inst) = &g.instance_ids {
+        let distinct: std::collections::BTreeSet<i32> =
+            inst.iter().copied().filter(|&i| i >= 0).collect();
+        r.add("instances", distinct.len());
+    }
+    if let Err(e) = g.check_layout() {
+        r.problems.push(format!("{e:#}"));
+    }
+    r.problems
+        .extend(g.value_problems().iter().map(|p| p.to_string()));
+    Ok(r)
+}
+
+fn add_class_counts(r: &mut Report, g: &Gaussians, ids: &[i32], table: Option<&ClassTable>) {
+    let mut counts: BTreeMap<i32, u64> = BTreeMap::new();
+    for &c in ids {
+        *counts.entry(c).or_default() += 1;
+    }
+    let n = g.len().max(1) as f64;
+    let rows: Vec<Value> = counts
+        .iter()
+        .map(|(&id, &count)| {
+            let name = match (id, table) {
+                (-1, _) => "(unseen)".to_owned(),
+                (id, Some(t)) if id >= 0 => t
+                    .get(id as u32)
+                    .map(|c| c.name.clone())
+                    .unwrap_or_else(|| "(not in table)".into()),
+                _ => String::new(),
+            };
+            json!({"id": id, "name": name, "count": count, "share": count as f64 / n})
+        })
+        .collect();
+    if let Some(t) = table {
+        let unknown: Vec<String> = counts
+            .keys()
+            .filter(|&&id| id >= 0 && !t.contains(id as u32))
+            .map(|id| id.to_string())
+            .collect();
+        if !unknown.is_empty() {
+            r.problems.push(format!(
+                "class ids not in the class table: {}",
+                unknown.join(", ")
+            ));
+        }
+    }
+    r.add("classes", rows);
+}
+
+// ---------------------------------------------------------------------------------------
+
+fn inspect_cameras(path: &Path) -> Result<Report> {
+    let (kind, cams) = if path.is_dir() {
+        let (_, format) = find_colmap_model(path)?;
+        let kind = match format {
+            ColmapFormat::Binary => "COLMAP model (binary)",
+            ColmapFormat::Text => "COLMAP model (text)",
+        };
+        (kind, load_cameras(path)?)
+    } else if path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("json"))
+    {
+        let (kind, cams) = read_cameras_json_kind(path)?;
+        let kind = match kind {
+            CameraJsonKind::Inria => "INRIA cameras.json",
+            CameraJsonKind::Semsplat => "semsplat camera JSON",
+        };
+        (kind, cams)
+    } else {
+        ("COLMAP model", load_cameras(path)?)
+    };
+    let mut r = Report::new(kind, path);
+    summarize_cameras(&mut r, &cams);
+    Ok(r)
+}
+
+fn summarize_cameras(r: &mut Report, cams: &[Camera]) {
+    r.add("cameras", cams.len());
+    let mut sizes: BTreeMap<(u32, u32), usize> = BTreeMap::new();
+    for c in cams {
+        *sizes.entry((c.width, c.height)).or_default() += 1;
+    }
+    let sizes: Vec<Value> = sizes
+        .iter()
+        .map(|(&(w, h), &n)| json!({"size": format!("{w}x{h}"), "cameras": n}))
+        .collect();
+    r.add("resolutions", sizes);
+    r.add("fx", range(cams.iter().map(|c| c.fx)));
+    r.add("fy", range(cams.iter().map(|c| c.fy)));
+    r.add("cx", range(cams.iter().map(|c| c.cx)));
+    r.add("cy", range(cams.iter().map(|c| c.cy)));
+    let train = cams.iter().filter(|c| c.split == Split::Train).count();
+    r.add(
+        "splits",
+        json!({"train": train, "test": cams.len() - train}),
+    );
+    let centers: Vec<[f64; 3]> = cams.iter().map(|c| c.center().to_array()).collect();
+    let axis = |a: usize| range(centers.iter().map(|c| c[a]));
+    r.add("centers", json!({"x": axis(0), "y": axis(1), "z": axis(2)}));
+    let first: Vec<&str> = cams.iter().take(3).map(|c| c.name.as_str()).collect();
+    r.add("first_names", first);
+}
+
+// ---------------------------------------------------------------------------------------
+
+fn inspect_labels(
+    path: &Path,
+    kind: &'static str,
+    files: &[(String, PathBuf)],
+    table: Option<&ClassTable>,
+    cameras: Option<&Path>,
+) -> Result<Report> {
+    let mut r = Report::new(kind, path);
+    let cams = cameras.map(load_cameras).transpose()?;
+    let by_name: BTreeMap<&str, &Camera> = cams
+        .iter()
+        .flatten()
+        .map(|c| (c.name.as_str(), c))
+        .collect();
+    let mut counts = vec![0u64; IGNORE_U16 as usize + 1];
+    let mut sizes: BTreeMap<(u32, u32), usize> = BTreeMap::new();
+    let mut read = 0usize;
+    let mut unmatched = Vec::new();
+    for (stem, file) in files {
+        let map = match read_label_png(file) {
+            Ok(m) => m,
+            Err(e) => {
+                r.problems.push(format!("{e:#}"));
+                continue;
+            }
+        };
+        read += 1;
+        *sizes.entry((map.width, map.height)).or_default() += 1;
+        map.count_into(&mut counts);
+        if cams.is_some() {
+            match by_name.get(stem.as_str()) {
+                Some(c) if (c.width, c.height) != (map.width, map.height) => {
+                    r.problems.push(format!(
+                        "label map {} is {}x{} but camera '{}' is {}x{}",
+                        file.display(),
+                        map.width,
+                        map.height,
+                        c.name,
+                        c.width,
+                        c.height
+                    ))
+                }
+                Some(_) => {}
+                None => unmatched.push(stem.clone()),
+            }
+        }
+    }
+    r.add("label_maps", read);
+    let sizes: Vec<Value> = sizes
+        .iter()
+        .map(|(&(w, h), &n)| json!({"size": format!("{w}x{h}"), "maps": n}))
+        .collect();
+    r.add("sizes", sizes);
+    let total: u64 = counts.iter().sum();
+    let ignore = counts[LabelMap::IGNORE as usize];
+    let share = |n: u64| {
+        if total == 0 {
+            0.0
+        } else {
+            n as f64 / total as f64
+        }
+    };
+    r.add("pixels", total);
+    r.add("ignore_share", share(ignore));
+    let mut unknown = Vec::new();
+    let rows: Vec<Value> = (0..IGNORE_U16)
+        .filter(|&id| counts[id as usize] > 0)
+        .map(|id| {
+            let name = table.map(|t| match t.get(id) {
+                Some(c) => c.name.clone(),
+                None => {
+                    unknown.push(id.to_string());
+                    "(not in table)".to_owned()
+                }
+            });
+            let mut row = json!({"id": id, "pixels": counts[id as usize], "share": share(counts[id as usize])});
+            if let Some(name) = name {
+                row["name"] = name.into();
+            }
+            row
+        })
+        .collect();
+    r.add("classes_present", rows.len());
+    r.add("classes", rows);
+    if !unknown.is_empty() {
+        r.problems.push(format!(
+            "label ids not in the class table: {}",
+            unknown.join(", ")
+        ));
+    }
+    if let Some(cams) = &cams {
+        let have: std::collections::HashSet<&str> = files.iter().map(|(s, _)| s.as_str()).collect();
+        let missing: Vec<&str> = cams
+            .iter()
+            .map(|c| c.name.as_str())
+            .filter(|n| !have.contains(n))
+            .collect();
+        if !missing.is_empty() {
+            let shown: Vec<&str> = missing.iter().take(5).copied().collect();
+            r.problems.push(format!(
+                "{} of {} cameras have no label map: {}{}",
+                missing.len(),
+                cams.len(),
+                shown.join(", "),
+                if missing.len() > 5 { ", ..." } else { "" }
+            ));
+        }
+        if !unmatched.is_empty() {
+            r.add("maps_without_camera", unmatched);
+        }
+    }
+    Ok(r)
+}
+
+// ---------------------------------------------------------------------------------------
+
+fn inspect_class_table(path: &Path) -> Result<Report> {
+    let table = read_class_table(path)?;
+    let mut r = Report::new("class table", path);
+    r.add("classes", table.len());
+    let rows: Vec<Value> = table
+        .classes
+        .iter()
+        .map(|c| json!({"id": c.id, "name": c.name, "color": c.color}))
+        .collect();
+    r.add("entries", rows);
+    if table.classes.iter().any(|c| c.id == 255) {
+        r.add(
+            "note",
+            "id 255 is the ignore value of 8-bit label maps: its maps must be 16-bit",
+        );
+    }
+    Ok(r)
 }

@@ -43,6 +43,62 @@ impl Camera {
 
     /// Projects a camera-space point to pixel coordinates (no culling).
     pub fn project_camera_point(&self, pc: DVec3) -> (f64, f64) {
-        (self.fx * pc.x / pc.z + self.cx, self.fy * pc.y / pc.z + self.cy)
+        (
+            self.fx * pc.x / pc.z + self.cx,
+            self.fy * pc.y / pc.z + self.cy,
+        )
+    }
+}
+
+/// How far `R^T R` may stray from the identity (per element) before a rotation is refused:
+/// loose enough for poses stored as float32 text, tight enough to catch scaled or
+/// transposed-by-mistake matrices.
+pub const ROTATION_TOLERANCE: f64 = 1e-3;
+
+impl Camera {
+    /// Checks positive sizes and focal lengths, finite values and a proper rotation
+    /// (orthonormal, determinant +1). The error names the camera.
+    pub fn validate(&self) -> anyhow::Result<()> {
+        let name = &self.name;
+        if name.is_empty() {
+            anyhow::bail!("a camera has an empty name");
+        }
+        if self.width == 0 || self.height == 0 {
+            anyhow::bail!(
+                "camera '{name}' has size {}x{}; both must be positive",
+                self.width,
+                self.height
+            );
+        }
+        for (what, v) in [("fx", self.fx), ("fy", self.fy)] {
+            if !(v.is_finite() && v > 0.0) {
+                anyhow::bail!(
+                    "camera '{name}' has {what} = {v}; focal lengths must be positive and finite"
+                );
+            }
+        }
+        for (what, v) in [("cx", self.cx), ("cy", self.cy)] {
+            if !v.is_finite() {
+                anyhow::bail!("camera '{name}' has non-finite {what} = {v}");
+            }
+        }
+        let r = self.rotation.to_cols_array();
+        let t = self.translation.to_array();
+        if r.iter().chain(t.iter()).any(|v| !v.is_finite()) {
+            anyhow::bail!("camera '{name}' has a non-finite rotation or translation");
+        }
+        let err = (self.rotation.transpose() * self.rotation - DMat3::IDENTITY)
+            .to_cols_array()
+            .iter()
+            .fold(0.0f64, |m, v| m.max(v.abs()));
+        if err > ROTATION_TOLERANCE {
+            anyhow::bail!(
+                "camera '{name}' has a rotation that is not orthonormal (|R^T R - I| = {err:.2e})"
+            );
+        }
+        if self.rotation.determinant() < 0.0 {
+            anyhow::bail!("camera '{name}' has a reflection (det R < 0), not a rotation");
+        }
+        Ok(())
     }
 }

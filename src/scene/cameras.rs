@@ -1,1 +1,86 @@
 //! Loading cameras from any supported format (detected from the path).
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use anyhow::{bail, Context, Result};
+
+use super::camera::Camera;
+use super::{cameras_json, colmap};
+
+/// Image file extensions stripped from names to get the stem label maps are matched by.
+const IMAGE_EXTENSIONS: &[&str] = &[
+    "png", "jpg", "jpeg", "tif", "tiff", "exr", "bmp", "webp", "gif", "ppm", "pgm", "heic", "jxl",
+    "avif", "dng", "raw",
+];
+
+/// The name label maps are matched by: the file name without directories and without an
+/// image extension (`images/frame.001.JPG` -> `frame.001`). Names without a known image
+/// extension are kept whole, so a stem that contains dots survives a round trip.
+pub fn image_name_stem(name: &str) -> String {
+    let base = name.rsplit(['/', '\\']).next().unwrap_or(name);
+    match base.rsplit_once('.') {
+        Some((stem, ext))
+            if !stem.is_empty() && IMAGE_EXTENSIONS.iter().any(|e| e.eq_ignore_ascii_case(ext)) =>
+        {
+            stem.to_owned()
+        }
+        _ => base.to_owned(),
+    }
+}
+
+/// Checks every camera (see [`Camera::validate`]) and that names are unique (label maps
+/// are matched by name).
+pub fn validate_cameras(cameras: &[Camera]) -> Result<()> {
+    let mut seen: HashMap<&str, usize> = HashMap::with_capacity(cameras.len());
+    for (i, cam) in cameras.iter().enumerate() {
+        cam.validate().with_context(|| format!("camera {i}"))?;
+        if let Some(first) = seen.insert(cam.name.as_str(), i) {
+            bail!(
+                "cameras {first} and {i} share the name '{}': names (image stems) must be unique \
+                 because label maps are matched by name",
+                cam.name
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Loads cameras from a COLMAP model folder (or a dataset folder with `sparse/0`, or one of
+/// the model's files), an INRIA `cameras.json`, or a semsplat camera JSON. The cameras are
+/// validated; errors name the file and the problem.
+pub fn load_cameras(path: &Path) -> Result<Vec<Camera>> {
+    if !path.exists() {
+        bail!("camera path {} does not exist", path.display());
+    }
+    if path.is_dir() {
+        return colmap::read_colmap_model(path);
+    }
+    let file_name = path
+        .file_name()
+        .and_then(|n| n.to_str())
+        .unwrap_or_default();
+    let is_json = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("json"));
+    if is_json {
+        return cameras_json::read_cameras_json(path);
+    }
+    let colmap_files = ["cameras", "images", "points3D", "rigs", "frames"];
+    let is_colmap_file = colmap_files.iter().any(|stem| {
+        file_name == format!("{stem}.bin").as_str() || file_name == format!("{stem}.txt").as_str()
+    });
+    if is_colmap_file {
+        let dir = path
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        return colmap::read_colmap_model(dir);
+    }
+    bail!(
+        "cannot tell the camera format of {}: expected a COLMAP model folder (cameras/images \
+         .bin or .txt, or a dataset folder with sparse/0), an INRIA cameras.json, or a semsplat \
+         camera JSON",
+        path.display()
+    )
+}

@@ -1,7 +1,14 @@
 //! Class tables: the user's label ids with names and palette colors, and the compact
 //! remap to the classes actually present (C = classes present).
 
+use std::collections::{BTreeMap, BTreeSet, HashSet};
+use std::io::Write;
+use std::path::Path;
+
+use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
+
+use crate::util::write_atomic;
 
 /// The ignore value of 8-bit label maps (16-bit maps use 65535).
 pub const IGNORE_U8: u32 = 255;
@@ -18,4 +25,269 @@ pub struct ClassInfo {
 #[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct ClassTable {
     pub classes: Vec<ClassInfo>,
+}
+
+/// A deterministic, well-spread color for a class id without one (golden-ratio hue steps at
+/// fixed saturation/value), so the same id gets the same color in every image we write.
+pub fn default_color(id: u32) -> [u8; 3] {
+    let hue = (id as f64 * 0.618_033_988_749_895).fract();
+    // Alternate two value levels so neighbouring ids also differ in brightness.
+    let (s, v) = if id % 2 == 0 {
+        (0.75, 0.95)
+    } else {
+        (0.85, 0.70)
+    };
+    hsv_to_rgb(hue, s, v)
+}
+
+fn hsv_to_rgb(h: f64, s: f64, v: f64) -> [u8; 3] {
+    let i = (h * 6.0).floor();
+    let f = h * 6.0 - i;
+    let (p, q, t) = (v * (1.0 - s), v * (1.0 - f * s), v * (1.0 - (1.0 - f) * s));
+    let (r, g, b) = match i as i32 % 6 {
+        0 => (v, t, p),
+        1 => (q, v, p),
+        2 => (p, v, t),
+        3 => (p, q, v),
+        4 => (t, p, v),
+        _ => (v, p, q),
+    };
+    let to_u8 = |x: f64| (x * 255.0).round().clamp(0.0, 255.0) as u8;
+    [to_u8(r), to_u8(g), to_u8(b)]
+}
+
+/// One class entry as written by users: color and name may be left out.
+#[derive(Deserialize)]
+struct ClassEntryJson {
+    id: u32,
+    #[serde(default)]
+    name: Option<String>,
+    #[serde(default)]
+    color: Option<[u8; 3]>,
+}
+
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum ClassTableJson {
+    List(Vec<ClassEntryJson>),
+    Object { classes: Vec<ClassEntryJson> },
+}
+
+impl ClassTable {
+    /// Builds a table for ids without names or colors ("class_<id>", default palette).
+    pub fn from_ids(ids: impl IntoIterator<Item = u32>) -> ClassTable {
+        let ids: BTreeSet<u32> = ids.into_iter().collect();
+        let classes = ids
+            .into_iter()
+            .map(|id| ClassInfo {
+                id,
+                name: format!("class_{id}"),
+                color: default_color(id),
+            })
+            .collect();
+        ClassTable { classes }
+    }
+
+    /// Parses a class table from JSON: a list of `{id, name, color}` or `{"classes": [...]}`.
+    /// Missing names become `class_<id>`, missing colors come from [`default_color`].
+    pub fn from_json_str(text: &str) -> Result<ClassTable> {
+        let parsed: ClassTableJson = serde_json::from_str(text).map_err(|e| {
+            anyhow::anyhow!(
+                "not a class table ({e}); expected a JSON list of {{\"id\", \"name\", \"color\": [r, g, b]}} \
+                 or {{\"classes\": [...]}}"
+            )
+        })?;
+        let entries = match parsed {
+            ClassTableJson::List(v) | ClassTableJson::Object { classes: v } => v,
+        };
+        let classes = entries
+            .into_iter()
+            .map(|e| ClassInfo {
+                id: e.id,
+                name: e.name.unwrap_or_else(|| format!("class_{}", e.id)),
+                color: e.color.unwrap_or_else(|| default_color(e.id)),
+            })
+            .collect();
+        let table = ClassTable { classes };
+        table.validate()?;
+        Ok(table)
+    }
+
+    /// Checks for duplicate ids or names, empty names, and ids that collide with the
+    /// 16-bit ignore value.
+    pub fn validate(&self) -> Result<()> {
+        let mut ids = HashSet::new();
+        let mut names = HashSet::new();
+        for c in &self.classes {
+            if c.id >= IGNORE_U16 {
+                bail!(
+                    "class '{}' has id {}: ids must be below {IGNORE_U16} (the ignore value of 16-bit label maps)",
+                    c.name,
+                    c.id
+                );
+            }
+            if c.name.trim().is_empty() {
+                bail!("class id {} has an empty name", c.id);
+            }
+            if !ids.insert(c.id) {
+                bail!("duplicate class id {}", c.id);
+            }
+            if !names.insert(c.name.as_str()) {
+                bail!("duplicate class name '{}'", c.name);
+            }
+        }
+        Ok(())
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.classes.is_empty()
+    }
+
+    pub fn len(&self) -> usize {
+        self.classes.len()
+    }
+
+    pub fn get(&self, id: u32) -> Option<&ClassInfo> {
+        self.classes.iter().find(|c| c.id == id)
+    }
+
+    pub fn by_name(&self, name: &str) -> Option<&ClassInfo> {
+        self.classes.iter().find(|c| c.name == name)
+    }
+
+    pub fn contains(&self, id: u32) -> bool {
+        self.get(id).is_some()
+    }
+
+    /// The table's color for `id`, or the default palette color if the id is not listed.
+    pub fn color_of(&self, id: u32) -> [u8; 3] {
+        self.get(id)
+            .map(|c| c.color)
+            .unwrap_or_else(|| default_color(id))
+    }
+
+    /// The class name for `id`, or `class_<id>` if the id is not listed.
+    pub fn name_of(&self, id: u32) -> String {
+        self.get(id)
+            .map(|c| c.name.clone())
+            .unwrap_or_else(|| format!("class_{id}"))
+    }
+
+    /// Dense id -> color lookup for all 16-bit ids (painting images pixel by pixel).
+    pub fn color_lut(&self) -> Vec<[u8; 3]> {
+        let mut lut: Vec<[u8; 3]> = (0..=IGNORE_U16).map(default_color).collect();
+        for c in &self.classes {
+            lut[c.id as usize] = c.color;
+        }
+        lut[IGNORE_U16 as usize] = [0, 0, 0];
+        lut
+    }
+}
+
+/// Reads a class table JSON file (see [`ClassTable::from_json_str`]).
+pub fn read_class_table(path: &Path) -> Result<ClassTable> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("reading class table {}", path.display()))?;
+    ClassTable::from_json_str(&text).with_context(|| format!("class table {}", path.display()))
+}
+
+/// Writes `{"classes": [{id, name, color}, ...]}` atomically, sorted by id.
+pub fn write_class_table(path: &Path, table: &ClassTable) -> Result<()> {
+    table
+        .validate()
+        .with_context(|| format!("refusing to write class table {}", path.display()))?;
+    let mut sorted = table.clone();
+    sorted.classes.sort_by_key(|c| c.id);
+    write_atomic(path, |w| {
+        serde_json::to_writer_pretty(&mut *w, &sorted)?;
+        w.write_all(b"\n")?;
+        Ok(())
+    })
+}
+
+/// The classes actually present in a scene, numbered 0..C-1 in increasing user-id order:
+/// kernels see compact indices, files and reports see the user's ids.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct CompactClasses {
+    /// Compact index -> user id, sorted ascending.
+    user_ids: Vec<u32>,
+    /// User id -> compact index, for the ids present.
+    compact: BTreeMap<u32, u16>,
+}
+
+impl CompactClasses {
+    /// From the ids seen (e.g. in label maps); the ignore values and duplicates are dropped.
+    pub fn from_ids(ids: impl IntoIterator<Item = u32>) -> Result<CompactClasses> {
+        let set: BTreeSet<u32> = ids.into_iter().filter(|&id| id != IGNORE_U16).collect();
+        if set.len() >= IGNORE_U16 as usize {
+            bail!(
+                "too many classes ({}); at most {} are supported",
+                set.len(),
+                IGNORE_U16 - 1
+            );
+        }
+        if let Some(&bad) = set.iter().find(|&&id| id > IGNORE_U16) {
+            bail!("class id {bad} is out of range (ids must be below {IGNORE_U16})");
+        }
+        let user_ids: Vec<u32> = set.into_iter().collect();
+        let compact = user_ids
+            .iter()
+            .enumerate()
+            .map(|(i, &id)| (id, i as u16))
+            .collect();
+        Ok(CompactClasses { user_ids, compact })
+    }
+
+    /// Every class of a table, present or not.
+    pub fn from_table(table: &ClassTable) -> Result<CompactClasses> {
+        Self::from_ids(table.classes.iter().map(|c| c.id))
+    }
+
+    /// The number of compact classes C.
+    pub fn len(&self) -> usize {
+        self.user_ids.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.user_ids.is_empty()
+    }
+
+    /// Compact index of a user id, if present.
+    pub fn compact_of(&self, user_id: u32) -> Option<u16> {
+        self.compact.get(&user_id).copied()
+    }
+
+    /// User id of a compact index, if in range.
+    pub fn user_of(&self, compact: usize) -> Option<u32> {
+        self.user_ids.get(compact).copied()
+    }
+
+    /// The user ids in compact order.
+    pub fn user_ids(&self) -> &[u32] {
+        &self.user_ids
+    }
+
+    /// Dense lookup from a 16-bit label value to its compact index; ids not present and the
+    /// ignore value map to `u16::MAX`. Meant for remapping label maps pixel by pixel.
+    pub fn label_lut(&self) -> Vec<u16> {
+        let mut lut = vec![u16::MAX; IGNORE_U16 as usize + 1];
+        for (i, &id) in self.user_ids.iter().enumerate() {
+            lut[id as usize] = i as u16;
+        }
+        lut
+    }
+
+    /// The table restricted to the present classes, in compact order (for the PLY sidecar).
+    pub fn table(&self, names: &ClassTable) -> ClassTable {
+        let classes = self
+            .user_ids
+            .iter()
+            .map(|&id| ClassInfo {
+                id,
+                name: names.name_of(id),
+                color: names.color_of(id),
+            })
+            .collect();
+        ClassTable { classes }
+    }
 }

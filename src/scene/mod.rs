@@ -7,7 +7,9 @@ pub mod classes;
 pub mod colmap;
 pub mod gaussians;
 pub mod labels;
+pub mod look_at;
 pub mod ply;
+pub mod random_scene;
 pub mod synth;
 
 pub use camera::{Camera, Split};

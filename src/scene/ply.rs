@@ -1,1 +1,837 @@
 //! PLY read/write in the INRIA 3DGS layout, plus semantic properties.
+//!
+//! Vertex properties, in the order we write them (viewers need the standard ones first):
+//! `x y z nx ny nz f_dc_0..2 f_rest_0..(3*(K-1)-1) opacity scale_0..2 rot_0..3`, then the
+//! optional semantic ones `class` (int), `class_conf` (float), `instance` (int),
+//! `sem_0..sem_{C-1}` (float). INRIA stores `f_rest` channel-major (all red coefficients
+//! 1..K-1, then green, then blue); [`Gaussians::sh`] is `[n][coeff][rgb]`.
+//!
+//! The reader is hand-written and streaming: it parses the header, then decodes vertex
+//! records straight into the structure-of-arrays vectors, so a 5M-Gaussian scene costs the
+//! scene itself plus one record buffer. It reads binary little/big-endian and ASCII, converts
+//! any scalar type, and skips unknown properties.
+
+use std::fs::File;
+use std::io::{BufRead, BufReader, Read, Write};
+use std::path::{Path, PathBuf};
+
+use anyhow::{anyhow, bail, Context, Result};
+
+use super::classes::{read_class_table, write_class_table, ClassTable};
+use super::gaussians::{sh_coeffs_for_degree, Gaussians, SemanticLogits};
+use crate::util::write_atomic;
+
+/// A header longer than this is not a 3DGS PLY (and must not be read into memory whole).
+const MAX_HEADER_BYTES: usize = 1 << 20;
+
+/// Bytes of vertex records reserved up front when the data size is unknown (reading from a
+/// stream): the vectors then grow with the data actually present, so a bogus count cannot
+/// exhaust memory.
+const STREAM_PREALLOC_BYTES: usize = 16 << 20;
+
+/// Most `sem_*` channels we accept (a bound on the record size, not a modelling limit).
+const MAX_SEM_CHANNELS: usize = 65_535;
+
+// ---------------------------------------------------------------------------------------
+// Header
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PlyFormat {
+    Ascii,
+    BinaryLittleEndian,
+    BinaryBigEndian,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Scalar {
+    I8,
+    U8,
+    I16,
+    U16,
+    I32,
+    U32,
+    F32,
+    F64,
+}
+
+impl Scalar {
+    fn parse(name: &str) -> Option<Scalar> {
+        Some(match name {
+            "char" | "int8" => Scalar::I8,
+            "uchar" | "uint8" => Scalar::U8,
+            "short" | "int16" => Scalar::I16,
+            "ushort" | "uint16" => Scalar::U16,
+            "int" | "int32" => Scalar::I32,
+            "uint" | "uint32" => Scalar::U32,
+            "float" | "float32" => Scalar::F32,
+            "double" | "float64" => Scalar::F64,
+            _ => return None,
+        })
+    }
+
+    fn size(self) -> usize {
+        match self {
+            Scalar::I8 | Scalar::U8 => 1,
+            Scalar::I16 | Scalar::U16 => 2,
+            Scalar::I32 | Scalar::U32 | Scalar::F32 => 4,
+            Scalar::F64 => 8,
+        }
+    }
+
+    /// Decodes one value; `b` holds exactly `size()` bytes.
+    fn decode(self, b: &[u8], big_endian: bool) -> f64 {
+        macro_rules! num {
+            ($t:ty, $n:literal) => {{
+                let mut a = [0u8; $n];
+                a.copy_from_slice(&b[..$n]);
+                if big_endian {
+                    <$t>::from_be_bytes(a) as f64
+                } else {
+                    <$t>::from_le_bytes(a) as f64
+                }
+            }};
+        }
+        match self {
+            Scalar::I8 => b[0] as i8 as f64,
+            Scalar::U8 => b[0] as f64,
+            Scalar::I16 => num!(i16, 2),
+            Scalar::U16 => num!(u16, 2),
+            Scalar::I32 => num!(i32, 4),
+            Scalar::U32 => num!(u32, 4),
+            Scalar::F32 => num!(f32, 4),
+            Scalar::F64 => num!(f64, 8),
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
+enum PropertyDef {
+    Scalar { name: String, ty: Scalar },
+    List { name: String },
+}
+
+impl PropertyDef {
+    fn name(&self) -> &str {
+        match self {
+            PropertyDef::Scalar { name, .. } | PropertyDef::List { name } => name,
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
+struct ElementDef {
+    name: String,
+    count: u64,
+    props: Vec<PropertyDef>,
+}
+
+#[derive(Debug)]
+struct Header {
+    format: PlyFormat,
+    elements: Vec<ElementDef>,
+    /// Bytes the header took, `end_header` line included.
+    len: u64,
+}
+
+fn parse_header(r: &mut impl BufRead) -> Result<Header> {
+    let mut len = 0usize;
+    let mut line = Vec::new();
+    let mut next_line = |line: &mut Vec<u8>| -> Result<String> {
+        line.clear();
+        let n = r
+            .by_ref()
+            .take((MAX_HEADER_BYTES - len) as u64 + 1)
+            .read_until(b'\n', line)?;
+        len += n;
+        if n == 0 {
+            bail!("truncated header (no end_header line)");
+        }
+        if len > MAX_HEADER_BYTES {
+            bail!("header is longer than {MAX_HEADER_BYTES} bytes");
+        }
+        let text = std::str::from_utf8(line).map_err(|_| anyhow!("header is not ASCII text"))?;
+        Ok(text.trim_end_matches(['\n', '\r']).to_owned())
+    };
+    let magic = next_line(&mut line)?;
+    if magic.trim() != "ply" {
+        bail!("not a PLY file (first line is not 'ply')");
+    }
+    let mut format = None;
+    let mut elements: Vec<ElementDef> = Vec::new();
+    loop {
+        let text = next_line(&mut line)?;
+        let toks: Vec<&str> = text.split_whitespace().collect();
+        match toks.as_slice() {
+            [] => {}
+            ["comment", ..] | ["obj_info", ..] => {}
+            ["format", f, _version] => {
+                format = Some(match *f {
+                    "ascii" => PlyFormat::Ascii,
+                    "binary_little_endian" => PlyFormat::BinaryLittleEndian,
+                    "binary_big_endian" => PlyFormat::BinaryBigEndian,
+                    other => bail!("unknown PLY format '{other}'"),
+                })
+            }
+            ["element", name, count] => {
+                let count = count
+                    .parse::<u64>()
+                    .map_err(|_| anyhow!("element '{name}' has an invalid count '{count}'"))?;
+                elements.push(ElementDef {
+                    name: name.to_string(),
+                    count,
+                    props: Vec::new(),
+                });
+            }
+            ["property", "list", _count_ty, _item_ty, name] => {
+                let el = elements
+                    .last_mut()
+                    .ok_or_else(|| anyhow!("property before any element"))?;
+                el.props.push(PropertyDef::List {
+                    name: name.to_string(),
+                });
+            }
+            ["property", ty, name] => {
+                let el = elements
+                    .last_mut()
+                    .ok_or_else(|| anyhow!("property before any element"))?;
+                let ty = Scalar::parse(ty)
+                    .ok_or_else(|| anyhow!("property '{name}' has unknown type '{ty}'"))?;
+                el.props.push(PropertyDef::Scalar {
+                    name: name.to_string(),
+                    ty,
+                });
+            }
+            ["end_header"] => break,
+            _ => bail!(
+                "malformed header line '{}'",
+                text.chars().take(80).collect::<String>()
+            ),
+        }
+    }
+    let format = format.ok_or_else(|| anyhow!("header has no format line"))?;
+    Ok(Header {
+        format,
+        elements,
+        len: len as u64,
+    })
+}
+
+// ---------------------------------------------------------------------------------------
+// Mapping vertex properties to the Gaussians
+
+/// Where one vertex property goes.
+#[derive(Clone, Copy, Debug)]
+enum Slot {
+    Mean(usize),
+    /// Offset inside this vertex's `[coeff][rgb]` SH block.
+    Sh(usize),
+    Opacity,
+    Scale(usize),
+    Rot(usize),
+    Class,
+    ClassConf,
+    Instance,
+    Sem(usize),
+    Skip,
+}
+
+struct Layout {
+    /// One slot and scalar type per vertex property, in file order.
+    slots: Vec<(Slot, Scalar)>,
+    sh_degree: u32,
+    sem_channels: Option<usize>,
+    has_class: bool,
+    has_conf: bool,
+    has_instance: bool,
+}
+
+/// `prefix<N>` -> N.
+fn indexed(name: &str, prefix: &str) -> Option<usize> {
+    let rest = name.strip_prefix(prefix)?;
+    if rest.is_empty()
+        || !rest.bytes().all(|b| b.is_ascii_digit())
+        || (rest.len() > 1 && rest.starts_with('0'))
+    {
+        return None;
+    }
+    rest.parse().ok()
+}
+
+fn plan_layout(props: &[PropertyDef]) -> Result<Layout> {
+    let mut seen = std::collections::HashSet::new();
+    for p in props {
+        if !seen.insert(p.name()) {
+            bail!("vertex property '{}' appears twice", p.name());
+        }
+    }
+    let rest_count = props
+        .iter()
+        .filter(|p| indexed(p.name(), "f_rest_").is_some())
+        .count();
+    let sh_degree = match rest_count {
+        0 => 0,
+        9 => 1,
+        24 => 2,
+        45 => 3,
+        n => bail!("{n} f_rest properties do not match an SH degree (expected 0, 9, 24 or 45 for degree 0..3)"),
+    };
+    let rest_per_channel = sh_coeffs_for_degree(sh_degree) - 1;
+    let sem_count = props
+        .iter()
+        .filter(|p| indexed(p.name(), "sem_").is_some())
+        .count();
+    if sem_count > MAX_SEM_CHANNELS {
+        bail!("{sem_count} sem_* properties (at most {MAX_SEM_CHANNELS})");
+    }
+
+    let mut slots = Vec::with_capacity(props.len());
+    for p in props {
+        let name = p.name();
+        let slot = if let Some(i) = indexed(name, "f_rest_") {
+            if i >= rest_count {
+                bail!(
+                    "f_rest indices must run 0..{} without gaps; found f_rest_{i}",
+                    rest_count - 1
+                );
+            }
+            // Channel-major on disk: f_rest_i is channel i / (K-1), coefficient 1 + i % (K-1).
+            let (channel, coeff) = (i / rest_per_channel, 1 + i % rest_per_channel);
+            Slot::Sh(coeff * 3 + channel)
+        } else if let Some(i) = indexed(name, "sem_") {
+            if i >= sem_count {
+                bail!(
+                    "sem indices must run 0..{} without gaps; found sem_{i}",
+                    sem_count - 1
+                );
+            }
+            Slot::Sem(i)
+        } else {
+            match name {
+                "x" => Slot::Mean(0),
+                "y" => Slot::Mean(1),
+                "z" => Slot::Mean(2),
+                "f_dc_0" => Slot::Sh(0),
+                "f_dc_1" => Slot::Sh(1),
+                "f_dc_2" => Slot::Sh(2),
+                "opacity" => Slot::Opacity,
+                "scale_0" => Slot::Scale(0),
+                "scale_1" => Slot::Scale(1),
+                "scale_2" => Slot::Scale(2),
+                "rot_0" => Slot::Rot(0),
+                "rot_1" => Slot::Rot(1),
+                "rot_2" => Slot::Rot(2),
+                "rot_3" => Slot::Rot(3),
+                "class" => Slot::Class,
+                "class_conf" => Slot::ClassConf,
+                "instance" => Slot::Instance,
+                _ => Slot::Skip,
+            }
+        };
+        let ty = match p {
+            PropertyDef::Scalar { ty, .. } => *ty,
+            PropertyDef::List { name } => {
+                bail!("vertex property '{name}' is a list; a Gaussian PLY has only scalar vertex properties")
+            }
+        };
+        slots.push((slot, ty));
+    }
+
+    const REQUIRED: [&str; 14] = [
+        "x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
+        "rot_0", "rot_1", "rot_2", "rot_3",
+    ];
+    let missing: Vec<&str> = REQUIRED
+        .iter()
+        .copied()
+        .filter(|r| !seen.contains(r))
+        .collect();
+    if !missing.is_empty() {
+        bail!(
+            "missing required vertex properties: {} (a 3DGS PLY needs x y z f_dc_0..2 opacity \
+             scale_0..2 rot_0..3)",
+            missing.join(", ")
+        );
+    }
+    Ok(Layout {
+        slots,
+        sh_degree,
+        sem_channels: (sem_count > 0).then_some(sem_count),
+        has_class: seen.contains("class"),
+        has_conf: seen.contains("class_conf"),
+        has_instance: seen.contains("instance"),
+    })
+}
+
+// ---------------------------------------------------------------------------------------
+// Reading
+
+/// Reads a 3DGS PLY and rejects bad values (NaN/Inf, zero quaternions, ...).
+pub fn read_ply(path: &Path) -> Result<Gaussians> {
+    let g = read_ply_unchecked(path)?;
+    g.validate()
+        .with_context(|| format!("PLY {}", path.display()))?;
+    Ok(g)
+}
+
+/// Reads a 3DGS PLY checking its structure but not its values (for `inspect`, which reports
+/// bad values instead of stopping at them).
+pub fn read_ply_unchecked(path: &Path) -> Result<Gaussians> {
+    let file = File::open(path).with_context(|| format!("opening PLY {}", path.display()))?;
+    let file_len = file.metadata().ok().map(|m| m.len());
+    read_ply_from(BufReader::with_capacity(1 << 20, file), file_len)
+        .with_context(|| format!("PLY {}", path.display()))
+}
+
+/// Reads a 3DGS PLY from any reader without checking values. `total_len` (the stream's full
+/// length, when known) lets a vertex count the data cannot hold fail before allocating.
+pub fn read_ply_from(mut r: impl BufRead, total_len: Option<u64>) -> Result<Gaussians> {
+    let header = parse_header(&mut r)?;
+    let vi = header
+        .elements
+        .iter()
+        .position(|e| e.name == "vertex")
+        .ok_or_else(|| anyhow!("no 'vertex' element in the header"))?;
+    let layout = plan_layout(&header.elements[vi].props)?;
+    for el in &header.elements[..vi] {
+        skip_element(&mut r, header.format, el)?;
+    }
+    let vertex = &header.elements[vi];
+    let count = vertex.count;
+    let record_len: usize = layout.slots.iter().map(|(_, ty)| ty.size()).sum();
+    let data_len = total_len.map(|t| t.saturating_sub(header.len));
+    // Smallest possible encoding of one vertex: its binary record, or "0" plus a separator
+    // per value in ASCII.
+    let min_vertex_bytes = match header.format {
+        PlyFormat::Ascii => 2 * layout.slots.len() as u64,
+        _ => record_len as u64,
+    };
+    let fits = count
+        .checked_mul(min_vertex_bytes)
+        .zip(data_len)
+        .map(|(need, have)| need <= have.saturating_add(1));
+    let n = usize::try_from(count).map_err(|_| anyhow!("vertex count {count} is too large"))?;
+    let reserve = match fits {
+        Some(true) => n,
+        Some(false) => bail!(
+            "header claims {count} vertices but only {} bytes of data follow (truncated file?)",
+            data_len.unwrap_or(0)
+        ),
+        None if count.checked_mul(min_vertex_bytes).is_none() => {
+            bail!("vertex count {count} is too large")
+        }
+        None => n.min(STREAM_PREALLOC_BYTES / record_len.max(1)),
+    };
+
+    let mut g = empty_gaussians(&layout, reserve);
+    match header.format {
+        PlyFormat::Ascii => read_ascii_vertices(&mut r, &layout, n, &mut g)?,
+        f => read_binary_vertices(
+            &mut r,
+            &layout,
+            record_len,
+            n,
+            f == PlyFormat::BinaryBigEndian,
+            &mut g,
+        )?,
+    }
+    Ok(g)
+}
+
+/// Empty Gaussians shaped by the layout, with room for `reserve` vertices.
+fn empty_gaussians(layout: &Layout, reserve: usize) -> Gaussians {
+    let k = sh_coeffs_for_degree(layout.sh_degree);
+    Gaussians {
+        means: Vec::with_capacity(reserve),
+        log_scales: Vec::with_capacity(reserve),
+        quats: Vec::with_capacity(reserve),
+        opacity_logits: Vec::with_capacity(reserve),
+        sh_degree: layout.sh_degree,
+        sh: Vec::with_capacity(reserve * k * 3),
+        semantics: layout.sem_channels.map(|c| SemanticLogits {
+            channels: c,
+            logits: Vec::with_capacity(reserve * c),
+        }),
+        class_ids: layout.has_class.then(|| Vec::with_capacity(reserve)),
+        class_conf: layout.has_conf.then(|| Vec::with_capacity(reserve)),
+        instance_ids: layout.has_instance.then(|| Vec::with_capacity(reserve)),
+    }
+}
+
+fn skip_element(r: &mut impl BufRead, format: PlyFormat, el: &ElementDef) -> Result<()> {
+    let mut scalar_bytes = 0u64;
+    for p in &el.props {
+        match p {
+            PropertyDef::Scalar { ty, .. } => scalar_bytes += ty.size() as u64,
+            PropertyDef::List { name } => bail!(
+                "element '{}' before 'vertex' has a list property '{name}'; put the vertex element first",
+                el.name
+            ),
+        }
+    }
+    let truncated = || {
+        anyhow!(
+            "truncated file (in element '{}' before the vertices)",
+            el.name
+        )
+    };
+    match format {
+        PlyFormat::Ascii => {
+            let values = el
+                .count
+                .checked_mul(el.props.len() as u64)
+                .ok_or_else(truncated)?;
+            let mut tokens = Tokens::new(r);
+            for _ in 0..values {
+                tokens.next_value()?.ok_or_else(truncated)?;
+            }
+            tokens.finish_line()
+        }
+        _ => {
+            let bytes = el.count.checked_mul(scalar_bytes).ok_or_else(truncated)?;
+            let copied = std::io::copy(&mut r.by_ref().take(bytes), &mut std::io::sink())?;
+            if copied != bytes {
+                return Err(truncated());
+            }
+            Ok(())
+        }
+    }
+}
+
+/// The values of one vertex before they are pushed (semantic logits go straight in).
+struct VertexValues {
+    mean: [f32; 3],
+    scale: [f32; 3],
+    rot: [f32; 4],
+    opacity: f32,
+    class: i32,
+    conf: f32,
+    instance: i32,
+}
+
+impl VertexValues {
+    fn new() -> Self {
+        VertexValues {
+            mean: [0.0; 3],
+            scale: [0.0; 3],
+            rot: [0.0; 4],
+            opacity: 0.0,
+            class: -1,
+            conf: 0.0,
+            instance: -1,
+        }
+    }
+}
+
+fn to_i32(v: f64, what: &str, vertex: usize) -> Result<i32> {
+    if v.fract() != 0.0 || v < i32::MIN as f64 || v > i32::MAX as f64 {
+        bail!("vertex {vertex}: '{what}' value {v} is not a 32-bit integer");
+    }
+    Ok(v as i32)
+}
+
+/// Puts one decoded value where its slot says. `sh` and `sem` are this vertex's blocks.
+#[inline]
+fn store(
+    slot: Slot,
+    v: f64,
+    vals: &mut VertexValues,
+    sh: &mut [f32],
+    sem: &mut [f32],
+    vertex: usize,
+) -> Result<()> {
+    match slot {
+        Slot::Mean(i) => vals.mean[i] = v as f32,
+        Slot::Sh(i) => sh[i] = v as f32,
+        Slot::Opacity => vals.opacity = v as f32,
+        Slot::Scale(i) => vals.scale[i] = v as f32,
+        Slot::Rot(i) => vals.rot[i] = v as f32,
+        Slot::Class => vals.class = to_i32(v, "class", vertex)?,
+        Slot::ClassConf => vals.conf = v as f32,
+        Slot::Instance => vals.instance = to_i32(v, "instance", vertex)?,
+        Slot::Sem(i) => sem[i] = v as f32,
+        Slot::Skip => {}
+    }
+    Ok(())
+}
+
+/// Appends one vertex: extends SH and semantics by a zeroed block, fills it through `fill`,
+/// then pushes the per-vertex scalars.
+fn push_vertex(
+    g: &mut Gaussians,
+    fill: impl FnOnce(&mut VertexValues, &mut [f32], &mut [f32]) -> Result<()>,
+) -> Result<()> {
+    let k3 = g.sh_coeffs() * 3;
+    let sh_start = g.sh.len();
+    g.sh.resize(sh_start + k3, 0.0);
+    let mut no_sem: [f32; 0] = [];
+    let sem: &mut [f32] = match &mut g.semantics {
+        Some(s) => {
+            let start = s.logits.len();
+            s.logits.resize(start + s.channels, 0.0);
+            &mut s.logits[start..]
+        }
+        None => &mut no_sem,
+    };
+    let mut vals = VertexValues::new();
+    fill(&mut vals, &mut g.sh[sh_start..], sem)?;
+    g.means.push(vals.mean);
+    g.log_scales.push(vals.scale);
+    g.quats.push(vals.rot);
+    g.opacity_logits.push(vals.opacity);
+    if let Some(v) = &mut g.class_ids {
+        v.push(vals.class);
+    }
+    if let Some(v) = &mut g.class_conf {
+        v.push(vals.conf);
+    }
+    if let Some(v) = &mut g.instance_ids {
+        v.push(vals.instance);
+    }
+    Ok(())
+}
+
+fn read_binary_vertices(
+    r: &mut impl Read,
+    layout: &Layout,
+    record_len: usize,
+    n: usize,
+    big_endian: bool,
+    g: &mut Gaussians,
+) -> Result<()> {
+    let mut record = vec![0u8; record_len];
+    for vertex in 0..n {
+        r.read_exact(&mut record).map_err(|e| match e.kind() {
+            std::io::ErrorKind::UnexpectedEof => {
+                anyhow!("truncated file: the header claims {n} vertices, the data ends in vertex {vertex}")
+            }
+            _ => anyhow!("read error in vertex {vertex}: {e}"),
+        })?;
+        push_vertex(g, |vals, sh, sem| {
+            let mut at = 0;
+            for &(slot, ty) in &layout.slots {
+                let size = ty.size();
+                let v = ty.decode(&record[at..at + size], big_endian);
+                at += size;
+                store(slot, v, vals, sh, sem, vertex)?;
+            }
+            Ok(())
+        })?;
+    }
+    Ok(())
+}
+
+fn read_ascii_vertices(
+    r: &mut impl BufRead,
+    layout: &Layout,
+    n: usize,
+    g: &mut Gaussians,
+) -> Result<()> {
+    let mut tokens = Tokens::new(r);
+    for vertex in 0..n {
+        push_vertex(g, |vals, sh, sem| {
+            for &(slot, _) in &layout.slots {
+                let v = tokens.next_value()?.ok_or_else(|| {
+                    anyhow!("truncated file: the header claims {n} vertices, the data ends in vertex {vertex}")
+                })?;
+                store(slot, v, vals, sh, sem, vertex)?;
+            }
+            Ok(())
+        })?;
+    }
+    Ok(())
+}
+
+/// Whitespace-separated ASCII values, read line by line.
+struct Tokens<'a, R: BufRead> {
+    r: &'a mut R,
+    line: String,
+    pos: usize,
+    line_no: usize,
+}
+
+impl<'a, R: BufRead> Tokens<'a, R> {
+    fn new(r: &'a mut R) -> Self {
+        Tokens {
+            r,
+            line: String::new(),
+            pos: 0,
+            line_no: 0,
+        }
+    }
+
+    /// The next value, `None` at end of input.
+    fn next_value(&mut self) -> Result<Option<f64>> {
+        loop {
+            let rest = &self.line[self.pos..];
+            let trimmed = rest.trim_start();
+            if !trimmed.is_empty() {
+                let start = self.pos + (rest.len() - trimmed.len());
+                let end = trimmed
+                    .find(char::is_whitespace)
+                    .map_or(self.line.len(), |e| start + e);
+                self.pos = end;
+                let tok = &self.line[start..end];
+                let v = tok.parse::<f64>().map_err(|_| {
+                    anyhow!(
+                        "data line {}: '{}' is not a number",
+                        self.line_no,
+                        tok.chars().take(40).collect::<String>()
+                    )
+                })?;
+                return Ok(Some(v));
+            }
+            self.line.clear();
+            self.pos = 0;
+            self.line_no += 1;
+            let read = self
+                .r
+                .read_line(&mut self.line)
+                .map_err(|e| anyhow!("data line {}: {e}", self.line_no))?;
+            if read == 0 {
+                return Ok(None);
+            }
+        }
+    }
+
+    /// Elements end at a line end: anything left on the current line is an error.
+    fn finish_line(&mut self) -> Result<()> {
+        if !self.line[self.pos..].trim().is_empty() {
+            bail!(
+                "data line {}: more values than the header declares",
+                self.line_no
+            );
+        }
+        Ok(())
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Writing
+
+/// The property names we write, in order (standard 3DGS first, then semantics).
+fn property_names(g: &Gaussians) -> Vec<(String, &'static str)> {
+    let mut names: Vec<(String, &'static str)> = Vec::new();
+    let float = |n: &str| (n.to_owned(), "float");
+    for n in [
+        "x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2",
+    ] {
+        names.push(float(n));
+    }
+    for i in 0..(g.sh_coeffs() - 1) * 3 {
+        names.push(float(&format!("f_rest_{i}")));
+    }
+    for n in [
+        "opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3",
+    ] {
+        names.push(float(n));
+    }
+    if g.class_ids.is_some() {
+        names.push(("class".into(), "int"));
+    }
+    if g.class_conf.is_some() {
+        names.push(float("class_conf"));
+    }
+    if g.instance_ids.is_some() {
+        names.push(("instance".into(), "int"));
+    }
+    if let Some(s) = &g.semantics {
+        for i in 0..s.channels {
+            names.push(float(&format!("sem_{i}")));
+        }
+    }
+    names
+}
+
+/// Writes a binary little-endian 3DGS PLY atomically, with the semantic fields that are set.
+pub fn write_ply(path: &Path, g: &Gaussians) -> Result<()> {
+    g.check_layout()
+        .with_context(|| format!("refusing to write PLY {}", path.display()))?;
+    write_atomic(path, |w| write_ply_to(w, g))
+}
+
+/// Writes a binary little-endian 3DGS PLY to any writer.
+pub fn write_ply_to(w: &mut impl Write, g: &Gaussians) -> Result<()> {
+    g.check_layout()?;
+    let names = property_names(g);
+    let mut header = format!(
+        "ply\nformat binary_little_endian 1.0\ncomment written by semsplat {}\nelement vertex {}\n",
+        env!("CARGO_PKG_VERSION"),
+        g.len()
+    );
+    for (name, ty) in &names {
+        header.push_str(&format!("property {ty} {name}\n"));
+    }
+    header.push_str("end_header\n");
+    w.write_all(header.as_bytes())?;
+
+    let k = g.sh_coeffs();
+    let mut record: Vec<u8> = Vec::with_capacity(names.len() * 4);
+    for i in 0..g.len() {
+        record.clear();
+        let mut f = |v: f32| record.extend_from_slice(&v.to_le_bytes());
+        g.means[i].iter().for_each(|&v| f(v));
+        [0.0; 3].iter().for_each(|&v| f(v)); // normals: unused by 3DGS, expected by viewers
+        let sh = &g.sh[i * k * 3..(i + 1) * k * 3];
+        (0..3).for_each(|c| f(sh[c]));
+        // f_rest channel-major: all red coefficients, then green, then blue.
+        for c in 0..3 {
+            for coeff in 1..k {
+                f(sh[coeff * 3 + c]);
+            }
+        }
+        f(g.opacity_logits[i]);
+        g.log_scales[i].iter().for_each(|&v| f(v));
+        g.quats[i].iter().for_each(|&v| f(v));
+        if let Some(v) = &g.class_ids {
+            record.extend_from_slice(&v[i].to_le_bytes());
+        }
+        if let Some(v) = &g.class_conf {
+            record.extend_from_slice(&v[i].to_le_bytes());
+        }
+        if let Some(v) = &g.instance_ids {
+            record.extend_from_slice(&v[i].to_le_bytes());
+        }
+        if let Some(s) = &g.semantics {
+            for v in &s.logits[i * s.channels..(i + 1) * s.channels] {
+                record.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        w.write_all(&record)?;
+    }
+    Ok(())
+}
+
+// ---------------------------------------------------------------------------------------
+// Class table sidecar
+
+/// `<ply path without .ply>.classes.json`: where the class table of a PLY's `class` ids lives.
+pub fn classes_sidecar_path(ply_path: &Path) -> PathBuf {
+    let is_ply = ply_path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("ply"));
+    let base = if is_ply {
+        ply_path.with_extension("")
+    } else {
+        ply_path.to_path_buf()
+    };
+    let mut name = base
+        .file_name()
+        .map(|n| n.to_os_string())
+        .unwrap_or_default();
+    name.push(".classes.json");
+    base.with_file_name(name)
+}
+
+/// Writes the class table beside a PLY (see [`classes_sidecar_path`]).
+pub fn write_classes_sidecar(ply_path: &Path, table: &ClassTable) -> Result<()> {
+    write_class_table(&classes_sidecar_path(ply_path), table)
+}
+
+/// Reads the class table beside a PLY, `None` if there is none.
+pub fn read_classes_sidecar(ply_path: &Path) -> Result<Option<ClassTable>> {
+    let path = classes_sidecar_path(ply_path);
+    if !path.exists() {
+        return Ok(None);
+    }
+    read_class_table(&path).map(Some)
+}

@@ -1,0 +1,297 @@
+//! Gaussians that sample the room's surfaces the way a trained scene would: flat discs on a
+//! regular grid (two scales ~ the spacing, the third tiny), oriented by the surface normal,
+//! nearly opaque, colored by the lit texture. Surfaces another solid covers (a box bottom on
+//! the floor, a leg inside a seat, a picture's back on its wall) get no Gaussians.
+//! Also the sparse, jittered point cloud a from-scratch training run starts from.
+
+use std::f64::consts::{PI, TAU};
+
+use glam::{DMat3, DQuat, DVec3};
+
+use super::primitives::{Face, Shape};
+use super::room::Room;
+use crate::scene::Gaussians;
+use crate::util::Rng;
+
+/// The degree-0 SH constant (color = SH_C0 * dc + 0.5).
+const SH_C0: f64 = 0.282_094_791_773_878_14;
+/// In-plane standard deviation per unit of grid spacing: neighbours overlap enough that the
+/// surface renders opaque without blurring textures much.
+const SCALE_PER_SPACING: f64 = 0.7;
+/// Thickness (normal-direction standard deviation) per unit of spacing.
+const THICKNESS_PER_SPACING: f64 = 0.05;
+const SURFACE_OPACITY: f64 = 0.95;
+/// Initial opacity of the from-scratch point cloud (the 3DGS convention).
+const INIT_OPACITY: f64 = 0.1;
+const INIT_COLOR_NOISE: f64 = 0.03;
+
+/// A point on a visible surface with its frame; `tangent_u x tangent_v = normal`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfaceSample {
+    pub position: DVec3,
+    pub normal: DVec3,
+    pub tangent_u: DVec3,
+    pub tangent_v: DVec3,
+    /// Grid spacing along each tangent (meters).
+    pub spacing_u: f64,
+    pub spacing_v: f64,
+    /// Index into `Room::primitives`.
+    pub primitive: u32,
+    pub face: Face,
+}
+
+/// Approximate number of grid samples over all surfaces before coverage culling.
+pub fn estimated_samples(room: &Room, spacing: f64) -> f64 {
+    let area: f64 = room.primitives.iter().map(|p| surface_area(&p.shape)).sum();
+    area / (spacing * spacing)
+}
+
+fn surface_area(shape: &Shape) -> f64 {
+    match shape {
+        Shape::Quad(q) => 4.0 * q.half.x * q.half.y,
+        Shape::Box(b) => 8.0 * (b.half.x * b.half.y + b.half.y * b.half.z + b.half.z * b.half.x),
+        Shape::Cylinder(c) => TAU * c.radius * (2.0 * c.half_height + c.radius),
+        Shape::Sphere(s) => 2.0 * TAU * s.radius * s.radius,
+    }
+}
+
+/// Samples every uncovered surface on a grid of about `spacing` meters.
+pub fn sample_surfaces(room: &Room, spacing: f64) -> Vec<SurfaceSample> {
+    let mut out = Vec::new();
+    for (index, prim) in room.primitives.iter().enumerate() {
+        let mut grid = Grid {
+            room,
+            primitive: index as u32,
+            spacing,
+            out: &mut out,
+        };
+        match &prim.shape {
+            Shape::Quad(q) => grid.rect(q.center, q.u, q.v, q.half.x, q.half.y, Face::Quad),
+            Shape::Box(b) => {
+                for face in 0..6u8 {
+                    let a = (face / 2) as usize;
+                    let sign = if face % 2 == 0 { 1.0 } else { -1.0 };
+                    let (mut t1, mut t2) = ((a + 1) % 3, (a + 2) % 3);
+                    if sign < 0.0 {
+                        std::mem::swap(&mut t1, &mut t2);
+                    }
+                    let center = b.center + b.rot.col(a) * (sign * b.half[a]);
+                    grid.rect(
+                        center,
+                        b.rot.col(t1),
+                        b.rot.col(t2),
+                        b.half[t1],
+                        b.half[t2],
+                        Face::Box(face),
+                    );
+                }
+            }
+            Shape::Cylinder(c) => {
+                let (ex, ey, ez) = (c.rot.x_axis, c.rot.y_axis, c.rot.z_axis);
+                let n_theta = ((TAU * c.radius / spacing).ceil() as usize).max(3);
+                let n_z = ((2.0 * c.half_height / spacing).ceil() as usize).max(1);
+                let (du, dv) = (
+                    TAU * c.radius / n_theta as f64,
+                    2.0 * c.half_height / n_z as f64,
+                );
+                for i in 0..n_theta {
+                    let theta = (i as f64 + 0.5) * TAU / n_theta as f64;
+                    let normal = ex * theta.cos() + ey * theta.sin();
+                    let tangent = -ex * theta.sin() + ey * theta.cos();
+                    for j in 0..n_z {
+                        let z = -c.half_height + (j as f64 + 0.5) * dv;
+                        let p = c.center + normal * c.radius + ez * z;
+                        grid.push(p, tangent, ez, du, dv, Face::CylinderSide);
+                    }
+                }
+                grid.disc(
+                    c.center + ez * c.half_height,
+                    ex,
+                    ey,
+                    c.radius,
+                    Face::CylinderTop,
+                );
+                grid.disc(
+                    c.center - ez * c.half_height,
+                    ey,
+                    ex,
+                    c.radius,
+                    Face::CylinderBottom,
+                );
+            }
+            Shape::Sphere(s) => {
+                let n = ((2.0 * TAU * s.radius * s.radius / (spacing * spacing)).round() as usize)
+                    .max(12);
+                let step = (2.0 * TAU * s.radius * s.radius / n as f64).sqrt();
+                let golden = PI * (3.0 - 5f64.sqrt());
+                for i in 0..n {
+                    let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+                    let r = (1.0 - z * z).max(0.0).sqrt();
+                    let phi = i as f64 * golden;
+                    let normal = DVec3::new(r * phi.cos(), r * phi.sin(), z);
+                    let t1 = DVec3::Z.cross(normal).try_normalize().unwrap_or(DVec3::X);
+                    let t2 = normal.cross(t1);
+                    grid.push(
+                        s.center + normal * s.radius,
+                        t1,
+                        t2,
+                        step,
+                        step,
+                        Face::Sphere,
+                    );
+                }
+            }
+        }
+    }
+    out
+}
+
+struct Grid<'a> {
+    room: &'a Room,
+    primitive: u32,
+    spacing: f64,
+    out: &'a mut Vec<SurfaceSample>,
+}
+
+impl Grid<'_> {
+    /// Keeps the sample if no other solid covers it.
+    fn push(
+        &mut self,
+        position: DVec3,
+        tangent_u: DVec3,
+        tangent_v: DVec3,
+        spacing_u: f64,
+        spacing_v: f64,
+        face: Face,
+    ) {
+        let normal = tangent_u.cross(tangent_v);
+        if self
+            .room
+            .is_covered(self.primitive as usize, position, normal)
+        {
+            return;
+        }
+        self.out.push(SurfaceSample {
+            position,
+            normal,
+            tangent_u,
+            tangent_v,
+            spacing_u,
+            spacing_v,
+            primitive: self.primitive,
+            face,
+        });
+    }
+
+    /// Cell centers of a rectangle `center + a * t1 + b * t2`, |a| <= h1, |b| <= h2.
+    fn rect(&mut self, center: DVec3, t1: DVec3, t2: DVec3, h1: f64, h2: f64, face: Face) {
+        let n1 = ((2.0 * h1 / self.spacing).ceil() as usize).max(1);
+        let n2 = ((2.0 * h2 / self.spacing).ceil() as usize).max(1);
+        let (d1, d2) = (2.0 * h1 / n1 as f64, 2.0 * h2 / n2 as f64);
+        for i in 0..n1 {
+            let a = -h1 + (i as f64 + 0.5) * d1;
+            for j in 0..n2 {
+                let b = -h2 + (j as f64 + 0.5) * d2;
+                self.push(center + t1 * a + t2 * b, t1, t2, d1, d2, face);
+            }
+        }
+    }
+
+    /// Concentric rings covering a disc of `radius` around `center` in the plane of t1, t2.
+    fn disc(&mut self, center: DVec3, t1: DVec3, t2: DVec3, radius: f64, face: Face) {
+        let rings = ((radius / self.spacing).ceil() as usize).max(1);
+        let dr = radius / rings as f64;
+        for k in 0..rings {
+            let r = (k as f64 + 0.5) * dr;
+            let count = ((TAU * r / dr).round() as usize).max(1);
+            for j in 0..count {
+                let angle = (j as f64 + 0.5 * (k % 2) as f64) * TAU / count as f64;
+                let p = center + (t1 * angle.cos() + t2 * angle.sin()) * r;
+                self.push(p, t1, t2, dr, dr, face);
+            }
+        }
+    }
+}
+
+fn logit(p: f64) -> f32 {
+    (p / (1.0 - p)).ln() as f32
+}
+
+fn push_color(sh: &mut Vec<f32>, color: DVec3) {
+    sh.extend(color.to_array().map(|c| ((c - 0.5) / SH_C0) as f32));
+}
+
+/// Gaussians for surface samples, with the sampled primitive's class and instance.
+pub fn gaussians_from_samples(room: &Room, samples: &[SurfaceSample]) -> Gaussians {
+    let n = samples.len();
+    let mut g = Gaussians {
+        means: Vec::with_capacity(n),
+        log_scales: Vec::with_capacity(n),
+        quats: Vec::with_capacity(n),
+        opacity_logits: vec![logit(SURFACE_OPACITY); n],
+        sh_degree: 0,
+        sh: Vec::with_capacity(3 * n),
+        semantics: None,
+        class_ids: Some(Vec::with_capacity(n)),
+        class_conf: None,
+        instance_ids: Some(Vec::with_capacity(n)),
+    };
+    for s in samples {
+        let prim = &room.primitives[s.primitive as usize];
+        g.means.push(s.position.as_vec3().to_array());
+        let thickness = THICKNESS_PER_SPACING * s.spacing_u.min(s.spacing_v);
+        g.log_scales.push(
+            [
+                SCALE_PER_SPACING * s.spacing_u,
+                SCALE_PER_SPACING * s.spacing_v,
+                thickness,
+            ]
+            .map(|x| x.ln() as f32),
+        );
+        // Local axes (x, y, z) = (tangent_u, tangent_v, normal): the flat axis is the normal.
+        let q = DQuat::from_mat3(&DMat3::from_cols(s.tangent_u, s.tangent_v, s.normal)).normalize();
+        let q = if q.w < 0.0 { -q } else { q };
+        g.quats
+            .push([q.w as f32, q.x as f32, q.y as f32, q.z as f32]);
+        push_color(
+            &mut g.sh,
+            room.color_at(s.primitive as usize, s.position, s.face),
+        );
+        if let Some(ids) = g.class_ids.as_mut() {
+            ids.push(prim.class_id as i32);
+        }
+        if let Some(ids) = g.instance_ids.as_mut() {
+            ids.push(prim.instance as i32);
+        }
+    }
+    g
+}
+
+/// A sparse point cloud for training from scratch (like a structure-from-motion cloud): one
+/// point per `spacing` cell of the visible surfaces, moved off the grid within its cell and
+/// by `jitter` meters (normal distribution) along the normal, with slightly noisy colors;
+/// isotropic, low-opacity Gaussians without labels.
+pub fn init_point_cloud(room: &Room, spacing: f64, jitter: f64, rng: &mut Rng) -> Gaussians {
+    let samples = sample_surfaces(room, spacing);
+    let n = samples.len();
+    let mut g = Gaussians {
+        means: Vec::with_capacity(n),
+        log_scales: vec![[(0.5 * spacing).ln() as f32; 3]; n],
+        quats: vec![[1.0, 0.0, 0.0, 0.0]; n],
+        opacity_logits: vec![logit(INIT_OPACITY); n],
+        sh_degree: 0,
+        sh: Vec::with_capacity(3 * n),
+        ..Default::default()
+    };
+    for s in &samples {
+        let du = rng.range_f64(-0.5, 0.5) * s.spacing_u;
+        let dv = rng.range_f64(-0.5, 0.5) * s.spacing_v;
+        let on_surface = s.position + s.tangent_u * du + s.tangent_v * dv;
+        let p = on_surface + s.normal * (jitter * rng.normal());
+        g.means.push(p.as_vec3().to_array());
+        let noise = DVec3::new(rng.normal(), rng.normal(), rng.normal()) * INIT_COLOR_NOISE;
+        let color = room.color_at(s.primitive as usize, on_surface, s.face) + noise;
+        push_color(&mut g.sh, color.clamp(DVec3::ZERO, DVec3::ONE));
+    }
+    g
+}

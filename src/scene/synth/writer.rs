@@ -1,0 +1,264 @@
+//! Writes a generated scene as an output folder (layout in `OUTPUT_LAYOUT`). Every file is
+//! written atomically; views are written several at a time. Files a previous run left in our
+//! own subfolders for views that no longer exist are removed, so a folder never mixes runs.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
+
+use anyhow::{Context, Result};
+use image::codecs::png::PngEncoder;
+use image::{ExtendedColorType, ImageEncoder};
+use indicatif::ProgressBar;
+use serde::Serialize;
+
+use super::raycast::ViewTruth;
+use super::SynthScene;
+use crate::scene::cameras_json::write_semsplat_cameras;
+use crate::scene::classes::write_class_table;
+use crate::scene::labels::{write_label_png, write_palette_png, LabelMap};
+use crate::scene::ply::{write_classes_sidecar, write_ply};
+use crate::util::{write_atomic, write_bytes_atomic};
+
+/// The output layout, for `--help`.
+// No line continuation before the first line: it would eat the indentation.
+pub const OUTPUT_LAYOUT: &str = "  scene.ply              ground-truth Gaussians (flat discs on the visible surfaces, SH degree 0)
+                         with per-Gaussian `class` and `instance`; scene.classes.json beside it
+  init.ply               sparse jittered surface point cloud (no labels) for training from scratch
+  cameras.json           all views (semsplat camera JSON; \"split\": \"train\" | \"test\")
+  classes.json           class table: id (as in label maps), name, palette color
+  instances.json         instance table: id (as in instances/), name, class
+  room.json              the room description; reusable with --preset DIR/room.json
+  synth.json             the settings of this run and the resulting counts
+  images/NAME.png        ray-cast RGB (NAME = train_0000.., test_0000..)
+  labels/NAME.png        true class ids (8-bit gray PNG, 255 = ignore: pixel sees nothing)
+  instances/NAME.png     true instance ids (8-bit, or 16-bit when >= 255 instances)
+  labels_noisy/NAME.png  noisy class ids for every view, with --noise (evaluate on labels/)
+  labels_noisy/noise.json  spec, seed, the consistently mislabeled objects and measured rates
+  vis/labels*/NAME.png   palette-colored previews of the label maps (unless --no-previews)";
+
+const VIEW_DIRS: &[&str] = &[
+    "images",
+    "labels",
+    "instances",
+    "labels_noisy",
+    "vis/labels",
+    "vis/labels_noisy",
+];
+
+#[derive(Serialize)]
+struct InstanceEntry<'a> {
+    id: u32,
+    name: &'a str,
+    class_id: u32,
+    class: &'a str,
+    structural: bool,
+}
+
+#[derive(Serialize)]
+struct RunSummary<'a> {
+    generator: String,
+    room: String,
+    seed: u64,
+    train_views: usize,
+    test_views: usize,
+    width: u32,
+    height: u32,
+    hfov_deg: f64,
+    spacing: f64,
+    init_spacing: f64,
+    init_jitter: f64,
+    noise: Option<String>,
+    classes: usize,
+    instances: usize,
+    primitives: usize,
+    gaussians: usize,
+    init_points: usize,
+    views: Vec<&'a str>,
+}
+
+/// Writes `scene` into `dir` (created if needed).
+pub fn write_synth(dir: &Path, scene: &SynthScene) -> Result<()> {
+    write_synth_with_progress(dir, scene, &ProgressBar::hidden())
+}
+
+/// `write_synth`, ticking `progress` once per written view (its length is set here).
+pub fn write_synth_with_progress(
+    dir: &Path,
+    scene: &SynthScene,
+    progress: &ProgressBar,
+) -> Result<()> {
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("creating output folder {}", dir.display()))?;
+    remove_stale(dir, scene)?;
+    let room = &scene.room;
+    write_ply(&dir.join("scene.ply"), &scene.gaussians)?;
+    write_classes_sidecar(&dir.join("scene.ply"), &room.classes)?;
+    write_ply(&dir.join("init.ply"), &scene.init_points)?;
+    write_semsplat_cameras(&dir.join("cameras.json"), &scene.cameras)?;
+    write_class_table(&dir.join("classes.json"), &room.classes)?;
+    let instances: Vec<InstanceEntry> = room
+        .instances
+        .iter()
+        .map(|i| InstanceEntry {
+            id: i.id,
+            name: &i.name,
+            class_id: i.class_id,
+            class: room.class_name(i.class_id),
+            structural: i.structural,
+        })
+        .collect();
+    write_json(&dir.join("instances.json"), &instances)?;
+    write_json(&dir.join("room.json"), &room.spec)?;
+    write_json(&dir.join("synth.json"), &summary(scene))?;
+    if let Some(noisy) = &scene.noisy {
+        write_json(&dir.join("labels_noisy").join("noise.json"), &noisy.report)?;
+    }
+
+    progress.set_length(scene.views.len() as u64);
+    let next = AtomicUsize::new(0);
+    let first_error: Mutex<Option<anyhow::Error>> = Mutex::new(None);
+    let threads = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .min(scene.views.len())
+        .max(1);
+    std::thread::scope(|s| {
+        for _ in 0..threads {
+            s.spawn(|| loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                if i >= scene.views.len() || first_error.lock().map_or(true, |e| e.is_some()) {
+                    break;
+                }
+                if let Err(e) = write_view(dir, scene, i) {
+                    if let Ok(mut slot) = first_error.lock() {
+                        slot.get_or_insert(e);
+                    }
+                    break;
+                }
+                progress.inc(1);
+            });
+        }
+    });
+    match first_error.into_inner().unwrap_or_else(|e| e.into_inner()) {
+        Some(e) => Err(e),
+        None => Ok(()),
+    }
+}
+
+fn write_view(dir: &Path, scene: &SynthScene, i: usize) -> Result<()> {
+    let view = &scene.views[i];
+    let file = format!("{}.png", scene.cameras[i].name);
+    write_bytes_atomic(&dir.join("images").join(&file), &encode_rgb(view)?)?;
+    let labels = label_map(view, view.labels.clone())?;
+    write_label_png(&dir.join("labels").join(&file), &labels)?;
+    write_label_png(
+        &dir.join("instances").join(&file),
+        &label_map(view, view.instances.clone())?,
+    )?;
+    let classes = &scene.room.classes;
+    if scene.config.previews {
+        write_palette_png(&dir.join("vis/labels").join(&file), &labels, classes)?;
+    }
+    if let Some(noisy) = &scene.noisy {
+        let map = label_map(view, noisy.maps[i].clone())?;
+        write_label_png(&dir.join("labels_noisy").join(&file), &map)?;
+        if scene.config.previews {
+            write_palette_png(&dir.join("vis/labels_noisy").join(&file), &map, classes)?;
+        }
+    }
+    Ok(())
+}
+
+fn label_map(view: &ViewTruth, labels: Vec<u16>) -> Result<LabelMap> {
+    LabelMap::new(view.width, view.height, labels)
+}
+
+fn encode_rgb(view: &ViewTruth) -> Result<Vec<u8>> {
+    let mut png = Vec::new();
+    PngEncoder::new(&mut png).write_image(
+        &view.rgb,
+        view.width,
+        view.height,
+        ExtendedColorType::Rgb8,
+    )?;
+    Ok(png)
+}
+
+fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
+    write_atomic(path, |w| {
+        serde_json::to_writer_pretty(&mut *w, value)?;
+        std::io::Write::write_all(w, b"\n")?;
+        Ok(())
+    })
+}
+
+fn summary(scene: &SynthScene) -> RunSummary<'_> {
+    let c = &scene.config;
+    let room = match &c.room {
+        super::RoomSource::Preset(name) => name.clone(),
+        super::RoomSource::File(path) => path.display().to_string(),
+        super::RoomSource::Spec(_) => "(in-memory room)".to_string(),
+    };
+    RunSummary {
+        generator: format!("semsplat {} synth", env!("CARGO_PKG_VERSION")),
+        room,
+        seed: c.seed,
+        train_views: c.train_views,
+        test_views: c.test_views,
+        width: c.width,
+        height: c.height,
+        hfov_deg: c.hfov_deg,
+        spacing: c.spacing,
+        init_spacing: c.init_spacing,
+        init_jitter: c.init_jitter,
+        noise: c.noise.as_ref().map(|n| n.to_string()),
+        classes: scene.room.classes.classes.len(),
+        instances: scene.room.instances.len(),
+        primitives: scene.room.primitives.len(),
+        gaussians: scene.gaussians.len(),
+        init_points: scene.init_points.len(),
+        views: scene.cameras.iter().map(|c| c.name.as_str()).collect(),
+    }
+}
+
+/// Removes PNGs in our view folders that this run will not rewrite (views of an earlier, larger
+/// run; noisy labels or previews this run does not produce) and an outdated noise.json.
+fn remove_stale(dir: &Path, scene: &SynthScene) -> Result<()> {
+    let keep = |sub: &str| -> bool {
+        match sub {
+            "labels_noisy" => scene.noisy.is_some(),
+            "vis/labels" => scene.config.previews,
+            "vis/labels_noisy" => scene.config.previews && scene.noisy.is_some(),
+            _ => true,
+        }
+    };
+    for sub in VIEW_DIRS {
+        let folder = dir.join(sub);
+        let Ok(entries) = std::fs::read_dir(&folder) else {
+            continue;
+        };
+        let mut stale: Vec<PathBuf> = Vec::new();
+        for entry in entries.flatten() {
+            let path = entry.path();
+            let is_png = path.extension().is_some_and(|e| e == "png") && path.is_file();
+            let stem = path
+                .file_stem()
+                .and_then(|s| s.to_str())
+                .unwrap_or_default();
+            if is_png && (!keep(sub) || !scene.cameras.iter().any(|c| c.name == stem)) {
+                stale.push(path);
+            }
+        }
+        stale.sort();
+        for path in stale {
+            std::fs::remove_file(&path)
+                .with_context(|| format!("removing stale {}", path.display()))?;
+        }
+    }
+    let noise_json = dir.join("labels_noisy").join("noise.json");
+    if scene.noisy.is_none() && noise_json.is_file() {
+        std::fs::remove_file(&noise_json)
+            .with_context(|| format!("removing stale {}", noise_json.display()))?;
+    }
+    Ok(())
+}

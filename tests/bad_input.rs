@@ -1,0 +1,518 @@
+//! Every kind of bad input gives one clear error that names the file and the problem.
+
+use std::path::{Path, PathBuf};
+
+use glam::{DMat3, DVec3};
+use semsplat::scene::cameras::load_cameras;
+use semsplat::scene::cameras_json::{parse_cameras_json, write_semsplat_cameras};
+use semsplat::scene::classes::{read_class_table, ClassTable};
+use semsplat::scene::colmap::{read_colmap_model, read_images_bin_from};
+use semsplat::scene::labels::{read_label_png, write_label_png, LabelDir, LabelMap, MissingLabels};
+use semsplat::scene::ply::{read_ply, read_ply_from, read_ply_unchecked, write_ply};
+use semsplat::scene::{Camera, Gaussians, Split};
+
+fn error_of<T>(r: anyhow::Result<T>) -> String {
+    match r {
+        Ok(_) => panic!("expected an error"),
+        Err(e) => format!("{e:#}"),
+    }
+}
+
+/// Asserts that the error names `path` (by file name) and contains every `needle`.
+fn assert_error(err: &str, path: &Path, needles: &[&str]) {
+    let name = path.file_name().unwrap().to_str().unwrap();
+    assert!(err.contains(name), "error does not name {name}: {err}");
+    for n in needles {
+        assert!(err.contains(n), "error lacks '{n}': {err}");
+    }
+}
+
+fn one_gaussian() -> Gaussians {
+    Gaussians {
+        means: vec![[0.0, 1.0, 2.0], [3.0, 4.0, 5.0]],
+        log_scales: vec![[0.0; 3]; 2],
+        quats: vec![[1.0, 0.0, 0.0, 0.0]; 2],
+        opacity_logits: vec![0.5; 2],
+        sh_degree: 0,
+        sh: vec![0.1; 6],
+        ..Default::default()
+    }
+}
+
+fn write_tmp(dir: &Path, name: &str, bytes: impl AsRef<[u8]>) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, bytes).unwrap();
+    p
+}
+
+const REQUIRED: &str = "property float x\nproperty float y\nproperty float z\n\
+property float f_dc_0\nproperty float f_dc_1\nproperty float f_dc_2\nproperty float opacity\n\
+property float scale_0\nproperty float scale_1\nproperty float scale_2\n\
+property float rot_0\nproperty float rot_1\nproperty float rot_2\nproperty float rot_3\n";
+
+// ---------------------------------------------------------------------------------------
+// PLY
+
+#[test]
+fn truncated_ply_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = dir.path().join("good.ply");
+    write_ply(&good, &one_gaussian()).unwrap();
+    let bytes = std::fs::read(&good).unwrap();
+    let cut = write_tmp(dir.path(), "cut.ply", &bytes[..bytes.len() - 5]);
+    assert_error(
+        &error_of(read_ply(&cut)),
+        &cut,
+        &["truncated", "2 vertices"],
+    );
+    // Streaming (no size known) reports where the data ends.
+    let err = error_of(read_ply_from(&bytes[..bytes.len() - 5], None));
+    assert!(
+        err.contains("truncated") && err.contains("vertex 1"),
+        "{err}"
+    );
+    // Header cut off.
+    let header_only = write_tmp(
+        dir.path(),
+        "header.ply",
+        "ply\nformat binary_little_endian 1.0\nelement vertex 2\n",
+    );
+    assert_error(
+        &error_of(read_ply(&header_only)),
+        &header_only,
+        &["end_header"],
+    );
+    // ASCII with too few values.
+    let ascii = write_tmp(
+        dir.path(),
+        "short.ply",
+        format!("ply\nformat ascii 1.0\nelement vertex 2\n{REQUIRED}end_header\n0 0 0 0 0 0 0 0 0 0 1 0 0 0\n1 2 3\n"),
+    );
+    assert_error(&error_of(read_ply(&ascii)), &ascii, &["truncated"]);
+}
+
+#[test]
+fn malformed_ply_headers_are_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases: &[(&str, String, &str)] = &[
+        ("magic.ply", "plx\nformat ascii 1.0\nend_header\n".into(), "not a PLY"),
+        ("format.ply", format!("ply\nformat binary_middle_endian 1.0\nelement vertex 0\n{REQUIRED}end_header\n"), "unknown PLY format"),
+        ("noformat.ply", format!("ply\nelement vertex 0\n{REQUIRED}end_header\n"), "no format"),
+        ("type.ply", format!("ply\nformat ascii 1.0\nelement vertex 0\n{REQUIRED}property float128 q\nend_header\n"), "unknown type 'float128'"),
+        ("count.ply", format!("ply\nformat ascii 1.0\nelement vertex -3\n{REQUIRED}end_header\n"), "invalid count"),
+        ("novertex.ply", "ply\nformat ascii 1.0\nelement face 0\nproperty list uchar int vertex_indices\nend_header\n".into(), "no 'vertex' element"),
+        ("list.ply", format!("ply\nformat ascii 1.0\nelement vertex 0\n{REQUIRED}property list uchar float q\nend_header\n"), "is a list"),
+        ("garbage.ply", format!("ply\nformat ascii 1.0\nelement vertex 0\n{REQUIRED}hello world\nend_header\n"), "malformed header line"),
+        ("dup.ply", format!("ply\nformat ascii 1.0\nelement vertex 0\n{REQUIRED}property float x\nend_header\n"), "'x' appears twice"),
+        ("notnum.ply", format!("ply\nformat ascii 1.0\nelement vertex 1\n{REQUIRED}end_header\n0 0 zero 0 0 0 0 0 0 0 1 0 0 0\n"), "'zero' is not a number"),
+        ("classfloat.ply", format!("ply\nformat ascii 1.0\nelement vertex 1\n{REQUIRED}property float class\nend_header\n0 0 0 0 0 0 0 0 0 0 1 0 0 0 2.5\n"), "not a 32-bit integer"),
+    ];
+    for (name, text, needle) in cases {
+        let p = write_tmp(dir.path(), name, text);
+        assert_error(&error_of(read_ply(&p)), &p, &[needle]);
+    }
+}
+
+#[test]
+fn missing_or_inconsistent_ply_properties_are_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let no_rot = REQUIRED
+        .replace("property float rot_3\n", "")
+        .replace("property float opacity\n", "");
+    let p = write_tmp(
+        dir.path(),
+        "norot.ply",
+        format!("ply\nformat ascii 1.0\nelement vertex 0\n{no_rot}end_header\n"),
+    );
+    assert_error(
+        &error_of(read_ply(&p)),
+        &p,
+        &["missing required vertex properties", "opacity", "rot_3"],
+    );
+
+    let five_rest: String = (0..5)
+        .map(|i| format!("property float f_rest_{i}\n"))
+        .collect();
+    let p = write_tmp(
+        dir.path(),
+        "rest.ply",
+        format!("ply\nformat ascii 1.0\nelement vertex 0\n{REQUIRED}{five_rest}end_header\n"),
+    );
+    assert_error(&error_of(read_ply(&p)), &p, &["5 f_rest", "SH degree"]);
+
+    let gap: String = (1..10)
+        .map(|i| format!("property float f_rest_{i}\n"))
+        .collect();
+    let p = write_tmp(
+        dir.path(),
+        "gap.ply",
+        format!("ply\nformat ascii 1.0\nelement vertex 0\n{REQUIRED}{gap}end_header\n"),
+    );
+    assert_error(&error_of(read_ply(&p)), &p, &["f_rest_9"]);
+
+    let sem = "property float sem_0\nproperty float sem_2\n";
+    let p = write_tmp(
+        dir.path(),
+        "sem.ply",
+        format!("ply\nformat ascii 1.0\nelement vertex 0\n{REQUIRED}{sem}end_header\n"),
+    );
+    assert_error(&error_of(read_ply(&p)), &p, &["sem_2"]);
+}
+
+#[test]
+fn nan_inf_and_zero_quaternions_are_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut nan = one_gaussian();
+    nan.opacity_logits[1] = f32::NAN;
+    let p = dir.path().join("nan.ply");
+    write_ply(&p, &nan).unwrap();
+    assert_error(
+        &error_of(read_ply(&p)),
+        &p,
+        &["non-finite opacity", "index 1"],
+    );
+    // The unchecked reader (used by `inspect`) still loads it.
+    assert!(read_ply_unchecked(&p).unwrap().opacity_logits[1].is_nan());
+
+    let mut inf = one_gaussian();
+    inf.means[0][2] = f32::INFINITY;
+    let p = dir.path().join("inf.ply");
+    write_ply(&p, &inf).unwrap();
+    assert_error(
+        &error_of(read_ply(&p)),
+        &p,
+        &["non-finite position", "index 0"],
+    );
+
+    let mut zero = one_gaussian();
+    zero.quats[1] = [0.0; 4];
+    let p = dir.path().join("zeroq.ply");
+    write_ply(&p, &zero).unwrap();
+    assert_error(
+        &error_of(read_ply(&p)),
+        &p,
+        &["zero rotation quaternion", "index 1"],
+    );
+
+    // ASCII "nan"/"inf" tokens too.
+    let p = write_tmp(
+        dir.path(),
+        "nanascii.ply",
+        format!("ply\nformat ascii 1.0\nelement vertex 1\n{REQUIRED}end_header\n0 0 0 nan 0 0 0 inf 0 0 1 0 0 0\n"),
+    );
+    assert_error(
+        &error_of(read_ply(&p)),
+        &p,
+        &["non-finite SH", "non-finite scale"],
+    );
+}
+
+#[test]
+fn absurd_vertex_counts_fail_without_allocating() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = format!("ply\nformat binary_little_endian 1.0\nelement vertex 1000000000000\n{REQUIRED}end_header\n");
+    let p = write_tmp(dir.path(), "huge.ply", &text);
+    assert_error(&error_of(read_ply(&p)), &p, &["1000000000000 vertices"]);
+    // From a stream of unknown length: runs out of data, not memory.
+    let err = error_of(read_ply_from(text.as_bytes(), None));
+    assert!(err.contains("truncated"), "{err}");
+    let text = format!(
+        "ply\nformat ascii 1.0\nelement vertex 18446744073709551615\n{REQUIRED}end_header\n"
+    );
+    assert!(read_ply_from(text.as_bytes(), None).is_err());
+    assert!(read_ply_from(text.as_bytes(), Some(text.len() as u64)).is_err());
+}
+
+// ---------------------------------------------------------------------------------------
+// Cameras
+
+#[test]
+fn distorted_colmap_models_are_refused_with_undistort_advice() {
+    let dir = tempfile::tempdir().unwrap();
+    write_tmp(
+        dir.path(),
+        "cameras.txt",
+        "1 SIMPLE_RADIAL 100 80 90 50 40 -0.02\n",
+    );
+    write_tmp(dir.path(), "images.txt", "1 1 0 0 0 0 0 0 1 a.png\n\n");
+    let err = error_of(read_colmap_model(dir.path()));
+    assert!(err.contains(&dir.path().display().to_string()), "{err}");
+    assert!(
+        err.contains("SIMPLE_RADIAL") && err.contains("image_undistorter"),
+        "{err}"
+    );
+
+    // Binary OPENCV with distortion, found through sparse/0.
+    let dir = tempfile::tempdir().unwrap();
+    let model = dir.path().join("sparse/0");
+    std::fs::create_dir_all(&model).unwrap();
+    let mut cams = 1u64.to_le_bytes().to_vec();
+    cams.extend_from_slice(&1u32.to_le_bytes());
+    cams.extend_from_slice(&4i32.to_le_bytes()); // OPENCV
+    cams.extend_from_slice(&100u64.to_le_bytes());
+    cams.extend_from_slice(&80u64.to_le_bytes());
+    for v in [90.0f64, 90.0, 50.0, 40.0, 0.1, 0.0, 0.0, 0.0] {
+        cams.extend_from_slice(&v.to_le_bytes());
+    }
+    write_tmp(&model, "cameras.bin", cams);
+    write_tmp(&model, "images.bin", 0u64.to_le_bytes());
+    let err = error_of(load_cameras(dir.path()));
+    assert!(err.contains("OPENCV") && err.contains("undistort"), "{err}");
+}
+
+#[test]
+fn broken_colmap_models_are_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    write_tmp(dir.path(), "cameras.txt", "1 PINHOLE 100 80 90 90 50 40\n");
+    write_tmp(dir.path(), "images.txt", "1 1 0 0 0 0 0 0 2 a.png\n\n");
+    let err = error_of(read_colmap_model(dir.path()));
+    assert!(
+        err.contains("camera 2") && err.contains("not in the model"),
+        "{err}"
+    );
+
+    write_tmp(dir.path(), "images.txt", "1 0 0 0 0 0 0 0 1 a.png\n\n");
+    let err = error_of(read_colmap_model(dir.path()));
+    assert!(err.contains("quaternion") && err.contains("zero"), "{err}");
+
+    write_tmp(
+        dir.path(),
+        "images.txt",
+        "1 1 0 0 0 0 0 0 1 a.png\n\n2 1 0 0 0 0 0 0 1 other/a.jpg\n",
+    );
+    let err = error_of(read_colmap_model(dir.path()));
+    assert!(err.contains("share the name 'a'"), "{err}");
+
+    write_tmp(dir.path(), "cameras.txt", "1 PINHOLE 100 80 90 90 50\n");
+    let err = error_of(read_colmap_model(dir.path()));
+    assert!(
+        err.contains("cameras.txt") && err.contains("line 1") && err.contains("needs 4 parameters"),
+        "{err}"
+    );
+
+    write_tmp(dir.path(), "cameras.txt", "1 PINHOLE 100 80 0 90 50 40\n");
+    write_tmp(dir.path(), "images.txt", "1 1 0 0 0 0 0 0 1 a.png\n\n");
+    let err = error_of(read_colmap_model(dir.path()));
+    assert!(err.contains("fx = 0"), "{err}");
+
+    write_tmp(dir.path(), "images.txt", "# no images\n");
+    let err = error_of(read_colmap_model(dir.path()));
+    assert!(err.contains("no images"), "{err}");
+
+    let empty = tempfile::tempdir().unwrap();
+    let err = error_of(load_cameras(empty.path()));
+    assert!(err.contains("not a COLMAP model"), "{err}");
+
+    // Binary: truncated image record, absurd counts.
+    let bin = tempfile::tempdir().unwrap();
+    let mut cams = 1u64.to_le_bytes().to_vec();
+    cams.extend_from_slice(&1u32.to_le_bytes());
+    cams.extend_from_slice(&1i32.to_le_bytes());
+    cams.extend_from_slice(&100u64.to_le_bytes());
+    cams.extend_from_slice(&80u64.to_le_bytes());
+    for v in [90.0f64, 90.0, 50.0, 40.0] {
+        cams.extend_from_slice(&v.to_le_bytes());
+    }
+    write_tmp(bin.path(), "cameras.bin", &cams);
+    let mut imgs = u64::MAX.to_le_bytes().to_vec();
+    imgs.extend_from_slice(&1u32.to_le_bytes());
+    imgs.extend_from_slice(&1.0f64.to_le_bytes());
+    let p = write_tmp(bin.path(), "images.bin", &imgs);
+    assert_error(&error_of(read_colmap_model(bin.path())), &p, &["truncated"]);
+    let mut huge_points = 1u64.to_le_bytes().to_vec();
+    huge_points.extend_from_slice(&1u32.to_le_bytes());
+    for v in [1.0f64, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0] {
+        huge_points.extend_from_slice(&v.to_le_bytes());
+    }
+    huge_points.extend_from_slice(&1u32.to_le_bytes());
+    huge_points.extend_from_slice(b"a.png\0");
+    huge_points.extend_from_slice(&(u64::MAX / 2).to_le_bytes());
+    let err = error_of(read_images_bin_from(&mut &huge_points[..]));
+    assert!(err.contains("2D points"), "{err}");
+    let mut bad_model = cams.clone();
+    bad_model[12..16].copy_from_slice(&99i32.to_le_bytes());
+    let p = write_tmp(bin.path(), "cameras.bin", &bad_model);
+    assert_error(
+        &error_of(read_colmap_model(bin.path())),
+        &p,
+        &["unknown model id 99"],
+    );
+}
+
+fn good_camera(name: &str) -> Camera {
+    Camera {
+        name: name.into(),
+        width: 4,
+        height: 3,
+        fx: 2.0,
+        fy: 2.0,
+        cx: 2.0,
+        cy: 1.5,
+        rotation: DMat3::IDENTITY,
+        translation: DVec3::ZERO,
+        split: Split::Train,
+    }
+}
+
+#[test]
+fn invalid_camera_jsons_are_errors() {
+    let cam = |extra: &str| {
+        format!(
+            r#"{{"format": "semsplat-cameras", "version": 1, "cameras": [{{"name": "v0", "width": 4, "height": 3,
+            "fx": 2, "fy": 2, "cx": 2, "cy": 1.5, "world_to_camera": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]{extra}}}]}}"#
+        )
+    };
+    assert!(parse_cameras_json(cam("").as_bytes()).is_ok());
+    let cases: Vec<(String, &str)> = vec![
+        (cam("").replace("\"fx\": 2", "\"fx\": 0"), "fx = 0"),
+        (cam("").replace("\"width\": 4", "\"width\": 0"), "size 0x3"),
+        (cam("").replace("[1,0,0,0],[0,1,0,0]", "[2,0,0,0],[0,1,0,0]"), "not orthonormal"),
+        (cam("").replace("[1,0,0,0],[0,1,0,0]", "[-1,0,0,0],[0,1,0,0]"), "reflection"),
+        (cam("").replace("[0,0,0,1]]", "[0,0,1,1]]"), "last row"),
+        (cam("").replace("\"version\": 1", "\"version\": 2"), "version 2"),
+        (cam("").replace("semsplat-cameras", "other-cams"), "unknown camera format"),
+        (cam(r#", "split": "val""#), "unknown variant"),
+        (cam("").replace("\"fx\": 2, ", ""), "missing field `fx`"),
+        (cam("").replace("]}]}", "]}, {\"name\": \"v0\", \"width\": 4, \"height\": 3, \"fx\": 2, \"fy\": 2, \"cx\": 2, \"cy\": 1.5, \"world_to_camera\": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}]}"), "share the name 'v0'"),
+        ("{\"frames\": []}".into(), "transforms.json"),
+        ("[]".into(), "no cameras"),
+        ("{not json".into(), "invalid JSON"),
+        (r#"[{"img_name": "a", "width": 4, "height": 3, "position": [0,0,0], "rotation": [[1,0,0],[0,1,0],[0,0,1]], "fx": 2}]"#.into(), "camera 0 ('a'): missing field `fy`"),
+        (r#"[{"img_name": "a", "width": 4, "height": 3, "position": [0,0,0], "rotation": [[1,0,0],[0,1,0],[0,0,1]], "fx": 2, "fy": 1e999}]"#.into(), "invalid JSON"),
+    ];
+    let dir = tempfile::tempdir().unwrap();
+    for (i, (text, needle)) in cases.iter().enumerate() {
+        let p = write_tmp(dir.path(), &format!("cams{i}.json"), text);
+        assert_error(&error_of(load_cameras(&p)), &p, &[needle]);
+    }
+    // Writers refuse invalid cameras too, and leave no file.
+    let mut bad = good_camera("x");
+    bad.fy = f64::NAN;
+    let p = dir.path().join("out.json");
+    assert_error(
+        &error_of(write_semsplat_cameras(&p, &[bad])),
+        &p,
+        &["fy = NaN"],
+    );
+    assert!(!p.exists());
+    let p = write_tmp(dir.path(), "cams.yaml", "x");
+    assert_error(
+        &error_of(load_cameras(&p)),
+        &p,
+        &["cannot tell the camera format"],
+    );
+}
+
+// ---------------------------------------------------------------------------------------
+// Label maps and class tables
+
+#[test]
+fn cameras_without_label_maps_are_listed() {
+    let dir = tempfile::tempdir().unwrap();
+    write_label_png(&dir.path().join("v0.png"), &LabelMap::filled(4, 3, 1)).unwrap();
+    let cams: Vec<Camera> = (0..9).map(|i| good_camera(&format!("v{i}"))).collect();
+    let err = error_of(LabelDir::open(
+        dir.path(),
+        &cams,
+        None,
+        MissingLabels::Error,
+    ));
+    assert!(err.contains(&dir.path().display().to_string()), "{err}");
+    assert!(
+        err.contains("8 of 9 cameras") && err.contains("v1, v2, v3, v4, v5 and 3 more"),
+        "{err}"
+    );
+}
+
+#[test]
+fn label_maps_of_the_wrong_size_are_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("v0.png");
+    write_label_png(&p, &LabelMap::filled(5, 3, 1)).unwrap();
+    let labels =
+        LabelDir::open(dir.path(), &[good_camera("v0")], None, MissingLabels::Error).unwrap();
+    let err = error_of(labels.load(0));
+    assert_error(&err, &p, &["5x3", "camera is 4x3"]);
+}
+
+#[test]
+fn class_ids_outside_the_table_are_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("v0.png");
+    let mut map = LabelMap::filled(4, 3, 1);
+    map.labels[0] = 9;
+    map.labels[1] = 12;
+    map.labels[2] = LabelMap::IGNORE;
+    write_label_png(&p, &map).unwrap();
+    let table = ClassTable::from_ids([0, 1]);
+    let labels = LabelDir::open(
+        dir.path(),
+        &[good_camera("v0")],
+        Some(&table),
+        MissingLabels::Error,
+    )
+    .unwrap();
+    let err = error_of(labels.iter().next().unwrap());
+    assert_error(&err, &p, &["2 pixels", "not in the class table: 9, 12"]);
+}
+
+#[test]
+fn color_and_broken_label_pngs_are_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let rgb = dir.path().join("rgb.png");
+    image::RgbImage::from_pixel(2, 2, image::Rgb([1, 2, 3]))
+        .save(&rgb)
+        .unwrap();
+    assert_error(
+        &error_of(read_label_png(&rgb)),
+        &rgb,
+        &["RGB PNG", "single-channel class ids"],
+    );
+
+    // A palette PNG header (color type 3): refused before decoding.
+    let mut pal = b"\x89PNG\r\n\x1a\n\0\0\0\x0dIHDR\0\0\0\x02\0\0\0\x02\x08\x03\0\0\0".to_vec();
+    pal.extend_from_slice(&[0; 4]);
+    let p = write_tmp(dir.path(), "pal.png", pal);
+    assert_error(
+        &error_of(read_label_png(&p)),
+        &p,
+        &["palette", "single-channel"],
+    );
+
+    let p = write_tmp(dir.path(), "text.png", "not a png at all, just text");
+    assert_error(&error_of(read_label_png(&p)), &p, &["not a PNG"]);
+
+    let good = dir.path().join("good.png");
+    write_label_png(&good, &LabelMap::filled(64, 64, 3)).unwrap();
+    let bytes = std::fs::read(&good).unwrap();
+    let p = write_tmp(dir.path(), "cut.png", &bytes[..bytes.len() / 2]);
+    assert_error(&error_of(read_label_png(&p)), &p, &["cannot decode"]);
+}
+
+#[test]
+fn invalid_class_tables_are_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        (
+            r#"[{"id": 1, "name": "a"}, {"id": 1, "name": "b"}]"#,
+            "duplicate class id 1",
+        ),
+        (
+            r#"[{"id": 1, "name": "a"}, {"id": 2, "name": "a"}]"#,
+            "duplicate class name 'a'",
+        ),
+        (
+            r#"{"classes": [{"id": 65535, "name": "x"}]}"#,
+            "ids must be below 65535",
+        ),
+        (
+            r#"[{"id": 3, "name": "a", "color": [1, 2]}]"#,
+            "not a class table",
+        ),
+        (r#"{"labels": []}"#, "not a class table"),
+    ];
+    for (i, (text, needle)) in cases.iter().enumerate() {
+        let p = write_tmp(dir.path(), &format!("classes{i}.json"), text);
+        assert_error(&error_of(read_class_table(&p)), &p, &[needle]);
+    }
+}
