@@ -31,6 +31,8 @@ enum Command {
     Inspect(cli::inspect::InspectArgs),
     /// Generate a procedural benchmark room with exact ground truth and label noise.
     Synth(cli::synth::SynthArgs),
+    /// Render views of a scene on the GPU (RGB, and semantic labels with --semantics).
+    Render(cli::render::RenderArgs),
 }
 
 fn main() -> ExitCode {
@@ -40,6 +42,7 @@ fn main() -> ExitCode {
         Command::Bench(cmd) => cli::bench::run(cmd),
         Command::Inspect(args) => cli::inspect::run(args),
         Command::Synth(args) => cli::synth::run(args),
+        Command::Render(args) => cli::render::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

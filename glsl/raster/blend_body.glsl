@@ -37,6 +37,7 @@ layout(set = 0, binding = 8) writeonly buffer DepthBuf { float data[]; } out_dep
 layout(set = 0, binding = 9) writeonly buffer FinalTBuf { float data[]; } out_final_t;
 layout(set = 0, binding = 10) writeonly buffer LastBuf { uint data[]; } out_last;
 layout(set = 0, binding = 11) writeonly buffer CountBuf { uint data[]; } out_n_contrib;
+layout(set = 0, binding = 15) readonly buffer FracBuf { vec2 data[]; } xy_frac;
 #if SEM_CHUNK > 0
 layout(set = 0, binding = 12) readonly buffer SemBuf { float data[]; } sem_in;
 layout(set = 0, binding = 13) writeonly buffer SemOutBuf { float data[]; } out_sem;
@@ -44,7 +45,8 @@ layout(set = 0, binding = 14) writeonly buffer SemNormBuf { float data[]; } out_
 shared float s_sem[BATCH * SEM_CHUNK];
 #endif
 
-shared vec4 s_xy_depth_opacity[BATCH];
+shared vec4 s_xy_depth_opacity[BATCH]; // floor(mean2d) depth opacity
+shared vec2 s_frac[BATCH];             // mean2d - floor(mean2d)
 shared vec4 s_conic[BATCH];
 shared vec4 s_color[BATCH];
 shared uint s_done_subgroups;
@@ -59,7 +61,7 @@ void main() {
     uint py = gl_WorkGroupID.y * TILE_SIZE + t / TILE_SIZE;
     bool inside = px < width && py < height;
     uint pix = py * width + px;
-    vec2 center = vec2(px, py) + 0.5;
+    vec2 pixel = vec2(px, py);
 
     uvec2 range = tile_ranges.data[tile_id];
     uint len = range.y - range.x;
@@ -111,6 +113,7 @@ void main() {
         if (idx < end) {
             uint g = isect_ids.data[idx];
             s_xy_depth_opacity[t] = xy_depth_opacity.data[g];
+            s_frac[t] = xy_frac.data[g];
             s_conic[t] = conics.data[g];
             s_color[t] = colors.data[g];
 #if SEM_CHUNK > 0
@@ -125,7 +128,7 @@ void main() {
         for (uint j = 0; j < count && !done; j++) {
             vec4 g = s_xy_depth_opacity[j];
             vec3 con = s_conic[j].xyz;
-            vec2 d = g.xy - center;
+            vec2 d = (g.xy - pixel) + (s_frac[j] - 0.5); // exact integer part first
             float sigma = 0.5 * (con.x * d.x * d.x + con.z * d.y * d.y) + con.y * d.x * d.y;
             if (sigma < 0.0) {
                 continue;

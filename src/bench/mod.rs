@@ -1,6 +1,7 @@
 //! Measurements behind `semsplat bench`: GPU time from timestamp queries, against a CPU
 //! baseline on the same data in the same run, with the GPU result checked against it.
 
+pub mod render;
 pub mod scan;
 pub mod sort;
 

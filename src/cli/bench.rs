@@ -5,7 +5,7 @@ use anyhow::Result;
 use clap::{Args, Subcommand};
 use serde::Serialize;
 
-use semsplat::bench::{scan::bench_scan, sort::bench_sort};
+use semsplat::bench::{render::bench_render, scan::bench_scan, sort::bench_sort};
 use semsplat::gpu::timings::KernelTotal;
 use semsplat::gpu::Gpu;
 
@@ -15,6 +15,24 @@ pub enum BenchCommand {
     Sort(SortArgs),
     /// Exclusive prefix sum of u32 vs a sequential CPU scan.
     Scan(ScanArgs),
+    /// Forward rendering of a random scene (SH degree 3): frames/s and per-stage GPU time.
+    Render(RenderArgs),
+}
+
+#[derive(Args)]
+pub struct RenderArgs {
+    /// Number of Gaussians.
+    #[arg(long, default_value_t = 100_000)]
+    n: usize,
+    #[arg(long, default_value_t = 640)]
+    width: u32,
+    #[arg(long, default_value_t = 480)]
+    height: u32,
+    /// Semantic channels blended with RGB (0: RGB only).
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u16).range(0..=256))]
+    channels: u16,
+    #[command(flatten)]
+    common: CommonArgs,
 }
 
 #[derive(Args)]
@@ -120,6 +138,36 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
                     r.ratio
                 );
                 print_kernels(&r.kernels);
+            })
+        }
+        BenchCommand::Render(a) => {
+            let r = bench_render(
+                &gpu,
+                a.n,
+                a.width,
+                a.height,
+                a.channels as usize,
+                a.common.iters,
+                a.common.seed,
+            )?;
+            emit(a.common.json, &r, || {
+                println!(
+                    "render: {} Gaussians, {}x{}, C = {} on {} (median of {})",
+                    r.n, r.width, r.height, r.channels, r.device, r.iters
+                );
+                println!(
+                    "  frame      {:>10.3} ms  {:>8.1} frames/s",
+                    r.frame_ms, r.frames_per_s
+                );
+                let s = &r.stages;
+                println!("  project    {:>10.3} ms", s.project_ms);
+                println!("  depth sort {:>10.3} ms", s.depth_sort_ms);
+                println!("  bin        {:>10.3} ms", s.bin_ms);
+                println!("  blend      {:>10.3} ms", s.blend_ms);
+                println!(
+                    "  visible {} Gaussians, {} tile intersections",
+                    r.visible, r.intersections
+                );
             })
         }
     }

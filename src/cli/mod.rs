@@ -3,4 +3,5 @@
 pub mod bench;
 pub mod info;
 pub mod inspect;
+pub mod render;
 pub mod synth;

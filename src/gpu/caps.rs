@@ -32,6 +32,8 @@ pub struct DeviceCaps {
     #[serde(skip)]
     pub has_atomic_float_ext: bool,
     pub int64: bool,
+    /// shaderFloat64: projection computes means in float64.
+    pub float64: bool,
     pub int64_atomics: bool,
     #[serde(skip)]
     pub storage_8bit: bool,
@@ -209,6 +211,7 @@ pub fn probe_device(instance: &ash::Instance, pd: vk::PhysicalDevice) -> (Device
             && atomic_float.shader_buffer_float32_atomics != 0,
         has_atomic_float_ext,
         int64: base_features.shader_int64 != 0,
+        float64: base_features.shader_float64 != 0,
         int64_atomics: base_features.shader_int64 != 0 && v12.shader_buffer_int64_atomics != 0,
         storage_8bit: v12.storage_buffer8_bit_access != 0 && v12.shader_int8 != 0,
         timestamps: base.limits.timestamp_compute_and_graphics != 0 && timestamp_valid_bits > 0,

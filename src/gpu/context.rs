@@ -299,6 +299,16 @@ impl Gpu {
         self.inner.debug.is_some()
     }
 
+    /// Device memory reserved by the allocator right now (blocks, in bytes).
+    pub fn memory_reserved(&self) -> u64 {
+        self.inner
+            .allocator
+            .lock()
+            .unwrap()
+            .as_ref()
+            .map_or(0, |a| a.generate_report().total_capacity_bytes)
+    }
+
     pub(crate) fn device(&self) -> &ash::Device {
         &self.inner.device
     }
@@ -328,7 +338,9 @@ fn create_device(
     let mut v13 = vk::PhysicalDeviceVulkan13Features::default()
         .subgroup_size_control(true)
         .compute_full_subgroups(true);
-    let base = vk::PhysicalDeviceFeatures::default().shader_int64(caps.int64);
+    let base = vk::PhysicalDeviceFeatures::default()
+        .shader_int64(caps.int64)
+        .shader_float64(caps.float64);
     let mut features = vk::PhysicalDeviceFeatures2::default()
         .features(base)
         .push_next(&mut v12)

@@ -319,6 +319,24 @@ impl Recorder {
         };
     }
 
+    /// Writes a few bytes (a multiple of 4, at most 65,536) into `dst` from the command
+    /// buffer itself: no staging buffer, ordered with the other commands.
+    pub fn update(&mut self, dst: &Buffer, offset: u64, data: &[u8]) {
+        assert!(
+            data.len() % 4 == 0 && data.len() <= 65_536,
+            "vkCmdUpdateBuffer takes 4..=65536 bytes in words"
+        );
+        if data.is_empty() {
+            return;
+        }
+        // SAFETY: recording into our command buffer; callers keep the range in bounds.
+        unsafe {
+            self.gpu
+                .device()
+                .cmd_update_buffer(self.cmd, dst.raw, offset, data)
+        };
+    }
+
     /// Fills `size` bytes (a multiple of 4) at `offset` with a repeated u32.
     pub fn fill(&mut self, dst: &Buffer, offset: u64, size: u64, value: u32) {
         if size == 0 {

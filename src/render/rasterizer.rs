@@ -59,6 +59,8 @@ struct Buffers {
     tiles_cap: u32,
     isect_cap: u32,
     xy: Buffer,
+    xy_frac: Buffer,
+    camera64: Buffer,
     conic: Buffer,
     color: Buffer,
     rect: Buffer,
@@ -93,6 +95,8 @@ pub struct Rasterizer {
     gpu: Gpu,
     bufs: Option<Buffers>,
     window_len: u32,
+    /// Project means in float64 (on devices with shaderFloat64).
+    float64: bool,
 }
 
 /// Sizes a frame needs.
@@ -128,6 +132,8 @@ impl Buffers {
             tiles_cap: need.tiles,
             isect_cap: isect as u32,
             xy: b("xy_depth_opacity", n * 16)?,
+            xy_frac: b("xy_frac", n * 8)?,
+            camera64: b("camera64", 16 * 8)?,
             conic: b("conics", n * 16)?,
             color: b("colors", n * 16)?,
             rect: b("tile_rects", n * 16)?,
@@ -180,7 +186,19 @@ impl Rasterizer {
             gpu: gpu.clone(),
             bufs: None,
             window_len: if capped { CAPPED_WINDOW } else { u32::MAX / 2 },
+            float64: gpu.caps().float64,
         }
+    }
+
+    /// Chooses float64 (default where the device has it) or float32 projection of the
+    /// means; float32 loses about 1e-5 px, which shows in alpha far from a center.
+    pub fn set_float64_projection(&mut self, on: bool) {
+        self.float64 = on && self.gpu.caps().float64;
+    }
+
+    /// Entries of a tile's list one per-tile dispatch walks.
+    pub fn window_len(&self) -> u32 {
+        self.window_len
     }
 
     /// Overrides how many entries of a tile's list one blend dispatch walks (tests use a
@@ -216,6 +234,53 @@ impl Rasterizer {
         cam: &Camera,
         opts: &RenderOptions,
     ) -> Result<RenderedFrame> {
+        let sem_buf = match opts.semantics {
+            Some(mode) => scene.semantics(&self.gpu, mode)?,
+            None => None,
+        };
+        let channels = if sem_buf.is_some() { scene.channels } else { 0 };
+        let window_len = self.window_len;
+        let frame = self.run_tiled(scene, cam, opts, channels, |rec, tiles| {
+            tiles.record_blend(rec, sem_buf, channels, window_len, opts.background)
+        })?;
+        let b = self.bufs.as_ref().expect("ran");
+        let stages = StageTimes::from_marks(&frame.timings, &frame.marks);
+        RenderedFrame::download(
+            &self.gpu,
+            cam,
+            channels,
+            [
+                &b.rgb,
+                &b.alpha,
+                &b.depth,
+                &b.final_t,
+                &b.last,
+                &b.n_contrib,
+                &b.sem,
+                &b.sem_norm,
+            ],
+            frame.visible,
+            frame.intersections,
+            stages,
+        )
+    }
+
+    /// Bins one view on the GPU (projection, depth sort, tile lists) and, in the same
+    /// submission, records `per_tile`: the stage that consumes the tile lists (blending,
+    /// or the fusion kernels). On an intersection overflow the buffers grow and everything
+    /// is recorded again, so `per_tile` may run more than once. `channels` sizes the
+    /// semantic outputs of blending (0 for other stages).
+    pub fn run_tiled<F>(
+        &mut self,
+        scene: &GpuScene,
+        cam: &Camera,
+        opts: &RenderOptions,
+        channels: u32,
+        mut per_tile: F,
+    ) -> Result<TiledRun>
+    where
+        F: FnMut(&mut Recorder, &TileLists) -> Result<()>,
+    {
         ensure!(
             cam.width > 0 && cam.height > 0,
             "camera {} has an empty image",
@@ -223,11 +288,6 @@ impl Rasterizer {
         );
         let tiles_x = cam.width.div_ceil(TILE_SIZE);
         let tiles_y = cam.height.div_ceil(TILE_SIZE);
-        let sem_buf = match opts.semantics {
-            Some(mode) => scene.semantics(&self.gpu, mode)?,
-            None => None,
-        };
-        let channels = if sem_buf.is_some() { scene.channels } else { 0 };
         let pixels = cam.width as u64 * cam.height as u64;
         let windows = scene.n.div_ceil(self.window_len).max(1);
         let carry_stride = 8 + if channels > 0 { SEM_CHUNK } else { 0 } as u64;
@@ -251,50 +311,73 @@ impl Rasterizer {
         };
         loop {
             self.ensure(need)?;
-            let (timings, marks) =
-                self.record_and_run(scene, cam, opts, sem_buf, channels, windows)?;
-            let bufs = self.bufs.as_ref().expect("ensured");
-            let status: Vec<u32> = self.gpu.download(&bufs.status, 0, ST_WORDS as usize)?;
+            let b = self.bufs.as_ref().expect("ensured");
+            let mut rec = Recorder::new(&self.gpu)?;
+            let marks = self.record_binning(&mut rec, scene, cam, opts)?;
+            let mut tiles = TileLists {
+                bufs: b,
+                cam,
+                tiles_x,
+                tiles_y,
+                windows,
+                marks: [marks[0], marks[1], marks[2], marks[3], None],
+            };
+            per_tile(&mut rec, &tiles)?;
+            tiles.marks[4] = rec.mark();
+            let marks = tiles.marks;
+            let timings = rec.submit_and_wait()?;
+            let status: Vec<u32> = self.gpu.download(&b.status, 0, ST_WORDS as usize)?;
             if status[ST_OVERFLOW as usize] != 0 {
                 need.isect = status[ST_ISECT_NEEDED as usize];
                 continue;
             }
-            let stages = StageTimes::from_marks(&timings, &marks);
-            return RenderedFrame::download(
-                &self.gpu,
-                cam,
-                channels,
-                [
-                    &bufs.rgb,
-                    &bufs.alpha,
-                    &bufs.depth,
-                    &bufs.final_t,
-                    &bufs.last,
-                    &bufs.n_contrib,
-                    &bufs.sem,
-                    &bufs.sem_norm,
-                ],
-                status[ST_VISIBLE as usize],
-                status[ST_ISECT as usize],
-                stages,
-            );
+            return Ok(TiledRun {
+                timings,
+                marks,
+                visible: status[ST_VISIBLE as usize],
+                intersections: status[ST_ISECT as usize],
+            });
         }
     }
 
-    fn record_and_run(
+    /// Renders several views of one scene, reusing the same buffers.
+    pub fn render_batch(
+        &mut self,
+        scene: &GpuScene,
+        cams: &[Camera],
+        opts: &RenderOptions,
+    ) -> Result<Vec<RenderedFrame>> {
+        cams.iter()
+            .map(|cam| self.render(scene, cam, opts))
+            .collect()
+    }
+
+    /// The (tile id, Gaussian id) pairs of the last rendered frame, in list order (by tile,
+    /// then depth). For tests and debugging: it downloads.
+    pub fn last_intersections(&self) -> Result<Vec<(u32, u32)>> {
+        let Some(b) = &self.bufs else {
+            return Ok(Vec::new());
+        };
+        let status: Vec<u32> = self.gpu.download(&b.status, 0, ST_WORDS as usize)?;
+        let count = status[ST_ISECT as usize] as usize;
+        let keys: Vec<u32> = self.gpu.download(&b.isect_keys, 0, count)?;
+        let ids: Vec<u32> = self.gpu.download(&b.isect_ids, 0, count)?;
+        Ok(keys.into_iter().zip(ids).collect())
+    }
+
+    /// Records projection, compaction, depth sort and tile binning; returns the marks
+    /// before and after each stage.
+    fn record_binning(
         &self,
+        rec: &mut Recorder,
         scene: &GpuScene,
         cam: &Camera,
         opts: &RenderOptions,
-        sem_buf: Option<&Buffer>,
-        channels: u32,
-        windows: u32,
-    ) -> Result<(Timings, [Option<Mark>; 5])> {
+    ) -> Result<[Option<Mark>; 4]> {
         let b = self.bufs.as_ref().expect("ensured");
         let n = scene.n;
         let tiles_x = cam.width.div_ceil(TILE_SIZE);
         let tiles_y = cam.height.div_ceil(TILE_SIZE);
-        let mut rec = Recorder::new(&self.gpu)?;
         rec.fill(&b.status, 0, ST_WORDS * 4, 0);
         rec.fill(&b.status, ST_N_PLUS1 as u64 * 4, 4, n + 1);
         rec.fill(&b.ranges, 0, (tiles_x * tiles_y) as u64 * 8, 0);
@@ -331,27 +414,44 @@ impl Rasterizer {
             dims: [cam.width, cam.height, tiles_x, tiles_y],
             counts: [n, scene.sh_degree, scene.sh_coeffs, 0],
         };
+        let mut bindings: Vec<(&str, &Buffer)> = vec![
+            ("means", &scene.means),
+            ("log_scales", &scene.log_scales),
+            ("quats", &scene.quats),
+            ("opacity_logits", &scene.opacity_logits),
+            ("sh", &scene.sh),
+            ("xy_depth_opacity", &b.xy),
+            ("xy_frac", &b.xy_frac),
+            ("conics", &b.conic),
+            ("colors", &b.color),
+            ("tile_rects", &b.rect),
+            ("visible", &b.flags),
+            ("tiles_touched", &b.touched),
+        ];
+        // With float64, the camera-space and 2D means are computed from the camera in
+        // double precision (float32 loses ~1e-5 px, which shows in alpha).
+        let kernel = if self.float64 {
+            let rows = [r.row(0), r.row(1), r.row(2)];
+            let camera64: Vec<f64> = (0..3)
+                .flat_map(|k| [rows[k].x, rows[k].y, rows[k].z, t[k]])
+                .chain([cam.fx, cam.fy, cam.cx, cam.cy])
+                .collect();
+            rec.update(&b.camera64, 0, bytemuck::cast_slice(&camera64));
+            rec.barrier();
+            bindings.push(("camera64", &b.camera64));
+            ids::RASTER_PROJECT_F64
+        } else {
+            ids::RASTER_PROJECT
+        };
         rec.dispatch(
-            ids::RASTER_PROJECT,
-            &[
-                ("means", &scene.means),
-                ("log_scales", &scene.log_scales),
-                ("quats", &scene.quats),
-                ("opacity_logits", &scene.opacity_logits),
-                ("sh", &scene.sh),
-                ("xy_depth_opacity", &b.xy),
-                ("conics", &b.conic),
-                ("colors", &b.color),
-                ("tile_rects", &b.rect),
-                ("visible", &b.flags),
-                ("tiles_touched", &b.touched),
-            ],
+            kernel,
+            &bindings,
             bytemuck::bytes_of(&params),
             [(n + 1).div_ceil(256), 1, 1],
         )?;
         rec.barrier();
         b.scan_n.record(
-            &mut rec,
+            rec,
             &b.flags,
             &b.visible_offsets,
             GpuCount::at(&b.status, ST_N_PLUS1),
@@ -373,7 +473,7 @@ impl Rasterizer {
         let m1 = rec.mark();
 
         b.depth_sort.record(
-            &mut rec,
+            rec,
             &b.depth_keys,
             &b.depth_ids,
             GpuCount::at(&b.status, ST_VISIBLE),
@@ -395,7 +495,7 @@ impl Rasterizer {
         )?;
         rec.barrier();
         b.scan_v.record(
-            &mut rec,
+            rec,
             &b.sorted_touched,
             &b.isect_offsets,
             GpuCount::at(&b.status, ST_VISIBLE_PLUS1),
@@ -416,7 +516,7 @@ impl Rasterizer {
         )?;
         rec.barrier();
         b.tile_sort.record(
-            &mut rec,
+            rec,
             &b.isect_keys,
             &b.isect_ids,
             GpuCount::at(&b.status, ST_ISECT),
@@ -436,7 +536,76 @@ impl Rasterizer {
         rec.barrier();
         let m3 = rec.mark();
 
-        let bg = opts.background;
+        Ok([m0, m1, m2, m3])
+    }
+}
+/// A binned view: the tile lists and per-Gaussian screen data a per-tile stage reads.
+pub struct TileLists<'a> {
+    bufs: &'a Buffers,
+    pub cam: &'a Camera,
+    pub tiles_x: u32,
+    pub tiles_y: u32,
+    windows: u32,
+    /// Marks around the stages (project, depth sort, bin, per-tile stage).
+    pub marks: [Option<Mark>; 5],
+}
+
+/// Timings and counts of one [`Rasterizer::run_tiled`].
+pub struct TiledRun {
+    pub timings: Timings,
+    pub marks: [Option<Mark>; 5],
+    pub visible: u32,
+    pub intersections: u32,
+}
+
+impl TileLists<'_> {
+    /// Start and end of each tile's run in the sorted lists (uvec2 per tile).
+    pub fn ranges(&self) -> &Buffer {
+        &self.bufs.ranges
+    }
+
+    /// Gaussian id of each list entry, tile-sorted, depth order within a tile.
+    pub fn isect_ids(&self) -> &Buffer {
+        &self.bufs.isect_ids
+    }
+
+    /// Per Gaussian: (floor(mean2d) x, y, depth, opacity).
+    pub fn xy_depth_opacity(&self) -> &Buffer {
+        &self.bufs.xy
+    }
+
+    /// Per Gaussian: the fraction of the 2D mean, mean2d - floor(mean2d).
+    pub fn xy_frac(&self) -> &Buffer {
+        &self.bufs.xy_frac
+    }
+
+    /// Per Gaussian: (conic A, B, C, -).
+    pub fn conics(&self) -> &Buffer {
+        &self.bufs.conic
+    }
+
+    /// Expected depth per pixel, written by [`Self::record_blend`].
+    pub fn depth(&self) -> &Buffer {
+        &self.bufs.depth
+    }
+
+    /// How many window dispatches walk the longest possible tile list.
+    pub fn windows(&self) -> u32 {
+        self.windows
+    }
+
+    /// Records forward blending into the rasterizer's output images.
+    pub fn record_blend(
+        &self,
+        rec: &mut Recorder,
+        sem_buf: Option<&Buffer>,
+        channels: u32,
+        window_len: u32,
+        background: [f32; 3],
+    ) -> Result<()> {
+        let bg = background;
+        let b = self.bufs;
+        let (cam, tiles_x, tiles_y, windows) = (self.cam, self.tiles_x, self.tiles_y, self.windows);
         let chunks = if channels > 0 {
             channels.div_ceil(SEM_CHUNK)
         } else {
@@ -447,8 +616,8 @@ impl Rasterizer {
                 let params = BlendParams {
                     dims: [cam.width, cam.height, tiles_x, channels],
                     window: [
-                        w * self.window_len,
-                        self.window_len,
+                        w * window_len,
+                        window_len,
                         chunk * SEM_CHUNK,
                         u32::from(chunk == 0),
                     ],
@@ -460,6 +629,7 @@ impl Rasterizer {
                     ("xy_depth_opacity", &b.xy),
                     ("conics", &b.conic),
                     ("colors", &b.color),
+                    ("xy_frac", &b.xy_frac),
                     ("carry", &b.carry),
                     ("out_rgb", &b.rgb),
                     ("out_alpha", &b.alpha),
@@ -488,8 +658,6 @@ impl Rasterizer {
                 rec.barrier();
             }
         }
-        let m4 = rec.mark();
-        let timings = rec.submit_and_wait()?;
-        Ok((timings, [m0, m1, m2, m3, m4]))
+        Ok(())
     }
 }

@@ -1,6 +1,7 @@
 //! Small shared utilities.
 
 pub mod atomic_write;
+pub mod npy;
 pub mod rng;
 
 pub use atomic_write::{write_atomic, write_bytes_atomic};

@@ -1,0 +1,127 @@
+// FlashSplat contribution accumulation (paper 002): for every pixel with label e, walk the
+// tile's depth-sorted list exactly as forward blending does and add each Gaussian's
+// weight alpha * T into A[e, gaussian]. Included by contrib_fixed.comp (64-bit fixed-point
+// integers: order-independent, so A is identical run to run) and contrib_float.comp (float
+// atomics).
+//
+// Every lane walks every entry (a done or unlabeled pixel contributes 0), so each step is
+// uniform across the subgroup: lanes that share the label (neighbouring pixels mostly do)
+// are summed in the subgroup first and one lane does the atomic. mode 1 keeps only the
+// pixel that holds the Gaussian's projected center: the weighted vote.
+#extension GL_EXT_control_flow_attributes : require
+#extension GL_KHR_shader_subgroup_basic : require
+#extension GL_KHR_shader_subgroup_vote : require
+#extension GL_KHR_shader_subgroup_arithmetic : require
+#include "raster_common.glsl"
+
+#define BATCH TILE_PIXELS
+#define NO_ROW 0xFFFFFFFFu
+
+layout(local_size_x = TILE_PIXELS) in;
+
+layout(push_constant) uniform Params {
+    uvec4 dims;   // width height tiles_x n
+    uvec4 window; // window_start window_len row_begin rows
+    uvec4 mode;   // 0: every pixel (A); 1: the center pixel only (weighted vote)
+} pc;
+
+layout(set = 0, binding = 0) readonly buffer RangesBuf { uvec2 data[]; } tile_ranges;
+layout(set = 0, binding = 1) readonly buffer IdsBuf { uint data[]; } isect_ids;
+layout(set = 0, binding = 2) readonly buffer XyBuf { vec4 data[]; } xy_depth_opacity;
+layout(set = 0, binding = 3) readonly buffer ConicBuf { vec4 data[]; } conics;
+layout(set = 0, binding = 4) readonly buffer LabelsBuf { uint data[]; } labels; // compact class per pixel
+layout(set = 0, binding = 5) buffer CarryBuf { vec2 data[]; } carry;           // (T, done) between windows
+layout(set = 0, binding = 7) readonly buffer FracBuf { vec2 data[]; } xy_frac;
+
+shared vec4 s_xy_depth_opacity[BATCH]; // floor(mean2d) depth opacity
+shared vec2 s_frac[BATCH];
+shared vec4 s_conic[BATCH];
+shared uint s_id[BATCH];
+shared uint s_done_subgroups;
+
+void accumulate(uint row, uint gaussian, float w);
+
+void main() {
+    uint width = pc.dims.x, height = pc.dims.y, n = pc.dims.w;
+    uint window_start = pc.window.x, window_len = pc.window.y, row_begin = pc.window.z, rows = pc.window.w;
+    uint tile_id = gl_WorkGroupID.y * pc.dims.z + gl_WorkGroupID.x;
+    uint t = gl_SubgroupID * gl_SubgroupSize + gl_SubgroupInvocationID;
+    uint px = gl_WorkGroupID.x * TILE_SIZE + t % TILE_SIZE;
+    uint py = gl_WorkGroupID.y * TILE_SIZE + t / TILE_SIZE;
+    bool inside = px < width && py < height;
+    uint pix = py * width + px;
+    vec2 pixel = vec2(px, py);
+
+    uvec2 range = tile_ranges.data[tile_id];
+    uint len = range.y - range.x;
+    if (window_start >= len) {
+        return;
+    }
+    uint start = range.x + window_start;
+    uint end = range.x + min(len, window_start + window_len);
+    bool last_window = window_start + window_len >= len;
+
+    // Rows of A this pass holds: labels outside [row_begin, row_begin + rows) wait for
+    // their own pass (unsigned wrap makes labels below row_begin fail the test too).
+    uint label = inside ? labels.data[pix] : NO_ROW;
+    uint row = label - row_begin;
+    bool labeled = label != NO_ROW && row < rows;
+    float T = 1.0;
+    bool done = !labeled;
+    if (window_start > 0 && labeled) {
+        vec2 c = carry.data[pix];
+        T = c.x;
+        done = c.y != 0.0;
+    }
+
+    for (uint b = start; b < end; b += BATCH) {
+        if (t == 0) {
+            s_done_subgroups = 0;
+        }
+        barrier();
+        if (subgroupAll(done) && subgroupElect()) {
+            atomicAdd(s_done_subgroups, 1);
+        }
+        barrier();
+        if (s_done_subgroups == gl_NumSubgroups) {
+            break;
+        }
+        uint idx = b + t;
+        if (idx < end) {
+            uint g = isect_ids.data[idx];
+            s_id[t] = g;
+            s_xy_depth_opacity[t] = xy_depth_opacity.data[g];
+            s_frac[t] = xy_frac.data[g];
+            s_conic[t] = conics.data[g];
+        }
+        barrier();
+        uint count = min(BATCH, end - b);
+        for (uint j = 0; j < count; j++) {
+            float w = 0.0;
+            vec4 g = s_xy_depth_opacity[j];
+            if (!done) {
+                vec3 con = s_conic[j].xyz;
+                vec2 d = (g.xy - pixel) + (s_frac[j] - 0.5);
+                float sigma = 0.5 * (con.x * d.x * d.x + con.z * d.y * d.y) + con.y * d.x * d.y;
+                float alpha = sigma < 0.0 ? 0.0 : min(ALPHA_MAX, g.w * exp(-sigma));
+                if (alpha >= ALPHA_MIN) {
+                    float next_t = T * (1.0 - alpha);
+                    if (next_t <= T_MIN) {
+                        done = true;
+                    } else {
+                        w = alpha * T;
+                        T = next_t;
+                    }
+                }
+            }
+            if (pc.mode.x == 1 && g.xy != pixel) {
+                w = 0.0;
+            }
+            accumulate(w > 0.0 ? row : NO_ROW, s_id[j], w);
+        }
+        barrier();
+    }
+    if (labeled && !last_window) {
+        carry.data[pix] = vec2(T, done ? 1.0 : 0.0);
+    }
+}

@@ -1,0 +1,143 @@
+// Projects every Gaussian into the camera (EWA splatting): 2D mean, dilated 2D covariance
+// and its inverse (conic), opacity, view-dependent color from SH, and the tiles its
+// opacity-aware screen extent covers. Writes a visibility flag per Gaussian (and a zero at
+// index n) for the compaction scan. Included by project.comp (float32) and
+// project_f64.comp (PROJECT_F64: the camera-space and 2D means in float64).
+//
+// The 2D mean is stored as its integer part (exact in float32) and its fraction, so that
+// pixel offsets d = (int - px) + (frac - 0.5) keep full precision at any image size.
+#extension GL_EXT_control_flow_attributes : require
+#include "raster_common.glsl"
+
+layout(local_size_x = 256) in;
+
+layout(push_constant) uniform Params {
+    vec4 rot_t0; // world-to-camera rows: (R00 R01 R02 t0)
+    vec4 rot_t1;
+    vec4 rot_t2;
+    vec4 intrinsics; // fx fy cx cy
+    vec4 center_near; // camera center (world), near plane
+    vec4 far_pad;     // far plane
+    uvec4 dims;       // width height tiles_x tiles_y
+    uvec4 counts;     // n sh_degree sh_coeffs -
+} pc;
+
+layout(set = 0, binding = 0) readonly buffer MeansBuf { float data[]; } means;
+layout(set = 0, binding = 1) readonly buffer LogScalesBuf { float data[]; } log_scales;
+layout(set = 0, binding = 2) readonly buffer QuatsBuf { float data[]; } quats;
+layout(set = 0, binding = 3) readonly buffer OpacityBuf { float data[]; } opacity_logits;
+layout(set = 0, binding = 4) readonly buffer ShBuf { float data[]; } sh;
+layout(set = 0, binding = 5) writeonly buffer XyBuf { vec4 data[]; } xy_depth_opacity; // floor(mean2d) depth opacity
+layout(set = 0, binding = 6) writeonly buffer ConicBuf { vec4 data[]; } conics;  // A B C -
+layout(set = 0, binding = 7) writeonly buffer ColorBuf { vec4 data[]; } colors;  // r g b -
+layout(set = 0, binding = 8) writeonly buffer RectBuf { uvec4 data[]; } tile_rects; // x0 y0 x1 y1 (end-exclusive)
+layout(set = 0, binding = 9) writeonly buffer FlagsBuf { uint data[]; } visible;    // n + 1 entries
+layout(set = 0, binding = 10) writeonly buffer TouchedBuf { uint data[]; } tiles_touched;
+layout(set = 0, binding = 11) writeonly buffer FracBuf { vec2 data[]; } xy_frac;
+#ifdef PROJECT_F64
+// World-to-camera rows (R00 R01 R02 t0, ...), then fx fy cx cy, in float64.
+layout(set = 0, binding = 12) readonly buffer Camera64Buf { double data[]; } camera64;
+#endif
+
+#define SH_COEFF(k) vec3(sh.data[base + 3 * (k)], sh.data[base + 3 * (k) + 1], sh.data[base + 3 * (k) + 2])
+
+void main() {
+    uint i = gl_GlobalInvocationID.x;
+    uint n = pc.counts.x;
+    if (i > n) {
+        return;
+    }
+    if (i == n) {
+        visible.data[n] = 0;
+        return;
+    }
+    visible.data[i] = 0;
+    tiles_touched.data[i] = 0;
+
+    vec3 mean = vec3(means.data[3 * i], means.data[3 * i + 1], means.data[3 * i + 2]);
+#ifdef PROJECT_F64
+    dvec3 md = dvec3(mean);
+    dvec3 pd = dvec3(camera64.data[0] * md.x + camera64.data[1] * md.y + camera64.data[2] * md.z + camera64.data[3],
+                     camera64.data[4] * md.x + camera64.data[5] * md.y + camera64.data[6] * md.z + camera64.data[7],
+                     camera64.data[8] * md.x + camera64.data[9] * md.y + camera64.data[10] * md.z + camera64.data[11]);
+    vec3 p = vec3(pd);
+#else
+    vec3 p = vec3(dot(pc.rot_t0.xyz, mean) + pc.rot_t0.w,
+                  dot(pc.rot_t1.xyz, mean) + pc.rot_t1.w,
+                  dot(pc.rot_t2.xyz, mean) + pc.rot_t2.w);
+#endif
+    if (!(p.z > pc.center_near.w && p.z < pc.far_pad.x)) {
+        return;
+    }
+    vec4 q = vec4(quats.data[4 * i], quats.data[4 * i + 1], quats.data[4 * i + 2], quats.data[4 * i + 3]);
+    float qn = length(q);
+    if (!(qn > 0.0)) {
+        return;
+    }
+    float opacity = sigmoid(opacity_logits.data[i]);
+    if (!(opacity >= ALPHA_MIN)) {
+        return;
+    }
+
+    // 3D covariance R S S^T R^T, then into camera space.
+    mat3 rq = quat_to_mat(q / qn);
+    vec3 s = exp(vec3(log_scales.data[3 * i], log_scales.data[3 * i + 1], log_scales.data[3 * i + 2]));
+    mat3 m = rq * mat3(s.x, 0, 0, 0, s.y, 0, 0, 0, s.z);
+    mat3 cov3 = m * transpose(m);
+    mat3 w = transpose(mat3(pc.rot_t0.xyz, pc.rot_t1.xyz, pc.rot_t2.xyz)); // rows -> matrix
+    mat3 covc = w * cov3 * transpose(w);
+
+    // Perspective Jacobian with x/z, y/z clamped to the frustum widened by 0.3 tan(fov/2).
+    float fx = pc.intrinsics.x, fy = pc.intrinsics.y, cx = pc.intrinsics.z, cy = pc.intrinsics.w;
+    float width = float(pc.dims.x), height = float(pc.dims.y);
+    float tan_x = 0.5 * width / fx, tan_y = 0.5 * height / fy;
+    float lim_xp = (width - cx) / fx + 0.3 * tan_x, lim_xn = cx / fx + 0.3 * tan_x;
+    float lim_yp = (height - cy) / fy + 0.3 * tan_y, lim_yn = cy / fy + 0.3 * tan_y;
+    float rz = 1.0 / p.z;
+    float tx = p.z * min(lim_xp, max(-lim_xn, p.x * rz));
+    float ty = p.z * min(lim_yp, max(-lim_yn, p.y * rz));
+    // J as a 3x2 column-major matrix (two columns = two rows of the 2x3 Jacobian).
+    vec3 j0 = vec3(fx * rz, 0.0, -fx * tx * rz * rz);
+    vec3 j1 = vec3(0.0, fy * rz, -fy * ty * rz * rz);
+    vec3 cj0 = covc * j0, cj1 = covc * j1;
+    float a = dot(j0, cj0) + 0.3;
+    float b = dot(j0, cj1);
+    float c = dot(j1, cj1) + 0.3;
+    float det = max(a * c - b * b, 1e-10);
+    vec3 conic = vec3(c / det, -b / det, a / det);
+
+#ifdef PROJECT_F64
+    dvec2 m2 = dvec2(camera64.data[12] * pd.x / pd.z + camera64.data[14], camera64.data[13] * pd.y / pd.z + camera64.data[15]);
+    dvec2 m2_floor = floor(m2);
+    vec2 mean_int = vec2(m2_floor);
+    vec2 mean_frac = vec2(m2 - m2_floor);
+#else
+    vec2 mean2d = vec2(fx * p.x * rz + cx, fy * p.y * rz + cy);
+    vec2 mean_int = floor(mean2d);
+    vec2 mean_frac = mean2d - mean_int;
+#endif
+    // Opacity-aware extent: alpha >= 1/255 needs d^T cov^-1 d <= 2 ln(255 opacity).
+    float r = sqrt(2.0 * log(255.0 * opacity));
+    vec2 extent = r * sqrt(vec2(a, c));
+    vec2 lo = max(mean_int + ceil(mean_frac - extent - 0.5), vec2(0.0));
+    vec2 hi = min(mean_int + floor(mean_frac + extent - 0.5), vec2(width - 1.0, height - 1.0));
+    if (!(lo.x <= hi.x && lo.y <= hi.y)) {
+        return;
+    }
+    uvec2 tlo = uvec2(lo) / TILE_SIZE;
+    uvec2 thi = uvec2(hi) / TILE_SIZE + 1;
+
+    vec3 dir = normalize(mean - pc.center_near.xyz);
+    uint base = i * pc.counts.z * 3;
+    vec3 color;
+    SH_EVAL(color, pc.counts.y, dir, SH_COEFF);
+    color = max(color + 0.5, vec3(0.0));
+
+    xy_depth_opacity.data[i] = vec4(mean_int, p.z, opacity);
+    xy_frac.data[i] = mean_frac;
+    conics.data[i] = vec4(conic, 0.0);
+    colors.data[i] = vec4(color, 0.0);
+    tile_rects.data[i] = uvec4(tlo, thi);
+    tiles_touched.data[i] = (thi.x - tlo.x) * (thi.y - tlo.y);
+    visible.data[i] = 1;
+}

@@ -1,0 +1,158 @@
+//! `semsplat render`: renders views of a scene on the GPU and writes images (and, with
+//! --raw, float arrays for comparison with other tools).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+
+use semsplat::gpu::Gpu;
+use semsplat::render::{GpuScene, Rasterizer, RenderOptions, RenderedFrame, SemanticMode};
+use semsplat::scene::cameras::load_cameras;
+use semsplat::scene::classes::ClassTable;
+use semsplat::scene::labels::{write_label_png, write_palette_png, LabelMap};
+use semsplat::scene::ply::{read_classes_sidecar, read_ply};
+use semsplat::scene::Camera;
+use semsplat::util::npy::write_npy_f32;
+use semsplat::util::write_bytes_atomic;
+
+#[derive(Args)]
+pub struct RenderArgs {
+    /// The scene: a 3DGS PLY (INRIA layout). Semantic logits come from its sem_0..sem_{C-1}
+    /// properties; class ids and colors from the `<scene>.classes.json` sidecar if present.
+    #[arg(long)]
+    scene: PathBuf,
+    /// Cameras: a COLMAP model folder (cameras/images .bin or .txt, or a folder with
+    /// sparse/0), an INRIA cameras.json, or a semsplat cameras.json.
+    #[arg(long)]
+    cameras: PathBuf,
+    /// Render only these views (image names without extension); default: all.
+    #[arg(long, num_args = 1.., value_delimiter = ',')]
+    views: Vec<String>,
+    /// Output folder: <view>.png (RGB) and, with --semantics, <view>.labels.png (class ids,
+    /// 255/65535 where nothing was drawn) and <view>.palette.png (class colors).
+    #[arg(long)]
+    out: PathBuf,
+    /// Also render the semantic channels (the argmax class per pixel).
+    #[arg(long)]
+    semantics: bool,
+    /// Blend softmax(logits) per Gaussian instead of raw logits.
+    #[arg(long, requires = "semantics")]
+    softmax: bool,
+    /// Background color, three values in [0, 1].
+    #[arg(long, value_delimiter = ',', num_args = 3, default_values_t = [0.0f32, 0.0, 0.0])]
+    background: Vec<f32>,
+    /// Also write float32 NumPy arrays per view: <view>.rgb.npy [H,W,3], .alpha.npy [H,W],
+    /// .depth.npy [H,W], and with --semantics .sem.npy [H,W,C] (blended) and
+    /// .sem_norm.npy [H,W,C] (divided by the accumulated alpha).
+    #[arg(long)]
+    raw: bool,
+}
+
+fn select_views(cams: Vec<Camera>, wanted: &[String]) -> Result<Vec<Camera>> {
+    if wanted.is_empty() {
+        return Ok(cams);
+    }
+    let missing: Vec<&String> = wanted
+        .iter()
+        .filter(|w| !cams.iter().any(|c| &c.name == *w))
+        .collect();
+    if !missing.is_empty() {
+        let known: Vec<&str> = cams.iter().take(10).map(|c| c.name.as_str()).collect();
+        bail!("no camera named {missing:?} (cameras include {known:?})");
+    }
+    Ok(cams
+        .into_iter()
+        .filter(|c| wanted.contains(&c.name))
+        .collect())
+}
+
+fn write_rgb_png(path: &Path, f: &RenderedFrame) -> Result<()> {
+    let bytes: Vec<u8> = f
+        .rgb
+        .iter()
+        .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
+        .collect();
+    let img = image::RgbImage::from_raw(f.width, f.height, bytes).context("image size")?;
+    let mut png = Vec::new();
+    img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)?;
+    write_bytes_atomic(path, &png)
+}
+
+/// Maps argmax channel k to the user's class id: row k of the class table, else k.
+fn label_map(f: &RenderedFrame, table: Option<&ClassTable>) -> Result<LabelMap> {
+    let labels = f
+        .argmax_labels()
+        .into_iter()
+        .map(|k| match k {
+            None => LabelMap::IGNORE,
+            Some(k) => table
+                .and_then(|t| t.classes.get(k as usize))
+                .map_or(k as u16, |c| c.id as u16),
+        })
+        .collect();
+    LabelMap::new(f.width, f.height, labels)
+}
+
+pub fn run(args: RenderArgs) -> Result<()> {
+    if args.background.iter().any(|v| !(0.0..=1.0).contains(v)) {
+        bail!(
+            "--background values must lie in [0, 1], got {:?}",
+            args.background
+        );
+    }
+    let g = read_ply(&args.scene)?;
+    let table = read_classes_sidecar(&args.scene)?;
+    let cams = select_views(load_cameras(&args.cameras)?, &args.views)?;
+    if args.semantics && g.semantics.is_none() {
+        bail!(
+            "{} has no sem_* properties: nothing to render with --semantics",
+            args.scene.display()
+        );
+    }
+    let gpu = Gpu::new()?;
+    let scene = GpuScene::upload(&gpu, &g)?;
+    let mode = if args.softmax {
+        SemanticMode::Softmax
+    } else {
+        SemanticMode::RawLogits
+    };
+    let opts = RenderOptions {
+        background: [args.background[0], args.background[1], args.background[2]],
+        semantics: args.semantics.then_some(mode),
+        ..Default::default()
+    };
+    let palette_table = table.clone().unwrap_or_else(|| {
+        ClassTable::from_ids(0..g.semantics.as_ref().map_or(0, |s| s.channels as u32))
+    });
+    let mut raster = Rasterizer::new(&gpu);
+    let bar = ProgressBar::new(cams.len() as u64).with_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} views {msg}").expect("valid template"),
+    );
+    for cam in &cams {
+        bar.set_message(cam.name.clone());
+        let f = raster.render(&scene, cam, &opts)?;
+        let out = |suffix: &str| args.out.join(format!("{}{suffix}", cam.name));
+        write_rgb_png(&out(".png"), &f)?;
+        if args.semantics {
+            let labels = label_map(&f, table.as_ref())?;
+            write_label_png(&out(".labels.png"), &labels)?;
+            write_palette_png(&out(".palette.png"), &labels, &palette_table)?;
+        }
+        if args.raw {
+            let (h, w, c) = (f.height as u64, f.width as u64, f.channels as u64);
+            write_npy_f32(&out(".rgb.npy"), &[h, w, 3], &f.rgb)?;
+            write_npy_f32(&out(".alpha.npy"), &[h, w], &f.alpha)?;
+            write_npy_f32(&out(".depth.npy"), &[h, w], &f.depth)?;
+            if args.semantics {
+                write_npy_f32(&out(".sem.npy"), &[h, w, c], &f.sem)?;
+                write_npy_f32(&out(".sem_norm.npy"), &[h, w, c], &f.sem_norm)?;
+            }
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    eprintln!("rendered {} views into {}", cams.len(), args.out.display());
+    Ok(())
+}

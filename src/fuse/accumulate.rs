@@ -1,0 +1,400 @@
+//! Gathers per-class evidence for every Gaussian on the GPU, view by view: votes of the
+//! projected centers (paper 001, plus occlusion-checked and alpha*T-weighted variants) or
+//! FlashSplat's contribution matrix A (paper 002). Label maps stream one view at a time;
+//! the evidence matrix stays dense while it fits the memory budget, else the classes are
+//! processed in batches of rows (each batch walks every view again; results are the same).
+
+use anyhow::{bail, ensure, Result};
+use bytemuck::{Pod, Zeroable};
+use serde::Serialize;
+
+use super::scores::ClassScores;
+use crate::gpu::kernel_table::ids;
+use crate::gpu::{Buffer, Gpu, Recorder};
+use crate::render::{GpuScene, Rasterizer, RenderOptions};
+use crate::scene::Camera;
+
+/// Marks a pixel without a label (or with a class outside the table).
+pub const NO_LABEL: u32 = u32::MAX;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Method {
+    /// Majority vote of the projected centers.
+    Vote,
+    /// Votes only where the center is visible: its depth within a tolerance of the
+    /// rendered expected depth at that pixel.
+    VoteOcclusion,
+    /// Votes weighted by the Gaussian's alpha * T at the pixel holding its center.
+    VoteWeighted,
+    /// FlashSplat: alpha * T of every Gaussian at every labeled pixel.
+    FlashSplat,
+}
+
+/// How the weighted methods accumulate on the GPU.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Accumulation {
+    /// 64-bit fixed point (2^-32 resolution): identical from run to run.
+    #[default]
+    FixedPoint,
+    /// float32 atomics: sums depend on the order of the atomics.
+    Float,
+}
+
+#[derive(Clone, Debug)]
+pub struct FuseConfig {
+    pub method: Method,
+    pub accumulation: Accumulation,
+    /// Bytes the evidence matrix may take on the device; None: a quarter of the
+    /// device-local memory, capped by the largest buffer a kernel can bind.
+    pub mem_budget: Option<u64>,
+    /// Relative depth tolerance of `VoteOcclusion`.
+    pub depth_tolerance: f32,
+    pub near: f32,
+    pub far: f32,
+}
+
+impl Default for FuseConfig {
+    fn default() -> Self {
+        FuseConfig {
+            method: Method::FlashSplat,
+            accumulation: Accumulation::FixedPoint,
+            mem_budget: None,
+            depth_tolerance: 0.05,
+            near: 0.01,
+            far: 1e10,
+        }
+    }
+}
+
+/// Gives the label map of a view as compact class indices per pixel ([`NO_LABEL`] where
+/// unlabeled), or None when the view has no labels. Called once per view and pass.
+pub trait LabelSource {
+    fn labels(&self, view: usize, cam: &Camera) -> Result<Option<Vec<u32>>>;
+}
+
+impl LabelSource for Vec<Option<Vec<u32>>> {
+    fn labels(&self, view: usize, _cam: &Camera) -> Result<Option<Vec<u32>>> {
+        Ok(self.get(view).cloned().flatten())
+    }
+}
+
+/// What a fusion run measured.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct FuseStats {
+    pub views: usize,
+    pub views_with_labels: usize,
+    /// Passes over the views (1 when the evidence matrix fits the budget).
+    pub passes: usize,
+    pub rows_per_pass: usize,
+    /// GPU time (timestamps): binning + per-tile stages, and the vote kernels.
+    pub gpu_ms: f64,
+    pub wall_s: f64,
+    pub views_per_s: f64,
+    pub peak_device_bytes: u64,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct ContribParams {
+    dims: [u32; 4],
+    window: [u32; 4],
+    mode: [u32; 4],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct VoteParams {
+    rot_t: [[f32; 4]; 3],
+    intrinsics: [f32; 4],
+    clip: [f32; 4],
+    dims: [u32; 4],
+    rows: [u32; 4],
+}
+
+fn bytes_per_entry(method: Method, acc: Accumulation) -> u64 {
+    match (method, acc) {
+        (Method::Vote | Method::VoteOcclusion, _) => 4,
+        (_, Accumulation::FixedPoint) => 8,
+        (_, Accumulation::Float) => 4,
+    }
+}
+
+/// Rows of the evidence matrix one pass holds.
+pub fn rows_per_pass(gpu: &Gpu, cfg: &FuseConfig, classes: usize, n: usize) -> Result<usize> {
+    let per_row = bytes_per_entry(cfg.method, cfg.accumulation) * n.max(1) as u64;
+    let caps = gpu.caps();
+    let budget = cfg
+        .mem_budget
+        .unwrap_or(caps.device_local_bytes() / 4)
+        .min(caps.max_storage_buffer_range);
+    let rows = (budget / per_row) as usize;
+    if rows == 0 {
+        bail!(
+            "one class row of the evidence matrix takes {per_row} bytes for {n} Gaussians, over the memory budget \
+             of {budget} bytes (raise --mem-budget; one buffer binding holds at most {} bytes on this device)",
+            caps.max_storage_buffer_range
+        );
+    }
+    Ok(rows.min(classes.max(1)))
+}
+
+/// Runs `cfg.method` over every view and returns the evidence [classes][n].
+pub fn accumulate(
+    gpu: &Gpu,
+    scene: &GpuScene,
+    cams: &[Camera],
+    labels: &dyn LabelSource,
+    classes: usize,
+    cfg: &FuseConfig,
+    mut progress: impl FnMut(usize, usize),
+) -> Result<(ClassScores, FuseStats)> {
+    let start = std::time::Instant::now();
+    let n = scene.n as usize;
+    if cfg.accumulation == Accumulation::FixedPoint && !gpu.caps().int64_atomics {
+        bail!("fixed-point accumulation needs 64-bit integer atomics, which {} lacks; use float atomics", gpu.caps().name);
+    }
+    if cfg.accumulation == Accumulation::Float && !gpu.caps().float_atomic_add {
+        bail!(
+            "float accumulation needs VK_EXT_shader_atomic_float, which {} lacks",
+            gpu.caps().name
+        );
+    }
+    let rows = rows_per_pass(gpu, cfg, classes, n)?;
+    let passes = classes.div_ceil(rows).max(1);
+    let entry = bytes_per_entry(cfg.method, cfg.accumulation);
+    let mut scores = ClassScores::zeros(classes, n);
+    let mut stats = FuseStats {
+        views: cams.len(),
+        passes,
+        rows_per_pass: rows,
+        ..Default::default()
+    };
+    let mut raster = Rasterizer::new(gpu);
+    let opts = RenderOptions {
+        near: cfg.near,
+        far: cfg.far,
+        semantics: None,
+        ..Default::default()
+    };
+    let mut label_buf: Option<Buffer> = None;
+    let mut carry: Option<Buffer> = None;
+
+    for pass in 0..passes {
+        let row_begin = pass * rows;
+        let pass_rows = rows.min(classes - row_begin);
+        let evidence = gpu.buffer("evidence", (pass_rows * n) as u64 * entry)?;
+        {
+            let mut rec = Recorder::new(gpu)?;
+            rec.fill(&evidence, 0, evidence.size(), 0);
+            rec.submit_and_wait()?;
+        }
+        for (view, cam) in cams.iter().enumerate() {
+            progress(pass * cams.len() + view, passes * cams.len());
+            let Some(map) = labels.labels(view, cam)? else {
+                continue;
+            };
+            let pixels = cam.width as usize * cam.height as usize;
+            ensure!(
+                map.len() == pixels,
+                "labels of view {} have {} pixels, the camera {pixels}",
+                cam.name,
+                map.len()
+            );
+            if pass == 0 {
+                stats.views_with_labels += 1;
+            }
+            if label_buf
+                .as_ref()
+                .is_none_or(|b| b.size() < pixels as u64 * 4)
+            {
+                label_buf = Some(gpu.buffer("labels", pixels as u64 * 4)?);
+                carry = Some(gpu.buffer("contrib-carry", pixels as u64 * 8)?);
+            }
+            let lb = label_buf.as_ref().expect("allocated");
+            gpu.upload(lb, 0, &map)?;
+            let ms = match cfg.method {
+                Method::Vote => record_vote(
+                    gpu, scene, cam, lb, None, &evidence, row_begin, pass_rows, cfg,
+                )?,
+                Method::VoteOcclusion => {
+                    let run = raster.run_tiled(scene, cam, &opts, 0, |rec, tiles| {
+                        tiles.record_blend(rec, None, 0, u32::MAX / 2, [0.0; 3])?;
+                        rec.barrier();
+                        dispatch_vote(
+                            rec,
+                            scene,
+                            cam,
+                            lb,
+                            Some(tiles.depth()),
+                            &evidence,
+                            row_begin,
+                            pass_rows,
+                            cfg,
+                        )
+                    })?;
+                    run.timings.total_ns() * 1e-6
+                }
+                Method::VoteWeighted | Method::FlashSplat => {
+                    let mode = u32::from(cfg.method == Method::VoteWeighted);
+                    let kernel = match cfg.accumulation {
+                        Accumulation::FixedPoint => ids::FUSE_CONTRIB_FIXED,
+                        Accumulation::Float => ids::FUSE_CONTRIB_FLOAT,
+                    };
+                    let window_len = raster.window_len();
+                    let cb = carry.as_ref().expect("allocated");
+                    let run = raster.run_tiled(scene, cam, &opts, 0, |rec, tiles| {
+                        for w in 0..tiles.windows() {
+                            let params = ContribParams {
+                                dims: [cam.width, cam.height, tiles.tiles_x, n as u32],
+                                window: [
+                                    w * window_len,
+                                    window_len,
+                                    row_begin as u32,
+                                    pass_rows as u32,
+                                ],
+                                mode: [mode, 0, 0, 0],
+                            };
+                            rec.dispatch(
+                                kernel,
+                                &[
+                                    ("tile_ranges", tiles.ranges()),
+                                    ("isect_ids", tiles.isect_ids()),
+                                    ("xy_depth_opacity", tiles.xy_depth_opacity()),
+                                    ("conics", tiles.conics()),
+                                    ("xy_frac", tiles.xy_frac()),
+                                    ("labels", lb),
+                                    ("carry", cb),
+                                    ("contrib", &evidence),
+                                ],
+                                bytemuck::bytes_of(&params),
+                                [tiles.tiles_x, tiles.tiles_y, 1],
+                            )?;
+                            rec.barrier();
+                        }
+                        Ok(())
+                    })?;
+                    run.timings.total_ns() * 1e-6
+                }
+            };
+            stats.gpu_ms += ms;
+            stats.peak_device_bytes = stats.peak_device_bytes.max(gpu.memory_reserved());
+        }
+        download_rows(gpu, &evidence, cfg, n, row_begin, pass_rows, &mut scores)?;
+    }
+    progress(passes * cams.len(), passes * cams.len());
+    stats.wall_s = start.elapsed().as_secs_f64();
+    stats.views_per_s = (stats.views * passes) as f64 / stats.wall_s.max(1e-9);
+    Ok((scores, stats))
+}
+
+fn download_rows(
+    gpu: &Gpu,
+    evidence: &Buffer,
+    cfg: &FuseConfig,
+    n: usize,
+    row_begin: usize,
+    rows: usize,
+    out: &mut ClassScores,
+) -> Result<()> {
+    let count = rows * n;
+    let values: Vec<f64> = match (cfg.method, cfg.accumulation) {
+        (Method::Vote | Method::VoteOcclusion, _) => gpu
+            .download::<u32>(evidence, 0, count)?
+            .into_iter()
+            .map(f64::from)
+            .collect(),
+        (_, Accumulation::FixedPoint) => {
+            let scale = 1.0 / 4_294_967_296.0;
+            gpu.download::<u64>(evidence, 0, count)?
+                .into_iter()
+                .map(|v| v as f64 * scale)
+                .collect()
+        }
+        (_, Accumulation::Float) => gpu
+            .download::<f32>(evidence, 0, count)?
+            .into_iter()
+            .map(f64::from)
+            .collect(),
+    };
+    out.data[row_begin * n..(row_begin + rows) * n].copy_from_slice(&values);
+    Ok(())
+}
+
+#[allow(clippy::too_many_arguments)]
+fn record_vote(
+    gpu: &Gpu,
+    scene: &GpuScene,
+    cam: &Camera,
+    labels: &Buffer,
+    depth: Option<&Buffer>,
+    votes: &Buffer,
+    row_begin: usize,
+    rows: usize,
+    cfg: &FuseConfig,
+) -> Result<f64> {
+    let mut rec = Recorder::new(gpu)?;
+    let m0 = rec.mark();
+    dispatch_vote(
+        &mut rec, scene, cam, labels, depth, votes, row_begin, rows, cfg,
+    )?;
+    let m1 = rec.mark();
+    let t = rec.submit_and_wait()?;
+    Ok(t.between(m0, m1).unwrap_or(0.0) * 1e-6)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn dispatch_vote(
+    rec: &mut Recorder,
+    scene: &GpuScene,
+    cam: &Camera,
+    labels: &Buffer,
+    depth: Option<&Buffer>,
+    votes: &Buffer,
+    row_begin: usize,
+    rows: usize,
+    cfg: &FuseConfig,
+) -> Result<()> {
+    let r = cam.rotation;
+    let t = cam.translation;
+    let params = VoteParams {
+        rot_t: [
+            [
+                r.x_axis.x as f32,
+                r.y_axis.x as f32,
+                r.z_axis.x as f32,
+                t.x as f32,
+            ],
+            [
+                r.x_axis.y as f32,
+                r.y_axis.y as f32,
+                r.z_axis.y as f32,
+                t.y as f32,
+            ],
+            [
+                r.x_axis.z as f32,
+                r.y_axis.z as f32,
+                r.z_axis.z as f32,
+                t.z as f32,
+            ],
+        ],
+        intrinsics: [cam.fx as f32, cam.fy as f32, cam.cx as f32, cam.cy as f32],
+        clip: [cfg.near, cfg.far, cfg.depth_tolerance, 0.0],
+        dims: [cam.width, cam.height, scene.n, u32::from(depth.is_some())],
+        rows: [row_begin as u32, rows as u32, 0, 0],
+    };
+    rec.dispatch(
+        ids::FUSE_VOTE,
+        &[
+            ("means", &scene.means),
+            ("labels", labels),
+            ("depth", depth.unwrap_or(labels)),
+            ("votes", votes),
+        ],
+        bytemuck::bytes_of(&params),
+        [scene.n.div_ceil(256).max(1), 1, 1],
+    )?;
+    rec.barrier();
+    Ok(())
+}

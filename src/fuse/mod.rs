@@ -1,0 +1,12 @@
+//! Training-free lifting: majority vote (paper 001) and FlashSplat's optimal assignment
+//! (paper 002), from per-view label maps to a class per Gaussian.
+
+pub mod accumulate;
+pub mod assign;
+pub mod scores;
+
+pub use accumulate::{
+    accumulate, Accumulation, FuseConfig, FuseStats, LabelSource, Method, NO_LABEL,
+};
+pub use assign::{assign_one_vs_rest, assign_semantic, Assignment};
+pub use scores::ClassScores;

@@ -1,0 +1,412 @@
+//! Fusion on the GPU against plain CPU computations: vote counts exactly, FlashSplat's A
+//! against the CPU reference renderer, determinism, batching, and Listing 1.1.
+
+mod common;
+
+use common::{check_validation, gpu, separate_depth_ties};
+use glam::DVec3;
+use semsplat::fuse::{
+    accumulate, assign_one_vs_rest, assign_semantic, Accumulation, ClassScores, FuseConfig, Method,
+    NO_LABEL,
+};
+use semsplat::render::reference::{self, RenderSettings};
+use semsplat::render::GpuScene;
+use semsplat::scene::random_scene::{random_scene, RandomSceneSpec};
+use semsplat::scene::{Camera, Gaussians};
+use semsplat::util::Rng;
+
+const CLASSES: usize = 5;
+
+fn cameras() -> Vec<Camera> {
+    let cam = |name: &str, eye: DVec3, target: DVec3| {
+        Camera::look_at(name, eye, target, -DVec3::Y, 61, 45, 70.0)
+    };
+    vec![
+        cam("a", DVec3::ZERO, DVec3::new(0.0, 0.0, 5.0)),
+        cam("b", DVec3::new(-2.0, -1.0, 0.5), DVec3::new(0.5, 0.0, 5.0)),
+        cam("c", DVec3::new(1.5, 1.0, -1.0), DVec3::new(0.0, 0.0, 4.0)),
+    ]
+}
+
+/// Label maps in 6x6-pixel blocks of random classes, a few blocks unlabeled.
+fn label_maps(cams: &[Camera], seed: u64) -> Vec<Option<Vec<u32>>> {
+    let mut rng = Rng::new(seed);
+    cams.iter()
+        .map(|c| {
+            let (bw, bh) = (c.width.div_ceil(6), c.height.div_ceil(6));
+            let blocks: Vec<u32> = (0..bw * bh)
+                .map(|_| {
+                    if rng.bool(0.15) {
+                        NO_LABEL
+                    } else {
+                        rng.below(CLASSES as u64) as u32
+                    }
+                })
+                .collect();
+            Some(
+                (0..c.width * c.height)
+                    .map(|i| blocks[((i / c.width / 6) * bw + (i % c.width) / 6) as usize])
+                    .collect(),
+            )
+        })
+        .collect()
+}
+
+fn scene(n: usize, seed: u64) -> Gaussians {
+    random_scene(&RandomSceneSpec {
+        n,
+        seed,
+        scale: (0.01, 0.1),
+        ..Default::default()
+    })
+}
+
+fn run(
+    g: &Gaussians,
+    cams: &[Camera],
+    labels: &Vec<Option<Vec<u32>>>,
+    cfg: &FuseConfig,
+) -> ClassScores {
+    let gpu = gpu();
+    let scene = GpuScene::upload(gpu, g).unwrap();
+    accumulate(gpu, &scene, cams, labels, CLASSES, cfg, |_, _| {})
+        .unwrap()
+        .0
+}
+
+#[test]
+fn vote_counts_equal_a_cpu_count() {
+    let g = scene(3_000, 1);
+    let cams = cameras();
+    let labels = label_maps(&cams, 2);
+    let got = run(
+        &g,
+        &cams,
+        &labels,
+        &FuseConfig {
+            method: Method::Vote,
+            ..Default::default()
+        },
+    );
+    let mut want = ClassScores::zeros(CLASSES, g.len());
+    // Centers within 1e-4 px of a pixel edge may land on either side in f32: leave them out.
+    let mut ambiguous = vec![false; g.len()];
+    for (cam, map) in cams.iter().zip(&labels) {
+        let map = map.as_ref().unwrap();
+        for (i, m) in g.means.iter().enumerate() {
+            let p = cam.world_to_camera(DVec3::new(m[0] as f64, m[1] as f64, m[2] as f64));
+            if p.z <= 0.01 {
+                continue;
+            }
+            let (u, v) = cam.project_camera_point(p);
+            let near_edge = |x: f64| (x - x.round()).abs() < 1e-4;
+            if near_edge(u) || near_edge(v) {
+                ambiguous[i] = true;
+            }
+            if u < 0.0 || v < 0.0 || u >= cam.width as f64 || v >= cam.height as f64 {
+                continue;
+            }
+            let label = map[v as usize * cam.width as usize + u as usize];
+            if label != NO_LABEL {
+                want.data[label as usize * g.len() + i] += 1.0;
+            }
+        }
+    }
+    let left_out = ambiguous.iter().filter(|&&a| a).count();
+    assert!(left_out < g.len() / 100, "{left_out} ambiguous centers");
+    let mut compared = 0;
+    for i in (0..g.len()).filter(|&i| !ambiguous[i]) {
+        for e in 0..CLASSES {
+            assert_eq!(got.get(e, i), want.get(e, i), "gaussian {i} class {e}");
+        }
+        compared += 1;
+    }
+    assert!(
+        want.data.iter().sum::<f64>() > 1000.0,
+        "the scene must produce votes"
+    );
+    assert!(compared > 2_900);
+    check_validation(gpu());
+}
+
+/// A[label(pixel)][g] += alpha * T over every pixel, from the f64 reference renderer.
+fn reference_contributions(
+    g: &Gaussians,
+    cams: &[Camera],
+    labels: &[Option<Vec<u32>>],
+    center_only: bool,
+) -> ClassScores {
+    let mut a = ClassScores::zeros(CLASSES, g.len());
+    let settings = RenderSettings {
+        semantics: false,
+        ..Default::default()
+    };
+    for (cam, map) in cams.iter().zip(labels) {
+        let map = map.as_ref().unwrap();
+        let centers: Vec<(i64, i64)> = g
+            .means
+            .iter()
+            .map(|m| {
+                let p = cam.world_to_camera(DVec3::new(m[0] as f64, m[1] as f64, m[2] as f64));
+                let (u, v) = cam.project_camera_point(p);
+                (u.floor() as i64, v.floor() as i64)
+            })
+            .collect();
+        reference::for_each_contribution(g, cam, &settings, |px, py, id, w| {
+            let label = map[(py * cam.width + px) as usize];
+            if label == NO_LABEL || (center_only && centers[id as usize] != (px as i64, py as i64))
+            {
+                return;
+            }
+            a.data[label as usize * g.len() + id as usize] += w;
+        });
+    }
+    a
+}
+
+fn assert_close(got: &ClassScores, want: &ClassScores, what: &str) {
+    assert_eq!((got.classes, got.n), (want.classes, want.n));
+    // 1e-5 relative; the absolute floor covers entries made of a few tiny weights, where
+    // float32 alpha (about 1e-7 relative per term) dominates.
+    for (k, (&a, &b)) in got.data.iter().zip(&want.data).enumerate() {
+        assert!(
+            (a - b).abs() <= 1e-5 * b.abs() + 1e-6,
+            "{what}: entry {k} (class {}, gaussian {}): gpu {a} cpu {b}",
+            k / got.n,
+            k % got.n
+        );
+    }
+}
+
+#[test]
+fn flashsplat_contributions_match_the_reference() {
+    let cams = cameras();
+    let labels = label_maps(&cams, 5);
+    // Each view's near-ties separated for all views at once is not possible; one view's
+    // ordering is what matters per comparison, so compare view by view.
+    for (v, cam) in cams.iter().enumerate() {
+        let g = separate_depth_ties(&scene(4_000, 7), cam);
+        let one_cam = std::slice::from_ref(cam);
+        let one_map = vec![labels[v].clone()];
+        let got = run(&g, one_cam, &one_map, &FuseConfig::default());
+        let want = reference_contributions(&g, one_cam, &one_map, false);
+        assert!(
+            want.data.iter().sum::<f64>() > 10.0,
+            "view {v} must see the scene"
+        );
+        assert_close(&got, &want, &format!("view {}", cam.name));
+        let float = run(
+            &g,
+            one_cam,
+            &one_map,
+            &FuseConfig {
+                accumulation: Accumulation::Float,
+                ..Default::default()
+            },
+        );
+        assert_close(&float, &want, &format!("float atomics, view {}", cam.name));
+    }
+    check_validation(gpu());
+}
+
+#[test]
+fn fixed_point_is_deterministic_and_batching_changes_nothing() {
+    let g = scene(5_000, 11);
+    let cams = cameras();
+    let labels = label_maps(&cams, 12);
+    let dense = run(&g, &cams, &labels, &FuseConfig::default());
+    let again = run(&g, &cams, &labels, &FuseConfig::default());
+    assert!(
+        dense.data == again.data,
+        "fixed-point A differs between two runs"
+    );
+    // A budget of one class row at a time: five passes over the views.
+    let one_row = 5_000 * 8;
+    let batched = run(
+        &g,
+        &cams,
+        &labels,
+        &FuseConfig {
+            mem_budget: Some(one_row),
+            ..Default::default()
+        },
+    );
+    assert!(dense.data == batched.data, "batched A differs from dense A");
+    let votes = run(
+        &g,
+        &cams,
+        &labels,
+        &FuseConfig {
+            method: Method::Vote,
+            ..Default::default()
+        },
+    );
+    let votes_batched = run(
+        &g,
+        &cams,
+        &labels,
+        &FuseConfig {
+            method: Method::Vote,
+            mem_budget: Some(5_000 * 4 * 2),
+            ..Default::default()
+        },
+    );
+    assert!(votes.data == votes_batched.data);
+    check_validation(gpu());
+}
+
+#[test]
+fn weighted_votes_match_the_reference_at_center_pixels() {
+    let cams = cameras();
+    let labels = label_maps(&cams, 9);
+    let cam = &cams[0];
+    let mut g = separate_depth_ties(&scene(3_000, 13), cam);
+    // Keep centers away from pixel edges, where f32 and f64 may pick different pixels.
+    for m in g.means.iter_mut() {
+        let p = cam.world_to_camera(DVec3::new(m[0] as f64, m[1] as f64, m[2] as f64));
+        let (u, v) = cam.project_camera_point(p);
+        let snap = |x: f64, f: f64, c: f64| ((x.floor() + 0.5) - c) / f * p.z;
+        let (x, y) = (snap(u, cam.fx, cam.cx), snap(v, cam.fy, cam.cy));
+        let world = cam.rotation.transpose() * (DVec3::new(x, y, p.z) - cam.translation);
+        *m = [world.x as f32, world.y as f32, world.z as f32];
+    }
+    let one_map = vec![labels[0].clone()];
+    let cfg = FuseConfig {
+        method: Method::VoteWeighted,
+        ..Default::default()
+    };
+    let got = run(&g, std::slice::from_ref(cam), &one_map, &cfg);
+    let want = reference_contributions(&g, std::slice::from_ref(cam), &one_map, true);
+    assert!(want.data.iter().filter(|&&v| v > 0.0).count() > 100);
+    assert_close(&got, &want, "weighted votes");
+    check_validation(gpu());
+}
+
+#[test]
+fn occlusion_keeps_hidden_gaussians_from_voting() {
+    // A wall of opaque Gaussians at z = 3 hides a second wall at z = 6; the label map is
+    // one class. Plain votes count both walls; occlusion-checked votes only the front.
+    let cam = Camera::look_at("o", DVec3::ZERO, DVec3::Z, -DVec3::Y, 48, 48, 50.0);
+    let mut g = Gaussians::default();
+    for (z, _) in [(3.0f32, 0), (6.0, 1)] {
+        for iy in 0..30 {
+            for ix in 0..30 {
+                let (x, y) = (
+                    (ix as f32 - 14.5) * 0.05 * z / 3.0,
+                    (iy as f32 - 14.5) * 0.05 * z / 3.0,
+                );
+                g.means.push([x, y, z]);
+                g.log_scales.push([
+                    (0.05 * z / 3.0f32).ln(),
+                    (0.05 * z / 3.0f32).ln(),
+                    (0.001f32).ln(),
+                ]);
+                g.quats.push([1.0, 0.0, 0.0, 0.0]);
+                g.opacity_logits.push(6.0);
+                g.sh.extend([0.5, 0.5, 0.5]);
+            }
+        }
+    }
+    let labels = vec![Some(vec![2u32; 48 * 48])];
+    let cams = [cam];
+    let plain = run(
+        &g,
+        &cams,
+        &labels,
+        &FuseConfig {
+            method: Method::Vote,
+            ..Default::default()
+        },
+    );
+    let occl = run(
+        &g,
+        &cams,
+        &labels,
+        &FuseConfig {
+            method: Method::VoteOcclusion,
+            ..Default::default()
+        },
+    );
+    let front_plain: f64 = plain.row(2)[..900].iter().sum();
+    let back_plain: f64 = plain.row(2)[900..].iter().sum();
+    let front_occl: f64 = occl.row(2)[..900].iter().sum();
+    let back_occl: f64 = occl.row(2)[900..].iter().sum();
+    assert!(
+        front_plain > 500.0 && back_plain > 500.0,
+        "{front_plain} {back_plain}"
+    );
+    assert!(
+        front_occl > 0.9 * front_plain,
+        "visible centers still vote: {front_occl} of {front_plain}"
+    );
+    assert_eq!(back_occl, 0.0, "hidden centers must not vote");
+    check_validation(gpu());
+}
+
+/// Listing 1.1 of paper 002, transcribed line by line.
+fn listing_1_1(all_contrib: &[Vec<f64>], gamma: f64) -> Vec<Vec<u8>> {
+    let obj_num = all_contrib.len();
+    let gs_num = all_contrib[0].len();
+    // all_contrib_sum = all_contrib.sum(dim=0)
+    let all_contrib_sum: Vec<f64> = (0..gs_num)
+        .map(|j| (0..obj_num).map(|i| all_contrib[i][j]).sum())
+        .collect();
+    let mut all_obj_labels = vec![vec![0u8; gs_num]; obj_num];
+    for (obj_idx, obj_contrib) in all_contrib.iter().enumerate() {
+        for j in 0..gs_num {
+            // other_contrib = all_contrib_sum - obj_contrib; stack([other, obj])
+            let mut pair = [all_contrib_sum[j] - obj_contrib[j], obj_contrib[j]];
+            // F.normalize(dim=0, p=1): divide by max(L1 norm, eps = 1e-12)
+            let norm = (pair[0].abs() + pair[1].abs()).max(1e-12);
+            pair = [pair[0] / norm, pair[1] / norm];
+            // obj_contrib[0, :] += gamma
+            pair[0] += gamma;
+            // argmax over dim 0; the first maximum wins
+            all_obj_labels[obj_idx][j] = if pair[1] > pair[0] { 1 } else { 0 };
+        }
+    }
+    all_obj_labels
+}
+
+#[test]
+fn one_vs_rest_assignment_is_listing_1_1() {
+    let mut rng = Rng::new(3);
+    let (e, n) = (6, 2_000);
+    let mut a = ClassScores::zeros(e, n);
+    for (k, v) in a.data.iter_mut().enumerate() {
+        // Sparse, skewed evidence, some all-zero columns (unseen Gaussians).
+        *v = if k % n < 50 || rng.bool(0.4) {
+            0.0
+        } else {
+            rng.f64().powi(3) * 10.0
+        };
+    }
+    let rows: Vec<Vec<f64>> = (0..e).map(|r| a.row(r).to_vec()).collect();
+    for gamma in [-0.3, 0.0, 0.1, 0.25, 0.6] {
+        let want = listing_1_1(&rows, gamma);
+        let got = assign_one_vs_rest(&a, gamma);
+        for r in 0..e {
+            for j in 0..n {
+                assert_eq!(
+                    got[r][j] as u8, want[r][j],
+                    "gamma {gamma} class {r} gaussian {j}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn semantic_assignment_takes_the_largest_share() {
+    let a = ClassScores {
+        classes: 3,
+        n: 4,
+        data: vec![1.0, 0.0, 0.0, 2.0, 3.0, 0.0, 0.0, 2.0, 0.0, 0.0, 0.5, 0.0],
+    };
+    let s = assign_semantic(&a);
+    assert_eq!(s.class, vec![Some(1), None, Some(2), Some(0)]);
+    assert_eq!(s.confidence[0], 0.75);
+    assert_eq!(s.confidence[1], 0.0);
+    assert_eq!(s.confidence[2], 1.0);
+    assert_eq!(s.confidence[3], 0.5);
+}

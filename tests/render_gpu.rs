@@ -1,0 +1,456 @@
+//! The GPU rasterizer against the independent CPU reference (f64): images within 1e-4 and
+//! the same (tile, Gaussian) intersection lists, on random scenes and edge cases.
+
+mod common;
+
+use common::{check_validation, gpu, separate_depth_ties};
+use glam::DVec3;
+use semsplat::render::reference::{self, RenderSettings};
+use semsplat::render::{GpuScene, Rasterizer, RenderOptions, RenderedFrame, SemanticMode};
+use semsplat::scene::random_scene::{random_scene, RandomSceneSpec};
+use semsplat::scene::{Camera, Gaussians};
+
+const TOL: f64 = 1e-4;
+
+fn ref_mode(m: SemanticMode) -> reference::SemanticMode {
+    match m {
+        SemanticMode::RawLogits => reference::SemanticMode::RawLogits,
+        SemanticMode::Softmax => reference::SemanticMode::Softmax,
+    }
+}
+
+fn camera(name: &str, eye: DVec3, target: DVec3, w: u32, h: u32) -> Camera {
+    Camera::look_at(name, eye, target, -DVec3::Y, w, h, 70.0)
+}
+
+/// A few poses around the random scenes (which fill a cone along +z from the origin).
+fn poses(w: u32, h: u32) -> Vec<Camera> {
+    vec![
+        camera("front", DVec3::ZERO, DVec3::new(0.0, 0.0, 5.0), w, h),
+        camera(
+            "side",
+            DVec3::new(-3.0, -1.0, 1.0),
+            DVec3::new(0.5, 0.0, 5.0),
+            w,
+            h,
+        ),
+        camera(
+            "far",
+            DVec3::new(1.0, 2.0, -6.0),
+            DVec3::new(0.0, 0.0, 4.0),
+            w,
+            h,
+        ),
+    ]
+}
+
+fn max_diff(gpu: &[f32], cpu: impl Iterator<Item = f64>) -> (f64, usize) {
+    let mut worst = (0.0, 0);
+    for (i, (g, c)) in gpu.iter().zip(cpu).enumerate() {
+        let d = (*g as f64 - c).abs();
+        if d.is_nan() || d > worst.0 {
+            worst = (d, i);
+        }
+    }
+    worst
+}
+
+/// Renders on both sides and checks every output and the intersection list.
+fn compare(
+    raster: &mut Rasterizer,
+    g: &Gaussians,
+    cam: &Camera,
+    mode: Option<SemanticMode>,
+    what: &str,
+) -> RenderedFrame {
+    compare_within(raster, g, cam, mode, what, TOL, true)
+}
+
+fn compare_within(
+    raster: &mut Rasterizer,
+    g: &Gaussians,
+    cam: &Camera,
+    mode: Option<SemanticMode>,
+    what: &str,
+    tol: f64,
+    exact_lists: bool,
+) -> RenderedFrame {
+    let gpu = gpu();
+    let g = &separate_depth_ties(g, cam);
+    let scene = GpuScene::upload(gpu, g).unwrap();
+    let opts = RenderOptions {
+        background: [0.2, 0.4, 0.6],
+        semantics: mode,
+        ..Default::default()
+    };
+    let frame = raster.render(&scene, cam, &opts).unwrap();
+    let settings = RenderSettings {
+        background: [0.2, 0.4, 0.6],
+        semantics: mode.is_some(),
+        semantic_mode: ref_mode(mode.unwrap_or_default()),
+        ..Default::default()
+    };
+    let r = reference::render(g, cam, &settings);
+    assert_eq!(frame.channels as usize, r.channels, "{what}: channels");
+    let checks: [(&str, &[f32], Vec<f64>); 5] = [
+        ("rgb", &frame.rgb, r.rgb.iter().flatten().copied().collect()),
+        ("alpha", &frame.alpha, r.alpha.clone()),
+        ("final_t", &frame.final_t, r.final_t.clone()),
+        ("sem", &frame.sem, r.sem.clone()),
+        ("sem_norm", &frame.sem_norm, r.sem_norm.clone()),
+    ];
+    for (name, got, want) in checks {
+        assert_eq!(got.len(), want.len(), "{what}: {name} length");
+        let (d, i) = max_diff(got, want.iter().copied());
+        assert!(
+            d <= tol,
+            "{what}: {name} differs by {d:.3e} at element {i}: gpu {} cpu {}",
+            got[i],
+            want[i]
+        );
+    }
+    // Expected depth is a ratio of sums: compare relative to the depth itself.
+    for (i, (&gd, &cd)) in frame.depth.iter().zip(&r.depth).enumerate() {
+        assert!(
+            (gd as f64 - cd).abs() <= tol * cd.abs().max(1.0),
+            "{what}: depth at {i}: gpu {gd} cpu {cd}"
+        );
+    }
+    if !exact_lists {
+        return frame;
+    }
+    assert_eq!(frame.n_contrib, r.n_contrib, "{what}: contributor counts");
+
+    let projected = reference::project(g, cam, &settings);
+    let want = reference::tile_intersections(&projected, cam);
+    let got = raster.last_intersections().unwrap();
+    assert_eq!(
+        frame.visible as usize,
+        projected.len(),
+        "{what}: visible Gaussians"
+    );
+    if got != want {
+        let first = (0..got.len().max(want.len()))
+            .find(|&i| got.get(i) != want.get(i))
+            .unwrap();
+        panic!(
+            "{what}: intersection lists differ (gpu {} entries, cpu {}); first difference at {first}: gpu {:?} cpu {:?}",
+            got.len(),
+            want.len(),
+            got.get(first),
+            want.get(first)
+        );
+    }
+    frame
+}
+
+#[test]
+fn random_scenes_match_the_reference() {
+    let gpu = gpu();
+    let mut raster = Rasterizer::new(gpu);
+    // (n, C, SH degree, mode): every C of the issue, both modes, N up to 20k.
+    let cases = [
+        (2_000, 1, 0, SemanticMode::RawLogits),
+        (5_000, 3, 1, SemanticMode::Softmax),
+        (20_000, 8, 3, SemanticMode::RawLogits),
+        (8_000, 17, 2, SemanticMode::Softmax),
+        (3_000, 64, 3, SemanticMode::RawLogits),
+        (3_000, 64, 0, SemanticMode::Softmax),
+    ];
+    for (k, &(n, c, deg, mode)) in cases.iter().enumerate() {
+        let g = random_scene(&RandomSceneSpec {
+            n,
+            channels: c,
+            sh_degree: deg,
+            seed: 100 + k as u64,
+            ..Default::default()
+        });
+        for cam in poses(97, 71) {
+            compare(
+                &mut raster,
+                &g,
+                &cam,
+                Some(mode),
+                &format!("n={n} C={c} deg={deg} {mode:?} {}", cam.name),
+            );
+        }
+    }
+    // RGB only on a scene that has semantics: C = 0 in the output.
+    let g = random_scene(&RandomSceneSpec {
+        n: 4_000,
+        channels: 5,
+        sh_degree: 3,
+        seed: 9,
+        ..Default::default()
+    });
+    let f = compare(&mut raster, &g, &poses(64, 48)[0], None, "rgb only");
+    assert_eq!(f.channels, 0);
+    assert!(f.sem.is_empty());
+    check_validation(gpu);
+}
+
+#[test]
+fn edge_cases_match_the_reference() {
+    let gpu = gpu();
+    let mut raster = Rasterizer::new(gpu);
+    let base = |seed| {
+        random_scene(&RandomSceneSpec {
+            n: 500,
+            channels: 3,
+            sh_degree: 1,
+            seed,
+            ..Default::default()
+        })
+    };
+    let cam = camera("c", DVec3::ZERO, DVec3::new(0.0, 0.0, 1.0), 53, 37);
+
+    // N = 0: background everywhere.
+    let empty = Gaussians {
+        semantics: None,
+        ..Default::default()
+    };
+    let f = compare(&mut raster, &empty, &cam, None, "empty scene");
+    assert!(f.alpha.iter().all(|&a| a == 0.0));
+    assert!((f.rgb[0] - 0.2).abs() < 1e-6 && (f.rgb[2] - 0.6).abs() < 1e-6);
+
+    // Every Gaussian behind the camera, or between the camera and the near plane.
+    let mut behind = base(1);
+    behind.means.iter_mut().for_each(|m| m[2] = -m[2]);
+    let f = compare(
+        &mut raster,
+        &behind,
+        &cam,
+        Some(SemanticMode::RawLogits),
+        "behind",
+    );
+    assert_eq!(f.visible, 0);
+    let mut near = base(2);
+    near.means.iter_mut().for_each(|m| m[2] *= 0.001);
+    compare(
+        &mut raster,
+        &near,
+        &cam,
+        Some(SemanticMode::RawLogits),
+        "inside near plane",
+    );
+
+    // Much larger than the image.
+    let mut huge = base(3);
+    huge.log_scales
+        .iter_mut()
+        .for_each(|s| *s = [2.0, 1.5, 2.5]);
+    compare(
+        &mut raster,
+        &huge,
+        &cam,
+        Some(SemanticMode::Softmax),
+        "huge",
+    );
+
+    // Tiny and degenerate scales (a zero-thickness disk, a needle, a point).
+    let mut tiny = base(4);
+    for (i, s) in tiny.log_scales.iter_mut().enumerate() {
+        *s = match i % 3 {
+            0 => [-20.0, -20.0, -20.0],
+            1 => [-1.0, -30.0, -3.0],
+            _ => [-30.0, -30.0, -1.0],
+        };
+    }
+    compare(
+        &mut raster,
+        &tiny,
+        &cam,
+        Some(SemanticMode::RawLogits),
+        "tiny scales",
+    );
+
+    // Extreme opacities: saturating (alpha clamped to 0.999, T stop) and invisible.
+    let mut opaque = base(5);
+    for (i, o) in opaque.opacity_logits.iter_mut().enumerate() {
+        *o = if i % 2 == 0 { 30.0 } else { -30.0 };
+    }
+    compare(
+        &mut raster,
+        &opaque,
+        &cam,
+        Some(SemanticMode::RawLogits),
+        "extreme opacity",
+    );
+
+    // Zero quaternions are culled on both sides.
+    let mut zero_q = base(6);
+    zero_q
+        .quats
+        .iter_mut()
+        .step_by(2)
+        .for_each(|q| *q = [0.0; 4]);
+    compare(
+        &mut raster,
+        &zero_q,
+        &cam,
+        Some(SemanticMode::RawLogits),
+        "zero quaternions",
+    );
+
+    // Image sizes that are not multiples of 16, down to one pixel.
+    let g = base(7);
+    for (w, h) in [(1, 1), (17, 15), (16, 33), (130, 7)] {
+        let cam = camera("odd", DVec3::ZERO, DVec3::new(0.0, 0.0, 1.0), w, h);
+        compare(
+            &mut raster,
+            &g,
+            &cam,
+            Some(SemanticMode::Softmax),
+            &format!("{w}x{h}"),
+        );
+    }
+    check_validation(gpu);
+}
+
+#[test]
+fn small_windows_carry_state_between_blend_dispatches() {
+    // Windows of 50 entries split most tile lists; results must not change.
+    let gpu = gpu();
+    let mut raster = Rasterizer::new(gpu);
+    raster.set_window_len(50);
+    let g = random_scene(&RandomSceneSpec {
+        n: 3_000,
+        channels: 17,
+        sh_degree: 2,
+        seed: 21,
+        ..Default::default()
+    });
+    for cam in poses(80, 50) {
+        compare(
+            &mut raster,
+            &g,
+            &cam,
+            Some(SemanticMode::RawLogits),
+            &format!("window 50 {}", cam.name),
+        );
+    }
+    check_validation(gpu);
+}
+
+#[test]
+fn a_tile_longer_than_lavapipes_loop_cap_renders_whole() {
+    // 70,000 faint Gaussians in one 16x16 tile, each covering about one pixel, in front of
+    // one bright Gaussian that sits last in depth order. A pixel's loop walks the whole
+    // list (about 273 of them blend at each pixel, T stays near 0.25), so a blend cut off
+    // after 65,535 iterations would miss the bright one.
+    let gpu = gpu();
+    let cam = Camera::look_at("tile", DVec3::ZERO, DVec3::Z, -DVec3::Y, 16, 16, 60.0);
+    let n = 70_000;
+    let mut rng = semsplat::util::Rng::new(5);
+    let mut g = Gaussians::default();
+    for i in 0..=n {
+        let (z, px, py, logit, scale) = if i < n {
+            (
+                2.0 + i as f64 * 1e-5,
+                rng.below(16) as f64 + 0.5,
+                rng.below(16) as f64 + 0.5,
+                -5.3,
+                1e-4,
+            )
+        } else {
+            (10.0, 8.0, 8.0, 3.0, 5.0)
+        };
+        let x = (px - cam.cx) / cam.fx * z;
+        let y = (py - cam.cy) / cam.fy * z;
+        g.means.push([x as f32, y as f32, z as f32]);
+        g.log_scales.push([(scale as f32).ln(); 3]);
+        g.quats.push([1.0, 0.0, 0.0, 0.0]);
+        g.opacity_logits.push(logit as f32);
+        let dc = if i < n { -1.0 } else { 3.0 };
+        g.sh.extend([dc, -1.0, -1.0]);
+    }
+    let mut raster = Rasterizer::new(gpu);
+    let f = compare(&mut raster, &g, &cam, None, "70k-entry tile");
+    assert!(
+        f.intersections as usize > n,
+        "the tile list holds every Gaussian"
+    );
+    let bright_red = f.rgb.iter().step_by(3).fold(0.0f32, |m, &r| m.max(r));
+    assert!(
+        bright_red > 0.3,
+        "the last Gaussian in the list was blended (red {bright_red})"
+    );
+    check_validation(gpu);
+}
+
+#[test]
+fn intersection_buffer_grows_on_overflow() {
+    // 200 large Gaussians on a 640x480 image: ~240k intersections, past the first guess
+    // (max(4N, 65536)); the frame is rendered again with room for all of them.
+    let gpu = gpu();
+    let mut g = random_scene(&RandomSceneSpec {
+        n: 200,
+        seed: 33,
+        ..Default::default()
+    });
+    g.log_scales.iter_mut().for_each(|s| *s = [1.0, 1.0, 1.0]);
+    let cam = camera("wide", DVec3::ZERO, DVec3::new(0.0, 0.0, 1.0), 640, 480);
+    let mut raster = Rasterizer::new(gpu);
+    let f = compare(&mut raster, &g, &cam, None, "overflow");
+    assert!(
+        f.intersections > 65_536,
+        "test must overflow the first guess ({})",
+        f.intersections
+    );
+    check_validation(gpu);
+}
+
+#[test]
+fn frames_report_stage_times() {
+    let gpu = gpu();
+    let g = random_scene(&RandomSceneSpec {
+        n: 2_000,
+        channels: 4,
+        ..Default::default()
+    });
+    let scene = GpuScene::upload(gpu, &g).unwrap();
+    let mut raster = Rasterizer::new(gpu);
+    let f = raster
+        .render(&scene, &poses(64, 64)[0], &RenderOptions::default())
+        .unwrap();
+    let s = f.stages;
+    for (name, v) in [
+        ("project", s.project_ms),
+        ("depth sort", s.depth_sort_ms),
+        ("bin", s.bin_ms),
+        ("blend", s.blend_ms),
+    ] {
+        assert!(v.is_finite() && v > 0.0, "{name}: {v} ms");
+    }
+    check_validation(gpu);
+}
+
+#[test]
+fn float32_projection_matches_the_reference_too() {
+    // Devices without shaderFloat64 project the means in float32: the camera-space mean
+    // then carries ~1e-6 relative error, ~1e-5 px in the 2D mean, which shows as up to
+    // ~2e-4 in alpha on these scenes (measured); this path is held to 1e-3, and a Gaussian
+    // at the 1/255 alpha or extent boundary may flip, so lists are not compared exactly.
+    let gpu = gpu();
+    let mut raster = Rasterizer::new(gpu);
+    raster.set_float64_projection(false);
+    let g = random_scene(&RandomSceneSpec {
+        n: 6_000,
+        channels: 3,
+        sh_degree: 2,
+        seed: 77,
+        ..Default::default()
+    });
+    for cam in poses(97, 71) {
+        compare_within(
+            &mut raster,
+            &g,
+            &cam,
+            Some(SemanticMode::RawLogits),
+            &format!("float32 {}", cam.name),
+            1e-3,
+            false,
+        );
+    }
+    check_validation(gpu);
+}
