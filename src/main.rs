@@ -31,6 +31,8 @@ enum Command {
     Inspect(cli::inspect::InspectArgs),
     /// Generate a procedural benchmark room with exact ground truth and label noise.
     Synth(cli::synth::SynthArgs),
+    /// Lift per-view label maps onto the Gaussians (vote or FlashSplat; no training).
+    Fuse(Box<cli::fuse::FuseArgs>),
     /// Render views of a scene on the GPU (RGB, and semantic labels with --semantics).
     Render(cli::render::RenderArgs),
 }
@@ -43,6 +45,7 @@ fn main() -> ExitCode {
         Command::Inspect(args) => cli::inspect::run(args),
         Command::Synth(args) => cli::synth::run(args),
         Command::Render(args) => cli::render::run(args),
+        Command::Fuse(args) => cli::fuse::run(*args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

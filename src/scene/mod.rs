@@ -10,6 +10,7 @@ pub mod labels;
 pub mod look_at;
 pub mod ply;
 pub mod random_scene;
+pub mod select;
 pub mod synth;
 
 pub use camera::{Camera, Split};

@@ -1,0 +1,426 @@
+//! `semsplat fuse`: training-free lifting of per-view label maps onto a scene's Gaussians.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use clap::{Args, ValueEnum};
+use indicatif::{ProgressBar, ProgressStyle};
+use serde::Serialize;
+
+use semsplat::fuse::{
+    accumulate, assign_one_vs_rest, assign_semantic, Accumulation, ClassScores, FuseConfig,
+    FuseStats, LabelSource, Method, NO_LABEL,
+};
+use semsplat::gpu::Gpu;
+use semsplat::render::GpuScene;
+use semsplat::scene::cameras::load_cameras;
+use semsplat::scene::classes::{
+    read_class_table, write_class_table, ClassInfo, ClassTable, CompactClasses,
+};
+use semsplat::scene::labels::{LabelDir, LabelMap, MissingLabels};
+use semsplat::scene::ply::{read_ply, write_classes_sidecar, write_ply};
+use semsplat::scene::{Camera, Gaussians};
+use semsplat::util::write_bytes_atomic;
+
+#[derive(Clone, Copy, ValueEnum)]
+enum MethodArg {
+    /// Majority vote of the Gaussian centers projected into each view (paper 001).
+    Vote,
+    /// FlashSplat: optimal assignment from every pixel's alpha*T contributions (paper 002).
+    Flashsplat,
+}
+
+#[derive(Args)]
+pub struct FuseArgs {
+    /// The scene: a 3DGS PLY (INRIA layout).
+    #[arg(long)]
+    scene: PathBuf,
+    /// Cameras: COLMAP model folder, INRIA cameras.json or semsplat cameras.json.
+    #[arg(long)]
+    cameras: Option<PathBuf>,
+    /// Folder of label PNGs (8/16-bit gray class ids, 255/65535 = no label), matched to
+    /// cameras by image name. Views without a label map are skipped.
+    #[arg(long)]
+    labels: Option<PathBuf>,
+    #[arg(long, value_enum, default_value_t = MethodArg::Flashsplat)]
+    method: MethodArg,
+    /// vote: count a center only where it is visible (depth within --depth-tol of the
+    /// rendered expected depth at that pixel).
+    #[arg(long, conflicts_with = "weighted")]
+    occlusion: bool,
+    /// vote: weigh each vote by the Gaussian's alpha*T at the pixel holding its center.
+    #[arg(long)]
+    weighted: bool,
+    /// Relative depth tolerance of --occlusion.
+    #[arg(long, default_value_t = 0.05)]
+    depth_tol: f32,
+    /// Background bias of the one-vs-rest assignment used by --extract/--remove, in [-1, 1]
+    /// (paper 002, Listing 1.1): larger keeps fewer Gaussians in the object.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    gamma: f64,
+    /// Class table (JSON: id, name, color). Default: classes.json beside or inside the label
+    /// folder, else the ids found in the label maps.
+    #[arg(long)]
+    classes: Option<PathBuf>,
+    /// Output PLY: the input Gaussians with `class` (label id, -1 for Gaussians no view saw)
+    /// and `class_conf` (the winning class's share of the evidence). The class table goes to
+    /// <out>.classes.json.
+    #[arg(long)]
+    out: PathBuf,
+    /// Write a JSON report: timings, views/s, peak device memory, per-class counts.
+    #[arg(long)]
+    report: Option<PathBuf>,
+    /// Write the evidence matrix A as float64 NumPy [classes, Gaussians], rows in the order
+    /// of FILE.classes.json written beside it.
+    #[arg(long)]
+    save_contrib: Option<PathBuf>,
+    /// Reassign from a saved evidence matrix instead of rendering (no GPU needed), e.g. to
+    /// try another --gamma.
+    #[arg(long, conflicts_with_all = ["labels", "cameras", "save_contrib"])]
+    contrib: Option<PathBuf>,
+    /// Keep only the Gaussians of this class (name or id) in --out, by one-vs-rest
+    /// assignment with --gamma.
+    #[arg(long, conflicts_with = "remove")]
+    extract: Option<String>,
+    /// Drop the Gaussians of this class (name or id) from --out.
+    #[arg(long)]
+    remove: Option<String>,
+    /// Also write a copy colored by class palette, viewable in any 3DGS viewer.
+    #[arg(long)]
+    palette_ply: Option<PathBuf>,
+    /// Accumulate with float32 atomics instead of 64-bit fixed point (fixed point gives the
+    /// same A on every run).
+    #[arg(long)]
+    float_atomics: bool,
+    /// Device memory for the evidence matrix, e.g. 512M or 2G; larger class counts are
+    /// processed in batches (same result). Default: a quarter of device memory.
+    #[arg(long, value_parser = parse_bytes)]
+    mem_budget: Option<u64>,
+}
+
+fn parse_bytes(s: &str) -> Result<u64, String> {
+    let s = s.trim();
+    let (num, mul) = match s.char_indices().last() {
+        Some((i, 'K' | 'k')) => (&s[..i], 1u64 << 10),
+        Some((i, 'M' | 'm')) => (&s[..i], 1 << 20),
+        Some((i, 'G' | 'g')) => (&s[..i], 1 << 30),
+        _ => (s, 1),
+    };
+    let v: f64 = num
+        .parse()
+        .map_err(|_| format!("'{s}' is not a size like 512M or 2G"))?;
+    if !(v > 0.0) {
+        return Err(format!("'{s}' must be positive"));
+    }
+    Ok((v * mul as f64) as u64)
+}
+
+/// Label maps streamed from the folder, as compact class indices.
+struct DirLabels<'a> {
+    dir: &'a LabelDir,
+    entry_of_camera: HashMap<usize, usize>,
+    compact: &'a CompactClasses,
+}
+
+impl LabelSource for DirLabels<'_> {
+    fn labels(&self, view: usize, _cam: &Camera) -> Result<Option<Vec<u32>>> {
+        let Some(&entry) = self.entry_of_camera.get(&view) else {
+            return Ok(None);
+        };
+        let map = self.dir.load(entry)?;
+        Ok(Some(
+            map.labels
+                .iter()
+                .map(|&l| {
+                    if l == LabelMap::IGNORE {
+                        NO_LABEL
+                    } else {
+                        self.compact
+                            .compact_of(l as u32)
+                            .map_or(NO_LABEL, u32::from)
+                    }
+                })
+                .collect(),
+        ))
+    }
+}
+
+fn default_class_table(labels: &Path) -> Option<PathBuf> {
+    [
+        labels.join("classes.json"),
+        labels
+            .parent()
+            .map(|p| p.join("classes.json"))
+            .unwrap_or_default(),
+    ]
+    .into_iter()
+    .find(|p| p.is_file())
+}
+
+fn contrib_sidecar(path: &Path) -> PathBuf {
+    path.with_extension("classes.json")
+}
+
+#[derive(Serialize)]
+struct ClassCount {
+    id: i64,
+    name: String,
+    gaussians: usize,
+}
+
+#[derive(Serialize)]
+struct Report<'a> {
+    method: &'a str,
+    accumulation: Accumulation,
+    gaussians: usize,
+    classes: usize,
+    stats: Option<FuseStats>,
+    assign_s: f64,
+    total_s: f64,
+    per_class: Vec<ClassCount>,
+}
+
+fn find_class(table: &ClassTable, key: &str) -> Result<u32> {
+    if let Some(c) = table.by_name(key) {
+        return Ok(c.id);
+    }
+    if let Ok(id) = key.parse::<u32>() {
+        if table.contains(id) {
+            return Ok(id);
+        }
+    }
+    let names: Vec<&str> = table.classes.iter().map(|c| c.name.as_str()).collect();
+    bail!("no class '{key}' in the class table (classes: {names:?})")
+}
+
+pub fn run(args: FuseArgs) -> Result<()> {
+    let start = std::time::Instant::now();
+    let mut g = read_ply(&args.scene)?;
+    let method = match (args.method, args.occlusion, args.weighted) {
+        (MethodArg::Vote, false, false) => Method::Vote,
+        (MethodArg::Vote, true, _) => Method::VoteOcclusion,
+        (MethodArg::Vote, _, true) => Method::VoteWeighted,
+        (MethodArg::Flashsplat, false, false) => Method::FlashSplat,
+        (MethodArg::Flashsplat, ..) => {
+            bail!("--occlusion and --weighted are variants of --method vote")
+        }
+    };
+    if !(-1.0..=1.0).contains(&args.gamma) {
+        bail!("--gamma must lie in [-1, 1], got {}", args.gamma);
+    }
+    let accumulation = if args.float_atomics {
+        Accumulation::Float
+    } else {
+        Accumulation::FixedPoint
+    };
+
+    // Evidence: from a saved matrix, or rendered from the views.
+    let (scores, table, stats) = if let Some(path) = &args.contrib {
+        let scores = ClassScores::load_npy(path)?;
+        let table = read_class_table(&contrib_sidecar(path)).with_context(|| {
+            format!(
+                "{} needs its row table {}",
+                path.display(),
+                contrib_sidecar(path).display()
+            )
+        })?;
+        if scores.n != g.len() || scores.classes != table.len() {
+            bail!(
+                "{} holds [{}, {}] but the scene has {} Gaussians and the row table {} classes",
+                path.display(),
+                scores.classes,
+                scores.n,
+                g.len(),
+                table.len()
+            );
+        }
+        (scores, table, None)
+    } else {
+        let (Some(cam_path), Some(label_path)) = (&args.cameras, &args.labels) else {
+            bail!(
+                "--cameras and --labels are needed (or --contrib to reassign from a saved matrix)"
+            );
+        };
+        let cams = load_cameras(cam_path)?;
+        let table_path = args
+            .classes
+            .clone()
+            .or_else(|| default_class_table(label_path));
+        let given = table_path.as_deref().map(read_class_table).transpose()?;
+        let dir = LabelDir::open(label_path, &cams, given.as_ref(), MissingLabels::Skip)?;
+        if dir.is_empty() {
+            bail!(
+                "no label map in {} matches a camera name",
+                label_path.display()
+            );
+        }
+        if !dir.skipped().is_empty() {
+            eprintln!(
+                "note: {} views have no label map and are skipped",
+                dir.skipped().len()
+            );
+        }
+        // C = the classes present in the label maps ("no more than the scene needs").
+        let mut present = std::collections::BTreeSet::new();
+        for i in 0..dir.len() {
+            present.extend(dir.load(i)?.present_ids());
+        }
+        let compact = CompactClasses::from_ids(present.iter().copied())?;
+        let table = ClassTable {
+            classes: compact
+                .user_ids()
+                .iter()
+                .map(|&id| match given.as_ref().and_then(|t| t.get(id)) {
+                    Some(c) => c.clone(),
+                    None => ClassInfo {
+                        id,
+                        name: format!("class_{id}"),
+                        color: semsplat::scene::classes::default_color(id),
+                    },
+                })
+                .collect(),
+        };
+        let entry_of_camera = (0..dir.len())
+            .filter_map(|i| dir.camera_index(i).map(|c| (c, i)))
+            .collect();
+        let source = DirLabels {
+            dir: &dir,
+            entry_of_camera,
+            compact: &compact,
+        };
+        let gpu = Gpu::new()?;
+        let scene = GpuScene::upload(&gpu, &g)?;
+        let cfg = FuseConfig {
+            method,
+            accumulation,
+            mem_budget: args.mem_budget,
+            depth_tolerance: args.depth_tol,
+            ..Default::default()
+        };
+        let bar = ProgressBar::new(cams.len() as u64).with_style(
+            ProgressStyle::with_template("{bar:40} {pos}/{len} views {per_sec} eta {eta}")
+                .expect("valid template"),
+        );
+        let (scores, stats) = accumulate(
+            &gpu,
+            &scene,
+            &cams,
+            &source,
+            compact.len(),
+            &cfg,
+            |done, total| {
+                bar.set_length(total as u64);
+                bar.set_position(done as u64);
+            },
+        )?;
+        bar.finish_and_clear();
+        (scores, table, Some(stats))
+    };
+
+    if let Some(path) = &args.save_contrib {
+        scores.save_npy(path)?;
+        write_class_table(&contrib_sidecar(path), &table)?;
+    }
+
+    let assign_start = std::time::Instant::now();
+    let assignment = assign_semantic(&scores);
+    g.class_ids = Some(
+        assignment
+            .class
+            .iter()
+            .map(|c| c.map_or(-1, |e| table.classes[e].id as i32))
+            .collect(),
+    );
+    g.class_conf = Some(assignment.confidence.clone());
+    let selected = match (&args.extract, &args.remove) {
+        (Some(name), _) | (_, Some(name)) => {
+            let id = find_class(&table, name)?;
+            let row = table
+                .classes
+                .iter()
+                .position(|c| c.id == id)
+                .expect("class in table");
+            let members = assign_one_vs_rest(&scores, args.gamma).swap_remove(row);
+            let keep: Vec<bool> = members
+                .iter()
+                .map(|&m| m == args.extract.is_some())
+                .collect();
+            g.select(&keep)
+        }
+        _ => g,
+    };
+    let assign_s = assign_start.elapsed().as_secs_f64();
+
+    write_ply(&args.out, &selected)?;
+    write_classes_sidecar(&args.out, &table)?;
+    if let Some(path) = &args.palette_ply {
+        let colors: Vec<[f32; 3]> = selected
+            .class_ids
+            .as_ref()
+            .expect("set above")
+            .iter()
+            .map(|&c| {
+                if c < 0 {
+                    [0.0; 3]
+                } else {
+                    table.color_of(c as u32).map(|v| v as f32 / 255.0)
+                }
+            })
+            .collect();
+        write_ply(path, &selected.with_flat_colors(&colors))?;
+    }
+
+    let per_class = per_class_counts(&selected, &table);
+    let report = Report {
+        method: match method {
+            Method::Vote => "vote",
+            Method::VoteOcclusion => "vote --occlusion",
+            Method::VoteWeighted => "vote --weighted",
+            Method::FlashSplat => "flashsplat",
+        },
+        accumulation,
+        gaussians: selected.len(),
+        classes: table.len(),
+        stats,
+        assign_s,
+        total_s: start.elapsed().as_secs_f64(),
+        per_class,
+    };
+    if let Some(path) = &args.report {
+        write_bytes_atomic(path, serde_json::to_string_pretty(&report)?.as_bytes())?;
+    }
+    let unseen = report
+        .per_class
+        .iter()
+        .find(|c| c.id == -1)
+        .map_or(0, |c| c.gaussians);
+    eprintln!(
+        "fused {} Gaussians into {} classes ({} unseen) in {:.2} s -> {}",
+        selected.len(),
+        table.len(),
+        unseen,
+        report.total_s,
+        args.out.display()
+    );
+    Ok(())
+}
+
+fn per_class_counts(g: &Gaussians, table: &ClassTable) -> Vec<ClassCount> {
+    let ids = g.class_ids.as_deref().unwrap_or(&[]);
+    let mut out: Vec<ClassCount> = table
+        .classes
+        .iter()
+        .map(|c| ClassCount {
+            id: c.id as i64,
+            name: c.name.clone(),
+            gaussians: ids.iter().filter(|&&i| i == c.id as i32).count(),
+        })
+        .collect();
+    out.push(ClassCount {
+        id: -1,
+        name: "unseen".into(),
+        gaussians: ids.iter().filter(|&&i| i == -1).count(),
+    });
+    out
+}

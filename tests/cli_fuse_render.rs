@@ -1,0 +1,325 @@
+//! `semsplat synth | fuse | render` end to end on a tiny room, and their bad input.
+
+use std::path::Path;
+use std::process::Command;
+
+fn semsplat(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_semsplat"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn ok(args: &[&str]) -> String {
+    let out = semsplat(args);
+    assert!(
+        out.status.success(),
+        "{args:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+fn synth(dir: &Path) {
+    ok(&[
+        "synth",
+        "--preset",
+        "tiny",
+        "--out",
+        dir.to_str().unwrap(),
+        "--views",
+        "4",
+        "--test-views",
+        "1",
+        "--width",
+        "64",
+        "--height",
+        "48",
+    ]);
+}
+
+#[test]
+fn fuse_writes_classes_reassigns_from_saved_evidence_and_extracts() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    synth(d);
+    let p = |f: &str| d.join(f).to_str().unwrap().to_string();
+    ok(&[
+        "fuse",
+        "--scene",
+        &p("scene.ply"),
+        "--cameras",
+        &p("cameras.json"),
+        "--labels",
+        &p("labels"),
+        "--out",
+        &p("fused.ply"),
+        "--report",
+        &p("report.json"),
+        "--save-contrib",
+        &p("A.npy"),
+        "--palette-ply",
+        &p("palette.ply"),
+    ]);
+    let g = semsplat::scene::ply::read_ply(&d.join("fused.ply")).unwrap();
+    let truth = semsplat::scene::ply::read_ply(&d.join("scene.ply")).unwrap();
+    let classes = g.class_ids.as_ref().unwrap();
+    let conf = g.class_conf.as_ref().unwrap();
+    assert_eq!(classes.len(), truth.len());
+    // Unseen Gaussians are -1 (never 0) with confidence 0; seen ones have a label id.
+    for (c, p) in classes.iter().zip(conf) {
+        assert!(*c >= -1);
+        assert_eq!(*c == -1, *p == 0.0);
+    }
+    // Four 64x48 views leave many Gaussians unseen; those seen are mostly right.
+    let seen = classes.iter().filter(|&&c| c >= 0).count();
+    let right = classes
+        .iter()
+        .zip(truth.class_ids.as_ref().unwrap())
+        .filter(|(a, b)| a == b)
+        .count();
+    assert!(seen > classes.len() / 4, "{seen} of {} seen", classes.len());
+    assert!(
+        right as f64 > 0.8 * seen as f64,
+        "{right} of {seen} seen Gaussians right"
+    );
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["method"], "flashsplat");
+    assert!(report["stats"]["views_per_s"].as_f64().unwrap() > 0.0);
+    assert!(report["stats"]["peak_device_bytes"].as_u64().unwrap() > 0);
+    assert!(d.join("A.classes.json").is_file() && d.join("palette.ply").is_file());
+
+    // Reassigning from the saved matrix gives the same classes without rendering.
+    ok(&[
+        "fuse",
+        "--scene",
+        &p("scene.ply"),
+        "--contrib",
+        &p("A.npy"),
+        "--out",
+        &p("again.ply"),
+    ]);
+    let again = semsplat::scene::ply::read_ply(&d.join("again.ply")).unwrap();
+    assert_eq!(again.class_ids, g.class_ids);
+
+    // Extract and remove one class: the two parts add up to the scene.
+    let table = semsplat::scene::classes::read_class_table(&d.join("A.classes.json")).unwrap();
+    let name = &table.classes[0].name;
+    ok(&[
+        "fuse",
+        "--scene",
+        &p("scene.ply"),
+        "--contrib",
+        &p("A.npy"),
+        "--extract",
+        name,
+        "--out",
+        &p("only.ply"),
+    ]);
+    ok(&[
+        "fuse",
+        "--scene",
+        &p("scene.ply"),
+        "--contrib",
+        &p("A.npy"),
+        "--remove",
+        name,
+        "--out",
+        &p("rest.ply"),
+    ]);
+    let only = semsplat::scene::ply::read_ply(&d.join("only.ply")).unwrap();
+    let rest = semsplat::scene::ply::read_ply(&d.join("rest.ply")).unwrap();
+    assert!(!only.is_empty());
+    assert_eq!(only.len() + rest.len(), truth.len());
+}
+
+#[test]
+fn render_writes_images_labels_and_raw_arrays() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    synth(d);
+    let p = |f: &str| d.join(f).to_str().unwrap().to_string();
+    // A scene with semantic logits: one-hot from the true classes.
+    let mut g = semsplat::scene::ply::read_ply(&d.join("scene.ply")).unwrap();
+    let ids = g.class_ids.clone().unwrap();
+    let c = (*ids.iter().max().unwrap() + 1) as usize;
+    let mut logits = vec![0.0f32; g.len() * c];
+    for (i, &id) in ids.iter().enumerate() {
+        logits[i * c + id as usize] = 10.0;
+    }
+    g.semantics = Some(semsplat::scene::SemanticLogits {
+        channels: c,
+        logits,
+    });
+    semsplat::scene::ply::write_ply(&d.join("sem.ply"), &g).unwrap();
+    let cams = semsplat::scene::cameras::load_cameras(&d.join("cameras.json")).unwrap();
+    let view = cams[0].name.clone();
+    ok(&[
+        "render",
+        "--scene",
+        &p("sem.ply"),
+        "--cameras",
+        &p("cameras.json"),
+        "--views",
+        &view,
+        "--out",
+        &p("out"),
+        "--semantics",
+        "--raw",
+    ]);
+    let out = d.join("out");
+    for suffix in [
+        ".png",
+        ".labels.png",
+        ".palette.png",
+        ".rgb.npy",
+        ".alpha.npy",
+        ".depth.npy",
+        ".sem.npy",
+        ".sem_norm.npy",
+    ] {
+        assert!(
+            out.join(format!("{view}{suffix}")).is_file(),
+            "{view}{suffix} missing"
+        );
+    }
+    let sem = std::fs::read(out.join(format!("{view}.sem_norm.npy"))).unwrap();
+    let npy = npyz::NpyFile::new(&sem[..]).unwrap();
+    assert_eq!(npy.shape(), &[48, 64, c as u64]);
+    // Rendered labels agree with the ray-cast truth on most pixels.
+    let rendered =
+        semsplat::scene::labels::read_label_png(&out.join(format!("{view}.labels.png"))).unwrap();
+    let truth =
+        semsplat::scene::labels::read_label_png(&d.join("labels").join(format!("{view}.png")))
+            .unwrap();
+    let agree = rendered
+        .labels
+        .iter()
+        .zip(&truth.labels)
+        .filter(|(a, b)| a == b)
+        .count();
+    assert!(
+        agree as f64 > 0.8 * truth.labels.len() as f64,
+        "{agree} of {} pixels agree",
+        truth.labels.len()
+    );
+}
+
+#[test]
+fn bad_input_is_one_clear_error_and_writes_nothing() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    synth(d);
+    let p = |f: &str| d.join(f).to_str().unwrap().to_string();
+    let cases: Vec<(Vec<String>, &str)> = vec![
+        (
+            vec![
+                "fuse".into(),
+                "--scene".into(),
+                p("missing.ply"),
+                "--cameras".into(),
+                p("cameras.json"),
+                "--labels".into(),
+                p("labels"),
+                "--out".into(),
+                p("x.ply"),
+            ],
+            "missing.ply",
+        ),
+        (
+            vec![
+                "fuse".into(),
+                "--scene".into(),
+                p("scene.ply"),
+                "--cameras".into(),
+                p("cameras.json"),
+                "--labels".into(),
+                p("images"),
+                "--out".into(),
+                p("x.ply"),
+            ],
+            "images",
+        ),
+        (
+            vec![
+                "fuse".into(),
+                "--scene".into(),
+                p("scene.ply"),
+                "--out".into(),
+                p("x.ply"),
+            ],
+            "--cameras",
+        ),
+        (
+            vec![
+                "fuse".into(),
+                "--scene".into(),
+                p("scene.ply"),
+                "--cameras".into(),
+                p("cameras.json"),
+                "--labels".into(),
+                p("labels"),
+                "--gamma".into(),
+                "3".into(),
+                "--out".into(),
+                p("x.ply"),
+            ],
+            "gamma",
+        ),
+        (
+            vec![
+                "fuse".into(),
+                "--scene".into(),
+                p("scene.ply"),
+                "--contrib".into(),
+                p("cameras.json"),
+                "--out".into(),
+                p("x.ply"),
+            ],
+            "cameras.json",
+        ),
+        (
+            vec![
+                "render".into(),
+                "--scene".into(),
+                p("scene.ply"),
+                "--cameras".into(),
+                p("cameras.json"),
+                "--out".into(),
+                p("r"),
+                "--semantics".into(),
+            ],
+            "sem_",
+        ),
+        (
+            vec![
+                "render".into(),
+                "--scene".into(),
+                p("scene.ply"),
+                "--cameras".into(),
+                p("cameras.json"),
+                "--out".into(),
+                p("r"),
+                "--views".into(),
+                "nope".into(),
+            ],
+            "nope",
+        ),
+    ];
+    for (args, needle) in cases {
+        let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+        let out = semsplat(&refs);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{refs:?} succeeded");
+        assert!(
+            err.contains(needle),
+            "{refs:?}: error does not mention {needle}: {err}"
+        );
+        assert!(!err.contains("panicked"), "{refs:?}: {err}");
+    }
+    assert!(
+        !d.join("x.ply").exists() && !d.join("r").exists(),
+        "a failed run left output behind"
+    );
+}
