@@ -12,24 +12,26 @@ pub fn gpu() -> Gpu {
     Gpu::new().unwrap_or_else(|e| panic!("benchmarks need a Vulkan device: {e}"))
 }
 
-/// Runs `prepare` (untimed) then `record` `iters` times, each in its own submission, and
-/// sums the GPU time between the marks around `record`.
+/// Sum of the GPU time of `iters` runs of `record` (each after an untimed `prepare`), as
+/// criterion's iter_custom wants it.
 pub fn gpu_time(
     gpu: &Gpu,
     iters: u64,
     mut prepare: impl FnMut(&mut Recorder),
     mut record: impl FnMut(&mut Recorder),
 ) -> Duration {
-    let mut total_ns = 0.0;
-    for _ in 0..iters {
-        let mut rec = Recorder::new(gpu).unwrap();
-        prepare(&mut rec);
-        rec.barrier();
-        let start = rec.mark();
-        record(&mut rec);
-        let end = rec.mark();
-        let t = rec.submit_and_wait().unwrap();
-        total_ns += t.between(start, end).expect("device has timestamps");
-    }
-    Duration::from_nanos(total_ns as u64)
+    let (samples, _) = semsplat::bench::time_gpu(
+        gpu,
+        iters as usize,
+        |rec| {
+            prepare(rec);
+            Ok(())
+        },
+        |rec| {
+            record(rec);
+            Ok(())
+        },
+    )
+    .unwrap();
+    Duration::from_nanos(samples.iter().sum::<f64>() as u64)
 }

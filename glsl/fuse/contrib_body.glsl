@@ -13,6 +13,7 @@
 #extension GL_KHR_shader_subgroup_vote : require
 #extension GL_KHR_shader_subgroup_arithmetic : require
 #include "raster_common.glsl"
+#include "tile_vote.glsl"
 
 #define BATCH TILE_PIXELS
 #define NO_ROW 0xFFFFFFFFu
@@ -37,7 +38,6 @@ shared vec4 s_xy_depth_opacity[BATCH]; // floor(mean2d) depth opacity
 shared vec2 s_frac[BATCH];
 shared vec4 s_conic[BATCH];
 shared uint s_id[BATCH];
-shared uint s_done_subgroups;
 
 void accumulate(uint row, uint gaussian, float w);
 
@@ -75,15 +75,8 @@ void main() {
     }
 
     for (uint b = start; b < end; b += BATCH) {
-        if (t == 0) {
-            s_done_subgroups = 0;
-        }
-        barrier();
-        if (subgroupAll(done) && subgroupElect()) {
-            atomicAdd(s_done_subgroups, 1);
-        }
-        barrier();
-        if (s_done_subgroups == gl_NumSubgroups) {
+        // Stop the tile once every pixel is done.
+        if (workgroup_all_done(done)) {
             break;
         }
         uint idx = b + t;

@@ -11,6 +11,7 @@
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_vote : require
 #include "raster_common.glsl"
+#include "tile_vote.glsl"
 
 #define BATCH TILE_PIXELS
 // Carried state per pixel: T, r, g, b, depth sum, contributors, last, done, then sems.
@@ -49,7 +50,6 @@ shared vec4 s_xy_depth_opacity[BATCH]; // floor(mean2d) depth opacity
 shared vec2 s_frac[BATCH];             // mean2d - floor(mean2d)
 shared vec4 s_conic[BATCH];
 shared vec4 s_color[BATCH];
-shared uint s_done_subgroups;
 
 void main() {
     uint width = pc.dims.x, height = pc.dims.y, channels = pc.dims.w;
@@ -97,16 +97,8 @@ void main() {
     }
 
     for (uint b = start; b < end; b += BATCH) {
-        // Stop the tile once every pixel is done: one vote per subgroup, then a count.
-        if (t == 0) {
-            s_done_subgroups = 0;
-        }
-        barrier();
-        if (subgroupAll(done) && subgroupElect()) {
-            atomicAdd(s_done_subgroups, 1);
-        }
-        barrier();
-        if (s_done_subgroups == gl_NumSubgroups) {
+        // Stop the tile once every pixel is done.
+        if (workgroup_all_done(done)) {
             break;
         }
         uint idx = b + t;

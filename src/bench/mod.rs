@@ -7,6 +7,46 @@ pub mod sort;
 
 use std::time::Instant;
 
+use crate::gpu::timings::KernelTotal;
+use crate::gpu::{Gpu, GpuResult, Recorder};
+
+/// GPU time of `runs` submissions of `record`, each after an untimed `prepare`, from the
+/// timestamps around `record` (ns per run), and the per-kernel split of the last run.
+pub fn time_gpu(
+    gpu: &Gpu,
+    runs: usize,
+    mut prepare: impl FnMut(&mut Recorder) -> GpuResult<()>,
+    mut record: impl FnMut(&mut Recorder) -> GpuResult<()>,
+) -> GpuResult<(Vec<f64>, Vec<KernelTotal>)> {
+    let mut samples = Vec::with_capacity(runs);
+    let mut kernels = Vec::new();
+    for _ in 0..runs {
+        let mut rec = Recorder::new(gpu)?;
+        prepare(&mut rec)?;
+        rec.barrier();
+        let start = rec.mark();
+        record(&mut rec)?;
+        let end = rec.mark();
+        let timings = rec.submit_and_wait()?;
+        samples.push(timings.between(start, end).unwrap_or(f64::NAN));
+        kernels = timings.by_kernel();
+    }
+    Ok((samples, kernels))
+}
+
+/// Median GPU time (ns) of `iters` timed runs after one warm-up (pipeline creation, first
+/// touches), with the per-kernel split of the last run.
+pub fn median_gpu_time(
+    gpu: &Gpu,
+    iters: usize,
+    mut prepare: impl FnMut(&mut Recorder) -> GpuResult<()>,
+    mut record: impl FnMut(&mut Recorder) -> GpuResult<()>,
+) -> GpuResult<(f64, Vec<KernelTotal>)> {
+    time_gpu(gpu, 1, &mut prepare, &mut record)?;
+    let (mut samples, kernels) = time_gpu(gpu, iters.max(1), prepare, record)?;
+    Ok((median(&mut samples), kernels))
+}
+
 /// Median of the samples (NaN when empty).
 pub fn median(samples: &mut [f64]) -> f64 {
     if samples.is_empty() {

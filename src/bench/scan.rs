@@ -3,9 +3,9 @@
 use anyhow::{ensure, Result};
 use serde::Serialize;
 
-use super::{median, time_cpu};
+use super::{median_gpu_time, time_cpu};
 use crate::gpu::timings::KernelTotal;
-use crate::gpu::{Gpu, GpuCount, PrefixScan, Recorder};
+use crate::gpu::{Gpu, GpuCount, PrefixScan};
 use crate::util::Rng;
 
 #[derive(Debug, Serialize)]
@@ -34,20 +34,12 @@ pub fn bench_scan(gpu: &Gpu, n: u64, iters: usize, seed: u64) -> Result<ScanBenc
     let output = gpu.buffer("bench-scan-out", n * 4)?;
     let count = gpu.buffer_from("bench-count", &[n as u32])?;
 
-    let mut samples = Vec::new();
-    let mut kernels = Vec::new();
-    for i in 0..=iters.max(1) {
-        let mut rec = Recorder::new(gpu)?;
-        let start = rec.mark();
-        scan.record(&mut rec, &input, &output, GpuCount::at(&count, 0))?;
-        let end = rec.mark();
-        let timings = rec.submit_and_wait()?;
-        if i > 0 {
-            samples.push(timings.between(start, end).unwrap_or(f64::NAN));
-            kernels = timings.by_kernel();
-        }
-    }
-    let gpu_ns = median(&mut samples);
+    let (gpu_ns, kernels) = median_gpu_time(
+        gpu,
+        iters,
+        |_| Ok(()),
+        |rec| scan.record(rec, &input, &output, GpuCount::at(&count, 0)),
+    )?;
     let (cpu_ns, expected) = time_cpu(
         iters,
         || (),

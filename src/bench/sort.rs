@@ -3,9 +3,9 @@
 use anyhow::{ensure, Result};
 use serde::Serialize;
 
-use super::{median, time_cpu};
+use super::{median_gpu_time, time_cpu};
 use crate::gpu::timings::KernelTotal;
-use crate::gpu::{Gpu, GpuCount, RadixSort, Recorder};
+use crate::gpu::{Gpu, GpuCount, RadixSort};
 use crate::util::Rng;
 
 #[derive(Debug, Serialize)]
@@ -43,30 +43,16 @@ pub fn bench_sort(gpu: &Gpu, n: u64, bits: u32, iters: usize, seed: u64) -> Resu
     let work_values = gpu.buffer("bench-values", n * 4)?;
     let count = gpu.buffer_from("bench-count", &[n as u32])?;
 
-    let mut samples = Vec::new();
-    let mut kernels = Vec::new();
-    // One warm-up run (pipeline creation, first touches), then the timed ones.
-    for i in 0..=iters.max(1) {
-        let mut rec = Recorder::new(gpu)?;
-        rec.copy(&src_keys, 0, &work_keys, 0, n * 4);
-        rec.copy(&src_values, 0, &work_values, 0, n * 4);
-        rec.barrier();
-        let start = rec.mark();
-        sorter.record(
-            &mut rec,
-            &work_keys,
-            &work_values,
-            GpuCount::at(&count, 0),
-            bits,
-        )?;
-        let end = rec.mark();
-        let timings = rec.submit_and_wait()?;
-        if i > 0 {
-            samples.push(timings.between(start, end).unwrap_or(f64::NAN));
-            kernels = timings.by_kernel();
-        }
-    }
-    let gpu_ns = median(&mut samples);
+    let (gpu_ns, kernels) = median_gpu_time(
+        gpu,
+        iters,
+        |rec| {
+            rec.copy(&src_keys, 0, &work_keys, 0, n * 4);
+            rec.copy(&src_values, 0, &work_values, 0, n * 4);
+            Ok(())
+        },
+        |rec| sorter.record(rec, &work_keys, &work_values, GpuCount::at(&count, 0), bits),
+    )?;
 
     let mask = if bits >= 32 {
         u32::MAX

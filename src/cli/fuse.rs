@@ -110,7 +110,7 @@ fn parse_bytes(s: &str) -> Result<u64, String> {
     let v: f64 = num
         .parse()
         .map_err(|_| format!("'{s}' is not a size like 512M or 2G"))?;
-    if !(v > 0.0) {
+    if v.is_nan() || v <= 0.0 {
         return Err(format!("'{s}' must be positive"));
     }
     Ok((v * mul as f64) as u64)

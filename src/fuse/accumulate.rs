@@ -11,7 +11,7 @@ use serde::Serialize;
 use super::scores::ClassScores;
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, Gpu, Recorder};
-use crate::render::{GpuScene, Rasterizer, RenderOptions};
+use crate::render::{camera_rows_f32, GpuScene, Rasterizer, RenderOptions};
 use crate::scene::Camera;
 
 /// Marks a pixel without a label (or with a class outside the table).
@@ -356,29 +356,8 @@ fn dispatch_vote(
     rows: usize,
     cfg: &FuseConfig,
 ) -> Result<()> {
-    let r = cam.rotation;
-    let t = cam.translation;
     let params = VoteParams {
-        rot_t: [
-            [
-                r.x_axis.x as f32,
-                r.y_axis.x as f32,
-                r.z_axis.x as f32,
-                t.x as f32,
-            ],
-            [
-                r.x_axis.y as f32,
-                r.y_axis.y as f32,
-                r.z_axis.y as f32,
-                t.y as f32,
-            ],
-            [
-                r.x_axis.z as f32,
-                r.y_axis.z as f32,
-                r.z_axis.z as f32,
-                t.z as f32,
-            ],
-        ],
+        rot_t: camera_rows_f32(cam),
         intrinsics: [cam.fx as f32, cam.fy as f32, cam.cx as f32, cam.cy as f32],
         clip: [cfg.near, cfg.far, cfg.depth_tolerance, 0.0],
         dims: [cam.width, cam.height, scene.n, u32::from(depth.is_some())],

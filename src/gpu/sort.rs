@@ -36,7 +36,15 @@ struct PassParams {
 
 /// The digit passes for sorting the low `bits` bits: (shift, width) each, width <= 4. The
 /// number of passes is even so the result lands back in the caller's buffers without a
-/// copy; the widths are spread evenly (13 bits: 4+3+3+3).
+/// copy; the widths are spread evenly.
+///
+/// ```
+/// use semsplat::gpu::sort::plan_passes;
+/// // 13 bits (tile ids of a 1080p frame): four passes of 4 + 3 + 3 + 3 bits.
+/// assert_eq!(plan_passes(13), vec![(0, 4), (4, 3), (7, 3), (10, 3)]);
+/// // One bit still takes two passes (the second copies), so no copy-back is needed.
+/// assert_eq!(plan_passes(1).len(), 2);
+/// ```
 pub fn plan_passes(bits: u32) -> Vec<(u32, u32)> {
     assert!(bits <= 32, "radix sort of {bits} bits: keys are 32-bit");
     let mut passes = bits.div_ceil(RADIX_BITS);

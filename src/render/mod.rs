@@ -13,6 +13,16 @@ use serde::Serialize;
 
 use crate::gpu::{Mark, Timings};
 
+/// The world-to-camera transform as three float32 rows (R00 R01 R02 t0, ...), as the
+/// kernels take it in push constants.
+pub(crate) fn camera_rows_f32(cam: &crate::scene::Camera) -> [[f32; 4]; 3] {
+    let (r, t) = (cam.rotation, cam.translation);
+    [0, 1, 2].map(|k| {
+        let row = r.row(k);
+        [row.x as f32, row.y as f32, row.z as f32, t[k] as f32]
+    })
+}
+
 /// What the semantic buffer blends (paper 000 and its softmax-before-blending ablation).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
 pub enum SemanticMode {

@@ -8,7 +8,7 @@ use bytemuck::{Pod, Zeroable};
 
 use super::frame::RenderedFrame;
 use super::gpu_scene::GpuScene;
-use super::{RenderOptions, StageTimes};
+use super::{camera_rows_f32, RenderOptions, StageTimes};
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, Gpu, GpuCount, Mark, PrefixScan, RadixSort, Recorder, Timings};
 use crate::scene::Camera;
@@ -388,26 +388,7 @@ impl Rasterizer {
         let t = cam.translation;
         let c = cam.center();
         let params = ProjectParams {
-            rot_t: [
-                [
-                    r.x_axis.x as f32,
-                    r.y_axis.x as f32,
-                    r.z_axis.x as f32,
-                    t.x as f32,
-                ],
-                [
-                    r.x_axis.y as f32,
-                    r.y_axis.y as f32,
-                    r.z_axis.y as f32,
-                    t.y as f32,
-                ],
-                [
-                    r.x_axis.z as f32,
-                    r.y_axis.z as f32,
-                    r.z_axis.z as f32,
-                    t.z as f32,
-                ],
-            ],
+            rot_t: camera_rows_f32(cam),
             intrinsics: [cam.fx as f32, cam.fy as f32, cam.cx as f32, cam.cy as f32],
             center_near: [c.x as f32, c.y as f32, c.z as f32, opts.near],
             far_pad: [opts.far, 0.0, 0.0, 0.0],

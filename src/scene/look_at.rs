@@ -5,9 +5,9 @@ use glam::{DMat3, DVec3};
 use super::camera::{Camera, Split};
 
 impl Camera {
-    /// A pinhole camera at `eye` looking at `target`, with the image's y axis pointing
-    /// along -`up` (our convention: x right, y down, z forward), principal point at the
-    /// image center and the given horizontal field of view in degrees.
+    /// A pinhole camera at `eye` looking at `target`, with the world's `up` pointing up in
+    /// the image (our convention: x right, y down, z forward), principal point at the image
+    /// center and the given horizontal field of view in degrees.
     pub fn look_at(
         name: &str,
         eye: DVec3,
@@ -18,7 +18,8 @@ impl Camera {
         hfov_deg: f64,
     ) -> Camera {
         let z = (target - eye).normalize();
-        let x = z.cross(up).normalize();
+        // Looking straight along `up` leaves the roll undefined: any right vector works.
+        let x = z.cross(up).try_normalize().unwrap_or(DVec3::X);
         let y = z.cross(x);
         // Rows of the world-to-camera rotation are the camera axes in world coordinates.
         let rotation = DMat3::from_cols(x, y, z).transpose();

@@ -4,7 +4,7 @@
 //! not change when the number of test views does.
 
 use anyhow::{bail, Result};
-use glam::{DMat3, DVec3};
+use glam::DVec3;
 
 use super::primitives::Aabb;
 use super::room::Room;
@@ -58,24 +58,17 @@ pub fn look_at(
     center: DVec3,
     target: DVec3,
 ) -> Camera {
-    let forward = (target - center).normalize();
-    let right = forward.cross(DVec3::Z).try_normalize().unwrap_or(DVec3::X);
-    let down = forward.cross(right);
-    // Rows of the world-to-camera rotation are the camera axes (x right, y down, z forward).
-    let rotation = DMat3::from_cols(right, down, forward).transpose();
-    let f = 0.5 * cfg.width as f64 / (0.5 * cfg.hfov_deg.to_radians()).tan();
-    Camera {
-        name,
-        width: cfg.width,
-        height: cfg.height,
-        fx: f,
-        fy: f,
-        cx: 0.5 * cfg.width as f64,
-        cy: 0.5 * cfg.height as f64,
-        rotation,
-        translation: -(rotation * center),
-        split,
-    }
+    let mut cam = Camera::look_at(
+        &name,
+        center,
+        target,
+        DVec3::Z,
+        cfg.width,
+        cfg.height,
+        cfg.hfov_deg,
+    );
+    cam.split = split;
+    cam
 }
 
 /// Objects grouped by class, with their bounds.
