@@ -22,6 +22,11 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Build the default benchmark room, lift its labels with every method, and compare
+    /// speed and accuracy (table, report.json, speed_vs_accuracy.png, strip.png).
+    Demo(cli::demo::DemoArgs),
+    /// Score a classified scene against label maps (mIoU, pixel and 3D accuracy).
+    Eval(cli::eval::EvalArgs),
     /// Show the Vulkan device semsplat would use and what it supports.
     Info(cli::info::InfoArgs),
     /// Measure GPU kernels (throughput from GPU timestamps) against CPU baselines.
@@ -40,6 +45,8 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Demo(args) => cli::demo::run(args),
+        Command::Eval(args) => cli::eval::run(args),
         Command::Info(args) => cli::info::run(args),
         Command::Bench(cmd) => cli::bench::run(cmd),
         Command::Inspect(args) => cli::inspect::run(args),

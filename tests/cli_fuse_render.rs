@@ -90,6 +90,33 @@ fn fuse_writes_classes_reassigns_from_saved_evidence_and_extracts() {
     assert!(report["stats"]["peak_device_bytes"].as_u64().unwrap() > 0);
     assert!(d.join("A.classes.json").is_file() && d.join("palette.ply").is_file());
 
+    // Scores on the views, with 3D accuracy against the synth truth.
+    let out = semsplat(&[
+        "eval",
+        "--scene",
+        &p("fused.ply"),
+        "--cameras",
+        &p("cameras.json"),
+        "--labels",
+        &p("labels"),
+        "--views",
+        "all",
+        "--truth",
+        &p("scene.ply"),
+        "--json",
+        &p("eval.json"),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let eval: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("eval.json")).unwrap()).unwrap();
+    let miou = eval["miou"].as_f64().unwrap();
+    assert!(miou > 0.5 && miou <= 1.0, "{eval}");
+    assert!(eval["gaussian_accuracy"].as_f64().unwrap() > 0.2);
+
     // Reassigning from the saved matrix gives the same classes without rendering.
     ok(&[
         "fuse",

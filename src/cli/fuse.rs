@@ -93,6 +93,10 @@ pub struct FuseArgs {
     /// same A on every run).
     #[arg(long)]
     float_atomics: bool,
+    /// Fuse only the cameras marked "train" (semsplat cameras.json), keeping the test views
+    /// held out for `semsplat eval`.
+    #[arg(long)]
+    train_only: bool,
     /// Device memory for the evidence matrix, e.g. 512M or 2G; larger class counts are
     /// processed in batches (same result). Default: a quarter of device memory.
     #[arg(long, value_parser = parse_bytes)]
@@ -242,7 +246,13 @@ pub fn run(args: FuseArgs) -> Result<()> {
                 "--cameras and --labels are needed (or --contrib to reassign from a saved matrix)"
             );
         };
-        let cams = load_cameras(cam_path)?;
+        let mut cams = load_cameras(cam_path)?;
+        if args.train_only {
+            cams.retain(|c| c.split == semsplat::scene::Split::Train);
+            if cams.is_empty() {
+                bail!("{} has no train cameras", cam_path.display());
+            }
+        }
         let table_path = args
             .classes
             .clone()

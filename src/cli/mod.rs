@@ -1,6 +1,8 @@
 //! One module per subcommand.
 
 pub mod bench;
+pub mod demo;
+pub mod eval;
 pub mod fuse;
 pub mod info;
 pub mod inspect;

@@ -1,0 +1,121 @@
+//! `semsplat eval`: scores a scene whose Gaussians carry classes (a `fuse` output) against
+//! label maps: 2D mIoU and pixel accuracy (per class too) on the chosen views, and 3D
+//! per-Gaussian accuracy when a PLY with the true classes is given.
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Result};
+use clap::{Args, ValueEnum};
+use serde::Serialize;
+
+use semsplat::eval::label_render::LabelRenderer;
+use semsplat::eval::metrics::{gaussian_accuracy, Confusion, SegmentationScores};
+use semsplat::gpu::Gpu;
+use semsplat::scene::cameras::load_cameras;
+use semsplat::scene::labels::{LabelDir, LabelMap, MissingLabels};
+use semsplat::scene::ply::read_ply;
+use semsplat::scene::Split;
+use semsplat::util::write_bytes_atomic;
+
+#[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
+enum Views {
+    /// Held-out views only (cameras marked "test"; formats without splits have none).
+    Test,
+    /// Training views only.
+    Train,
+    /// Every view with a label map.
+    All,
+}
+
+#[derive(Args)]
+pub struct EvalArgs {
+    /// A PLY whose Gaussians carry `class` (as written by `semsplat fuse`).
+    #[arg(long)]
+    scene: PathBuf,
+    #[arg(long)]
+    cameras: PathBuf,
+    /// True label maps (PNG class ids, 255/65535 = ignore), matched by image name.
+    #[arg(long)]
+    labels: PathBuf,
+    #[arg(long, value_enum, default_value_t = Views::Test)]
+    views: Views,
+    /// A PLY with the true class of every Gaussian (e.g. a synth scene.ply), for 3D accuracy.
+    #[arg(long)]
+    truth: Option<PathBuf>,
+    /// Write the scores as JSON.
+    #[arg(long)]
+    json: Option<PathBuf>,
+}
+
+#[derive(Serialize)]
+struct EvalReport {
+    views: usize,
+    #[serde(flatten)]
+    segmentation: SegmentationScores,
+    gaussian_accuracy: Option<f64>,
+}
+
+pub fn run(args: EvalArgs) -> Result<()> {
+    let g = read_ply(&args.scene)?;
+    let Some(classes) = g.class_ids.clone() else {
+        bail!(
+            "{} has no `class` property: run `semsplat fuse` first",
+            args.scene.display()
+        );
+    };
+    let cams = load_cameras(&args.cameras)?;
+    let dir = LabelDir::open(&args.labels, &cams, None, MissingLabels::Skip)?;
+    let chosen: Vec<usize> = (0..dir.len())
+        .filter(|&i| {
+            let split = cams[dir.camera_index(i).expect("entry")].split;
+            args.views == Views::All || (args.views == Views::Test) == (split == Split::Test)
+        })
+        .collect();
+    if chosen.is_empty() {
+        bail!("no labeled view matches --views (cameras without splits are all train views; try --views all)");
+    }
+    let gaussian_accuracy = match &args.truth {
+        Some(path) => {
+            let truth = read_ply(path)?;
+            let Some(t) = truth.class_ids else {
+                bail!("{} has no `class` property", path.display())
+            };
+            if t.len() != classes.len() {
+                bail!(
+                    "{} has {} Gaussians, the scene {}",
+                    path.display(),
+                    t.len(),
+                    classes.len()
+                );
+            }
+            Some(gaussian_accuracy(&classes, &t))
+        }
+        None => None,
+    };
+    let gpu = Gpu::new()?;
+    let mut renderer = LabelRenderer::new(&gpu, &g, &classes)?;
+    let mut confusion = Confusion::default();
+    for &i in &chosen {
+        let cam = &cams[dir.camera_index(i).expect("entry")];
+        let truth = dir.load(i)?;
+        confusion.add(&truth.labels, &renderer.render(cam)?, LabelMap::IGNORE);
+    }
+    let report = EvalReport {
+        views: chosen.len(),
+        segmentation: confusion.scores(),
+        gaussian_accuracy,
+    };
+    println!("views: {}", report.views);
+    println!("mIoU: {:.4}", report.segmentation.miou);
+    println!("pixel accuracy: {:.4}", report.segmentation.pixel_accuracy);
+    if let Some(a) = report.gaussian_accuracy {
+        println!("3D accuracy: {a:.4}");
+    }
+    for c in &report.segmentation.per_class {
+        println!("  class {:>5}: IoU {:.4} ({} px)", c.id, c.iou, c.pixels);
+    }
+    if let Some(path) = &args.json {
+        write_bytes_atomic(path, serde_json::to_string_pretty(&report)?.as_bytes())?;
+    }
+    Ok(())
+}

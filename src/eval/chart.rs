@@ -1,0 +1,195 @@
+//! Charts as PNG: speed against accuracy (log time axis, one labelled point per method) and
+//! metric-versus-level lines (robustness sweeps). Drawn with plotters into an RGB buffer
+//! with an embedded font, so they look the same on every machine.
+
+use std::path::Path;
+use std::sync::Once;
+
+use anyhow::{anyhow, ensure, Result};
+use plotters::prelude::*;
+
+use crate::util::write_bytes_atomic;
+
+pub const CHART_SIZE: (u32, u32) = (960, 640);
+
+pub(crate) fn register_fonts() {
+    static ONCE: Once = Once::new();
+    ONCE.call_once(|| {
+        // The bytes are a valid TTF shipped by the dejavu crate.
+        let _ = plotters::style::register_font(
+            "sans-serif",
+            FontStyle::Normal,
+            dejavu::sans::regular(),
+        );
+        let _ = plotters::style::register_font("sans-serif", FontStyle::Bold, dejavu::sans::bold());
+    });
+}
+
+fn save_png(path: &Path, buf: Vec<u8>, (w, h): (u32, u32)) -> Result<()> {
+    let img = image::RgbImage::from_raw(w, h, buf).ok_or_else(|| anyhow!("chart buffer size"))?;
+    let mut png = Vec::new();
+    img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)?;
+    write_bytes_atomic(path, &png)
+}
+
+fn plot_err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
+    anyhow!("drawing chart: {e:?}")
+}
+
+/// One method's point on the speed/accuracy chart.
+pub struct SpeedPoint<'a> {
+    pub label: &'a str,
+    pub seconds: f64,
+    pub score: f64,
+}
+
+/// Scatter of `score` (y, 0..1) against wall time (x, log scale), each point labelled.
+pub fn speed_vs_accuracy(
+    path: &Path,
+    title: &str,
+    y_label: &str,
+    points: &[SpeedPoint],
+) -> Result<()> {
+    ensure!(!points.is_empty(), "no points to chart");
+    ensure!(
+        points
+            .iter()
+            .all(|p| p.seconds > 0.0 && p.seconds.is_finite() && p.score.is_finite()),
+        "non-finite chart data"
+    );
+    register_fonts();
+    let (w, h) = CHART_SIZE;
+    let mut buf = vec![255u8; (w * h * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(plot_err)?;
+        let tmin = points
+            .iter()
+            .map(|p| p.seconds)
+            .fold(f64::INFINITY, f64::min);
+        let tmax = points.iter().map(|p| p.seconds).fold(0.0, f64::max);
+        let (x0, x1) = (tmin / 2.0, tmax * 2.0);
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 28))
+            .margin(20)
+            .x_label_area_size(55)
+            .y_label_area_size(70)
+            .build_cartesian_2d((x0..x1).log_scale(), 0.0f64..1.0f64)
+            .map_err(plot_err)?;
+        chart
+            .configure_mesh()
+            .x_desc("wall time (s, log scale)")
+            .y_desc(y_label)
+            .axis_desc_style(("sans-serif", 20))
+            .label_style(("sans-serif", 16))
+            .draw()
+            .map_err(plot_err)?;
+        for (i, p) in points.iter().enumerate() {
+            let color = Palette99::pick(i).to_rgba();
+            chart
+                .draw_series(std::iter::once(Circle::new(
+                    (p.seconds, p.score),
+                    7,
+                    color.filled(),
+                )))
+                .map_err(plot_err)?
+                .label(format!("{} ({:.3}, {:.2} s)", p.label, p.score, p.seconds))
+                .legend(move |(x, y)| Circle::new((x, y), 6, color.filled()));
+            chart
+                .draw_series(std::iter::once(Text::new(
+                    p.label.to_string(),
+                    // Alternately above and below, so labels of nearby points do not overprint.
+                    (
+                        p.seconds,
+                        (p.score + [0.03, -0.05, 0.075, -0.095][i % 4]).clamp(0.02, 0.97),
+                    ),
+                    ("sans-serif", 16),
+                )))
+                .map_err(plot_err)?;
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::LowerRight)
+            .background_style(WHITE.mix(0.9))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 16))
+            .draw()
+            .map_err(plot_err)?;
+        root.present().map_err(plot_err)?;
+    }
+    save_png(path, buf, (w, h))
+}
+
+/// One line of a metric-versus-level chart.
+pub struct Line<'a> {
+    pub label: &'a str,
+    /// (level, value) pairs in level order.
+    pub points: Vec<(f64, f64)>,
+}
+
+/// Lines of `y_label` (0..1) against `x_label`, one per method.
+pub fn lines(
+    path: &Path,
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    series: &[Line],
+) -> Result<()> {
+    let all = || series.iter().flat_map(|s| s.points.iter());
+    ensure!(all().count() > 0, "no points to chart");
+    ensure!(
+        all().all(|(x, y)| x.is_finite() && y.is_finite()),
+        "non-finite chart data"
+    );
+    register_fonts();
+    let (w, h) = CHART_SIZE;
+    let mut buf = vec![255u8; (w * h * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(plot_err)?;
+        let xmin = all().map(|p| p.0).fold(f64::INFINITY, f64::min);
+        let xmax = all().map(|p| p.0).fold(f64::NEG_INFINITY, f64::max);
+        let pad = ((xmax - xmin) * 0.05).max(1e-3);
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 28))
+            .margin(20)
+            .x_label_area_size(55)
+            .y_label_area_size(70)
+            .build_cartesian_2d((xmin - pad)..(xmax + pad), 0.0f64..1.0f64)
+            .map_err(plot_err)?;
+        chart
+            .configure_mesh()
+            .x_desc(x_label)
+            .y_desc(y_label)
+            .axis_desc_style(("sans-serif", 20))
+            .label_style(("sans-serif", 16))
+            .draw()
+            .map_err(plot_err)?;
+        for (i, s) in series.iter().enumerate() {
+            let color = Palette99::pick(i).to_rgba();
+            chart
+                .draw_series(LineSeries::new(
+                    s.points.iter().copied(),
+                    color.stroke_width(3),
+                ))
+                .map_err(plot_err)?
+                .label(s.label)
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(3))
+                });
+            chart
+                .draw_series(s.points.iter().map(|&p| Circle::new(p, 5, color.filled())))
+                .map_err(plot_err)?;
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::LowerLeft)
+            .background_style(WHITE.mix(0.9))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 16))
+            .draw()
+            .map_err(plot_err)?;
+        root.present().map_err(plot_err)?;
+    }
+    save_png(path, buf, (w, h))
+}

@@ -1,0 +1,159 @@
+//! Segmentation metrics: pixel accuracy and mean IoU over the classes present in the ground
+//! truth (ignore pixels excluded), per class too, and per-Gaussian accuracy.
+
+use std::collections::BTreeMap;
+
+use serde::Serialize;
+
+/// Counts of (true class, predicted class) over labeled pixels; a prediction of `None`
+/// (nothing rendered there) counts against the true class.
+#[derive(Clone, Debug, Default)]
+pub struct Confusion {
+    counts: BTreeMap<(u32, Option<u32>), u64>,
+}
+
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct ClassIou {
+    pub id: u32,
+    pub iou: f64,
+    /// Ground-truth pixels of this class.
+    pub pixels: u64,
+}
+
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct SegmentationScores {
+    pub pixel_accuracy: f64,
+    pub miou: f64,
+    /// Classes present in the ground truth, by id.
+    pub per_class: Vec<ClassIou>,
+    pub labeled_pixels: u64,
+}
+
+impl Confusion {
+    /// Adds one view. `ignore` marks unlabeled ground-truth pixels (left out entirely).
+    pub fn add(&mut self, truth: &[u16], pred: &[Option<u16>], ignore: u16) {
+        assert_eq!(truth.len(), pred.len(), "one prediction per pixel");
+        for (&t, &p) in truth.iter().zip(pred) {
+            if t != ignore {
+                *self.counts.entry((t as u32, p.map(u32::from))).or_insert(0) += 1;
+            }
+        }
+    }
+
+    pub fn scores(&self) -> SegmentationScores {
+        let mut tp: BTreeMap<u32, u64> = BTreeMap::new();
+        let mut truth_total: BTreeMap<u32, u64> = BTreeMap::new();
+        let mut pred_total: BTreeMap<u32, u64> = BTreeMap::new();
+        let mut labeled = 0;
+        for (&(t, p), &n) in &self.counts {
+            labeled += n;
+            *truth_total.entry(t).or_insert(0) += n;
+            if let Some(p) = p {
+                *pred_total.entry(p).or_insert(0) += n;
+                if p == t {
+                    *tp.entry(t).or_insert(0) += n;
+                }
+            }
+        }
+        let correct: u64 = tp.values().sum();
+        let per_class: Vec<ClassIou> = truth_total
+            .iter()
+            .map(|(&id, &pixels)| {
+                let tp = tp.get(&id).copied().unwrap_or(0);
+                let fp = pred_total.get(&id).copied().unwrap_or(0) - tp;
+                let fn_ = pixels - tp;
+                ClassIou {
+                    id,
+                    iou: tp as f64 / (tp + fp + fn_) as f64,
+                    pixels,
+                }
+            })
+            .collect();
+        let miou = if per_class.is_empty() {
+            0.0
+        } else {
+            per_class.iter().map(|c| c.iou).sum::<f64>() / per_class.len() as f64
+        };
+        SegmentationScores {
+            pixel_accuracy: if labeled == 0 {
+                0.0
+            } else {
+                correct as f64 / labeled as f64
+            },
+            miou,
+            per_class,
+            labeled_pixels: labeled,
+        }
+    }
+}
+
+/// Fraction of Gaussians whose predicted class equals the true one (unseen = wrong);
+/// Gaussians without a true class (< 0) are left out.
+pub fn gaussian_accuracy(pred: &[i32], truth: &[i32]) -> f64 {
+    let (mut right, mut total) = (0usize, 0usize);
+    for (&p, &t) in pred.iter().zip(truth) {
+        if t >= 0 {
+            total += 1;
+            right += usize::from(p == t);
+        }
+    }
+    if total == 0 {
+        0.0
+    } else {
+        right as f64 / total as f64
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn miou_over_present_classes_with_ignore_and_misses() {
+        // truth: 0 0 1 1 | 255 (ignored) ; pred: 0 1 1 none | 2
+        let mut c = Confusion::default();
+        c.add(
+            &[0, 0, 1, 1, 255],
+            &[Some(0), Some(1), Some(1), None, Some(2)],
+            255,
+        );
+        let s = c.scores();
+        // class 0: tp 1, fp 0, fn 1 -> 1/2; class 1: tp 1, fp 1, fn 1 -> 1/3.
+        // Class 2 appears only as a prediction on an ignored pixel: not counted at all.
+        assert_eq!(s.labeled_pixels, 4);
+        assert_eq!(s.pixel_accuracy, 0.5);
+        assert_eq!(
+            s.per_class,
+            vec![
+                ClassIou {
+                    id: 0,
+                    iou: 0.5,
+                    pixels: 2
+                },
+                ClassIou {
+                    id: 1,
+                    iou: 1.0 / 3.0,
+                    pixels: 2
+                },
+            ]
+        );
+        assert!((s.miou - (0.5 + 1.0 / 3.0) / 2.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn predicted_classes_absent_from_truth_only_cost_precision() {
+        // A class predicted but never true adds false positives to no class's IoU mean
+        // entry of its own, yet lowers the IoU of the class it overwrote.
+        let mut c = Confusion::default();
+        c.add(&[3, 3, 3, 3], &[Some(3), Some(3), Some(7), Some(7)], 255);
+        let s = c.scores();
+        assert_eq!(s.per_class.len(), 1);
+        assert_eq!(s.per_class[0].iou, 0.5);
+        assert_eq!(s.miou, 0.5);
+    }
+
+    #[test]
+    fn gaussian_accuracy_counts_unseen_as_wrong() {
+        assert_eq!(gaussian_accuracy(&[1, -1, 2, 2], &[1, 1, 2, -1]), 2.0 / 3.0);
+    }
+}
