@@ -27,6 +27,8 @@ enum Command {
     Demo(cli::demo::DemoArgs),
     /// Score a classified scene against label maps (mIoU, pixel and 3D accuracy).
     Eval(cli::eval::EvalArgs),
+    /// Robustness: every method's mIoU as one kind of label noise grows (chart + JSON).
+    Sweep(cli::sweep::SweepArgs),
     /// Show the Vulkan device semsplat would use and what it supports.
     Info(cli::info::InfoArgs),
     /// Measure GPU kernels (throughput from GPU timestamps) against CPU baselines.
@@ -48,6 +50,7 @@ fn main() -> ExitCode {
         Command::Demo(args) => cli::demo::run(args),
         Command::Eval(args) => cli::eval::run(args),
         Command::Info(args) => cli::info::run(args),
+        Command::Sweep(args) => cli::sweep::run(args),
         Command::Bench(cmd) => cli::bench::run(cmd),
         Command::Inspect(args) => cli::inspect::run(args),
         Command::Synth(args) => cli::synth::run(args),

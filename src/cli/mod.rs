@@ -7,4 +7,5 @@ pub mod fuse;
 pub mod info;
 pub mod inspect;
 pub mod render;
+pub mod sweep;
 pub mod synth;

@@ -36,6 +36,22 @@ fn plot_err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
     anyhow!("drawing chart: {e:?}")
 }
 
+type Canvas<'a> = DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>;
+
+/// Draws on a white CHART_SIZE canvas and saves it as PNG.
+fn draw_png(path: &Path, draw: impl FnOnce(&Canvas) -> Result<()>) -> Result<()> {
+    register_fonts();
+    let (w, h) = CHART_SIZE;
+    let mut buf = vec![255u8; (w * h * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(plot_err)?;
+        draw(&root)?;
+        root.present().map_err(plot_err)?;
+    }
+    save_png(path, buf, (w, h))
+}
+
 /// One method's point on the speed/accuracy chart.
 pub struct SpeedPoint<'a> {
     pub label: &'a str,
@@ -57,19 +73,14 @@ pub fn speed_vs_accuracy(
             .all(|p| p.seconds > 0.0 && p.seconds.is_finite() && p.score.is_finite()),
         "non-finite chart data"
     );
-    register_fonts();
-    let (w, h) = CHART_SIZE;
-    let mut buf = vec![255u8; (w * h * 3) as usize];
-    {
-        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
-        root.fill(&WHITE).map_err(plot_err)?;
+    draw_png(path, |root| {
         let tmin = points
             .iter()
             .map(|p| p.seconds)
             .fold(f64::INFINITY, f64::min);
         let tmax = points.iter().map(|p| p.seconds).fold(0.0, f64::max);
         let (x0, x1) = (tmin / 2.0, tmax * 2.0);
-        let mut chart = ChartBuilder::on(&root)
+        let mut chart = ChartBuilder::on(root)
             .caption(title, ("sans-serif", 28))
             .margin(20)
             .x_label_area_size(55)
@@ -115,9 +126,8 @@ pub fn speed_vs_accuracy(
             .label_font(("sans-serif", 16))
             .draw()
             .map_err(plot_err)?;
-        root.present().map_err(plot_err)?;
-    }
-    save_png(path, buf, (w, h))
+        Ok(())
+    })
 }
 
 /// One line of a metric-versus-level chart.
@@ -141,16 +151,11 @@ pub fn lines(
         all().all(|(x, y)| x.is_finite() && y.is_finite()),
         "non-finite chart data"
     );
-    register_fonts();
-    let (w, h) = CHART_SIZE;
-    let mut buf = vec![255u8; (w * h * 3) as usize];
-    {
-        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
-        root.fill(&WHITE).map_err(plot_err)?;
+    draw_png(path, |root| {
         let xmin = all().map(|p| p.0).fold(f64::INFINITY, f64::min);
         let xmax = all().map(|p| p.0).fold(f64::NEG_INFINITY, f64::max);
         let pad = ((xmax - xmin) * 0.05).max(1e-3);
-        let mut chart = ChartBuilder::on(&root)
+        let mut chart = ChartBuilder::on(root)
             .caption(title, ("sans-serif", 28))
             .margin(20)
             .x_label_area_size(55)
@@ -189,7 +194,6 @@ pub fn lines(
             .label_font(("sans-serif", 16))
             .draw()
             .map_err(plot_err)?;
-        root.present().map_err(plot_err)?;
-    }
-    save_png(path, buf, (w, h))
+        Ok(())
+    })
 }
