@@ -117,6 +117,41 @@ fn fuse_writes_classes_reassigns_from_saved_evidence_and_extracts() {
     assert!(miou > 0.5 && miou <= 1.0, "{eval}");
     assert!(eval["gaussian_accuracy"].as_f64().unwrap() > 0.2);
 
+    // Label maps rendered from the fused scene, and the multi-instance membership.
+    ok(&[
+        "fuse",
+        "--scene",
+        &p("scene.ply"),
+        "--contrib",
+        &p("A.npy"),
+        "--cameras",
+        &p("cameras.json"),
+        "--render-views",
+        &p("views"),
+        "--save-membership",
+        &p("S.npy"),
+        "--gamma",
+        "0.1",
+        "--out",
+        &p("v.ply"),
+    ]);
+    let cams = semsplat::scene::cameras::load_cameras(&d.join("cameras.json")).unwrap();
+    for c in &cams {
+        assert!(d
+            .join("views")
+            .join(format!("{}.labels.png", c.name))
+            .is_file());
+        assert!(d
+            .join("views")
+            .join(format!("{}.palette.png", c.name))
+            .is_file());
+    }
+    let s_bytes = std::fs::read(d.join("S.npy")).unwrap();
+    let s_npy = npyz::NpyFile::new(&s_bytes[..]).unwrap();
+    assert_eq!(s_npy.shape()[1], truth.len() as u64);
+    let s_vals: Vec<f32> = s_npy.into_vec().unwrap();
+    assert!(s_vals.iter().all(|&v| v == 0.0 || v == 1.0) && s_vals.contains(&1.0));
+
     // Reassigning from the saved matrix gives the same classes without rendering.
     ok(&[
         "fuse",

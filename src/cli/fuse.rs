@@ -8,6 +8,7 @@ use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 
+use semsplat::eval::label_render::LabelRenderer;
 use semsplat::fuse::{
     accumulate, assign_one_vs_rest, assign_semantic, Accumulation, ClassScores, FuseConfig,
     FuseStats, LabelSource, Method, NO_LABEL,
@@ -18,9 +19,12 @@ use semsplat::scene::cameras::load_cameras;
 use semsplat::scene::classes::{
     read_class_table, write_class_table, ClassInfo, ClassTable, CompactClasses,
 };
-use semsplat::scene::labels::{LabelDir, LabelMap, MissingLabels};
+use semsplat::scene::labels::{
+    write_label_png, write_palette_png, LabelDir, LabelMap, MissingLabels,
+};
 use semsplat::scene::ply::{read_ply, write_classes_sidecar, write_ply};
 use semsplat::scene::{Camera, Gaussians};
+use semsplat::util::npy::write_npy_f32;
 use semsplat::util::write_bytes_atomic;
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -77,7 +81,7 @@ pub struct FuseArgs {
     save_contrib: Option<PathBuf>,
     /// Reassign from a saved evidence matrix instead of rendering (no GPU needed), e.g. to
     /// try another --gamma.
-    #[arg(long, conflicts_with_all = ["labels", "cameras", "save_contrib"])]
+    #[arg(long, conflicts_with_all = ["labels", "save_contrib"])]
     contrib: Option<PathBuf>,
     /// Keep only the Gaussians of this class (name or id) in --out, by one-vs-rest
     /// assignment with --gamma.
@@ -86,6 +90,15 @@ pub struct FuseArgs {
     /// Drop the Gaussians of this class (name or id) from --out.
     #[arg(long)]
     remove: Option<String>,
+    /// Render label and palette PNGs of every view from the fused scene into DIR
+    /// (<view>.labels.png with label ids, 255/65535 where nothing is drawn; <view>.palette.png).
+    #[arg(long, requires = "cameras")]
+    render_views: Option<PathBuf>,
+    /// Write the multi-instance membership S of paper 002's Listing 1.1 (with --gamma) as a
+    /// float32 NumPy array [classes, Gaussians] of 0/1: a Gaussian may belong to several
+    /// classes or none. Rows follow <out>.classes.json.
+    #[arg(long)]
+    save_membership: Option<PathBuf>,
     /// Also write a copy colored by class palette, viewable in any 3DGS viewer.
     #[arg(long)]
     palette_ply: Option<PathBuf>,
@@ -343,6 +356,32 @@ pub fn run(args: FuseArgs) -> Result<()> {
             .collect(),
     );
     g.class_conf = Some(assignment.confidence.clone());
+    if let Some(path) = &args.save_membership {
+        let s_matrix = assign_one_vs_rest(&scores, args.gamma);
+        let flat: Vec<f32> = s_matrix
+            .iter()
+            .flatten()
+            .map(|&m| f32::from(u8::from(m)))
+            .collect();
+        write_npy_f32(path, &[scores.classes as u64, scores.n as u64], &flat)?;
+    }
+    if let Some(dir) = &args.render_views {
+        let cam_path = args.cameras.as_ref().expect("clap requires --cameras");
+        let cams = load_cameras(cam_path)?;
+        let gpu = Gpu::new()?;
+        let ids = g.class_ids.as_deref().expect("set above");
+        let mut renderer = LabelRenderer::new(&gpu, &g, ids)?;
+        for cam in &cams {
+            let labels: Vec<u16> = renderer
+                .render(cam)?
+                .into_iter()
+                .map(|l| l.unwrap_or(LabelMap::IGNORE))
+                .collect();
+            let map = LabelMap::new(cam.width, cam.height, labels)?;
+            write_label_png(&dir.join(format!("{}.labels.png", cam.name)), &map)?;
+            write_palette_png(&dir.join(format!("{}.palette.png", cam.name)), &map, &table)?;
+        }
+    }
     let selected = match (&args.extract, &args.remove) {
         (Some(name), _) | (_, Some(name)) => {
             let id = find_class(&table, name)?;
