@@ -12,7 +12,7 @@ mod cli;
     version,
     about = "Lift 2D semantic labels into 3D Gaussian Splatting scenes (Vulkan compute)",
     long_about = "Lift 2D semantic labels into 3D Gaussian Splatting scenes on a Vulkan compute \
-                  backend. Runs on any Vulkan 1.2 device; without a GPU, install lavapipe with \
+                  backend. Runs on any Vulkan 1.3 device; without a GPU, install lavapipe with \
                   tools/setup.sh. Select a device with SEMSPLAT_DEVICE=<index or name substring>."
 )]
 struct Cli {
@@ -25,23 +25,23 @@ enum Command {
     /// Build the default benchmark room, lift its labels with every method, and compare
     /// speed and accuracy (table, report.json, speed_vs_accuracy.png, strip.png).
     Demo(cli::demo::DemoArgs),
-    /// Score a classified scene against label maps (mIoU, pixel and 3D accuracy).
-    Eval(cli::eval::EvalArgs),
-    /// Robustness: every method's mIoU as one kind of label noise grows (chart + JSON).
-    Sweep(cli::sweep::SweepArgs),
-    /// Show the Vulkan device semsplat would use and what it supports.
-    Info(cli::info::InfoArgs),
-    /// Measure GPU kernels (throughput from GPU timestamps) against CPU baselines.
-    #[command(subcommand)]
-    Bench(cli::bench::BenchCommand),
-    /// Summarize a PLY scene, a camera model or a label folder, and report problems.
-    Inspect(cli::inspect::InspectArgs),
     /// Generate a procedural benchmark room with exact ground truth and label noise.
     Synth(cli::synth::SynthArgs),
     /// Lift per-view label maps onto the Gaussians (vote or FlashSplat; no training).
     Fuse(Box<cli::fuse::FuseArgs>),
     /// Render views of a scene on the GPU (RGB, and semantic labels with --semantics).
     Render(cli::render::RenderArgs),
+    /// Score a classified scene against label maps (mIoU, pixel and 3D accuracy).
+    Eval(cli::eval::EvalArgs),
+    /// Robustness: every method's mIoU as one kind of label noise grows (chart + JSON).
+    Sweep(cli::sweep::SweepArgs),
+    /// Summarize a PLY scene, a camera model or a label folder, and report problems.
+    Inspect(cli::inspect::InspectArgs),
+    /// Show the Vulkan device semsplat would use and what it supports.
+    Info(cli::info::InfoArgs),
+    /// Measure GPU kernels (throughput from GPU timestamps) against CPU baselines.
+    #[command(subcommand)]
+    Bench(cli::bench::BenchCommand),
 }
 
 fn main() -> ExitCode {

@@ -1,9 +1,9 @@
 #version 460
 // Downsweep of one radix pass: moves each (key, value) of the block to its place, keeping
-// equal digits in input order (stable). The block is processed as SORT_ITEMS tiles of
-// SORT_WG_SIZE elements in lane order; within a tile, each element's rank among equal
-// digits of its subgroup comes from ballots (multi-split: one ballot per digit bit, so any
-// subgroup size up to 128 works), and subgroups are ordered by a per-digit scan of their
+// equal digits in input order (stable). The block is processed in rounds of SUBTILES tiles
+// of SORT_WG_SIZE elements in lane order; each element's rank among equal digits of its
+// subgroup comes from ballots (multi-split: one ballot per digit bit, so any subgroup size
+// up to 128 works), and (subtile, subgroup) pairs are ordered by a per-digit scan of their
 // counts. No workgroup waits on another.
 #extension GL_EXT_control_flow_attributes : require
 #extension GL_KHR_shader_subgroup_basic : require
@@ -26,10 +26,14 @@ layout(set = 0, binding = 5) readonly buffer OffsetsBuf { uint data[]; } offsets
 
 // Subgroups of at least 4 lanes.
 #define MAX_SUBGROUPS (SORT_WG_SIZE / 4)
+// A round ranks SUBTILES tiles of SORT_WG_SIZE elements with one histogram, one prefix
+// pass and one scatter: a quarter of the barriers of one tile per round.
+#define SUBTILES 4
+#define ROUND (SORT_WG_SIZE * SUBTILES)
 
-shared uint digit_base[RADIX];          // next output slot of each digit for this block
-shared uint tile_total[RADIX];          // elements of each digit in the current tile
-shared uint sg_hist[MAX_SUBGROUPS * RADIX]; // per-subgroup digit counts, then their prefixes
+shared uint digit_base[RADIX];                         // next output slot of each digit
+shared uint round_total[RADIX];                        // elements of each digit this round
+shared uint sg_hist[SUBTILES * MAX_SUBGROUPS * RADIX]; // counts per (subtile, subgroup, digit), then prefixes
 
 void main() {
     uint blocks = state.data[0];
@@ -39,54 +43,64 @@ void main() {
     if (t < RADIX) {
         digit_base[t] = offsets.data[t * blocks + gl_WorkGroupID.x];
     }
-    uint hist_slots = gl_NumSubgroups * RADIX;
-    for (uint i = 0; i < SORT_ITEMS; i++) {
-        uint tile_start = base + i * SORT_WG_SIZE;
-        if (tile_start >= n) {
+    uint sg_slots = gl_NumSubgroups * RADIX;
+    for (uint r = 0; r < SORT_BLOCK / ROUND; r++) {
+        uint round_start = base + r * ROUND;
+        if (round_start >= n) {
             break; // uniform across the workgroup
         }
-        for (uint s = t; s < hist_slots; s += SORT_WG_SIZE) {
+        for (uint s = t; s < SUBTILES * sg_slots; s += SORT_WG_SIZE) {
             sg_hist[s] = 0;
         }
         barrier();
 
-        uint g = tile_start + t;
-        bool valid = g < n;
-        uint key = valid ? keys_in.data[g] : 0;
-        uint value = valid ? values_in.data[g] : 0;
-        uint digit = bitfieldExtract(key, int(pc.shift), int(pc.bits));
-        uvec4 peers = subgroupBallot(valid);
-        [[unroll]] for (uint b = 0; b < RADIX_BITS; b++) {
-            if (b < pc.bits) {
-                bool bit = ((digit >> b) & 1u) != 0;
-                uvec4 set_lanes = subgroupBallot(bit);
-                peers &= bit ? set_lanes : ~set_lanes;
+        // Element order within the round: subtile, then subgroup, then lane.
+        uint keys[SUBTILES];
+        uint values[SUBTILES];
+        uint digits[SUBTILES];
+        uint ranks[SUBTILES];
+        bool valid[SUBTILES];
+        [[unroll]] for (uint k = 0; k < SUBTILES; k++) {
+            uint g = round_start + k * SORT_WG_SIZE + t;
+            valid[k] = g < n;
+            keys[k] = valid[k] ? keys_in.data[g] : 0;
+            values[k] = valid[k] ? values_in.data[g] : 0;
+            digits[k] = bitfieldExtract(keys[k], int(pc.shift), int(pc.bits));
+            uvec4 peers = subgroupBallot(valid[k]);
+            [[unroll]] for (uint b = 0; b < RADIX_BITS; b++) {
+                if (b < pc.bits) {
+                    bool bit = ((digits[k] >> b) & 1u) != 0;
+                    uvec4 set_lanes = subgroupBallot(bit);
+                    peers &= bit ? set_lanes : ~set_lanes;
+                }
             }
-        }
-        uint rank = subgroupBallotExclusiveBitCount(peers);
-        if (valid && rank == 0) {
-            sg_hist[gl_SubgroupID * RADIX + digit] = subgroupBallotBitCount(peers);
+            ranks[k] = subgroupBallotExclusiveBitCount(peers);
+            if (valid[k] && ranks[k] == 0) {
+                sg_hist[k * sg_slots + gl_SubgroupID * RADIX + digits[k]] = subgroupBallotBitCount(peers);
+            }
         }
         barrier();
         if (t < RADIX) {
             uint acc = 0;
-            for (uint s = 0; s < gl_NumSubgroups; s++) {
+            for (uint s = 0; s < SUBTILES * gl_NumSubgroups; s++) {
                 uint c = sg_hist[s * RADIX + t];
                 sg_hist[s * RADIX + t] = acc;
                 acc += c;
             }
-            tile_total[t] = acc;
+            round_total[t] = acc;
         }
         barrier();
-        if (valid) {
-            uint dst = digit_base[digit] + sg_hist[gl_SubgroupID * RADIX + digit] + rank;
-            keys_out.data[dst] = key;
-            values_out.data[dst] = value;
+        [[unroll]] for (uint k = 0; k < SUBTILES; k++) {
+            if (valid[k]) {
+                uint dst = digit_base[digits[k]] + sg_hist[k * sg_slots + gl_SubgroupID * RADIX + digits[k]] + ranks[k];
+                keys_out.data[dst] = keys[k];
+                values_out.data[dst] = values[k];
+            }
         }
         barrier();
         if (t < RADIX) {
-            digit_base[t] += tile_total[t];
+            digit_base[t] += round_total[t];
         }
-        // The next tile's first barrier orders this update before its use.
+        // The next round's first barrier orders this update before its use.
     }
 }
