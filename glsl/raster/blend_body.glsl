@@ -27,6 +27,7 @@ layout(push_constant) uniform Params {
 } pc;
 
 layout(set = 0, binding = 0) readonly buffer RangesBuf { uvec2 data[]; } tile_ranges;
+#include "tile_window.glsl"
 layout(set = 0, binding = 1) readonly buffer IdsBuf { uint data[]; } isect_ids;
 layout(set = 0, binding = 2) readonly buffer XyBuf { vec4 data[]; } xy_depth_opacity;
 layout(set = 0, binding = 3) readonly buffer ConicBuf { vec4 data[]; } conics;
@@ -55,23 +56,16 @@ void main() {
     uint width = pc.dims.x, height = pc.dims.y, channels = pc.dims.w;
     uint window_start = pc.window.x, window_len = pc.window.y, chunk_base = pc.window.z;
     bool write_rgb = pc.window.w != 0;
-    uint tile_id = gl_WorkGroupID.y * pc.dims.z + gl_WorkGroupID.x;
-    uint t = gl_SubgroupID * gl_SubgroupSize + gl_SubgroupInvocationID;
-    uint px = gl_WorkGroupID.x * TILE_SIZE + t % TILE_SIZE;
-    uint py = gl_WorkGroupID.y * TILE_SIZE + t / TILE_SIZE;
-    bool inside = px < width && py < height;
-    uint pix = py * width + px;
+    TileWindow tw = tile_window(width, height, pc.dims.z, window_start, window_len);
+    uint t = tw.t, px = tw.px, py = tw.py, pix = tw.pix;
+    bool inside = tw.inside;
     vec2 pixel = vec2(px, py);
-
-    uvec2 range = tile_ranges.data[tile_id];
-    uint len = range.y - range.x;
     // Later windows only continue tiles that are longer; window 0 always writes (background).
-    if (window_start > 0 && window_start >= len) {
+    if (window_start > 0 && window_start >= tw.len) {
         return;
     }
-    uint start = range.x + window_start;
-    uint end = range.x + min(len, window_start + window_len);
-    bool last_window = window_start + window_len >= len;
+    uint start = tw.start, end = tw.end;
+    bool last_window = tw.last;
 
     float T = 1.0;
     vec3 rgb = vec3(0.0);

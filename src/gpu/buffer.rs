@@ -155,21 +155,45 @@ impl Gpu {
     /// Reads `count` elements of type T from `src` starting at byte `offset`, and waits.
     pub fn download<T: Pod>(&self, src: &Buffer, offset: u64, count: usize) -> GpuResult<Vec<T>> {
         let len = (count * std::mem::size_of::<T>()) as u64;
-        if len == 0 {
-            return Ok(Vec::new());
+        let bytes = self
+            .download_many(&[(src, offset, len)])?
+            .pop()
+            .unwrap_or_default();
+        Ok(bytemuck::pod_collect_to_vec(&bytes))
+    }
+
+    /// Reads several ranges `(buffer, byte offset, bytes)` through one staging buffer and one
+    /// submission (a frame's outputs at once), returning the bytes of each.
+    pub fn download_many(&self, ranges: &[(&Buffer, u64, u64)]) -> GpuResult<Vec<Vec<u8>>> {
+        let total: u64 = ranges.iter().map(|r| r.2).sum();
+        if total == 0 {
+            return Ok(ranges.iter().map(|_| Vec::new()).collect());
         }
-        assert!(
-            offset + len <= src.size,
-            "download past the end of {}",
-            src.name
-        );
-        let mut staging = self.create_buffer("staging-download", len, MemoryLocation::GpuToCpu)?;
+        let mut staging =
+            self.create_buffer("staging-download", total, MemoryLocation::GpuToCpu)?;
         let mut rec = Recorder::new(self)?;
-        rec.copy(src, offset, &staging, 0, len);
+        let mut at = 0;
+        for &(src, offset, len) in ranges {
+            assert!(
+                offset + len <= src.size,
+                "download past the end of {}",
+                src.name
+            );
+            rec.copy(src, offset, &staging, at, len);
+            at += len;
+        }
         rec.host_barrier();
         rec.submit_and_wait()?;
-        let bytes = &staging.mapped()[..len as usize];
-        Ok(bytemuck::pod_collect_to_vec(bytes))
+        let bytes = staging.mapped();
+        let mut at = 0;
+        Ok(ranges
+            .iter()
+            .map(|r| {
+                let v = bytes[at as usize..(at + r.2) as usize].to_vec();
+                at += r.2;
+                v
+            })
+            .collect())
     }
 
     /// Reads the whole buffer as elements of type T.

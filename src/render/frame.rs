@@ -46,20 +46,33 @@ impl RenderedFrame {
         intersections: u32,
         stages: StageTimes,
     ) -> Result<RenderedFrame> {
-        let p = cam.width as usize * cam.height as usize;
-        let c = channels as usize;
+        let p = (cam.width as u64) * (cam.height as u64);
+        let c = channels as u64;
+        // One staging buffer and one submission for all outputs.
+        let parts = gpu.download_many(&[
+            (rgb, 0, p * 12),
+            (alpha, 0, p * 4),
+            (depth, 0, p * 4),
+            (final_t, 0, p * 4),
+            (last, 0, p * 4),
+            (n_contrib, 0, p * 4),
+            (sem, 0, p * c * 4),
+            (sem_norm, 0, p * c * 4),
+        ])?;
+        let f32s = |k: usize| -> Vec<f32> { bytemuck::pod_collect_to_vec(&parts[k]) };
+        let u32s = |k: usize| -> Vec<u32> { bytemuck::pod_collect_to_vec(&parts[k]) };
         Ok(RenderedFrame {
             width: cam.width,
             height: cam.height,
             channels,
-            rgb: gpu.download(rgb, 0, p * 3)?,
-            alpha: gpu.download(alpha, 0, p)?,
-            depth: gpu.download(depth, 0, p)?,
-            final_t: gpu.download(final_t, 0, p)?,
-            last: gpu.download(last, 0, p)?,
-            n_contrib: gpu.download(n_contrib, 0, p)?,
-            sem: gpu.download(sem, 0, p * c)?,
-            sem_norm: gpu.download(sem_norm, 0, p * c)?,
+            rgb: f32s(0),
+            alpha: f32s(1),
+            depth: f32s(2),
+            final_t: f32s(3),
+            last: u32s(4),
+            n_contrib: u32s(5),
+            sem: f32s(6),
+            sem_norm: f32s(7),
             visible,
             intersections,
             stages,
