@@ -180,6 +180,7 @@ pub fn accumulate(
     };
     let mut label_buf: Option<Buffer> = None;
     let mut carry: Option<Buffer> = None;
+    let mut staging: Option<Buffer> = None;
 
     for pass in 0..passes {
         let row_begin = pass * rows;
@@ -210,10 +211,11 @@ pub fn accumulate(
                 .is_none_or(|b| b.size() < pixels as u64 * 4)
             {
                 label_buf = Some(gpu.buffer("labels", pixels as u64 * 4)?);
+                staging = Some(gpu.staging_buffer(pixels as u64 * 4)?);
                 carry = Some(gpu.buffer("contrib-carry", pixels as u64 * 8)?);
             }
             let lb = label_buf.as_ref().expect("allocated");
-            gpu.upload(lb, 0, &map)?;
+            gpu.upload_with(staging.as_mut().expect("allocated"), lb, 0, &map)?;
             let ms = match cfg.method {
                 Method::Vote => record_vote(
                     gpu, scene, cam, lb, None, &evidence, row_begin, pass_rows, cfg,

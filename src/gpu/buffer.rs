@@ -129,8 +129,31 @@ impl Gpu {
         Ok(buf)
     }
 
-    /// Copies `data` into `dst` at byte `offset` through a staging buffer, and waits.
+    /// A host-visible staging buffer for [`Gpu::upload_with`], reused across uploads (one per
+    /// view in a loop over views, instead of an allocation each time).
+    pub fn staging_buffer(&self, size: u64) -> GpuResult<Buffer> {
+        self.create_buffer("staging-upload", size, MemoryLocation::CpuToGpu)
+    }
+
+    /// Copies `data` into `dst` at byte `offset` through a fresh staging buffer, and waits.
     pub fn upload<T: Pod>(&self, dst: &Buffer, offset: u64, data: &[T]) -> GpuResult<()> {
+        let bytes = std::mem::size_of_val(data) as u64;
+        if bytes == 0 {
+            return Ok(());
+        }
+        let mut staging = self.staging_buffer(bytes)?;
+        self.upload_with(&mut staging, dst, offset, data)
+    }
+
+    /// Copies `data` into `dst` at byte `offset` through `staging` (a
+    /// [`Gpu::staging_buffer`] at least as large), and waits.
+    pub fn upload_with<T: Pod>(
+        &self,
+        staging: &mut Buffer,
+        dst: &Buffer,
+        offset: u64,
+        data: &[T],
+    ) -> GpuResult<()> {
         let bytes: &[u8] = bytemuck::cast_slice(data);
         if bytes.is_empty() {
             return Ok(());
@@ -140,14 +163,14 @@ impl Gpu {
             "upload past the end of {}",
             dst.name
         );
-        let mut staging = self.create_buffer(
-            "staging-upload",
-            bytes.len() as u64,
-            MemoryLocation::CpuToGpu,
-        )?;
+        assert!(
+            bytes.len() as u64 <= staging.size,
+            "staging buffer {} is too small",
+            staging.name
+        );
         staging.mapped()[..bytes.len()].copy_from_slice(bytes);
         let mut rec = Recorder::new(self)?;
-        rec.copy(&staging, 0, dst, offset, bytes.len() as u64);
+        rec.copy(staging, 0, dst, offset, bytes.len() as u64);
         rec.submit_and_wait()?;
         Ok(())
     }
