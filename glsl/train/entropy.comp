@@ -1,0 +1,52 @@
+#version 460
+// Entropy regularizer (paper 000, Eq. 4-6) on per-Gaussian semantic logits s_i:
+// H_i = -sum_k p_k log p_k with p = softmax(s_i), dH/ds_k = -p_k (log p_k + H_i).
+// ADDS weight * dH/ds into grad_logits (weight = lambda_H / N) and writes the partial
+// sums of H_i / N. Grid-stride over Gaussians so the partials fit a fixed slot size.
+
+#include "loss_sums.glsl"
+
+layout(local_size_x = LOSS_WG) in;
+
+layout(push_constant) uniform Params {
+    uint n;
+    uint channels;
+    uint stride;
+    float weight;     // lambda_H / N
+    float inv_n;      // 1 / N
+} pc;
+
+layout(set = 0, binding = 0) readonly buffer LogitsBuf { float data[]; } logits; // [N][C]
+layout(set = 0, binding = 1) buffer GradLogitsBuf { float data[]; } grad_logits; // [N][C]
+layout(set = 0, binding = 2) writeonly buffer PartialsBuf { float data[]; } partials;
+
+void main() {
+    uint threads = gl_NumWorkGroups.x * LOSS_WG;
+    float h_sum = 0.0;
+    for (uint i = gl_GlobalInvocationID.x; i < pc.n; i += threads) {
+        uint base = i * pc.channels;
+        float m = -3.402823466e38;
+        for (uint k = 0; k < pc.channels; k++) {
+            m = max(m, logits.data[base + k]);
+        }
+        float z = 0.0;
+        for (uint k = 0; k < pc.channels; k++) {
+            z += exp(logits.data[base + k] - m);
+        }
+        float log_z = log(z);
+        float h = 0.0;
+        for (uint k = 0; k < pc.channels; k++) {
+            float log_p = logits.data[base + k] - m - log_z;
+            h -= exp(log_p) * log_p;
+        }
+        for (uint k = 0; k < pc.channels; k++) {
+            float log_p = logits.data[base + k] - m - log_z;
+            grad_logits.data[base + k] -= pc.weight * exp(log_p) * (log_p + h);
+        }
+        h_sum += h;
+    }
+    vec4 total = workgroup_sum4(vec4(h_sum * pc.inv_n, 0.0, 0.0, 0.0), gl_LocalInvocationIndex);
+    if (gl_LocalInvocationIndex == 0) {
+        partials.data[SLOT_ENTROPY * pc.stride + gl_WorkGroupID.x] = total.x;
+    }
+}

@@ -1,0 +1,42 @@
+#version 460
+// SSIM backward, pass 1: the horizontal blur of the three moment gradients (the window's
+// transpose is the window itself).
+
+#include "ssim_window.glsl"
+
+layout(local_size_x = 16, local_size_y = 16) in;
+
+layout(push_constant) uniform Params {
+    uint width;
+    uint height;
+} pc;
+
+layout(set = 0, binding = 0) readonly buffer MomentGradsBuf { float data[]; } moment_grads; // [3][P][3]
+layout(set = 0, binding = 1) writeonly buffer BlurredBuf { float data[]; } blurred;         // [3][P][3]
+
+void main() {
+    uint px = gl_GlobalInvocationID.x;
+    uint py = gl_GlobalInvocationID.y;
+    if (px >= pc.width || py >= pc.height) {
+        return;
+    }
+    uint plane = pc.width * pc.height * 3;
+    uint row = py * pc.width;
+    [[unroll]] for (uint c = 0; c < 3; c++) {
+        float g[3] = float[3](0.0, 0.0, 0.0);
+        [[unroll]] for (int k = 0; k < SSIM_TAPS; k++) {
+            int qx = int(px) + k - SSIM_RADIUS;
+            if (qx >= 0 && qx < int(pc.width)) {
+                uint i = (row + uint(qx)) * 3 + c;
+                float w = SSIM_WEIGHTS[k];
+                [[unroll]] for (uint q = 0; q < 3; q++) {
+                    g[q] += w * moment_grads.data[q * plane + i];
+                }
+            }
+        }
+        uint o = (row + px) * 3 + c;
+        [[unroll]] for (uint q = 0; q < 3; q++) {
+            blurred.data[q * plane + o] = g[q];
+        }
+    }
+}

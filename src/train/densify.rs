@@ -1,0 +1,617 @@
+//! Adaptive density control of 3DGS (Kerbl et al. 2023, `densify_and_prune`) on the GPU:
+//! prune, clone and split in one planned step, with a hard cap on the model size.
+//!
+//! A step has two halves. [`Densifier::plan`] classifies every Gaussian and lays out the
+//! new set on the GPU (one submission, then one download of a few counters).
+//! [`Densifier::apply`] then builds each parameter tensor of the new set from the old one by
+//! a gather, so the caller passes its tensors generically: any width, one [`Role`] each.
+//!
+//! Semantics, per Gaussian i with `avg_grad = grad_accum / grad_count` (0 where the count
+//! is 0):
+//! - **prune** when `sigmoid(opacity_logit) < min_opacity`, or (with `prune_large`)
+//!   `max(exp(log_scales)) > 0.1 * extent`. Pruning looks at the original Gaussians only; a
+//!   pruned Gaussian is never densified.
+//! - a survivor with `avg_grad >= grad_threshold` is a **candidate**. Candidates whose
+//!   largest scale is `<= percent_dense * extent` are **cloned** (the Gaussian stays and a
+//!   copy is added), the others **split** (replaced by two children, each with
+//!   `mean + R(q) * (exp(log_scales) * z)`, `z ~ N(0, I)`, and `log_scales - ln(1.6)`).
+//! - **cap**: each densified Gaussian adds exactly one, so at most
+//!   `max_gaussians - survivors` candidates are densified: those with the largest
+//!   `avg_grad` (f32, as the GPU divides), ties broken by the lower index. The result never
+//!   exceeds `max_gaussians` (the input must not exceed it either).
+//! - Adam moments: kept Gaussians (the original of a clone included) keep theirs; every new
+//!   Gaussian (a clone's copy, both split children) starts at zero.
+//! - Not modelled: 3DGS's screen-space size pruning (`max_radii2D`), which needs the
+//!   rasterizer's per-view radii.
+//!
+//! **Order of the new set**: the original order, each Gaussian replaced by its outputs:
+//! nothing if pruned, itself if kept, itself then its copy if cloned, child 0 then child 1
+//! if split. (Densified Gaussians stay next to their neighbours in memory.)
+//!
+//! **Split RNG** (counter-based, so the children do not depend on the dispatch): child
+//! `c` (0 or 1) of Gaussian `i` hashes `h = pcg4d(i, c, seed as u32, (seed >> 32) as u32)`
+//! (Jarzynski and Olano 2020), maps each word to `u_k = ((h_k >> 8) + 0.5) / 2^24` and
+//! takes Box-Muller pairs `r0 = sqrt(-2 ln u0)`, `a0 = pi * (2 u1 - 1)`,
+//! `r1 = sqrt(-2 ln u2)`, `a1 = pi * (2 u3 - 1)`:
+//! `z = (r0 cos a0, r0 sin a0, r1 cos a1)`. The quaternion is normalized before use
+//! (glsl/train/densify_common.glsl: `split_normal`).
+
+use anyhow::{ensure, Result};
+use bytemuck::{Pod, Zeroable};
+
+use crate::gpu::kernel_table::ids;
+use crate::gpu::{Buffer, Gpu, GpuCount, PrefixScan, RadixSort, Recorder};
+
+/// Threads per workgroup of every densify kernel (densify_common.glsl: DENSIFY_WG_SIZE).
+const WG_SIZE: u32 = 256;
+/// Plan status words (densify_common.glsl: DS_*).
+const DS_SURVIVORS: usize = 0;
+const DS_CANDIDATES: usize = 1;
+const DS_DENSIFIED: usize = 2;
+const DS_CLONED: usize = 3;
+const DS_SPLIT: usize = 4;
+const DS_NEW_N: usize = 5;
+const DS_N_PLUS1: u32 = 6;
+const DS_WORDS: u64 = 8;
+/// Gather roles (densify_gather.comp: ROLE_*).
+const ROLE_COPY: u32 = 0;
+const ROLE_MOMENT: u32 = 1;
+const ROLE_MEANS: u32 = 2;
+const ROLE_LOG_SCALES: u32 = 3;
+
+/// Opacity that 3DGS's opacity reset caps every Gaussian at.
+pub const OPACITY_RESET: f32 = 0.01;
+
+/// Thresholds of one densify-and-prune step; the defaults are 3DGS's.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DensifyConfig {
+    /// Average 2D-mean gradient (NDC units) from which a Gaussian is densified.
+    pub grad_threshold: f32,
+    /// Fraction of the scene extent that separates clone (at most) from split (above).
+    pub percent_dense: f32,
+    /// Scene extent (3DGS: the radius of the cameras times 1.1).
+    pub extent: f32,
+    /// Gaussians with a lower opacity are pruned.
+    pub min_opacity: f32,
+    /// Also prune Gaussians whose largest scale exceeds 0.1 * extent.
+    pub prune_large: bool,
+    /// Hard cap on the Gaussians after the step.
+    pub max_gaussians: u32,
+    /// Seed of the split children's offsets.
+    pub seed: u64,
+}
+
+impl Default for DensifyConfig {
+    fn default() -> Self {
+        DensifyConfig {
+            grad_threshold: 0.0002,
+            percent_dense: 0.01,
+            extent: 1.0,
+            min_opacity: 0.005,
+            prune_large: false,
+            max_gaussians: u32::MAX,
+            seed: 0,
+        }
+    }
+}
+
+impl DensifyConfig {
+    fn validate(&self) -> Result<()> {
+        ensure!(
+            self.grad_threshold.is_finite(),
+            "densify: grad_threshold must be finite, got {}",
+            self.grad_threshold
+        );
+        ensure!(
+            self.percent_dense > 0.0 && self.percent_dense.is_finite(),
+            "densify: percent_dense must be positive, got {}",
+            self.percent_dense
+        );
+        ensure!(
+            self.extent > 0.0 && self.extent.is_finite(),
+            "densify: extent must be positive, got {}",
+            self.extent
+        );
+        ensure!(
+            (0.0..=1.0).contains(&self.min_opacity),
+            "densify: min_opacity must be in [0, 1], got {}",
+            self.min_opacity
+        );
+        Ok(())
+    }
+}
+
+/// The per-Gaussian tensors a plan reads (f32, structure-of-arrays, `n` Gaussians).
+#[derive(Clone, Copy)]
+pub struct DensifyInputs<'a> {
+    pub n: u32,
+    /// `[n * 3]`
+    pub log_scales: &'a Buffer,
+    /// `[n * 4]`, w x y z, unnormalized
+    pub quats: &'a Buffer,
+    /// `[n]`
+    pub opacity_logits: &'a Buffer,
+    /// `[n]`: sum over views of the 2D-mean gradient norm
+    pub grad_accum: &'a Buffer,
+    /// `[n]`: views in which the Gaussian was visible
+    pub grad_count: &'a Buffer,
+}
+
+/// The outcome of [`Densifier::plan`]: counts for logging, and the key to apply it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct DensifyPlan {
+    /// Gaussians before the step.
+    pub n: u32,
+    /// Gaussians after the step: `n - pruned + cloned + split`.
+    pub new_n: u32,
+    pub pruned: u32,
+    /// Gaussians cloned (each adds one copy).
+    pub cloned: u32,
+    /// Gaussians split (each replaced by two children).
+    pub split: u32,
+    /// Survivors whose gradient asked for densification, before the cap.
+    pub candidates: u32,
+    /// Which plan of its densifier this is: apply refuses a plan that a later one replaced.
+    generation: u64,
+}
+
+impl DensifyPlan {
+    /// Candidates left out by `max_gaussians`.
+    pub fn capped(&self) -> u32 {
+        self.candidates - self.cloned - self.split
+    }
+}
+
+/// How [`Densifier::apply`] builds a tensor of the new set from the old one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Role {
+    /// Every output is a copy of its source (quats, opacity logits, SH, semantic logits).
+    Copy,
+    /// An Adam moment (m or v) of any parameter: kept Gaussians keep it, new ones get 0.
+    AdamMoment,
+    /// Means (width 3): split children add their offset (computed by the plan from the
+    /// parents' scales and rotations).
+    Means,
+    /// Log-scales (width 3): split children get `log_scales - ln(1.6)`.
+    LogScales,
+    /// Every output is 0 (gradient statistics, restarted after the step).
+    Zeroed,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct ClassifyParams {
+    n: u32,
+    grad_threshold: f32,
+    opacity_logit_min: f32,
+    ln_prune_scale: f32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct CompactParams {
+    n: u32,
+    max_gaussians: u32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct LayoutParams {
+    n: u32,
+    ln_split_scale: f32,
+    seed: [u32; 2],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct GatherParams {
+    elements: u32,
+    width: u32,
+    role: u32,
+    ln_split_shrink: f32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct ResetParams {
+    n: u32,
+    max_logit: f32,
+}
+
+/// Scratch of a plan, sized for `n_cap` Gaussians in and `slot_cap` out.
+struct PlanBuffers {
+    n_cap: u64,
+    slot_cap: u64,
+    status: Buffer,
+    /// `[n + 1]` flags and their exclusive scan: where each candidate is compacted to.
+    candidate_flags: Buffer,
+    candidate_offsets: Buffer,
+    /// Compacted candidates: descending-gradient sort keys and their Gaussian indices.
+    candidate_keys: Buffer,
+    candidate_ids: Buffer,
+    /// `[n + 1]` output slots per Gaussian (0, 1, 2) and their exclusive scan.
+    out_count: Buffer,
+    out_offsets: Buffer,
+    /// Per output slot: source Gaussian, kind (SLOT_*), mean offset (xyz, 0 unless split).
+    slot_source: Buffer,
+    slot_kind: Buffer,
+    slot_mean_delta: Buffer,
+    scan: PrefixScan,
+    sort: RadixSort,
+}
+
+impl PlanBuffers {
+    fn new(gpu: &Gpu, n_cap: u64, slot_cap: u64) -> Result<PlanBuffers> {
+        let b = |name: &str, bytes: u64| gpu.buffer(name, bytes);
+        Ok(PlanBuffers {
+            n_cap,
+            slot_cap,
+            status: b("densify-status", DS_WORDS * 4)?,
+            candidate_flags: b("candidate_flags", (n_cap + 1) * 4)?,
+            candidate_offsets: b("candidate_offsets", (n_cap + 1) * 4)?,
+            candidate_keys: b("candidate_keys", n_cap * 4)?,
+            candidate_ids: b("candidate_ids", n_cap * 4)?,
+            out_count: b("out_count", (n_cap + 1) * 4)?,
+            out_offsets: b("out_offsets", (n_cap + 1) * 4)?,
+            slot_source: b("slot_source", slot_cap * 4)?,
+            slot_kind: b("slot_kind", slot_cap * 4)?,
+            slot_mean_delta: b("slot_mean_delta", slot_cap * 12)?,
+            scan: PrefixScan::new(gpu, n_cap + 1)?,
+            sort: RadixSort::new(gpu, n_cap)?,
+        })
+    }
+}
+
+/// Grows a capacity by half again when it must grow, within `limit`.
+fn grow(current: u64, need: u64, limit: u64) -> u64 {
+    if need <= current {
+        current
+    } else {
+        need.max((current + current / 2).min(limit))
+    }
+}
+
+/// Workgroups covering `invocations` in one dimension.
+fn groups(invocations: u64) -> [u32; 3] {
+    [invocations.div_ceil(WG_SIZE as u64) as u32, 1, 1]
+}
+
+/// Plans and applies densify-and-prune steps; reuses its scratch buffers across steps.
+pub struct Densifier {
+    gpu: Gpu,
+    bufs: Option<PlanBuffers>,
+    generation: u64,
+}
+
+impl Densifier {
+    pub fn new(gpu: &Gpu) -> Densifier {
+        Densifier {
+            gpu: gpu.clone(),
+            bufs: None,
+            generation: 0,
+        }
+    }
+
+    /// The most Gaussians one plan can take in (every `[n + 1]` u32 array in one binding,
+    /// one invocation per Gaussian in one dispatch dimension).
+    fn max_n(&self) -> u64 {
+        let caps = self.gpu.caps();
+        (caps.max_storage_buffer_range / 4 - 1)
+            .min(caps.max_workgroup_count[0] as u64 * WG_SIZE as u64 - 1)
+    }
+
+    fn ensure(&mut self, n: u64, slots: u64) -> Result<()> {
+        let n_limit = self.max_n();
+        let slot_limit = self.gpu.caps().max_storage_buffer_range / 12;
+        ensure!(
+            n <= n_limit && slots <= slot_limit,
+            "densify: {n} Gaussians ({slots} after the step) exceed this device's limits \
+             ({n_limit} in, {slot_limit} out)"
+        );
+        let fits = self
+            .bufs
+            .as_ref()
+            .is_some_and(|b| n <= b.n_cap && slots <= b.slot_cap);
+        if !fits {
+            let (n_cap, slot_cap) = match &self.bufs {
+                Some(b) => (
+                    grow(b.n_cap, n, n_limit),
+                    grow(b.slot_cap, slots, slot_limit),
+                ),
+                None => (n, slots),
+            };
+            self.bufs = None; // free before allocating the larger set
+            self.bufs = Some(PlanBuffers::new(&self.gpu, n_cap.max(1), slot_cap.max(1))?);
+        }
+        Ok(())
+    }
+
+    /// Decides which Gaussians are pruned, cloned and split, and lays out the new set on
+    /// the GPU. Waits for the GPU and downloads the counts. The plan stays valid for
+    /// [`Densifier::apply`] until the next call.
+    pub fn plan(&mut self, inputs: &DensifyInputs, config: &DensifyConfig) -> Result<DensifyPlan> {
+        config.validate()?;
+        let n = inputs.n;
+        ensure!(
+            n <= config.max_gaussians,
+            "densify: {n} Gaussians already exceed max_gaussians = {}",
+            config.max_gaussians
+        );
+        let n64 = n as u64;
+        for (name, buf, width) in [
+            ("log_scales", inputs.log_scales, 3),
+            ("quats", inputs.quats, 4),
+            ("opacity_logits", inputs.opacity_logits, 1),
+            ("grad_accum", inputs.grad_accum, 1),
+            ("grad_count", inputs.grad_count, 1),
+        ] {
+            ensure!(
+                buf.size() >= n64 * width * 4,
+                "densify: {name} holds {} bytes, {n} Gaussians need {}",
+                buf.size(),
+                n64 * width * 4
+            );
+        }
+        self.generation += 1;
+        let mut plan = DensifyPlan {
+            n,
+            new_n: 0,
+            pruned: 0,
+            cloned: 0,
+            split: 0,
+            candidates: 0,
+            generation: self.generation,
+        };
+        if n == 0 {
+            return Ok(plan);
+        }
+        let slots = (2 * n64).min(config.max_gaussians as u64);
+        self.ensure(n64, slots)?;
+        let b = self.bufs.as_ref().expect("ensured");
+
+        // Thresholds move to log and logit space on the host (in f64), so the kernels
+        // compare without exp and agree with any device's exp.
+        let logit = |p: f64| (p / (1.0 - p)).ln();
+        let ln_extent = |fraction: f64| (fraction * config.extent as f64).ln() as f32;
+        let classify = ClassifyParams {
+            n,
+            grad_threshold: config.grad_threshold,
+            opacity_logit_min: logit(config.min_opacity as f64) as f32,
+            ln_prune_scale: if config.prune_large {
+                ln_extent(0.1)
+            } else {
+                f32::INFINITY
+            },
+        };
+        let n_plus1 = GpuCount::at(&b.status, DS_N_PLUS1);
+
+        let mut rec = Recorder::new(&self.gpu)?;
+        rec.fill(&b.status, 0, DS_WORDS * 4, 0);
+        rec.fill(&b.status, DS_N_PLUS1 as u64 * 4, 4, n + 1);
+        rec.barrier();
+        rec.dispatch(
+            ids::TRAIN_DENSIFY_CLASSIFY,
+            &[
+                ("log_scales", inputs.log_scales),
+                ("opacity_logits", inputs.opacity_logits),
+                ("grad_accum", inputs.grad_accum),
+                ("grad_count", inputs.grad_count),
+                ("candidate_flags", &b.candidate_flags),
+                ("out_count", &b.out_count),
+                ("status", &b.status),
+            ],
+            bytemuck::bytes_of(&classify),
+            groups(n64 + 1),
+        )?;
+        rec.barrier();
+        b.scan
+            .record(&mut rec, &b.candidate_flags, &b.candidate_offsets, n_plus1)?;
+        rec.dispatch(
+            ids::TRAIN_DENSIFY_COMPACT,
+            &[
+                ("grad_accum", inputs.grad_accum),
+                ("grad_count", inputs.grad_count),
+                ("candidate_flags", &b.candidate_flags),
+                ("candidate_offsets", &b.candidate_offsets),
+                ("candidate_keys", &b.candidate_keys),
+                ("candidate_ids", &b.candidate_ids),
+                ("status", &b.status),
+            ],
+            bytemuck::bytes_of(&CompactParams {
+                n,
+                max_gaussians: config.max_gaussians,
+            }),
+            groups(n64 + 1),
+        )?;
+        rec.barrier();
+        // Only a budget below 2n can leave candidates out; then the largest gradients go
+        // first. Otherwise every candidate is densified and their order does not matter.
+        if 2 * n64 > config.max_gaussians as u64 {
+            b.sort.record(
+                &mut rec,
+                &b.candidate_keys,
+                &b.candidate_ids,
+                GpuCount::at(&b.status, DS_CANDIDATES as u32),
+                32,
+            )?;
+        }
+        rec.dispatch(
+            ids::TRAIN_DENSIFY_SELECT,
+            &[
+                ("status", &b.status),
+                ("candidate_ids", &b.candidate_ids),
+                ("out_count", &b.out_count),
+            ],
+            &[],
+            groups(n64),
+        )?;
+        rec.barrier();
+        b.scan
+            .record(&mut rec, &b.out_count, &b.out_offsets, n_plus1)?;
+        let layout = LayoutParams {
+            n,
+            ln_split_scale: ln_extent(config.percent_dense as f64),
+            seed: [config.seed as u32, (config.seed >> 32) as u32],
+        };
+        rec.dispatch(
+            ids::TRAIN_DENSIFY_LAYOUT,
+            &[
+                ("log_scales", inputs.log_scales),
+                ("quats", inputs.quats),
+                ("out_offsets", &b.out_offsets),
+                ("slot_source", &b.slot_source),
+                ("slot_kind", &b.slot_kind),
+                ("slot_mean_delta", &b.slot_mean_delta),
+                ("status", &b.status),
+            ],
+            bytemuck::bytes_of(&layout),
+            groups(n64 + 1),
+        )?;
+        rec.submit_and_wait()?;
+
+        let status: Vec<u32> = self.gpu.download(&b.status, 0, DS_WORDS as usize)?;
+        plan.new_n = status[DS_NEW_N];
+        plan.pruned = n - status[DS_SURVIVORS];
+        plan.cloned = status[DS_CLONED];
+        plan.split = status[DS_SPLIT];
+        plan.candidates = status[DS_CANDIDATES];
+        let densified = status[DS_DENSIFIED];
+        ensure!(
+            plan.cloned + plan.split == densified
+                && plan.new_n == status[DS_SURVIVORS] + densified
+                && plan.new_n <= config.max_gaussians,
+            "densify: inconsistent plan counts {status:?}"
+        );
+        Ok(plan)
+    }
+
+    /// Records the building of one tensor of the new set (`width` f32 per Gaussian) from
+    /// `tensor`, the same tensor of the set the plan was made on, and returns the new
+    /// buffer (`plan.new_n * width` f32). Submit `rec` before reading it, and keep this
+    /// densifier and `tensor` alive until then.
+    pub fn apply(
+        &self,
+        rec: &mut Recorder,
+        plan: &DensifyPlan,
+        tensor: &Buffer,
+        width: u32,
+        role: Role,
+    ) -> Result<Buffer> {
+        ensure!(
+            plan.generation == self.generation,
+            "densify: this plan was replaced by a later plan of the same densifier"
+        );
+        ensure!(
+            width > 0,
+            "densify: {}: width must be positive",
+            tensor.name()
+        );
+        if matches!(role, Role::Means | Role::LogScales) {
+            ensure!(
+                width == 3,
+                "densify: {}: {role:?} has width 3, got {width}",
+                tensor.name()
+            );
+        }
+        let in_bytes = plan.n as u64 * width as u64 * 4;
+        ensure!(
+            tensor.size() >= in_bytes,
+            "densify: {} holds {} bytes, {} Gaussians of width {width} need {in_bytes}",
+            tensor.name(),
+            tensor.size(),
+            plan.n
+        );
+        let elements = plan.new_n as u64 * width as u64;
+        let caps = self.gpu.caps();
+        ensure!(
+            elements * 4 <= caps.max_storage_buffer_range,
+            "densify: {} after the step ({elements} f32) exceeds the device's binding limit",
+            tensor.name()
+        );
+        let out = self.gpu.buffer(tensor.name(), elements * 4)?;
+        let role = match role {
+            Role::Zeroed => {
+                rec.fill(&out, 0, elements * 4, 0);
+                rec.barrier();
+                return Ok(out);
+            }
+            Role::Copy => ROLE_COPY,
+            Role::AdamMoment => ROLE_MOMENT,
+            Role::Means => ROLE_MEANS,
+            Role::LogScales => ROLE_LOG_SCALES,
+        };
+        if elements == 0 {
+            return Ok(out);
+        }
+        let b = self
+            .bufs
+            .as_ref()
+            .expect("a plan with Gaussians has buffers");
+        // A 2D grid: one element per invocation can pass 65,535 workgroups.
+        let total = elements.div_ceil(WG_SIZE as u64);
+        let gx = total.min(caps.max_workgroup_count[0] as u64);
+        let gy = total.div_ceil(gx);
+        let params = GatherParams {
+            elements: elements as u32,
+            width,
+            role,
+            ln_split_shrink: 1.6f64.ln() as f32,
+        };
+        rec.dispatch(
+            ids::TRAIN_DENSIFY_GATHER,
+            &[
+                ("slot_source", &b.slot_source),
+                ("slot_kind", &b.slot_kind),
+                ("slot_mean_delta", &b.slot_mean_delta),
+                ("src", tensor),
+                ("dst", &out),
+            ],
+            bytemuck::bytes_of(&params),
+            [gx as u32, gy as u32, 1],
+        )?;
+        rec.barrier();
+        Ok(out)
+    }
+}
+
+/// Records 3DGS's opacity reset on `n` Gaussians: every opacity becomes at most
+/// `max_opacity` ([`OPACITY_RESET`] in 3DGS), i.e. `opacity_logits = min(opacity_logits,
+/// logit(max_opacity))`, and the opacity's Adam moments (`moments`, `[n]` each) restart
+/// at zero.
+pub fn reset_opacity(
+    rec: &mut Recorder,
+    n: u32,
+    opacity_logits: &Buffer,
+    moments: &[&Buffer],
+    max_opacity: f32,
+) -> Result<()> {
+    ensure!(
+        max_opacity > 0.0 && max_opacity < 1.0,
+        "opacity reset: max_opacity must be in (0, 1), got {max_opacity}"
+    );
+    let bytes = n as u64 * 4;
+    for buf in std::iter::once(&opacity_logits).chain(moments) {
+        ensure!(
+            buf.size() >= bytes,
+            "opacity reset: {} holds {} bytes, {n} Gaussians need {bytes}",
+            buf.name(),
+            buf.size()
+        );
+    }
+    let p = max_opacity as f64;
+    let params = ResetParams {
+        n,
+        max_logit: (p / (1.0 - p)).ln() as f32,
+    };
+    rec.dispatch(
+        ids::TRAIN_DENSIFY_RESET_OPACITY,
+        &[("opacity_logits", opacity_logits)],
+        bytemuck::bytes_of(&params),
+        groups(n as u64),
+    )?;
+    for m in moments {
+        rec.fill(m, 0, bytes, 0);
+    }
+    rec.barrier();
+    Ok(())
+}

@@ -1,0 +1,379 @@
+//! The training losses of paper 000 (Sec. 3.4) on the device, recorded into the caller's
+//! Recorder without host syncs: the 3DGS photometric loss 0.8 L1 + 0.2 (1 - SSIM), the
+//! semantic cross-entropy on the normalized semantic image, and (loss_entropy.rs) the
+//! per-Gaussian entropy regularizer. Each writes its gradient and the partial sums of its
+//! value; `ImageLoss::read_values` fetches every value with one download afterwards.
+//!
+//! Kernels (glsl/train/): ssim_blur_inputs -> ssim_forward -> ssim_blur_grads ->
+//! ssim_backward for L1 + SSIM (separable 11-tap blurs, the backward blurs the per-pixel
+//! partials with the same window); loss_count_labels -> loss_cross_entropy for the
+//! semantic term; loss_reduce adds each workgroup's partials in a fixed order.
+
+use anyhow::{bail, ensure, Result};
+use bytemuck::{Pod, Zeroable};
+
+pub use super::loss_entropy::entropy_weight;
+pub use super::loss_values::LossValues;
+use super::loss_values::{L1_WEIGHT, SLOTS, SLOT_CE, SLOT_L1, SLOT_LABELED, SLOT_SE, SSIM_WEIGHT};
+use crate::gpu::kernel_table::ids;
+use crate::gpu::{Buffer, Gpu, Recorder};
+use crate::render::SemanticMode;
+
+/// Edge of the 2D workgroups of the ssim_* kernels (local_size 16 x 16).
+const TILE: u32 = 16;
+/// Invocations per workgroup of the 1D loss kernels (loss_sums.glsl: LOSS_WG).
+pub(crate) const LOSS_WG: u32 = 256;
+/// Most workgroups one dispatch dimension may have on every Vulkan device.
+const MAX_GROUPS: u32 = 65_535;
+/// Loop iterations we let one invocation run: lavapipe ends every loop of an invocation
+/// after 65,535 iterations in total, silently (../shared/TOOLCHAIN.md).
+pub(crate) const LOOP_BUDGET: u64 = 60_000;
+/// Moment planes the SSIM forward blurs: x, y, x^2, y^2, xy.
+const MOMENT_PLANES: u64 = 5;
+/// Moment gradients the SSIM backward blurs: d/d blur(x), blur(x^2), blur(xy).
+const GRAD_PLANES: u64 = 3;
+
+/// The semantic term of one view: the buffers and how to read them.
+#[derive(Clone, Copy)]
+pub struct SemanticTerm<'a> {
+    /// The normalized rendered semantic image, f32 [pixels * channels], channel fastest.
+    pub sem_norm: &'a Buffer,
+    /// Compact class per pixel, u32 [pixels]; [`IGNORE_LABEL`] (or any value >= channels)
+    /// leaves the pixel out.
+    pub labels: &'a Buffer,
+    /// RawLogits: sem_norm holds logits (CE of their softmax); Softmax: sem_norm already
+    /// holds a distribution (CE = -log max(p, 1e-6)).
+    pub mode: SemanticMode,
+    /// lambda_sem: scales the gradient (the logged CE value is unweighted).
+    pub lambda: f32,
+    /// Gets dL/d sem_norm, f32 [pixels * channels]; overwritten, zero on ignored pixels.
+    pub v_sem_norm: &'a Buffer,
+}
+
+/// A pixel without a label.
+pub const IGNORE_LABEL: u32 = u32::MAX;
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct ImageDims {
+    width: u32,
+    height: u32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct SsimForwardParams {
+    width: u32,
+    height: u32,
+    stride: u32,
+    inv_count: f32,
+    ssim_weight: f32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct SsimBackwardParams {
+    width: u32,
+    height: u32,
+    l1_weight: f32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct CountParams {
+    pixels: u32,
+    channels: u32,
+    stride: u32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct ReduceParams {
+    first_slot: u32,
+    groups: u32,
+    stride: u32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct CrossEntropyParams {
+    pixels: u32,
+    channels: u32,
+    stride: u32,
+    mode: u32,
+    lambda: f32,
+}
+
+/// The loss scratch for views of one size (W x H, C semantic channels), and the values
+/// buffer every loss term of an iteration leaves its mean in.
+pub struct ImageLoss {
+    pub(crate) gpu: Gpu,
+    width: u32,
+    height: u32,
+    pub(crate) channels: u32,
+    /// [5][pixels][3] blurred moments; the SSIM backward reuses its first three planes.
+    moments: Buffer,
+    /// [3][pixels][3] dL/d(blurred moment) per pixel and channel.
+    moment_grads: Buffer,
+    /// [SLOTS][stride] one partial sum per workgroup and slot.
+    pub(crate) partials: Buffer,
+    pub(crate) stride: u32,
+    /// [SLOTS] the means (loss_values.rs: SLOT_*).
+    pub(crate) values: Buffer,
+}
+
+impl ImageLoss {
+    /// Scratch for W x H views with `channels` semantic classes (0: RGB only).
+    pub fn new(gpu: &Gpu, width: u32, height: u32, channels: u32) -> Result<ImageLoss> {
+        ensure!(
+            width > 0 && height > 0,
+            "loss image must not be empty ({width}x{height})"
+        );
+        let pixels = width as u64 * height as u64;
+        let pixel_groups = pixels.div_ceil(LOSS_WG as u64);
+        ensure!(
+            pixel_groups <= MAX_GROUPS as u64
+                && width.div_ceil(TILE) <= MAX_GROUPS
+                && height.div_ceil(TILE) <= MAX_GROUPS,
+            "loss image {width}x{height} is too large for one dispatch"
+        );
+        let moment_bytes = MOMENT_PLANES * pixels * 3 * 4;
+        let max_range = gpu.caps().max_storage_buffer_range;
+        ensure!(
+            moment_bytes <= max_range,
+            "loss image {width}x{height} needs a {moment_bytes}-byte SSIM scratch binding; \
+             the device binds at most {max_range} bytes"
+        );
+        // loss_cross_entropy runs three loops over the channels per pixel.
+        ensure!(
+            3 * channels as u64 + 3 <= LOOP_BUDGET,
+            "{channels} semantic channels exceed the per-invocation loop budget"
+        );
+        let tiles = width.div_ceil(TILE) * height.div_ceil(TILE);
+        let stride = tiles
+            .max(pixel_groups as u32)
+            .max(super::loss_entropy::ENTROPY_GROUPS);
+        let moments = gpu.buffer("loss-moments", moment_bytes)?;
+        let moment_grads = gpu.buffer("loss-moment-grads", GRAD_PLANES * pixels * 3 * 4)?;
+        let partials = gpu.buffer("loss-partials", SLOTS as u64 * stride as u64 * 4)?;
+        // Zeros until a term is recorded: a loop that never records entropy reads 0.
+        let values = gpu.buffer_from("loss-values", &[0f32; SLOTS as usize])?;
+        Ok(ImageLoss {
+            gpu: gpu.clone(),
+            width,
+            height,
+            channels,
+            moments,
+            moment_grads,
+            partials,
+            stride,
+            values,
+        })
+    }
+
+    pub fn width(&self) -> u32 {
+        self.width
+    }
+
+    pub fn height(&self) -> u32 {
+        self.height
+    }
+
+    pub fn channels(&self) -> u32 {
+        self.channels
+    }
+
+    fn pixels(&self) -> u32 {
+        self.width * self.height
+    }
+
+    /// Records L_rgb = 0.8 mean|x - y| + 0.2 (1 - mean SSIM(x, y)) of the rendered `rgb`
+    /// against `target` (f32 [pixels * 3], channel fastest), OVERWRITING `v_rgb` with
+    /// dL_rgb/d rgb, and, with `semantics`, lambda * mean CE over the labeled pixels,
+    /// overwriting its v_sem_norm. Barriers before and after: inputs written earlier in
+    /// `rec` are seen, outputs are visible to what is recorded next. The values are read
+    /// with [`ImageLoss::read_values`] after the submission; without `semantics` the CE
+    /// value and labeled count read 0.
+    pub fn record(
+        &self,
+        rec: &mut Recorder,
+        rgb: &Buffer,
+        target: &Buffer,
+        v_rgb: &Buffer,
+        semantics: Option<&SemanticTerm<'_>>,
+    ) -> Result<()> {
+        let pixels = self.pixels();
+        let rgb_bytes = pixels as u64 * 3 * 4;
+        for (what, buf) in [("rgb", rgb), ("target", target), ("v_rgb", v_rgb)] {
+            ensure!(
+                buf.size() >= rgb_bytes,
+                "{what} holds {} bytes; a {}x{} RGB image needs {rgb_bytes}",
+                buf.size(),
+                self.width,
+                self.height
+            );
+        }
+        if let Some(s) = semantics {
+            self.check_semantics(s)?;
+        }
+        let tiles = [self.width.div_ceil(TILE), self.height.div_ceil(TILE), 1];
+        let tile_count = tiles[0] * tiles[1];
+        let pixel_groups = pixels.div_ceil(LOSS_WG);
+        let dims = ImageDims {
+            width: self.width,
+            height: self.height,
+        };
+        let count = 3.0 * pixels as f32;
+
+        rec.barrier();
+        match semantics {
+            Some(s) => rec.dispatch(
+                ids::TRAIN_LOSS_COUNT_LABELS,
+                &[("labels", s.labels), ("partials", &self.partials)],
+                bytemuck::bytes_of(&CountParams {
+                    pixels,
+                    channels: self.channels,
+                    stride: self.stride,
+                }),
+                [pixel_groups, 1, 1],
+            )?,
+            // The count and the CE are adjacent slots.
+            None => rec.fill(&self.values, SLOT_LABELED as u64 * 4, 8, 0),
+        }
+        rec.dispatch(
+            ids::TRAIN_SSIM_BLUR_INPUTS,
+            &[("rgb", rgb), ("target", target), ("moments", &self.moments)],
+            bytemuck::bytes_of(&dims),
+            tiles,
+        )?;
+        rec.barrier();
+        if semantics.is_some() {
+            self.record_reduce(rec, SLOT_LABELED, 1, pixel_groups)?;
+        }
+        rec.dispatch(
+            ids::TRAIN_SSIM_FORWARD,
+            &[
+                ("rgb", rgb),
+                ("target", target),
+                ("moments", &self.moments),
+                ("moment_grads", &self.moment_grads),
+                ("partials", &self.partials),
+            ],
+            bytemuck::bytes_of(&SsimForwardParams {
+                width: self.width,
+                height: self.height,
+                stride: self.stride,
+                inv_count: 1.0 / count,
+                ssim_weight: -SSIM_WEIGHT / count,
+            }),
+            tiles,
+        )?;
+        rec.barrier();
+        if let Some(s) = semantics {
+            rec.dispatch(
+                ids::TRAIN_LOSS_CROSS_ENTROPY,
+                &[
+                    ("sem_norm", s.sem_norm),
+                    ("labels", s.labels),
+                    ("values", &self.values),
+                    ("v_sem_norm", s.v_sem_norm),
+                    ("partials", &self.partials),
+                ],
+                bytemuck::bytes_of(&CrossEntropyParams {
+                    pixels,
+                    channels: self.channels,
+                    stride: self.stride,
+                    mode: match s.mode {
+                        SemanticMode::RawLogits => 0,
+                        SemanticMode::Softmax => 1,
+                    },
+                    lambda: s.lambda,
+                }),
+                [pixel_groups, 1, 1],
+            )?;
+        }
+        rec.dispatch(
+            ids::TRAIN_SSIM_BLUR_GRADS,
+            &[
+                ("moment_grads", &self.moment_grads),
+                ("blurred", &self.moments),
+            ],
+            bytemuck::bytes_of(&dims),
+            tiles,
+        )?;
+        rec.barrier();
+        rec.dispatch(
+            ids::TRAIN_SSIM_BACKWARD,
+            &[
+                ("rgb", rgb),
+                ("target", target),
+                ("blurred", &self.moments),
+                ("v_rgb", v_rgb),
+            ],
+            bytemuck::bytes_of(&SsimBackwardParams {
+                width: self.width,
+                height: self.height,
+                l1_weight: L1_WEIGHT / count,
+            }),
+            tiles,
+        )?;
+        // L1, SSIM and SE are adjacent slots.
+        const _: () = assert!(SLOT_SE == SLOT_L1 + 2);
+        self.record_reduce(rec, SLOT_L1, 3, tile_count)?;
+        if semantics.is_some() {
+            self.record_reduce(rec, SLOT_CE, 1, pixel_groups)?;
+        }
+        rec.barrier();
+        Ok(())
+    }
+
+    fn check_semantics(&self, s: &SemanticTerm<'_>) -> Result<()> {
+        if self.channels == 0 {
+            bail!("this ImageLoss was made without semantic channels");
+        }
+        let pixels = self.pixels() as u64;
+        let sem_bytes = pixels * self.channels as u64 * 4;
+        for (what, buf, need) in [
+            ("sem_norm", s.sem_norm, sem_bytes),
+            ("v_sem_norm", s.v_sem_norm, sem_bytes),
+            ("labels", s.labels, pixels * 4),
+        ] {
+            ensure!(
+                buf.size() >= need,
+                "{what} holds {} bytes; {}x{} pixels with {} channels need {need}",
+                buf.size(),
+                self.width,
+                self.height,
+                self.channels
+            );
+        }
+        Ok(())
+    }
+
+    /// Adds the `groups` partials of `slots` slots from `first_slot` into their values.
+    pub(crate) fn record_reduce(
+        &self,
+        rec: &mut Recorder,
+        first_slot: u32,
+        slots: u32,
+        groups: u32,
+    ) -> Result<()> {
+        rec.dispatch(
+            ids::TRAIN_LOSS_REDUCE,
+            &[("partials", &self.partials), ("values", &self.values)],
+            bytemuck::bytes_of(&ReduceParams {
+                first_slot,
+                groups,
+                stride: self.stride,
+            }),
+            [slots, 1, 1],
+        )?;
+        Ok(())
+    }
+
+    /// The values of the last submission that recorded each term (one small download).
+    pub fn read_values(&self) -> Result<LossValues> {
+        let v: Vec<f32> = self.gpu.download(&self.values, 0, SLOTS as usize)?;
+        Ok(LossValues::from_slots(&v))
+    }
+}

@@ -1,0 +1,573 @@
+//! The training loop of joint optimization (paper 000) on the GPU. One iteration, one
+//! view: render (RGB + semantics), losses, backward, in one submission; then softmax
+//! backward, entropy, Adam in a second (so an intersection-buffer overflow, which re-runs
+//! the first, never applies a step twice). Densification rebuilds every tensor on the
+//! device. Nothing is read back except the 64-byte frame status and, every `log_every`
+//! iterations, the loss values.
+
+use std::collections::HashMap;
+use std::sync::OnceLock;
+use std::time::Instant;
+
+use anyhow::{ensure, Result};
+use glam::DVec3;
+use serde::Serialize;
+
+use super::adam::{record_adam, AdamMoments, AdamStep, AdamTensor, ExponentialLr};
+use super::config::TrainConfig;
+use super::densify::{
+    reset_opacity, Densifier, DensifyConfig, DensifyInputs, DensifyPlan, Role, OPACITY_RESET,
+};
+use super::loss::{ImageLoss, SemanticTerm};
+use super::loss_entropy::entropy_weight;
+use super::loss_values::LossValues;
+use super::views::{DeviceView, TrainView};
+use crate::gpu::{Buffer, Gpu, Mark, Recorder};
+use crate::render::backward::{PixelGrads, SceneGrads};
+use crate::render::{GpuScene, Rasterizer, RenderOptions, SemanticMode};
+use crate::scene::gaussians::SemanticLogits;
+use crate::scene::{Camera, Gaussians};
+use crate::util::Rng;
+
+/// GPU milliseconds per stage, summed over the iterations so far.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct StageTotals {
+    /// Projection, sorting, binning and forward blending.
+    pub forward_ms: f64,
+    /// Photometric and semantic losses and their image gradients.
+    pub loss_ms: f64,
+    /// Blend and projection backward (and the softmax backward).
+    pub backward_ms: f64,
+    /// Entropy regularizer and Adam.
+    pub optimizer_ms: f64,
+    /// Densification and pruning (wall time: it reads back counts).
+    pub densify_ms: f64,
+    pub iterations: u32,
+}
+
+/// One densification step, for the log.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct DensifyEvent {
+    pub iteration: u32,
+    pub before: u32,
+    pub after: u32,
+    pub pruned: u32,
+    pub cloned: u32,
+    pub split: u32,
+    pub capped: u32,
+}
+
+/// The result of a run.
+pub struct TrainOutput {
+    /// Trained Gaussians with their semantic logits (and no class fields: see
+    /// [`classes_from_logits`]).
+    pub gaussians: Gaussians,
+    /// Per Gaussian: whether some training view saw it.
+    pub seen: Vec<bool>,
+    /// The riders given to [`Trainer::new`], carried through densification.
+    pub riders: Vec<Vec<f32>>,
+    pub times: StageTotals,
+    pub densify_events: Vec<DensifyEvent>,
+}
+
+/// A parameter tensor: its buffer, gradient, width per Gaussian, and how densification
+/// rebuilds it.
+struct TensorRef<'a> {
+    param: &'a Buffer,
+    grad: &'a Buffer,
+    width: u32,
+    role: Role,
+    lr: f64,
+    geometry: bool,
+}
+
+pub struct Trainer {
+    gpu: Gpu,
+    cfg: TrainConfig,
+    scene: GpuScene,
+    grads: SceneGrads,
+    /// Adam moments, in the order of [`Trainer::tensors`].
+    moments: Vec<AdamMoments>,
+    riders: Vec<Buffer>,
+    rasterizer: Rasterizer,
+    losses: HashMap<(u32, u32), ImageLoss>,
+    views: Vec<DeviceView>,
+    v_rgb: Buffer,
+    v_alpha: Buffer,
+    v_sem_norm: Buffer,
+    densifier: Densifier,
+    extent: f64,
+    position_lr: ExponentialLr,
+    iter: u32,
+    order: Vec<usize>,
+    rng: Rng,
+    times: StageTotals,
+    events: Vec<DensifyEvent>,
+    last_loss: Option<(u32, u32)>,
+}
+
+/// 3DGS's scene extent: 1.1 times the largest distance of a camera center from their mean.
+pub fn scene_extent(cams: &[Camera]) -> f64 {
+    let centers: Vec<DVec3> = cams.iter().map(|c| c.center()).collect();
+    let mean = centers.iter().copied().sum::<DVec3>() / centers.len().max(1) as f64;
+    let radius = centers
+        .iter()
+        .map(|c| c.distance(mean))
+        .fold(0.0f64, f64::max);
+    1.1 * radius.max(1e-3)
+}
+
+impl Trainer {
+    /// Prepares a run: `init` must carry semantic logits with `channels` classes (see
+    /// [`with_initial_logits`]); `riders` are per-Gaussian values carried unchanged through
+    /// densification (e.g. a ground-truth class, for evaluation).
+    pub fn new(
+        gpu: &Gpu,
+        init: &Gaussians,
+        views: &[TrainView],
+        cfg: TrainConfig,
+        riders: &[Vec<f32>],
+    ) -> Result<Trainer> {
+        ensure!(!views.is_empty(), "training needs at least one view");
+        ensure!(cfg.iters > 0, "training needs at least one iteration");
+        ensure!(!init.is_empty(), "the initial scene has no Gaussians");
+        let channels = init.semantics.as_ref().map_or(0, |s| s.channels) as u32;
+        ensure!(
+            channels > 0 || !cfg.semantics_only,
+            "--semantics-only needs semantic classes"
+        );
+        for r in riders {
+            ensure!(r.len() == init.len(), "a rider has the wrong length");
+        }
+        let scene = GpuScene::upload(gpu, init)?;
+        let grads = SceneGrads::new(gpu, &scene)?;
+        let device_views = views
+            .iter()
+            .map(|v| v.upload(gpu, channels))
+            .collect::<Result<Vec<_>>>()?;
+        let max_pixels = views
+            .iter()
+            .map(|v| v.camera.width as u64 * v.camera.height as u64)
+            .max()
+            .unwrap_or(1);
+        let cams: Vec<Camera> = views.iter().map(|v| v.camera.clone()).collect();
+        let extent = scene_extent(&cams);
+        let v_alpha = gpu.buffer("v_alpha", max_pixels * 4)?;
+        let mut rec = Recorder::new(gpu)?;
+        rec.fill(&v_alpha, 0, v_alpha.size(), 0); // no loss reads the accumulated alpha
+        rec.submit_and_wait()?;
+        let mut trainer = Trainer {
+            gpu: gpu.clone(),
+            position_lr: ExponentialLr::positions(extent, cfg.iters),
+            scene,
+            grads,
+            moments: Vec::new(),
+            riders: riders
+                .iter()
+                .map(|r| gpu.buffer_from("rider", r))
+                .collect::<Result<_, _>>()?,
+            rasterizer: Rasterizer::new(gpu),
+            losses: HashMap::new(),
+            views: device_views,
+            v_rgb: gpu.buffer("v_rgb", max_pixels * 12)?,
+            v_alpha,
+            v_sem_norm: gpu.buffer("v_sem_norm", max_pixels * channels.max(1) as u64 * 4)?,
+            densifier: Densifier::new(gpu),
+            extent,
+            iter: 0,
+            order: Vec::new(),
+            rng: Rng::new(cfg.seed ^ 0x7261_696e),
+            times: StageTotals::default(),
+            events: Vec::new(),
+            last_loss: None,
+            cfg,
+        };
+        trainer.moments = trainer.new_moments()?;
+        Ok(trainer)
+    }
+
+    fn new_moments(&self) -> Result<Vec<AdamMoments>> {
+        self.tensors()
+            .iter()
+            .map(|t| AdamMoments::new(&self.gpu, t.param.name(), self.scene.n * t.width))
+            .collect()
+    }
+
+    /// The trainable tensors, in a fixed order.
+    fn tensors(&self) -> Vec<TensorRef<'_>> {
+        let (s, g, lr) = (&self.scene, &self.grads, &self.cfg.lr);
+        let t = |param, grad, width, role, lr, geometry| TensorRef {
+            param,
+            grad,
+            width,
+            role,
+            lr,
+            geometry,
+        };
+        let mut v = vec![
+            t(&s.means, &g.means, 3, Role::Means, 0.0, true),
+            t(
+                &s.log_scales,
+                &g.log_scales,
+                3,
+                Role::LogScales,
+                lr.log_scales,
+                true,
+            ),
+            t(&s.quats, &g.quats, 4, Role::Copy, lr.quats, true),
+            t(
+                &s.opacity_logits,
+                &g.opacity_logits,
+                1,
+                Role::Copy,
+                lr.opacity,
+                true,
+            ),
+            t(&s.sh, &g.sh, 3 * s.sh_coeffs, Role::Copy, lr.sh, true),
+        ];
+        if let Some(logits) = &s.logits {
+            v.push(t(
+                logits,
+                &g.logits,
+                s.channels,
+                Role::Copy,
+                lr.logits,
+                false,
+            ));
+        }
+        v
+    }
+
+    pub fn iteration(&self) -> u32 {
+        self.iter
+    }
+
+    pub fn gaussian_count(&self) -> u32 {
+        self.scene.n
+    }
+
+    pub fn times(&self) -> StageTotals {
+        self.times
+    }
+
+    pub fn extent(&self) -> f64 {
+        self.extent
+    }
+
+    /// Views in a fresh random order each epoch (3DGS).
+    fn next_view(&mut self) -> usize {
+        if self.order.is_empty() {
+            self.order = (0..self.views.len()).collect();
+            for i in (1..self.order.len()).rev() {
+                let j = (self.rng.next_u32() as usize) % (i + 1);
+                self.order.swap(i, j);
+            }
+        }
+        self.order.pop().expect("refilled")
+    }
+
+    /// Runs one iteration; returns the loss values when this iteration read them back.
+    pub fn step(&mut self) -> Result<Option<LossValues>> {
+        let step = self.iter + 1;
+        let vi = self.next_view();
+        let cam = self.views[vi].camera.clone();
+        let key = (cam.width, cam.height);
+        let channels = self.scene.channels;
+        if !self.losses.contains_key(&key) {
+            let loss = ImageLoss::new(&self.gpu, cam.width, cam.height, channels)?;
+            self.losses.insert(key, loss);
+        }
+        let pixels = cam.width as u64 * cam.height as u64;
+        let window_len = self.rasterizer.window_len();
+        let windows = self.scene.n.div_ceil(window_len).max(1);
+        self.grads.prepare_view(&self.gpu, pixels, windows)?;
+        let mode = self.cfg.semantic_mode;
+        let opts = RenderOptions {
+            background: self.cfg.background,
+            semantics: (channels > 0).then_some(mode),
+            ..Default::default()
+        };
+        let sem_buf = match opts.semantics {
+            Some(m) => self.scene.semantics(&self.gpu, m)?,
+            None => None,
+        };
+
+        let (scene, grads, view, loss) = (
+            &self.scene,
+            &self.grads,
+            &self.views[vi],
+            &self.losses[&key],
+        );
+        let (v_rgb, v_alpha, v_sem_norm) = (&self.v_rgb, &self.v_alpha, &self.v_sem_norm);
+        let (lambda_sem, background) = (self.cfg.lambda_sem, self.cfg.background);
+        let mut marks: [Option<Mark>; 3] = [None; 3];
+        let run = self
+            .rasterizer
+            .run_tiled(scene, &cam, &opts, channels, |rec, tiles| {
+                if mode == SemanticMode::Softmax && channels > 0 {
+                    scene.record_softmax(rec)?;
+                }
+                grads.record_zero(rec);
+                tiles.record_blend(rec, sem_buf, channels, window_len, background)?;
+                marks[0] = rec.mark();
+                let term = SemanticTerm {
+                    sem_norm: tiles.sem_norm(),
+                    labels: &view.labels,
+                    mode,
+                    lambda: lambda_sem,
+                    v_sem_norm,
+                };
+                loss.record(
+                    rec,
+                    tiles.rgb(),
+                    &view.rgb,
+                    v_rgb,
+                    (channels > 0).then_some(&term),
+                )?;
+                marks[1] = rec.mark();
+                let upstream = PixelGrads {
+                    rgb: v_rgb,
+                    alpha: v_alpha,
+                    sem_norm: v_sem_norm,
+                };
+                tiles.record_backward(rec, scene, &opts, window_len, &upstream, grads)?;
+                marks[2] = rec.mark();
+                Ok(())
+            })?;
+        let ms = |a: Option<Mark>, b: Option<Mark>| run.timings.between(a, b).unwrap_or(0.0) * 1e-6;
+        self.times.forward_ms += ms(run.marks[0], marks[0]);
+        self.times.loss_ms += ms(marks[0], marks[1]);
+        self.times.backward_ms += ms(marks[1], marks[2]);
+
+        // Softmax backward, entropy, Adam.
+        let mut rec = Recorder::new(&self.gpu)?;
+        let m0 = rec.mark();
+        if mode == SemanticMode::Softmax {
+            self.grads.record_softmax_backward(&mut rec, &self.scene)?;
+        }
+        let m1 = rec.mark();
+        let lambda_h = entropy_weight(self.cfg.lambda_entropy, step, self.cfg.entropy_warmup);
+        if let (Some(logits), true) = (&self.scene.logits, lambda_h > 0.0) {
+            self.losses[&key].record_entropy(
+                &mut rec,
+                logits,
+                self.scene.n,
+                lambda_h,
+                &self.grads.logits,
+            )?;
+        }
+        let pos_lr = self.position_lr.at(step);
+        for (t, m) in self.tensors().iter().zip(&self.moments) {
+            if self.cfg.semantics_only && t.geometry {
+                continue;
+            }
+            let lr = if t.role == Role::Means { pos_lr } else { t.lr };
+            let tensor = AdamTensor {
+                param: t.param,
+                grad: t.grad,
+                exp_avg: &m.exp_avg,
+                exp_avg_sq: &m.exp_avg_sq,
+                count: self.scene.n * t.width,
+            };
+            record_adam(&mut rec, &tensor, AdamStep::new(lr, step))?;
+        }
+        let m2 = rec.mark();
+        let timings = rec.submit_and_wait()?;
+        self.times.backward_ms += timings.between(m0, m1).unwrap_or(0.0) * 1e-6;
+        self.times.optimizer_ms += timings.between(m1, m2).unwrap_or(0.0) * 1e-6;
+        self.iter = step;
+        self.times.iterations = step;
+        self.last_loss = Some(key);
+
+        if let Some(d) = self.cfg.densify {
+            let start = Instant::now();
+            if step < d.until && step > d.from && step % d.every == 0 {
+                self.densify(step > d.opacity_reset_every)?;
+            }
+            if step < d.until && step % d.opacity_reset_every == 0 {
+                self.reset_opacity()?;
+            }
+            self.times.densify_ms += start.elapsed().as_secs_f64() * 1e3;
+        }
+
+        let log = step % self.cfg.log_every.max(1) == 0 || step == self.cfg.iters;
+        if log {
+            Ok(Some(self.losses[&key].read_values()?))
+        } else {
+            Ok(None)
+        }
+    }
+
+    /// The loss values of the last iteration (one small download).
+    pub fn last_losses(&self) -> Result<Option<LossValues>> {
+        match self.last_loss {
+            Some(key) => Ok(Some(self.losses[&key].read_values()?)),
+            None => Ok(None),
+        }
+    }
+
+    /// One densify-and-prune step (3DGS): rebuilds every tensor, its Adam moments and the
+    /// riders for the new set.
+    fn densify(&mut self, prune_large: bool) -> Result<()> {
+        let sched = self.cfg.densify.expect("scheduled");
+        let config = DensifyConfig {
+            grad_threshold: sched.grad_threshold,
+            extent: self.extent as f32,
+            prune_large,
+            max_gaussians: sched.max_gaussians.max(1),
+            seed: self.cfg.seed.wrapping_add(self.iter as u64),
+            ..Default::default()
+        };
+        let inputs = DensifyInputs {
+            n: self.scene.n,
+            log_scales: &self.scene.log_scales,
+            quats: &self.scene.quats,
+            opacity_logits: &self.scene.opacity_logits,
+            grad_accum: &self.grads.densify_grad,
+            grad_count: &self.grads.densify_count,
+        };
+        let plan: DensifyPlan = self.densifier.plan(&inputs, &config)?;
+        let mut rec = Recorder::new(&self.gpu)?;
+        let mut params = Vec::new();
+        let mut moments = Vec::new();
+        for (t, m) in self.tensors().iter().zip(&self.moments) {
+            let d = &self.densifier;
+            params.push(d.apply(&mut rec, &plan, t.param, t.width, t.role)?);
+            moments.push(AdamMoments {
+                exp_avg: d.apply(&mut rec, &plan, &m.exp_avg, t.width, Role::AdamMoment)?,
+                exp_avg_sq: d.apply(&mut rec, &plan, &m.exp_avg_sq, t.width, Role::AdamMoment)?,
+            });
+        }
+        let riders = self
+            .riders
+            .iter()
+            .map(|r| self.densifier.apply(&mut rec, &plan, r, 1, Role::Copy))
+            .collect::<Result<Vec<_>>>()?;
+        rec.submit_and_wait()?;
+        let mut params = params.into_iter();
+        let mut next = || params.next().expect("one per tensor");
+        let old = &self.scene;
+        let scene = GpuScene {
+            n: plan.new_n,
+            sh_degree: old.sh_degree,
+            sh_coeffs: old.sh_coeffs,
+            channels: old.channels,
+            means: next(),
+            log_scales: next(),
+            quats: next(),
+            opacity_logits: next(),
+            sh: next(),
+            logits: old.logits.as_ref().map(|_| next()),
+            probs: OnceLock::new(),
+        };
+        self.grads = SceneGrads::new(&self.gpu, &scene)?;
+        self.scene = scene;
+        self.moments = moments;
+        self.riders = riders;
+        self.events.push(DensifyEvent {
+            iteration: self.iter,
+            before: plan.n,
+            after: plan.new_n,
+            pruned: plan.pruned,
+            cloned: plan.cloned,
+            split: plan.split,
+            capped: plan.capped(),
+        });
+        Ok(())
+    }
+
+    /// 3DGS's opacity reset: opacities capped at 0.01, their Adam moments restarted.
+    fn reset_opacity(&mut self) -> Result<()> {
+        let mut rec = Recorder::new(&self.gpu)?;
+        let m = &self.moments[3];
+        reset_opacity(
+            &mut rec,
+            self.scene.n,
+            &self.scene.opacity_logits,
+            &[&m.exp_avg, &m.exp_avg_sq],
+            OPACITY_RESET,
+        )?;
+        rec.submit_and_wait()?;
+        Ok(())
+    }
+
+    /// Downloads the current model (Gaussians with logits).
+    pub fn gaussians(&self) -> Result<Gaussians> {
+        let mut g = Gaussians::default();
+        self.scene.download_into(&self.gpu, &mut g)?;
+        Ok(g)
+    }
+
+    /// Ends the run: the model, which Gaussians the training views see, the riders.
+    pub fn finish(mut self) -> Result<TrainOutput> {
+        let gaussians = self.gaussians()?;
+        let mut seen = vec![false; self.scene.n as usize];
+        let opts = RenderOptions {
+            semantics: None,
+            ..Default::default()
+        };
+        for vi in 0..self.views.len() {
+            let cam = self.views[vi].camera.clone();
+            self.rasterizer
+                .run_tiled(&self.scene, &cam, &opts, 0, |_, _| Ok(()))?;
+            let flags = self.rasterizer.last_visible_flags(self.scene.n)?;
+            for (s, f) in seen.iter_mut().zip(flags) {
+                *s |= f != 0;
+            }
+        }
+        let riders = self
+            .riders
+            .iter()
+            .map(|r| self.gpu.download::<f32>(r, 0, self.scene.n as usize))
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(TrainOutput {
+            gaussians,
+            seen,
+            riders,
+            times: self.times,
+            densify_events: self.events,
+        })
+    }
+}
+
+/// Gives every Gaussian `channels` small random logits (paper 000: "initialized with small
+/// random values"), replacing any it had.
+pub fn with_initial_logits(g: &Gaussians, channels: usize, seed: u64) -> Gaussians {
+    let mut rng = Rng::new(seed);
+    let mut out = g.clone();
+    out.semantics = Some(SemanticLogits {
+        channels,
+        logits: (0..g.len() * channels)
+            .map(|_| (rng.normal() * 0.01) as f32)
+            .collect(),
+    });
+    out.class_ids = None;
+    out.class_conf = None;
+    out
+}
+
+/// Class (compact index, None where unseen) and confidence (softmax probability of the
+/// winner) per Gaussian from its logits.
+pub fn classes_from_logits(g: &Gaussians, seen: &[bool]) -> (Vec<Option<u32>>, Vec<f32>) {
+    let Some(s) = &g.semantics else {
+        return (vec![None; g.len()], vec![0.0; g.len()]);
+    };
+    let c = s.channels;
+    (0..g.len())
+        .map(|i| {
+            let row = &s.logits[i * c..(i + 1) * c];
+            let (best, &max) = row
+                .iter()
+                .enumerate()
+                .max_by(|a, b| a.1.total_cmp(b.1))
+                .expect("channels > 0");
+            let sum: f32 = row.iter().map(|v| (v - max).exp()).sum();
+            let conf = 1.0 / sum;
+            if seen.get(i).copied().unwrap_or(false) {
+                (Some(best as u32), conf)
+            } else {
+                (None, 0.0)
+            }
+        })
+        .unzip()
+}
