@@ -7,4 +7,5 @@ pub mod fuse;
 pub mod gpu;
 pub mod render;
 pub mod scene;
+pub mod train;
 pub mod util;

@@ -29,6 +29,9 @@ enum Command {
     Synth(cli::synth::SynthArgs),
     /// Lift per-view label maps onto the Gaussians (vote or FlashSplat; no training).
     Fuse(Box<cli::fuse::FuseArgs>),
+    /// Train semantic logits jointly with geometry and appearance (paper 000), or the
+    /// logits alone with --semantics-only.
+    Train(Box<cli::train::TrainArgs>),
     /// Render views of a scene on the GPU (RGB, and semantic labels with --semantics).
     Render(cli::render::RenderArgs),
     /// Score a classified scene against label maps (mIoU, pixel and 3D accuracy).
@@ -56,6 +59,7 @@ fn main() -> ExitCode {
         Command::Synth(args) => cli::synth::run(args),
         Command::Render(args) => cli::render::run(args),
         Command::Fuse(args) => cli::fuse::run(*args),
+        Command::Train(args) => cli::train::run(*args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

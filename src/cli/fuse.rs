@@ -8,6 +8,7 @@ use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 
+use super::label_classes::{classes_in_labels, default_class_table};
 use semsplat::eval::label_render::LabelRenderer;
 use semsplat::fuse::{
     accumulate, assign_one_vs_rest, assign_semantic, Accumulation, ClassScores, FuseConfig,
@@ -16,9 +17,7 @@ use semsplat::fuse::{
 use semsplat::gpu::Gpu;
 use semsplat::render::GpuScene;
 use semsplat::scene::cameras::load_cameras;
-use semsplat::scene::classes::{
-    read_class_table, write_class_table, ClassInfo, ClassTable, CompactClasses,
-};
+use semsplat::scene::classes::{read_class_table, write_class_table, ClassTable, CompactClasses};
 use semsplat::scene::labels::{
     write_label_png, write_palette_png, LabelDir, LabelMap, MissingLabels,
 };
@@ -163,18 +162,6 @@ impl LabelSource for DirLabels<'_> {
     }
 }
 
-fn default_class_table(labels: &Path) -> Option<PathBuf> {
-    [
-        labels.join("classes.json"),
-        labels
-            .parent()
-            .map(|p| p.join("classes.json"))
-            .unwrap_or_default(),
-    ]
-    .into_iter()
-    .find(|p| p.is_file())
-}
-
 fn contrib_sidecar(path: &Path) -> PathBuf {
     path.with_extension("classes.json")
 }
@@ -284,26 +271,7 @@ pub fn run(args: FuseArgs) -> Result<()> {
                 dir.skipped().len()
             );
         }
-        // C = the classes present in the label maps ("no more than the scene needs").
-        let mut present = std::collections::BTreeSet::new();
-        for i in 0..dir.len() {
-            present.extend(dir.load(i)?.present_ids());
-        }
-        let compact = CompactClasses::from_ids(present.iter().copied())?;
-        let table = ClassTable {
-            classes: compact
-                .user_ids()
-                .iter()
-                .map(|&id| match given.as_ref().and_then(|t| t.get(id)) {
-                    Some(c) => c.clone(),
-                    None => ClassInfo {
-                        id,
-                        name: format!("class_{id}"),
-                        color: semsplat::scene::classes::default_color(id),
-                    },
-                })
-                .collect(),
-        };
+        let (compact, table) = classes_in_labels(&dir, given.as_ref())?;
         let entry_of_camera = (0..dir.len())
             .filter_map(|i| dir.camera_index(i).map(|c| (c, i)))
             .collect();

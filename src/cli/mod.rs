@@ -6,6 +6,8 @@ pub mod eval;
 pub mod fuse;
 pub mod info;
 pub mod inspect;
+pub mod label_classes;
 pub mod render;
 pub mod sweep;
 pub mod synth;
+pub mod train;

@@ -17,6 +17,8 @@ use crate::scene::classes::CompactClasses;
 use crate::scene::labels::LabelMap;
 use crate::scene::synth::SynthScene;
 use crate::scene::{Camera, Split};
+use crate::train::loss::IGNORE_LABEL;
+use crate::train::views::TrainView;
 
 /// The name a method goes by in tables and charts.
 pub fn method_name(m: Method) -> &'static str {
@@ -144,6 +146,31 @@ fn train_labels(
                         }
                     })
                     .collect()
+            })
+        })
+        .collect())
+}
+
+/// The scene's train views as training input: ray-cast images and the chosen label maps
+/// (compact classes).
+pub fn synth_train_views(
+    s: &SynthScene,
+    which: TrainLabels,
+    compact: &CompactClasses,
+) -> Result<Vec<TrainView>> {
+    let labels = train_labels(s, which, compact)?;
+    Ok(s.cameras
+        .iter()
+        .zip(&s.views)
+        .zip(labels)
+        .filter_map(|((cam, view), labels)| {
+            labels.map(|labels| TrainView {
+                camera: cam.clone(),
+                rgb: view.rgb.iter().map(|&v| v as f32 / 255.0).collect(),
+                labels: labels
+                    .into_iter()
+                    .map(|l| if l == NO_LABEL { IGNORE_LABEL } else { l })
+                    .collect(),
             })
         })
         .collect())

@@ -58,19 +58,70 @@ impl GpuScene {
             SemanticMode::RawLogits => Ok(Some(logits)),
             SemanticMode::Softmax => {
                 if self.probs.get().is_none() {
-                    let probs = gpu.buffer("probs", self.n as u64 * self.channels as u64 * 4)?;
                     let mut rec = Recorder::new(gpu)?;
-                    rec.dispatch(
-                        ids::RASTER_SOFTMAX,
-                        &[("logits", logits), ("probs", &probs)],
-                        bytemuck::cast_slice(&[self.n, self.channels]),
-                        [self.n.div_ceil(256), 1, 1],
-                    )?;
+                    self.record_softmax(&mut rec)?;
                     rec.submit_and_wait()?;
-                    let _ = self.probs.set(probs);
                 }
                 Ok(self.probs.get())
             }
         }
+    }
+
+    /// Records (re)computing softmax(logits) into the probabilities the softmax mode
+    /// blends; training calls it every iteration since the logits change.
+    pub(crate) fn record_softmax(&self, rec: &mut Recorder) -> GpuResult<()> {
+        let Some(logits) = &self.logits else {
+            return Ok(());
+        };
+        if self.probs.get().is_none() {
+            let bytes = self.n.max(1) as u64 * self.channels as u64 * 4;
+            let _ = self.probs.set(rec.gpu().buffer("probs", bytes)?);
+        }
+        let probs = self.probs.get().expect("set above");
+        rec.dispatch(
+            ids::RASTER_SOFTMAX,
+            &[("logits", logits), ("probs", probs)],
+            bytemuck::cast_slice(&[self.n, self.channels]),
+            [self.n.div_ceil(256), 1, 1],
+        )?;
+        rec.barrier();
+        Ok(())
+    }
+
+    /// Downloads the parameters into `g`'s arrays (which must have this scene's shape:
+    /// training changes values, and densification rebuilds `g` to the new count first).
+    pub fn download_into(&self, gpu: &Gpu, g: &mut Gaussians) -> GpuResult<()> {
+        let n = self.n as u64;
+        let c = self.channels as u64;
+        let parts = gpu.download_many(&[
+            (&self.means, 0, n * 12),
+            (&self.log_scales, 0, n * 12),
+            (&self.quats, 0, n * 16),
+            (&self.opacity_logits, 0, n * 4),
+            (&self.sh, 0, n * 12 * self.sh_coeffs as u64),
+            (
+                self.logits.as_ref().unwrap_or(&self.means),
+                0,
+                if self.logits.is_some() { n * c * 4 } else { 0 },
+            ),
+        ])?;
+        let f = |k: usize| -> Vec<f32> { bytemuck::pod_collect_to_vec(&parts[k]) };
+        let triples = |v: Vec<f32>| v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+        g.means = triples(f(0));
+        g.log_scales = triples(f(1));
+        g.quats = f(2)
+            .chunks_exact(4)
+            .map(|c| [c[0], c[1], c[2], c[3]])
+            .collect();
+        g.opacity_logits = f(3);
+        g.sh = f(4);
+        g.sh_degree = self.sh_degree;
+        if self.logits.is_some() {
+            g.semantics = Some(crate::scene::gaussians::SemanticLogits {
+                channels: self.channels as usize,
+                logits: f(5),
+            });
+        }
+        Ok(())
     }
 }

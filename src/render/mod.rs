@@ -1,5 +1,6 @@
 //! Rendering: the GPU rasterizer and its independent CPU reference.
 
+pub mod backward;
 pub mod frame;
 pub mod gpu_scene;
 pub mod rasterizer;

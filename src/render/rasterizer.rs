@@ -196,6 +196,11 @@ impl Rasterizer {
         self.float64 = on && self.gpu.caps().float64;
     }
 
+    /// The device this rasterizer renders on.
+    pub fn gpu(&self) -> &Gpu {
+        &self.gpu
+    }
+
     /// Entries of a tile's list one per-tile dispatch walks.
     pub fn window_len(&self) -> u32 {
         self.window_len
@@ -243,6 +248,16 @@ impl Rasterizer {
         let frame = self.run_tiled(scene, cam, opts, channels, |rec, tiles| {
             tiles.record_blend(rec, sem_buf, channels, window_len, opts.background)
         })?;
+        self.download_frame(cam, channels, &frame)
+    }
+
+    /// Downloads the images of the frame `run` just rendered.
+    pub(crate) fn download_frame(
+        &self,
+        cam: &Camera,
+        channels: u32,
+        frame: &TiledRun,
+    ) -> Result<RenderedFrame> {
         let b = self.bufs.as_ref().expect("ran");
         let stages = StageTimes::from_marks(&frame.timings, &frame.marks);
         RenderedFrame::download(
@@ -363,6 +378,14 @@ impl Rasterizer {
         let keys: Vec<u32> = self.gpu.download(&b.isect_keys, 0, count)?;
         let ids: Vec<u32> = self.gpu.download(&b.isect_ids, 0, count)?;
         Ok(keys.into_iter().zip(ids).collect())
+    }
+
+    /// Per Gaussian of the last frame: 1 where it was projected into the view.
+    pub fn last_visible_flags(&self, n: u32) -> Result<Vec<u32>> {
+        let Some(b) = &self.bufs else {
+            return Ok(vec![0; n as usize]);
+        };
+        Ok(self.gpu.download(&b.flags, 0, n as usize)?)
     }
 
     /// Records projection, compaction, depth sort and tile binning; returns the marks
@@ -568,6 +591,41 @@ impl TileLists<'_> {
     /// Expected depth per pixel, written by [`Self::record_blend`].
     pub fn depth(&self) -> &Buffer {
         &self.bufs.depth
+    }
+
+    /// Per Gaussian: view-dependent color (r, g, b, -).
+    pub fn colors(&self) -> &Buffer {
+        &self.bufs.color
+    }
+
+    /// Per Gaussian: 1 where this view projected it (its tile lists may hold it).
+    pub fn visible_flags(&self) -> &Buffer {
+        &self.bufs.flags
+    }
+
+    /// Per pixel, written by [`Self::record_blend`]: rgb (3 floats, background included).
+    pub fn rgb(&self) -> &Buffer {
+        &self.bufs.rgb
+    }
+
+    /// Per pixel: transmittance after the last blended Gaussian.
+    pub fn final_t(&self) -> &Buffer {
+        &self.bufs.final_t
+    }
+
+    /// Per pixel: list entry (absolute) of the last blended Gaussian.
+    pub fn last_entry(&self) -> &Buffer {
+        &self.bufs.last
+    }
+
+    /// Per pixel: how many Gaussians were blended.
+    pub fn n_contrib(&self) -> &Buffer {
+        &self.bufs.n_contrib
+    }
+
+    /// Per pixel: the C normalized semantic channels (Eq. 2).
+    pub fn sem_norm(&self) -> &Buffer {
+        &self.bufs.sem_norm
     }
 
     /// How many window dispatches walk the longest possible tile list.

@@ -12,6 +12,14 @@
 //! Clarity over speed; it is still fast enough for test scenes (tens of thousands of
 //! Gaussians at small resolutions) because each pixel only walks its tile's list.
 
+pub mod backward;
+mod backward_blend;
+mod backward_params;
+mod backward_project;
+mod backward_projection;
+mod backward_replay;
+mod backward_semantics;
+mod backward_sh;
 mod blend;
 mod project;
 mod sh;

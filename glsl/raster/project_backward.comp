@@ -1,0 +1,199 @@
+#version 460
+// Backward of projection (project_body.glsl) for one view: from each visible Gaussian's
+// screen-space gradient (grad2d: mean2d, conic, opacity, color) to its stored parameters
+// (means, log-scales, quaternion, opacity logit, SH), added into the gradient buffers,
+// which hold one value per parameter and sum over the views of an iteration. Also adds
+// the densification statistic: the norm of the 2D-mean gradient in NDC units (3DGS), and
+// counts the view. Recomputes the forward's intermediates in float32.
+#extension GL_EXT_control_flow_attributes : require
+#include "raster_common.glsl"
+
+#define GRAD2D_STRIDE 10
+
+layout(local_size_x = 256) in;
+
+layout(push_constant) uniform Params {
+    vec4 rot_t0; // world-to-camera rows: (R00 R01 R02 t0)
+    vec4 rot_t1;
+    vec4 rot_t2;
+    vec4 intrinsics;  // fx fy cx cy
+    vec4 center_near; // camera center (world), -
+    uvec4 dims;       // width height - -
+    uvec4 counts;     // n sh_degree sh_coeffs -
+} pc;
+
+layout(set = 0, binding = 0) readonly buffer MeansBuf { float data[]; } means;
+layout(set = 0, binding = 1) readonly buffer LogScalesBuf { float data[]; } log_scales;
+layout(set = 0, binding = 2) readonly buffer QuatsBuf { float data[]; } quats;
+layout(set = 0, binding = 3) readonly buffer OpacityBuf { float data[]; } opacity_logits;
+layout(set = 0, binding = 4) readonly buffer ShBuf { float data[]; } sh;
+layout(set = 0, binding = 5) readonly buffer FlagsBuf { uint data[]; } visible;
+layout(set = 0, binding = 6) readonly buffer Grad2dBuf { float data[]; } grad2d;
+layout(set = 0, binding = 7) buffer GMeansBuf { float data[]; } grad_means;
+layout(set = 0, binding = 8) buffer GLogScalesBuf { float data[]; } grad_log_scales;
+layout(set = 0, binding = 9) buffer GQuatsBuf { float data[]; } grad_quats;
+layout(set = 0, binding = 10) buffer GOpacityBuf { float data[]; } grad_opacity_logits;
+layout(set = 0, binding = 11) buffer GShBuf { float data[]; } grad_sh;
+layout(set = 0, binding = 12) buffer DensifyGradBuf { float data[]; } densify_grad;
+layout(set = 0, binding = 13) buffer DensifyCountBuf { float data[]; } densify_count;
+
+#define SH_COEFF(k) vec3(sh.data[base + 3 * (k)], sh.data[base + 3 * (k) + 1], sh.data[base + 3 * (k) + 2])
+
+// Gradient of sum_k basis_k(dir) * g_k with respect to dir (the SH basis of SH_EVAL).
+vec3 sh_basis_grad(uint degree, vec3 dir, float g[16]) {
+    vec3 r = vec3(0.0);
+    if (degree < 1) {
+        return r;
+    }
+    float x = dir.x, y = dir.y, z = dir.z;
+    r += SH_C1 * vec3(-g[3], -g[1], g[2]);
+    if (degree < 2) {
+        return r;
+    }
+    const float k4 = 1.0925484305920792, k6 = 0.31539156525252005, k8 = 0.5462742152960396;
+    r += k4 * g[4] * vec3(y, x, 0.0);
+    r -= k4 * g[5] * vec3(0.0, z, y);
+    r += k6 * g[6] * vec3(-2.0 * x, -2.0 * y, 4.0 * z);
+    r -= k4 * g[7] * vec3(z, 0.0, x);
+    r += k8 * g[8] * vec3(2.0 * x, -2.0 * y, 0.0);
+    if (degree < 3) {
+        return r;
+    }
+    float xx = x * x, yy = y * y, zz = z * z;
+    const float k9 = -0.5900435899266435, k10 = 2.890611442640554, k11 = -0.4570457994644658;
+    const float k12 = 0.3731763325901154, k14 = 1.445305721320277;
+    r += k9 * g[9] * vec3(6.0 * x * y, 3.0 * xx - 3.0 * yy, 0.0);
+    r += k10 * g[10] * vec3(y * z, x * z, x * y);
+    r += k11 * g[11] * vec3(-2.0 * x * y, 4.0 * zz - xx - 3.0 * yy, 8.0 * y * z);
+    r += k12 * g[12] * vec3(-6.0 * x * z, -6.0 * y * z, 6.0 * zz - 3.0 * xx - 3.0 * yy);
+    r += k11 * g[13] * vec3(4.0 * zz - 3.0 * xx - yy, -2.0 * x * y, 8.0 * x * z);
+    r += k14 * g[14] * vec3(2.0 * x * z, -2.0 * y * z, xx - yy);
+    r += k9 * g[15] * vec3(3.0 * xx - 3.0 * yy, -6.0 * x * y, 0.0);
+    return r;
+}
+
+// The SH basis values of SH_EVAL, read back by evaluating it with unit coefficients.
+#define UNIT_COEFF(k) vec3((k) == unit_k ? 1.0 : 0.0)
+
+void main() {
+    uint i = gl_GlobalInvocationID.x;
+    uint n = pc.counts.x;
+    if (i >= n || visible.data[i] == 0) {
+        return;
+    }
+    uint g0 = i * GRAD2D_STRIDE;
+    vec2 v_mean2d = vec2(grad2d.data[g0], grad2d.data[g0 + 1]);
+    vec3 v_conic = vec3(grad2d.data[g0 + 2], grad2d.data[g0 + 3], grad2d.data[g0 + 4]);
+    float v_opacity = grad2d.data[g0 + 5];
+    vec3 v_color = vec3(grad2d.data[g0 + 6], grad2d.data[g0 + 7], grad2d.data[g0 + 8]);
+
+    // Forward intermediates.
+    vec3 mean = vec3(means.data[3 * i], means.data[3 * i + 1], means.data[3 * i + 2]);
+    mat3 w = transpose(mat3(pc.rot_t0.xyz, pc.rot_t1.xyz, pc.rot_t2.xyz)); // world -> camera
+    vec3 p = w * mean + vec3(pc.rot_t0.w, pc.rot_t1.w, pc.rot_t2.w);
+    vec4 q_raw = vec4(quats.data[4 * i], quats.data[4 * i + 1], quats.data[4 * i + 2], quats.data[4 * i + 3]);
+    float qn = length(q_raw);
+    vec4 q = q_raw / qn;
+    mat3 rq = quat_to_mat(q);
+    vec3 s = exp(vec3(log_scales.data[3 * i], log_scales.data[3 * i + 1], log_scales.data[3 * i + 2]));
+    mat3 m = rq * mat3(s.x, 0, 0, 0, s.y, 0, 0, 0, s.z);
+    mat3 cov3 = m * transpose(m);
+    mat3 covc = w * cov3 * transpose(w);
+    float fx = pc.intrinsics.x, fy = pc.intrinsics.y, cx = pc.intrinsics.z, cy = pc.intrinsics.w;
+    float width = float(pc.dims.x), height = float(pc.dims.y);
+    float tan_x = 0.5 * width / fx, tan_y = 0.5 * height / fy;
+    float lim_xp = (width - cx) / fx + 0.3 * tan_x, lim_xn = cx / fx + 0.3 * tan_x;
+    float lim_yp = (height - cy) / fy + 0.3 * tan_y, lim_yn = cy / fy + 0.3 * tan_y;
+    float rz = 1.0 / p.z;
+    float ux = p.x * rz, uy = p.y * rz;
+    bool clamp_x = ux > lim_xp || ux < -lim_xn;
+    bool clamp_y = uy > lim_yp || uy < -lim_yn;
+    float tx = p.z * min(lim_xp, max(-lim_xn, ux));
+    float ty = p.z * min(lim_yp, max(-lim_yn, uy));
+    // J (2x3) as mat3x2: column k holds d(u, v)/d p_k.
+    mat3x2 jac = mat3x2(fx * rz, 0.0, 0.0, fy * rz, -fx * tx * rz * rz, -fy * ty * rz * rz);
+    mat2 cov2 = jac * covc * transpose(jac) + mat2(0.3, 0.0, 0.0, 0.3);
+    float det = max(cov2[0][0] * cov2[1][1] - cov2[0][1] * cov2[0][1], 1e-10);
+    mat2 conic = mat2(cov2[1][1], -cov2[0][1], -cov2[0][1], cov2[0][0]) / det;
+
+    // conic = cov2^-1: dL/dcov2 = -conic G conic, G the symmetric gradient of the conic
+    // (B appears twice in the matrix, so each off-diagonal entry gets half of dL/dB).
+    mat2 g_conic = mat2(v_conic.x, 0.5 * v_conic.y, 0.5 * v_conic.y, v_conic.z);
+    mat2 v_cov2 = -(conic * g_conic * conic);
+    // cov2 = J covc J^T + 0.3 I.
+    mat3 v_covc = transpose(jac) * v_cov2 * jac;
+    mat3x2 v_jac = 2.0 * (v_cov2 * jac * covc);
+    // covc = W cov3 W^T; cov3 = M M^T with M = R diag(s).
+    mat3 v_cov3 = transpose(w) * v_covc * w;
+    mat3 v_m = 2.0 * (v_cov3 * m);
+    vec3 v_s = vec3(dot(v_m[0], rq[0]), dot(v_m[1], rq[1]), dot(v_m[2], rq[2]));
+    vec3 v_log_scale = v_s * s;
+    mat3 v_r = mat3(v_m[0] * s.x, v_m[1] * s.y, v_m[2] * s.z);
+    // R(q) for a unit quaternion (w, x, y, z); r(row, col) = v_r[col][row].
+    float qw = q.x, qx = q.y, qy = q.z, qz = q.w;
+#define R(row, col) v_r[col][row]
+    vec4 v_q = 2.0 * vec4(
+        qz * (R(1, 0) - R(0, 1)) + qy * (R(0, 2) - R(2, 0)) + qx * (R(2, 1) - R(1, 2)),
+        qy * (R(1, 0) + R(0, 1)) + qz * (R(2, 0) + R(0, 2)) + qw * (R(2, 1) - R(1, 2)) - 2.0 * qx * (R(1, 1) + R(2, 2)),
+        qx * (R(1, 0) + R(0, 1)) + qw * (R(0, 2) - R(2, 0)) + qz * (R(2, 1) + R(1, 2)) - 2.0 * qy * (R(0, 0) + R(2, 2)),
+        qw * (R(1, 0) - R(0, 1)) + qx * (R(2, 0) + R(0, 2)) + qy * (R(2, 1) + R(1, 2)) - 2.0 * qz * (R(0, 0) + R(1, 1)));
+#undef R
+    // q = q_raw / |q_raw|.
+    vec4 v_q_raw = (v_q - q * dot(q, v_q)) / qn;
+
+    // Camera-space mean: through the 2D mean and through J (x/z, y/z clamped in J only).
+    vec3 v_p = vec3(fx * rz * v_mean2d.x, fy * rz * v_mean2d.y,
+                    -(fx * p.x * v_mean2d.x + fy * p.y * v_mean2d.y) * rz * rz);
+    float rz2 = rz * rz, rz3 = rz2 * rz;
+    v_p.z += -fx * rz2 * v_jac[0][0] - fy * rz2 * v_jac[1][1];
+    if (clamp_x) {
+        v_p.z += fx * tx * rz3 * v_jac[2][0];
+    } else {
+        v_p.x += -fx * rz2 * v_jac[2][0];
+        v_p.z += 2.0 * fx * tx * rz3 * v_jac[2][0];
+    }
+    if (clamp_y) {
+        v_p.z += fy * ty * rz3 * v_jac[2][1];
+    } else {
+        v_p.y += -fy * rz2 * v_jac[2][1];
+        v_p.z += 2.0 * fy * ty * rz3 * v_jac[2][1];
+    }
+    vec3 v_mean = transpose(w) * v_p;
+
+    // Color = max(SH(dir) + 0.5, 0), dir = normalize(mean - camera center).
+    uint degree = pc.counts.y, coeffs = pc.counts.z;
+    uint base = i * coeffs * 3;
+    vec3 to_mean = mean - pc.center_near.xyz;
+    vec3 dir = normalize(to_mean);
+    vec3 color;
+    SH_EVAL(color, degree, dir, SH_COEFF);
+    v_color *= vec3(greaterThan(color + 0.5, vec3(0.0)));
+    float g_basis[16];
+    for (uint k = 0; k < 16; k++) {
+        g_basis[k] = 0.0;
+    }
+    for (uint k = 0; k < coeffs; k++) {
+        uint unit_k = k;
+        vec3 basis;
+        SH_EVAL(basis, degree, dir, UNIT_COEFF);
+        vec3 v_coeff = basis * v_color;
+        grad_sh.data[base + 3 * k] += v_coeff.x;
+        grad_sh.data[base + 3 * k + 1] += v_coeff.y;
+        grad_sh.data[base + 3 * k + 2] += v_coeff.z;
+        g_basis[k] = dot(SH_COEFF(k), v_color);
+    }
+    vec3 v_dir = sh_basis_grad(degree, dir, g_basis);
+    v_mean += (v_dir - dir * dot(dir, v_dir)) / length(to_mean);
+
+    float opacity = sigmoid(opacity_logits.data[i]);
+    grad_opacity_logits.data[i] += v_opacity * opacity * (1.0 - opacity);
+    [[unroll]] for (uint k = 0; k < 3; k++) {
+        grad_means.data[3 * i + k] += v_mean[k];
+        grad_log_scales.data[3 * i + k] += v_log_scale[k];
+    }
+    [[unroll]] for (uint k = 0; k < 4; k++) {
+        grad_quats.data[4 * i + k] += v_q_raw[k];
+    }
+    densify_grad.data[i] += length(v_mean2d * vec2(0.5 * width, 0.5 * height));
+    densify_count.data[i] += 1.0;
+}

@@ -1,0 +1,407 @@
+//! The GPU backward pass: blending backward (per tile, back to front, subgroup-reduced
+//! atomics into screen-space gradients) then projection backward (per Gaussian, into the
+//! stored parameters). Recorded into the same submission as the forward that produced the
+//! tile lists, so an iteration needs no host round trip.
+
+use anyhow::{ensure, Result};
+use bytemuck::{Pod, Zeroable};
+
+use super::frame::RenderedFrame;
+use super::gpu_scene::GpuScene;
+use super::rasterizer::{Rasterizer, TileLists, SEM_CHUNK};
+use super::{camera_rows_f32, RenderOptions, SemanticMode};
+use crate::gpu::kernel_table::ids;
+use crate::gpu::{Buffer, Gpu, Recorder};
+use crate::scene::Camera;
+
+/// Floats per Gaussian in the screen-space gradient (mean2d 2, conic 3, opacity, color 3,
+/// one pad): glsl/raster/blend_backward_body.glsl GRAD2D_STRIDE.
+pub const GRAD2D_STRIDE: u32 = 10;
+/// Floats carried per pixel between backward windows: T, S_rgb, S_sem chunk.
+const CARRY_STRIDE: u64 = 4 + SEM_CHUNK as u64;
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct BlendBackwardParams {
+    dims: [u32; 4],
+    window: [u32; 4],
+    background: [f32; 4],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct ProjectBackwardParams {
+    rot_t: [[f32; 4]; 3],
+    intrinsics: [f32; 4],
+    center: [f32; 4],
+    dims: [u32; 4],
+    counts: [u32; 4],
+}
+
+/// Upstream gradients per pixel, on the device: dL/d(rgb) [P*3], dL/d(accumulated alpha)
+/// [P], and dL/d(normalized semantics) [P*C] (any buffer when C = 0).
+pub struct PixelGrads<'a> {
+    pub rgb: &'a Buffer,
+    pub alpha: &'a Buffer,
+    pub sem_norm: &'a Buffer,
+}
+
+/// Gradients of a scene's parameters, summed over the views recorded since the last
+/// [`SceneGrads::record_zero`], plus the 3DGS densification statistics.
+pub struct SceneGrads {
+    pub n: u32,
+    pub channels: u32,
+    pub sh_coeffs: u32,
+    pub means: Buffer,
+    pub log_scales: Buffer,
+    pub quats: Buffer,
+    pub opacity_logits: Buffer,
+    pub sh: Buffer,
+    /// dL/d(logits) [n*C].
+    pub logits: Buffer,
+    /// dL/d(softmax probabilities) [n*C], the blended vectors of the softmax mode.
+    probs: Buffer,
+    /// Sum over views of |dL/d(mean2d)| in NDC units, and the number of views that saw
+    /// each Gaussian.
+    pub densify_grad: Buffer,
+    pub densify_count: Buffer,
+    /// One view's screen-space gradients, [n * GRAD2D_STRIDE].
+    pub screen: Buffer,
+    carry: Buffer,
+    placeholder: Buffer,
+    /// Accumulate with float atomics (default where the device has them) or with the
+    /// compare-and-swap fallback.
+    pub float_atomics: bool,
+}
+
+/// Gradients downloaded to the host (tests, diagnostics).
+#[derive(Clone, Debug, Default)]
+pub struct HostGrads {
+    pub means: Vec<f32>,
+    pub log_scales: Vec<f32>,
+    pub quats: Vec<f32>,
+    pub opacity_logits: Vec<f32>,
+    pub sh: Vec<f32>,
+    pub logits: Vec<f32>,
+    /// The last view's screen-space gradients, GRAD2D_STRIDE per Gaussian.
+    pub screen: Vec<f32>,
+    pub densify_grad: Vec<f32>,
+    pub densify_count: Vec<f32>,
+}
+
+impl SceneGrads {
+    /// Zeroed gradients for `scene`'s shape.
+    pub fn new(gpu: &Gpu, scene: &GpuScene) -> Result<SceneGrads> {
+        let n = scene.n.max(1) as u64;
+        let c = scene.channels.max(1) as u64;
+        let b = |name: &str, floats: u64| gpu.buffer(name, floats * 4);
+        let grads = SceneGrads {
+            n: scene.n,
+            channels: scene.channels,
+            sh_coeffs: scene.sh_coeffs,
+            means: b("grad_means", n * 3)?,
+            log_scales: b("grad_log_scales", n * 3)?,
+            quats: b("grad_quats", n * 4)?,
+            opacity_logits: b("grad_opacity_logits", n)?,
+            sh: b("grad_sh", n * 3 * scene.sh_coeffs.max(1) as u64)?,
+            logits: b("grad_logits", n * c)?,
+            probs: b("grad_probs", n * c)?,
+            densify_grad: b("densify_grad", n)?,
+            densify_count: b("densify_count", n)?,
+            screen: b("grad2d", n * GRAD2D_STRIDE as u64)?,
+            carry: b("backward_carry", 1)?,
+            placeholder: b("placeholder", 4)?,
+            float_atomics: gpu.caps().float_atomic_add,
+        };
+        let mut rec = Recorder::new(gpu)?;
+        grads.record_zero(&mut rec);
+        grads.record_zero_densify(&mut rec);
+        rec.submit_and_wait()?;
+        Ok(grads)
+    }
+
+    /// Sizes the per-pixel carry buffer for views of `pixels` pixels walked in `windows`
+    /// windows (only needed when a tile list spans more than one window).
+    pub fn prepare_view(&mut self, gpu: &Gpu, pixels: u64, windows: u32) -> Result<()> {
+        let need = if windows > 1 {
+            pixels * CARRY_STRIDE * 4
+        } else {
+            4
+        };
+        if self.carry.size() < need {
+            self.carry = gpu.buffer("backward_carry", need)?;
+        }
+        Ok(())
+    }
+
+    /// Records zeroing of the parameter gradients (start of an iteration).
+    pub fn record_zero(&self, rec: &mut Recorder) {
+        for b in [
+            &self.means,
+            &self.log_scales,
+            &self.quats,
+            &self.opacity_logits,
+            &self.sh,
+            &self.logits,
+            &self.probs,
+        ] {
+            rec.fill(b, 0, b.size(), 0);
+        }
+        rec.barrier();
+    }
+
+    /// Records zeroing of the densification statistics.
+    pub fn record_zero_densify(&self, rec: &mut Recorder) {
+        for b in [&self.densify_grad, &self.densify_count] {
+            rec.fill(b, 0, b.size(), 0);
+        }
+        rec.barrier();
+    }
+
+    /// Records the softmax backward that turns the probabilities' gradient into the
+    /// logits' (softmax mode; once per iteration, after every view's backward).
+    pub fn record_softmax_backward(&self, rec: &mut Recorder, scene: &GpuScene) -> Result<()> {
+        let Some(probs) = scene.probs.get() else {
+            return Ok(()); // nothing was rendered in softmax mode
+        };
+        rec.dispatch(
+            ids::RASTER_SOFTMAX_BACKWARD,
+            &[
+                ("probs", probs),
+                ("grad_probs", &self.probs),
+                ("grad_logits", &self.logits),
+            ],
+            bytemuck::cast_slice(&[self.n, self.channels]),
+            [self.n.div_ceil(256), 1, 1],
+        )?;
+        rec.barrier();
+        Ok(())
+    }
+
+    /// Downloads every gradient.
+    pub fn download(&self, gpu: &Gpu) -> Result<HostGrads> {
+        let n = self.n as u64;
+        let c = self.channels as u64;
+        let parts = gpu.download_many(&[
+            (&self.means, 0, n * 12),
+            (&self.log_scales, 0, n * 12),
+            (&self.quats, 0, n * 16),
+            (&self.opacity_logits, 0, n * 4),
+            (&self.sh, 0, n * 12 * self.sh_coeffs as u64),
+            (&self.logits, 0, n * c * 4),
+            (&self.screen, 0, n * GRAD2D_STRIDE as u64 * 4),
+            (&self.densify_grad, 0, n * 4),
+            (&self.densify_count, 0, n * 4),
+        ])?;
+        let f = |k: usize| -> Vec<f32> { bytemuck::pod_collect_to_vec(&parts[k]) };
+        Ok(HostGrads {
+            means: f(0),
+            log_scales: f(1),
+            quats: f(2),
+            opacity_logits: f(3),
+            sh: f(4),
+            logits: f(5),
+            screen: f(6),
+            densify_grad: f(7),
+            densify_count: f(8),
+        })
+    }
+}
+
+impl TileLists<'_> {
+    /// Records the backward pass of the view these lists hold, after its forward blend
+    /// ([`TileLists::record_blend`] with the same `mode`): adds the view's parameter
+    /// gradients into `grads`. `upstream` holds dL/d of the view's outputs.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_backward(
+        &self,
+        rec: &mut Recorder,
+        scene: &GpuScene,
+        opts: &RenderOptions,
+        window_len: u32,
+        upstream: &PixelGrads,
+        grads: &SceneGrads,
+    ) -> Result<()> {
+        ensure!(
+            grads.n == scene.n && grads.channels == scene.channels,
+            "gradient buffers were made for another scene"
+        );
+        let gpu = rec.gpu().clone();
+        let cam = self.cam;
+        let (sem_in, channels, sem_target) = match opts.semantics {
+            Some(mode) => match scene.semantics(&gpu, mode)? {
+                Some(buf) => {
+                    let target = match mode {
+                        SemanticMode::RawLogits => &grads.logits,
+                        SemanticMode::Softmax => &grads.probs,
+                    };
+                    (buf, scene.channels, target)
+                }
+                None => (&grads.placeholder, 0, &grads.placeholder),
+            },
+            None => (&grads.placeholder, 0, &grads.placeholder),
+        };
+        let sem_norm = if channels > 0 {
+            self.sem_norm()
+        } else {
+            &grads.placeholder
+        };
+        let windows = self.windows();
+        ensure!(
+            windows == 1
+                || grads.carry.size() >= cam.width as u64 * cam.height as u64 * CARRY_STRIDE * 4,
+            "SceneGrads::prepare_view was not called for this view size"
+        );
+        rec.fill(&grads.screen, 0, grads.screen.size(), 0);
+        rec.barrier();
+        let kernel = if grads.float_atomics {
+            ids::RASTER_BLEND_BACKWARD
+        } else {
+            ids::RASTER_BLEND_BACKWARD_CAS
+        };
+        let bg = opts.background;
+        let chunks = channels.div_ceil(SEM_CHUNK).max(1);
+        for chunk in 0..chunks {
+            for w in (0..windows).rev() {
+                let params = BlendBackwardParams {
+                    dims: [cam.width, cam.height, self.tiles_x, channels],
+                    window: [w * window_len, window_len, chunk * SEM_CHUNK, 0],
+                    background: [bg[0], bg[1], bg[2], 0.0],
+                };
+                rec.dispatch(
+                    kernel,
+                    &[
+                        ("tile_ranges", self.ranges()),
+                        ("isect_ids", self.isect_ids()),
+                        ("xy_depth_opacity", self.xy_depth_opacity()),
+                        ("xy_frac", self.xy_frac()),
+                        ("conics", self.conics()),
+                        ("colors", self.colors()),
+                        ("sem_in", sem_in),
+                        ("final_t", self.final_t()),
+                        ("last_entry", self.last_entry()),
+                        ("n_contrib", self.n_contrib()),
+                        ("sem_norm", sem_norm),
+                        ("v_rgb", upstream.rgb),
+                        ("v_alpha", upstream.alpha),
+                        ("v_sem_norm", upstream.sem_norm),
+                        ("carry", &grads.carry),
+                        ("grad2d", &grads.screen),
+                        ("grad_sem", sem_target),
+                    ],
+                    bytemuck::bytes_of(&params),
+                    [self.tiles_x, self.tiles_y, 1],
+                )?;
+                rec.barrier();
+            }
+        }
+        self.record_project_backward(rec, scene, cam, grads)
+    }
+
+    fn record_project_backward(
+        &self,
+        rec: &mut Recorder,
+        scene: &GpuScene,
+        cam: &Camera,
+        grads: &SceneGrads,
+    ) -> Result<()> {
+        let c = cam.center();
+        let params = ProjectBackwardParams {
+            rot_t: camera_rows_f32(cam),
+            intrinsics: [cam.fx as f32, cam.fy as f32, cam.cx as f32, cam.cy as f32],
+            center: [c.x as f32, c.y as f32, c.z as f32, 0.0],
+            dims: [cam.width, cam.height, 0, 0],
+            counts: [scene.n, scene.sh_degree, scene.sh_coeffs, 0],
+        };
+        rec.dispatch(
+            ids::RASTER_PROJECT_BACKWARD,
+            &[
+                ("means", &scene.means),
+                ("log_scales", &scene.log_scales),
+                ("quats", &scene.quats),
+                ("opacity_logits", &scene.opacity_logits),
+                ("sh", &scene.sh),
+                ("visible", self.visible_flags()),
+                ("grad2d", &grads.screen),
+                ("grad_means", &grads.means),
+                ("grad_log_scales", &grads.log_scales),
+                ("grad_quats", &grads.quats),
+                ("grad_opacity_logits", &grads.opacity_logits),
+                ("grad_sh", &grads.sh),
+                ("densify_grad", &grads.densify_grad),
+                ("densify_count", &grads.densify_count),
+            ],
+            bytemuck::bytes_of(&params),
+            [scene.n.div_ceil(256), 1, 1],
+        )?;
+        rec.barrier();
+        Ok(())
+    }
+}
+
+/// Upstream gradients on the host, for [`Rasterizer::render_backward`].
+pub struct HostPixelGrads<'a> {
+    pub rgb: &'a [f32],
+    pub alpha: &'a [f32],
+    pub sem_norm: &'a [f32],
+}
+
+impl Rasterizer {
+    /// Renders one view and back-propagates the given per-pixel gradients through it, in
+    /// one submission; returns the frame and the parameter gradients (tests, tools).
+    /// `float_atomics: false` forces the compare-and-swap accumulation.
+    pub fn render_backward(
+        &mut self,
+        scene: &GpuScene,
+        cam: &Camera,
+        opts: &RenderOptions,
+        upstream: &HostPixelGrads,
+        float_atomics: bool,
+    ) -> Result<(RenderedFrame, HostGrads)> {
+        let gpu = self.gpu().clone();
+        let pixels = cam.width as u64 * cam.height as u64;
+        let channels = match opts.semantics {
+            Some(_) => scene.channels,
+            None => 0,
+        };
+        ensure!(
+            upstream.rgb.len() as u64 == pixels * 3
+                && upstream.alpha.len() as u64 == pixels
+                && upstream.sem_norm.len() as u64 == pixels * channels as u64,
+            "upstream gradients do not match the view ({} pixels, {channels} channels)",
+            pixels
+        );
+        let v_rgb = gpu.buffer_from("v_rgb", upstream.rgb)?;
+        let v_alpha = gpu.buffer_from("v_alpha", upstream.alpha)?;
+        let v_sem = if channels > 0 {
+            gpu.buffer_from("v_sem_norm", upstream.sem_norm)?
+        } else {
+            gpu.buffer("v_sem_norm", 4)?
+        };
+        let mut grads = SceneGrads::new(&gpu, scene)?;
+        grads.float_atomics = float_atomics && gpu.caps().float_atomic_add;
+        let windows = scene.n.div_ceil(self.window_len()).max(1);
+        grads.prepare_view(&gpu, pixels, windows)?;
+        let sem_buf = match opts.semantics {
+            Some(mode) => scene.semantics(&gpu, mode)?,
+            None => None,
+        };
+        let window_len = self.window_len();
+        let pixel_grads = PixelGrads {
+            rgb: &v_rgb,
+            alpha: &v_alpha,
+            sem_norm: &v_sem,
+        };
+        let run = self.run_tiled(scene, cam, opts, channels, |rec, tiles| {
+            tiles.record_blend(rec, sem_buf, channels, window_len, opts.background)?;
+            grads.record_zero(rec);
+            grads.record_zero_densify(rec);
+            tiles.record_backward(rec, scene, opts, window_len, &pixel_grads, &grads)
+        })?;
+        let mut rec = Recorder::new(&gpu)?;
+        grads.record_softmax_backward(&mut rec, scene)?;
+        rec.submit_and_wait()?;
+        let frame = self.download_frame(cam, channels, &run)?;
+        Ok((frame, grads.download(&gpu)?))
+    }
+}
