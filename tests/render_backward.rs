@@ -6,7 +6,7 @@
 mod common;
 
 use glam::DVec3;
-use semsplat::render::backward::{HostGrads, HostPixelGrads};
+use semsplat::render::backward::{BackwardVariant, HostGrads, HostPixelGrads};
 use semsplat::render::reference::backward::{
     backward, objective, GaussianParams, ParamGrads, PixelGrads,
 };
@@ -121,6 +121,7 @@ struct Case {
     background: [f32; 3],
     window: Option<u32>,
     float_atomics: bool,
+    semantics_only: bool,
 }
 
 /// Runs the GPU backward and the reference backward on one case; returns the worst
@@ -151,7 +152,10 @@ fn compare(case: &Case) -> f64 {
                 alpha: &alpha,
                 sem_norm: &sem,
             },
-            case.float_atomics,
+            BackwardVariant {
+                float_atomics: case.float_atomics,
+                semantics_only: case.semantics_only,
+            },
         )
         .unwrap();
     let settings = RenderSettings {
@@ -163,7 +167,21 @@ fn compare(case: &Case) -> f64 {
         ..Default::default()
     };
     let cpu = backward(&g, &case.cam, &settings, &host);
-    let errs = errors(&grads, &cpu);
+    let errs = if case.semantics_only {
+        for (name, v) in [
+            ("means", &grads.means),
+            ("sh", &grads.sh),
+            ("screen", &grads.screen),
+        ] {
+            assert!(
+                v.iter().all(|&x| x == 0.0),
+                "semantics-only wrote {name} gradients"
+            );
+        }
+        vec![("logits", rel_l2(&grads.logits, cpu.logits.iter().copied()))]
+    } else {
+        errors(&grads, &cpu)
+    };
     let worst = errs.iter().map(|e| e.1).fold(0.0, f64::max);
     println!(
         "{}: worst {worst:.2e} {:?}",
@@ -225,6 +243,7 @@ fn gpu_backward_matches_the_reference_backward() {
             background: [0.2, 0.5, 0.1],
             window: None,
             float_atomics: true,
+            semantics_only: false,
         });
     }
     // Windows of 7 list entries: the per-pixel state is carried between backward dispatches.
@@ -236,6 +255,7 @@ fn gpu_backward_matches_the_reference_backward() {
         background: [0.0; 3],
         window: Some(7),
         float_atomics: true,
+        semantics_only: false,
     });
     // The compare-and-swap path for devices without float atomics.
     cases.push(Case {
@@ -246,7 +266,21 @@ fn gpu_backward_matches_the_reference_backward() {
         background: [0.0; 3],
         window: None,
         float_atomics: false,
+        semantics_only: false,
     });
+    // Logits only (geometry frozen): the semantic-only kernels, both accumulations.
+    for float_atomics in [true, false] {
+        cases.push(Case {
+            name: "semantics only",
+            scene: random_scene(&spec(300, 1, 6, 42)),
+            cam: cam.clone(),
+            mode: SemanticMode::RawLogits,
+            background: [0.0; 3],
+            window: Some(11),
+            float_atomics,
+            semantics_only: true,
+        });
+    }
     for case in &cases {
         let worst = compare(case);
         assert!(
@@ -292,6 +326,7 @@ fn gpu_backward_handles_the_forward_edge_cases() {
         background: [1.0, 1.0, 1.0],
         window: None,
         float_atomics: true,
+        semantics_only: false,
     });
     assert!(worst < TOLERANCE, "edge cases: relative error {worst:.2e}");
     common::check_validation(common::gpu());
@@ -324,7 +359,7 @@ fn gpu_backward_matches_finite_differences() {
                 alpha: &alpha,
                 sem_norm: &sem,
             },
-            true,
+            BackwardVariant::default(),
         )
         .unwrap();
     let settings = RenderSettings {

@@ -1,10 +1,16 @@
-//! Short training runs on a tiny synthetic room: joint optimization and --semantics-only.
+//! Short training runs on the tiny synthetic room (lavapipe): full joint optimization from
+//! the sparse init cloud must improve held-out PSNR and semantics; `--semantics-only` on
+//! the room's Gaussians must reach per-Gaussian accuracy comparable to FlashSplat.
 
 mod common;
 
 use semsplat::eval::benchmark::{synth_train_views, TrainLabels};
+use semsplat::eval::label_render::LabelRenderer;
+use semsplat::eval::metrics::Confusion;
+use semsplat::fuse::{accumulate, assign_semantic, FuseConfig, Method, NO_LABEL};
 use semsplat::render::{GpuScene, Rasterizer, RenderOptions};
 use semsplat::scene::classes::CompactClasses;
+use semsplat::scene::labels::LabelMap;
 use semsplat::scene::synth::{generate, SynthConfig, SynthScene};
 use semsplat::scene::{Gaussians, Split};
 use semsplat::train::config::TrainConfig;
@@ -12,15 +18,15 @@ use semsplat::train::trainer::{classes_from_logits, with_initial_logits, Trainer
 
 fn tiny() -> SynthScene {
     let mut cfg = SynthConfig::preset("tiny");
-    cfg.train_views = 12;
-    cfg.test_views = 4;
-    cfg.width = 96;
-    cfg.height = 72;
+    cfg.train_views = 8;
+    cfg.test_views = 3;
+    cfg.width = 64;
+    cfg.height = 48;
     cfg.previews = false;
     generate(&cfg).unwrap()
 }
 
-/// Mean PSNR over the test views.
+/// Mean PSNR of the test views rendered from `g`.
 fn test_psnr(s: &SynthScene, g: &Gaussians) -> f64 {
     let gpu = common::gpu();
     let scene = GpuScene::upload(gpu, g).unwrap();
@@ -29,143 +35,186 @@ fn test_psnr(s: &SynthScene, g: &Gaussians) -> f64 {
         semantics: None,
         ..Default::default()
     };
-    let mut total = 0.0;
-    let mut count = 0;
+    let mut psnr = Vec::new();
     for (cam, view) in s.cameras.iter().zip(&s.views) {
-        if cam.split != Split::Test {
-            continue;
+        if cam.split == Split::Test {
+            let f = r.render(&scene, cam, &opts).unwrap();
+            let mse = f
+                .rgb
+                .iter()
+                .zip(&view.rgb)
+                .map(|(a, b)| (a.clamp(0.0, 1.0) as f64 - *b as f64 / 255.0).powi(2))
+                .sum::<f64>()
+                / f.rgb.len() as f64;
+            psnr.push(-10.0 * mse.log10());
         }
-        let f = r.render(&scene, cam, &opts).unwrap();
-        let mse: f64 = f
-            .rgb
-            .iter()
-            .zip(&view.rgb)
-            .map(|(a, b)| {
-                let d = a.clamp(0.0, 1.0) as f64 - *b as f64 / 255.0;
-                d * d
-            })
-            .sum::<f64>()
-            / f.rgb.len() as f64;
-        total += -10.0 * mse.log10();
-        count += 1;
     }
-    total / count as f64
+    psnr.iter().sum::<f64>() / psnr.len() as f64
 }
 
-fn accuracy(
-    s: &SynthScene,
-    classes: &[Option<u32>],
-    truth: &[f32],
-    compact: &CompactClasses,
-) -> f64 {
-    let ok = classes
+/// Pixel accuracy of the test views' labels rendered from `g` with per-Gaussian classes.
+fn test_label_accuracy(s: &SynthScene, g: &Gaussians, classes: &[i32]) -> f64 {
+    let mut renderer = LabelRenderer::new(common::gpu(), g, classes).unwrap();
+    let mut confusion = Confusion::default();
+    for (cam, view) in s.cameras.iter().zip(&s.views) {
+        if cam.split == Split::Test {
+            confusion.add(
+                &view.labels,
+                &renderer.render(cam).unwrap(),
+                LabelMap::IGNORE,
+            );
+        }
+    }
+    confusion.scores().pixel_accuracy
+}
+
+fn user_classes(classes: &[Option<u32>], compact: &CompactClasses) -> Vec<i32> {
+    classes
         .iter()
-        .zip(truth)
-        .filter(|(c, t)| {
+        .map(|c| {
             c.and_then(|c| compact.user_of(c as usize))
-                .map(|u| u as f32)
-                == Some(**t)
+                .map_or(-1, |u| u as i32)
         })
-        .count();
-    let _ = s;
-    ok as f64 / classes.len() as f64
+        .collect()
+}
+
+fn train(
+    init: &Gaussians,
+    s: &SynthScene,
+    cfg: TrainConfig,
+    riders: &[Vec<f32>],
+) -> semsplat::train::trainer::TrainOutput {
+    let compact = CompactClasses::from_table(&s.room.classes).unwrap();
+    let views = synth_train_views(s, TrainLabels::True, &compact).unwrap();
+    let iters = cfg.iters;
+    let mut trainer = Trainer::new(common::gpu(), init, &views, cfg, riders).unwrap();
+    let mut first = None;
+    let mut last = None;
+    for _ in 0..iters {
+        if let Some(l) = trainer.step().unwrap() {
+            assert!(l.l1.is_finite() && l.ce.is_finite() && l.entropy.is_finite());
+            first.get_or_insert(l);
+            last = Some(l);
+        }
+    }
+    let (first, last) = (first.unwrap(), last.unwrap());
+    println!("train losses: first {first:?}\n              last  {last:?}");
+    trainer.finish().unwrap()
 }
 
 #[test]
-fn joint_training_improves_psnr_and_semantics() {
-    let gpu = common::gpu();
+fn joint_training_improves_held_out_psnr_and_semantics() {
     let s = tiny();
     let compact = CompactClasses::from_table(&s.room.classes).unwrap();
-    let views = synth_train_views(&s, TrainLabels::True, &compact).unwrap();
-    let iters: u32 = std::env::var("ITERS")
-        .map(|v| v.parse().unwrap())
-        .unwrap_or(300);
     let init = with_initial_logits(&s.init_points, compact.len(), 1);
-    println!("init {} Gaussians, scene {}", init.len(), s.gaussians.len());
-    let psnr0 = test_psnr(&s, &init);
-    let cfg = TrainConfig::new(iters);
-    let t0 = std::time::Instant::now();
-    let mut trainer = Trainer::new(gpu, &init, &views, cfg, &[]).unwrap();
-    for _ in 0..iters {
-        if let Some(l) = trainer.step().unwrap() {
-            if trainer.iteration() % 50 == 0 {
-                println!(
-                    "it {} n {} l1 {:.4} ssim {:.3} ce {:.3} ent {:.3} psnr {:.2}",
-                    trainer.iteration(),
-                    trainer.gaussian_count(),
-                    l.l1,
-                    l.ssim,
-                    l.ce,
-                    l.entropy,
-                    l.psnr()
-                );
-            }
-        }
-    }
-    let secs = t0.elapsed().as_secs_f64();
-    let out = trainer.finish().unwrap();
-    println!(
-        "times {:?} in {secs:.1}s, events {:?}",
-        out.times, out.densify_events
+    // Random logits: argmax labels before training.
+    let all_seen = vec![true; init.len()];
+    let classes0 = user_classes(&classes_from_logits(&init, &all_seen).0, &compact);
+    let (psnr0, acc0) = (
+        test_psnr(&s, &init),
+        test_label_accuracy(&s, &init, &classes0),
     );
-    let psnr1 = test_psnr(&s, &out.gaussians);
-    println!("psnr {psnr0:.2} -> {psnr1:.2}");
-    common::check_validation(gpu);
+
+    let mut cfg = TrainConfig::new(150);
+    cfg.densify.as_mut().unwrap().max_gaussians = 12_000;
+    let out = train(&init, &s, cfg, &[]);
+    let classes = user_classes(&classes_from_logits(&out.gaussians, &out.seen).0, &compact);
+    let (psnr1, acc1) = (
+        test_psnr(&s, &out.gaussians),
+        test_label_accuracy(&s, &out.gaussians, &classes),
+    );
+    println!(
+        "{} -> {} Gaussians; held-out PSNR {psnr0:.2} -> {psnr1:.2} dB, label accuracy {acc0:.3} -> {acc1:.3}; {:?}",
+        init.len(),
+        out.gaussians.len(),
+        out.times
+    );
+    assert!(out.gaussians.len() <= 12_000, "the cap was exceeded");
+    assert!(out.gaussians.len() > init.len(), "densification never ran");
+    // Measured (this seed, lavapipe): PSNR 8.9 -> 18.5 dB, accuracy 0.11 -> 0.93. The
+    // bounds leave ~2 dB and ~0.08 of room for run-to-run change (atomic order) while
+    // still failing if training only partly works (e.g. a wrong-sign gradient, or no
+    // semantic gradient: accuracy stays near chance).
+    assert!(psnr1 > psnr0 + 7.0, "PSNR {psnr0:.2} -> {psnr1:.2}");
+    assert!(acc1 > 0.85, "held-out label accuracy {acc1:.3}");
+    common::check_validation(common::gpu());
 }
 
 #[test]
-fn semantics_only_matches_fusion() {
+fn semantics_only_is_comparable_to_flashsplat() {
     let gpu = common::gpu();
     let s = tiny();
     let compact = CompactClasses::from_table(&s.room.classes).unwrap();
-    let views = synth_train_views(&s, TrainLabels::True, &compact).unwrap();
-    let iters: u32 = std::env::var("ITERS")
-        .map(|v| v.parse().unwrap())
-        .unwrap_or(300);
-    let init = with_initial_logits(&s.gaussians, compact.len(), 1);
-    let truth: Vec<f32> = s
-        .gaussians
-        .class_ids
-        .as_ref()
-        .unwrap()
+    let truth = s.gaussians.class_ids.clone().unwrap();
+
+    let labels: Vec<Option<Vec<u32>>> = s
+        .cameras
         .iter()
-        .map(|&c| c as f32)
+        .zip(&s.views)
+        .map(|(cam, v)| {
+            (cam.split == Split::Train).then(|| {
+                v.labels
+                    .iter()
+                    .map(|&l| compact.compact_of(l as u32).map_or(NO_LABEL, u32::from))
+                    .collect()
+            })
+        })
         .collect();
-    let cfg = TrainConfig::semantics_only(iters);
-    let t0 = std::time::Instant::now();
-    let mut trainer = Trainer::new(gpu, &init, &views, cfg, &[truth.clone()]).unwrap();
-    for _ in 0..iters {
-        if let Some(l) = trainer.step().unwrap() {
-            if trainer.iteration() % 50 == 0 {
-                println!(
-                    "it {} ce {:.3} ent {:.3}",
-                    trainer.iteration(),
-                    l.ce,
-                    l.entropy
-                );
-            }
-        }
-    }
-    let secs = t0.elapsed().as_secs_f64();
-    let out = trainer.finish().unwrap();
-    let (classes, _) = classes_from_logits(&out.gaussians, &out.seen);
-    println!("times {:?} in {secs:.1}s", out.times);
-    let seen_acc = {
-        let idx: Vec<usize> = (0..classes.len()).filter(|&i| out.seen[i]).collect();
-        idx.iter()
+    let scene = GpuScene::upload(gpu, &s.gaussians).unwrap();
+    let cfg = FuseConfig {
+        method: Method::FlashSplat,
+        ..Default::default()
+    };
+    let (evidence, _) = accumulate(
+        gpu,
+        &scene,
+        &s.cameras,
+        &labels,
+        compact.len(),
+        &cfg,
+        |_, _| {},
+    )
+    .unwrap();
+    let flash = assign_semantic(&evidence);
+
+    let init = with_initial_logits(&s.gaussians, compact.len(), 2);
+    let out = train(&init, &s, TrainConfig::semantics_only(100), &[]);
+    assert_eq!(
+        out.gaussians.len(),
+        s.gaussians.len(),
+        "semantics-only must not densify"
+    );
+    assert_eq!(
+        out.gaussians.means, s.gaussians.means,
+        "semantics-only moved the geometry"
+    );
+    let (joint, _) = classes_from_logits(&out.gaussians, &out.seen);
+
+    // Accuracy over the Gaussians FlashSplat has evidence for (those that contribute to
+    // some pixel): both methods see exactly these.
+    let contributing: Vec<usize> = (0..truth.len())
+        .filter(|&i| flash.class[i].is_some())
+        .collect();
+    let acc = |pred: &dyn Fn(usize) -> Option<u32>| {
+        contributing
+            .iter()
             .filter(|&&i| {
-                classes[i]
+                pred(i)
                     .and_then(|c| compact.user_of(c as usize))
-                    .map(|u| u as f32)
+                    .map(|u| u as i32)
                     == Some(truth[i])
             })
             .count() as f64
-            / idx.len() as f64
+            / contributing.len() as f64
     };
-    println!(
-        "acc all {:.4} seen {:.4}",
-        accuracy(&s, &classes, &truth, &compact),
-        seen_acc
+    let acc_flash = acc(&|i| flash.class[i].map(|c| c as u32));
+    let acc_joint = acc(&|i| joint[i]);
+    println!("per-Gaussian accuracy over {} contributing: flashsplat {acc_flash:.4}, semantics-only {acc_joint:.4}", contributing.len());
+    // Measured: flashsplat 0.94, semantics-only 0.93 after 100 iterations. "Comparable":
+    // within 0.03 of FlashSplat.
+    assert!(
+        acc_joint > acc_flash - 0.03,
+        "semantics-only {acc_joint:.4} vs flashsplat {acc_flash:.4}"
     );
     common::check_validation(gpu);
 }

@@ -1,7 +1,9 @@
 // Backward of forward blending (blend_body.glsl) for one 16x16 tile per workgroup.
 // Included by blend_backward.comp (float atomics) and blend_backward_cas.comp
 // (compare-and-swap fallback); the includer defines grad_add(index, value) and
-// sem_grad_add(index, value) and binds their buffers.
+// sem_grad_add(index, value) and binds their buffers. With SEM_ONLY (the *_sem_only
+// variants, for training the logits with geometry frozen) only the semantic vectors'
+// gradient w_i * dL/dsem is computed: no alpha gradient, no carried sums.
 //
 // Per pixel, contributors are walked back to front from the last blended entry, starting
 // from the saved final T and recovering T_i = T_{i+1} / (1 - alpha_i). The upstream
@@ -69,7 +71,11 @@ shared uint s_bound; // one past the furthest entry any pixel of the tile blende
 void main() {
     uint width = pc.dims.x, height = pc.dims.y, channels = pc.dims.w;
     uint window_start = pc.window.x, window_len = pc.window.y, chunk_base = pc.window.z;
+#ifdef SEM_ONLY
+    bool with_rgb = false; // only the semantic vectors' gradient (geometry frozen)
+#else
     bool with_rgb = chunk_base == 0;
+#endif
     TileWindow tw = tile_window(width, height, pc.dims.z, window_start, window_len);
     if (window_start > 0 && window_start >= tw.len) {
         return; // this tile's list ends before the window
@@ -91,11 +97,13 @@ void main() {
         bound = last_entry.data[pix] + 1;
         t_final = final_t.data[pix];
         float covered = 1.0 - t_final;
+#ifndef SEM_ONLY
         if (with_rgb) {
             v_col = vec3(v_rgb.data[3 * pix], v_rgb.data[3 * pix + 1], v_rgb.data[3 * pix + 2]);
             // rgb = sum + T_final * background; accumulated alpha = 1 - T_final.
             v_tfinal = dot(v_col, pc.background.rgb) - v_alpha.data[pix];
         }
+#endif
         // Eq. 2: sem_norm = sem / (1 - T_final), so dL/dsem = v / (1 - T_final) and
         // dL/dT_final += sum_k v_k sem_norm_k / (1 - T_final).
         [[unroll]] for (uint k = 0; k < SEM_CHUNK; k++) {
@@ -103,7 +111,9 @@ void main() {
             if (c < channels && covered > 0.0) {
                 float v = v_sem_norm.data[pix * channels + c];
                 v_sem[k] = v / covered;
+#ifndef SEM_ONLY
                 v_tfinal += v * sem_norm.data[pix * channels + c] / covered;
+#endif
             }
         }
     }
@@ -146,11 +156,13 @@ void main() {
             s_xy_depth_opacity[t] = xy_depth_opacity.data[g];
             s_frac[t] = xy_frac.data[g];
             s_conic[t] = conics.data[g];
+#ifndef SEM_ONLY
             s_color[t] = colors.data[g];
             [[unroll]] for (uint k = 0; k < SEM_CHUNK; k++) {
                 uint c = chunk_base + k;
                 s_sem[t * SEM_CHUNK + k] = c < channels ? sem_in.data[g * channels + c] : 0.0;
             }
+#endif
         }
         barrier();
         for (uint jj = count; jj > 0; jj--) {
@@ -179,6 +191,11 @@ void main() {
                 float one_minus = 1.0 - alpha;
                 float t_i = T / one_minus; // transmittance in front of this Gaussian
                 float w = alpha * t_i;
+#ifdef SEM_ONLY
+                [[unroll]] for (uint k = 0; k < SEM_CHUNK; k++) {
+                    vals[GRAD2D_STRIDE + k] = w * v_sem[k];
+                }
+#else
                 // dL/dalpha: its own weight, the dimming of everything behind it, and T_final.
                 float v_a = -v_tfinal * t_final / one_minus;
                 if (with_rgb) {
@@ -205,6 +222,7 @@ void main() {
                     vals[4] = v_sigma * 0.5 * d.y * d.y;
                     vals[5] = v_a * gauss;
                 }
+#endif
                 T = t_i;
             }
             // Sum over the subgroup; lane l then does the atomics of values l, l + size, ...
@@ -213,7 +231,11 @@ void main() {
             [[unroll]] for (uint k = 0; k < STEP_VALUES; k++) {
                 // Uniform bound: only the values this dispatch has (no color past chunk 0,
                 // no channels past C).
+#ifdef SEM_ONLY
+                bool wanted = k >= GRAD2D_STRIDE && chunk_base + k - GRAD2D_STRIDE < channels;
+#else
                 bool wanted = k < GRAD2D_STRIDE ? (with_rgb || k < 6) : (chunk_base + k - GRAD2D_STRIDE < channels);
+#endif
                 if (!wanted) {
                     continue;
                 }

@@ -3,6 +3,7 @@
 
 use std::path::PathBuf;
 
+use super::joint_args::JointArgs;
 use anyhow::{Context, Result};
 use clap::Args;
 use serde::Serialize;
@@ -39,6 +40,8 @@ pub struct DemoArgs {
     /// Label noise on the train views (e.g. flicker=0.2,boundary=2); default: true labels.
     #[arg(long)]
     noise: Option<NoiseSpec>,
+    #[command(flatten)]
+    joint: JointArgs,
 }
 
 #[derive(Serialize)]
@@ -87,7 +90,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     } else {
         TrainLabels::True
     };
-    let scores = score_methods(&gpu, &s, which, &ALL_METHODS, |m| {
+    let scores = score_methods(&gpu, &s, which, &ALL_METHODS, &args.joint.schedule(), |m| {
         eprintln!("lifting with {m}")
     })?;
 
@@ -158,7 +161,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         ("true labels".into(), palette(&s.views[i].labels, table)),
     ];
     for r in &scores {
-        let labels: Vec<u16> = LabelRenderer::new(&gpu, &s.gaussians, &r.classes)?
+        let labels: Vec<u16> = LabelRenderer::new(&gpu, r.scene(&s.gaussians), &r.classes)?
             .render(cam)?
             .into_iter()
             .map(|l| l.unwrap_or(LabelMap::IGNORE))

@@ -6,6 +6,7 @@ pub mod eval;
 pub mod fuse;
 pub mod info;
 pub mod inspect;
+pub mod joint_args;
 pub mod label_classes;
 pub mod render;
 pub mod sweep;

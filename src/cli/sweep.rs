@@ -3,6 +3,7 @@
 
 use std::path::PathBuf;
 
+use super::joint_args::JointArgs;
 use anyhow::{bail, Result};
 use clap::{Args, ValueEnum};
 use serde::Serialize;
@@ -73,6 +74,8 @@ pub struct SweepArgs {
     height: u32,
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    #[command(flatten)]
+    joint: JointArgs,
 }
 
 #[derive(Serialize)]
@@ -120,9 +123,14 @@ pub fn run(args: SweepArgs) -> Result<()> {
         cfg.noise = Some(spec.parse::<NoiseSpec>()?);
         eprintln!("{spec}");
         let s = generate(&cfg)?;
-        let scores = score_methods(&gpu, &s, TrainLabels::Noisy, &ALL_METHODS, |m| {
-            eprintln!("  {m}")
-        })?;
+        let scores = score_methods(
+            &gpu,
+            &s,
+            TrainLabels::Noisy,
+            &ALL_METHODS,
+            &args.joint.schedule(),
+            |m| eprintln!("  {m}"),
+        )?;
         for r in &scores {
             println!(
                 "{spec:<16} {:<18} mIoU {:.4}  3D acc {:.4}",

@@ -16,26 +16,63 @@ use crate::render::GpuScene;
 use crate::scene::classes::CompactClasses;
 use crate::scene::labels::LabelMap;
 use crate::scene::synth::SynthScene;
+use crate::scene::Gaussians;
 use crate::scene::{Camera, Split};
+use crate::train::config::TrainConfig;
 use crate::train::loss::IGNORE_LABEL;
+use crate::train::trainer::{classes_from_logits, with_initial_logits, Trainer};
 use crate::train::views::TrainView;
 
+/// A way to lift labels: a training-free fusion method, or joint optimization.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Lifter {
+    Fuse(Method),
+    /// Joint optimization of the logits only, geometry frozen (`train --semantics-only`).
+    JointSemantics,
+    /// Joint optimization of geometry, appearance and logits (`train`).
+    JointFull,
+}
+
 /// The name a method goes by in tables and charts.
-pub fn method_name(m: Method) -> &'static str {
+pub fn method_name(m: Lifter) -> &'static str {
     match m {
-        Method::Vote => "vote",
-        Method::VoteOcclusion => "vote --occlusion",
-        Method::VoteWeighted => "vote --weighted",
-        Method::FlashSplat => "flashsplat",
+        Lifter::Fuse(Method::Vote) => "vote",
+        Lifter::Fuse(Method::VoteOcclusion) => "vote --occlusion",
+        Lifter::Fuse(Method::VoteWeighted) => "vote --weighted",
+        Lifter::Fuse(Method::FlashSplat) => "flashsplat",
+        Lifter::JointSemantics => "joint --semantics-only",
+        Lifter::JointFull => "joint",
     }
 }
 
-pub const ALL_METHODS: [Method; 4] = [
-    Method::Vote,
-    Method::VoteOcclusion,
-    Method::VoteWeighted,
-    Method::FlashSplat,
+pub const ALL_METHODS: [Lifter; 6] = [
+    Lifter::Fuse(Method::Vote),
+    Lifter::Fuse(Method::VoteOcclusion),
+    Lifter::Fuse(Method::VoteWeighted),
+    Lifter::Fuse(Method::FlashSplat),
+    Lifter::JointSemantics,
+    Lifter::JointFull,
 ];
+
+/// Iterations of the joint methods in a benchmark (short schedules: the benchmark compares
+/// methods at a budget, not joint optimization at convergence).
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct JointSchedule {
+    pub semantics_only_iters: u32,
+    pub full_iters: u32,
+    /// Joint full may grow the model to this multiple of the input's Gaussians.
+    pub max_growth: f64,
+}
+
+impl Default for JointSchedule {
+    fn default() -> Self {
+        JointSchedule {
+            semantics_only_iters: 60,
+            full_iters: 60,
+            max_growth: 1.5,
+        }
+    }
+}
 
 #[derive(Clone, Debug, Serialize)]
 pub struct MethodScore {
@@ -55,6 +92,26 @@ pub struct MethodScore {
     /// The winning class's share of each Gaussian's evidence.
     #[serde(skip)]
     pub confidence: Vec<f32>,
+    /// The scene `classes` refer to when the method changed the Gaussians (joint full);
+    /// None: the input scene.
+    #[serde(skip)]
+    pub lifted: Option<LiftedScene>,
+}
+
+/// A scene a method rebuilt, with the truth carried through densification.
+#[derive(Clone, Debug)]
+pub struct LiftedScene {
+    pub gaussians: Gaussians,
+    /// True class and instance per Gaussian (-1: none).
+    pub truth: Vec<i32>,
+    pub instances: Vec<i32>,
+}
+
+impl MethodScore {
+    /// The Gaussians `classes` label.
+    pub fn scene<'a>(&'a self, input: &'a Gaussians) -> &'a Gaussians {
+        self.lifted.as_ref().map_or(input, |l| &l.gaussians)
+    }
 }
 
 /// How a method treated one consistently mislabeled object (paper 000's limitation: a
@@ -75,9 +132,13 @@ pub struct MislabelFollow {
 
 /// For every consistently mislabeled object of the scene's noise: what `score` assigned.
 pub fn mislabel_follow(s: &SynthScene, score: &MethodScore) -> Vec<MislabelFollow> {
-    let (Some(noisy), Some(instances)) = (&s.noisy, &s.gaussians.instance_ids) else {
+    let (Some(noisy), Some(input_instances)) = (&s.noisy, &s.gaussians.instance_ids) else {
         return Vec::new();
     };
+    let instances = score
+        .lifted
+        .as_ref()
+        .map_or(input_instances, |l| &l.instances);
     noisy
         .report
         .consistent
@@ -181,10 +242,11 @@ pub fn score_methods(
     gpu: &Gpu,
     s: &SynthScene,
     which: TrainLabels,
-    methods: &[Method],
+    methods: &[Lifter],
+    joint: &JointSchedule,
     mut progress: impl FnMut(&str),
 ) -> Result<Vec<MethodScore>> {
-    let truth = s.gaussians.class_ids.clone().unwrap_or_default();
+    let truth0 = s.gaussians.class_ids.clone().unwrap_or_default();
     let compact = CompactClasses::from_table(&s.room.classes)?;
     let labels = train_labels(s, which, &compact)?;
     let test: Vec<(usize, &Camera)> = s
@@ -198,51 +260,148 @@ pub fn score_methods(
         "the scene has no held-out test views to evaluate on"
     );
     let mut out = Vec::new();
-    for &method in methods {
-        progress(method_name(method));
+    for &lifter in methods {
+        progress(method_name(lifter));
         let start = Instant::now();
-        let scene = GpuScene::upload(gpu, &s.gaussians)?;
-        let cfg = FuseConfig {
-            method,
-            ..Default::default()
+        let lifted = match lifter {
+            Lifter::Fuse(method) => fuse_lifted(gpu, s, method, &labels, &compact)?,
+            Lifter::JointSemantics | Lifter::JointFull => {
+                joint_lifted(gpu, s, which, lifter == Lifter::JointFull, joint, &compact)?
+            }
         };
-        let (evidence, stats) = accumulate(
-            gpu,
-            &scene,
-            &s.cameras,
-            &labels,
-            compact.len(),
-            &cfg,
-            |_, _| {},
-        )?;
-        let assignment = assign_semantic(&evidence);
-        let classes: Vec<i32> = assignment
-            .class
-            .iter()
-            .map(|c| {
-                c.and_then(|e| compact.user_of(e))
-                    .map_or(-1, |id| id as i32)
-            })
-            .collect();
         let seconds = start.elapsed().as_secs_f64();
+        let Lifted {
+            classes,
+            confidence,
+            lifted,
+            peak_device_bytes,
+        } = lifted;
+        let scene = lifted.as_ref().map_or(&s.gaussians, |l| &l.gaussians);
+        let truth = lifted.as_ref().map_or(&truth0, |l| &l.truth);
 
         let mut confusion = Confusion::default();
-        let mut renderer = LabelRenderer::new(gpu, &s.gaussians, &classes)?;
+        let mut renderer = LabelRenderer::new(gpu, scene, &classes)?;
         for &(i, cam) in &test {
             confusion.add(&s.views[i].labels, &renderer.render(cam)?, LabelMap::IGNORE);
         }
         let seg = confusion.scores();
         out.push(MethodScore {
-            method: method_name(method),
+            method: method_name(lifter),
             seconds,
             miou: seg.miou,
             pixel_accuracy: seg.pixel_accuracy,
-            gaussian_accuracy: gaussian_accuracy(&classes, &truth),
-            peak_device_bytes: stats.peak_device_bytes,
+            gaussian_accuracy: gaussian_accuracy(&classes, truth),
+            peak_device_bytes,
             per_class: seg.per_class,
             classes,
-            confidence: assignment.confidence,
+            confidence,
+            lifted,
         });
     }
     Ok(out)
+}
+
+/// What a method produced: classes (user ids, -1 unseen) and confidences per Gaussian of
+/// the scene it returns (None: the input scene, unchanged), and the truth for that scene
+/// when its Gaussians differ from the input's.
+struct Lifted {
+    classes: Vec<i32>,
+    confidence: Vec<f32>,
+    lifted: Option<LiftedScene>,
+    peak_device_bytes: u64,
+}
+
+fn fuse_lifted(
+    gpu: &Gpu,
+    s: &SynthScene,
+    method: Method,
+    labels: &Vec<Option<Vec<u32>>>,
+    compact: &CompactClasses,
+) -> Result<Lifted> {
+    let scene = GpuScene::upload(gpu, &s.gaussians)?;
+    let cfg = FuseConfig {
+        method,
+        ..Default::default()
+    };
+    let (evidence, stats) = accumulate(
+        gpu,
+        &scene,
+        &s.cameras,
+        labels,
+        compact.len(),
+        &cfg,
+        |_, _| {},
+    )?;
+    let assignment = assign_semantic(&evidence);
+    let classes = assignment
+        .class
+        .iter()
+        .map(|c| {
+            c.and_then(|e| compact.user_of(e))
+                .map_or(-1, |id| id as i32)
+        })
+        .collect();
+    Ok(Lifted {
+        classes,
+        confidence: assignment.confidence,
+        lifted: None,
+        peak_device_bytes: stats.peak_device_bytes,
+    })
+}
+
+/// Joint optimization from the scene's Gaussians (the trained 3DGS every method gets),
+/// with small random logits; full mode also refines geometry and densifies.
+fn joint_lifted(
+    gpu: &Gpu,
+    s: &SynthScene,
+    which: TrainLabels,
+    full: bool,
+    schedule: &JointSchedule,
+    compact: &CompactClasses,
+) -> Result<Lifted> {
+    let views = synth_train_views(s, which, compact)?;
+    let init = with_initial_logits(&s.gaussians, compact.len(), s.config.seed);
+    // Truth and instances ride along through densification (small integers, exact in f32).
+    let rider = |v: &Option<Vec<i32>>| -> Vec<f32> {
+        v.as_ref()
+            .map(|c| c.iter().map(|&v| v as f32).collect())
+            .unwrap_or_else(|| vec![-1.0; s.gaussians.len()])
+    };
+    let riders = [
+        rider(&s.gaussians.class_ids),
+        rider(&s.gaussians.instance_ids),
+    ];
+    let cfg = if full {
+        let mut cfg = TrainConfig::new(schedule.full_iters);
+        if let Some(d) = &mut cfg.densify {
+            d.max_gaussians = (s.gaussians.len() as f64 * schedule.max_growth) as u32;
+        }
+        cfg
+    } else {
+        TrainConfig::semantics_only(schedule.semantics_only_iters)
+    };
+    let mut trainer = Trainer::new(gpu, &init, &views, cfg.clone(), &riders)?;
+    for _ in 0..cfg.iters {
+        trainer.step()?;
+    }
+    let out = trainer.finish()?;
+    let (compact_classes, confidence) = classes_from_logits(&out.gaussians, &out.seen);
+    let classes = compact_classes
+        .iter()
+        .map(|c| {
+            c.and_then(|c| compact.user_of(c as usize))
+                .map_or(-1, |id| id as i32)
+        })
+        .collect();
+    let ints = |v: &[f32]| v.iter().map(|&v| v as i32).collect();
+    Ok(Lifted {
+        classes,
+        confidence,
+        lifted: Some(LiftedScene {
+            truth: ints(&out.riders[0]),
+            instances: ints(&out.riders[1]),
+            gaussians: out.gaussians,
+        }),
+        peak_device_bytes: out.peak_device_bytes,
+    })
 }

@@ -226,6 +226,26 @@ impl Recorder {
         Ok(())
     }
 
+    /// [`Recorder::dispatch`] where the buffers in `optional` are bound only if the kernel
+    /// uses them (the optimizer drops bindings a variant never reads).
+    pub fn dispatch_with_optional(
+        &mut self,
+        kernel: KernelId,
+        bindings: &[(&str, &Buffer)],
+        optional: &[(&str, &Buffer)],
+        push: &[u8],
+        groups: [u32; 3],
+    ) -> GpuResult<()> {
+        let used = kernel.info().bindings;
+        let mut all = bindings.to_vec();
+        all.extend(
+            optional
+                .iter()
+                .filter(|(name, _)| used.iter().any(|b| b.name == *name)),
+        );
+        self.dispatch(kernel, &all, push, groups)
+    }
+
     /// Dispatches with the workgroup count read from `args` at byte `offset`
     /// (three u32: x, y, z), so counts computed on the GPU need no readback.
     pub fn dispatch_indirect(

@@ -72,6 +72,9 @@ pub struct SceneGrads {
     /// Accumulate with float atomics (default where the device has them) or with the
     /// compare-and-swap fallback.
     pub float_atomics: bool,
+    /// Compute only the semantic vectors' gradient (training the logits with geometry
+    /// frozen): a cheaper blend backward and no projection backward.
+    pub semantics_only: bool,
 }
 
 /// Gradients downloaded to the host (tests, diagnostics).
@@ -112,6 +115,7 @@ impl SceneGrads {
             carry: b("backward_carry", 1)?,
             placeholder: b("placeholder", 4)?,
             float_atomics: gpu.caps().float_atomic_add,
+            semantics_only: false,
         };
         let mut rec = Recorder::new(gpu)?;
         grads.record_zero(&mut rec);
@@ -254,10 +258,11 @@ impl TileLists<'_> {
         );
         rec.fill(&grads.screen, 0, grads.screen.size(), 0);
         rec.barrier();
-        let kernel = if grads.float_atomics {
-            ids::RASTER_BLEND_BACKWARD
-        } else {
-            ids::RASTER_BLEND_BACKWARD_CAS
+        let kernel = match (grads.semantics_only, grads.float_atomics) {
+            (false, true) => ids::RASTER_BLEND_BACKWARD,
+            (false, false) => ids::RASTER_BLEND_BACKWARD_CAS,
+            (true, true) => ids::RASTER_BLEND_BACKWARD_SEM_ONLY,
+            (true, false) => ids::RASTER_BLEND_BACKWARD_SEM_ONLY_CAS,
         };
         let bg = opts.background;
         let chunks = channels.div_ceil(SEM_CHUNK).max(1);
@@ -268,32 +273,40 @@ impl TileLists<'_> {
                     window: [w * window_len, window_len, chunk * SEM_CHUNK, 0],
                     background: [bg[0], bg[1], bg[2], 0.0],
                 };
-                rec.dispatch(
+                let bindings: [(&str, &Buffer); 12] = [
+                    ("tile_ranges", self.ranges()),
+                    ("isect_ids", self.isect_ids()),
+                    ("xy_depth_opacity", self.xy_depth_opacity()),
+                    ("xy_frac", self.xy_frac()),
+                    ("conics", self.conics()),
+                    ("final_t", self.final_t()),
+                    ("last_entry", self.last_entry()),
+                    ("n_contrib", self.n_contrib()),
+                    ("v_sem_norm", upstream.sem_norm),
+                    ("carry", &grads.carry),
+                    ("grad2d", &grads.screen),
+                    ("grad_sem", sem_target),
+                ];
+                // What the alpha and color gradients read (not the semantic-only variant).
+                let optional: [(&str, &Buffer); 5] = [
+                    ("colors", self.colors()),
+                    ("sem_in", sem_in),
+                    ("sem_norm", sem_norm),
+                    ("v_rgb", upstream.rgb),
+                    ("v_alpha", upstream.alpha),
+                ];
+                rec.dispatch_with_optional(
                     kernel,
-                    &[
-                        ("tile_ranges", self.ranges()),
-                        ("isect_ids", self.isect_ids()),
-                        ("xy_depth_opacity", self.xy_depth_opacity()),
-                        ("xy_frac", self.xy_frac()),
-                        ("conics", self.conics()),
-                        ("colors", self.colors()),
-                        ("sem_in", sem_in),
-                        ("final_t", self.final_t()),
-                        ("last_entry", self.last_entry()),
-                        ("n_contrib", self.n_contrib()),
-                        ("sem_norm", sem_norm),
-                        ("v_rgb", upstream.rgb),
-                        ("v_alpha", upstream.alpha),
-                        ("v_sem_norm", upstream.sem_norm),
-                        ("carry", &grads.carry),
-                        ("grad2d", &grads.screen),
-                        ("grad_sem", sem_target),
-                    ],
+                    &bindings,
+                    &optional,
                     bytemuck::bytes_of(&params),
                     [self.tiles_x, self.tiles_y, 1],
                 )?;
                 rec.barrier();
             }
+        }
+        if grads.semantics_only {
+            return Ok(());
         }
         self.record_project_backward(rec, scene, cam, grads)
     }
@@ -339,6 +352,24 @@ impl TileLists<'_> {
     }
 }
 
+/// Which backward kernels [`Rasterizer::render_backward`] runs.
+#[derive(Clone, Copy, Debug)]
+pub struct BackwardVariant {
+    /// false: the compare-and-swap accumulation, as on devices without float atomics.
+    pub float_atomics: bool,
+    /// Only the semantic vectors' gradient (see [`SceneGrads::semantics_only`]).
+    pub semantics_only: bool,
+}
+
+impl Default for BackwardVariant {
+    fn default() -> Self {
+        BackwardVariant {
+            float_atomics: true,
+            semantics_only: false,
+        }
+    }
+}
+
 /// Upstream gradients on the host, for [`Rasterizer::render_backward`].
 pub struct HostPixelGrads<'a> {
     pub rgb: &'a [f32],
@@ -349,14 +380,13 @@ pub struct HostPixelGrads<'a> {
 impl Rasterizer {
     /// Renders one view and back-propagates the given per-pixel gradients through it, in
     /// one submission; returns the frame and the parameter gradients (tests, tools).
-    /// `float_atomics: false` forces the compare-and-swap accumulation.
     pub fn render_backward(
         &mut self,
         scene: &GpuScene,
         cam: &Camera,
         opts: &RenderOptions,
         upstream: &HostPixelGrads,
-        float_atomics: bool,
+        variant: BackwardVariant,
     ) -> Result<(RenderedFrame, HostGrads)> {
         let gpu = self.gpu().clone();
         let pixels = cam.width as u64 * cam.height as u64;
@@ -379,7 +409,8 @@ impl Rasterizer {
             gpu.buffer("v_sem_norm", 4)?
         };
         let mut grads = SceneGrads::new(&gpu, scene)?;
-        grads.float_atomics = float_atomics && gpu.caps().float_atomic_add;
+        grads.float_atomics = variant.float_atomics && gpu.caps().float_atomic_add;
+        grads.semantics_only = variant.semantics_only;
         let windows = scene.n.div_ceil(self.window_len()).max(1);
         grads.prepare_view(&gpu, pixels, windows)?;
         let sem_buf = match opts.semantics {

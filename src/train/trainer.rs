@@ -68,6 +68,9 @@ pub struct TrainOutput {
     pub riders: Vec<Vec<f32>>,
     pub times: StageTotals,
     pub densify_events: Vec<DensifyEvent>,
+    /// Device memory the run held at its end (buffers of the final model, gradients,
+    /// moments, views).
+    pub peak_device_bytes: u64,
 }
 
 /// A parameter tensor: its buffer, gradient, width per Gaussian, and how densification
@@ -140,7 +143,8 @@ impl Trainer {
             ensure!(r.len() == init.len(), "a rider has the wrong length");
         }
         let scene = GpuScene::upload(gpu, init)?;
-        let grads = SceneGrads::new(gpu, &scene)?;
+        let mut grads = SceneGrads::new(gpu, &scene)?;
+        grads.semantics_only = cfg.semantics_only;
         let device_views = views
             .iter()
             .map(|v| v.upload(gpu, channels))
@@ -500,6 +504,7 @@ impl Trainer {
 
     /// Ends the run: the model, which Gaussians the training views see, the riders.
     pub fn finish(mut self) -> Result<TrainOutput> {
+        let peak_device_bytes = self.gpu.memory_reserved();
         let gaussians = self.gaussians()?;
         let mut seen = vec![false; self.scene.n as usize];
         let opts = RenderOptions {
@@ -526,6 +531,7 @@ impl Trainer {
             riders,
             times: self.times,
             densify_events: self.events,
+            peak_device_bytes,
         })
     }
 }

@@ -71,7 +71,8 @@ fn conic_backward(cov2d: [f64; 3], grad_conic: [f64; 3]) -> [f64; 3] {
     let grad_det = if det_raw > DET_MIN {
         -(ga * conic[0] + gb * conic[1] + gc * conic[2]) / det
     } else {
-        // The clamp holds det constant.
+        // The clamp holds det constant. (It cannot bind for a PSD covariance: the 0.3
+        // dilation alone keeps det >= 0.09.)
         0.0
     };
     [
