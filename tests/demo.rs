@@ -19,6 +19,10 @@ fn demo_reports_every_method_with_finite_numbers_and_valid_charts() {
             "96",
             "--height",
             "72",
+            "--semantics-only-iters",
+            "25",
+            "--joint-iters",
+            "25",
         ])
         .arg("--out")
         .arg(&out)
@@ -39,7 +43,14 @@ fn demo_reports_every_method_with_finite_numbers_and_valid_charts() {
         .collect();
     assert_eq!(
         names,
-        ["vote", "vote --occlusion", "vote --weighted", "flashsplat"]
+        [
+            "vote",
+            "vote --occlusion",
+            "vote --weighted",
+            "flashsplat",
+            "joint --semantics-only",
+            "joint"
+        ]
     );
     for m in methods {
         for key in ["seconds", "miou", "pixel_accuracy", "gaussian_accuracy"] {

@@ -131,11 +131,11 @@ fn joint_training_improves_held_out_psnr_and_semantics() {
     );
     assert!(out.gaussians.len() <= 12_000, "the cap was exceeded");
     assert!(out.gaussians.len() > init.len(), "densification never ran");
-    // Measured (this seed, lavapipe): PSNR 8.9 -> 18.5 dB, accuracy 0.11 -> 0.93. The
-    // bounds leave ~2 dB and ~0.08 of room for run-to-run change (atomic order) while
+    // Measured (this seed, lavapipe): PSNR 9.0 -> 17.1 dB, accuracy 0.15 -> 0.92. The
+    // bounds leave ~2 dB and ~0.07 of room for run-to-run change (atomic order) while
     // still failing if training only partly works (e.g. a wrong-sign gradient, or no
     // semantic gradient: accuracy stays near chance).
-    assert!(psnr1 > psnr0 + 7.0, "PSNR {psnr0:.2} -> {psnr1:.2}");
+    assert!(psnr1 > psnr0 + 6.0, "PSNR {psnr0:.2} -> {psnr1:.2}");
     assert!(acc1 > 0.85, "held-out label accuracy {acc1:.3}");
     common::check_validation(common::gpu());
 }
@@ -210,7 +210,7 @@ fn semantics_only_is_comparable_to_flashsplat() {
     let acc_flash = acc(&|i| flash.class[i].map(|c| c as u32));
     let acc_joint = acc(&|i| joint[i]);
     println!("per-Gaussian accuracy over {} contributing: flashsplat {acc_flash:.4}, semantics-only {acc_joint:.4}", contributing.len());
-    // Measured: flashsplat 0.94, semantics-only 0.93 after 100 iterations. "Comparable":
+    // Measured: flashsplat 0.911, semantics-only 0.902 after 100 iterations. "Comparable":
     // within 0.03 of FlashSplat.
     assert!(
         acc_joint > acc_flash - 0.03,

@@ -3,12 +3,12 @@
 
 use std::path::PathBuf;
 
-use super::joint_args::JointArgs;
+use super::joint_args::MethodArgs;
 use anyhow::{Context, Result};
 use clap::Args;
 use serde::Serialize;
 
-use semsplat::eval::benchmark::{score_methods, MethodScore, TrainLabels, ALL_METHODS};
+use semsplat::eval::benchmark::{score_methods, MethodScore, TrainLabels};
 use semsplat::eval::chart::{speed_vs_accuracy, SpeedPoint};
 use semsplat::eval::label_render::LabelRenderer;
 use semsplat::eval::strip::write_strip;
@@ -41,7 +41,7 @@ pub struct DemoArgs {
     #[arg(long)]
     noise: Option<NoiseSpec>,
     #[command(flatten)]
-    joint: JointArgs,
+    methods: MethodArgs,
 }
 
 #[derive(Serialize)]
@@ -84,23 +84,24 @@ pub fn run(args: DemoArgs) -> Result<()> {
         args.preset, args.views, args.test_views, args.width, args.height
     );
     let s = generate(&cfg)?;
+    let methods = args.methods.methods()?;
     let gpu = Gpu::new()?;
     let which = if args.noise.is_some() {
         TrainLabels::Noisy
     } else {
         TrainLabels::True
     };
-    let scores = score_methods(&gpu, &s, which, &ALL_METHODS, &args.joint.schedule(), |m| {
+    let scores = score_methods(&gpu, &s, which, &methods, &args.methods.schedule(), |m| {
         eprintln!("lifting with {m}")
     })?;
 
     println!(
-        "{:<18} {:>9} {:>8} {:>10} {:>10} {:>10}",
+        "{:<24} {:>9} {:>8} {:>10} {:>10} {:>10}",
         "method", "seconds", "mIoU", "pixel acc", "3D acc", "memory"
     );
     for r in &scores {
         println!(
-            "{:<18} {:>9.2} {:>8.3} {:>10.3} {:>10.3} {:>7.0} MiB",
+            "{:<24} {:>9.2} {:>8.3} {:>10.3} {:>10.3} {:>7.0} MiB",
             r.method,
             r.seconds,
             r.miou,

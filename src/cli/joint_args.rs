@@ -1,12 +1,17 @@
-//! The joint methods' schedule in `demo` and `sweep` (shared flags).
+//! Which methods `demo` and `sweep` run, and the joint methods' schedule (shared flags).
 
+use anyhow::{anyhow, Result};
 use clap::Args;
 
-use semsplat::eval::benchmark::JointSchedule;
+use semsplat::eval::benchmark::{JointSchedule, Lifter, ALL_METHODS};
 
-#[derive(Args, Clone, Copy)]
-pub struct JointArgs {
-    /// Iterations of `joint --semantics-only` (one view each).
+#[derive(Args, Clone)]
+pub struct MethodArgs {
+    /// Methods to run (default: all): vote, vote-occlusion, vote-weighted, flashsplat,
+    /// joint-semantics (train --semantics-only), joint (full joint training).
+    #[arg(long, value_delimiter = ',', num_args = 1..)]
+    methods: Vec<String>,
+    /// Iterations of joint-semantics (one view each).
     #[arg(long, default_value_t = JointSchedule::default().semantics_only_iters)]
     semantics_only_iters: u32,
     /// Iterations of full joint training (geometry, appearance and logits).
@@ -14,7 +19,22 @@ pub struct JointArgs {
     joint_iters: u32,
 }
 
-impl JointArgs {
+impl MethodArgs {
+    pub fn methods(&self) -> Result<Vec<Lifter>> {
+        if self.methods.is_empty() {
+            return Ok(ALL_METHODS.to_vec());
+        }
+        self.methods
+            .iter()
+            .map(|m| {
+                Lifter::from_key(m).ok_or_else(|| {
+                    let keys: Vec<&str> = ALL_METHODS.iter().map(|l| l.key()).collect();
+                    anyhow!("unknown method '{m}' (known: {})", keys.join(", "))
+                })
+            })
+            .collect()
+    }
+
     pub fn schedule(&self) -> JointSchedule {
         JointSchedule {
             semantics_only_iters: self.semantics_only_iters,

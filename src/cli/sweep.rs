@@ -3,14 +3,12 @@
 
 use std::path::PathBuf;
 
-use super::joint_args::JointArgs;
+use super::joint_args::MethodArgs;
 use anyhow::{bail, Result};
 use clap::{Args, ValueEnum};
 use serde::Serialize;
 
-use semsplat::eval::benchmark::{
-    mislabel_follow, score_methods, MislabelFollow, TrainLabels, ALL_METHODS,
-};
+use semsplat::eval::benchmark::{mislabel_follow, score_methods, MislabelFollow, TrainLabels};
 use semsplat::eval::chart::{lines, Line};
 use semsplat::gpu::Gpu;
 use semsplat::scene::synth::{generate, NoiseSpec, RoomSource, SynthConfig};
@@ -75,7 +73,7 @@ pub struct SweepArgs {
     #[arg(long, default_value_t = 0)]
     seed: u64,
     #[command(flatten)]
-    joint: JointArgs,
+    methods: MethodArgs,
 }
 
 #[derive(Serialize)]
@@ -106,6 +104,7 @@ pub fn run(args: SweepArgs) -> Result<()> {
     if levels.iter().any(|l| !l.is_finite() || *l < 0.0) {
         bail!("--levels must be finite and >= 0, got {levels:?}");
     }
+    let methods = args.methods.methods()?;
     let gpu = Gpu::new()?;
     let mut results = Vec::new();
     for &level in &levels {
@@ -127,8 +126,8 @@ pub fn run(args: SweepArgs) -> Result<()> {
             &gpu,
             &s,
             TrainLabels::Noisy,
-            &ALL_METHODS,
-            &args.joint.schedule(),
+            &methods,
+            &args.methods.schedule(),
             |m| eprintln!("  {m}"),
         )?;
         for r in &scores {

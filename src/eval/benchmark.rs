@@ -45,6 +45,24 @@ pub fn method_name(m: Lifter) -> &'static str {
     }
 }
 
+impl Lifter {
+    /// The short name `--methods` takes.
+    pub fn key(self) -> &'static str {
+        match self {
+            Lifter::Fuse(Method::Vote) => "vote",
+            Lifter::Fuse(Method::VoteOcclusion) => "vote-occlusion",
+            Lifter::Fuse(Method::VoteWeighted) => "vote-weighted",
+            Lifter::Fuse(Method::FlashSplat) => "flashsplat",
+            Lifter::JointSemantics => "joint-semantics",
+            Lifter::JointFull => "joint",
+        }
+    }
+
+    pub fn from_key(key: &str) -> Option<Lifter> {
+        ALL_METHODS.into_iter().find(|l| l.key() == key)
+    }
+}
+
 pub const ALL_METHODS: [Lifter; 6] = [
     Lifter::Fuse(Method::Vote),
     Lifter::Fuse(Method::VoteOcclusion),

@@ -79,7 +79,8 @@ pub fn speed_vs_accuracy(
             .map(|p| p.seconds)
             .fold(f64::INFINITY, f64::min);
         let tmax = points.iter().map(|p| p.seconds).fold(0.0, f64::max);
-        let (x0, x1) = (tmin / 2.0, tmax * 2.0);
+        // Room on the right for the slowest point's label (drawn rightwards from it).
+        let (x0, x1) = (tmin / 2.0, tmax * 6.0);
         let mut chart = ChartBuilder::on(root)
             .caption(title, ("sans-serif", 28))
             .margin(20)

@@ -52,7 +52,9 @@ pub struct DensifySchedule {
 }
 
 impl DensifySchedule {
-    /// 3DGS's schedule (500..15000 every 100, opacity reset every 3000) scaled to `iters`.
+    /// 3DGS's schedule (500..15000 every 100) scaled to `iters`; the opacity reset stays
+    /// every 3000 iterations (opacities need about that long to recover from 0.01 at
+    /// their learning rate, so short runs never reset).
     pub fn scaled_to(iters: u32) -> DensifySchedule {
         let s = iters as f64 / REFERENCE_ITERS;
         let at = |v: f64| (v * s).round().max(1.0) as u32;
@@ -60,7 +62,7 @@ impl DensifySchedule {
             from: at(500.0),
             until: at(15_000.0),
             every: at(100.0).max(10),
-            opacity_reset_every: at(3000.0).max(50),
+            opacity_reset_every: 3000,
             grad_threshold: 2e-4,
             max_gaussians: 3_000_000,
         }

@@ -1,10 +1,10 @@
 //! Joint optimization (paper 000): losses, Adam, densification, and the training loop.
 
 pub mod adam;
+pub mod config;
 pub mod densify;
 pub mod loss;
 pub mod loss_entropy;
 pub mod loss_values;
-pub mod config;
 pub mod trainer;
 pub mod views;

@@ -150,22 +150,7 @@ pub fn render_screen(
     settings: &RenderSettings,
 ) -> ReferenceImage {
     let channels = screen.channels;
-    let npix = (cam.width * cam.height) as usize;
-    let mut img = ReferenceImage {
-        width: cam.width,
-        height: cam.height,
-        channels,
-        rgb: vec![[0.0; 3]; npix],
-        alpha: vec![0.0; npix],
-        depth: vec![0.0; npix],
-        depth_sum: vec![0.0; npix],
-        sem: vec![0.0; npix * channels],
-        sem_norm: vec![0.0; npix * channels],
-        final_t: vec![1.0; npix],
-        n_contrib: vec![0; npix],
-        last_contributor_id: vec![None; npix],
-        last_contributor_pos: vec![None; npix],
-    };
+    let mut img = ReferenceImage::blank(cam, channels);
     let replay = Replay::new(screen, cam);
     replay.for_each_pixel(cam, |px, py, blended, outcome| {
         let mut rgb = [0.0f64; 3];
@@ -182,26 +167,7 @@ pub fn render_screen(
             }
         }
         let i = (py * cam.width + px) as usize;
-        let t = outcome.final_t;
-        let covered = 1.0 - t;
-        for (ch, acc) in rgb.iter().enumerate() {
-            img.rgb[i][ch] = acc + t * settings.background[ch];
-        }
-        img.alpha[i] = covered;
-        img.depth_sum[i] = depth_sum;
-        img.depth[i] = if covered > 0.0 {
-            depth_sum / covered
-        } else {
-            0.0
-        };
-        for (c, acc) in sem.iter().enumerate() {
-            img.sem[i * channels + c] = *acc;
-            img.sem_norm[i * channels + c] = if covered > 0.0 { acc / covered } else { 0.0 };
-        }
-        img.final_t[i] = t;
-        img.n_contrib[i] = outcome.n_contrib;
-        img.last_contributor_pos[i] = outcome.last.map(|(pos, _)| pos);
-        img.last_contributor_id[i] = outcome.last.map(|(_, id)| id);
+        img.store_pixel(i, (&rgb, depth_sum, &sem), outcome, settings.background);
     });
     img
 }

@@ -127,6 +127,59 @@ impl ReferenceImage {
         let i = self.index(px, py) * self.channels;
         &self.sem_norm[i..i + self.channels]
     }
+
+    /// An image with nothing blended yet (T = 1 everywhere).
+    pub(super) fn blank(cam: &Camera, channels: usize) -> ReferenceImage {
+        let npix = (cam.width * cam.height) as usize;
+        ReferenceImage {
+            width: cam.width,
+            height: cam.height,
+            channels,
+            rgb: vec![[0.0; 3]; npix],
+            alpha: vec![0.0; npix],
+            depth: vec![0.0; npix],
+            depth_sum: vec![0.0; npix],
+            sem: vec![0.0; npix * channels],
+            sem_norm: vec![0.0; npix * channels],
+            final_t: vec![1.0; npix],
+            n_contrib: vec![0; npix],
+            last_contributor_id: vec![None; npix],
+            last_contributor_pos: vec![None; npix],
+        }
+    }
+
+    /// Stores pixel `i`'s outputs from its blended sums (`sum w c`, `sum w z`, `sum w s`)
+    /// and what compositing left: background, normalization by `1 - T_final` (Eq. 2).
+    pub(super) fn store_pixel(
+        &mut self,
+        i: usize,
+        sums: (&[f64; 3], f64, &[f64]),
+        outcome: &PixelOutcome,
+        background: [f64; 3],
+    ) {
+        let (rgb, depth_sum, sem) = sums;
+        let channels = self.channels;
+        let t = outcome.final_t;
+        let covered = 1.0 - t;
+        for (ch, acc) in rgb.iter().enumerate() {
+            self.rgb[i][ch] = acc + t * background[ch];
+        }
+        self.alpha[i] = covered;
+        self.depth_sum[i] = depth_sum;
+        self.depth[i] = if covered > 0.0 {
+            depth_sum / covered
+        } else {
+            0.0
+        };
+        for (c, acc) in sem.iter().enumerate() {
+            self.sem[i * channels + c] = *acc;
+            self.sem_norm[i * channels + c] = if covered > 0.0 { acc / covered } else { 0.0 };
+        }
+        self.final_t[i] = t;
+        self.n_contrib[i] = outcome.n_contrib;
+        self.last_contributor_pos[i] = outcome.last.map(|(pos, _)| pos);
+        self.last_contributor_id[i] = outcome.last.map(|(_, id)| id);
+    }
 }
 
 /// Projection plus tile lists for one view.
@@ -224,22 +277,7 @@ pub fn render(g: &Gaussians, cam: &Camera, settings: &RenderSettings) -> Referen
     // Per Gaussian id, its row in `svec` (= its index in `projected`).
     let slot = &frame.slot;
 
-    let npix = (cam.width * cam.height) as usize;
-    let mut img = ReferenceImage {
-        width: cam.width,
-        height: cam.height,
-        channels,
-        rgb: vec![[0.0; 3]; npix],
-        alpha: vec![0.0; npix],
-        depth: vec![0.0; npix],
-        depth_sum: vec![0.0; npix],
-        sem: vec![0.0; npix * channels],
-        sem_norm: vec![0.0; npix * channels],
-        final_t: vec![1.0; npix],
-        n_contrib: vec![0; npix],
-        last_contributor_id: vec![None; npix],
-        last_contributor_pos: vec![None; npix],
-    };
+    let mut img = ReferenceImage::blank(cam, channels);
 
     let mut sem_acc = vec![0.0f64; channels];
     frame.for_each_pixel(cam, |px, py, tile| {
@@ -258,26 +296,12 @@ pub fn render(g: &Gaussians, cam: &Camera, settings: &RenderSettings) -> Referen
         });
 
         let i = (py * cam.width + px) as usize;
-        let t = outcome.final_t;
-        let covered = 1.0 - t;
-        for (ch, acc) in rgb.iter().enumerate() {
-            img.rgb[i][ch] = acc + t * settings.background[ch];
-        }
-        img.alpha[i] = covered;
-        img.depth_sum[i] = depth_sum;
-        img.depth[i] = if covered > 0.0 {
-            depth_sum / covered
-        } else {
-            0.0
-        };
-        for (c, acc) in sem_acc.iter().enumerate() {
-            img.sem[i * channels + c] = *acc;
-            img.sem_norm[i * channels + c] = if covered > 0.0 { acc / covered } else { 0.0 };
-        }
-        img.final_t[i] = t;
-        img.n_contrib[i] = outcome.n_contrib;
-        img.last_contributor_pos[i] = outcome.last.map(|(pos, _)| pos);
-        img.last_contributor_id[i] = outcome.last.map(|(_, id)| id);
+        img.store_pixel(
+            i,
+            (&rgb, depth_sum, &sem_acc),
+            &outcome,
+            settings.background,
+        );
     });
     img
 }

@@ -183,6 +183,17 @@ fn to_f64<const N: usize>(v: [f32; N]) -> [f64; N] {
     v.map(f64::from)
 }
 
+/// One Gaussian's parameters in f64, as the projection reads them (from a scene's f32
+/// arrays, or from the f64 parameters the finite-difference tests perturb).
+pub(super) struct GaussianValues {
+    pub mean: DVec3,
+    pub log_scale: [f64; 3],
+    pub quat: [f64; 4],
+    pub opacity_logit: f64,
+    pub sh_degree: u32,
+    pub sh: Vec<[f64; 3]>,
+}
+
 /// Projects Gaussian `i`; `Err` says why it is not visible. Panics when `i` is out of range.
 pub fn project_one(
     g: &Gaussians,
@@ -190,10 +201,31 @@ pub fn project_one(
     cam: &Camera,
     settings: &RenderSettings,
 ) -> Result<ProjectedGaussian, Culled> {
-    let mean = DVec3::from(to_f64(g.means[i]));
-    let log_scale = to_f64(g.log_scales[i]);
-    let quat = to_f64(g.quats[i]);
-    let logit = f64::from(g.opacity_logits[i]);
+    let k = g.sh_coeffs();
+    let values = GaussianValues {
+        mean: DVec3::from(to_f64(g.means[i])),
+        log_scale: to_f64(g.log_scales[i]),
+        quat: to_f64(g.quats[i]),
+        opacity_logit: f64::from(g.opacity_logits[i]),
+        sh_degree: g.sh_degree,
+        sh: (0..k)
+            .map(|j| {
+                let o = (i * k + j) * 3;
+                [g.sh[o], g.sh[o + 1], g.sh[o + 2]].map(f64::from)
+            })
+            .collect(),
+    };
+    project_values(&values, i as u32, cam, settings)
+}
+
+/// Projects one Gaussian given its values; `id` names it in the result.
+pub(super) fn project_values(
+    v: &GaussianValues,
+    id: u32,
+    cam: &Camera,
+    settings: &RenderSettings,
+) -> Result<ProjectedGaussian, Culled> {
+    let (mean, log_scale, quat, logit) = (v.mean, v.log_scale, v.quat, v.opacity_logit);
     let finite = mean.is_finite()
         && log_scale.iter().all(|v| v.is_finite())
         && quat.iter().all(|v| v.is_finite())
@@ -240,20 +272,13 @@ pub fn project_one(
     };
 
     let degree = match settings.sh_degree {
-        Some(d) => d.min(g.sh_degree),
-        None => g.sh_degree,
+        Some(d) => d.min(v.sh_degree),
+        None => v.sh_degree,
     };
-    let k = g.sh_coeffs();
-    let coeffs: Vec<[f64; 3]> = (0..k)
-        .map(|j| {
-            let o = (i * k + j) * 3;
-            [g.sh[o], g.sh[o + 1], g.sh[o + 2]].map(f64::from)
-        })
-        .collect();
-    let color = sh_color(degree, &coeffs, mean, cam.center());
+    let color = sh_color(degree, &v.sh, mean, cam.center());
 
     Ok(ProjectedGaussian {
-        id: i as u32,
+        id,
         mean_cam: p,
         mean2d,
         cov2d: [a, b, c],

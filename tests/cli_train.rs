@@ -1,0 +1,191 @@
+//! `semsplat train` end to end on a tiny synth room, and its bad input.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use semsplat::scene::ply::read_ply;
+
+fn semsplat(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_semsplat"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn synth(dir: &Path) {
+    let out = semsplat(&[
+        "synth",
+        "--preset",
+        "tiny",
+        "--views",
+        "4",
+        "--test-views",
+        "1",
+        "--width",
+        "48",
+        "--height",
+        "36",
+        "--no-previews",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+fn train_args<'a>(d: &'a str, out: &'a str) -> Vec<String> {
+    [
+        "train",
+        "--images",
+        &format!("{d}/images"),
+        "--labels",
+        &format!("{d}/labels"),
+        "--cameras",
+        &format!("{d}/cameras.json"),
+        "--init",
+        &format!("{d}/init.ply"),
+        "--out",
+        out,
+        "--train-only",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect()
+}
+
+fn run(args: &[String]) -> Output {
+    let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+    semsplat(&refs)
+}
+
+#[test]
+fn train_writes_classes_logits_checkpoints_and_a_report() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path().join("room");
+    synth(&d);
+    let d = d.to_str().unwrap();
+    let out = tmp.path().join("trained.ply");
+    let report = tmp.path().join("train.json");
+    let mut args = train_args(d, out.to_str().unwrap());
+    args.extend(
+        [
+            "--iters",
+            "30",
+            "--max-gaussians",
+            "8000",
+            "--checkpoint-every",
+            "10",
+            "--report",
+            report.to_str().unwrap(),
+        ]
+        .map(String::from),
+    );
+    let r = run(&args);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let g = read_ply(&out).unwrap();
+    let init = read_ply(Path::new(&format!("{d}/init.ply"))).unwrap();
+    assert!(g.len() <= 8000);
+    let sem = g.semantics.as_ref().expect("logits in the output");
+    assert!(
+        sem.channels >= 2 && sem.channels <= 6,
+        "{} channels",
+        sem.channels
+    );
+    let classes = g.class_ids.as_ref().unwrap();
+    let conf = g.class_conf.as_ref().unwrap();
+    let table: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(tmp.path().join("trained.classes.json")).unwrap())
+            .unwrap();
+    let ids: Vec<i64> = table["classes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["id"].as_i64().unwrap())
+        .collect();
+    for (c, p) in classes.iter().zip(conf) {
+        assert!(
+            *c == -1 || ids.contains(&(*c as i64)),
+            "class {c} not in the table"
+        );
+        assert!((0.0..=1.0).contains(p));
+    }
+    assert!(classes.iter().any(|&c| c >= 0));
+    for it in [10, 20] {
+        assert!(tmp.path().join(format!("trained.iter{it}.ply")).is_file());
+    }
+    let rep: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    assert_eq!(
+        rep["initial_gaussians"].as_u64().unwrap() as usize,
+        init.len()
+    );
+    assert!(!rep["log"].as_array().unwrap().is_empty());
+    for key in ["forward_ms", "loss_ms", "backward_ms", "optimizer_ms"] {
+        let v = rep["stage_ms_per_iteration"][key].as_f64().unwrap();
+        assert!(v.is_finite() && v >= 0.0, "{key}: {v}");
+    }
+}
+
+#[test]
+fn semantics_only_keeps_the_geometry() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path().join("room");
+    synth(&d);
+    let d = d.to_str().unwrap();
+    let out = tmp.path().join("sem.ply");
+    let mut args = train_args(d, out.to_str().unwrap());
+    args[8] = format!("{d}/scene.ply");
+    args.extend(["--iters", "15", "--semantics-only"].map(String::from));
+    let r = run(&args);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let g = read_ply(&out).unwrap();
+    let scene = read_ply(Path::new(&format!("{d}/scene.ply"))).unwrap();
+    assert_eq!(g.means, scene.means);
+    assert_eq!(g.log_scales, scene.log_scales);
+    assert_eq!(g.sh, scene.sh);
+    assert_eq!(g.opacity_logits, scene.opacity_logits);
+}
+
+#[test]
+fn bad_input_gives_a_clear_error_and_no_output() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path().join("room");
+    synth(&d);
+    let ds = d.to_str().unwrap();
+    let out = tmp.path().join("never.ply");
+    let outs = out.to_str().unwrap();
+
+    // No images folder.
+    let mut args = train_args(ds, outs);
+    args[2] = format!("{ds}/nothing_here");
+    args.extend(["--iters", "5"].map(String::from));
+    let r = run(&args);
+    assert!(!r.status.success());
+    assert!(String::from_utf8_lossy(&r.stderr).contains("no image for camera"));
+
+    // More Gaussians than allowed.
+    let mut args = train_args(ds, outs);
+    args.extend(["--iters", "5", "--max-gaussians", "10"].map(String::from));
+    let r = run(&args);
+    assert!(!r.status.success());
+    assert!(String::from_utf8_lossy(&r.stderr).contains("more than --max-gaussians"));
+
+    // An image of the wrong size.
+    let first = std::fs::read_dir(d.join("images"))
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path();
+    image::RgbImage::new(10, 10).save(&first).unwrap();
+    let mut args = train_args(ds, outs);
+    args.extend(["--iters", "5"].map(String::from));
+    let r = run(&args);
+    assert!(!r.status.success());
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(err.contains("is 10x10 but camera"), "{err}");
+
+    assert!(!out.exists(), "a failed run left {}", out.display());
+}
