@@ -33,6 +33,10 @@
 // Parameter loops index several parallel arrays at once, like the formulas they check.
 #![allow(clippy::needless_range_loop)]
 
+mod common;
+
+use common::spec_scene::{scene, Spec};
+
 use std::time::Instant;
 
 use glam::{DMat3, DQuat, DVec3};
@@ -45,7 +49,7 @@ use semsplat::render::reference::{
     FRUSTUM_MARGIN, MAX_ALPHA, T_STOP,
 };
 use semsplat::scene::random_scene::{random_scene, RandomSceneSpec};
-use semsplat::scene::{Camera, Gaussians, SemanticLogits, Split};
+use semsplat::scene::{Camera, Gaussians, Split};
 use semsplat::util::Rng;
 
 /// Relative tolerance of the FD comparison (see the module docs).
@@ -92,41 +96,6 @@ fn posed_camera(width: u32, height: u32) -> Camera {
         translation: DVec3::new(0.3, -0.2, 0.5),
         split: Split::Train,
     }
-}
-
-#[derive(Clone)]
-struct Spec {
-    mean: [f32; 3],
-    log_scale: [f32; 3],
-    quat: [f32; 4],
-    logit: f32,
-    /// `[coeff][rgb]`; all specs of a scene must have the same count.
-    sh: Vec<[f32; 3]>,
-    logits: Vec<f32>,
-}
-
-fn scene(specs: &[Spec]) -> Gaussians {
-    let coeffs = specs[0].sh.len();
-    let channels = specs[0].logits.len();
-    let mut g = Gaussians {
-        sh_degree: (coeffs as f64).sqrt() as u32 - 1,
-        ..Default::default()
-    };
-    let mut logits = Vec::new();
-    for s in specs {
-        assert_eq!((s.sh.len(), s.logits.len()), (coeffs, channels));
-        g.means.push(s.mean);
-        g.log_scales.push(s.log_scale);
-        g.quats.push(s.quat);
-        g.opacity_logits.push(s.logit);
-        g.sh.extend(s.sh.iter().flatten());
-        logits.extend_from_slice(&s.logits);
-    }
-    if channels > 0 {
-        g.semantics = Some(SemanticLogits { channels, logits });
-    }
-    g.check_layout().unwrap();
-    g
 }
 
 /// A Gaussian at pixel `(u, v)` and depth `z` of `cam`, with random rotation, SH and

@@ -5,11 +5,15 @@
 // Channel loops index several parallel arrays at once, like the formulas they check.
 #![allow(clippy::needless_range_loop)]
 
+mod common;
+
+use common::spec_scene::{scene, Spec};
+
 use std::collections::BTreeSet;
 
 use glam::{DMat3, DQuat, DVec3};
 use semsplat::render::reference::*;
-use semsplat::scene::{Camera, Gaussians, SemanticLogits, Split};
+use semsplat::scene::{Camera, Gaussians, Split};
 use semsplat::util::Rng;
 
 // ---------------------------------------------------------------- helpers
@@ -29,17 +33,6 @@ fn camera(width: u32, height: u32, f: f64, cx: f64, cy: f64) -> Camera {
     }
 }
 
-#[derive(Clone)]
-struct Spec {
-    mean: [f32; 3],
-    log_scale: [f32; 3],
-    quat: [f32; 4],
-    logit: f32,
-    /// `[coeff][rgb]`; all specs of a scene must have the same count.
-    sh: Vec<[f32; 3]>,
-    logits: Vec<f32>,
-}
-
 /// An isotropic, unrotated, degree-0 Gaussian.
 fn iso(mean: [f32; 3], log_scale: f32, logit: f32, dc: [f32; 3]) -> Spec {
     Spec {
@@ -50,32 +43,6 @@ fn iso(mean: [f32; 3], log_scale: f32, logit: f32, dc: [f32; 3]) -> Spec {
         sh: vec![dc],
         logits: vec![],
     }
-}
-
-fn scene(specs: &[Spec]) -> Gaussians {
-    let coeffs = specs.first().map_or(1, |s| s.sh.len());
-    let degree = (coeffs as f64).sqrt() as u32 - 1;
-    let channels = specs.first().map_or(0, |s| s.logits.len());
-    let mut g = Gaussians {
-        sh_degree: degree,
-        ..Default::default()
-    };
-    let mut logits = Vec::new();
-    for s in specs {
-        assert_eq!(s.sh.len(), coeffs);
-        assert_eq!(s.logits.len(), channels);
-        g.means.push(s.mean);
-        g.log_scales.push(s.log_scale);
-        g.quats.push(s.quat);
-        g.opacity_logits.push(s.logit);
-        g.sh.extend(s.sh.iter().flatten());
-        logits.extend_from_slice(&s.logits);
-    }
-    if channels > 0 {
-        g.semantics = Some(SemanticLogits { channels, logits });
-    }
-    g.check_layout().unwrap();
-    g
 }
 
 fn sigmoid(x: f32) -> f64 {

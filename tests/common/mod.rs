@@ -3,6 +3,8 @@
 //! the layer fails it.
 #![allow(dead_code)]
 
+pub mod spec_scene;
+
 use std::sync::OnceLock;
 
 use glam::DVec3;

@@ -13,10 +13,8 @@ use super::backward_blend::ScreenGrads;
 use super::backward_params::GaussianParams;
 use super::backward_project::{effective_sh_degree, sigmoid};
 use super::backward_sh::sh_color_backward;
-use super::{
-    projection_jacobian, quat_to_rotation, ProjectedGaussian, RenderSettings, DET_MIN,
-    FRUSTUM_MARGIN,
-};
+use super::project::clamped_ratios;
+use super::{projection_jacobian, quat_to_rotation, ProjectedGaussian, RenderSettings, DET_MIN};
 use crate::scene::Camera;
 
 /// `dL/d` of one Gaussian's stored parameters.
@@ -37,26 +35,6 @@ fn from_rows(rows: [[f64; 3]; 3]) -> DMat3 {
 /// Entry (row, column).
 fn at(m: DMat3, row: usize, col: usize) -> f64 {
     m.col(col)[row]
-}
-
-/// gsplat's clamped `x/z` and `y/z` at camera-space `p` (the same limits as
-/// [`projection_jacobian`]), each with whether the clamp changed it.
-fn clamped_ratios(p: DVec3, cam: &Camera) -> [(f64, bool); 2] {
-    let (w, h) = (cam.width as f64, cam.height as f64);
-    let tan_fovx = 0.5 * w / cam.fx;
-    let tan_fovy = 0.5 * h / cam.fy;
-    let lim_x_pos = (w - cam.cx) / cam.fx + FRUSTUM_MARGIN * tan_fovx;
-    let lim_x_neg = cam.cx / cam.fx + FRUSTUM_MARGIN * tan_fovx;
-    let lim_y_pos = (h - cam.cy) / cam.fy + FRUSTUM_MARGIN * tan_fovy;
-    let lim_y_neg = cam.cy / cam.fy + FRUSTUM_MARGIN * tan_fovy;
-    let clamp = |ratio: f64, neg: f64, pos: f64| {
-        let clamped = ratio.max(-neg).min(pos);
-        (clamped, clamped != ratio)
-    };
-    [
-        clamp(p.x / p.z, lim_x_neg, lim_x_pos),
-        clamp(p.y / p.z, lim_y_neg, lim_y_pos),
-    ]
 }
 
 /// `dL/d(a, b, c)` of the dilated 2D covariance `[[a, b], [b, c]]` from `dL/dconic`, where

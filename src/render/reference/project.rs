@@ -122,9 +122,9 @@ pub fn covariance_3d(log_scale: [f64; 3], quat: [f64; 4]) -> Option<DMat3> {
     Some(m * m.transpose())
 }
 
-/// gsplat's perspective Jacobian at camera-space point `p`, with x/z and y/z clamped to the
-/// frustum widened by 0.3 tan(fov/2). Rows: `d(u)/d(p)`, `d(v)/d(p)`.
-pub fn projection_jacobian(p: DVec3, cam: &Camera) -> [[f64; 3]; 2] {
+/// gsplat's clamped `x/z` and `y/z` at camera-space `p` (the limits of
+/// [`projection_jacobian`]), each with whether the clamp changed it.
+pub(super) fn clamped_ratios(p: DVec3, cam: &Camera) -> [(f64, bool); 2] {
     let (w, h) = (cam.width as f64, cam.height as f64);
     let tan_fovx = 0.5 * w / cam.fx;
     let tan_fovy = 0.5 * h / cam.fy;
@@ -132,8 +132,22 @@ pub fn projection_jacobian(p: DVec3, cam: &Camera) -> [[f64; 3]; 2] {
     let lim_x_neg = cam.cx / cam.fx + FRUSTUM_MARGIN * tan_fovx;
     let lim_y_pos = (h - cam.cy) / cam.fy + FRUSTUM_MARGIN * tan_fovy;
     let lim_y_neg = cam.cy / cam.fy + FRUSTUM_MARGIN * tan_fovy;
-    let tx = p.z * (p.x / p.z).max(-lim_x_neg).min(lim_x_pos);
-    let ty = p.z * (p.y / p.z).max(-lim_y_neg).min(lim_y_pos);
+    let clamp = |ratio: f64, neg: f64, pos: f64| {
+        let clamped = ratio.max(-neg).min(pos);
+        (clamped, clamped != ratio)
+    };
+    [
+        clamp(p.x / p.z, lim_x_neg, lim_x_pos),
+        clamp(p.y / p.z, lim_y_neg, lim_y_pos),
+    ]
+}
+
+/// gsplat's perspective Jacobian at camera-space point `p`, with x/z and y/z clamped to the
+/// frustum widened by 0.3 tan(fov/2). Rows: `d(u)/d(p)`, `d(v)/d(p)`.
+pub fn projection_jacobian(p: DVec3, cam: &Camera) -> [[f64; 3]; 2] {
+    let [(rx, _), (ry, _)] = clamped_ratios(p, cam);
+    let tx = p.z * rx;
+    let ty = p.z * ry;
     let z2 = p.z * p.z;
     [
         [cam.fx / p.z, 0.0, -cam.fx * tx / z2],
