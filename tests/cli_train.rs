@@ -116,6 +116,23 @@ fn train_writes_classes_logits_checkpoints_and_a_report() {
     for it in [10, 20] {
         assert!(tmp.path().join(format!("trained.iter{it}.ply")).is_file());
     }
+    // `eval` scores the trained scene, RGB included.
+    let e = semsplat(&[
+        "eval",
+        "--scene",
+        out.to_str().unwrap(),
+        "--cameras",
+        &format!("{d}/cameras.json"),
+        "--labels",
+        &format!("{d}/labels"),
+        "--images",
+        &format!("{d}/images"),
+        "--views",
+        "all",
+    ]);
+    assert!(e.status.success(), "{}", String::from_utf8_lossy(&e.stderr));
+    let text = String::from_utf8_lossy(&e.stdout);
+    assert!(text.contains("mIoU") && text.contains("PSNR"), "{text}");
     let rep: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
     assert_eq!(
         rep["initial_gaussians"].as_u64().unwrap() as usize,

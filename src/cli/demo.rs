@@ -8,8 +8,9 @@ use anyhow::{Context, Result};
 use clap::Args;
 use serde::Serialize;
 
-use semsplat::eval::benchmark::{score_methods, MethodScore, TrainLabels};
+use semsplat::eval::benchmark::{held_out_quality, score_methods, MethodScore, TrainLabels};
 use semsplat::eval::chart::{speed_vs_accuracy, SpeedPoint};
+use semsplat::eval::image_quality::ImageQuality;
 use semsplat::eval::label_render::LabelRenderer;
 use semsplat::eval::strip::write_strip;
 use semsplat::gpu::Gpu;
@@ -56,6 +57,9 @@ struct DemoReport<'a> {
     noise: String,
     device: String,
     methods: &'a [MethodScore],
+    /// Held-out PSNR and SSIM of the input scene, the baseline for methods that change
+    /// appearance.
+    input_image_quality: ImageQuality,
 }
 
 fn palette(labels: &[u16], table: &ClassTable) -> Vec<u8> {
@@ -96,21 +100,28 @@ pub fn run(args: DemoArgs) -> Result<()> {
     })?;
 
     println!(
-        "{:<24} {:>9} {:>8} {:>10} {:>10} {:>10}",
-        "method", "seconds", "mIoU", "pixel acc", "3D acc", "memory"
+        "{:<24} {:>9} {:>8} {:>10} {:>10} {:>10} {:>10}",
+        "method", "seconds", "mIoU", "pixel acc", "3D acc", "memory", "PSNR"
     );
     for r in &scores {
         println!(
-            "{:<24} {:>9.2} {:>8.3} {:>10.3} {:>10.3} {:>7.0} MiB",
+            "{:<24} {:>9.2} {:>8.3} {:>10.3} {:>10.3} {:>7.0} MiB {:>10}",
             r.method,
             r.seconds,
             r.miou,
             r.pixel_accuracy,
             r.gaussian_accuracy,
-            r.peak_device_bytes as f64 / (1 << 20) as f64
+            r.peak_device_bytes as f64 / (1 << 20) as f64,
+            r.image_quality
+                .map_or("-".to_string(), |q| format!("{:.2} dB", q.psnr))
         );
     }
 
+    let input_image_quality = held_out_quality(&gpu, &s, &s.gaussians)?;
+    println!(
+        "input scene, held out: PSNR {:.2} dB, SSIM {:.4}",
+        input_image_quality.psnr, input_image_quality.ssim
+    );
     let report = DemoReport {
         preset: &args.preset,
         gaussians: s.gaussians.len(),
@@ -122,6 +133,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         noise: args.noise.as_ref().map_or("none".into(), |n| n.to_string()),
         device: gpu.caps().name.clone(),
         methods: &scores,
+        input_image_quality,
     };
     let out = &args.out;
     write_bytes_atomic(

@@ -8,13 +8,15 @@ use anyhow::{bail, Result};
 use clap::{Args, ValueEnum};
 use serde::Serialize;
 
+use semsplat::eval::image_quality::{image_quality, ImageQuality};
 use semsplat::eval::label_render::LabelRenderer;
 use semsplat::eval::metrics::{gaussian_accuracy, Confusion, SegmentationScores};
 use semsplat::gpu::Gpu;
 use semsplat::scene::cameras::load_cameras;
+use semsplat::scene::images::load_view_image;
 use semsplat::scene::labels::{LabelDir, LabelMap, MissingLabels};
 use semsplat::scene::ply::read_ply;
-use semsplat::scene::Split;
+use semsplat::scene::{Camera, Split};
 use semsplat::util::write_bytes_atomic;
 
 #[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
@@ -42,6 +44,10 @@ pub struct EvalArgs {
     /// A PLY with the true class of every Gaussian (e.g. a synth scene.ply), for 3D accuracy.
     #[arg(long)]
     truth: Option<PathBuf>,
+    /// Images of the views (named like the cameras): also report PSNR and SSIM of the
+    /// scene's rendered RGB (for trained scenes, whose appearance changed).
+    #[arg(long)]
+    images: Option<PathBuf>,
     /// Write the scores as JSON.
     #[arg(long)]
     json: Option<PathBuf>,
@@ -53,6 +59,7 @@ struct EvalReport {
     #[serde(flatten)]
     segmentation: SegmentationScores,
     gaussian_accuracy: Option<f64>,
+    image_quality: Option<ImageQuality>,
 }
 
 pub fn run(args: EvalArgs) -> Result<()> {
@@ -100,16 +107,39 @@ pub fn run(args: EvalArgs) -> Result<()> {
         let truth = dir.load(i)?;
         confusion.add(&truth.labels, &renderer.render(cam)?, LabelMap::IGNORE);
     }
+    let image_quality = match &args.images {
+        Some(image_dir) => {
+            let views: Vec<&Camera> = chosen
+                .iter()
+                .map(|&i| &cams[dir.camera_index(i).expect("entry")])
+                .collect();
+            let images = views
+                .iter()
+                .map(|cam| load_view_image(image_dir, cam))
+                .collect::<Result<Vec<_>>>()?;
+            let pairs: Vec<(&Camera, &[f32])> = views
+                .iter()
+                .zip(&images)
+                .map(|(c, im)| (*c, im.as_slice()))
+                .collect();
+            Some(image_quality(&gpu, &g, &pairs)?)
+        }
+        None => None,
+    };
     let report = EvalReport {
         views: chosen.len(),
         segmentation: confusion.scores(),
         gaussian_accuracy,
+        image_quality,
     };
     println!("views: {}", report.views);
     println!("mIoU: {:.4}", report.segmentation.miou);
     println!("pixel accuracy: {:.4}", report.segmentation.pixel_accuracy);
     if let Some(a) = report.gaussian_accuracy {
         println!("3D accuracy: {a:.4}");
+    }
+    if let Some(q) = &report.image_quality {
+        println!("PSNR: {:.2} dB, SSIM: {:.4}", q.psnr, q.ssim);
     }
     for c in &report.segmentation.per_class {
         println!("  class {:>5}: IoU {:.4} ({} px)", c.id, c.iou, c.pixels);

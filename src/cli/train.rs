@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
@@ -14,9 +14,10 @@ use semsplat::gpu::Gpu;
 use semsplat::render::SemanticMode;
 use semsplat::scene::cameras::load_cameras;
 use semsplat::scene::classes::{read_class_table, CompactClasses};
+use semsplat::scene::images::load_view_image;
 use semsplat::scene::labels::{LabelDir, LabelMap, MissingLabels};
 use semsplat::scene::ply::{read_ply, write_classes_sidecar, write_ply};
-use semsplat::scene::{Camera, Gaussians};
+use semsplat::scene::Gaussians;
 use semsplat::train::config::TrainConfig;
 use semsplat::train::loss::IGNORE_LABEL;
 use semsplat::train::trainer::{
@@ -119,37 +120,6 @@ struct TrainReport<'a> {
     densify: Vec<DensifyEvent>,
 }
 
-/// Loads `<name>.png|jpg|jpeg` for a camera as [H, W, 3] floats in [0, 1].
-fn load_image(dir: &Path, cam: &Camera) -> Result<Vec<f32>> {
-    let path = ["png", "jpg", "jpeg", "PNG", "JPG"]
-        .iter()
-        .map(|ext| dir.join(format!("{}.{ext}", cam.name)))
-        .find(|p| p.is_file())
-        .with_context(|| {
-            format!(
-                "no image for camera {} in {} (expected {}.png or .jpg)",
-                cam.name,
-                dir.display(),
-                cam.name
-            )
-        })?;
-    let img = image::open(&path)
-        .with_context(|| format!("reading {}", path.display()))?
-        .to_rgb8();
-    if img.width() != cam.width || img.height() != cam.height {
-        bail!(
-            "{} is {}x{} but camera {} is {}x{}",
-            path.display(),
-            img.width(),
-            img.height(),
-            cam.name,
-            cam.width,
-            cam.height
-        );
-    }
-    Ok(img.as_raw().iter().map(|&v| v as f32 / 255.0).collect())
-}
-
 fn compact_labels(map: &LabelMap, compact: &CompactClasses) -> Vec<u32> {
     map.labels
         .iter()
@@ -206,7 +176,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         .map(|(cam, entry)| {
             Ok(TrainView {
                 camera: cam.clone(),
-                rgb: load_image(&args.images, cam)?,
+                rgb: load_view_image(&args.images, cam)?,
                 labels: match entry {
                     Some(i) => compact_labels(&dir.load(*i)?, &compact),
                     None => Vec::new(),

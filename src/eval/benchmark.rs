@@ -8,6 +8,7 @@ use std::time::Instant;
 use anyhow::{ensure, Result};
 use serde::Serialize;
 
+use super::image_quality::{image_quality, ImageQuality};
 use super::label_render::LabelRenderer;
 use super::metrics::{gaussian_accuracy, ClassIou, Confusion};
 use crate::fuse::{accumulate, assign_semantic, FuseConfig, Method, NO_LABEL};
@@ -114,6 +115,9 @@ pub struct MethodScore {
     /// None: the input scene.
     #[serde(skip)]
     pub lifted: Option<LiftedScene>,
+    /// PSNR and SSIM of the held-out views rendered from the lifted scene, for methods that
+    /// change appearance (joint).
+    pub image_quality: Option<ImageQuality>,
 }
 
 /// A scene a method rebuilt, with the truth carried through densification.
@@ -303,6 +307,10 @@ pub fn score_methods(
             confusion.add(&s.views[i].labels, &renderer.render(cam)?, LabelMap::IGNORE);
         }
         let seg = confusion.scores();
+        let image_quality = match &lifted {
+            Some(l) => Some(held_out_quality(gpu, s, &l.gaussians)?),
+            None => None,
+        };
         out.push(MethodScore {
             method: method_name(lifter),
             seconds,
@@ -314,9 +322,27 @@ pub fn score_methods(
             classes,
             confidence,
             lifted,
+            image_quality,
         });
     }
     Ok(out)
+}
+
+/// PSNR and SSIM of `g` rendered from the scene's held-out views against their images.
+pub fn held_out_quality(gpu: &Gpu, s: &SynthScene, g: &Gaussians) -> Result<ImageQuality> {
+    let test: Vec<usize> = (0..s.cameras.len())
+        .filter(|&i| s.cameras[i].split == Split::Test)
+        .collect();
+    let images: Vec<Vec<f32>> = test
+        .iter()
+        .map(|&i| s.views[i].rgb.iter().map(|&v| v as f32 / 255.0).collect())
+        .collect();
+    let pairs: Vec<(&Camera, &[f32])> = test
+        .iter()
+        .zip(&images)
+        .map(|(&i, im)| (&s.cameras[i], im.as_slice()))
+        .collect();
+    image_quality(gpu, g, &pairs)
 }
 
 /// What a method produced: classes (user ids, -1 unseen) and confidences per Gaussian of

@@ -3,6 +3,7 @@
 
 pub mod benchmark;
 pub mod chart;
+pub mod image_quality;
 pub mod label_render;
 pub mod metrics;
 pub mod strip;

@@ -6,6 +6,7 @@ pub mod cameras_json;
 pub mod classes;
 pub mod colmap;
 pub mod gaussians;
+pub mod images;
 pub mod labels;
 pub mod look_at;
 pub mod ply;
