@@ -23,6 +23,18 @@ float sigmoid(float x) {
     return 1.0 / (1.0 + exp(-x));
 }
 
+// Offset of a 2D mean, stored as integer part plus fraction (project_body.glsl), from the
+// center of pixel `pixel`: the exact integer difference first keeps full precision.
+vec2 pixel_offset(vec2 mean_int, vec2 mean_frac, vec2 pixel) {
+    return (mean_int - pixel) + (mean_frac - 0.5);
+}
+
+// The Gaussian's exponent at offset d: alpha = opacity * exp(-sigma). Forward, backward and
+// fusion call this one function, so they agree on every skip decision.
+float conic_sigma(vec3 con, vec2 d) {
+    return 0.5 * (con.x * d.x * d.x + con.z * d.y * d.y) + con.y * d.x * d.y;
+}
+
 // Rotation matrix of a unit quaternion (w, x, y, z); GLSL matrices are column-major.
 mat3 quat_to_mat(vec4 q) {
     float w = q.x, x = q.y, y = q.z, z = q.w;

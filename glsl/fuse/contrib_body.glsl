@@ -88,8 +88,8 @@ void main() {
             vec4 g = s_xy_depth_opacity[j];
             if (!done) {
                 vec3 con = s_conic[j].xyz;
-                vec2 d = (g.xy - pixel) + (s_frac[j] - 0.5);
-                float sigma = 0.5 * (con.x * d.x * d.x + con.z * d.y * d.y) + con.y * d.x * d.y;
+                vec2 d = pixel_offset(g.xy, s_frac[j], pixel);
+                float sigma = conic_sigma(con, d);
                 float alpha = sigma < 0.0 ? 0.0 : min(ALPHA_MAX, g.w * exp(-sigma));
                 if (alpha >= ALPHA_MIN) {
                     float next_t = T * (1.0 - alpha);

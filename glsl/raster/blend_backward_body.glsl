@@ -1,7 +1,7 @@
 // Backward of forward blending (blend_body.glsl) for one 16x16 tile per workgroup.
-// Included by blend_backward.comp (float atomics) and blend_backward_cas.comp
-// (compare-and-swap fallback); the includer defines grad_add(index, value) and
-// sem_grad_add(index, value) and binds their buffers. With SEM_ONLY (the *_sem_only
+// Included by the blend_backward*.comp kernels after grad_add_float.glsl or
+// grad_add_cas.glsl, which define grad_add(index, value) and sem_grad_add(index, value)
+// and bind their buffers. With SEM_ONLY (the *_sem_only
 // variants, for training the logits with geometry frozen) only the semantic vectors'
 // gradient w_i * dL/dsem is computed: no alpha gradient, no carried sums.
 //
@@ -174,8 +174,8 @@ void main() {
             vec4 g = s_xy_depth_opacity[j];
             vec3 con = s_conic[j].xyz;
             if (live) {
-                d = (g.xy - pixel) + (s_frac[j] - 0.5); // as the forward computes it
-                float sigma = 0.5 * (con.x * d.x * d.x + con.z * d.y * d.y) + con.y * d.x * d.y;
+                d = pixel_offset(g.xy, s_frac[j], pixel);
+                float sigma = conic_sigma(con, d);
                 gauss = exp(-sigma);
                 alpha = min(ALPHA_MAX, g.w * gauss);
                 live = sigma >= 0.0 && alpha >= ALPHA_MIN;

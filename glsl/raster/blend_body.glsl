@@ -114,8 +114,8 @@ void main() {
         for (uint j = 0; j < count && !done; j++) {
             vec4 g = s_xy_depth_opacity[j];
             vec3 con = s_conic[j].xyz;
-            vec2 d = (g.xy - pixel) + (s_frac[j] - 0.5); // exact integer part first
-            float sigma = 0.5 * (con.x * d.x * d.x + con.z * d.y * d.y) + con.y * d.x * d.y;
+            vec2 d = pixel_offset(g.xy, s_frac[j], pixel);
+            float sigma = conic_sigma(con, d);
             if (sigma < 0.0) {
                 continue;
             }

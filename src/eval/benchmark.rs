@@ -249,7 +249,7 @@ pub fn synth_train_views(
         .filter_map(|((cam, view), labels)| {
             labels.map(|labels| TrainView {
                 camera: cam.clone(),
-                rgb: view.rgb.iter().map(|&v| v as f32 / 255.0).collect(),
+                rgb: view.rgb_unit(),
                 labels: labels
                     .into_iter()
                     .map(|l| if l == NO_LABEL { IGNORE_LABEL } else { l })
@@ -333,10 +333,7 @@ pub fn held_out_quality(gpu: &Gpu, s: &SynthScene, g: &Gaussians) -> Result<Imag
     let test: Vec<usize> = (0..s.cameras.len())
         .filter(|&i| s.cameras[i].split == Split::Test)
         .collect();
-    let images: Vec<Vec<f32>> = test
-        .iter()
-        .map(|&i| s.views[i].rgb.iter().map(|&v| v as f32 / 255.0).collect())
-        .collect();
+    let images: Vec<Vec<f32>> = test.iter().map(|&i| s.views[i].rgb_unit()).collect();
     let pairs: Vec<(&Camera, &[f32])> = test
         .iter()
         .zip(&images)

@@ -5,7 +5,7 @@
 use anyhow::Result;
 use serde::Serialize;
 
-use crate::gpu::Gpu;
+use crate::gpu::{Buffer, Gpu, Recorder};
 use crate::render::{GpuScene, Rasterizer, RenderOptions};
 use crate::scene::{Camera, Gaussians};
 use crate::train::loss::ImageLoss;
@@ -32,15 +32,26 @@ pub fn image_quality(
         ..Default::default()
     };
     let (mut psnr, mut ssim) = (0.0, 0.0);
+    // The loss and its buffers serve every view of one size.
+    let mut sized: Option<(u32, u32, ImageLoss, [Buffer; 3])> = None;
     for (cam, image) in views {
         let frame = rasterizer.render(&scene, cam, &opts)?;
         let rendered: Vec<f32> = frame.rgb.iter().map(|v| v.clamp(0.0, 1.0)).collect();
-        let loss = ImageLoss::new(gpu, cam.width, cam.height, 0)?;
-        let rgb = gpu.buffer_from("rendered", &rendered)?;
-        let target = gpu.buffer_from("image", image)?;
-        let v_rgb = gpu.buffer("v_rgb", rgb.size())?;
-        let mut rec = crate::gpu::Recorder::new(gpu)?;
-        loss.record(&mut rec, &rgb, &target, &v_rgb, None)?;
+        if !matches!(&sized, Some((w, h, ..)) if (*w, *h) == (cam.width, cam.height)) {
+            let bytes = rendered.len() as u64 * 4;
+            let buffers = [
+                gpu.buffer("rendered", bytes)?,
+                gpu.buffer("image", bytes)?,
+                gpu.buffer("v_rgb", bytes)?,
+            ];
+            let loss = ImageLoss::new(gpu, cam.width, cam.height, 0)?;
+            sized = Some((cam.width, cam.height, loss, buffers));
+        }
+        let (_, _, loss, [rgb, target, v_rgb]) = sized.as_ref().expect("set above");
+        gpu.upload(rgb, 0, &rendered)?;
+        gpu.upload(target, 0, image)?;
+        let mut rec = Recorder::new(gpu)?;
+        loss.record(&mut rec, rgb, target, v_rgb, None)?;
         rec.submit_and_wait()?;
         let values = loss.read_values()?;
         psnr += values.psnr() as f64;

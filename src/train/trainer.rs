@@ -483,7 +483,12 @@ impl Trainer {
     /// 3DGS's opacity reset: opacities capped at 0.01, their Adam moments restarted.
     fn reset_opacity(&mut self) -> Result<()> {
         let mut rec = Recorder::new(&self.gpu)?;
-        let m = &self.moments[3];
+        let slot = self
+            .tensors()
+            .iter()
+            .position(|t| std::ptr::eq(t.param, &self.scene.opacity_logits))
+            .expect("opacity is a tensor");
+        let m = &self.moments[slot];
         reset_opacity(
             &mut rec,
             self.scene.n,

@@ -31,6 +31,11 @@ impl ViewTruth {
     pub fn pixel_count(&self) -> usize {
         self.width as usize * self.height as usize
     }
+
+    /// The image as [H, W, 3] floats in [0, 1], as training and image metrics take it.
+    pub fn rgb_unit(&self) -> Vec<f32> {
+        self.rgb.iter().map(|&v| v as f32 / 255.0).collect()
+    }
 }
 
 /// World-space origin and (unnormalized) direction of the ray through pixel `(px, py)`'s center.
