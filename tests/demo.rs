@@ -48,6 +48,7 @@ fn demo_reports_every_method_with_finite_numbers_and_valid_charts() {
             "vote --occlusion",
             "vote --weighted",
             "flashsplat",
+            "flashsplat --per-view",
             "joint --semantics-only",
             "joint"
         ]

@@ -129,20 +129,41 @@ fn vote_counts_equal_a_cpu_count() {
     check_validation(gpu());
 }
 
+/// Which pixels count, and how much.
+#[derive(Clone, Copy, PartialEq)]
+enum Weights {
+    /// alpha * T at every pixel (FlashSplat's A).
+    Every,
+    /// alpha * T at the pixel holding the Gaussian's center only (weighted vote).
+    CenterOnly,
+    /// alpha * T over the Gaussian's footprint in the view: 2 pi opacity sqrt(det cov2d).
+    PerView,
+}
+
 /// A[label(pixel)][g] += alpha * T over every pixel, from the f64 reference renderer.
 fn reference_contributions(
     g: &Gaussians,
     cams: &[Camera],
     labels: &[Option<Vec<u32>>],
-    center_only: bool,
+    weights: Weights,
 ) -> ClassScores {
     let mut a = ClassScores::zeros(CLASSES, g.len());
     let settings = RenderSettings {
         semantics: false,
         ..Default::default()
     };
+    let center_only = weights == Weights::CenterOnly;
     for (cam, map) in cams.iter().zip(labels) {
         let map = map.as_ref().unwrap();
+        let footprint: Vec<f64> = (0..g.len())
+            .map(|i| match reference::project_one(g, i, cam, &settings) {
+                Ok(p) if weights == Weights::PerView => {
+                    let [xx, xy, yy] = p.cov2d;
+                    std::f64::consts::TAU * p.opacity * (xx * yy - xy * xy).sqrt()
+                }
+                _ => 1.0,
+            })
+            .collect();
         let centers: Vec<(i64, i64)> = g
             .means
             .iter()
@@ -158,7 +179,7 @@ fn reference_contributions(
             {
                 return;
             }
-            a.data[label as usize * g.len() + id as usize] += w;
+            a.data[label as usize * g.len() + id as usize] += w / footprint[id as usize];
         });
     }
     a
@@ -189,7 +210,7 @@ fn flashsplat_contributions_match_the_reference() {
         let one_cam = std::slice::from_ref(cam);
         let one_map = vec![labels[v].clone()];
         let got = run(&g, one_cam, &one_map, &FuseConfig::default());
-        let want = reference_contributions(&g, one_cam, &one_map, false);
+        let want = reference_contributions(&g, one_cam, &one_map, Weights::Every);
         assert!(
             want.data.iter().sum::<f64>() > 10.0,
             "view {v} must see the scene"
@@ -205,6 +226,32 @@ fn flashsplat_contributions_match_the_reference() {
             },
         );
         assert_close(&float, &want, &format!("float atomics, view {}", cam.name));
+    }
+    check_validation(gpu());
+}
+
+#[test]
+fn per_view_contributions_match_the_reference() {
+    let cams = cameras();
+    let labels = label_maps(&cams, 6);
+    for (v, cam) in cams.iter().enumerate() {
+        let g = separate_depth_ties(&scene(4_000, 8), cam);
+        let one_cam = std::slice::from_ref(cam);
+        let one_map = vec![labels[v].clone()];
+        let cfg = FuseConfig {
+            method: Method::FlashSplatPerView,
+            ..Default::default()
+        };
+        let got = run(&g, one_cam, &one_map, &cfg);
+        let want = reference_contributions(&g, one_cam, &one_map, Weights::PerView);
+        let plain = reference_contributions(&g, one_cam, &one_map, Weights::Every);
+        // The normalization must change A (or this test would pass on plain FlashSplat);
+        // a Gaussian the view sees whole sums to about 1 over the labels.
+        assert!(
+            (want.data.iter().sum::<f64>() - plain.data.iter().sum::<f64>()).abs() > 1.0,
+            "view {v}: footprint normalization changed nothing"
+        );
+        assert_close(&got, &want, &format!("per view, view {}", cam.name));
     }
     check_validation(gpu());
 }
@@ -276,7 +323,8 @@ fn weighted_votes_match_the_reference_at_center_pixels() {
         ..Default::default()
     };
     let got = run(&g, std::slice::from_ref(cam), &one_map, &cfg);
-    let want = reference_contributions(&g, std::slice::from_ref(cam), &one_map, true);
+    let want =
+        reference_contributions(&g, std::slice::from_ref(cam), &one_map, Weights::CenterOnly);
     assert!(want.data.iter().filter(|&&v| v > 0.0).count() > 100);
     assert_close(&got, &want, "weighted votes");
     check_validation(gpu());

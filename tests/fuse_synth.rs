@@ -1,21 +1,22 @@
-//! Fusion on a procedural office with exact per-Gaussian truth: every method's accuracy on
-//! true and on flickering labels, printed for the record, with regression floors set from
-//! measurement. The issue's targets (FlashSplat >= 0.98 on true labels, and no worse than
-//! vote under flicker) are not met on this untrained synthetic scene: see README, Fusion.
+//! Fusion on the procedural office with exact per-Gaussian truth (issue #5): every method's
+//! accuracy on true and on flickering labels over the Gaussians that contribute to some
+//! pixel, printed for the record. Asserted: FlashSplat >= 0.98 on true labels (the issue's
+//! target), the per-view variant's gain under flicker, and regression floors for the rest.
+//! Not asserted, because it does not hold: FlashSplat at least as accurate as vote under
+//! flicker (README, Fusion).
 
 mod common;
 
 use common::{check_validation, gpu};
-use semsplat::fuse::{accumulate, assign_semantic, FuseConfig, Method, NO_LABEL};
+use semsplat::fuse::{accumulate, assign_semantic, ClassScores, FuseConfig, Method, NO_LABEL};
 use semsplat::render::GpuScene;
 use semsplat::scene::classes::CompactClasses;
 use semsplat::scene::synth::{generate, SynthConfig, SynthScene};
 
+/// `synth --preset office --noise flicker=0.2` at its defaults (24 views at 640x480), without
+/// held-out views: the scene stands in for a 3DGS trained on the labeled views.
 fn office() -> SynthScene {
     let mut cfg = SynthConfig::preset("office");
-    cfg.width = 400;
-    cfg.height = 300;
-    cfg.train_views = 12;
     cfg.test_views = 0;
     cfg.noise = Some("flicker=0.2".parse().unwrap());
     generate(&cfg).unwrap()
@@ -43,6 +44,36 @@ fn accuracy(pred: &[Option<usize>], truth: &[i32], classes: &CompactClasses, mas
         }
     }
     right as f64 / total as f64
+}
+
+/// Vote's expected accuracy if its ties were broken at random: `assign_semantic` gives a
+/// tie to the lower class index, which in the presets is floor, wall or ceiling, the
+/// commonest classes, so tied Gaussians there are right more often than chance.
+fn fair_tie_accuracy(
+    votes: &ClassScores,
+    truth: &[i32],
+    classes: &CompactClasses,
+    mask: &[bool],
+) -> f64 {
+    let (mut right, mut total) = (0.0, 0usize);
+    for g in (0..votes.n).filter(|&g| mask[g]) {
+        total += 1;
+        let top = (0..votes.classes)
+            .map(|e| votes.get(e, g))
+            .fold(0.0, f64::max);
+        if top > 0.0 {
+            let tied: Vec<usize> = (0..votes.classes)
+                .filter(|&e| votes.get(e, g) == top)
+                .collect();
+            if tied
+                .iter()
+                .any(|&e| classes.user_of(e) == Some(truth[g] as u32))
+            {
+                right += 1.0 / tied.len() as f64;
+            }
+        }
+    }
+    right / total as f64
 }
 
 #[test]
@@ -79,15 +110,26 @@ fn office_accuracy_of_every_method_clean_and_under_flicker() {
         .0
     };
 
+    let methods = [
+        Method::Vote,
+        Method::VoteOcclusion,
+        Method::VoteWeighted,
+        Method::FlashSplat,
+        Method::FlashSplatPerView,
+    ];
+    let evidence: Vec<(ClassScores, ClassScores)> = methods
+        .iter()
+        .map(|&m| (fuse(&clean, m), fuse(&noisy, m)))
+        .collect();
     // The Gaussians that contribute to some pixel of some view (the issue's population).
-    let a = fuse(&clean, Method::FlashSplat);
+    let a = &evidence[3].0;
     let contributes: Vec<bool> = (0..a.n)
         .map(|g| (0..a.classes).any(|e| a.get(e, g) > 0.0))
         .collect();
     let seen = contributes.iter().filter(|&&c| c).count();
     assert!(
-        seen > a.n * 3 / 4,
-        "most Gaussians are seen ({seen} of {})",
+        seen > a.n * 9 / 10,
+        "nearly every Gaussian of the scene is seen ({seen} of {})",
         a.n
     );
     eprintln!(
@@ -95,44 +137,65 @@ fn office_accuracy_of_every_method_clean_and_under_flicker() {
         a.n,
         s.cameras.len()
     );
-
-    let mut results = Vec::new();
-    for method in [
-        Method::Vote,
-        Method::VoteOcclusion,
-        Method::VoteWeighted,
-        Method::FlashSplat,
-    ] {
-        let acc_clean = accuracy(
-            &assign_semantic(&fuse(&clean, method)).class,
-            &truth,
-            &classes,
-            &contributes,
+    let acc = |e: &ClassScores| accuracy(&assign_semantic(e).class, &truth, &classes, &contributes);
+    let mut clean_acc = Vec::new();
+    let mut noisy_acc = Vec::new();
+    for (method, (c, n)) in methods.iter().zip(&evidence) {
+        clean_acc.push(acc(c));
+        noisy_acc.push(acc(n));
+        eprintln!(
+            "{:<22} true labels {:.4}   flicker=0.2 {:.4}",
+            method.name(),
+            clean_acc.last().unwrap(),
+            noisy_acc.last().unwrap()
         );
-        let acc_noisy = accuracy(
-            &assign_semantic(&fuse(&noisy, method)).class,
-            &truth,
-            &classes,
-            &contributes,
-        );
-        eprintln!("{method:?}: accuracy clean {acc_clean:.4}, flicker=0.2 {acc_noisy:.4}");
-        results.push((method, acc_clean, acc_noisy));
     }
-    // Measured at this size (seed 0): clean 0.90-0.94, flicker 0.82-0.84 across methods.
-    // Floors a little below, so a regression in any method fails; flicker must cost every
-    // method accuracy, or the noisy labels are not reaching it.
-    for (method, acc_clean, acc_noisy) in results {
+    let fair = |e: &ClassScores| fair_tie_accuracy(e, &truth, &classes, &contributes);
+    eprintln!(
+        "vote with ties broken at random (expected): true labels {:.4}   flicker=0.2 {:.4}",
+        fair(&evidence[0].0),
+        fair(&evidence[0].1)
+    );
+
+    // The issue's target on true labels.
+    assert!(
+        clean_acc[3] >= 0.98,
+        "flashsplat on true labels: {:.4}",
+        clean_acc[3]
+    );
+    // Per-view normalization is for flicker: it must help there and cost little on true labels.
+    assert!(
+        noisy_acc[4] > noisy_acc[3] + 0.005,
+        "flashsplat --per-view under flicker {:.4}, plain {:.4}",
+        noisy_acc[4],
+        noisy_acc[3]
+    );
+    assert!(
+        clean_acc[4] >= clean_acc[3] - 0.005,
+        "flashsplat --per-view on true labels {:.4}, plain {:.4}",
+        clean_acc[4],
+        clean_acc[3]
+    );
+    // Measured (seed 0): true labels 0.955-0.984, flicker 0.92-0.94 across methods. Floors
+    // a little below, so a regression in any method fails; flicker must cost every method
+    // accuracy, or the noisy labels are not reaching it.
+    for (k, method) in methods.iter().enumerate() {
         assert!(
-            acc_clean >= 0.88,
-            "{method:?}: clean accuracy {acc_clean:.4}"
+            clean_acc[k] >= 0.94,
+            "{}: accuracy on true labels {:.4}",
+            method.name(),
+            clean_acc[k]
         );
         assert!(
-            acc_noisy >= 0.78,
-            "{method:?}: accuracy under flicker {acc_noisy:.4}"
+            noisy_acc[k] >= 0.90,
+            "{}: accuracy under flicker {:.4}",
+            method.name(),
+            noisy_acc[k]
         );
         assert!(
-            acc_noisy < acc_clean,
-            "{method:?}: flicker did not lower accuracy"
+            noisy_acc[k] < clean_acc[k],
+            "{}: flicker did not lower accuracy",
+            method.name()
         );
     }
     check_validation(gpu);

@@ -11,6 +11,7 @@ use semsplat::scene::classes::read_class_table;
 use semsplat::scene::labels::read_label_png;
 use semsplat::scene::ply::read_ply;
 use semsplat::scene::synth::furniture::{self, looks, Placement};
+use semsplat::scene::synth::primitives::Shape;
 use semsplat::scene::synth::raycast::{cast_pixel, pixel_ray};
 use semsplat::scene::synth::room_spec::{ObjectSpec, PartSpec, ShapeSpec};
 use semsplat::scene::synth::shading::to_rgb8;
@@ -19,7 +20,7 @@ use semsplat::scene::synth::{
     self, generate, render_view, write_synth, NoiseSpec, Room, RoomSource, RoomSpec, SynthConfig,
     SynthScene, IGNORE,
 };
-use semsplat::scene::Split;
+use semsplat::scene::{Gaussians, Split};
 
 fn small(preset: &str, seed: u64, train: usize, test: usize) -> SynthConfig {
     SynthConfig {
@@ -240,8 +241,10 @@ fn pixels_that_see_nothing_are_ignored() {
 #[test]
 fn gaussians_lie_on_their_primitives_with_sane_frames() {
     for preset in ["tiny", "office"] {
+        // Every surface, seen or not: this test is about the sampler.
         let cfg = SynthConfig {
             spacing: 0.1,
+            keep_hidden: true,
             ..small(preset, 5, 1, 0)
         };
         let scene = generate(&cfg).unwrap();
@@ -251,6 +254,7 @@ fn gaussians_lie_on_their_primitives_with_sane_frames() {
         g.validate().unwrap();
         let classes = g.class_ids.as_ref().unwrap();
         let instances = g.instance_ids.as_ref().unwrap();
+        let mut thin = 0;
         for i in 0..g.len() {
             let prim = &room.primitives[scene.gaussian_primitives[i] as usize];
             let p = DVec3::from_array(g.means[i].map(f64::from));
@@ -273,7 +277,9 @@ fn gaussians_lie_on_their_primitives_with_sane_frames() {
                 axes.z_axis
             );
             let s = g.log_scales[i].map(f32::exp);
-            assert!(s[2] < 0.2 * s[0].min(s[1]), "flat: {s:?}");
+            // Flat: thinnest along the normal; discs on small faces shrink in-plane toward it.
+            assert!(s[2] <= s[0].min(s[1]), "flat: {s:?}");
+            thin += usize::from(s[2] < 0.2 * s[0].min(s[1]));
             // At most 0.7 x the spacing (thin parts get finer grids, so smaller discs).
             assert!(
                 s[0].max(s[1]) <= 0.0735 && s[0].min(s[1]) > 0.0,
@@ -290,6 +296,11 @@ fn gaussians_lie_on_their_primitives_with_sane_frames() {
                 }
             }
         }
+        assert!(
+            thin > g.len() * 3 / 4,
+            "{preset}: {thin} of {} flat",
+            g.len()
+        );
         // Colors are the lit texture colors: SH DC maps back to the surface color.
         let dc = &g.sh[..3];
         let c = room.color_at(
@@ -311,11 +322,13 @@ fn gaussians_lie_on_their_primitives_with_sane_frames() {
 fn hidden_faces_get_no_gaussians_and_density_scales_the_count() {
     let coarse = generate(&SynthConfig {
         spacing: 0.1,
+        keep_hidden: true,
         ..small("tiny", 1, 1, 0)
     })
     .unwrap();
     let fine = generate(&SynthConfig {
         spacing: 0.05,
+        keep_hidden: true,
         ..small("tiny", 1, 1, 0)
     })
     .unwrap();
@@ -790,6 +803,117 @@ fn cli_writes_a_room_and_rejects_bad_arguments() {
     ] {
         assert!(help.contains(needle), "--help lacks {needle}");
     }
+}
+
+/// Near the end of its surface (a face edge, or where another solid covers it) a Gaussian
+/// shrinks so that 1.5 standard deviations stay on the surface: it does not spill over a
+/// silhouette or across a junction. Away from edges it keeps 0.7 x the spacing.
+#[test]
+fn gaussians_shrink_at_the_end_of_their_surface() {
+    let spacing = 0.1;
+    let scene = generate(&SynthConfig {
+        spacing,
+        keep_hidden: true,
+        ..small("office", 3, 1, 0)
+    })
+    .unwrap();
+    let g = &scene.gaussians;
+    let (mut shrunk, mut full, mut checked) = (0, 0, 0);
+    for i in 0..g.len() {
+        let prim = &scene.room.primitives[scene.gaussian_primitives[i] as usize];
+        // Flat faces only: on a box or quad a point past the face's edge is off the shape.
+        if !matches!(prim.shape, Shape::Box(_) | Shape::Quad(_)) {
+            continue;
+        }
+        let p = DVec3::from_array(g.means[i].map(f64::from));
+        let [w, x, y, z] = g.quats[i].map(f64::from);
+        let axes = DMat3::from_quat(DQuat::from_xyzw(x, y, z, w));
+        let s = g.log_scales[i].map(|v| f64::from(v).exp());
+        for (axis, sigma) in [(axes.x_axis, s[0]), (axes.y_axis, s[1])] {
+            for sign in [-1.0, 1.0] {
+                let q = p + axis * (sign * 1.5 * sigma);
+                // Still on this primitive's surface (the covered-region search walks in
+                // steps of a quarter spacing, hence the tolerance) ...
+                assert!(
+                    prim.shape.sdf(q).abs() < 0.13 * spacing,
+                    "Gaussian {i} spills {} m off its face",
+                    prim.shape.sdf(q)
+                );
+                // ... and not inside another solid or outside the room.
+                assert!(
+                    scene.room.interior_contains(q, -0.13 * spacing),
+                    "Gaussian {i} spills out of the room at {q}"
+                );
+                checked += 1;
+            }
+            if sigma < 0.69 * spacing {
+                shrunk += 1;
+            } else {
+                full += 1;
+            }
+        }
+    }
+    assert!(checked > 10_000, "{checked}");
+    assert!(
+        shrunk > 500 && full > 2 * shrunk,
+        "shrunk {shrunk} axes, full {full}"
+    );
+}
+
+/// Gaussian `i`'s center and the points one standard deviation out along its in-plane axes.
+fn probe_points(g: &Gaussians, i: usize) -> [DVec3; 5] {
+    let p = DVec3::from_array(g.means[i].map(f64::from));
+    let [w, x, y, z] = g.quats[i].map(f64::from);
+    let axes = DMat3::from_quat(DQuat::from_xyzw(x, y, z, w));
+    let s = g.log_scales[i].map(|v| f64::from(v).exp());
+    [
+        p,
+        p + axes.x_axis * s[0],
+        p - axes.x_axis * s[0],
+        p + axes.y_axis * s[1],
+        p - axes.y_axis * s[1],
+    ]
+}
+
+/// By default only Gaussians some camera sees are kept (their center or a point one standard
+/// deviation out); `keep_hidden` keeps the rest too.
+#[test]
+fn gaussians_no_camera_sees_are_left_out() {
+    use semsplat::scene::synth::visibility::point_seen;
+    let cfg = SynthConfig {
+        spacing: 0.1,
+        ..small("office", 2, 3, 1)
+    };
+    let seen = generate(&cfg).unwrap();
+    let all = generate(&SynthConfig {
+        keep_hidden: true,
+        ..cfg
+    })
+    .unwrap();
+    assert!(
+        seen.gaussians.len() < all.gaussians.len() * 3 / 4,
+        "{} of {} kept from four views",
+        seen.gaussians.len(),
+        all.gaussians.len()
+    );
+    let seen_by_a_camera = |s: &SynthScene, i: usize| {
+        probe_points(&s.gaussians, i)
+            .iter()
+            .any(|&q| s.cameras.iter().any(|c| point_seen(&s.room, c, q)))
+    };
+    let g = &seen.gaussians;
+    for i in 0..g.len() {
+        assert!(
+            seen_by_a_camera(&seen, i),
+            "kept Gaussian {i} is seen by no camera"
+        );
+    }
+    // The kept ones are exactly those of the full set that pass the test (same order).
+    let kept: Vec<[f32; 3]> = (0..all.gaussians.len())
+        .filter(|&i| seen_by_a_camera(&all, i))
+        .map(|i| all.gaussians.means[i])
+        .collect();
+    assert_eq!(kept, g.means);
 }
 
 /// Rendering the Gaussians (with the CPU reference rasterizer) approximates the ray-cast truth:

@@ -8,6 +8,7 @@
 #define ALPHA_MIN (1.0 / 255.0)
 #define ALPHA_MAX 0.999
 #define T_MIN 1e-4
+#define TWO_PI 6.28318530717958648
 
 // Frame status buffer (u32 words), written on the GPU so no stage needs a readback.
 #define ST_VISIBLE 0          // visible Gaussians V

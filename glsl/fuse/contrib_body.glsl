@@ -7,7 +7,10 @@
 // Every lane walks every entry (a done or unlabeled pixel contributes 0), so each step is
 // uniform across the subgroup: lanes that share the label (neighbouring pixels mostly do)
 // are summed in the subgroup first and one lane does the atomic. mode 1 keeps only the
-// pixel that holds the Gaussian's projected center: the weighted vote.
+// pixel that holds the Gaussian's projected center: the weighted vote. per_view divides
+// each weight by the Gaussian's projected footprint in this view, 2 pi opacity sqrt(det
+// Sigma2d), so a view adds the share of the Gaussian it sees under each label (at most
+// about 1) instead of a number of pixels: near views no longer outweigh far ones.
 #extension GL_EXT_control_flow_attributes : require
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_vote : require
@@ -23,7 +26,7 @@ layout(local_size_x = TILE_PIXELS) in;
 layout(push_constant) uniform Params {
     uvec4 dims;   // width height tiles_x n
     uvec4 window; // window_start window_len row_begin rows
-    uvec4 mode;   // 0: every pixel (A); 1: the center pixel only (weighted vote)
+    uvec4 mode;   // x: 0 every pixel (A), 1 the center pixel only (weighted vote); y: per_view
 } pc;
 
 layout(set = 0, binding = 0) readonly buffer RangesBuf { uvec2 data[]; } tile_ranges;
@@ -103,6 +106,11 @@ void main() {
             }
             if (pc.mode.x == 1 && g.xy != pixel) {
                 w = 0.0;
+            }
+            if (pc.mode.y == 1 && w > 0.0) {
+                // The conic is the inverse of Sigma2d: sqrt(det Sigma2d) = 1 / sqrt(det conic).
+                vec3 con = s_conic[j].xyz;
+                w *= sqrt(max(con.x * con.z - con.y * con.y, 0.0)) / (TWO_PI * g.w);
             }
             accumulate(w > 0.0 ? row : NO_ROW, s_id[j], w);
         }

@@ -86,6 +86,10 @@ pub struct SynthArgs {
     /// Skip the palette previews under vis/.
     #[arg(long)]
     no_previews: bool,
+    /// Keep Gaussians on surfaces no camera sees (by default they are left out, as 3DGS
+    /// training would prune them).
+    #[arg(long)]
+    keep_hidden: bool,
 }
 
 pub fn run(args: SynthArgs) -> Result<()> {
@@ -106,6 +110,7 @@ pub fn run(args: SynthArgs) -> Result<()> {
         init_jitter: args.init_jitter,
         noise,
         previews: !args.no_previews,
+        keep_hidden: args.keep_hidden,
     };
     config.validate()?;
     check_output_folder(&args.out, args.force)?;

@@ -37,10 +37,7 @@ pub enum Lifter {
 /// The name a method goes by in tables and charts.
 pub fn method_name(m: Lifter) -> &'static str {
     match m {
-        Lifter::Fuse(Method::Vote) => "vote",
-        Lifter::Fuse(Method::VoteOcclusion) => "vote --occlusion",
-        Lifter::Fuse(Method::VoteWeighted) => "vote --weighted",
-        Lifter::Fuse(Method::FlashSplat) => "flashsplat",
+        Lifter::Fuse(method) => method.name(),
         Lifter::JointSemantics => "joint --semantics-only",
         Lifter::JointFull => "joint",
     }
@@ -54,6 +51,7 @@ impl Lifter {
             Lifter::Fuse(Method::VoteOcclusion) => "vote-occlusion",
             Lifter::Fuse(Method::VoteWeighted) => "vote-weighted",
             Lifter::Fuse(Method::FlashSplat) => "flashsplat",
+            Lifter::Fuse(Method::FlashSplatPerView) => "flashsplat-per-view",
             Lifter::JointSemantics => "joint-semantics",
             Lifter::JointFull => "joint",
         }
@@ -64,11 +62,12 @@ impl Lifter {
     }
 }
 
-pub const ALL_METHODS: [Lifter; 6] = [
+pub const ALL_METHODS: [Lifter; 7] = [
     Lifter::Fuse(Method::Vote),
     Lifter::Fuse(Method::VoteOcclusion),
     Lifter::Fuse(Method::VoteWeighted),
     Lifter::Fuse(Method::FlashSplat),
+    Lifter::Fuse(Method::FlashSplatPerView),
     Lifter::JointSemantics,
     Lifter::JointFull,
 ];

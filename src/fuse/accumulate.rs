@@ -29,6 +29,24 @@ pub enum Method {
     VoteWeighted,
     /// FlashSplat: alpha * T of every Gaussian at every labeled pixel.
     FlashSplat,
+    /// FlashSplat with each view's weights divided by the Gaussian's projected footprint in
+    /// that view (2 pi opacity sqrt(det Sigma2d)): a view adds the share of the Gaussian it
+    /// sees under each label, so every view counts about once, as in a vote, instead of in
+    /// proportion to the pixels it covers. Robust to per-view label flicker.
+    FlashSplatPerView,
+}
+
+impl Method {
+    /// How the CLI spells the method.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Vote => "vote",
+            Method::VoteOcclusion => "vote --occlusion",
+            Method::VoteWeighted => "vote --weighted",
+            Method::FlashSplat => "flashsplat",
+            Method::FlashSplatPerView => "flashsplat --per-view",
+        }
+    }
 }
 
 /// How the weighted methods accumulate on the GPU.
@@ -238,8 +256,13 @@ pub fn accumulate(
                     })?;
                     run.timings.total_ns() * 1e-6
                 }
-                Method::VoteWeighted | Method::FlashSplat => {
-                    let mode = u32::from(cfg.method == Method::VoteWeighted);
+                Method::VoteWeighted | Method::FlashSplat | Method::FlashSplatPerView => {
+                    let mode = [
+                        u32::from(cfg.method == Method::VoteWeighted),
+                        u32::from(cfg.method == Method::FlashSplatPerView),
+                        0,
+                        0,
+                    ];
                     let kernel = match cfg.accumulation {
                         Accumulation::FixedPoint => ids::FUSE_CONTRIB_FIXED,
                         Accumulation::Float => ids::FUSE_CONTRIB_FLOAT,
@@ -256,7 +279,7 @@ pub fn accumulate(
                                     row_begin as u32,
                                     pass_rows as u32,
                                 ],
-                                mode: [mode, 0, 0, 0],
+                                mode,
                             };
                             rec.dispatch(
                                 kernel,

@@ -6,7 +6,8 @@
 //! - ground-truth RGB, class and instance maps by exact CPU ray casting ([`raycast`]),
 //!   independent of any Gaussian renderer;
 //! - Gaussians sampling the visible surfaces with their true class and instance
-//!   ([`surface_sampling`]), plus a sparse jittered point cloud for training from scratch;
+//!   ([`surface_sampling`]), kept where some camera sees them ([`visibility`]), plus a sparse
+//!   jittered point cloud for training from scratch;
 //! - cameras inside the room looking at its content ([`views`]);
 //! - noisy label maps imitating a 2D segmenter ([`noise`], grammar in [`noise_spec`]).
 //!
@@ -27,6 +28,7 @@ pub mod room_spec;
 pub mod shading;
 pub mod surface_sampling;
 pub mod views;
+pub mod visibility;
 pub mod writer;
 
 use std::path::PathBuf;
@@ -110,6 +112,8 @@ pub struct SynthConfig {
     pub noise: Option<NoiseSpec>,
     /// Write palette previews of label maps under vis/.
     pub previews: bool,
+    /// Keep the Gaussians no camera sees (a trained scene would have pruned them).
+    pub keep_hidden: bool,
 }
 
 pub const DEFAULT_TRAIN_VIEWS: usize = 24;
@@ -139,6 +143,7 @@ impl SynthConfig {
             init_jitter: DEFAULT_INIT_JITTER,
             noise: None,
             previews: true,
+            keep_hidden: false,
         }
     }
 
@@ -234,7 +239,12 @@ pub fn generate_with_progress(config: &SynthConfig, progress: &ProgressBar) -> R
     let cameras = views::place_cameras(&room, &view_cfg, &root.fork(1))?;
     progress.set_length(cameras.len() as u64);
     let rendered = raycast::render_views(&room, &cameras, progress);
-    let samples = surface_sampling::sample_surfaces(&room, config.spacing);
+    let mut samples = surface_sampling::sample_surfaces(&room, config.spacing);
+    if !config.keep_hidden {
+        let seen = visibility::seen_by_any(&room, &cameras, &samples);
+        let mut flags = seen.into_iter();
+        samples.retain(|_| flags.next().unwrap_or(false));
+    }
     let gaussians = surface_sampling::gaussians_from_samples(&room, &samples);
     let gaussian_primitives = samples.iter().map(|s| s.primitive).collect();
     let init_points = surface_sampling::init_point_cloud(

@@ -1,7 +1,9 @@
 //! Gaussians that sample the room's surfaces the way a trained scene would: flat discs on a
 //! regular grid (two scales ~ the spacing, the third tiny), oriented by the surface normal,
 //! nearly opaque, colored by the lit texture. Surfaces another solid covers (a box bottom on
-//! the floor, a leg inside a seat, a picture's back on its wall) get no Gaussians.
+//! the floor, a leg inside a seat, a picture's back on its wall) get no Gaussians, and near
+//! the end of a surface (an edge, a junction with another solid, the silhouette of a thin
+//! cylinder) the discs shrink across it instead of spilling over.
 //! Also the sparse, jittered point cloud a from-scratch training run starts from.
 
 use std::f64::consts::{PI, TAU};
@@ -18,6 +20,15 @@ const SH_C0: f64 = 0.282_094_791_773_878_14;
 /// In-plane standard deviation per unit of grid spacing: neighbours overlap enough that the
 /// surface renders opaque without blurring textures much.
 const SCALE_PER_SPACING: f64 = 0.7;
+/// Standard deviations that fit between a Gaussian's center and the end of its visible
+/// surface (a face edge, or where another solid covers it), along each tangent. A trained
+/// scene does not let a surface spill over a silhouette or across a junction (the photometric
+/// loss would pay for it), so Gaussians near an edge shrink across it.
+/// 1.5 renders closest to the ray-cast truth: office, 24 views at 640x480, PSNR / SSIM
+/// 32.79 / 0.946 at 1.25, 32.70 / 0.947 at 1.5, 31.59 / 0.942 at 2, 30.75 / 0.933 unclipped.
+const EDGE_SIGMAS: f64 = 1.5;
+/// Step (per unit of spacing) of the walk that finds where another solid covers a surface.
+const PROBE_STEP: f64 = 0.25;
 /// Thickness (normal-direction standard deviation) per unit of spacing.
 const THICKNESS_PER_SPACING: f64 = 0.05;
 const SURFACE_OPACITY: f64 = 0.95;
@@ -35,9 +46,27 @@ pub struct SurfaceSample {
     /// Grid spacing along each tangent (meters).
     pub spacing_u: f64,
     pub spacing_v: f64,
+    /// Distance along each tangent (the nearer side) to where the visible surface ends,
+    /// capped at the reach of a full-size Gaussian.
+    pub free_u: f64,
+    pub free_v: f64,
     /// Index into `Room::primitives`.
     pub primitive: u32,
     pub face: Face,
+}
+
+impl SurfaceSample {
+    /// Standard deviations along tangent_u, tangent_v and the normal of the sample's Gaussian.
+    pub fn sigmas(&self) -> (f64, f64, f64) {
+        let thickness = THICKNESS_PER_SPACING * self.spacing_u.min(self.spacing_v);
+        let in_plane =
+            |spacing: f64, free: f64| (SCALE_PER_SPACING * spacing).min(free / EDGE_SIGMAS);
+        (
+            in_plane(self.spacing_u, self.free_u).max(thickness),
+            in_plane(self.spacing_v, self.free_v).max(thickness),
+            thickness,
+        )
+    }
 }
 
 /// Approximate number of grid samples over all surfaces before coverage culling.
@@ -101,7 +130,19 @@ pub fn sample_surfaces(room: &Room, spacing: f64) -> Vec<SurfaceSample> {
                     for j in 0..n_z {
                         let z = -c.half_height + (j as f64 + 0.5) * dv;
                         let p = c.center + normal * c.radius + ez * z;
-                        grid.push(p, tangent, ez, du, dv, Face::CylinderSide);
+                        let edge_z = c.half_height - z.abs();
+                        grid.push(
+                            p,
+                            tangent,
+                            ez,
+                            du,
+                            dv,
+                            // Past a radius along the curve a tangent disc leaves the
+                            // silhouette.
+                            c.radius,
+                            edge_z,
+                            Face::CylinderSide,
+                        );
                     }
                 }
                 grid.disc(
@@ -137,6 +178,8 @@ pub fn sample_surfaces(room: &Room, spacing: f64) -> Vec<SurfaceSample> {
                         t2,
                         step,
                         step,
+                        s.radius,
+                        s.radius,
                         Face::Sphere,
                     );
                 }
@@ -154,7 +197,9 @@ struct Grid<'a> {
 }
 
 impl Grid<'_> {
-    /// Keeps the sample if no other solid covers it.
+    /// Keeps the sample if no other solid covers it. `edge_u`/`edge_v`: distance along each
+    /// tangent to the face's own boundary (the nearer side).
+    #[allow(clippy::too_many_arguments)]
     fn push(
         &mut self,
         position: DVec3,
@@ -162,15 +207,30 @@ impl Grid<'_> {
         tangent_v: DVec3,
         spacing_u: f64,
         spacing_v: f64,
+        edge_u: f64,
+        edge_v: f64,
         face: Face,
     ) {
         let normal = tangent_u.cross(tangent_v);
-        if self
-            .room
-            .is_covered(self.primitive as usize, position, normal)
-        {
+        let covered = |p: DVec3| self.room.is_covered(self.primitive as usize, p, normal);
+        if covered(position) {
             return;
         }
+        // Walk out along each tangent (both ways) until another solid covers the surface.
+        let free = |tangent: DVec3, spacing: f64, edge: f64| {
+            let reach = (EDGE_SIGMAS * SCALE_PER_SPACING * spacing).min(edge);
+            let step = PROBE_STEP * spacing;
+            let mut d = step;
+            while d < reach {
+                if covered(position + tangent * d) || covered(position - tangent * d) {
+                    return d - 0.5 * step;
+                }
+                d += step;
+            }
+            reach
+        };
+        let free_u = free(tangent_u, spacing_u, edge_u);
+        let free_v = free(tangent_v, spacing_v, edge_v);
         self.out.push(SurfaceSample {
             position,
             normal,
@@ -178,6 +238,8 @@ impl Grid<'_> {
             tangent_v,
             spacing_u,
             spacing_v,
+            free_u,
+            free_v,
             primitive: self.primitive,
             face,
         });
@@ -192,7 +254,8 @@ impl Grid<'_> {
             let a = -h1 + (i as f64 + 0.5) * d1;
             for j in 0..n2 {
                 let b = -h2 + (j as f64 + 0.5) * d2;
-                self.push(center + t1 * a + t2 * b, t1, t2, d1, d2, face);
+                let (e1, e2) = (h1 - a.abs(), h2 - b.abs());
+                self.push(center + t1 * a + t2 * b, t1, t2, d1, d2, e1, e2, face);
             }
         }
     }
@@ -206,8 +269,11 @@ impl Grid<'_> {
             let count = ((TAU * r / dr).round() as usize).max(1);
             for j in 0..count {
                 let angle = (j as f64 + 0.5 * (k % 2) as f64) * TAU / count as f64;
-                let p = center + (t1 * angle.cos() + t2 * angle.sin()) * r;
-                self.push(p, t1, t2, dr, dr, face);
+                let (x, y) = (r * angle.cos(), r * angle.sin());
+                // Distance along each axis to the rim.
+                let e1 = (radius * radius - y * y).max(0.0).sqrt() - x.abs();
+                let e2 = (radius * radius - x * x).max(0.0).sqrt() - y.abs();
+                self.push(center + t1 * x + t2 * y, t1, t2, dr, dr, e1, e2, face);
             }
         }
     }
@@ -239,15 +305,9 @@ pub fn gaussians_from_samples(room: &Room, samples: &[SurfaceSample]) -> Gaussia
     for s in samples {
         let prim = &room.primitives[s.primitive as usize];
         g.means.push(s.position.as_vec3().to_array());
-        let thickness = THICKNESS_PER_SPACING * s.spacing_u.min(s.spacing_v);
-        g.log_scales.push(
-            [
-                SCALE_PER_SPACING * s.spacing_u,
-                SCALE_PER_SPACING * s.spacing_v,
-                thickness,
-            ]
-            .map(|x| x.ln() as f32),
-        );
+        let (su, sv, thickness) = s.sigmas();
+        g.log_scales
+            .push([su, sv, thickness].map(|x| x.ln() as f32));
         // Local axes (x, y, z) = (tangent_u, tangent_v, normal): the flat axis is the normal.
         let q = DQuat::from_mat3(&DMat3::from_cols(s.tangent_u, s.tangent_v, s.normal)).normalize();
         let q = if q.w < 0.0 { -q } else { q };
