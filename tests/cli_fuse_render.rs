@@ -44,14 +44,22 @@ fn fuse_writes_classes_reassigns_from_saved_evidence_and_extracts() {
     let d = tmp.path();
     synth(d);
     let p = |f: &str| d.join(f).to_str().unwrap().to_string();
-    ok(&[
-        "fuse",
-        "--scene",
-        &p("scene.ply"),
-        "--cameras",
-        &p("cameras.json"),
-        "--labels",
-        &p("labels"),
+    // `fuse` on the synth folder's scene, cameras and labels, plus `extra`.
+    let (scene, cameras, labels) = (p("scene.ply"), p("cameras.json"), p("labels"));
+    let fuse = |extra: &[&str]| {
+        let mut args = vec![
+            "fuse",
+            "--scene",
+            &scene,
+            "--cameras",
+            &cameras,
+            "--labels",
+            &labels,
+        ];
+        args.extend_from_slice(extra);
+        ok(&args)
+    };
+    fuse(&[
         "--out",
         &p("fused.ply"),
         "--report",
@@ -89,6 +97,29 @@ fn fuse_writes_classes_reassigns_from_saved_evidence_and_extracts() {
     assert!(report["stats"]["views_per_s"].as_f64().unwrap() > 0.0);
     assert!(report["stats"]["peak_device_bytes"].as_u64().unwrap() > 0);
     assert!(d.join("A.classes.json").is_file() && d.join("palette.ply").is_file());
+
+    // The per-view variant runs end to end and says so; it agrees with plain FlashSplat on
+    // most Gaussians of these true labels.
+    fuse(&[
+        "--per-view",
+        "--out",
+        &p("per_view.ply"),
+        "--report",
+        &p("per_view.json"),
+    ]);
+    let per_view: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("per_view.json")).unwrap()).unwrap();
+    assert_eq!(per_view["method"], "flashsplat --per-view");
+    let pv = semsplat::scene::ply::read_ply(&d.join("per_view.ply")).unwrap();
+    let same = pv
+        .class_ids
+        .as_ref()
+        .unwrap()
+        .iter()
+        .zip(classes)
+        .filter(|(a, b)| a == b)
+        .count();
+    assert!(same as f64 > 0.9 * classes.len() as f64, "{same} agree");
 
     // Scores on the views, with 3D accuracy against the synth truth.
     let out = semsplat(&[
@@ -274,6 +305,17 @@ fn bad_input_is_one_clear_error_and_writes_nothing() {
     let d = tmp.path();
     synth(d);
     let p = |f: &str| d.join(f).to_str().unwrap().to_string();
+    // A complete `fuse` command writing x.ply, with `extra` options.
+    let fuse_with = |extra: &[&str]| -> Vec<String> {
+        let mut args: Vec<String> = ["fuse", "--scene", &p("scene.ply"), "--cameras"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        args.extend([p("cameras.json"), "--labels".into(), p("labels")]);
+        args.extend(extra.iter().map(|s| s.to_string()));
+        args.extend(["--out".into(), p("x.ply")]);
+        args
+    };
     let cases: Vec<(Vec<String>, &str)> = vec![
         (
             vec![
@@ -313,21 +355,10 @@ fn bad_input_is_one_clear_error_and_writes_nothing() {
             ],
             "--cameras",
         ),
+        (fuse_with(&["--gamma", "3"]), "gamma"),
         (
-            vec![
-                "fuse".into(),
-                "--scene".into(),
-                p("scene.ply"),
-                "--cameras".into(),
-                p("cameras.json"),
-                "--labels".into(),
-                p("labels"),
-                "--gamma".into(),
-                "3".into(),
-                "--out".into(),
-                p("x.ply"),
-            ],
-            "gamma",
+            fuse_with(&["--method", "vote", "--per-view"]),
+            "--per-view is a variant of --method flashsplat",
         ),
         (
             vec![

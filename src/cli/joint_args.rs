@@ -8,7 +8,8 @@ use semsplat::eval::benchmark::{JointSchedule, Lifter, ALL_METHODS};
 #[derive(Args, Clone)]
 pub struct MethodArgs {
     /// Methods to run (default: all): vote, vote-occlusion, vote-weighted, flashsplat,
-    /// joint-semantics (train --semantics-only), joint (full joint training).
+    /// flashsplat-per-view (fuse --per-view), joint-semantics (train --semantics-only), joint
+    /// (full joint training).
     #[arg(long, value_delimiter = ',', num_args = 1..)]
     methods: Vec<String>,
     /// Iterations of joint-semantics (one view each).

@@ -6,6 +6,7 @@ use std::path::Path;
 use std::sync::Once;
 
 use anyhow::{anyhow, ensure, Result};
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 use crate::util::write_bytes_atomic;
@@ -96,6 +97,8 @@ pub fn speed_vs_accuracy(
             .label_style(("sans-serif", 16))
             .draw()
             .map_err(plot_err)?;
+        // Labels placed so far: (left, top, right) in pixels.
+        let mut placed: Vec<(i32, i32, i32)> = Vec::new();
         for (i, p) in points.iter().enumerate() {
             let color = Palette99::pick(i).to_rgba();
             chart
@@ -107,14 +110,13 @@ pub fn speed_vs_accuracy(
                 .map_err(plot_err)?
                 .label(format!("{} ({:.3}, {:.2} s)", p.label, p.score, p.seconds))
                 .legend(move |(x, y)| Circle::new((x, y), 6, color.filled()));
+            let y = label_height(&chart, &placed, p);
+            let (px, py) = chart.backend_coord(&(p.seconds, y));
+            placed.push((px, py, px + label_width(p.label)));
             chart
                 .draw_series(std::iter::once(Text::new(
                     p.label.to_string(),
-                    // Alternately above and below, so labels of nearby points do not overprint.
-                    (
-                        p.seconds,
-                        (p.score + [0.03, -0.05, 0.075, -0.095][i % 4]).clamp(0.02, 0.97),
-                    ),
+                    (p.seconds, y),
                     ("sans-serif", 16),
                 )))
                 .map_err(plot_err)?;
@@ -129,6 +131,36 @@ pub fn speed_vs_accuracy(
             .map_err(plot_err)?;
         Ok(())
     })
+}
+
+/// Pixel width of a label in the 16-pixel font (about half the height per character).
+fn label_width(label: &str) -> i32 {
+    label.chars().count() as i32 * 9
+}
+
+/// A height for `p`'s label near its point, alternately above and below and further out,
+/// where it overprints no label placed before (labels are drawn rightwards from the point).
+fn label_height<DB: DrawingBackend>(
+    chart: &ChartContext<DB, Cartesian2d<LogCoord<f64>, RangedCoordf64>>,
+    placed: &[(i32, i32, i32)],
+    p: &SpeedPoint,
+) -> f64 {
+    const LINE: f64 = 0.045;
+    let candidates = (1..12).flat_map(|k| {
+        let d = LINE * (k as f64) - 0.015;
+        [p.score + d, p.score - d - 0.02]
+    });
+    let free = |y: f64| {
+        let (x, top) = chart.backend_coord(&(p.seconds, y));
+        let right = x + label_width(p.label);
+        placed
+            .iter()
+            .all(|&(l, t, r)| right <= l || x >= r || (top - t).abs() >= 18)
+    };
+    candidates
+        .filter(|y| (0.02..=0.97).contains(y))
+        .find(|&y| free(y))
+        .unwrap_or((p.score + 0.03).min(0.97))
 }
 
 /// One line of a metric-versus-level chart.

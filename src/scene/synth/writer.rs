@@ -22,7 +22,7 @@ use crate::util::{write_atomic, write_bytes_atomic};
 
 /// The output layout, for `--help`.
 // No line continuation before the first line: it would eat the indentation.
-pub const OUTPUT_LAYOUT: &str = "  scene.ply              ground-truth Gaussians (flat discs on the visible surfaces, SH degree 0)
+pub const OUTPUT_LAYOUT: &str = "  scene.ply              ground-truth Gaussians (flat discs on the surfaces the cameras see, SH degree 0)
                          with per-Gaussian `class` and `instance`; scene.classes.json beside it
   init.ply               sparse jittered surface point cloud (no labels) for training from scratch
   cameras.json           all views (semsplat camera JSON; \"split\": \"train\" | \"test\")
