@@ -58,7 +58,8 @@ pub struct FuseArgs {
     /// flashsplat: divide each view's alpha*T by the Gaussian's projected footprint in that
     /// view, so every view counts about once (as in a vote) instead of by the pixels it
     /// covers. More robust when the segmenter flickers from view to view; on consistent
-    /// labels it matches plain flashsplat within a fraction of a percent.
+    /// labels it matches plain flashsplat within a fraction of a percent. --save-contrib then
+    /// writes this normalized evidence.
     #[arg(long)]
     per_view: bool,
     /// Relative depth tolerance of --occlusion.
