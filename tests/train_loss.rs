@@ -53,6 +53,25 @@ struct Stats {
     cxy: Vec<f64>,
 }
 
+/// The window's taps around pixel (px, py) of channel c that fall inside the image (zero
+/// padding 5): (index into the [H, W, 3] image, weight).
+fn window_taps(
+    win: &[[f64; 11]; 11],
+    px: usize,
+    py: usize,
+    c: usize,
+    w: usize,
+    h: usize,
+) -> impl Iterator<Item = (usize, f64)> + '_ {
+    win.iter().enumerate().flat_map(move |(dy, row)| {
+        row.iter().enumerate().filter_map(move |(dx, &wt)| {
+            let (qx, qy) = (px as i64 + dx as i64 - 5, py as i64 + dy as i64 - 5);
+            (qx >= 0 && qy >= 0 && qx < w as i64 && qy < h as i64)
+                .then(|| ((qy as usize * w + qx as usize) * 3 + c, wt))
+        })
+    })
+}
+
 /// conv2d with the window, zero padding 5, per channel (as torch's F.conv2d, groups = 3).
 fn stats(x: &[f64], y: &[f64], w: usize, h: usize) -> Stats {
     let win = window();
@@ -68,19 +87,12 @@ fn stats(x: &[f64], y: &[f64], w: usize, h: usize) -> Stats {
         for px in 0..w {
             for c in 0..3 {
                 let (mut a, mut b, mut aa, mut bb, mut ab) = (0.0, 0.0, 0.0, 0.0, 0.0);
-                for (dy, row) in win.iter().enumerate() {
-                    for (dx, &wt) in row.iter().enumerate() {
-                        let (qx, qy) = (px as i64 + dx as i64 - 5, py as i64 + dy as i64 - 5);
-                        if qx < 0 || qy < 0 || qx >= w as i64 || qy >= h as i64 {
-                            continue;
-                        }
-                        let i = (qy as usize * w + qx as usize) * 3 + c;
-                        a += wt * x[i];
-                        b += wt * y[i];
-                        aa += wt * x[i] * x[i];
-                        bb += wt * y[i] * y[i];
-                        ab += wt * x[i] * y[i];
-                    }
+                for (i, wt) in window_taps(&win, px, py, c, w, h) {
+                    a += wt * x[i];
+                    b += wt * y[i];
+                    aa += wt * x[i] * x[i];
+                    bb += wt * y[i] * y[i];
+                    ab += wt * x[i] * y[i];
                 }
                 let o = (py * w + px) * 3 + c;
                 s.mx[o] = a;
@@ -141,18 +153,11 @@ fn rgb_grad_cpu(x: &[f64], y: &[f64], w: usize, h: usize) -> Vec<f64> {
                 let dcs_dvx = -cs_num / (cs_den * cs_den);
                 let dcs_dcxy = 2.0 / cs_den;
                 let up = -0.2 / n; // dL/dSSIM(o)
-                for (dy, row) in win.iter().enumerate() {
-                    for (dx, &wt) in row.iter().enumerate() {
-                        let (qx, qy) = (px as i64 + dx as i64 - 5, py as i64 + dy as i64 - 5);
-                        if qx < 0 || qy < 0 || qx >= w as i64 || qy >= h as i64 {
-                            continue;
-                        }
-                        let q = (qy as usize * w + qx as usize) * 3 + c;
-                        // d mx/dx_q = wt, d vx/dx_q = 2 wt (x_q - mx), d cxy/dx_q = wt (y_q - my).
-                        let dssim = dl_dmx * wt * cs
-                            + l * (dcs_dvx * 2.0 * wt * (x[q] - mx) + dcs_dcxy * wt * (y[q] - my));
-                        g[q] += up * dssim;
-                    }
+                for (q, wt) in window_taps(&win, px, py, c, w, h) {
+                    // d mx/dx_q = wt, d vx/dx_q = 2 wt (x_q - mx), d cxy/dx_q = wt (y_q - my).
+                    let dssim = dl_dmx * wt * cs
+                        + l * (dcs_dvx * 2.0 * wt * (x[q] - mx) + dcs_dcxy * wt * (y[q] - my));
+                    g[q] += up * dssim;
                 }
             }
         }

@@ -7,7 +7,7 @@ use anyhow::{ensure, Result};
 use bytemuck::{Pod, Zeroable};
 
 use super::frame::RenderedFrame;
-use super::gpu_scene::GpuScene;
+use super::gpu_scene::{parameter_floats, parameter_ranges, GpuScene};
 use super::rasterizer::{Rasterizer, TileLists, SEM_CHUNK};
 use super::{camera_rows_f32, RenderOptions, SemanticMode};
 use crate::gpu::kernel_table::ids;
@@ -98,15 +98,16 @@ impl SceneGrads {
         let n = scene.n.max(1) as u64;
         let c = scene.channels.max(1) as u64;
         let b = |name: &str, floats: u64| gpu.buffer(name, floats * 4);
+        let [means, log_scales, quats, opacity, sh] = parameter_floats(scene.sh_coeffs.max(1));
         let grads = SceneGrads {
             n: scene.n,
             channels: scene.channels,
             sh_coeffs: scene.sh_coeffs,
-            means: b("grad_means", n * 3)?,
-            log_scales: b("grad_log_scales", n * 3)?,
-            quats: b("grad_quats", n * 4)?,
-            opacity_logits: b("grad_opacity_logits", n)?,
-            sh: b("grad_sh", n * 3 * scene.sh_coeffs.max(1) as u64)?,
+            means: b("grad_means", n * means)?,
+            log_scales: b("grad_log_scales", n * log_scales)?,
+            quats: b("grad_quats", n * quats)?,
+            opacity_logits: b("grad_opacity_logits", n * opacity)?,
+            sh: b("grad_sh", n * sh)?,
             logits: b("grad_logits", n * c)?,
             probs: b("grad_probs", n * c)?,
             densify_grad: b("densify_grad", n)?,
@@ -186,17 +187,21 @@ impl SceneGrads {
     pub fn download(&self, gpu: &Gpu) -> Result<HostGrads> {
         let n = self.n as u64;
         let c = self.channels as u64;
-        let parts = gpu.download_many(&[
-            (&self.means, 0, n * 12),
-            (&self.log_scales, 0, n * 12),
-            (&self.quats, 0, n * 16),
-            (&self.opacity_logits, 0, n * 4),
-            (&self.sh, 0, n * 12 * self.sh_coeffs as u64),
+        let params = [
+            &self.means,
+            &self.log_scales,
+            &self.quats,
+            &self.opacity_logits,
+            &self.sh,
+        ];
+        let mut ranges = parameter_ranges(params, n, self.sh_coeffs);
+        ranges.extend([
             (&self.logits, 0, n * c * 4),
             (&self.screen, 0, n * GRAD2D_STRIDE as u64 * 4),
             (&self.densify_grad, 0, n * 4),
             (&self.densify_count, 0, n * 4),
-        ])?;
+        ]);
+        let parts = gpu.download_many(&ranges)?;
         let f = |k: usize| -> Vec<f32> { bytemuck::pod_collect_to_vec(&parts[k]) };
         Ok(HostGrads {
             means: f(0),

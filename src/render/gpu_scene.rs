@@ -6,6 +6,25 @@ use crate::scene::Gaussians;
 
 use super::SemanticMode;
 
+/// Floats per Gaussian of the parameter tensors, in the order means, log-scales,
+/// quaternions, opacity logits, SH: the layout of `GpuScene` and of its gradients.
+pub(crate) fn parameter_floats(sh_coeffs: u32) -> [u64; 5] {
+    [3, 3, 4, 1, 3 * sh_coeffs as u64]
+}
+
+/// Download ranges of `n` Gaussians' parameter tensors (or their gradients), in that order.
+pub(crate) fn parameter_ranges(
+    tensors: [&Buffer; 5],
+    n: u64,
+    sh_coeffs: u32,
+) -> Vec<(&Buffer, u64, u64)> {
+    tensors
+        .into_iter()
+        .zip(parameter_floats(sh_coeffs))
+        .map(|(b, floats)| (b, 0, n * floats * 4))
+        .collect()
+}
+
 /// Gaussians on the device. Semantic logits are optional; their softmax is computed on
 /// the device the first time the softmax mode asks for it.
 pub struct GpuScene {
@@ -88,23 +107,27 @@ impl GpuScene {
         Ok(())
     }
 
+    /// The parameter tensors in the order of [`parameter_floats`].
+    pub(crate) fn parameters(&self) -> [&Buffer; 5] {
+        [
+            &self.means,
+            &self.log_scales,
+            &self.quats,
+            &self.opacity_logits,
+            &self.sh,
+        ]
+    }
+
     /// Downloads the parameters into `g`'s arrays (which must have this scene's shape:
     /// training changes values, and densification rebuilds `g` to the new count first).
     pub fn download_into(&self, gpu: &Gpu, g: &mut Gaussians) -> GpuResult<()> {
         let n = self.n as u64;
         let c = self.channels as u64;
-        let parts = gpu.download_many(&[
-            (&self.means, 0, n * 12),
-            (&self.log_scales, 0, n * 12),
-            (&self.quats, 0, n * 16),
-            (&self.opacity_logits, 0, n * 4),
-            (&self.sh, 0, n * 12 * self.sh_coeffs as u64),
-            (
-                self.logits.as_ref().unwrap_or(&self.means),
-                0,
-                if self.logits.is_some() { n * c * 4 } else { 0 },
-            ),
-        ])?;
+        let mut ranges = parameter_ranges(self.parameters(), n, self.sh_coeffs);
+        if let Some(logits) = &self.logits {
+            ranges.push((logits, 0, n * c * 4));
+        }
+        let parts = gpu.download_many(&ranges)?;
         let f = |k: usize| -> Vec<f32> { bytemuck::pod_collect_to_vec(&parts[k]) };
         let triples = |v: Vec<f32>| v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
         g.means = triples(f(0));

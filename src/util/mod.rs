@@ -2,7 +2,9 @@
 
 pub mod atomic_write;
 pub mod npy;
+pub mod parallel;
 pub mod rng;
 
 pub use atomic_write::{write_atomic, write_bytes_atomic};
+pub use parallel::parallel_map;
 pub use rng::Rng;

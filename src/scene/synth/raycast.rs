@@ -1,15 +1,13 @@
 //! Ground-truth images by exact ray casting: one ray through each pixel center, first surface
 //! hit, its lit texture color, class and instance. Independent of any Gaussian renderer.
 
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
-
 use glam::DVec3;
 use indicatif::ProgressBar;
 
 use super::room::{Room, SurfaceHit};
 use super::shading::to_rgb8;
 use crate::scene::Camera;
+use crate::util::parallel_map;
 
 /// Label/instance value of pixels that see no surface (the 16-bit ignore value).
 pub const IGNORE: u16 = u16::MAX;
@@ -89,27 +87,9 @@ pub fn render_view(room: &Room, cam: &Camera) -> ViewTruth {
 
 /// Renders all views, several at a time, in camera order; ticks `progress` once per view.
 pub fn render_views(room: &Room, cameras: &[Camera], progress: &ProgressBar) -> Vec<ViewTruth> {
-    let results: Mutex<Vec<Option<ViewTruth>>> = Mutex::new(vec![None; cameras.len()]);
-    let next = AtomicUsize::new(0);
-    let threads = std::thread::available_parallelism()
-        .map_or(1, |n| n.get())
-        .min(cameras.len())
-        .max(1);
-    std::thread::scope(|scope| {
-        for _ in 0..threads {
-            scope.spawn(|| loop {
-                let i = next.fetch_add(1, Ordering::Relaxed);
-                let Some(cam) = cameras.get(i) else { break };
-                let view = render_view(room, cam);
-                results.lock().unwrap_or_else(|e| e.into_inner())[i] = Some(view);
-                progress.inc(1);
-            });
-        }
-    });
-    results
-        .into_inner()
-        .unwrap_or_else(|e| e.into_inner())
-        .into_iter()
-        .flatten()
-        .collect()
+    parallel_map(cameras.len(), |i| {
+        let view = render_view(room, &cameras[i]);
+        progress.inc(1);
+        view
+    })
 }

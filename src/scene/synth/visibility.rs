@@ -1,16 +1,15 @@
 //! Which surface samples some camera sees. A trained 3DGS keeps only Gaussians its views
 //! see: one the views never reach gets no gradient, and 3DGS's opacity reset and pruning
 //! remove it. A synthetic sheet of Gaussians behind every surface would not render (the
-//! surface in front hides it) but would leak into fusion through the ~1% transmittance left
+//! surface in front hides it) but would leak into fusion through the little transmittance left
 //! behind that surface, so the generator leaves such Gaussians out.
-
-use std::sync::Mutex;
 
 use glam::DVec3;
 
 use super::room::Room;
 use super::surface_sampling::SurfaceSample;
 use crate::scene::Camera;
+use crate::util::parallel_map;
 
 /// Nearest depth a camera sees (meters).
 const NEAR: f64 = 0.01;
@@ -23,22 +22,15 @@ const CHUNK: usize = 1024;
 /// For each sample: whether some camera sees its center or a point one standard deviation
 /// out along either in-plane axis (so a Gaussian half hidden behind an occluder stays).
 pub fn seen_by_any(room: &Room, cameras: &[Camera], samples: &[SurfaceSample]) -> Vec<bool> {
-    let mut seen = vec![false; samples.len()];
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-    // A queue of chunks: hidden samples cost every camera and probe, so even splits would not balance.
-    let queue = Mutex::new(seen.chunks_mut(CHUNK).enumerate().collect::<Vec<_>>());
-    std::thread::scope(|scope| {
-        for _ in 0..threads {
-            scope.spawn(|| loop {
-                let item = queue.lock().unwrap_or_else(|e| e.into_inner()).pop();
-                let Some((k, out)) = item else { break };
-                for (j, flag) in out.iter_mut().enumerate() {
-                    *flag = sample_seen(room, cameras, &samples[k * CHUNK + j]);
-                }
-            });
-        }
-    });
-    seen
+    // Chunks are the work items (a lock per sample would cost more than its check).
+    let chunks: Vec<&[SurfaceSample]> = samples.chunks(CHUNK).collect();
+    parallel_map(chunks.len(), |k| {
+        chunks[k]
+            .iter()
+            .map(|s| sample_seen(room, cameras, s))
+            .collect::<Vec<bool>>()
+    })
+    .concat()
 }
 
 fn sample_seen(room: &Room, cameras: &[Camera], s: &SurfaceSample) -> bool {
