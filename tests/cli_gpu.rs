@@ -152,3 +152,72 @@ fn info_json_lists_the_selected_device() {
         assert!(!d[key].is_null(), "{key} missing from {d}");
     }
 }
+
+#[test]
+fn bench_fuse_json_times_every_method_against_the_forward_render() {
+    let out = semsplat()
+        .args([
+            "bench", "fuse", "--n", "3000", "--views", "3", "--width", "96", "--height", "64",
+            "--json",
+        ])
+        .env("SEMSPLAT_VALIDATION", "1")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(!stderr.contains("[vulkan"), "validation layer: {stderr}");
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["views"], 3);
+    assert_eq!(v["n"], 3000);
+    assert_eq!(v["goal_ratio"], 1.3);
+    let positive = |x: &serde_json::Value, key: &str| {
+        let t = x[key]
+            .as_f64()
+            .unwrap_or_else(|| panic!("{key} missing in {x}"));
+        assert!(t.is_finite() && t > 0.0, "{key} = {t}");
+        t
+    };
+    let fwd_gpu = positive(&v["forward"], "gpu_ms");
+    let fwd_wall = positive(&v["forward"], "wall_s");
+    let methods = v["methods"].as_array().unwrap();
+    let keys: Vec<&str> = methods.iter().map(|m| m["key"].as_str().unwrap()).collect();
+    assert_eq!(
+        keys,
+        [
+            "vote",
+            "vote-occlusion",
+            "vote-weighted",
+            "flashsplat",
+            "flashsplat-per-view"
+        ]
+    );
+    for m in methods {
+        let (gpu, wall) = (positive(m, "gpu_ms"), positive(m, "wall_s"));
+        positive(m, "views_per_s");
+        let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * b;
+        assert!(close(positive(m, "gpu_ratio"), gpu / fwd_gpu), "{m}");
+        assert!(close(positive(m, "wall_ratio"), wall / fwd_wall), "{m}");
+        assert_eq!(m["passes"], 1);
+    }
+}
+
+#[test]
+fn bench_fuse_rejects_bad_input() {
+    for (args, needle) in [
+        (vec!["--views", "0"], "--views"),
+        (vec!["--n", "0"], "--n"),
+        (vec!["--classes", "0"], "--classes"),
+        (vec!["--classes", "65536"], "--classes"),
+        (vec!["--methods", "vote,joint"], "unknown method 'joint'"),
+    ] {
+        let out = semsplat()
+            .args(["bench", "fuse"])
+            .args(&args)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?} succeeded");
+        assert!(stderr.contains(needle), "{args:?}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
+    }
+}

@@ -1,6 +1,8 @@
 //! Measurements behind `semsplat bench`: GPU time from timestamp queries, against a CPU
-//! baseline on the same data in the same run, with the GPU result checked against it.
+//! baseline on the same data in the same run, with the GPU result checked against it (or,
+//! for fusion, against a forward render of the same views).
 
+pub mod fuse;
 pub mod render;
 pub mod scan;
 pub mod sort;

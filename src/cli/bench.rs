@@ -1,11 +1,15 @@
 //! `semsplat bench`: GPU kernel throughput from timestamps, against a CPU baseline measured
-//! in the same run on the same data.
+//! in the same run on the same data; fusion against a forward render of the same views.
 
 use anyhow::Result;
 use clap::{Args, Subcommand};
 use serde::Serialize;
 
+use super::joint_args::parse_methods;
+use super::progress::views_bar;
+use semsplat::bench::fuse::{bench_fuse, FuseBench, FuseBenchSpec};
 use semsplat::bench::{render::bench_render, scan::bench_scan, sort::bench_sort};
+use semsplat::eval::benchmark::{Lifter, ALL_METHODS};
 use semsplat::gpu::timings::KernelTotal;
 use semsplat::gpu::Gpu;
 
@@ -17,6 +21,41 @@ pub enum BenchCommand {
     Scan(ScanArgs),
     /// Forward rendering of a random scene (SH degree 3): frames/s and per-stage GPU time.
     Render(RenderArgs),
+    /// Every fusion method over many views of a random scene, against a plain forward render
+    /// (RGB only) of the same views: seconds, GPU time, views/s and the ratio to the render.
+    Fuse(FuseArgs),
+}
+
+#[derive(Args)]
+pub struct FuseArgs {
+    /// Number of Gaussians (a random scene, SH degree 3).
+    #[arg(long, default_value_t = 200_000)]
+    n: usize,
+    /// Views: cameras on a ring in front of the scene, each seeing most of it, with a
+    /// label map of blocks of random classes each (seeded, streamed view by view).
+    #[arg(long, default_value_t = 100)]
+    views: usize,
+    #[arg(long, default_value_t = 640)]
+    width: u32,
+    #[arg(long, default_value_t = 480)]
+    height: u32,
+    /// Label classes (rows of the evidence matrix), 1..=65535.
+    #[arg(long, default_value_t = 16)]
+    classes: usize,
+    /// Fusion methods (default: all five): vote, vote-occlusion, vote-weighted, flashsplat,
+    /// flashsplat-per-view.
+    #[arg(long, value_delimiter = ',', num_args = 1..)]
+    methods: Vec<String>,
+    /// Timed runs over all views of the forward render and of every method (after a
+    /// one-view warm-up); the median is reported. One run already times every view.
+    #[arg(long, default_value_t = 1)]
+    iters: usize,
+    /// Seed of the scene and the label maps.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Print one JSON object instead of a table.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Args)]
@@ -87,6 +126,66 @@ fn emit<T: Serialize>(json: bool, value: &T, table: impl FnOnce()) -> Result<()>
         table();
     }
     Ok(())
+}
+
+fn mib(bytes: u64) -> f64 {
+    bytes as f64 / (1u64 << 20) as f64
+}
+
+/// A ratio to the forward render, with whether it meets the goal.
+fn against_goal(ratio: f64, goal: f64) -> String {
+    let verdict = if ratio <= goal { "met" } else { "missed" };
+    format!("{ratio:>7.2}x {verdict:<6}")
+}
+
+fn print_fuse(r: &FuseBench) {
+    println!(
+        "fuse: {} Gaussians, {} views at {}x{}, {} classes, on {} (median of {} run{})",
+        r.n,
+        r.views,
+        r.width,
+        r.height,
+        r.classes,
+        r.device,
+        r.iters,
+        if r.iters == 1 { "" } else { "s" }
+    );
+    let f = &r.forward;
+    println!(
+        "{:<22} {:>8} {:>10} {:>8} {:>6} {:>8} {:>8}        {:>8}",
+        "", "wall s", "GPU ms", "views/s", "passes", "memory", "GPU/fwd", "wall/fwd"
+    );
+    println!(
+        "{:<22} {:>8.2} {:>10.1} {:>8.2} {:>6} {:>4.0} MiB",
+        "forward render (RGB)",
+        f.wall_s,
+        f.gpu_ms,
+        f.views_per_s,
+        1,
+        mib(f.peak_device_bytes)
+    );
+    for m in &r.methods {
+        let row = format!(
+            "{:<22} {:>8.2} {:>10.1} {:>8.2} {:>6} {:>4.0} MiB {} {}",
+            m.method,
+            m.wall_s,
+            m.gpu_ms,
+            m.views_per_s,
+            m.passes,
+            mib(m.peak_device_bytes),
+            against_goal(m.gpu_ratio, r.goal_ratio),
+            against_goal(m.wall_ratio, r.goal_ratio)
+        );
+        println!("{}", row.trim_end());
+    }
+    println!(
+        "goal (issue #5): accumulation <= {:.1}x the forward render (GPU time and wall time)",
+        r.goal_ratio
+    );
+    println!(
+        "forward render: {:.0} visible Gaussians, {:.0} tile intersections per view",
+        f.visible_per_view, f.intersections_per_view
+    );
 }
 
 pub fn run(cmd: BenchCommand) -> Result<()> {
@@ -169,6 +268,39 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
                     r.visible, r.intersections
                 );
             })
+        }
+        BenchCommand::Fuse(a) => {
+            let fusion: Vec<Lifter> = ALL_METHODS
+                .into_iter()
+                .filter(|l| matches!(l, Lifter::Fuse(_)))
+                .collect();
+            let methods = parse_methods(&a.methods, &fusion)?
+                .into_iter()
+                .filter_map(|l| match l {
+                    Lifter::Fuse(m) => Some(m),
+                    _ => None,
+                })
+                .collect::<Vec<_>>();
+            let spec = FuseBenchSpec {
+                n: a.n,
+                views: a.views,
+                width: a.width,
+                height: a.height,
+                classes: a.classes,
+                iters: a.iters,
+                seed: a.seed,
+            };
+            let bar = views_bar(0);
+            let r = bench_fuse(&gpu, &spec, &methods, |phase, done, total| {
+                if bar.message() != phase {
+                    bar.set_message(phase.to_string());
+                    bar.reset();
+                }
+                bar.set_length(total as u64);
+                bar.set_position(done as u64);
+            })?;
+            bar.finish_and_clear();
+            emit(a.json, &r, || print_fuse(&r))
         }
     }
 }

@@ -5,10 +5,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
-use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 
 use super::label_classes::{classes_in_labels, default_class_table};
+use super::progress::views_bar;
 use semsplat::eval::label_render::LabelRenderer;
 use semsplat::fuse::{
     accumulate, assign_one_vs_rest, assign_semantic, Accumulation, ClassScores, FuseConfig,
@@ -303,10 +303,7 @@ pub fn run(args: FuseArgs) -> Result<()> {
             depth_tolerance: args.depth_tol,
             ..Default::default()
         };
-        let bar = ProgressBar::new(cams.len() as u64).with_style(
-            ProgressStyle::with_template("{bar:40} {pos}/{len} views {per_sec} eta {eta}")
-                .expect("valid template"),
-        );
+        let bar = views_bar(cams.len());
         let (scores, stats) = accumulate(
             &gpu,
             &scene,

@@ -1,4 +1,5 @@
-//! Which methods `demo` and `sweep` run, and the joint methods' schedule (shared flags).
+//! Which methods `demo`, `sweep` and `bench fuse` run, and the joint methods' schedule
+//! (shared flags).
 
 use anyhow::{anyhow, Result};
 use clap::Args;
@@ -22,18 +23,7 @@ pub struct MethodArgs {
 
 impl MethodArgs {
     pub fn methods(&self) -> Result<Vec<Lifter>> {
-        if self.methods.is_empty() {
-            return Ok(ALL_METHODS.to_vec());
-        }
-        self.methods
-            .iter()
-            .map(|m| {
-                Lifter::from_key(m).ok_or_else(|| {
-                    let keys: Vec<&str> = ALL_METHODS.iter().map(|l| l.key()).collect();
-                    anyhow!("unknown method '{m}' (known: {})", keys.join(", "))
-                })
-            })
-            .collect()
+        parse_methods(&self.methods, &ALL_METHODS)
     }
 
     pub fn schedule(&self) -> JointSchedule {
@@ -43,4 +33,21 @@ impl MethodArgs {
             ..Default::default()
         }
     }
+}
+
+/// The methods named by `--methods` keys, each one of `known`; no key: all of `known`.
+pub fn parse_methods(keys: &[String], known: &[Lifter]) -> Result<Vec<Lifter>> {
+    if keys.is_empty() {
+        return Ok(known.to_vec());
+    }
+    keys.iter()
+        .map(|m| {
+            Lifter::from_key(m)
+                .filter(|l| known.contains(l))
+                .ok_or_else(|| {
+                    let keys: Vec<&str> = known.iter().map(|l| l.key()).collect();
+                    anyhow!("unknown method '{m}' (known: {})", keys.join(", "))
+                })
+        })
+        .collect()
 }

@@ -8,6 +8,7 @@ pub mod info;
 pub mod inspect;
 pub mod joint_args;
 pub mod label_classes;
+pub mod progress;
 pub mod render;
 pub mod sweep;
 pub mod synth;

@@ -86,6 +86,19 @@ impl Default for FuseConfig {
     }
 }
 
+impl FuseConfig {
+    /// How the tiled methods bin a view: RGB only, with this config's clip planes (also the
+    /// forward render `bench fuse` compares against).
+    pub fn render_options(&self) -> RenderOptions {
+        RenderOptions {
+            near: self.near,
+            far: self.far,
+            semantics: None,
+            ..Default::default()
+        }
+    }
+}
+
 /// Gives the label map of a view as compact class indices per pixel ([`NO_LABEL`] where
 /// unlabeled), or None when the view has no labels. Called once per view and pass.
 pub trait LabelSource {
@@ -190,12 +203,7 @@ pub fn accumulate(
         ..Default::default()
     };
     let mut raster = Rasterizer::new(gpu);
-    let opts = RenderOptions {
-        near: cfg.near,
-        far: cfg.far,
-        semantics: None,
-        ..Default::default()
-    };
+    let opts = cfg.render_options();
     let mut label_buf: Option<Buffer> = None;
     let mut carry: Option<Buffer> = None;
     let mut staging: Option<Buffer> = None;

@@ -1,0 +1,316 @@
+//! Fusion speed (issue #5): every fusion method over many views of a random scene, against
+//! a plain forward render (RGB only, the same render options) of the same views.
+
+use std::time::Instant;
+
+use anyhow::{ensure, Result};
+use glam::DVec3;
+use serde::Serialize;
+
+use super::median;
+use crate::eval::benchmark::Lifter;
+use crate::fuse::{accumulate, FuseConfig, FuseStats, LabelSource, Method, NO_LABEL};
+use crate::gpu::Gpu;
+use crate::render::{GpuScene, Rasterizer, RenderOptions};
+use crate::scene::random_scene::{random_scene, RandomSceneSpec};
+use crate::scene::Camera;
+use crate::util::Rng;
+
+/// Issue #5's goal: accumulation takes at most this multiple of the forward render's time.
+pub const GOAL_RATIO: f64 = 1.3;
+
+/// Label classes a label map can hold (16-bit label PNGs).
+pub const MAX_CLASSES: usize = 65_535;
+
+/// Share of the label blocks left unlabeled, as a segmenter leaves some pixels.
+const UNLABELED: f64 = 0.05;
+
+/// What to measure.
+#[derive(Clone, Debug)]
+pub struct FuseBenchSpec {
+    /// Gaussians.
+    pub n: usize,
+    pub views: usize,
+    pub width: u32,
+    pub height: u32,
+    pub classes: usize,
+    /// Timed runs of every method and of the forward render; medians are reported.
+    pub iters: usize,
+    pub seed: u64,
+}
+
+/// The forward render of every view.
+#[derive(Debug, Serialize)]
+pub struct ForwardBench {
+    /// GPU time of all views (binning + RGB blending), from timestamps.
+    pub gpu_ms: f64,
+    pub wall_s: f64,
+    pub views_per_s: f64,
+    /// Mean over the views.
+    pub visible_per_view: f64,
+    pub intersections_per_view: f64,
+    pub peak_device_bytes: u64,
+}
+
+/// One fusion method over every view.
+#[derive(Debug, Serialize)]
+pub struct MethodBench {
+    /// As `fuse` spells it ("vote --occlusion").
+    pub method: &'static str,
+    /// As `--methods` takes it ("vote-occlusion").
+    pub key: &'static str,
+    /// Accumulation over all views (label upload, GPU work, evidence download), from
+    /// `fuse::accumulate`; the assignment afterwards is not included.
+    pub wall_s: f64,
+    /// GPU time of all views (binning + accumulation), from timestamps.
+    pub gpu_ms: f64,
+    /// Views (times passes) per wall second.
+    pub views_per_s: f64,
+    /// Passes over the views (the evidence matrix split into class-row batches).
+    pub passes: usize,
+    pub rows_per_pass: usize,
+    pub peak_device_bytes: u64,
+    /// gpu_ms / forward gpu_ms.
+    pub gpu_ratio: f64,
+    /// wall_s / forward wall_s.
+    pub wall_ratio: f64,
+}
+
+#[derive(Debug, Serialize)]
+pub struct FuseBench {
+    pub n: usize,
+    pub views: usize,
+    pub width: u32,
+    pub height: u32,
+    pub classes: usize,
+    pub iters: usize,
+    pub seed: u64,
+    pub device: String,
+    /// The ratio to the forward render the issue asks accumulation to stay within.
+    pub goal_ratio: f64,
+    pub forward: ForwardBench,
+    pub methods: Vec<MethodBench>,
+}
+
+/// Label maps like a segmenter's: square blocks of about a twelfth of the image, one class
+/// each (a few unlabeled), so neighbouring pixels share labels, as the subgroup combining of
+/// contributions expects of real maps. Blocks are not tile-aligned (random offset, size not
+/// a multiple of 16). Fresh per view and the same in every run: drawn from (seed, view).
+struct BlockLabels {
+    classes: u64,
+    rng: Rng,
+}
+
+impl LabelSource for BlockLabels {
+    fn labels(&self, view: usize, cam: &Camera) -> Result<Option<Vec<u32>>> {
+        let (w, h) = (cam.width as usize, cam.height as usize);
+        let block = (w.max(h) / 12).max(3) | 1;
+        let mut rng = self.rng.fork(view as u64);
+        let (ox, oy) = (
+            rng.below(block as u64) as usize,
+            rng.below(block as u64) as usize,
+        );
+        let bw = (w + ox).div_ceil(block);
+        let ids: Vec<u32> = (0..bw * (h + oy).div_ceil(block))
+            .map(|_| {
+                if rng.bool(UNLABELED) {
+                    NO_LABEL
+                } else {
+                    rng.below(self.classes) as u32
+                }
+            })
+            .collect();
+        let mut map = Vec::with_capacity(w * h);
+        for y in 0..h {
+            let row = &ids[(y + oy) / block * bw..];
+            map.extend((0..w).map(|x| row[(x + ox) / block]));
+        }
+        Ok(Some(map))
+    }
+}
+
+/// `views` cameras on a ring in front of the random scene (which fills the view cone of a
+/// camera at the origin looking down +z), each aimed at its middle, so every view sees
+/// most of it from a slightly different side.
+fn ring_cameras(views: usize, width: u32, height: u32) -> Vec<Camera> {
+    let target = DVec3::new(0.0, 0.0, 4.5);
+    (0..views)
+        .map(|i| {
+            let a = std::f64::consts::TAU * i as f64 / views as f64;
+            let eye = DVec3::new(a.cos(), a.sin(), -0.5);
+            Camera::look_at(
+                &format!("view{i:04}"),
+                eye,
+                target,
+                -DVec3::Y,
+                width,
+                height,
+                70.0,
+            )
+        })
+        .collect()
+}
+
+/// One timed forward render of every view: binning and RGB blending, as `Rasterizer::render`
+/// records them, without downloading the images (accumulation downloads nothing per view
+/// either). A fresh rasterizer, as `accumulate` starts with, so buffer growth counts alike.
+fn forward_run(
+    gpu: &Gpu,
+    scene: &GpuScene,
+    cams: &[Camera],
+    opts: &RenderOptions,
+    mut progress: impl FnMut(usize),
+) -> Result<ForwardBench> {
+    let start = Instant::now();
+    let mut raster = Rasterizer::new(gpu);
+    let window_len = raster.window_len();
+    let (mut gpu_ms, mut visible, mut isect, mut peak) = (0.0, 0u64, 0u64, 0u64);
+    for (i, cam) in cams.iter().enumerate() {
+        progress(i);
+        let run = raster.run_tiled(scene, cam, opts, 0, |rec, tiles| {
+            tiles.record_blend(rec, None, 0, window_len, opts.background)
+        })?;
+        gpu_ms += run.timings.total_ns() * 1e-6;
+        visible += u64::from(run.visible);
+        isect += u64::from(run.intersections);
+        peak = peak.max(gpu.memory_reserved());
+    }
+    progress(cams.len());
+    let wall_s = start.elapsed().as_secs_f64();
+    let views = cams.len() as f64;
+    Ok(ForwardBench {
+        gpu_ms,
+        wall_s,
+        views_per_s: views / wall_s,
+        visible_per_view: visible as f64 / views,
+        intersections_per_view: isect as f64 / views,
+        peak_device_bytes: peak,
+    })
+}
+
+/// Times the forward render and then each of `methods` over `spec.views` views of a random
+/// scene. `progress(phase, done, total)` counts views within each phase ("forward render",
+/// then each method's name).
+pub fn bench_fuse(
+    gpu: &Gpu,
+    spec: &FuseBenchSpec,
+    methods: &[Method],
+    mut progress: impl FnMut(&str, usize, usize),
+) -> Result<FuseBench> {
+    ensure!(spec.n > 0, "--n must be at least 1 Gaussian");
+    ensure!(
+        spec.n <= u32::MAX as usize,
+        "--n must be below 2^32 Gaussians"
+    );
+    ensure!(spec.views > 0, "--views must be at least 1");
+    ensure!(
+        spec.width > 0 && spec.height > 0,
+        "--width and --height must be at least 1 pixel"
+    );
+    ensure!(
+        (1..=MAX_CLASSES).contains(&spec.classes),
+        "--classes must lie in 1..={MAX_CLASSES}, got {}",
+        spec.classes
+    );
+    ensure!(spec.iters > 0, "--iters must be at least 1");
+    ensure!(!methods.is_empty(), "no fusion method to run");
+    ensure!(
+        gpu.caps().timestamps,
+        "the device has no timestamp queries; GPU time cannot be measured"
+    );
+    // SH degree 3 as a trained 3DGS scene (and `bench render`): projection evaluates it.
+    let g = random_scene(&RandomSceneSpec {
+        n: spec.n,
+        sh_degree: 3,
+        seed: spec.seed,
+        ..Default::default()
+    });
+    let scene = GpuScene::upload(gpu, &g)?;
+    drop(g);
+    let cams = ring_cameras(spec.views, spec.width, spec.height);
+    let labels = BlockLabels {
+        classes: spec.classes as u64,
+        rng: Rng::new(spec.seed).fork(0x1abe1),
+    };
+    let (iters, views) = (spec.iters, spec.views);
+
+    // Warm-ups on the first view compile the pipelines, so no run pays for them.
+    let opts = FuseConfig::default().render_options();
+    forward_run(gpu, &scene, &cams[..1], &opts, |_| {})?;
+    let mut runs = Vec::with_capacity(iters);
+    for it in 0..iters {
+        let phase = "forward render";
+        runs.push(forward_run(gpu, &scene, &cams, &opts, |d| {
+            progress(phase, it * views + d, iters * views)
+        })?);
+    }
+    let forward = median_forward(runs, views);
+
+    let mut results = Vec::with_capacity(methods.len());
+    for &method in methods {
+        let cfg = FuseConfig {
+            method,
+            ..Default::default()
+        };
+        accumulate(
+            gpu,
+            &scene,
+            &cams[..1],
+            &labels,
+            spec.classes,
+            &cfg,
+            |_, _| {},
+        )?;
+        let mut runs: Vec<FuseStats> = Vec::with_capacity(iters);
+        for it in 0..iters {
+            let (_, stats) =
+                accumulate(gpu, &scene, &cams, &labels, spec.classes, &cfg, |d, t| {
+                    progress(method.name(), it * t + d, iters * t)
+                })?;
+            runs.push(stats);
+        }
+        let wall_s = median(&mut runs.iter().map(|s| s.wall_s).collect::<Vec<_>>());
+        let gpu_ms = median(&mut runs.iter().map(|s| s.gpu_ms).collect::<Vec<_>>());
+        let last = &runs[runs.len() - 1];
+        results.push(MethodBench {
+            method: method.name(),
+            key: Lifter::Fuse(method).key(),
+            wall_s,
+            gpu_ms,
+            views_per_s: (views * last.passes) as f64 / wall_s,
+            passes: last.passes,
+            rows_per_pass: last.rows_per_pass,
+            peak_device_bytes: runs.iter().map(|s| s.peak_device_bytes).max().unwrap_or(0),
+            gpu_ratio: gpu_ms / forward.gpu_ms,
+            wall_ratio: wall_s / forward.wall_s,
+        });
+    }
+    Ok(FuseBench {
+        n: spec.n,
+        views,
+        width: spec.width,
+        height: spec.height,
+        classes: spec.classes,
+        iters,
+        seed: spec.seed,
+        device: gpu.caps().name.clone(),
+        goal_ratio: GOAL_RATIO,
+        forward,
+        methods: results,
+    })
+}
+
+/// The forward figures with GPU and wall time each the median over the runs.
+fn median_forward(runs: Vec<ForwardBench>, views: usize) -> ForwardBench {
+    let gpu_ms = median(&mut runs.iter().map(|f| f.gpu_ms).collect::<Vec<_>>());
+    let wall_s = median(&mut runs.iter().map(|f| f.wall_s).collect::<Vec<_>>());
+    let peak = runs.iter().map(|f| f.peak_device_bytes).max().unwrap_or(0);
+    let last = runs.into_iter().last().expect("at least one run");
+    ForwardBench {
+        gpu_ms,
+        wall_s,
+        views_per_s: views as f64 / wall_s,
+        peak_device_bytes: peak,
+        ..last
+    }
+}
