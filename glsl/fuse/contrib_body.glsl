@@ -4,9 +4,10 @@
 // integers: order-independent, so A is identical run to run) and contrib_float.comp (float
 // atomics).
 //
-// Every lane walks every entry (a done or unlabeled pixel contributes 0), so each step is
-// uniform across the subgroup: lanes that share the label (neighbouring pixels mostly do)
-// are summed in the subgroup first and one lane does the atomic. mode 1 keeps only the
+// Every lane walks every entry until all lanes of its subgroup are done (a done or
+// unlabeled pixel contributes 0), so each step is uniform across the subgroup: lanes that
+// share the label (neighbouring pixels mostly do) are summed in the subgroup first and one
+// lane does the atomic. mode 1 keeps only the
 // pixel that holds the Gaussian's projected center: the weighted vote. per_view divides
 // each weight by the Gaussian's projected footprint in this view, 2 pi opacity sqrt(det
 // Sigma2d), so a view adds the share of the Gaussian it sees under each label (at most
@@ -42,6 +43,7 @@ shared vec4 s_xy_depth_opacity[BATCH]; // floor(mean2d) depth opacity
 shared vec2 s_frac[BATCH];
 shared vec4 s_conic[BATCH];
 shared uint s_id[BATCH];
+shared float s_scale[BATCH]; // per_view: 1 / footprint; else 1
 
 void accumulate(uint row, uint gaussian, float w);
 
@@ -83,10 +85,21 @@ void main() {
             s_xy_depth_opacity[t] = xy_depth_opacity.data[g];
             s_frac[t] = xy_frac.data[g];
             s_conic[t] = conics.data[g];
+            // The footprint is the Gaussian's, not the pixel's: once per entry, not per step.
+            // The conic is the inverse of Sigma2d: sqrt(det Sigma2d) = 1 / sqrt(det conic).
+            vec4 con = s_conic[t];
+            s_scale[t] = pc.mode.y == 1
+                ? sqrt(max(con.x * con.z - con.y * con.y, 0.0)) / (TWO_PI * s_xy_depth_opacity[t].w)
+                : 1.0;
         }
         barrier();
         uint count = min(BATCH, end - b);
         for (uint j = 0; j < count; j++) {
+            // A subgroup-uniform exit, as blending's per-lane one: once every pixel of the
+            // subgroup is saturated or unlabeled, the rest of the batch adds nothing.
+            if (subgroupAll(done)) {
+                break;
+            }
             float w = 0.0;
             vec4 g = s_xy_depth_opacity[j];
             if (!done) {
@@ -107,11 +120,7 @@ void main() {
             if (pc.mode.x == 1 && g.xy != pixel) {
                 w = 0.0;
             }
-            if (pc.mode.y == 1 && w > 0.0) {
-                // The conic is the inverse of Sigma2d: sqrt(det Sigma2d) = 1 / sqrt(det conic).
-                vec3 con = s_conic[j].xyz;
-                w *= sqrt(max(con.x * con.z - con.y * con.y, 0.0)) / (TWO_PI * g.w);
-            }
+            w *= s_scale[j];
             accumulate(w > 0.0 ? row : NO_ROW, s_id[j], w);
         }
         barrier();

@@ -9,7 +9,7 @@ use serde::Serialize;
 
 use super::median;
 use crate::eval::benchmark::Lifter;
-use crate::fuse::{accumulate, FuseConfig, FuseStats, LabelSource, Method, NO_LABEL};
+use crate::fuse::{accumulate, FuseConfig, LabelSource, Method, NO_LABEL};
 use crate::gpu::Gpu;
 use crate::render::{GpuScene, Rasterizer, RenderOptions};
 use crate::scene::random_scene::{random_scene, RandomSceneSpec};
@@ -26,7 +26,7 @@ pub const MAX_CLASSES: usize = 65_535;
 const UNLABELED: f64 = 0.05;
 
 /// What to measure.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize)]
 pub struct FuseBenchSpec {
     /// Gaussians.
     pub n: usize,
@@ -78,13 +78,8 @@ pub struct MethodBench {
 
 #[derive(Debug, Serialize)]
 pub struct FuseBench {
-    pub n: usize,
-    pub views: usize,
-    pub width: u32,
-    pub height: u32,
-    pub classes: usize,
-    pub iters: usize,
-    pub seed: u64,
+    #[serde(flatten)]
+    pub spec: FuseBenchSpec,
     pub device: String,
     /// The ratio to the forward render the issue asks accumulation to stay within.
     pub goal_ratio: f64,
@@ -188,9 +183,9 @@ fn forward_run(
     })
 }
 
-/// Times the forward render and then each of `methods` over `spec.views` views of a random
-/// scene. `progress(phase, done, total)` counts views within each phase ("forward render",
-/// then each method's name).
+/// Times the forward render and each of `methods` over `spec.views` views of a random
+/// scene, taking turns on rounds of views. `progress(phase, done, total)` counts views over
+/// all phases ("forward render" or the method's name).
 pub fn bench_fuse(
     gpu: &Gpu,
     spec: &FuseBenchSpec,
@@ -233,66 +228,98 @@ pub fn bench_fuse(
         rng: Rng::new(spec.seed).fork(0x1abe1),
     };
     let (iters, views) = (spec.iters, spec.views);
+    let cfgs: Vec<FuseConfig> = methods
+        .iter()
+        .map(|&method| FuseConfig {
+            method,
+            ..Default::default()
+        })
+        .collect();
 
     // Warm-ups on the first view compile the pipelines, so no run pays for them.
     let opts = FuseConfig::default().render_options();
     forward_run(gpu, &scene, &cams[..1], &opts, |_| {})?;
-    let mut runs = Vec::with_capacity(iters);
-    for it in 0..iters {
-        let phase = "forward render";
-        runs.push(forward_run(gpu, &scene, &cams, &opts, |d| {
-            progress(phase, it * views + d, iters * views)
-        })?);
-    }
-    let forward = median_forward(runs, views);
-
-    let mut results = Vec::with_capacity(methods.len());
-    for &method in methods {
-        let cfg = FuseConfig {
-            method,
-            ..Default::default()
-        };
+    for cfg in &cfgs {
         accumulate(
             gpu,
             &scene,
             &cams[..1],
             &labels,
             spec.classes,
-            &cfg,
+            cfg,
             |_, _| {},
         )?;
-        let mut runs: Vec<FuseStats> = Vec::with_capacity(iters);
-        for it in 0..iters {
-            let (_, stats) =
-                accumulate(gpu, &scene, &cams, &labels, spec.classes, &cfg, |d, t| {
-                    progress(method.name(), it * t + d, iters * t)
-                })?;
-            runs.push(stats);
-        }
-        let wall_s = median(&mut runs.iter().map(|s| s.wall_s).collect::<Vec<_>>());
-        let gpu_ms = median(&mut runs.iter().map(|s| s.gpu_ms).collect::<Vec<_>>());
-        let last = &runs[runs.len() - 1];
-        results.push(MethodBench {
-            method: method.name(),
-            key: Lifter::Fuse(method).key(),
-            wall_s,
-            gpu_ms,
-            views_per_s: (views * last.passes) as f64 / wall_s,
-            passes: last.passes,
-            rows_per_pass: last.rows_per_pass,
-            peak_device_bytes: runs.iter().map(|s| s.peak_device_bytes).max().unwrap_or(0),
-            gpu_ratio: gpu_ms / forward.gpu_ms,
-            wall_ratio: wall_s / forward.wall_s,
-        });
     }
+    // The forward render and the methods take turns on each round of views, so a slow
+    // spell of a shared machine slows them alike and the ratios stay meaningful.
+    let total = iters * views * (1 + methods.len());
+    let mut done = 0;
+    let mut forward_runs = Vec::with_capacity(iters);
+    let mut method_runs: Vec<Vec<RunTotal>> = vec![Vec::with_capacity(iters); methods.len()];
+    for _ in 0..iters {
+        let mut forward = RunTotal::default();
+        let mut per_method = vec![RunTotal::default(); methods.len()];
+        for (r, round) in cams.chunks(ROUND_VIEWS).enumerate() {
+            let first = r * ROUND_VIEWS;
+            let f = forward_run(gpu, &scene, round, &opts, |d| {
+                progress("forward render", done + d, total)
+            })?;
+            done += round.len();
+            forward.add(f.gpu_ms, f.wall_s, f.peak_device_bytes);
+            forward.visible += f.visible_per_view * round.len() as f64;
+            forward.intersections += f.intersections_per_view * round.len() as f64;
+            for (cfg, sum) in cfgs.iter().zip(&mut per_method) {
+                let shifted = Shifted {
+                    labels: &labels,
+                    first,
+                };
+                let (_, stats) =
+                    accumulate(gpu, &scene, round, &shifted, spec.classes, cfg, |d, _| {
+                        progress(cfg.method.name(), done + d, total)
+                    })?;
+                done += round.len();
+                sum.add(stats.gpu_ms, stats.wall_s, stats.peak_device_bytes);
+                sum.passes = stats.passes;
+                sum.rows_per_pass = stats.rows_per_pass;
+            }
+        }
+        forward_runs.push(forward);
+        for (runs, sum) in method_runs.iter_mut().zip(per_method) {
+            runs.push(sum);
+        }
+    }
+    let forward = RunTotal::median(&forward_runs);
+    let n_views = views as f64;
+    let last = forward_runs.last().expect("at least one run");
+    let forward = ForwardBench {
+        gpu_ms: forward.gpu_ms,
+        wall_s: forward.wall_s,
+        views_per_s: n_views / forward.wall_s,
+        visible_per_view: last.visible / n_views,
+        intersections_per_view: last.intersections / n_views,
+        peak_device_bytes: forward.peak_device_bytes,
+    };
+    let results = methods
+        .iter()
+        .zip(&method_runs)
+        .map(|(&method, runs)| {
+            let m = RunTotal::median(runs);
+            MethodBench {
+                method: method.name(),
+                key: Lifter::Fuse(method).key(),
+                wall_s: m.wall_s,
+                gpu_ms: m.gpu_ms,
+                views_per_s: (views * m.passes) as f64 / m.wall_s,
+                passes: m.passes,
+                rows_per_pass: m.rows_per_pass,
+                peak_device_bytes: m.peak_device_bytes,
+                gpu_ratio: m.gpu_ms / forward.gpu_ms,
+                wall_ratio: m.wall_s / forward.wall_s,
+            }
+        })
+        .collect();
     Ok(FuseBench {
-        n: spec.n,
-        views,
-        width: spec.width,
-        height: spec.height,
-        classes: spec.classes,
-        iters,
-        seed: spec.seed,
+        spec: spec.clone(),
         device: gpu.caps().name.clone(),
         goal_ratio: GOAL_RATIO,
         forward,
@@ -300,17 +327,47 @@ pub fn bench_fuse(
     })
 }
 
-/// The forward figures with GPU and wall time each the median over the runs.
-fn median_forward(runs: Vec<ForwardBench>, views: usize) -> ForwardBench {
-    let gpu_ms = median(&mut runs.iter().map(|f| f.gpu_ms).collect::<Vec<_>>());
-    let wall_s = median(&mut runs.iter().map(|f| f.wall_s).collect::<Vec<_>>());
-    let peak = runs.iter().map(|f| f.peak_device_bytes).max().unwrap_or(0);
-    let last = runs.into_iter().last().expect("at least one run");
-    ForwardBench {
-        gpu_ms,
-        wall_s,
-        views_per_s: views as f64 / wall_s,
-        peak_device_bytes: peak,
-        ..last
+/// Views per round: see `bench_fuse`.
+const ROUND_VIEWS: usize = 10;
+
+/// Time and memory of one run over all views, summed over its rounds.
+#[derive(Clone, Debug, Default)]
+struct RunTotal {
+    gpu_ms: f64,
+    wall_s: f64,
+    peak_device_bytes: u64,
+    passes: usize,
+    rows_per_pass: usize,
+    visible: f64,
+    intersections: f64,
+}
+
+impl RunTotal {
+    fn add(&mut self, gpu_ms: f64, wall_s: f64, peak: u64) {
+        self.gpu_ms += gpu_ms;
+        self.wall_s += wall_s;
+        self.peak_device_bytes = self.peak_device_bytes.max(peak);
+    }
+
+    /// GPU and wall time each the median over the runs; the largest memory peak.
+    fn median(runs: &[RunTotal]) -> RunTotal {
+        RunTotal {
+            gpu_ms: median(&mut runs.iter().map(|r| r.gpu_ms).collect::<Vec<_>>()),
+            wall_s: median(&mut runs.iter().map(|r| r.wall_s).collect::<Vec<_>>()),
+            peak_device_bytes: runs.iter().map(|r| r.peak_device_bytes).max().unwrap_or(0),
+            ..runs.last().cloned().unwrap_or_default()
+        }
+    }
+}
+
+/// The label maps of a round of views, numbered as in the whole run.
+struct Shifted<'a> {
+    labels: &'a BlockLabels,
+    first: usize,
+}
+
+impl LabelSource for Shifted<'_> {
+    fn labels(&self, view: usize, cam: &Camera) -> Result<Option<Vec<u32>>> {
+        self.labels.labels(self.first + view, cam)
     }
 }

@@ -139,16 +139,17 @@ fn against_goal(ratio: f64, goal: f64) -> String {
 }
 
 fn print_fuse(r: &FuseBench) {
+    let s = &r.spec;
     println!(
         "fuse: {} Gaussians, {} views at {}x{}, {} classes, on {} (median of {} run{})",
-        r.n,
-        r.views,
-        r.width,
-        r.height,
-        r.classes,
+        s.n,
+        s.views,
+        s.width,
+        s.height,
+        s.classes,
         r.device,
-        r.iters,
-        if r.iters == 1 { "" } else { "s" }
+        s.iters,
+        if s.iters == 1 { "" } else { "s" }
     );
     let f = &r.forward;
     println!(
@@ -294,7 +295,6 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
             let r = bench_fuse(&gpu, &spec, &methods, |phase, done, total| {
                 if bar.message() != phase {
                     bar.set_message(phase.to_string());
-                    bar.reset();
                 }
                 bar.set_length(total as u64);
                 bar.set_position(done as u64);
