@@ -7,11 +7,11 @@
 // Every lane walks every entry until all lanes of its subgroup are done (a done or
 // unlabeled pixel contributes 0), so each step is uniform across the subgroup: lanes that
 // share the label (neighbouring pixels mostly do) are summed in the subgroup first and one
-// lane does the atomic. mode 1 keeps only the
-// pixel that holds the Gaussian's projected center: the weighted vote. per_view divides
-// each weight by the Gaussian's projected footprint in this view, 2 pi opacity sqrt(det
-// Sigma2d), so a view adds the share of the Gaussian it sees under each label (at most
-// about 1) instead of a number of pixels: near views no longer outweigh far ones.
+// lane does the atomic. mode 1 keeps only the pixel that holds the Gaussian's projected
+// center: the weighted vote. per_view divides each weight by the Gaussian's projected
+// footprint in this view, 2 pi opacity sqrt(det Sigma2d), so a view adds the share of the
+// Gaussian it sees under each label (at most about 1) instead of a number of pixels: near
+// views no longer outweigh far ones.
 #extension GL_EXT_control_flow_attributes : require
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_vote : require

@@ -146,7 +146,7 @@ fn ring_cameras(views: usize, width: u32, height: u32) -> Vec<Camera> {
         .collect()
 }
 
-/// One timed forward render of every view: binning and RGB blending, as `Rasterizer::render`
+/// One timed forward render of `cams`: binning and RGB blending, as `Rasterizer::render`
 /// records them, without downloading the images (accumulation downloads nothing per view
 /// either). A fresh rasterizer, as `accumulate` starts with, so buffer growth counts alike.
 fn forward_run(
@@ -155,32 +155,23 @@ fn forward_run(
     cams: &[Camera],
     opts: &RenderOptions,
     mut progress: impl FnMut(usize),
-) -> Result<ForwardBench> {
+) -> Result<RunTotal> {
     let start = Instant::now();
     let mut raster = Rasterizer::new(gpu);
     let window_len = raster.window_len();
-    let (mut gpu_ms, mut visible, mut isect, mut peak) = (0.0, 0u64, 0u64, 0u64);
+    let mut total = RunTotal::default();
     for (i, cam) in cams.iter().enumerate() {
         progress(i);
         let run = raster.run_tiled(scene, cam, opts, 0, |rec, tiles| {
             tiles.record_blend(rec, None, 0, window_len, opts.background)
         })?;
-        gpu_ms += run.timings.total_ns() * 1e-6;
-        visible += u64::from(run.visible);
-        isect += u64::from(run.intersections);
-        peak = peak.max(gpu.memory_reserved());
+        total.add(run.timings.total_ns() * 1e-6, 0.0, gpu.memory_reserved());
+        total.visible += f64::from(run.visible);
+        total.intersections += f64::from(run.intersections);
     }
     progress(cams.len());
-    let wall_s = start.elapsed().as_secs_f64();
-    let views = cams.len() as f64;
-    Ok(ForwardBench {
-        gpu_ms,
-        wall_s,
-        views_per_s: views / wall_s,
-        visible_per_view: visible as f64 / views,
-        intersections_per_view: isect as f64 / views,
-        peak_device_bytes: peak,
-    })
+    total.wall_s = start.elapsed().as_secs_f64();
+    Ok(total)
 }
 
 /// Times the forward render and each of `methods` over `spec.views` views of a random
@@ -266,8 +257,8 @@ pub fn bench_fuse(
             })?;
             done += round.len();
             forward.add(f.gpu_ms, f.wall_s, f.peak_device_bytes);
-            forward.visible += f.visible_per_view * round.len() as f64;
-            forward.intersections += f.intersections_per_view * round.len() as f64;
+            forward.visible += f.visible;
+            forward.intersections += f.intersections;
             for (cfg, sum) in cfgs.iter().zip(&mut per_method) {
                 let shifted = Shifted {
                     labels: &labels,
@@ -330,7 +321,8 @@ pub fn bench_fuse(
 /// Views per round: see `bench_fuse`.
 const ROUND_VIEWS: usize = 10;
 
-/// Time and memory of one run over all views, summed over its rounds.
+/// Time and memory of one run over all views (or one round of them), summed over its
+/// rounds; for the forward render also the visible Gaussians and tile intersections.
 #[derive(Clone, Debug, Default)]
 struct RunTotal {
     gpu_ms: f64,
