@@ -7,5 +7,6 @@ pub mod fuse;
 pub mod gpu;
 pub mod render;
 pub mod scene;
+pub mod synth;
 pub mod train;
 pub mod util;

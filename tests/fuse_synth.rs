@@ -11,7 +11,7 @@ use common::{check_validation, gpu};
 use semsplat::fuse::{accumulate, assign_semantic, ClassScores, FuseConfig, Method, NO_LABEL};
 use semsplat::render::GpuScene;
 use semsplat::scene::classes::CompactClasses;
-use semsplat::scene::synth::{generate, SynthConfig, SynthScene};
+use semsplat::synth::{generate, SynthConfig, SynthScene};
 
 /// `synth --preset office --noise flicker=0.2` at its defaults (24 views at 640x480), without
 /// held-out views: the scene stands in for a 3DGS trained on the labeled views.

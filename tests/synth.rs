@@ -10,17 +10,17 @@ use semsplat::scene::cameras::load_cameras;
 use semsplat::scene::classes::read_class_table;
 use semsplat::scene::labels::read_label_png;
 use semsplat::scene::ply::read_ply;
-use semsplat::scene::synth::furniture::{self, looks, Placement};
-use semsplat::scene::synth::primitives::Shape;
-use semsplat::scene::synth::raycast::{cast_pixel, pixel_ray};
-use semsplat::scene::synth::room_spec::{ObjectSpec, PartSpec, ShapeSpec};
-use semsplat::scene::synth::shading::to_rgb8;
-use semsplat::scene::synth::views::{look_at, ViewConfig};
-use semsplat::scene::synth::{
+use semsplat::scene::{Gaussians, Split};
+use semsplat::synth::furniture::{self, looks, Placement};
+use semsplat::synth::primitives::Shape;
+use semsplat::synth::raycast::{cast_pixel, pixel_ray};
+use semsplat::synth::room_spec::{ObjectSpec, PartSpec, ShapeSpec};
+use semsplat::synth::shading::to_rgb8;
+use semsplat::synth::views::{look_at, ViewConfig};
+use semsplat::synth::{
     self, generate, render_view, write_synth, NoiseSpec, Room, RoomSource, RoomSpec, SynthConfig,
     SynthScene, IGNORE,
 };
-use semsplat::scene::{Gaussians, Split};
 
 fn small(preset: &str, seed: u64, train: usize, test: usize) -> SynthConfig {
     SynthConfig {
@@ -879,7 +879,7 @@ fn probe_points(g: &Gaussians, i: usize) -> [DVec3; 5] {
 /// deviation out); `keep_hidden` keeps the rest too.
 #[test]
 fn gaussians_no_camera_sees_are_left_out() {
-    use semsplat::scene::synth::visibility::point_seen;
+    use semsplat::synth::visibility::point_seen;
     let cfg = SynthConfig {
         spacing: 0.1,
         ..small("office", 2, 3, 1)

@@ -11,8 +11,8 @@ use semsplat::fuse::{accumulate, assign_semantic, FuseConfig, Method, NO_LABEL};
 use semsplat::render::{GpuScene, Rasterizer, RenderOptions};
 use semsplat::scene::classes::CompactClasses;
 use semsplat::scene::labels::LabelMap;
-use semsplat::scene::synth::{generate, SynthConfig, SynthScene};
 use semsplat::scene::{Gaussians, Split};
+use semsplat::synth::{generate, SynthConfig, SynthScene};
 use semsplat::train::config::TrainConfig;
 use semsplat::train::trainer::{classes_from_logits, with_initial_logits, Trainer};
 

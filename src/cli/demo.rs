@@ -15,8 +15,8 @@ use semsplat::eval::label_render::LabelRenderer;
 use semsplat::eval::strip::write_strip;
 use semsplat::gpu::Gpu;
 use semsplat::scene::labels::LabelMap;
-use semsplat::scene::synth::{generate, NoiseSpec, RoomSource, SynthConfig};
 use semsplat::scene::{ClassTable, Split};
+use semsplat::synth::{generate, NoiseSpec, RoomSource, SynthConfig};
 use semsplat::util::write_bytes_atomic;
 
 #[derive(Args)]

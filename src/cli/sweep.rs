@@ -11,7 +11,7 @@ use serde::Serialize;
 use semsplat::eval::benchmark::{mislabel_follow, score_methods, MislabelFollow, TrainLabels};
 use semsplat::eval::chart::{lines, Line};
 use semsplat::gpu::Gpu;
-use semsplat::scene::synth::{generate, NoiseSpec, RoomSource, SynthConfig};
+use semsplat::synth::{generate, NoiseSpec, RoomSource, SynthConfig};
 use semsplat::util::write_bytes_atomic;
 
 #[derive(Clone, Copy, ValueEnum, PartialEq, Eq, Debug)]

@@ -1,5 +1,5 @@
 //! `semsplat synth`: generate a procedural benchmark room (the logic lives in
-//! `semsplat::scene::synth`; this file parses arguments, guards the output folder and reports).
+//! `semsplat::synth`; this file parses arguments, guards the output folder and reports).
 
 use std::path::{Path, PathBuf};
 use std::sync::LazyLock;
@@ -9,8 +9,8 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use semsplat::scene::synth::writer::OUTPUT_LAYOUT;
-use semsplat::scene::synth::{
+use semsplat::synth::writer::OUTPUT_LAYOUT;
+use semsplat::synth::{
     self, NoiseSpec, RoomSource, SynthConfig, DEFAULT_HEIGHT, DEFAULT_HFOV_DEG,
     DEFAULT_INIT_JITTER, DEFAULT_INIT_SPACING, DEFAULT_SPACING, DEFAULT_TEST_VIEWS,
     DEFAULT_TRAIN_VIEWS, DEFAULT_WIDTH, NOISE_KEYS_HELP, PRESETS,

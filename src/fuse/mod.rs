@@ -3,10 +3,10 @@
 
 pub mod accumulate;
 pub mod assign;
+pub mod method;
 pub mod scores;
 
-pub use accumulate::{
-    accumulate, Accumulation, FuseConfig, FuseStats, LabelSource, Method, NO_LABEL,
-};
+pub use accumulate::{accumulate, Accumulation, FuseConfig, FuseStats, LabelSource, NO_LABEL};
 pub use assign::{assign_one_vs_rest, assign_semantic, Assignment};
+pub use method::Method;
 pub use scores::ClassScores;

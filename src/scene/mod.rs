@@ -1,4 +1,4 @@
-//! Scene data: Gaussians, cameras, label maps, class tables, and synthetic benchmark rooms.
+//! Scene data: Gaussians, cameras, label maps, class tables, file formats.
 
 pub mod camera;
 pub mod cameras;
@@ -12,7 +12,6 @@ pub mod look_at;
 pub mod ply;
 pub mod random_scene;
 pub mod select;
-pub mod synth;
 
 pub use camera::{Camera, Split};
 pub use classes::{ClassInfo, ClassTable};

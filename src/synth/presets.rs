@@ -706,7 +706,7 @@ fn tiny(rng: &mut Rng) -> RoomSpec {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::synth::room::Room;
+    use crate::synth::room::Room;
     use glam::DVec3;
 
     #[test]
@@ -763,7 +763,7 @@ mod tests {
                     for iy in 0..=n.y {
                         for iz in 0..=n.z {
                             let p = b_box.min + DVec3::new(ix as f64, iy as f64, iz as f64) * step;
-                            let deep = |parts: &[&crate::scene::synth::room::Primitive]| {
+                            let deep = |parts: &[&crate::synth::room::Primitive]| {
                                 parts.iter().any(|q| q.shape.sdf(p) < -0.01)
                             };
                             if deep(&parts_a) && deep(&parts_b) {

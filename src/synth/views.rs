@@ -157,7 +157,7 @@ fn choose_pose(room: &Room, targets: &Targets, rng: &mut Rng) -> Result<(DVec3, 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::synth::presets::preset;
+    use crate::synth::presets::preset;
 
     #[test]
     fn look_at_centers_the_target_with_z_up() {
