@@ -451,3 +451,49 @@ fn semantic_assignment_takes_the_largest_share() {
     assert_eq!(s.confidence[2], 1.0);
     assert_eq!(s.confidence[3], 0.5);
 }
+
+/// The suite runs with overflow checks on (Cargo.toml's release profile), so a host-side
+/// u32 overflow such as a window start past 2^32 panics in a test instead of wrapping.
+#[test]
+fn host_arithmetic_overflow_panics() {
+    let max = std::hint::black_box(u32::MAX);
+    let wrapped = std::panic::catch_unwind(|| max + std::hint::black_box(1));
+    assert!(
+        wrapped.is_err(),
+        "overflow checks are off: u32::MAX + 1 did not panic"
+    );
+}
+
+/// Every tiled method walks the tile lists in many small windows (per-pixel state carried
+/// between dispatches) and gets exactly what one window per list gives. The occlusion vote
+/// once computed its window starts from a window length of u32::MAX / 2, which overflowed
+/// from the third window on.
+#[test]
+fn many_windows_give_the_same_evidence() {
+    let g = scene(600, 9);
+    let cams = cameras();
+    let labels = label_maps(&cams, 10);
+    for method in [
+        Method::VoteOcclusion,
+        Method::VoteWeighted,
+        Method::FlashSplat,
+        Method::FlashSplatPerView,
+    ] {
+        let cfg = |window_len| FuseConfig {
+            method,
+            window_len,
+            ..Default::default()
+        };
+        let whole = run(&g, &cams, &labels, &cfg(None));
+        let windowed = run(&g, &cams, &labels, &cfg(Some(50)));
+        assert!(
+            whole.data.iter().any(|&v| v > 0.0),
+            "{method:?}: no evidence"
+        );
+        assert_eq!(
+            whole.data, windowed.data,
+            "{method:?}: windows changed the evidence"
+        );
+    }
+    check_validation(gpu());
+}

@@ -158,13 +158,10 @@ fn forward_run(
 ) -> Result<RunTotal> {
     let start = Instant::now();
     let mut raster = Rasterizer::new(gpu);
-    let window_len = raster.window_len();
     let mut total = RunTotal::default();
     for (i, cam) in cams.iter().enumerate() {
         progress(i);
-        let run = raster.run_tiled(scene, cam, opts, 0, |rec, tiles| {
-            tiles.record_blend(rec, None, 0, window_len, opts.background)
-        })?;
+        let run = raster.run_tiled(scene, cam, opts, |rec, tiles| tiles.record_blend(rec))?;
         total.add(run.timings.total_ns() * 1e-6, 0.0, gpu.memory_reserved());
         total.visible += f64::from(run.visible);
         total.intersections += f64::from(run.intersections);

@@ -40,6 +40,9 @@ pub struct FuseConfig {
     pub depth_tolerance: f32,
     pub near: f32,
     pub far: f32,
+    /// Entries of a tile's list one per-tile dispatch walks; None: the device's default
+    /// (tests set a small window to walk many windows on small scenes).
+    pub window_len: Option<u32>,
 }
 
 impl Default for FuseConfig {
@@ -51,6 +54,7 @@ impl Default for FuseConfig {
             depth_tolerance: 0.05,
             near: 0.01,
             far: 1e10,
+            window_len: None,
         }
     }
 }
@@ -172,6 +176,9 @@ pub fn accumulate(
         ..Default::default()
     };
     let mut raster = Rasterizer::new(gpu);
+    if let Some(len) = cfg.window_len {
+        raster.set_window_len(len);
+    }
     let opts = cfg.render_options();
     let mut label_buf: Option<Buffer> = None;
     let mut carry: Option<Buffer> = None;
@@ -216,8 +223,8 @@ pub fn accumulate(
                     gpu, scene, cam, lb, None, &evidence, row_begin, pass_rows, cfg,
                 )?,
                 Method::VoteOcclusion => {
-                    let run = raster.run_tiled(scene, cam, &opts, 0, |rec, tiles| {
-                        tiles.record_blend(rec, None, 0, u32::MAX / 2, [0.0; 3])?;
+                    let run = raster.run_tiled(scene, cam, &opts, |rec, tiles| {
+                        tiles.record_blend(rec)?;
                         rec.barrier();
                         dispatch_vote(
                             rec,
@@ -244,18 +251,13 @@ pub fn accumulate(
                         Accumulation::FixedPoint => ids::FUSE_CONTRIB_FIXED,
                         Accumulation::Float => ids::FUSE_CONTRIB_FLOAT,
                     };
-                    let window_len = raster.window_len();
                     let cb = carry.as_ref().expect("allocated");
-                    let run = raster.run_tiled(scene, cam, &opts, 0, |rec, tiles| {
-                        for w in 0..tiles.windows() {
+                    let run = raster.run_tiled(scene, cam, &opts, |rec, tiles| {
+                        let f = &tiles.frame;
+                        for start in f.window_starts() {
                             let params = ContribParams {
-                                dims: [cam.width, cam.height, tiles.tiles_x, n as u32],
-                                window: [
-                                    w * window_len,
-                                    window_len,
-                                    row_begin as u32,
-                                    pass_rows as u32,
-                                ],
+                                dims: [cam.width, cam.height, f.tiles_x, n as u32],
+                                window: [start, f.window_len, row_begin as u32, pass_rows as u32],
                                 mode,
                             };
                             rec.dispatch(
@@ -271,7 +273,7 @@ pub fn accumulate(
                                     ("contrib", &evidence),
                                 ],
                                 bytemuck::bytes_of(&params),
-                                [tiles.tiles_x, tiles.tiles_y, 1],
+                                f.tile_groups(),
                             )?;
                             rec.barrier();
                         }

@@ -235,4 +235,19 @@ impl DeviceCaps {
             .map(|h| h.size_bytes)
             .sum()
     }
+
+    /// Loop iterations one shader invocation may run in total before the driver silently
+    /// cuts its loops short, where the driver has such a cap: Mesa's llvmpipe (lavapipe)
+    /// stops every invocation after 65,535 iterations, shared by all its loops. Kernels
+    /// that walk long lists split the walk into dispatches that stay below it.
+    pub fn loop_iteration_cap(&self) -> Option<u32> {
+        self.driver_name
+            .to_lowercase()
+            .contains("llvmpipe")
+            .then_some(LLVMPIPE_LOOP_CAP)
+    }
 }
+
+/// llvmpipe's per-invocation loop budget (measured: a 100,000-iteration loop returns after
+/// 65,535; nested 300 x 300 loops after 65,100).
+const LLVMPIPE_LOOP_CAP: u32 = 65_535;

@@ -219,15 +219,12 @@ impl SceneGrads {
 
 impl TileLists<'_> {
     /// Records the backward pass of the view these lists hold, after its forward blend
-    /// ([`TileLists::record_blend`] with the same `mode`): adds the view's parameter
-    /// gradients into `grads`. `upstream` holds dL/d of the view's outputs.
-    #[allow(clippy::too_many_arguments)]
+    /// ([`TileLists::record_blend`]): adds the view's parameter gradients into `grads`.
+    /// `upstream` holds dL/d of the view's outputs.
     pub fn record_backward(
         &self,
         rec: &mut Recorder,
         scene: &GpuScene,
-        opts: &RenderOptions,
-        window_len: u32,
         upstream: &PixelGrads,
         grads: &SceneGrads,
     ) -> Result<()> {
@@ -235,47 +232,52 @@ impl TileLists<'_> {
             grads.n == scene.n && grads.channels == scene.channels,
             "gradient buffers were made for another scene"
         );
-        let gpu = rec.gpu().clone();
-        let cam = self.cam;
-        let (sem_in, channels, sem_target) = match opts.semantics {
-            Some(mode) => match scene.semantics(&gpu, mode)? {
-                Some(buf) => {
-                    let target = match mode {
-                        SemanticMode::RawLogits => &grads.logits,
-                        SemanticMode::Softmax => &grads.probs,
-                    };
-                    (buf, scene.channels, target)
-                }
-                None => (&grads.placeholder, 0, &grads.placeholder),
-            },
-            None => (&grads.placeholder, 0, &grads.placeholder),
-        };
-        let sem_norm = if channels > 0 {
-            self.sem_norm()
-        } else {
-            &grads.placeholder
-        };
-        let windows = self.windows();
+        let f = &self.frame;
         ensure!(
-            windows == 1
-                || grads.carry.size() >= cam.width as u64 * cam.height as u64 * CARRY_STRIDE * 4,
+            f.windows == 1
+                || grads.carry.size()
+                    >= f.cam.width as u64 * f.cam.height as u64 * CARRY_STRIDE * 4,
             "SceneGrads::prepare_view was not called for this view size"
         );
         rec.fill(&grads.screen, 0, grads.screen.size(), 0);
         rec.barrier();
+        self.record_blend_backward(rec, upstream, grads)?;
+        if grads.semantics_only {
+            return Ok(());
+        }
+        self.record_project_backward(rec, scene, f.cam, grads)
+    }
+
+    /// The per-tile half of the backward: every semantic chunk, windows back to front.
+    fn record_blend_backward(
+        &self,
+        rec: &mut Recorder,
+        upstream: &PixelGrads,
+        grads: &SceneGrads,
+    ) -> Result<()> {
+        let f = &self.frame;
+        let (sem_in, sem_target) = match f.semantics {
+            Some((SemanticMode::RawLogits, buf)) => (buf, &grads.logits),
+            Some((SemanticMode::Softmax, buf)) => (buf, &grads.probs),
+            None => (&grads.placeholder, &grads.placeholder),
+        };
+        let sem_norm = if f.channels > 0 {
+            self.sem_norm()
+        } else {
+            &grads.placeholder
+        };
         let kernel = match (grads.semantics_only, grads.float_atomics) {
             (false, true) => ids::RASTER_BLEND_BACKWARD,
             (false, false) => ids::RASTER_BLEND_BACKWARD_CAS,
             (true, true) => ids::RASTER_BLEND_BACKWARD_SEM_ONLY,
             (true, false) => ids::RASTER_BLEND_BACKWARD_SEM_ONLY_CAS,
         };
-        let bg = opts.background;
-        let chunks = channels.div_ceil(SEM_CHUNK).max(1);
-        for chunk in 0..chunks {
-            for w in (0..windows).rev() {
+        let bg = f.background;
+        for chunk in 0..f.sem_chunks() {
+            for start in f.window_starts().rev() {
                 let params = BlendBackwardParams {
-                    dims: [cam.width, cam.height, self.tiles_x, channels],
-                    window: [w * window_len, window_len, chunk * SEM_CHUNK, 0],
+                    dims: [f.cam.width, f.cam.height, f.tiles_x, f.channels],
+                    window: [start, f.window_len, chunk * SEM_CHUNK, 0],
                     background: [bg[0], bg[1], bg[2], 0.0],
                 };
                 let bindings: [(&str, &Buffer); 12] = [
@@ -305,15 +307,12 @@ impl TileLists<'_> {
                     &bindings,
                     &optional,
                     bytemuck::bytes_of(&params),
-                    [self.tiles_x, self.tiles_y, 1],
+                    f.tile_groups(),
                 )?;
                 rec.barrier();
             }
         }
-        if grads.semantics_only {
-            return Ok(());
-        }
-        self.record_project_backward(rec, scene, cam, grads)
+        Ok(())
     }
 
     fn record_project_backward(
@@ -416,28 +415,22 @@ impl Rasterizer {
         let mut grads = SceneGrads::new(&gpu, scene)?;
         grads.float_atomics = variant.float_atomics && gpu.caps().float_atomic_add;
         grads.semantics_only = variant.semantics_only;
-        let windows = scene.n.div_ceil(self.window_len()).max(1);
-        grads.prepare_view(&gpu, pixels, windows)?;
-        let sem_buf = match opts.semantics {
-            Some(mode) => scene.semantics(&gpu, mode)?,
-            None => None,
-        };
-        let window_len = self.window_len();
+        grads.prepare_view(&gpu, pixels, self.windows_for(scene.n))?;
         let pixel_grads = PixelGrads {
             rgb: &v_rgb,
             alpha: &v_alpha,
             sem_norm: &v_sem,
         };
-        let run = self.run_tiled(scene, cam, opts, channels, |rec, tiles| {
-            tiles.record_blend(rec, sem_buf, channels, window_len, opts.background)?;
+        let run = self.run_tiled(scene, cam, opts, |rec, tiles| {
+            tiles.record_blend(rec)?;
             grads.record_zero(rec);
             grads.record_zero_densify(rec);
-            tiles.record_backward(rec, scene, opts, window_len, &pixel_grads, &grads)
+            tiles.record_backward(rec, scene, &pixel_grads, &grads)
         })?;
         let mut rec = Recorder::new(&gpu)?;
         grads.record_softmax_backward(&mut rec, scene)?;
         rec.submit_and_wait()?;
-        let frame = self.download_frame(cam, channels, &run)?;
+        let frame = self.download_frame(cam, &run)?;
         Ok((frame, grads.download(&gpu)?))
     }
 }

@@ -8,7 +8,7 @@ use bytemuck::{Pod, Zeroable};
 
 use super::frame::RenderedFrame;
 use super::gpu_scene::GpuScene;
-use super::{camera_rows_f32, RenderOptions, StageTimes};
+use super::{camera_rows_f32, RenderOptions, SemanticMode, StageTimes};
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, Gpu, GpuCount, Mark, PrefixScan, RadixSort, Recorder, Timings};
 use crate::scene::Camera;
@@ -27,9 +27,10 @@ const ST_ARGS_ISECT: u64 = 12;
 const ST_WORDS: u64 = 16;
 /// Semantic channels per blend dispatch (blend_sem.comp: SEM_CHUNK).
 pub const SEM_CHUNK: u32 = 16;
-/// Entries of a tile's list one blend dispatch walks on devices with a loop cap
-/// (lavapipe stops every invocation after 65,535 loop iterations).
-const CAPPED_WINDOW: u32 = 32_768;
+/// Entries of a tile's list one per-tile dispatch walks on a device without a loop cap:
+/// every list fits one window (a list holds at most n <= u32::MAX / 2 entries in practice,
+/// and starts plus lengths stay inside u32 in the kernels).
+const UNCAPPED_WINDOW: u32 = u32::MAX / 2;
 
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
@@ -94,6 +95,7 @@ struct Buffers {
 pub struct Rasterizer {
     gpu: Gpu,
     bufs: Option<Buffers>,
+    /// Entries of a tile's list one per-tile dispatch walks (see [`FrameSpec::window_len`]).
     window_len: u32,
     /// Project means in float64 (on devices with shaderFloat64).
     float64: bool,
@@ -181,11 +183,16 @@ fn tile_bits(tiles: u32) -> u32 {
 
 impl Rasterizer {
     pub fn new(gpu: &Gpu) -> Rasterizer {
-        let capped = gpu.caps().driver_name.to_lowercase().contains("llvmpipe");
+        // A device that cuts loops after `cap` iterations per invocation gets windows of
+        // half the cap, so the per-entry loops and their bookkeeping stay below it.
+        let window_len = gpu
+            .caps()
+            .loop_iteration_cap()
+            .map_or(UNCAPPED_WINDOW, |cap| cap.div_ceil(2));
         Rasterizer {
             gpu: gpu.clone(),
             bufs: None,
-            window_len: if capped { CAPPED_WINDOW } else { u32::MAX / 2 },
+            window_len,
             float64: gpu.caps().float64,
         }
     }
@@ -201,9 +208,9 @@ impl Rasterizer {
         &self.gpu
     }
 
-    /// Entries of a tile's list one per-tile dispatch walks.
-    pub fn window_len(&self) -> u32 {
-        self.window_len
+    /// How many windows walk the longest tile list of a scene of `n` Gaussians.
+    pub fn windows_for(&self, n: u32) -> u32 {
+        n.div_ceil(self.window_len).max(1)
     }
 
     /// Overrides how many entries of a tile's list one blend dispatch walks (tests use a
@@ -239,31 +246,18 @@ impl Rasterizer {
         cam: &Camera,
         opts: &RenderOptions,
     ) -> Result<RenderedFrame> {
-        let sem_buf = match opts.semantics {
-            Some(mode) => scene.semantics(&self.gpu, mode)?,
-            None => None,
-        };
-        let channels = if sem_buf.is_some() { scene.channels } else { 0 };
-        let window_len = self.window_len;
-        let frame = self.run_tiled(scene, cam, opts, channels, |rec, tiles| {
-            tiles.record_blend(rec, sem_buf, channels, window_len, opts.background)
-        })?;
-        self.download_frame(cam, channels, &frame)
+        let frame = self.run_tiled(scene, cam, opts, |rec, tiles| tiles.record_blend(rec))?;
+        self.download_frame(cam, &frame)
     }
 
     /// Downloads the images of the frame `run` just rendered.
-    pub(crate) fn download_frame(
-        &self,
-        cam: &Camera,
-        channels: u32,
-        frame: &TiledRun,
-    ) -> Result<RenderedFrame> {
+    pub(crate) fn download_frame(&self, cam: &Camera, frame: &TiledRun) -> Result<RenderedFrame> {
         let b = self.bufs.as_ref().expect("ran");
         let stages = StageTimes::from_marks(&frame.timings, &frame.marks);
         RenderedFrame::download(
             &self.gpu,
             cam,
-            channels,
+            frame.channels,
             [
                 &b.rgb,
                 &b.alpha,
@@ -283,14 +277,13 @@ impl Rasterizer {
     /// Bins one view on the GPU (projection, depth sort, tile lists) and, in the same
     /// submission, records `per_tile`: the stage that consumes the tile lists (blending,
     /// or the fusion kernels). On an intersection overflow the buffers grow and everything
-    /// is recorded again, so `per_tile` may run more than once. `channels` sizes the
-    /// semantic outputs of blending (0 for other stages).
+    /// is recorded again, so `per_tile` may run more than once. The tile lists carry the
+    /// frame (`opts`' semantics, background, windows) that every per-tile pass reads.
     pub fn run_tiled<F>(
         &mut self,
         scene: &GpuScene,
         cam: &Camera,
         opts: &RenderOptions,
-        channels: u32,
         mut per_tile: F,
     ) -> Result<TiledRun>
     where
@@ -301,10 +294,27 @@ impl Rasterizer {
             "camera {} has an empty image",
             cam.name
         );
-        let tiles_x = cam.width.div_ceil(TILE_SIZE);
-        let tiles_y = cam.height.div_ceil(TILE_SIZE);
+        let semantics = match opts.semantics {
+            Some(mode) => scene.semantics(&self.gpu, mode)?.map(|buf| (mode, buf)),
+            None => None,
+        };
+        let frame = FrameSpec {
+            cam,
+            tiles_x: cam.width.div_ceil(TILE_SIZE),
+            tiles_y: cam.height.div_ceil(TILE_SIZE),
+            window_len: self.window_len,
+            windows: self.windows_for(scene.n),
+            channels: if semantics.is_some() {
+                scene.channels
+            } else {
+                0
+            },
+            semantics,
+            background: opts.background,
+        };
+        let (tiles_x, tiles_y, windows, channels) =
+            (frame.tiles_x, frame.tiles_y, frame.windows, frame.channels);
         let pixels = cam.width as u64 * cam.height as u64;
-        let windows = scene.n.div_ceil(self.window_len).max(1);
         let carry_stride = 8 + if channels > 0 { SEM_CHUNK } else { 0 } as u64;
         let mut need = Need {
             n: scene.n,
@@ -331,10 +341,7 @@ impl Rasterizer {
             let marks = self.record_binning(&mut rec, scene, cam, opts)?;
             let mut tiles = TileLists {
                 bufs: b,
-                cam,
-                tiles_x,
-                tiles_y,
-                windows,
+                frame: frame.clone(),
                 marks: [marks[0], marks[1], marks[2], marks[3], None],
             };
             per_tile(&mut rec, &tiles)?;
@@ -351,6 +358,7 @@ impl Rasterizer {
                 marks,
                 visible: status[ST_VISIBLE as usize],
                 intersections: status[ST_ISECT as usize],
+                channels,
             });
         }
     }
@@ -543,13 +551,48 @@ impl Rasterizer {
         Ok([m0, m1, m2, m3])
     }
 }
-/// A binned view: the tile lists and per-Gaussian screen data a per-tile stage reads.
-pub struct TileLists<'a> {
-    bufs: &'a Buffers,
+/// What every per-tile pass of one binned view works on, fixed when the view is binned:
+/// passes read it from [`TileLists::frame`] instead of each caller supplying it again.
+#[derive(Clone)]
+pub struct FrameSpec<'a> {
     pub cam: &'a Camera,
     pub tiles_x: u32,
     pub tiles_y: u32,
-    windows: u32,
+    /// Entries of a tile's list one dispatch walks. On a device with a loop cap the lists
+    /// are walked in windows with per-pixel state carried between dispatches, so no
+    /// invocation reaches the cap.
+    pub window_len: u32,
+    /// Windows that cover the longest possible tile list (one entry per Gaussian).
+    pub windows: u32,
+    /// Semantic channels blended (0: RGB only).
+    pub channels: u32,
+    /// What the semantic channels blend, and the per-Gaussian vectors (None: RGB only).
+    pub semantics: Option<(SemanticMode, &'a Buffer)>,
+    pub background: [f32; 3],
+}
+
+impl FrameSpec<'_> {
+    /// First list entry of each window, in walking order (front to back).
+    pub fn window_starts(&self) -> impl DoubleEndedIterator<Item = u32> + '_ {
+        // windows = ceil(n / window_len), so every start is below n: no u32 overflow.
+        (0..self.windows).map(|w| w * self.window_len)
+    }
+
+    /// Dispatches that cover the semantic channels, SEM_CHUNK at a time (1 for RGB only).
+    pub fn sem_chunks(&self) -> u32 {
+        self.channels.div_ceil(SEM_CHUNK).max(1)
+    }
+
+    /// One workgroup per tile.
+    pub fn tile_groups(&self) -> [u32; 3] {
+        [self.tiles_x, self.tiles_y, 1]
+    }
+}
+
+/// A binned view: the tile lists and per-Gaussian screen data a per-tile stage reads.
+pub struct TileLists<'a> {
+    bufs: &'a Buffers,
+    pub frame: FrameSpec<'a>,
     /// Marks around the stages (project, depth sort, bin, per-tile stage).
     pub marks: [Option<Mark>; 5],
 }
@@ -560,6 +603,8 @@ pub struct TiledRun {
     pub marks: [Option<Mark>; 5],
     pub visible: u32,
     pub intersections: u32,
+    /// Semantic channels the per-tile stage saw in the frame.
+    pub channels: u32,
 }
 
 impl TileLists<'_> {
@@ -628,35 +673,17 @@ impl TileLists<'_> {
         &self.bufs.sem_norm
     }
 
-    /// How many window dispatches walk the longest possible tile list.
-    pub fn windows(&self) -> u32 {
-        self.windows
-    }
-
-    /// Records forward blending into the rasterizer's output images.
-    pub fn record_blend(
-        &self,
-        rec: &mut Recorder,
-        sem_buf: Option<&Buffer>,
-        channels: u32,
-        window_len: u32,
-        background: [f32; 3],
-    ) -> Result<()> {
-        let bg = background;
-        let b = self.bufs;
-        let (cam, tiles_x, tiles_y, windows) = (self.cam, self.tiles_x, self.tiles_y, self.windows);
-        let chunks = if channels > 0 {
-            channels.div_ceil(SEM_CHUNK)
-        } else {
-            1
-        };
-        for chunk in 0..chunks {
-            for w in 0..windows {
+    /// Records forward blending of the frame into the rasterizer's output images.
+    pub fn record_blend(&self, rec: &mut Recorder) -> Result<()> {
+        let (b, f) = (self.bufs, &self.frame);
+        let bg = f.background;
+        for chunk in 0..f.sem_chunks() {
+            for start in f.window_starts() {
                 let params = BlendParams {
-                    dims: [cam.width, cam.height, tiles_x, channels],
+                    dims: [f.cam.width, f.cam.height, f.tiles_x, f.channels],
                     window: [
-                        w * window_len,
-                        window_len,
+                        start,
+                        f.window_len,
                         chunk * SEM_CHUNK,
                         u32::from(chunk == 0),
                     ],
@@ -677,8 +704,8 @@ impl TileLists<'_> {
                     ("out_last", &b.last),
                     ("out_n_contrib", &b.n_contrib),
                 ];
-                let kernel = match sem_buf {
-                    Some(sem) => {
+                let kernel = match f.semantics {
+                    Some((_, sem)) => {
                         bindings.extend([
                             ("sem_in", sem),
                             ("out_sem", &b.sem),
@@ -692,7 +719,7 @@ impl TileLists<'_> {
                     kernel,
                     &bindings,
                     bytemuck::bytes_of(&params),
-                    [tiles_x, tiles_y, 1],
+                    f.tile_groups(),
                 )?;
                 rec.barrier();
             }

@@ -282,8 +282,7 @@ impl Trainer {
             self.losses.insert(key, loss);
         }
         let pixels = cam.width as u64 * cam.height as u64;
-        let window_len = self.rasterizer.window_len();
-        let windows = self.scene.n.div_ceil(window_len).max(1);
+        let windows = self.rasterizer.windows_for(self.scene.n);
         self.grads.prepare_view(&self.gpu, pixels, windows)?;
         let mode = self.cfg.semantic_mode;
         let opts = RenderOptions {
@@ -291,11 +290,6 @@ impl Trainer {
             semantics: (channels > 0).then_some(mode),
             ..Default::default()
         };
-        let sem_buf = match opts.semantics {
-            Some(m) => self.scene.semantics(&self.gpu, m)?,
-            None => None,
-        };
-
         let (scene, grads, view, loss) = (
             &self.scene,
             &self.grads,
@@ -303,16 +297,16 @@ impl Trainer {
             &self.losses[&key],
         );
         let (v_rgb, v_alpha, v_sem_norm) = (&self.v_rgb, &self.v_alpha, &self.v_sem_norm);
-        let (lambda_sem, background) = (self.cfg.lambda_sem, self.cfg.background);
+        let lambda_sem = self.cfg.lambda_sem;
         let mut marks: [Option<Mark>; 3] = [None; 3];
         let run = self
             .rasterizer
-            .run_tiled(scene, &cam, &opts, channels, |rec, tiles| {
+            .run_tiled(scene, &cam, &opts, |rec, tiles| {
                 if mode == SemanticMode::Softmax && channels > 0 {
                     scene.record_softmax(rec)?;
                 }
                 grads.record_zero(rec);
-                tiles.record_blend(rec, sem_buf, channels, window_len, background)?;
+                tiles.record_blend(rec)?;
                 marks[0] = rec.mark();
                 let term = SemanticTerm {
                     sem_norm: tiles.sem_norm(),
@@ -334,7 +328,7 @@ impl Trainer {
                     alpha: v_alpha,
                     sem_norm: v_sem_norm,
                 };
-                tiles.record_backward(rec, scene, &opts, window_len, &upstream, grads)?;
+                tiles.record_backward(rec, scene, &upstream, grads)?;
                 marks[2] = rec.mark();
                 Ok(())
             })?;
@@ -519,7 +513,7 @@ impl Trainer {
         for vi in 0..self.views.len() {
             let cam = self.views[vi].camera.clone();
             self.rasterizer
-                .run_tiled(&self.scene, &cam, &opts, 0, |_, _| Ok(()))?;
+                .run_tiled(&self.scene, &cam, &opts, |_, _| Ok(()))?;
             let flags = self.rasterizer.last_visible_flags(self.scene.n)?;
             for (s, f) in seen.iter_mut().zip(flags) {
                 *s |= f != 0;
