@@ -52,7 +52,7 @@ fn compile(
         shaderc::TargetEnv::Vulkan,
         shaderc::EnvVersion::Vulkan1_2 as u32,
     );
-    // rspirv-reflect fails on SPIR-V 1.6 (../shared/TOOLCHAIN.md): stay on 1.5.
+    // rspirv-reflect fails on SPIR-V 1.6 (docs/TOOLCHAIN.md): stay on 1.5.
     opts.set_target_spirv(shaderc::SpirvVersion::V1_5);
     opts.set_source_language(shaderc::SourceLanguage::GLSL);
     opts.set_optimization_level(if optimize {

@@ -29,7 +29,7 @@ enum Command {
     Synth(cli::synth::SynthArgs),
     /// Lift per-view label maps onto the Gaussians (vote or FlashSplat; no training).
     Fuse(Box<cli::fuse::FuseArgs>),
-    /// Train semantic logits jointly with geometry and appearance (paper 000), or the
+    /// Train semantic logits jointly with geometry and appearance (Gaussian Semantics), or the
     /// logits alone with --semantics-only.
     Train(Box<cli::train::TrainArgs>),
     /// Render views of a scene on the GPU (RGB, and semantic labels with --semantics).

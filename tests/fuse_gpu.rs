@@ -384,7 +384,7 @@ fn occlusion_keeps_hidden_gaussians_from_voting() {
     check_validation(gpu());
 }
 
-/// Listing 1.1 of paper 002, transcribed line by line.
+/// Listing 1.1 of FlashSplat (docs/papers.md), transcribed line by line.
 fn listing_1_1(all_contrib: &[Vec<f64>], gamma: f64) -> Vec<Vec<u8>> {
     let obj_num = all_contrib.len();
     let gs_num = all_contrib[0].len();

@@ -52,7 +52,7 @@ fn sweep_charts_every_method_and_reports_how_mislabels_are_followed() {
     assert_eq!(levels[0]["miou"].as_array().unwrap().len(), 7);
     assert_eq!(report["breaks_at"].as_array().unwrap().len(), 7);
     // With the object wrong in every train view, every method follows the majority: most of
-    // its Gaussians take the wrong class (paper 000's stated limitation).
+    // its Gaussians take the wrong class (Gaussian Semantics' stated limitation).
     for (method, follows) in levels[1]["mislabeled"]
         .as_array()
         .unwrap()

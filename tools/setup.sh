@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Installs what semsplat needs on a fresh Debian (bookworm) machine, then builds the merged
 # shaderc archive that .cargo/config.toml points shaderc-sys at. Idempotent; run as root
-# (or with sudo available). Recipe and reasons: ../shared/TOOLCHAIN.md.
+# (or with sudo available). Recipe and reasons: docs/TOOLCHAIN.md.
 set -euo pipefail
 
 say() { printf '[setup] %s\n' "$*"; }

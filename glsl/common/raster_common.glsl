@@ -1,5 +1,5 @@
 // Shared by the rasterizer kernels and src/render/: tile size, the frame status layout, and
-// the per-Gaussian math of classic 3DGS as gsplat 1.5 does it (../shared/DESIGN.md).
+// the per-Gaussian math of classic 3DGS as gsplat 1.5 does it (docs/CONVENTIONS.md, Rendering).
 #ifndef RASTER_COMMON_GLSL
 #define RASTER_COMMON_GLSL
 

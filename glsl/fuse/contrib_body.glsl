@@ -1,4 +1,4 @@
-// FlashSplat contribution accumulation (paper 002): for every pixel with label e, walk the
+// FlashSplat contribution accumulation (docs/papers.md): for every pixel with label e, walk the
 // tile's depth-sorted list exactly as forward blending does and add each Gaussian's
 // weight alpha * T into A[e, gaussian]. Included by contrib_fixed.comp (64-bit fixed-point
 // integers: order-independent, so A is identical run to run) and contrib_float.comp (float

@@ -1,5 +1,5 @@
 #version 460
-// Majority vote (paper 001): each Gaussian's center is projected into the view and votes
+// Majority vote (Semantic Fusion): each Gaussian's center is projected into the view and votes
 // for the label under it. Behind the camera, outside the image and unlabeled pixels do not
 // vote; with occlusion on, only a center whose depth is within a tolerance of the
 // rendered expected depth at that pixel votes. One invocation per Gaussian owns its

@@ -1,6 +1,6 @@
 #version 460
 // Per-Gaussian softmax of the semantic logits, for the mode that blends probabilities
-// (paper 000's ablation) instead of raw logits.
+// (Gaussian Semantics' ablation) instead of raw logits.
 
 layout(local_size_x = 256) in;
 

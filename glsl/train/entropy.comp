@@ -1,5 +1,5 @@
 #version 460
-// Entropy regularizer (paper 000, Eq. 4-6) on per-Gaussian semantic logits s_i:
+// Entropy regularizer (Gaussian Semantics Eq. 4-6) on per-Gaussian semantic logits s_i:
 // H_i = -sum_k p_k log p_k with p = softmax(s_i), dH/ds_k = -p_k (log p_k + H_i).
 // ADDS weight * dH/ds into grad_logits (weight = lambda_H / N) and writes the partial
 // sums of H_i / N. Grid-stride over Gaussians so the partials fit a fixed slot size.

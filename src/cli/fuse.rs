@@ -28,9 +28,9 @@ use semsplat::util::write_bytes_atomic;
 
 #[derive(Clone, Copy, ValueEnum)]
 enum MethodArg {
-    /// Majority vote of the Gaussian centers projected into each view (paper 001).
+    /// Majority vote of the Gaussian centers projected into each view (Semantic Fusion).
     Vote,
-    /// FlashSplat: optimal assignment from every pixel's alpha*T contributions (paper 002).
+    /// FlashSplat: optimal assignment from every pixel's alpha*T contributions.
     Flashsplat,
 }
 
@@ -66,7 +66,7 @@ pub struct FuseArgs {
     #[arg(long, default_value_t = 0.05)]
     depth_tol: f32,
     /// Background bias of the one-vs-rest assignment used by --extract/--remove, in [-1, 1]
-    /// (paper 002, Listing 1.1): larger keeps fewer Gaussians in the object.
+    /// (FlashSplat's Listing 1.1): larger keeps fewer Gaussians in the object.
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     gamma: f64,
     /// Class table (JSON: id, name, color). Default: classes.json beside or inside the label
@@ -100,7 +100,7 @@ pub struct FuseArgs {
     /// (<view>.labels.png with label ids, 255/65535 where nothing is drawn; <view>.palette.png).
     #[arg(long, requires = "cameras")]
     render_views: Option<PathBuf>,
-    /// Write the multi-instance membership S of paper 002's Listing 1.1 (with --gamma) as a
+    /// Write the multi-instance membership S of FlashSplat's Listing 1.1 (with --gamma) as a
     /// float32 NumPy array [classes, Gaussians] of 0/1: a Gaussian may belong to several
     /// classes or none. Rows follow <out>.classes.json.
     #[arg(long)]

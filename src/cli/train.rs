@@ -1,5 +1,5 @@
 //! `semsplat train`: joint optimization of geometry, appearance and semantic logits
-//! (paper 000), or of the logits alone (`--semantics-only`).
+//! (Gaussian Semantics, docs/papers.md), or of the logits alone (`--semantics-only`).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -55,13 +55,13 @@ pub struct TrainArgs {
     /// middle point between fusion and full training).
     #[arg(long)]
     semantics_only: bool,
-    /// Blend softmax(logits) instead of the raw logits (paper 000's ablation).
+    /// Blend softmax(logits) instead of the raw logits (Gaussian Semantics' ablation).
     #[arg(long)]
     softmax: bool,
-    /// Weight of the semantic cross-entropy (paper 000: 1).
+    /// Weight of the semantic cross-entropy (Gaussian Semantics: 1).
     #[arg(long, default_value_t = 1.0)]
     lambda_sem: f32,
-    /// Weight of the per-Gaussian entropy regularizer (paper 000: 0.01; 0 turns it off).
+    /// Weight of the per-Gaussian entropy regularizer (Gaussian Semantics: 0.01; 0 turns it off).
     #[arg(long, default_value_t = 0.01)]
     lambda_entropy: f32,
     /// Iterations over which the entropy weight grows from 0 (default: 5000 of 30000,

@@ -135,7 +135,7 @@ impl MethodScore {
     }
 }
 
-/// How a method treated one consistently mislabeled object (paper 000's limitation: a
+/// How a method treated one consistently mislabeled object (Gaussian Semantics' limitation: a
 /// majority of wrong views wins), and whether its confidence flags it.
 #[derive(Clone, Debug, Serialize)]
 pub struct MislabelFollow {

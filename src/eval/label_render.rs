@@ -1,6 +1,6 @@
 //! Label maps rendered from a scene whose Gaussians carry classes: each Gaussian blends a
 //! one-hot vector of its class (unseen Gaussians blend zeros but still occlude), and the
-//! pixel takes the argmax of the normalized semantics (paper 000, Eq. 2).
+//! pixel takes the argmax of the normalized semantics (Gaussian Semantics Eq. 2).
 
 use anyhow::Result;
 

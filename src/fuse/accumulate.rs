@@ -1,6 +1,6 @@
 //! Gathers per-class evidence for every Gaussian on the GPU, view by view: votes of the
-//! projected centers (paper 001, plus occlusion-checked and alpha*T-weighted variants) or
-//! FlashSplat's contribution matrix A (paper 002). Label maps stream one view at a time;
+//! projected centers (Semantic Fusion, plus occlusion-checked and alpha*T-weighted variants) or
+//! FlashSplat's contribution matrix A (docs/papers.md). Label maps stream one view at a time;
 //! the evidence matrix stays dense while it fits the memory budget, else the classes are
 //! processed in batches of rows (each batch walks every view again; results are the same).
 

@@ -1,5 +1,5 @@
 //! From per-class evidence to per-Gaussian classes: semantic argmax, and FlashSplat's
-//! one-vs-rest assignment with a background bias (paper 002, Listing 1.1).
+//! one-vs-rest assignment with a background bias (FlashSplat's Listing 1.1, docs/papers.md).
 
 use super::scores::ClassScores;
 
@@ -33,7 +33,7 @@ pub fn assign_semantic(a: &ClassScores) -> Assignment {
     Assignment { class, confidence }
 }
 
-/// Listing 1.1 of paper 002: for each class e, the pair (rest, e) of every Gaussian is
+/// Listing 1.1 of FlashSplat: for each class e, the pair (rest, e) of every Gaussian is
 /// L1-normalized, `gamma` is added to the rest, and the Gaussian belongs to e when e's
 /// share is strictly larger (ties go to the rest, as torch.argmax picks the first).
 /// Returns S [E][N]: a Gaussian may belong to several classes (multi-instance) or none.

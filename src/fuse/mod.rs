@@ -1,5 +1,5 @@
-//! Training-free lifting: majority vote (paper 001) and FlashSplat's optimal assignment
-//! (paper 002), from per-view label maps to a class per Gaussian.
+//! Training-free lifting: majority vote (Semantic Fusion) and FlashSplat's optimal assignment
+//! (docs/papers.md), from per-view label maps to a class per Gaussian.
 
 pub mod accumulate;
 pub mod assign;

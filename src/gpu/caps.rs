@@ -81,8 +81,7 @@ pub const REQUIRED_SUBGROUP_OPS: vk::SubgroupFeatureFlags = vk::SubgroupFeatureF
 
 /// Reads a device's capabilities and lists the required features it lacks.
 pub fn probe_device(instance: &ash::Instance, pd: vk::PhysicalDevice) -> (DeviceCaps, Vec<String>) {
-    let mut missing = Vec::new();
-    // SAFETY (whole function): plain queries on a valid physical device.
+    // SAFETY (this and the extension query): plain queries on a valid physical device.
     let base = unsafe { instance.get_physical_device_properties(pd) };
     let api = base.api_version;
     let has_13 = vk::api_version_major(api) > 1 || vk::api_version_minor(api) >= 3;
@@ -92,7 +91,81 @@ pub fn probe_device(instance: &ash::Instance, pd: vk::PhysicalDevice) -> (Device
             .any(|e| e.extension_name_as_c_str().is_ok_and(|n| n == name))
     };
     let has_atomic_float_ext = has_ext(ash::ext::shader_atomic_float::NAME);
+    let props = query_properties(instance, pd, has_13);
+    let features = query_features(instance, pd, has_13, has_atomic_float_ext);
 
+    // SAFETY: plain query on a valid physical device.
+    let families = unsafe { instance.get_physical_device_queue_family_properties(pd) };
+    let compute_family = pick_compute_family(&families);
+    let timestamp_valid_bits = compute_family
+        .map(|f| families[f as usize].timestamp_valid_bits)
+        .unwrap_or(0);
+
+    let missing = missing_features(
+        api,
+        compute_family.is_some(),
+        has_ext(ash::khr::push_descriptor::NAME),
+        &props,
+        &features,
+    );
+    let (min_sg, max_sg) = if has_13 {
+        (
+            props.size_control.min_subgroup_size,
+            props.size_control.max_subgroup_size,
+        )
+    } else {
+        (props.subgroup.subgroup_size, props.subgroup.subgroup_size)
+    };
+    let (atomic_float, v12, base_features) =
+        (&features.atomic_float, &features.v12, &features.base);
+    let caps = DeviceCaps {
+        name: cstr(&base.device_name),
+        device_type: base.device_type,
+        vendor_id: base.vendor_id,
+        driver_name: cstr(&props.driver.driver_name),
+        driver_info: cstr(&props.driver.driver_info),
+        vulkan_version: format!(
+            "{}.{}.{}",
+            vk::api_version_major(api),
+            vk::api_version_minor(api),
+            vk::api_version_patch(api)
+        ),
+        api_version: api,
+        subgroup_size: props.subgroup.subgroup_size,
+        min_subgroup_size: min_sg,
+        max_subgroup_size: max_sg,
+        float_atomic_add: atomic_float.shader_buffer_float32_atomic_add != 0
+            && atomic_float.shader_buffer_float32_atomics != 0,
+        has_atomic_float_ext,
+        int64: base_features.shader_int64 != 0,
+        float64: base_features.shader_float64 != 0,
+        int64_atomics: base_features.shader_int64 != 0 && v12.shader_buffer_int64_atomics != 0,
+        storage_8bit: v12.storage_buffer8_bit_access != 0 && v12.shader_int8 != 0,
+        timestamps: base.limits.timestamp_compute_and_graphics != 0 && timestamp_valid_bits > 0,
+        timestamp_period_ns: base.limits.timestamp_period as f64,
+        timestamp_valid_bits,
+        max_storage_buffer_range: base.limits.max_storage_buffer_range as u64,
+        max_workgroup_count: base.limits.max_compute_work_group_count,
+        max_shared_memory: base.limits.max_compute_shared_memory_size,
+        heaps: memory_heaps(instance, pd),
+        compute_queue_family: compute_family,
+    };
+    (caps, missing)
+}
+
+/// The properties of the `vkGetPhysicalDeviceProperties2` chain we read (`size_control`
+/// only on Vulkan 1.3; default otherwise).
+struct ChainedProperties {
+    subgroup: vk::PhysicalDeviceSubgroupProperties<'static>,
+    driver: vk::PhysicalDeviceDriverProperties<'static>,
+    size_control: vk::PhysicalDeviceSubgroupSizeControlProperties<'static>,
+}
+
+fn query_properties(
+    instance: &ash::Instance,
+    pd: vk::PhysicalDevice,
+    has_13: bool,
+) -> ChainedProperties {
     let mut subgroup = vk::PhysicalDeviceSubgroupProperties::default();
     let mut driver = vk::PhysicalDeviceDriverProperties::default();
     let mut size_control = vk::PhysicalDeviceSubgroupSizeControlProperties::default();
@@ -103,13 +176,39 @@ pub fn probe_device(instance: &ash::Instance, pd: vk::PhysicalDevice) -> (Device
         if has_13 {
             props = props.push_next(&mut size_control);
         }
+        // SAFETY: plain query on a valid physical device; the chain outlives the call.
         unsafe { instance.get_physical_device_properties2(pd, &mut props) };
     }
+    // The chain's links point into this frame: cut them before the structs move out.
+    subgroup.p_next = std::ptr::null_mut();
+    driver.p_next = std::ptr::null_mut();
+    size_control.p_next = std::ptr::null_mut();
+    ChainedProperties {
+        subgroup,
+        driver,
+        size_control,
+    }
+}
 
+/// The features of the `vkGetPhysicalDeviceFeatures2` chain we read (`v13` only on Vulkan
+/// 1.3, `atomic_float` only with VK_EXT_shader_atomic_float; default otherwise).
+struct ChainedFeatures {
+    base: vk::PhysicalDeviceFeatures,
+    v12: vk::PhysicalDeviceVulkan12Features<'static>,
+    v13: vk::PhysicalDeviceVulkan13Features<'static>,
+    atomic_float: vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT<'static>,
+}
+
+fn query_features(
+    instance: &ash::Instance,
+    pd: vk::PhysicalDevice,
+    has_13: bool,
+    has_atomic_float_ext: bool,
+) -> ChainedFeatures {
     let mut atomic_float = vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT::default();
     let mut v12 = vk::PhysicalDeviceVulkan12Features::default();
     let mut v13 = vk::PhysicalDeviceVulkan13Features::default();
-    let base_features = {
+    let base = {
         let mut features = vk::PhysicalDeviceFeatures2::default().push_next(&mut v12);
         if has_13 {
             features = features.push_next(&mut v13);
@@ -117,13 +216,25 @@ pub fn probe_device(instance: &ash::Instance, pd: vk::PhysicalDevice) -> (Device
         if has_atomic_float_ext {
             features = features.push_next(&mut atomic_float);
         }
+        // SAFETY: plain query on a valid physical device; the chain outlives the call.
         unsafe { instance.get_physical_device_features2(pd, &mut features) };
         features.features
     };
+    // The chain's links point into this frame: cut them before the structs move out.
+    atomic_float.p_next = std::ptr::null_mut();
+    v12.p_next = std::ptr::null_mut();
+    v13.p_next = std::ptr::null_mut();
+    ChainedFeatures {
+        base,
+        v12,
+        v13,
+        atomic_float,
+    }
+}
 
-    let families = unsafe { instance.get_physical_device_queue_family_properties(pd) };
-    // Prefer a compute family without graphics (async compute), else any with compute.
-    let compute_family = families
+/// Prefers a compute family without graphics (async compute), else any with compute.
+fn pick_compute_family(families: &[vk::QueueFamilyProperties]) -> Option<u32> {
+    families
         .iter()
         .position(|f| {
             f.queue_flags.contains(vk::QueueFlags::COMPUTE)
@@ -134,20 +245,31 @@ pub fn probe_device(instance: &ash::Instance, pd: vk::PhysicalDevice) -> (Device
                 .iter()
                 .position(|f| f.queue_flags.contains(vk::QueueFlags::COMPUTE))
         })
-        .map(|i| i as u32);
-    let timestamp_valid_bits = compute_family
-        .map(|f| families[f as usize].timestamp_valid_bits)
-        .unwrap_or(0);
+        .map(|i| i as u32)
+}
 
+fn memory_heaps(instance: &ash::Instance, pd: vk::PhysicalDevice) -> Vec<Heap> {
+    // SAFETY: plain query on a valid physical device.
     let mem = unsafe { instance.get_physical_device_memory_properties(pd) };
-    let heaps = mem.memory_heaps[..mem.memory_heap_count as usize]
+    mem.memory_heaps[..mem.memory_heap_count as usize]
         .iter()
         .map(|h| Heap {
             size_bytes: h.size,
             device_local: h.flags.contains(vk::MemoryHeapFlags::DEVICE_LOCAL),
         })
-        .collect();
+        .collect()
+}
 
+/// The required features a device lacks, in words (empty: usable).
+fn missing_features(
+    api: u32,
+    has_compute_family: bool,
+    has_push_descriptor: bool,
+    props: &ChainedProperties,
+    features: &ChainedFeatures,
+) -> Vec<String> {
+    let mut missing = Vec::new();
+    let has_13 = vk::api_version_major(api) > 1 || vk::api_version_minor(api) >= 3;
     if !has_13 {
         missing.push(format!(
             "Vulkan 1.3 (device reports {}.{})",
@@ -155,12 +277,13 @@ pub fn probe_device(instance: &ash::Instance, pd: vk::PhysicalDevice) -> (Device
             vk::api_version_minor(api)
         ));
     }
-    if compute_family.is_none() {
+    if !has_compute_family {
         missing.push("a compute queue".into());
     }
-    if !has_ext(ash::khr::push_descriptor::NAME) {
+    if !has_push_descriptor {
         missing.push("VK_KHR_push_descriptor".into());
     }
+    let subgroup = &props.subgroup;
     if !subgroup
         .supported_stages
         .contains(vk::ShaderStageFlags::COMPUTE)
@@ -179,51 +302,11 @@ pub fn probe_device(instance: &ash::Instance, pd: vk::PhysicalDevice) -> (Device
             subgroup.subgroup_size
         ));
     }
+    let v13 = &features.v13;
     if has_13 && (v13.subgroup_size_control == 0 || v13.compute_full_subgroups == 0) {
         missing.push("subgroupSizeControl with computeFullSubgroups".into());
     }
-
-    let (min_sg, max_sg) = if has_13 {
-        (
-            size_control.min_subgroup_size,
-            size_control.max_subgroup_size,
-        )
-    } else {
-        (subgroup.subgroup_size, subgroup.subgroup_size)
-    };
-    let caps = DeviceCaps {
-        name: cstr(&base.device_name),
-        device_type: base.device_type,
-        vendor_id: base.vendor_id,
-        driver_name: cstr(&driver.driver_name),
-        driver_info: cstr(&driver.driver_info),
-        vulkan_version: format!(
-            "{}.{}.{}",
-            vk::api_version_major(api),
-            vk::api_version_minor(api),
-            vk::api_version_patch(api)
-        ),
-        api_version: api,
-        subgroup_size: subgroup.subgroup_size,
-        min_subgroup_size: min_sg,
-        max_subgroup_size: max_sg,
-        float_atomic_add: atomic_float.shader_buffer_float32_atomic_add != 0
-            && atomic_float.shader_buffer_float32_atomics != 0,
-        has_atomic_float_ext,
-        int64: base_features.shader_int64 != 0,
-        float64: base_features.shader_float64 != 0,
-        int64_atomics: base_features.shader_int64 != 0 && v12.shader_buffer_int64_atomics != 0,
-        storage_8bit: v12.storage_buffer8_bit_access != 0 && v12.shader_int8 != 0,
-        timestamps: base.limits.timestamp_compute_and_graphics != 0 && timestamp_valid_bits > 0,
-        timestamp_period_ns: base.limits.timestamp_period as f64,
-        timestamp_valid_bits,
-        max_storage_buffer_range: base.limits.max_storage_buffer_range as u64,
-        max_workgroup_count: base.limits.max_compute_work_group_count,
-        max_shared_memory: base.limits.max_compute_shared_memory_size,
-        heaps,
-        compute_queue_family: compute_family,
-    };
-    (caps, missing)
+    missing
 }
 
 impl DeviceCaps {

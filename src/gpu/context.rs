@@ -215,34 +215,14 @@ impl Gpu {
         };
 
         let debug = if validation {
-            let loader = ash::ext::debug_utils::Instance::new(&entry, &instance);
-            let info = vk::DebugUtilsMessengerCreateInfoEXT::default()
-                .message_severity(
-                    vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
-                        | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
-                )
-                .message_type(
-                    vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
-                        | vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION
-                        | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE,
-                )
-                .pfn_user_callback(Some(debug_callback))
-                .user_data(Arc::as_ptr(&validation_log) as *mut c_void);
-            // SAFETY: the log outlives the messenger (both owned by Inner, messenger destroyed first).
-            let messenger = unsafe { loader.create_debug_utils_messenger(&info, None) }
-                .vk("vkCreateDebugUtilsMessengerEXT")?;
-            guard.debug = Some((loader.clone(), messenger));
-            Some((loader, messenger))
+            let debug = create_messenger(&entry, &instance, &validation_log)?;
+            guard.debug = Some(debug.clone());
+            Some(debug)
         } else {
             None
         };
 
-        let cands = enumerate(&instance)?;
-        let index = choose_device(&cands, wanted.as_deref())?;
-        // SAFETY: plain query.
-        let physical = unsafe { instance.enumerate_physical_devices() }
-            .vk("vkEnumeratePhysicalDevices")?[index];
-        let caps = cands[index].caps.clone();
+        let (physical, caps) = pick_physical(&instance, wanted.as_deref())?;
         let queue_family = caps
             .compute_queue_family
             .expect("usable device has a compute queue");
@@ -250,19 +230,7 @@ impl Gpu {
         let device = create_device(&instance, physical, &caps, queue_family)?;
         // SAFETY: queue 0 of a family we created the device with.
         let queue = unsafe { device.get_device_queue(queue_family, 0) };
-        let allocator = Allocator::new(&AllocatorCreateDesc {
-            instance: instance.clone(),
-            device: device.clone(),
-            physical_device: physical,
-            debug_settings: Default::default(),
-            buffer_device_address: false,
-            allocation_sizes: Default::default(),
-        })
-        .map_err(|source| GpuError::Allocation {
-            name: "allocator".into(),
-            size: 0,
-            source,
-        })?;
+        let allocator = create_allocator(&instance, &device, physical)?;
         let push_descriptor = ash::khr::push_descriptor::Device::new(&instance, &device);
         guard.disarm();
 
@@ -312,6 +280,65 @@ impl Gpu {
     pub(crate) fn device(&self) -> &ash::Device {
         &self.inner.device
     }
+}
+
+/// The messenger that hands validation warnings and errors to `log`.
+fn create_messenger(
+    entry: &ash::Entry,
+    instance: &ash::Instance,
+    log: &Arc<ValidationLog>,
+) -> GpuResult<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)> {
+    let loader = ash::ext::debug_utils::Instance::new(entry, instance);
+    let info = vk::DebugUtilsMessengerCreateInfoEXT::default()
+        .message_severity(
+            vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
+                | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
+        )
+        .message_type(
+            vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
+                | vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION
+                | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE,
+        )
+        .pfn_user_callback(Some(debug_callback))
+        .user_data(Arc::as_ptr(log) as *mut c_void);
+    // SAFETY: the log outlives the messenger (both owned by Inner, messenger destroyed first).
+    let messenger = unsafe { loader.create_debug_utils_messenger(&info, None) }
+        .vk("vkCreateDebugUtilsMessengerEXT")?;
+    Ok((loader, messenger))
+}
+
+/// The physical device `choose_device` picks for `wanted`, with its capabilities.
+fn pick_physical(
+    instance: &ash::Instance,
+    wanted: Option<&str>,
+) -> GpuResult<(vk::PhysicalDevice, DeviceCaps)> {
+    let cands = enumerate(instance)?;
+    let index = choose_device(&cands, wanted)?;
+    // SAFETY: plain query.
+    let physical =
+        unsafe { instance.enumerate_physical_devices() }.vk("vkEnumeratePhysicalDevices")?[index];
+    Ok((physical, cands[index].caps.clone()))
+}
+
+/// The memory allocator over `device` (no buffer device addresses).
+fn create_allocator(
+    instance: &ash::Instance,
+    device: &ash::Device,
+    physical: vk::PhysicalDevice,
+) -> GpuResult<Allocator> {
+    Allocator::new(&AllocatorCreateDesc {
+        instance: instance.clone(),
+        device: device.clone(),
+        physical_device: physical,
+        debug_settings: Default::default(),
+        buffer_device_address: false,
+        allocation_sizes: Default::default(),
+    })
+    .map_err(|source| GpuError::Allocation {
+        name: "allocator".into(),
+        size: 0,
+        source,
+    })
 }
 
 fn create_device(

@@ -28,7 +28,7 @@ pub struct RenderedFrame {
     pub n_contrib: Vec<u32>,
     /// [H, W, C]: sum of alpha * T * s.
     pub sem: Vec<f32>,
-    /// [H, W, C]: `sem / (1 - T)` (paper 000, Eq. 2); 0 where nothing was blended.
+    /// [H, W, C]: `sem / (1 - T)` (Gaussian Semantics Eq. 2); 0 where nothing was blended.
     pub sem_norm: Vec<f32>,
     /// Visible Gaussians and (tile, Gaussian) intersections in this frame.
     pub visible: u32,

@@ -24,7 +24,7 @@ pub(crate) fn camera_rows_f32(cam: &crate::scene::Camera) -> [[f32; 4]; 3] {
     })
 }
 
-/// What the semantic buffer blends (paper 000 and its softmax-before-blending ablation).
+/// What the semantic buffer blends (Gaussian Semantics and its softmax-before-blending ablation).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
 pub enum SemanticMode {
     /// Each Gaussian's raw logits.

@@ -1,5 +1,5 @@
 //! What a training run does: iterations, learning rates, loss weights and the
-//! densification schedule. Defaults are 3DGS's (Kerbl et al. 2023) and paper 000's, with
+//! densification schedule. Defaults are 3DGS's (Kerbl et al. 2023) and Gaussian Semantics', with
 //! the 30k-iteration schedule scaled to the run's length.
 
 use serde::Serialize;
@@ -90,7 +90,7 @@ pub struct TrainConfig {
 }
 
 impl TrainConfig {
-    /// Paper 000's defaults (lambda_sem 1, lambda_H 0.01 warmed up over the first 5k of
+    /// Gaussian Semantics' defaults (lambda_sem 1, lambda_H 0.01 warmed up over the first 5k of
     /// 30k iterations) and 3DGS's densification, scaled to `iters`.
     pub fn new(iters: u32) -> TrainConfig {
         TrainConfig {

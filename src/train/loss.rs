@@ -1,4 +1,4 @@
-//! The training losses of paper 000 (Sec. 3.4) on the device, recorded into the caller's
+//! The training losses of Gaussian Semantics (Sec. 3.4) on the device, recorded into the caller's
 //! Recorder without host syncs: the 3DGS photometric loss 0.8 L1 + 0.2 (1 - SSIM), the
 //! semantic cross-entropy on the normalized semantic image, and (loss_entropy.rs) the
 //! per-Gaussian entropy regularizer. Each writes its gradient and the partial sums of its
@@ -26,7 +26,7 @@ pub(crate) const LOSS_WG: u32 = 256;
 /// Most workgroups one dispatch dimension may have on every Vulkan device.
 const MAX_GROUPS: u32 = 65_535;
 /// Loop iterations we let one invocation run: lavapipe ends every loop of an invocation
-/// after 65,535 iterations in total, silently (../shared/TOOLCHAIN.md).
+/// after 65,535 iterations in total, silently (docs/TOOLCHAIN.md).
 pub(crate) const LOOP_BUDGET: u64 = 60_000;
 /// Moment planes the SSIM forward blurs: x, y, x^2, y^2, xy.
 const MOMENT_PLANES: u64 = 5;

@@ -1,4 +1,4 @@
-//! The Gaussian entropy regularizer (paper 000, Eq. 4-6) and its warm-up. Its value lands
+//! The Gaussian entropy regularizer (Gaussian Semantics Eq. 4-6) and its warm-up. Its value lands
 //! in the same values buffer as the image losses, so one download reads them all.
 
 use anyhow::{ensure, Result};

@@ -1,4 +1,4 @@
-//! Joint optimization (paper 000): losses, Adam, densification, and the training loop.
+//! Joint optimization (Gaussian Semantics): losses, Adam, densification, and the training loop.
 
 pub mod adam;
 pub mod config;

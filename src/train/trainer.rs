@@ -1,4 +1,4 @@
-//! The training loop of joint optimization (paper 000) on the GPU. One iteration, one
+//! The training loop of joint optimization (Gaussian Semantics) on the GPU. One iteration, one
 //! view: render (RGB + semantics), losses, backward, in one submission; then softmax
 //! backward, entropy, Adam in a second (so an intersection-buffer overflow, which re-runs
 //! the first, never applies a step twice). Densification rebuilds every tensor on the
@@ -535,7 +535,7 @@ impl Trainer {
     }
 }
 
-/// Gives every Gaussian `channels` small random logits (paper 000: "initialized with small
+/// Gives every Gaussian `channels` small random logits (Gaussian Semantics: "initialized with small
 /// random values"), replacing any it had.
 pub fn with_initial_logits(g: &Gaussians, channels: usize, seed: u64) -> Gaussians {
     let mut rng = Rng::new(seed);

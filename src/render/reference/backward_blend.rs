@@ -4,7 +4,7 @@
 //! At one pixel, with the blended Gaussians `i = 0..N` front to back, `T_i = prod_{j<i}
 //! (1 - alpha_j)` and `T_N` the final transmittance, the forward computes
 //!   rgb = sum_i alpha_i T_i c_i + T_N bg,   alpha = 1 - T_N,
-//!   sem = sum_i alpha_i T_i s_i,            sem_norm = sem / (1 - T_N)   (paper 000, Eq. 2).
+//!   sem = sum_i alpha_i T_i s_i,            sem_norm = sem / (1 - T_N)  (Gaussian Semantics Eq. 2).
 //! With upstream gradients `v_rgb, v_alpha, v_sem`, the pixel's objective has the partials
 //!   dL/dsem = v_sem / (1 - T_N) =: g_sem,
 //!   dL/dT_N = v_rgb . bg - v_alpha + v_sem . sem / (1 - T_N)^2 =: g_T,

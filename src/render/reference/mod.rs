@@ -7,7 +7,7 @@
 //! 2. [`tile_intersections`]: (tile, Gaussian) pairs sorted by tile, depth, id.
 //! 3. [`render`] / [`for_each_contribution`]: per pixel, front-to-back over the pixel's
 //!    tile list with weights `alpha * T`; RGB, alpha, depth and C semantic channels, the
-//!    latter also normalized by `1 - T_final` (paper 000, Eq. 2).
+//!    latter also normalized by `1 - T_final` (Gaussian Semantics Eq. 2, docs/papers.md).
 //!
 //! Clarity over speed; it is still fast enough for test scenes (tens of thousands of
 //! Gaussians at small resolutions) because each pixel only walks its tile's list.
@@ -92,7 +92,7 @@ pub struct ReferenceImage {
     pub depth_sum: Vec<f64>,
     /// `sum w s` (not normalized), `H * W * C`.
     pub sem: Vec<f64>,
-    /// `sum w s / (1 - T_final)` (paper 000, Eq. 2), 0 where nothing was blended.
+    /// `sum w s / (1 - T_final)` (Gaussian Semantics Eq. 2), 0 where nothing was blended.
     pub sem_norm: Vec<f64>,
     /// Transmittance left after the last blended Gaussian.
     pub final_t: Vec<f64>,
