@@ -2,6 +2,7 @@
 //! backend. See README.md for the architecture.
 
 pub mod bench;
+pub mod contract;
 pub mod eval;
 pub mod fuse;
 pub mod gpu;

@@ -3,22 +3,14 @@
 #ifndef RASTER_COMMON_GLSL
 #define RASTER_COMMON_GLSL
 
-#define TILE_SIZE 16
+#include "shared_constants.glsl" // TILE_SIZE, SEM_CHUNK, the frame status words ST_*
+
 #define TILE_PIXELS (TILE_SIZE * TILE_SIZE)
 #define ALPHA_MIN (1.0 / 255.0)
 #define ALPHA_MAX 0.999
 #define T_MIN 1e-4
 #define TWO_PI 6.28318530717958648
 
-// Frame status buffer (u32 words), written on the GPU so no stage needs a readback.
-#define ST_VISIBLE 0          // visible Gaussians V
-#define ST_VISIBLE_PLUS1 1    // V + 1 (scan length with a trailing zero)
-#define ST_ISECT 2            // intersections kept (<= capacity)
-#define ST_ISECT_NEEDED 3     // intersections the frame produced
-#define ST_OVERFLOW 4         // 1 if the intersection buffer was too small
-#define ST_ARGS_VISIBLE 8     // (groups, 1, 1) over V + 1 invocations
-#define ST_ARGS_ISECT 12      // (groups, 1, 1) over the kept intersections
-#define ST_WORDS 16
 
 float sigmoid(float x) {
     return 1.0 / (1.0 + exp(-x));

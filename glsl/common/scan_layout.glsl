@@ -3,13 +3,10 @@
 #ifndef SCAN_LAYOUT_GLSL
 #define SCAN_LAYOUT_GLSL
 
-#define SCAN_WG_SIZE 256
-#define SCAN_ITEMS 8
-#define SCAN_BLOCK (SCAN_WG_SIZE * SCAN_ITEMS) // 2048 elements per workgroup
-#define SCAN_MAX_LEVELS 4
+// SCAN_WG_SIZE, SCAN_ITEMS, SCAN_BLOCK, SCAN_MAX_LEVELS, SCAN_ARGS_OFFSET.
+#include "shared_constants.glsl"
 
 // state[level]: element count at that level (level 0: the input).
 // state[SCAN_ARGS_OFFSET + 3 * level ..]: (workgroups, 1, 1) for that level.
-#define SCAN_ARGS_OFFSET 4
 
 #endif

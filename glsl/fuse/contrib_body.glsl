@@ -24,10 +24,17 @@
 
 layout(local_size_x = TILE_PIXELS) in;
 
-layout(push_constant) uniform Params {
-    uvec4 dims;   // width height tiles_x n
-    uvec4 window; // window_start window_len row_begin rows
-    uvec4 mode;   // x: 0 every pixel (A), 1 the center pixel only (weighted vote); y: per_view
+layout(push_constant) uniform ContribParams {
+    uint width;
+    uint height;
+    uint tiles_x;
+    uint n;
+    uint window_start; // first entry of each tile's list this dispatch walks
+    uint window_len;   // entries it walks at most
+    uint row_begin;    // first class row of the evidence this pass holds
+    uint rows;         // class rows this pass holds
+    uint center_only;  // 1: only the pixel holding the center counts (weighted vote); 0: every pixel (A)
+    uint per_view;     // 1: each view's weights divided by the Gaussian's projected footprint
 } pc;
 
 layout(set = 0, binding = 0) readonly buffer RangesBuf { uvec2 data[]; } tile_ranges;
@@ -48,9 +55,9 @@ shared float s_scale[BATCH]; // per_view: 1 / footprint; else 1
 void accumulate(uint row, uint gaussian, float w);
 
 void main() {
-    uint width = pc.dims.x, height = pc.dims.y, n = pc.dims.w;
-    uint window_start = pc.window.x, window_len = pc.window.y, row_begin = pc.window.z, rows = pc.window.w;
-    TileWindow tw = tile_window(width, height, pc.dims.z, window_start, window_len);
+    uint width = pc.width, height = pc.height, n = pc.n;
+    uint window_start = pc.window_start, window_len = pc.window_len, row_begin = pc.row_begin, rows = pc.rows;
+    TileWindow tw = tile_window(width, height, pc.tiles_x, window_start, window_len);
     uint t = tw.t, px = tw.px, py = tw.py, pix = tw.pix;
     bool inside = tw.inside;
     vec2 pixel = vec2(px, py);
@@ -88,7 +95,7 @@ void main() {
             // The footprint is the Gaussian's, not the pixel's: once per entry, not per step.
             // The conic is the inverse of Sigma2d: sqrt(det Sigma2d) = 1 / sqrt(det conic).
             vec4 con = s_conic[t];
-            s_scale[t] = pc.mode.y == 1
+            s_scale[t] = pc.per_view == 1
                 ? sqrt(max(con.x * con.z - con.y * con.y, 0.0)) / (TWO_PI * s_xy_depth_opacity[t].w)
                 : 1.0;
         }
@@ -117,7 +124,7 @@ void main() {
                     }
                 }
             }
-            if (pc.mode.x == 1 && g.xy != pixel) {
+            if (pc.center_only == 1 && g.xy != pixel) {
                 w = 0.0;
             }
             w *= s_scale[j];

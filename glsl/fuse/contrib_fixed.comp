@@ -16,10 +16,10 @@ void accumulate(uint row, uint gaussian, float w) {
             uint lo = subgroupAdd(v & 0xFFFFu);
             uint hi = subgroupAdd(v >> 16);
             if (subgroupElect()) {
-                atomicAdd(contrib.data[row * pc.dims.w + gaussian], (uint64_t(hi) << 16) + uint64_t(lo));
+                atomicAdd(contrib.data[row * pc.n + gaussian], (uint64_t(hi) << 16) + uint64_t(lo));
             }
         }
     } else if (row != NO_ROW) {
-        atomicAdd(contrib.data[row * pc.dims.w + gaussian], uint64_t(v));
+        atomicAdd(contrib.data[row * pc.n + gaussian], uint64_t(v));
     }
 }

@@ -10,10 +10,10 @@ void accumulate(uint row, uint gaussian, float w) {
         if (row != NO_ROW) {
             float s = subgroupAdd(w);
             if (subgroupElect()) {
-                atomicAdd(contrib.data[row * pc.dims.w + gaussian], s);
+                atomicAdd(contrib.data[row * pc.n + gaussian], s);
             }
         }
     } else if (row != NO_ROW) {
-        atomicAdd(contrib.data[row * pc.dims.w + gaussian], w);
+        atomicAdd(contrib.data[row * pc.n + gaussian], w);
     }
 }

@@ -7,14 +7,21 @@
 
 layout(local_size_x = 256) in;
 
-layout(push_constant) uniform Params {
-    vec4 rot_t0;
-    vec4 rot_t1;
-    vec4 rot_t2;
-    vec4 intrinsics;  // fx fy cx cy
-    vec4 clip;        // near far depth_tolerance -
-    uvec4 dims;       // width height n occlusion
-    uvec4 rows;       // row_begin rows - -
+layout(push_constant) uniform VoteParams {
+    vec4 world_to_camera[3]; // rows (R00 R01 R02 t0), ...
+    float fx;
+    float fy;
+    float cx;
+    float cy;
+    float near;
+    float far;
+    float depth_tolerance; // relative, of the occlusion test
+    uint occlusion;        // 1: vote only where the center is within tolerance of the depth
+    uint width;
+    uint height;
+    uint n;
+    uint row_begin;        // first class row of the votes this pass holds
+    uint rows;             // class rows this pass holds
 } pc;
 
 layout(set = 0, binding = 0) readonly buffer MeansBuf { float data[]; } means;
@@ -24,29 +31,29 @@ layout(set = 0, binding = 3) buffer VotesBuf { uint data[]; } votes; // [rows][n
 
 void main() {
     uint i = gl_GlobalInvocationID.x;
-    uint n = pc.dims.z;
+    uint n = pc.n;
     if (i >= n) {
         return;
     }
     vec3 mean = vec3(means.data[3 * i], means.data[3 * i + 1], means.data[3 * i + 2]);
-    vec3 p = vec3(dot(pc.rot_t0.xyz, mean) + pc.rot_t0.w,
-                  dot(pc.rot_t1.xyz, mean) + pc.rot_t1.w,
-                  dot(pc.rot_t2.xyz, mean) + pc.rot_t2.w);
-    if (!(p.z > pc.clip.x && p.z < pc.clip.y)) {
+    vec3 p = vec3(dot(pc.world_to_camera[0].xyz, mean) + pc.world_to_camera[0].w,
+                  dot(pc.world_to_camera[1].xyz, mean) + pc.world_to_camera[1].w,
+                  dot(pc.world_to_camera[2].xyz, mean) + pc.world_to_camera[2].w);
+    if (!(p.z > pc.near && p.z < pc.far)) {
         return;
     }
-    vec2 uv = vec2(pc.intrinsics.x * p.x / p.z + pc.intrinsics.z, pc.intrinsics.y * p.y / p.z + pc.intrinsics.w);
-    if (!(uv.x >= 0.0 && uv.y >= 0.0 && uv.x < float(pc.dims.x) && uv.y < float(pc.dims.y))) {
+    vec2 uv = vec2(pc.fx * p.x / p.z + pc.cx, pc.fy * p.y / p.z + pc.cy);
+    if (!(uv.x >= 0.0 && uv.y >= 0.0 && uv.x < float(pc.width) && uv.y < float(pc.height))) {
         return;
     }
-    uint pix = uint(uv.y) * pc.dims.x + uint(uv.x);
-    uint row = labels.data[pix] - pc.rows.x; // unlabeled (0xFFFFFFFF) and other passes' rows fail below
-    if (row >= pc.rows.y) {
+    uint pix = uint(uv.y) * pc.width + uint(uv.x);
+    uint row = labels.data[pix] - pc.row_begin; // unlabeled (0xFFFFFFFF) and other passes' rows fail below
+    if (row >= pc.rows) {
         return;
     }
-    if (pc.dims.w != 0) {
+    if (pc.occlusion != 0) {
         float d = depth.data[pix];
-        if (!(d > 0.0 && abs(p.z - d) <= pc.clip.z * d)) {
+        if (!(d > 0.0 && abs(p.z - d) <= pc.depth_tolerance * d)) {
             return;
         }
     }

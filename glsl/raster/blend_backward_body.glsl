@@ -24,23 +24,17 @@
 #extension GL_KHR_shader_subgroup_arithmetic : require
 #include "raster_common.glsl"
 
-#define SEM_CHUNK 16
 #define BATCH TILE_PIXELS
-// Screen-space gradient per Gaussian (grad2d, GRAD2D_STRIDE floats): mean2d x y,
-// conic A B C, opacity, color r g b.
-#define GRAD2D_STRIDE 10
+// Screen-space gradient per Gaussian (grad2d, GRAD2D_STRIDE floats, shared_constants.txt):
+// mean2d x y, conic A B C, opacity, color r g b.
 // Values reduced per (tile, Gaussian) step: the 10 screen-space ones, then the channels.
 #define STEP_VALUES (GRAD2D_STRIDE + SEM_CHUNK)
 // Carried per pixel between windows: T, S_rgb (3), S_sem (SEM_CHUNK).
-#define CARRY_STRIDE (4 + SEM_CHUNK)
+#define CARRY_STRIDE BACKWARD_CARRY_STRIDE
 
 layout(local_size_x = TILE_PIXELS) in;
 
-layout(push_constant) uniform Params {
-    uvec4 dims;      // width height tiles_x channels
-    uvec4 window;    // window_start window_len chunk_base -
-    vec4 background; // r g b -
-} pc;
+#include "blend_params.glsl"
 
 layout(set = 0, binding = 0) readonly buffer RangesBuf { uvec2 data[]; } tile_ranges;
 #include "tile_window.glsl"
@@ -69,14 +63,14 @@ shared float s_sem[BATCH * SEM_CHUNK];
 shared uint s_bound; // one past the furthest entry any pixel of the tile blended
 
 void main() {
-    uint width = pc.dims.x, height = pc.dims.y, channels = pc.dims.w;
-    uint window_start = pc.window.x, window_len = pc.window.y, chunk_base = pc.window.z;
+    uint width = pc.width, height = pc.height, channels = pc.channels;
+    uint window_start = pc.window_start, window_len = pc.window_len, chunk_base = pc.chunk_base;
 #ifdef SEM_ONLY
     bool with_rgb = false; // only the semantic vectors' gradient (geometry frozen)
 #else
     bool with_rgb = chunk_base == 0;
 #endif
-    TileWindow tw = tile_window(width, height, pc.dims.z, window_start, window_len);
+    TileWindow tw = tile_window(width, height, pc.tiles_x, window_start, window_len);
     if (window_start > 0 && window_start >= tw.len) {
         return; // this tile's list ends before the window
     }
@@ -101,7 +95,7 @@ void main() {
         if (with_rgb) {
             v_col = vec3(v_rgb.data[3 * pix], v_rgb.data[3 * pix + 1], v_rgb.data[3 * pix + 2]);
             // rgb = sum + T_final * background; accumulated alpha = 1 - T_final.
-            v_tfinal = dot(v_col, pc.background.rgb) - v_alpha.data[pix];
+            v_tfinal = dot(v_col, pc.background) - v_alpha.data[pix];
         }
 #endif
         // Eq. 2: sem_norm = sem / (1 - T_final), so dL/dsem = v / (1 - T_final) and

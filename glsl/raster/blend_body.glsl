@@ -1,12 +1,12 @@
 // Forward blending of one 16x16 tile per workgroup (included by blend_rgb.comp with
-// SEM_CHUNK 0 and blend_sem.comp with SEM_CHUNK 16).
+// CHUNK_CHANNELS 0 and blend_sem.comp with CHUNK_CHANNELS 16).
 //
 // Each workgroup loads its tile's Gaussians into shared memory in batches; a pixel stops at
 // the transmittance threshold, and the tile stops once every pixel is done (subgroup vote,
 // then a workgroup count). One dispatch covers a window of at most `window_len` entries of
 // each tile's list: per-pixel state (T, accumulators) is carried in a buffer between
 // windows, so no invocation comes near lavapipe's 65,535-iteration loop cap. Semantic
-// channels are processed SEM_CHUNK at a time (chunk_base), C being a run-time value.
+// channels are processed CHUNK_CHANNELS at a time (chunk_base), C being a run-time value.
 #extension GL_EXT_control_flow_attributes : require
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_vote : require
@@ -15,16 +15,11 @@
 
 #define BATCH TILE_PIXELS
 // Carried state per pixel: T, r, g, b, depth sum, contributors, last, done, then sems.
-#define CARRY_BASE 8
-#define CARRY_STRIDE (CARRY_BASE + SEM_CHUNK)
+#define CARRY_STRIDE (BLEND_CARRY_BASE + CHUNK_CHANNELS)
 
 layout(local_size_x = TILE_PIXELS) in;
 
-layout(push_constant) uniform Params {
-    uvec4 dims;        // width height tiles_x channels
-    uvec4 window;      // window_start window_len chunk_base write_rgb
-    vec4 background;   // r g b -
-} pc;
+#include "blend_params.glsl"
 
 layout(set = 0, binding = 0) readonly buffer RangesBuf { uvec2 data[]; } tile_ranges;
 #include "tile_window.glsl"
@@ -40,11 +35,11 @@ layout(set = 0, binding = 9) writeonly buffer FinalTBuf { float data[]; } out_fi
 layout(set = 0, binding = 10) writeonly buffer LastBuf { uint data[]; } out_last;
 layout(set = 0, binding = 11) writeonly buffer CountBuf { uint data[]; } out_n_contrib;
 layout(set = 0, binding = 15) readonly buffer FracBuf { vec2 data[]; } xy_frac;
-#if SEM_CHUNK > 0
+#if CHUNK_CHANNELS > 0
 layout(set = 0, binding = 12) readonly buffer SemBuf { float data[]; } sem_in;
 layout(set = 0, binding = 13) writeonly buffer SemOutBuf { float data[]; } out_sem;
 layout(set = 0, binding = 14) writeonly buffer SemNormBuf { float data[]; } out_sem_norm;
-shared float s_sem[BATCH * SEM_CHUNK];
+shared float s_sem[BATCH * CHUNK_CHANNELS];
 #endif
 
 shared vec4 s_xy_depth_opacity[BATCH]; // floor(mean2d) depth opacity
@@ -53,10 +48,10 @@ shared vec4 s_conic[BATCH];
 shared vec4 s_color[BATCH];
 
 void main() {
-    uint width = pc.dims.x, height = pc.dims.y, channels = pc.dims.w;
-    uint window_start = pc.window.x, window_len = pc.window.y, chunk_base = pc.window.z;
-    bool write_rgb = pc.window.w != 0;
-    TileWindow tw = tile_window(width, height, pc.dims.z, window_start, window_len);
+    uint width = pc.width, height = pc.height, channels = pc.channels;
+    uint window_start = pc.window_start, window_len = pc.window_len, chunk_base = pc.chunk_base;
+    bool write_rgb = pc.write_rgb != 0;
+    TileWindow tw = tile_window(width, height, pc.tiles_x, window_start, window_len);
     uint t = tw.t, px = tw.px, py = tw.py, pix = tw.pix;
     bool inside = tw.inside;
     vec2 pixel = vec2(px, py);
@@ -73,8 +68,8 @@ void main() {
     uint n_contrib = 0;
     uint last = 0;
     bool done = !inside;
-    float sem[SEM_CHUNK > 0 ? SEM_CHUNK : 1];
-    [[unroll]] for (uint k = 0; k < max(SEM_CHUNK, 1); k++) {
+    float sem[CHUNK_CHANNELS > 0 ? CHUNK_CHANNELS : 1];
+    [[unroll]] for (uint k = 0; k < max(CHUNK_CHANNELS, 1); k++) {
         sem[k] = 0.0;
     }
     if (window_start > 0 && inside) {
@@ -85,8 +80,8 @@ void main() {
         n_contrib = floatBitsToUint(carry.data[c0 + 5]);
         last = floatBitsToUint(carry.data[c0 + 6]);
         done = carry.data[c0 + 7] != 0.0;
-        [[unroll]] for (uint k = 0; k < SEM_CHUNK; k++) {
-            sem[k] = carry.data[c0 + CARRY_BASE + k];
+        [[unroll]] for (uint k = 0; k < CHUNK_CHANNELS; k++) {
+            sem[k] = carry.data[c0 + BLEND_CARRY_BASE + k];
         }
     }
 
@@ -102,10 +97,10 @@ void main() {
             s_frac[t] = xy_frac.data[g];
             s_conic[t] = conics.data[g];
             s_color[t] = colors.data[g];
-#if SEM_CHUNK > 0
-            [[unroll]] for (uint k = 0; k < SEM_CHUNK; k++) {
+#if CHUNK_CHANNELS > 0
+            [[unroll]] for (uint k = 0; k < CHUNK_CHANNELS; k++) {
                 uint c = chunk_base + k;
-                s_sem[t * SEM_CHUNK + k] = c < channels ? sem_in.data[g * channels + c] : 0.0;
+                s_sem[t * CHUNK_CHANNELS + k] = c < channels ? sem_in.data[g * channels + c] : 0.0;
             }
 #endif
         }
@@ -133,9 +128,9 @@ void main() {
                 rgb += weight * s_color[j].rgb;
                 depth_sum += weight * g.z;
             }
-#if SEM_CHUNK > 0
-            [[unroll]] for (uint k = 0; k < SEM_CHUNK; k++) {
-                sem[k] += weight * s_sem[j * SEM_CHUNK + k];
+#if CHUNK_CHANNELS > 0
+            [[unroll]] for (uint k = 0; k < CHUNK_CHANNELS; k++) {
+                sem[k] += weight * s_sem[j * CHUNK_CHANNELS + k];
             }
 #endif
             T = next_t;
@@ -158,14 +153,14 @@ void main() {
         carry.data[c0 + 5] = uintBitsToFloat(n_contrib);
         carry.data[c0 + 6] = uintBitsToFloat(last);
         carry.data[c0 + 7] = done ? 1.0 : 0.0;
-        [[unroll]] for (uint k = 0; k < SEM_CHUNK; k++) {
-            carry.data[c0 + CARRY_BASE + k] = sem[k];
+        [[unroll]] for (uint k = 0; k < CHUNK_CHANNELS; k++) {
+            carry.data[c0 + BLEND_CARRY_BASE + k] = sem[k];
         }
         return;
     }
     float acc_alpha = 1.0 - T;
     if (write_rgb) {
-        vec3 c = rgb + T * pc.background.rgb;
+        vec3 c = rgb + T * pc.background;
         out_rgb.data[3 * pix] = c.r;
         out_rgb.data[3 * pix + 1] = c.g;
         out_rgb.data[3 * pix + 2] = c.b;
@@ -175,8 +170,8 @@ void main() {
         out_last.data[pix] = last;
         out_n_contrib.data[pix] = n_contrib;
     }
-#if SEM_CHUNK > 0
-    [[unroll]] for (uint k = 0; k < SEM_CHUNK; k++) {
+#if CHUNK_CHANNELS > 0
+    [[unroll]] for (uint k = 0; k < CHUNK_CHANNELS; k++) {
         uint c = chunk_base + k;
         if (c < channels) {
             out_sem.data[pix * channels + c] = sem[k];

@@ -1,4 +1,4 @@
 #version 460
 // RGB, alpha, depth only: no semantic channels to pay for.
-#define SEM_CHUNK 0
+#define CHUNK_CHANNELS 0
 #include "blend_body.glsl"

@@ -1,4 +1,5 @@
 #version 460
 // RGB plus SEM_CHUNK semantic channels per dispatch (chunk_base selects which).
-#define SEM_CHUNK 16
+#include "shared_constants.glsl"
+#define CHUNK_CHANNELS SEM_CHUNK
 #include "blend_body.glsl"

@@ -6,7 +6,7 @@
 
 layout(local_size_x = 256) in;
 
-layout(push_constant) uniform Params { uint n; } pc;
+layout(push_constant) uniform CompactParams { uint n; } pc;
 
 layout(set = 0, binding = 0) readonly buffer FlagsBuf { uint data[]; } visible;
 layout(set = 0, binding = 1) readonly buffer OffsetsBuf { uint data[]; } visible_offsets; // n + 1

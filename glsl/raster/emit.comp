@@ -6,7 +6,7 @@
 
 layout(local_size_x = 256) in;
 
-layout(push_constant) uniform Params {
+layout(push_constant) uniform EmitParams {
     uint tiles_x;
     uint capacity;
 } pc;

@@ -11,7 +11,7 @@
 
 layout(local_size_x = 256) in;
 
-layout(push_constant) uniform Params {
+layout(push_constant) uniform ProjectParams {
     vec4 rot_t0; // world-to-camera rows: (R00 R01 R02 t0)
     vec4 rot_t1;
     vec4 rot_t2;

@@ -4,7 +4,7 @@
 
 layout(local_size_x = 256) in;
 
-layout(push_constant) uniform Params {
+layout(push_constant) uniform SoftmaxParams {
     uint n;
     uint channels;
 } pc;

@@ -9,7 +9,7 @@
 
 layout(local_size_x = SCAN_WG_SIZE) in;
 
-layout(push_constant) uniform Params {
+layout(push_constant) uniform ScanDownsweepParams {
     uint level;
     uint has_offsets; // 0 at the top level: its single block starts at 0
 } pc;

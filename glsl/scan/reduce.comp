@@ -8,7 +8,7 @@
 
 layout(local_size_x = SCAN_WG_SIZE) in;
 
-layout(push_constant) uniform Params { uint level; } pc;
+layout(push_constant) uniform ScanReduceParams { uint level; } pc;
 
 layout(set = 0, binding = 0) readonly buffer StateBuf { uint data[]; } state;
 layout(set = 0, binding = 1) readonly buffer SrcBuf { uint data[]; } src;

@@ -6,7 +6,7 @@
 
 layout(local_size_x = 1) in;
 
-layout(push_constant) uniform Params {
+layout(push_constant) uniform ScanSetupParams {
     uint count_index;
     uint div;
     uint mul;

@@ -12,7 +12,7 @@
 
 layout(local_size_x = SORT_WG_SIZE) in;
 
-layout(push_constant) uniform Params {
+layout(push_constant) uniform SortPassParams {
     uint shift;
     uint bits;
 } pc;

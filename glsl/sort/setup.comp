@@ -5,7 +5,7 @@
 
 layout(local_size_x = 1) in;
 
-layout(push_constant) uniform Params {
+layout(push_constant) uniform SortSetupParams {
     uint count_index;
     uint capacity;
 } pc;

@@ -5,7 +5,7 @@
 
 layout(local_size_x = 256) in;
 
-layout(push_constant) uniform Params {
+layout(push_constant) uniform AdamParams {
     uint count;
     float beta1;
     float beta2;

@@ -10,7 +10,7 @@
 
 layout(local_size_x = DENSIFY_WG_SIZE) in;
 
-layout(push_constant) uniform Params {
+layout(push_constant) uniform DensifyClassifyParams {
     uint n;
     float grad_threshold;
     // Thresholds on the largest log-scale (ln of the host's scale thresholds, so the test

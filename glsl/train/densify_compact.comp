@@ -6,7 +6,7 @@
 
 layout(local_size_x = DENSIFY_WG_SIZE) in;
 
-layout(push_constant) uniform Params {
+layout(push_constant) uniform DensifyCompactParams {
     uint n;
     uint max_gaussians;
 } pc;

@@ -13,7 +13,7 @@
 
 layout(local_size_x = DENSIFY_WG_SIZE) in;
 
-layout(push_constant) uniform Params {
+layout(push_constant) uniform GatherParams {
     uint elements; // new_n * width
     uint width;
     uint role;

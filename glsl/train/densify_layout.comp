@@ -11,7 +11,7 @@
 
 layout(local_size_x = DENSIFY_WG_SIZE) in;
 
-layout(push_constant) uniform Params {
+layout(push_constant) uniform DensifyLayoutParams {
     uint n;
     float ln_split_scale; // densified Gaussians with a larger max log-scale split
     uvec2 seed;

@@ -5,7 +5,7 @@
 
 layout(local_size_x = DENSIFY_WG_SIZE) in;
 
-layout(push_constant) uniform Params {
+layout(push_constant) uniform ResetOpacityParams {
     uint n;
     float max_logit;
 } pc;

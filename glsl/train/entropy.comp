@@ -8,7 +8,7 @@
 
 layout(local_size_x = LOSS_WG) in;
 
-layout(push_constant) uniform Params {
+layout(push_constant) uniform EntropyParams {
     uint n;
     uint channels;
     uint stride;

@@ -6,7 +6,7 @@
 
 layout(local_size_x = LOSS_WG) in;
 
-layout(push_constant) uniform Params {
+layout(push_constant) uniform CountLabelsParams {
     uint pixels;
     uint channels;
     uint stride;

@@ -10,7 +10,7 @@
 
 layout(local_size_x = LOSS_WG) in;
 
-layout(push_constant) uniform Params {
+layout(push_constant) uniform CrossEntropyParams {
     uint pixels;
     uint channels;
     uint stride;

@@ -6,7 +6,7 @@
 
 layout(local_size_x = LOSS_WG) in;
 
-layout(push_constant) uniform Params {
+layout(push_constant) uniform LossReduceParams {
     uint first_slot;
     uint groups;
     uint stride;

@@ -8,7 +8,7 @@
 
 layout(local_size_x = 16, local_size_y = 16) in;
 
-layout(push_constant) uniform Params {
+layout(push_constant) uniform SsimBackwardParams {
     uint width;
     uint height;
     float l1_weight; // 0.8 / (3 * pixels)

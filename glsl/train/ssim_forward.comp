@@ -9,7 +9,7 @@
 
 layout(local_size_x = 16, local_size_y = 16) in;
 
-layout(push_constant) uniform Params {
+layout(push_constant) uniform SsimForwardParams {
     uint width;
     uint height;
     uint stride;        // partials per slot

@@ -5,11 +5,11 @@
 //! processed in batches of rows (each batch walks every view again; results are the same).
 
 use anyhow::{bail, ensure, Result};
-use bytemuck::{Pod, Zeroable};
 use serde::Serialize;
 
 use super::method::Method;
 use super::scores::ClassScores;
+use crate::contract::params::{ContribParams, VoteParams};
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, Gpu, Recorder};
 use crate::render::{camera_rows_f32, GpuScene, Rasterizer, RenderOptions};
@@ -97,24 +97,6 @@ pub struct FuseStats {
     pub wall_s: f64,
     pub views_per_s: f64,
     pub peak_device_bytes: u64,
-}
-
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct ContribParams {
-    dims: [u32; 4],
-    window: [u32; 4],
-    mode: [u32; 4],
-}
-
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct VoteParams {
-    rot_t: [[f32; 4]; 3],
-    intrinsics: [f32; 4],
-    clip: [f32; 4],
-    dims: [u32; 4],
-    rows: [u32; 4],
 }
 
 fn bytes_per_entry(method: Method, acc: Accumulation) -> u64 {
@@ -241,12 +223,6 @@ pub fn accumulate(
                     run.timings.total_ns() * 1e-6
                 }
                 Method::VoteWeighted | Method::FlashSplat | Method::FlashSplatPerView => {
-                    let mode = [
-                        u32::from(cfg.method == Method::VoteWeighted),
-                        u32::from(cfg.method == Method::FlashSplatPerView),
-                        0,
-                        0,
-                    ];
                     let kernel = match cfg.accumulation {
                         Accumulation::FixedPoint => ids::FUSE_CONTRIB_FIXED,
                         Accumulation::Float => ids::FUSE_CONTRIB_FLOAT,
@@ -256,9 +232,16 @@ pub fn accumulate(
                         let f = &tiles.frame;
                         for start in f.window_starts() {
                             let params = ContribParams {
-                                dims: [cam.width, cam.height, f.tiles_x, n as u32],
-                                window: [start, f.window_len, row_begin as u32, pass_rows as u32],
-                                mode,
+                                width: cam.width,
+                                height: cam.height,
+                                tiles_x: f.tiles_x,
+                                n: n as u32,
+                                window_start: start,
+                                window_len: f.window_len,
+                                row_begin: row_begin as u32,
+                                rows: pass_rows as u32,
+                                center_only: u32::from(cfg.method == Method::VoteWeighted),
+                                per_view: u32::from(cfg.method == Method::FlashSplatPerView),
                             };
                             rec.dispatch(
                                 kernel,
@@ -272,7 +255,7 @@ pub fn accumulate(
                                     ("carry", cb),
                                     ("contrib", &evidence),
                                 ],
-                                bytemuck::bytes_of(&params),
+                                &params,
                                 f.tile_groups(),
                             )?;
                             rec.barrier();
@@ -361,11 +344,20 @@ fn dispatch_vote(
     cfg: &FuseConfig,
 ) -> Result<()> {
     let params = VoteParams {
-        rot_t: camera_rows_f32(cam),
-        intrinsics: [cam.fx as f32, cam.fy as f32, cam.cx as f32, cam.cy as f32],
-        clip: [cfg.near, cfg.far, cfg.depth_tolerance, 0.0],
-        dims: [cam.width, cam.height, scene.n, u32::from(depth.is_some())],
-        rows: [row_begin as u32, rows as u32, 0, 0],
+        world_to_camera: camera_rows_f32(cam),
+        fx: cam.fx as f32,
+        fy: cam.fy as f32,
+        cx: cam.cx as f32,
+        cy: cam.cy as f32,
+        near: cfg.near,
+        far: cfg.far,
+        depth_tolerance: cfg.depth_tolerance,
+        occlusion: u32::from(depth.is_some()),
+        width: cam.width,
+        height: cam.height,
+        n: scene.n,
+        row_begin: row_begin as u32,
+        rows: rows as u32,
     };
     rec.dispatch(
         ids::FUSE_VOTE,
@@ -375,8 +367,8 @@ fn dispatch_vote(
             ("depth", depth.unwrap_or(labels)),
             ("votes", votes),
         ],
-        bytemuck::bytes_of(&params),
-        [scene.n.div_ceil(256).max(1), 1, 1],
+        &params,
+        ids::FUSE_VOTE.groups_for(scene.n),
     )?;
     rec.barrier();
     Ok(())

@@ -7,7 +7,7 @@ use ash::vk;
 use super::buffer::Buffer;
 use super::context::Gpu;
 use super::error::{GpuResult, VkContext};
-use super::kernel_table::KernelId;
+use super::kernel_table::{Kernel, KernelId};
 use super::timings::{Mark, Timings};
 
 /// Timestamps one command buffer can hold; later dispatches go untimed.
@@ -199,11 +199,11 @@ impl Recorder {
     }
 
     /// Dispatches `groups` workgroups of `kernel`, binding buffers by their GLSL names.
-    pub fn dispatch(
+    pub fn dispatch<P: bytemuck::Pod>(
         &mut self,
-        kernel: KernelId,
+        kernel: Kernel<P>,
         bindings: &[(&str, &Buffer)],
-        push: &[u8],
+        params: &P,
         groups: [u32; 3],
     ) -> GpuResult<()> {
         if groups.contains(&0) {
@@ -215,7 +215,7 @@ impl Recorder {
             "{}: {groups:?} workgroups exceed the device limit {limit:?}",
             kernel.info().name
         );
-        self.bind(kernel, bindings, push)?;
+        self.bind(kernel.id(), bindings, bytemuck::bytes_of(params))?;
         // SAFETY: recording into our command buffer.
         unsafe {
             self.gpu
@@ -228,12 +228,12 @@ impl Recorder {
 
     /// [`Recorder::dispatch`] where the buffers in `optional` are bound only if the kernel
     /// uses them (the optimizer drops bindings a variant never reads).
-    pub fn dispatch_with_optional(
+    pub fn dispatch_with_optional<P: bytemuck::Pod>(
         &mut self,
-        kernel: KernelId,
+        kernel: Kernel<P>,
         bindings: &[(&str, &Buffer)],
         optional: &[(&str, &Buffer)],
-        push: &[u8],
+        params: &P,
         groups: [u32; 3],
     ) -> GpuResult<()> {
         let used = kernel.info().bindings;
@@ -243,20 +243,20 @@ impl Recorder {
                 .iter()
                 .filter(|(name, _)| used.iter().any(|b| b.name == *name)),
         );
-        self.dispatch(kernel, &all, push, groups)
+        self.dispatch(kernel, &all, params, groups)
     }
 
     /// Dispatches with the workgroup count read from `args` at byte `offset`
     /// (three u32: x, y, z), so counts computed on the GPU need no readback.
-    pub fn dispatch_indirect(
+    pub fn dispatch_indirect<P: bytemuck::Pod>(
         &mut self,
-        kernel: KernelId,
+        kernel: Kernel<P>,
         bindings: &[(&str, &Buffer)],
-        push: &[u8],
+        params: &P,
         args: &Buffer,
         offset: u64,
     ) -> GpuResult<()> {
-        self.bind(kernel, bindings, push)?;
+        self.bind(kernel.id(), bindings, bytemuck::bytes_of(params))?;
         // SAFETY: recording into our command buffer; args has INDIRECT usage.
         unsafe {
             self.gpu

@@ -1,44 +1,21 @@
 //! GPU exclusive prefix sum of u32 (reduce-then-scan; no workgroup waits on another, so it
 //! is correct on lavapipe). The element count is read from a GPU buffer.
 
-use bytemuck::{Pod, Zeroable};
-
 use super::buffer::Buffer;
 use super::context::Gpu;
 use super::count::GpuCount;
 use super::error::{GpuError, GpuResult};
 use super::kernel_table::ids;
 use super::recorder::Recorder;
+use crate::contract;
+use crate::contract::params::{ScanDownsweepParams, ScanReduceParams, ScanSetupParams};
 
-/// Elements per workgroup (glsl/common/scan_layout.glsl: SCAN_BLOCK).
-pub const SCAN_BLOCK: u64 = 2048;
-/// Levels the state buffer has room for (SCAN_MAX_LEVELS).
-const MAX_LEVELS: usize = 4;
-/// Word offset of the indirect arguments in the state buffer (SCAN_ARGS_OFFSET).
-const ARGS_OFFSET: u64 = 4;
-
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct SetupParams {
-    count_index: u32,
-    div: u32,
-    mul: u32,
-    levels: u32,
-    capacity: u32,
-}
-
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct ReduceParams {
-    level: u32,
-}
-
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct DownsweepParams {
-    level: u32,
-    has_offsets: u32,
-}
+/// Elements per workgroup.
+pub const SCAN_BLOCK: u64 = contract::SCAN_BLOCK as u64;
+/// Levels the state buffer has room for.
+const MAX_LEVELS: usize = contract::SCAN_MAX_LEVELS as usize;
+/// Word offset of the indirect arguments in the state buffer.
+const ARGS_OFFSET: u64 = contract::SCAN_ARGS_OFFSET as u64;
 
 /// A planned prefix scan for up to `capacity` elements, owning its scratch buffers.
 pub struct PrefixScan {
@@ -97,7 +74,7 @@ impl PrefixScan {
         count: GpuCount,
     ) -> GpuResult<()> {
         let levels = self.partials.len() + 1;
-        let setup = SetupParams {
+        let setup = ScanSetupParams {
             count_index: count.index,
             div: count.div,
             mul: count.mul,
@@ -107,13 +84,13 @@ impl PrefixScan {
         rec.dispatch(
             ids::SCAN_SETUP,
             &[("count_src", count.buffer), ("state", &self.state)],
-            bytemuck::bytes_of(&setup),
+            &setup,
             [1, 1, 1],
         )?;
         rec.barrier();
         let args_offset = |level: usize| (ARGS_OFFSET + 3 * level as u64) * 4;
         for level in 0..levels - 1 {
-            let params = ReduceParams {
+            let params = ScanReduceParams {
                 level: level as u32,
             };
             rec.dispatch_indirect(
@@ -123,7 +100,7 @@ impl PrefixScan {
                     ("src", self.level_buffer(input, level)),
                     ("sums", &self.partials[level]),
                 ],
-                bytemuck::bytes_of(&params),
+                &params,
                 &self.state,
                 args_offset(level),
             )?;
@@ -142,7 +119,7 @@ impl PrefixScan {
             } else {
                 &self.partials[level]
             };
-            let params = DownsweepParams {
+            let params = ScanDownsweepParams {
                 level: level as u32,
                 has_offsets: u32::from(!top),
             };
@@ -154,7 +131,7 @@ impl PrefixScan {
                     ("dst", dst),
                     ("offsets", offsets),
                 ],
-                bytemuck::bytes_of(&params),
+                &params,
                 &self.state,
                 args_offset(level),
             )?;

@@ -4,8 +4,6 @@
 //! no workgroup waits on another, and every invocation's loops stay far below lavapipe's
 //! 65,535-iteration cap.
 
-use bytemuck::{Pod, Zeroable};
-
 use super::buffer::Buffer;
 use super::context::Gpu;
 use super::count::GpuCount;
@@ -13,26 +11,13 @@ use super::error::{GpuError, GpuResult};
 use super::kernel_table::ids;
 use super::recorder::Recorder;
 use super::scan::PrefixScan;
+use crate::contract::params::{SortPassParams, SortSetupParams};
+use crate::contract::{self, RADIX_BITS};
 
-/// Elements per workgroup (glsl/common/sort_layout.glsl: SORT_BLOCK).
-pub const SORT_BLOCK: u64 = 4096;
-/// Digit width of a pass (RADIX_BITS) and digits per pass (RADIX).
-const RADIX_BITS: u32 = 4;
+/// Elements per workgroup.
+pub const SORT_BLOCK: u64 = contract::SORT_BLOCK as u64;
+/// Digits per pass.
 const RADIX: u64 = 1 << RADIX_BITS;
-
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct SetupParams {
-    count_index: u32,
-    capacity: u32,
-}
-
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct PassParams {
-    shift: u32,
-    bits: u32,
-}
 
 /// The digit passes for sorting the low `bits` bits: (shift, width) each, width <= 4. The
 /// number of passes is even so the result lands back in the caller's buffers without a
@@ -113,14 +98,14 @@ impl RadixSort {
         if passes.is_empty() {
             return Ok(());
         }
-        let setup = SetupParams {
+        let setup = SortSetupParams {
             count_index: count.index,
             capacity: self.capacity as u32,
         };
         rec.dispatch(
             ids::SORT_SETUP,
             &[("count_src", count.buffer), ("state", &self.state)],
-            bytemuck::bytes_of(&setup),
+            &setup,
             [1, 1, 1],
         )?;
         rec.barrier();
@@ -130,7 +115,7 @@ impl RadixSort {
             } else {
                 (&self.tmp_keys, &self.tmp_values, keys, values)
             };
-            let params = PassParams { shift, bits: width };
+            let params = SortPassParams { shift, bits: width };
             rec.dispatch_indirect(
                 ids::SORT_COUNT,
                 &[
@@ -138,7 +123,7 @@ impl RadixSort {
                     ("keys", src_k),
                     ("counts", &self.counts),
                 ],
-                bytemuck::bytes_of(&params),
+                &params,
                 &self.state,
                 0,
             )?;
@@ -162,7 +147,7 @@ impl RadixSort {
                     ("values_out", dst_v),
                     ("offsets", &self.counts),
                 ],
-                bytemuck::bytes_of(&params),
+                &params,
                 &self.state,
                 0,
             )?;

@@ -4,39 +4,19 @@
 //! tile lists, so an iteration needs no host round trip.
 
 use anyhow::{ensure, Result};
-use bytemuck::{Pod, Zeroable};
 
 use super::frame::RenderedFrame;
 use super::gpu_scene::{parameter_floats, parameter_ranges, GpuScene};
-use super::rasterizer::{Rasterizer, TileLists, SEM_CHUNK};
+use super::rasterizer::{Rasterizer, TileLists};
 use super::{camera_rows_f32, RenderOptions, SemanticMode};
+use crate::contract::params::{ProjectBackwardParams, SoftmaxParams};
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, Gpu, Recorder};
 use crate::scene::Camera;
 
-/// Floats per Gaussian in the screen-space gradient (mean2d 2, conic 3, opacity, color 3,
-/// one pad): glsl/raster/blend_backward_body.glsl GRAD2D_STRIDE.
-pub const GRAD2D_STRIDE: u32 = 10;
+pub use crate::contract::GRAD2D_STRIDE;
 /// Floats carried per pixel between backward windows: T, S_rgb, S_sem chunk.
-const CARRY_STRIDE: u64 = 4 + SEM_CHUNK as u64;
-
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct BlendBackwardParams {
-    dims: [u32; 4],
-    window: [u32; 4],
-    background: [f32; 4],
-}
-
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct ProjectBackwardParams {
-    rot_t: [[f32; 4]; 3],
-    intrinsics: [f32; 4],
-    center: [f32; 4],
-    dims: [u32; 4],
-    counts: [u32; 4],
-}
+const CARRY_STRIDE: u64 = crate::contract::BACKWARD_CARRY_STRIDE as u64;
 
 /// Upstream gradients per pixel, on the device: dL/d(rgb) [P*3], dL/d(accumulated alpha)
 /// [P], and dL/d(normalized semantics) [P*C] (any buffer when C = 0).
@@ -176,8 +156,11 @@ impl SceneGrads {
                 ("grad_probs", &self.probs),
                 ("grad_logits", &self.logits),
             ],
-            bytemuck::cast_slice(&[self.n, self.channels]),
-            [self.n.div_ceil(256), 1, 1],
+            &SoftmaxParams {
+                n: self.n,
+                channels: self.channels,
+            },
+            ids::RASTER_SOFTMAX_BACKWARD.groups_for(self.n),
         )?;
         rec.barrier();
         Ok(())
@@ -272,14 +255,9 @@ impl TileLists<'_> {
             (true, true) => ids::RASTER_BLEND_BACKWARD_SEM_ONLY,
             (true, false) => ids::RASTER_BLEND_BACKWARD_SEM_ONLY_CAS,
         };
-        let bg = f.background;
         for chunk in 0..f.sem_chunks() {
             for start in f.window_starts().rev() {
-                let params = BlendBackwardParams {
-                    dims: [f.cam.width, f.cam.height, f.tiles_x, f.channels],
-                    window: [start, f.window_len, chunk * SEM_CHUNK, 0],
-                    background: [bg[0], bg[1], bg[2], 0.0],
-                };
+                let params = f.blend_params(start, chunk, false);
                 let bindings: [(&str, &Buffer); 12] = [
                     ("tile_ranges", self.ranges()),
                     ("isect_ids", self.isect_ids()),
@@ -302,13 +280,7 @@ impl TileLists<'_> {
                     ("v_rgb", upstream.rgb),
                     ("v_alpha", upstream.alpha),
                 ];
-                rec.dispatch_with_optional(
-                    kernel,
-                    &bindings,
-                    &optional,
-                    bytemuck::bytes_of(&params),
-                    f.tile_groups(),
-                )?;
+                rec.dispatch_with_optional(kernel, &bindings, &optional, &params, f.tile_groups())?;
                 rec.barrier();
             }
         }
@@ -323,10 +295,13 @@ impl TileLists<'_> {
         grads: &SceneGrads,
     ) -> Result<()> {
         let c = cam.center();
+        let rows = camera_rows_f32(cam);
         let params = ProjectBackwardParams {
-            rot_t: camera_rows_f32(cam),
+            rot_t0: rows[0],
+            rot_t1: rows[1],
+            rot_t2: rows[2],
             intrinsics: [cam.fx as f32, cam.fy as f32, cam.cx as f32, cam.cy as f32],
-            center: [c.x as f32, c.y as f32, c.z as f32, 0.0],
+            center_near: [c.x as f32, c.y as f32, c.z as f32, 0.0],
             dims: [cam.width, cam.height, 0, 0],
             counts: [scene.n, scene.sh_degree, scene.sh_coeffs, 0],
         };
@@ -348,8 +323,8 @@ impl TileLists<'_> {
                 ("densify_grad", &grads.densify_grad),
                 ("densify_count", &grads.densify_count),
             ],
-            bytemuck::bytes_of(&params),
-            [scene.n.div_ceil(256), 1, 1],
+            &params,
+            ids::RASTER_PROJECT_BACKWARD.groups_for(scene.n),
         )?;
         rec.barrier();
         Ok(())

@@ -5,6 +5,7 @@ use crate::gpu::{Buffer, Gpu, GpuResult, Recorder};
 use crate::scene::Gaussians;
 
 use super::SemanticMode;
+use crate::contract::params::SoftmaxParams;
 
 /// Floats per Gaussian of the parameter tensors, in the order means, log-scales,
 /// quaternions, opacity logits, SH: the layout of `GpuScene` and of its gradients.
@@ -100,8 +101,11 @@ impl GpuScene {
         rec.dispatch(
             ids::RASTER_SOFTMAX,
             &[("logits", logits), ("probs", probs)],
-            bytemuck::cast_slice(&[self.n, self.channels]),
-            [self.n.div_ceil(256), 1, 1],
+            &SoftmaxParams {
+                n: self.n,
+                channels: self.channels,
+            },
+            ids::RASTER_SOFTMAX.groups_for(self.n),
         )?;
         rec.barrier();
         Ok(())

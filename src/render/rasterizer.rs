@@ -4,52 +4,25 @@
 //! the overflow flag that tells the buffers to grow.
 
 use anyhow::{ensure, Result};
-use bytemuck::{Pod, Zeroable};
 
 use super::frame::RenderedFrame;
 use super::gpu_scene::GpuScene;
 use super::{camera_rows_f32, RenderOptions, SemanticMode, StageTimes};
+use crate::contract::params::{BlendParams, CompactParams, EmitParams, ProjectParams};
+use crate::contract::{
+    BLEND_CARRY_BASE, ST_ARGS_ISECT, ST_ARGS_VISIBLE, ST_ISECT, ST_ISECT_NEEDED, ST_N_PLUS1,
+    ST_OVERFLOW, ST_VISIBLE, ST_VISIBLE_PLUS1, ST_WORDS,
+};
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, Gpu, GpuCount, Mark, PrefixScan, RadixSort, Recorder, Timings};
 use crate::scene::Camera;
 
-/// Tile edge in pixels (glsl/common/raster_common.glsl: TILE_SIZE).
-pub const TILE_SIZE: u32 = 16;
-/// Frame status words (ST_*).
-const ST_VISIBLE: u32 = 0;
-const ST_VISIBLE_PLUS1: u32 = 1;
-const ST_ISECT: u32 = 2;
-const ST_ISECT_NEEDED: u32 = 3;
-const ST_OVERFLOW: u32 = 4;
-const ST_N_PLUS1: u32 = 5;
-const ST_ARGS_VISIBLE: u64 = 8;
-const ST_ARGS_ISECT: u64 = 12;
-const ST_WORDS: u64 = 16;
-/// Semantic channels per blend dispatch (blend_sem.comp: SEM_CHUNK).
-pub const SEM_CHUNK: u32 = 16;
+pub use crate::contract::{SEM_CHUNK, TILE_SIZE};
+
 /// Entries of a tile's list one per-tile dispatch walks on a device without a loop cap:
 /// every list fits one window (a list holds at most n <= u32::MAX / 2 entries in practice,
 /// and starts plus lengths stay inside u32 in the kernels).
 const UNCAPPED_WINDOW: u32 = u32::MAX / 2;
-
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct ProjectParams {
-    rot_t: [[f32; 4]; 3],
-    intrinsics: [f32; 4],
-    center_near: [f32; 4],
-    far_pad: [f32; 4],
-    dims: [u32; 4],
-    counts: [u32; 4],
-}
-
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct BlendParams {
-    dims: [u32; 4],
-    window: [u32; 4],
-    background: [f32; 4],
-}
 
 /// Buffers sized for the largest scene, image and intersection count seen so far.
 struct Buffers {
@@ -158,7 +131,7 @@ impl Buffers {
             n_contrib: b("n_contrib", p * 4)?,
             sem: b("sem", need.sem * 4)?,
             sem_norm: b("sem_norm", need.sem * 4)?,
-            status: b("status", ST_WORDS * 4)?,
+            status: b("status", ST_WORDS as u64 * 4)?,
             scan_n: PrefixScan::new(gpu, n + 1)?,
             scan_v: PrefixScan::new(gpu, n + 1)?,
             depth_sort: RadixSort::new(gpu, n)?,
@@ -315,7 +288,7 @@ impl Rasterizer {
         let (tiles_x, tiles_y, windows, channels) =
             (frame.tiles_x, frame.tiles_y, frame.windows, frame.channels);
         let pixels = cam.width as u64 * cam.height as u64;
-        let carry_stride = 8 + if channels > 0 { SEM_CHUNK } else { 0 } as u64;
+        let carry_stride = (BLEND_CARRY_BASE + if channels > 0 { SEM_CHUNK } else { 0 }) as u64;
         let mut need = Need {
             n: scene.n,
             pixels,
@@ -409,7 +382,7 @@ impl Rasterizer {
         let n = scene.n;
         let tiles_x = cam.width.div_ceil(TILE_SIZE);
         let tiles_y = cam.height.div_ceil(TILE_SIZE);
-        rec.fill(&b.status, 0, ST_WORDS * 4, 0);
+        rec.fill(&b.status, 0, ST_WORDS as u64 * 4, 0);
         rec.fill(&b.status, ST_N_PLUS1 as u64 * 4, 4, n + 1);
         rec.fill(&b.ranges, 0, (tiles_x * tiles_y) as u64 * 8, 0);
         rec.barrier();
@@ -418,8 +391,11 @@ impl Rasterizer {
         let r = cam.rotation;
         let t = cam.translation;
         let c = cam.center();
+        let [rot_t0, rot_t1, rot_t2] = camera_rows_f32(cam);
         let params = ProjectParams {
-            rot_t: camera_rows_f32(cam),
+            rot_t0,
+            rot_t1,
+            rot_t2,
             intrinsics: [cam.fx as f32, cam.fy as f32, cam.cx as f32, cam.cy as f32],
             center_near: [c.x as f32, c.y as f32, c.z as f32, opts.near],
             far_pad: [opts.far, 0.0, 0.0, 0.0],
@@ -455,12 +431,7 @@ impl Rasterizer {
         } else {
             ids::RASTER_PROJECT
         };
-        rec.dispatch(
-            kernel,
-            &bindings,
-            bytemuck::bytes_of(&params),
-            [(n + 1).div_ceil(256), 1, 1],
-        )?;
+        rec.dispatch(kernel, &bindings, &params, kernel.groups_for(n + 1))?;
         rec.barrier();
         b.scan_n.record(
             rec,
@@ -478,8 +449,8 @@ impl Rasterizer {
                 ("depth_ids", &b.depth_ids),
                 ("status", &b.status),
             ],
-            bytemuck::bytes_of(&n),
-            [(n + 1).div_ceil(256), 1, 1],
+            &CompactParams { n },
+            ids::RASTER_COMPACT.groups_for(n + 1),
         )?;
         rec.barrier();
         let m1 = rec.mark();
@@ -501,9 +472,9 @@ impl Rasterizer {
                 ("tiles_touched", &b.touched),
                 ("sorted_touched", &b.sorted_touched),
             ],
-            &[],
+            &(),
             &b.status,
-            ST_ARGS_VISIBLE * 4,
+            ST_ARGS_VISIBLE as u64 * 4,
         )?;
         rec.barrier();
         b.scan_v.record(
@@ -522,9 +493,12 @@ impl Rasterizer {
                 ("isect_keys", &b.isect_keys),
                 ("isect_ids", &b.isect_ids),
             ],
-            bytemuck::cast_slice(&[tiles_x, b.isect_cap]),
+            &EmitParams {
+                tiles_x,
+                capacity: b.isect_cap,
+            },
             &b.status,
-            ST_ARGS_VISIBLE * 4,
+            ST_ARGS_VISIBLE as u64 * 4,
         )?;
         rec.barrier();
         b.tile_sort.record(
@@ -541,9 +515,9 @@ impl Rasterizer {
                 ("isect_keys", &b.isect_keys),
                 ("tile_ranges", &b.ranges),
             ],
-            &[],
+            &(),
             &b.status,
-            ST_ARGS_ISECT * 4,
+            ST_ARGS_ISECT as u64 * 4,
         )?;
         rec.barrier();
         let m3 = rec.mark();
@@ -581,6 +555,22 @@ impl FrameSpec<'_> {
     /// Dispatches that cover the semantic channels, SEM_CHUNK at a time (1 for RGB only).
     pub fn sem_chunks(&self) -> u32 {
         self.channels.div_ceil(SEM_CHUNK).max(1)
+    }
+
+    /// Push constants of a blend or blend-backward dispatch over the window at `start`
+    /// and semantic chunk `chunk`; `write_rgb` marks the forward chunk that writes RGB.
+    pub fn blend_params(&self, start: u32, chunk: u32, write_rgb: bool) -> BlendParams {
+        BlendParams {
+            width: self.cam.width,
+            height: self.cam.height,
+            tiles_x: self.tiles_x,
+            channels: self.channels,
+            window_start: start,
+            window_len: self.window_len,
+            chunk_base: chunk * SEM_CHUNK,
+            write_rgb: u32::from(write_rgb),
+            background: self.background,
+        }
     }
 
     /// One workgroup per tile.
@@ -676,19 +666,9 @@ impl TileLists<'_> {
     /// Records forward blending of the frame into the rasterizer's output images.
     pub fn record_blend(&self, rec: &mut Recorder) -> Result<()> {
         let (b, f) = (self.bufs, &self.frame);
-        let bg = f.background;
         for chunk in 0..f.sem_chunks() {
             for start in f.window_starts() {
-                let params = BlendParams {
-                    dims: [f.cam.width, f.cam.height, f.tiles_x, f.channels],
-                    window: [
-                        start,
-                        f.window_len,
-                        chunk * SEM_CHUNK,
-                        u32::from(chunk == 0),
-                    ],
-                    background: [bg[0], bg[1], bg[2], 0.0],
-                };
+                let params = f.blend_params(start, chunk, chunk == 0);
                 let mut bindings: Vec<(&str, &Buffer)> = vec![
                     ("tile_ranges", &b.ranges),
                     ("isect_ids", &b.isect_ids),
@@ -715,12 +695,7 @@ impl TileLists<'_> {
                     }
                     None => ids::RASTER_BLEND_RGB,
                 };
-                rec.dispatch(
-                    kernel,
-                    &bindings,
-                    bytemuck::bytes_of(&params),
-                    f.tile_groups(),
-                )?;
+                rec.dispatch(kernel, &bindings, &params, f.tile_groups())?;
                 rec.barrier();
             }
         }
