@@ -3,6 +3,10 @@
 #ifndef RASTER_COMMON_GLSL
 #define RASTER_COMMON_GLSL
 
+// The projection math (quat_to_mat and the rest) lives in projection.glsl; included here
+// for the kernels that read quat_to_mat through this file (train/densify_layout.comp).
+#include "projection.glsl"
+
 #define TILE_SIZE 16
 #define TILE_PIXELS (TILE_SIZE * TILE_SIZE)
 #define ALPHA_MIN (1.0 / 255.0)
@@ -34,15 +38,6 @@ vec2 pixel_offset(vec2 mean_int, vec2 mean_frac, vec2 pixel) {
 // fusion call this one function, so they agree on every skip decision.
 float conic_sigma(vec3 con, vec2 d) {
     return 0.5 * (con.x * d.x * d.x + con.z * d.y * d.y) + con.y * d.x * d.y;
-}
-
-// Rotation matrix of a unit quaternion (w, x, y, z); GLSL matrices are column-major.
-mat3 quat_to_mat(vec4 q) {
-    float w = q.x, x = q.y, y = q.z, z = q.w;
-    return mat3(
-        1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y + w * z), 2.0 * (x * z - w * y),
-        2.0 * (x * y - w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z + w * x),
-        2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y));
 }
 
 // Real spherical harmonics up to degree 3 with the standard 3DGS constants and basis
