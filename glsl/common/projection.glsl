@@ -117,8 +117,9 @@ vec3 persp_proj_cov(vec3 p, mat3 covc, vec4 intrinsics, vec2 size) {
     return vec3(dot(j0, cj0), dot(j0, cj1), dot(j1, cj1));
 }
 
-// From dL/dmean2d and v_cov2 = dL/dcov2 to dL/dp (through the 2D mean and through J, whose
-// clamped coordinates pass no gradient) and v_covc = dL/dcovc.
+// From dL/dmean2d and v_cov2 = dL/dcov2 to dL/dp, through the 2D mean and through J, and to
+// v_covc = dL/dcovc. Where x/z is clamped, J's tx = z * limit passes gradient to z only,
+// none to x (the same for y).
 vec3 persp_proj_vjp(vec3 p, mat3 covc, vec4 intrinsics, vec2 size, vec2 v_mean2d, mat2 v_cov2,
                     out mat3 v_covc) {
     float fx = intrinsics.x, fy = intrinsics.y;
