@@ -11,7 +11,6 @@
 #define T_MIN 1e-4
 #define TWO_PI 6.28318530717958648
 
-
 float sigmoid(float x) {
     return 1.0 / (1.0 + exp(-x));
 }
@@ -26,15 +25,6 @@ vec2 pixel_offset(vec2 mean_int, vec2 mean_frac, vec2 pixel) {
 // fusion call this one function, so they agree on every skip decision.
 float conic_sigma(vec3 con, vec2 d) {
     return 0.5 * (con.x * d.x * d.x + con.z * d.y * d.y) + con.y * d.x * d.y;
-}
-
-// Rotation matrix of a unit quaternion (w, x, y, z); GLSL matrices are column-major.
-mat3 quat_to_mat(vec4 q) {
-    float w = q.x, x = q.y, y = q.z, z = q.w;
-    return mat3(
-        1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y + w * z), 2.0 * (x * z - w * y),
-        2.0 * (x * y - w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z + w * x),
-        2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y));
 }
 
 // Real spherical harmonics up to degree 3 with the standard 3DGS constants and basis

@@ -7,6 +7,7 @@
 // counts the view. Recomputes the forward's intermediates in float32.
 #extension GL_EXT_control_flow_attributes : require
 #include "raster_common.glsl"
+#include "projection.glsl"
 
 #define GRAD2D_STRIDE 10
 
@@ -96,69 +97,20 @@ void main() {
     vec4 q = q_raw / qn;
     mat3 rq = quat_to_mat(q);
     vec3 s = exp(vec3(log_scales.data[3 * i], log_scales.data[3 * i + 1], log_scales.data[3 * i + 2]));
-    mat3 m = rq * mat3(s.x, 0, 0, 0, s.y, 0, 0, 0, s.z);
-    mat3 cov3 = m * transpose(m);
-    mat3 covc = w * cov3 * transpose(w);
-    float fx = pc.intrinsics.x, fy = pc.intrinsics.y, cx = pc.intrinsics.z, cy = pc.intrinsics.w;
+    mat3 covc = covar_world_to_cam(w, rot_scale_to_covar(rq, s));
     float width = float(pc.dims.x), height = float(pc.dims.y);
-    float tan_x = 0.5 * width / fx, tan_y = 0.5 * height / fy;
-    float lim_xp = (width - cx) / fx + 0.3 * tan_x, lim_xn = cx / fx + 0.3 * tan_x;
-    float lim_yp = (height - cy) / fy + 0.3 * tan_y, lim_yn = cy / fy + 0.3 * tan_y;
-    float rz = 1.0 / p.z;
-    float ux = p.x * rz, uy = p.y * rz;
-    bool clamp_x = ux > lim_xp || ux < -lim_xn;
-    bool clamp_y = uy > lim_yp || uy < -lim_yn;
-    float tx = p.z * min(lim_xp, max(-lim_xn, ux));
-    float ty = p.z * min(lim_yp, max(-lim_yn, uy));
-    // J (2x3) as mat3x2: column k holds d(u, v)/d p_k.
-    mat3x2 jac = mat3x2(fx * rz, 0.0, 0.0, fy * rz, -fx * tx * rz * rz, -fy * ty * rz * rz);
-    mat2 cov2 = jac * covc * transpose(jac) + mat2(0.3, 0.0, 0.0, 0.3);
-    float det = max(cov2[0][0] * cov2[1][1] - cov2[0][1] * cov2[0][1], 1e-10);
-    mat2 conic = mat2(cov2[1][1], -cov2[0][1], -cov2[0][1], cov2[0][0]) / det;
+    vec3 conic = cov2_to_conic(dilate_cov2(persp_proj_cov(p, covc, pc.intrinsics, vec2(width, height))));
 
-    // conic = cov2^-1: dL/dcov2 = -conic G conic, G the symmetric gradient of the conic
-    // (B appears twice in the matrix, so each off-diagonal entry gets half of dL/dB).
-    mat2 g_conic = mat2(v_conic.x, 0.5 * v_conic.y, 0.5 * v_conic.y, v_conic.z);
-    mat2 v_cov2 = -(conic * g_conic * conic);
-    // cov2 = J covc J^T + 0.3 I.
-    mat3 v_covc = transpose(jac) * v_cov2 * jac;
-    mat3x2 v_jac = 2.0 * (v_cov2 * jac * covc);
-    // covc = W cov3 W^T; cov3 = M M^T with M = R diag(s).
-    mat3 v_cov3 = transpose(w) * v_covc * w;
-    mat3 v_m = 2.0 * (v_cov3 * m);
-    vec3 v_s = vec3(dot(v_m[0], rq[0]), dot(v_m[1], rq[1]), dot(v_m[2], rq[2]));
-    vec3 v_log_scale = v_s * s;
-    mat3 v_r = mat3(v_m[0] * s.x, v_m[1] * s.y, v_m[2] * s.z);
-    // R(q) for a unit quaternion (w, x, y, z); r(row, col) = v_r[col][row].
-    float qw = q.x, qx = q.y, qy = q.z, qz = q.w;
-#define R(row, col) v_r[col][row]
-    vec4 v_q = 2.0 * vec4(
-        qz * (R(1, 0) - R(0, 1)) + qy * (R(0, 2) - R(2, 0)) + qx * (R(2, 1) - R(1, 2)),
-        qy * (R(1, 0) + R(0, 1)) + qz * (R(2, 0) + R(0, 2)) + qw * (R(2, 1) - R(1, 2)) - 2.0 * qx * (R(1, 1) + R(2, 2)),
-        qx * (R(1, 0) + R(0, 1)) + qw * (R(0, 2) - R(2, 0)) + qz * (R(2, 1) + R(1, 2)) - 2.0 * qy * (R(0, 0) + R(2, 2)),
-        qw * (R(1, 0) - R(0, 1)) + qx * (R(2, 0) + R(0, 2)) + qy * (R(2, 1) + R(1, 2)) - 2.0 * qz * (R(0, 0) + R(1, 1)));
-#undef R
-    // q = q_raw / |q_raw|.
-    vec4 v_q_raw = (v_q - q * dot(q, v_q)) / qn;
-
-    // Camera-space mean: through the 2D mean and through J (x/z, y/z clamped in J only).
-    vec3 v_p = vec3(fx * rz * v_mean2d.x, fy * rz * v_mean2d.y,
-                    -(fx * p.x * v_mean2d.x + fy * p.y * v_mean2d.y) * rz * rz);
-    float rz2 = rz * rz, rz3 = rz2 * rz;
-    v_p.z += -fx * rz2 * v_jac[0][0] - fy * rz2 * v_jac[1][1];
-    if (clamp_x) {
-        v_p.z += fx * tx * rz3 * v_jac[2][0];
-    } else {
-        v_p.x += -fx * rz2 * v_jac[2][0];
-        v_p.z += 2.0 * fx * tx * rz3 * v_jac[2][0];
-    }
-    if (clamp_y) {
-        v_p.z += fy * ty * rz3 * v_jac[2][1];
-    } else {
-        v_p.y += -fy * rz2 * v_jac[2][1];
-        v_p.z += 2.0 * fy * ty * rz3 * v_jac[2][1];
-    }
+    // Back along the chain; the dilation passes the gradient through unchanged.
+    mat2 v_cov2 = cov2_to_conic_vjp(conic, v_conic);
+    mat3 v_covc;
+    vec3 v_p = persp_proj_vjp(p, covc, pc.intrinsics, vec2(width, height), v_mean2d, v_cov2, v_covc);
     vec3 v_mean = transpose(w) * v_p;
+    mat3 v_r;
+    vec3 v_s;
+    rot_scale_to_covar_vjp(rq, s, covar_world_to_cam_vjp(w, v_covc), v_r, v_s);
+    vec3 v_log_scale = v_s * s;
+    vec4 v_q_raw = quat_normalize_vjp(q, qn, quat_to_mat_vjp(q, v_r));
 
     // Color = max(SH(dir) + 0.5, 0), dir = normalize(mean - camera center).
     uint degree = pc.counts.y, coeffs = pc.counts.z;

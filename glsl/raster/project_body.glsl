@@ -8,6 +8,7 @@
 // pixel offsets d = (int - px) + (frac - 0.5) keep full precision at any image size.
 #extension GL_EXT_control_flow_attributes : require
 #include "raster_common.glsl"
+#include "projection.glsl"
 
 layout(local_size_x = 256) in;
 
@@ -79,32 +80,14 @@ void main() {
         return;
     }
 
-    // 3D covariance R S S^T R^T, then into camera space.
+    // 3D covariance R S S^T R^T, into camera space, then onto the image.
     mat3 rq = quat_to_mat(q / qn);
     vec3 s = exp(vec3(log_scales.data[3 * i], log_scales.data[3 * i + 1], log_scales.data[3 * i + 2]));
-    mat3 m = rq * mat3(s.x, 0, 0, 0, s.y, 0, 0, 0, s.z);
-    mat3 cov3 = m * transpose(m);
     mat3 w = transpose(mat3(pc.rot_t0.xyz, pc.rot_t1.xyz, pc.rot_t2.xyz)); // rows -> matrix
-    mat3 covc = w * cov3 * transpose(w);
-
-    // Perspective Jacobian with x/z, y/z clamped to the frustum widened by 0.3 tan(fov/2).
-    float fx = pc.intrinsics.x, fy = pc.intrinsics.y, cx = pc.intrinsics.z, cy = pc.intrinsics.w;
+    mat3 covc = covar_world_to_cam(w, rot_scale_to_covar(rq, s));
     float width = float(pc.dims.x), height = float(pc.dims.y);
-    float tan_x = 0.5 * width / fx, tan_y = 0.5 * height / fy;
-    float lim_xp = (width - cx) / fx + 0.3 * tan_x, lim_xn = cx / fx + 0.3 * tan_x;
-    float lim_yp = (height - cy) / fy + 0.3 * tan_y, lim_yn = cy / fy + 0.3 * tan_y;
-    float rz = 1.0 / p.z;
-    float tx = p.z * min(lim_xp, max(-lim_xn, p.x * rz));
-    float ty = p.z * min(lim_yp, max(-lim_yn, p.y * rz));
-    // J as a 3x2 column-major matrix (two columns = two rows of the 2x3 Jacobian).
-    vec3 j0 = vec3(fx * rz, 0.0, -fx * tx * rz * rz);
-    vec3 j1 = vec3(0.0, fy * rz, -fy * ty * rz * rz);
-    vec3 cj0 = covc * j0, cj1 = covc * j1;
-    float a = dot(j0, cj0) + 0.3;
-    float b = dot(j0, cj1);
-    float c = dot(j1, cj1) + 0.3;
-    float det = max(a * c - b * b, 1e-10);
-    vec3 conic = vec3(c / det, -b / det, a / det);
+    vec3 cov2 = dilate_cov2(persp_proj_cov(p, covc, pc.intrinsics, vec2(width, height)));
+    vec3 conic = cov2_to_conic(cov2);
 
 #ifdef PROJECT_F64
     dvec2 m2 = dvec2(camera64.data[12] * pd.x / pd.z + camera64.data[14], camera64.data[13] * pd.y / pd.z + camera64.data[15]);
@@ -112,13 +95,13 @@ void main() {
     vec2 mean_int = vec2(m2_floor);
     vec2 mean_frac = vec2(m2 - m2_floor);
 #else
-    vec2 mean2d = vec2(fx * p.x * rz + cx, fy * p.y * rz + cy);
+    vec2 mean2d = persp_proj_mean(p, pc.intrinsics);
     vec2 mean_int = floor(mean2d);
     vec2 mean_frac = mean2d - mean_int;
 #endif
     // Opacity-aware extent: alpha >= 1/255 needs d^T cov^-1 d <= 2 ln(255 opacity).
     float r = sqrt(2.0 * log(255.0 * opacity));
-    vec2 extent = r * sqrt(vec2(a, c));
+    vec2 extent = r * sqrt(cov2.xz);
     vec2 lo = max(mean_int + ceil(mean_frac - extent - 0.5), vec2(0.0));
     vec2 hi = min(mean_int + floor(mean_frac + extent - 0.5), vec2(width - 1.0, height - 1.0));
     if (!(lo.x <= hi.x && lo.y <= hi.y)) {

@@ -7,7 +7,7 @@
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_arithmetic : require
 #include "densify_common.glsl"
-#include "raster_common.glsl"
+#include "projection.glsl" // quat_to_mat
 
 layout(local_size_x = DENSIFY_WG_SIZE) in;
 

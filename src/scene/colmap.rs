@@ -474,94 +474,32 @@ pub fn write_colmap_model(
     validate_cameras(cameras)
         .with_context(|| format!("refusing to write COLMAP model {}", dir.display()))?;
     let (intrinsics, cam_of_image) = dedupe_intrinsics(cameras);
-    let name_of = |c: &Camera| {
-        if image_ext.is_empty() {
-            c.name.clone()
-        } else {
-            format!("{}.{}", c.name, image_ext.trim_start_matches('.'))
-        }
-    };
+    let images: Vec<ImageEntry> = cameras
+        .iter()
+        .zip(&cam_of_image)
+        .map(|(camera, &intrinsics_index)| ImageEntry {
+            camera,
+            intrinsics_index,
+            name: if image_ext.is_empty() {
+                camera.name.clone()
+            } else {
+                format!("{}.{}", camera.name, image_ext.trim_start_matches('.'))
+            },
+        })
+        .collect();
     let ext = format.ext();
     let cam_path = dir.join(format!("cameras.{ext}"));
     let img_path = dir.join(format!("images.{ext}"));
     let pts_path = dir.join(format!("points3D.{ext}"));
     match format {
         ColmapFormat::Binary => {
-            write_atomic(&cam_path, |w| {
-                w.write_all(&(intrinsics.len() as u64).to_le_bytes())?;
-                for (i, c) in intrinsics.iter().enumerate() {
-                    w.write_all(&(i as u32 + 1).to_le_bytes())?;
-                    w.write_all(&1i32.to_le_bytes())?; // PINHOLE
-                    w.write_all(&(c.width as u64).to_le_bytes())?;
-                    w.write_all(&(c.height as u64).to_le_bytes())?;
-                    for v in [c.fx, c.fy, c.cx, c.cy] {
-                        w.write_all(&v.to_le_bytes())?;
-                    }
-                }
-                Ok(())
-            })?;
-            write_atomic(&img_path, |w| {
-                w.write_all(&(cameras.len() as u64).to_le_bytes())?;
-                for (i, c) in cameras.iter().enumerate() {
-                    w.write_all(&(i as u32 + 1).to_le_bytes())?;
-                    for v in qvec_from_rotation(c.rotation) {
-                        w.write_all(&v.to_le_bytes())?;
-                    }
-                    for v in c.translation.to_array() {
-                        w.write_all(&v.to_le_bytes())?;
-                    }
-                    w.write_all(&(cam_of_image[i] as u32 + 1).to_le_bytes())?;
-                    w.write_all(name_of(c).as_bytes())?;
-                    w.write_all(&[0])?;
-                    w.write_all(&0u64.to_le_bytes())?; // no 2D points
-                }
-                Ok(())
-            })?;
+            write_atomic(&cam_path, |w| write_cameras_bin(w, &intrinsics))?;
+            write_atomic(&img_path, |w| write_images_bin(w, &images))?;
             write_bytes_atomic(&pts_path, &0u64.to_le_bytes())?;
         }
         ColmapFormat::Text => {
-            let mut text = String::from(
-                "# Camera list with one line of data per camera:\n\
-                 #   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]\n",
-            );
-            let _ = writeln!(text, "# Number of cameras: {}", intrinsics.len());
-            for (i, c) in intrinsics.iter().enumerate() {
-                let _ = writeln!(
-                    text,
-                    "{} PINHOLE {} {} {} {} {} {}",
-                    i + 1,
-                    c.width,
-                    c.height,
-                    c.fx,
-                    c.fy,
-                    c.cx,
-                    c.cy
-                );
-            }
-            write_bytes_atomic(&cam_path, text.as_bytes())?;
-
-            let mut text = String::from(
-                "# Image list with two lines of data per image:\n\
-                 #   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME\n\
-                 #   POINTS2D[] as (X, Y, POINT3D_ID)\n",
-            );
-            let _ = writeln!(
-                text,
-                "# Number of images: {}, mean observations per image: 0",
-                cameras.len()
-            );
-            for (i, c) in cameras.iter().enumerate() {
-                let [qw, qx, qy, qz] = qvec_from_rotation(c.rotation);
-                let [tx, ty, tz] = c.translation.to_array();
-                let _ = writeln!(
-                    text,
-                    "{} {qw} {qx} {qy} {qz} {tx} {ty} {tz} {} {}\n",
-                    i + 1,
-                    cam_of_image[i] + 1,
-                    name_of(c)
-                );
-            }
-            write_bytes_atomic(&img_path, text.as_bytes())?;
+            write_bytes_atomic(&cam_path, cameras_txt(&intrinsics).as_bytes())?;
+            write_bytes_atomic(&img_path, images_txt(&images).as_bytes())?;
             write_bytes_atomic(
                 &pts_path,
                 b"# 3D point list with one line of data per point:\n\
@@ -571,6 +509,97 @@ pub fn write_colmap_model(
         }
     }
     Ok(())
+}
+
+/// One image to write: its camera, the index of its intrinsics (0-based; COLMAP ids are
+/// 1-based) and its file name.
+struct ImageEntry<'a> {
+    camera: &'a Camera,
+    intrinsics_index: usize,
+    name: String,
+}
+
+/// cameras.bin: one PINHOLE camera per distinct intrinsics.
+fn write_cameras_bin(w: &mut impl Write, intrinsics: &[&Camera]) -> Result<()> {
+    w.write_all(&(intrinsics.len() as u64).to_le_bytes())?;
+    for (i, c) in intrinsics.iter().enumerate() {
+        w.write_all(&(i as u32 + 1).to_le_bytes())?;
+        w.write_all(&1i32.to_le_bytes())?; // PINHOLE
+        w.write_all(&(c.width as u64).to_le_bytes())?;
+        w.write_all(&(c.height as u64).to_le_bytes())?;
+        for v in [c.fx, c.fy, c.cx, c.cy] {
+            w.write_all(&v.to_le_bytes())?;
+        }
+    }
+    Ok(())
+}
+
+/// images.bin: pose, camera id and name per image, without 2D points.
+fn write_images_bin(w: &mut impl Write, images: &[ImageEntry]) -> Result<()> {
+    w.write_all(&(images.len() as u64).to_le_bytes())?;
+    for (i, image) in images.iter().enumerate() {
+        w.write_all(&(i as u32 + 1).to_le_bytes())?;
+        for v in qvec_from_rotation(image.camera.rotation) {
+            w.write_all(&v.to_le_bytes())?;
+        }
+        for v in image.camera.translation.to_array() {
+            w.write_all(&v.to_le_bytes())?;
+        }
+        w.write_all(&(image.intrinsics_index as u32 + 1).to_le_bytes())?;
+        w.write_all(image.name.as_bytes())?;
+        w.write_all(&[0])?;
+        w.write_all(&0u64.to_le_bytes())?; // no 2D points
+    }
+    Ok(())
+}
+
+/// cameras.txt: one PINHOLE camera per distinct intrinsics.
+fn cameras_txt(intrinsics: &[&Camera]) -> String {
+    let mut text = String::from(
+        "# Camera list with one line of data per camera:\n\
+         #   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]\n",
+    );
+    let _ = writeln!(text, "# Number of cameras: {}", intrinsics.len());
+    for (i, c) in intrinsics.iter().enumerate() {
+        let _ = writeln!(
+            text,
+            "{} PINHOLE {} {} {} {} {} {}",
+            i + 1,
+            c.width,
+            c.height,
+            c.fx,
+            c.fy,
+            c.cx,
+            c.cy
+        );
+    }
+    text
+}
+
+/// images.txt: a pose line per image, each followed by an empty 2D-points line.
+fn images_txt(images: &[ImageEntry]) -> String {
+    let mut text = String::from(
+        "# Image list with two lines of data per image:\n\
+         #   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME\n\
+         #   POINTS2D[] as (X, Y, POINT3D_ID)\n",
+    );
+    let _ = writeln!(
+        text,
+        "# Number of images: {}, mean observations per image: 0",
+        images.len()
+    );
+    for (i, image) in images.iter().enumerate() {
+        let [qw, qx, qy, qz] = qvec_from_rotation(image.camera.rotation);
+        let [tx, ty, tz] = image.camera.translation.to_array();
+        let _ = writeln!(
+            text,
+            "{} {qw} {qx} {qy} {qz} {tx} {ty} {tz} {} {}\n",
+            i + 1,
+            image.intrinsics_index + 1,
+            image.name
+        );
+    }
+    text
 }
 
 /// Distinct intrinsics (first appearance order) and, per camera, the index of its intrinsics.

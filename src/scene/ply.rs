@@ -133,87 +133,114 @@ struct Header {
     len: u64,
 }
 
-fn parse_header(r: &mut impl BufRead) -> Result<Header> {
-    let mut len = 0usize;
-    let mut line = Vec::new();
-    let mut next_line = |line: &mut Vec<u8>| -> Result<String> {
-        line.clear();
-        let n = r
+/// Reads header lines, counting their bytes against MAX_HEADER_BYTES.
+struct HeaderLines<'a, R> {
+    r: &'a mut R,
+    /// Bytes read so far.
+    len: usize,
+    line: Vec<u8>,
+}
+
+impl<R: BufRead> HeaderLines<'_, R> {
+    /// The next line without its line ending.
+    fn next_line(&mut self) -> Result<String> {
+        self.line.clear();
+        let n = self
+            .r
             .by_ref()
-            .take((MAX_HEADER_BYTES - len) as u64 + 1)
-            .read_until(b'\n', line)?;
-        len += n;
+            .take((MAX_HEADER_BYTES - self.len) as u64 + 1)
+            .read_until(b'\n', &mut self.line)?;
+        self.len += n;
         if n == 0 {
             bail!("truncated header (no end_header line)");
         }
-        if len > MAX_HEADER_BYTES {
+        if self.len > MAX_HEADER_BYTES {
             bail!("header is longer than {MAX_HEADER_BYTES} bytes");
         }
-        let text = std::str::from_utf8(line).map_err(|_| anyhow!("header is not ASCII text"))?;
+        let text =
+            std::str::from_utf8(&self.line).map_err(|_| anyhow!("header is not ASCII text"))?;
         Ok(text.trim_end_matches(['\n', '\r']).to_owned())
+    }
+}
+
+fn parse_header(r: &mut impl BufRead) -> Result<Header> {
+    let mut lines = HeaderLines {
+        r,
+        len: 0,
+        line: Vec::new(),
     };
-    let magic = next_line(&mut line)?;
+    let magic = lines.next_line()?;
     if magic.trim() != "ply" {
         bail!("not a PLY file (first line is not 'ply')");
     }
     let mut format = None;
     let mut elements: Vec<ElementDef> = Vec::new();
-    loop {
-        let text = next_line(&mut line)?;
-        let toks: Vec<&str> = text.split_whitespace().collect();
-        match toks.as_slice() {
-            [] => {}
-            ["comment", ..] | ["obj_info", ..] => {}
-            ["format", f, _version] => {
-                format = Some(match *f {
-                    "ascii" => PlyFormat::Ascii,
-                    "binary_little_endian" => PlyFormat::BinaryLittleEndian,
-                    "binary_big_endian" => PlyFormat::BinaryBigEndian,
-                    other => bail!("unknown PLY format '{other}'"),
-                })
-            }
-            ["element", name, count] => {
-                let count = count
-                    .parse::<u64>()
-                    .map_err(|_| anyhow!("element '{name}' has an invalid count '{count}'"))?;
-                elements.push(ElementDef {
-                    name: name.to_string(),
-                    count,
-                    props: Vec::new(),
-                });
-            }
-            ["property", "list", _count_ty, _item_ty, name] => {
-                let el = elements
-                    .last_mut()
-                    .ok_or_else(|| anyhow!("property before any element"))?;
-                el.props.push(PropertyDef::List {
-                    name: name.to_string(),
-                });
-            }
-            ["property", ty, name] => {
-                let el = elements
-                    .last_mut()
-                    .ok_or_else(|| anyhow!("property before any element"))?;
-                let ty = Scalar::parse(ty)
-                    .ok_or_else(|| anyhow!("property '{name}' has unknown type '{ty}'"))?;
-                el.props.push(PropertyDef::Scalar {
-                    name: name.to_string(),
-                    ty,
-                });
-            }
-            ["end_header"] => break,
-            _ => bail!(
-                "malformed header line '{}'",
-                text.chars().take(80).collect::<String>()
-            ),
-        }
-    }
+    while !parse_header_line(&lines.next_line()?, &mut format, &mut elements)? {}
     let format = format.ok_or_else(|| anyhow!("header has no format line"))?;
     Ok(Header {
         format,
         elements,
-        len: len as u64,
+        len: lines.len as u64,
     })
+}
+
+/// Applies one header line after the magic to `format` and `elements`; true at
+/// `end_header`.
+fn parse_header_line(
+    text: &str,
+    format: &mut Option<PlyFormat>,
+    elements: &mut Vec<ElementDef>,
+) -> Result<bool> {
+    let toks: Vec<&str> = text.split_whitespace().collect();
+    match toks.as_slice() {
+        [] => {}
+        ["comment", ..] | ["obj_info", ..] => {}
+        ["format", f, _version] => {
+            *format = Some(match *f {
+                "ascii" => PlyFormat::Ascii,
+                "binary_little_endian" => PlyFormat::BinaryLittleEndian,
+                "binary_big_endian" => PlyFormat::BinaryBigEndian,
+                other => bail!("unknown PLY format '{other}'"),
+            })
+        }
+        ["element", name, count] => {
+            let count = count
+                .parse::<u64>()
+                .map_err(|_| anyhow!("element '{name}' has an invalid count '{count}'"))?;
+            elements.push(ElementDef {
+                name: name.to_string(),
+                count,
+                props: Vec::new(),
+            });
+        }
+        ["property", "list", _count_ty, _item_ty, name] => {
+            last_element(elements)?.props.push(PropertyDef::List {
+                name: name.to_string(),
+            });
+        }
+        ["property", ty, name] => {
+            let el = last_element(elements)?;
+            let ty = Scalar::parse(ty)
+                .ok_or_else(|| anyhow!("property '{name}' has unknown type '{ty}'"))?;
+            el.props.push(PropertyDef::Scalar {
+                name: name.to_string(),
+                ty,
+            });
+        }
+        ["end_header"] => return Ok(true),
+        _ => bail!(
+            "malformed header line '{}'",
+            text.chars().take(80).collect::<String>()
+        ),
+    }
+    Ok(false)
+}
+
+/// The element a property line belongs to.
+fn last_element(elements: &mut [ElementDef]) -> Result<&mut ElementDef> {
+    elements
+        .last_mut()
+        .ok_or_else(|| anyhow!("property before any element"))
 }
 
 // ---------------------------------------------------------------------------------------
@@ -268,14 +295,7 @@ fn plan_layout(props: &[PropertyDef]) -> Result<Layout> {
         .iter()
         .filter(|p| indexed(p.name(), "f_rest_").is_some())
         .count();
-    let sh_degree = match rest_count {
-        0 => 0,
-        9 => 1,
-        24 => 2,
-        45 => 3,
-        n => bail!("{n} f_rest properties do not match an SH degree (expected 0, 9, 24 or 45 for degree 0..3)"),
-    };
-    let rest_per_channel = sh_coeffs_for_degree(sh_degree) - 1;
+    let sh_degree = sh_degree_of_rest_count(rest_count)?;
     let sem_count = props
         .iter()
         .filter(|p| indexed(p.name(), "sem_").is_some())
@@ -283,50 +303,15 @@ fn plan_layout(props: &[PropertyDef]) -> Result<Layout> {
     if sem_count > MAX_SEM_CHANNELS {
         bail!("{sem_count} sem_* properties (at most {MAX_SEM_CHANNELS})");
     }
+    let counts = IndexedCounts {
+        rest: rest_count,
+        rest_per_channel: sh_coeffs_for_degree(sh_degree) - 1,
+        sem: sem_count,
+    };
 
     let mut slots = Vec::with_capacity(props.len());
     for p in props {
-        let name = p.name();
-        let slot = if let Some(i) = indexed(name, "f_rest_") {
-            if i >= rest_count {
-                bail!(
-                    "f_rest indices must run 0..{} without gaps; found f_rest_{i}",
-                    rest_count - 1
-                );
-            }
-            // Channel-major on disk: f_rest_i is channel i / (K-1), coefficient 1 + i % (K-1).
-            let (channel, coeff) = (i / rest_per_channel, 1 + i % rest_per_channel);
-            Slot::Sh(coeff * 3 + channel)
-        } else if let Some(i) = indexed(name, "sem_") {
-            if i >= sem_count {
-                bail!(
-                    "sem indices must run 0..{} without gaps; found sem_{i}",
-                    sem_count - 1
-                );
-            }
-            Slot::Sem(i)
-        } else {
-            match name {
-                "x" => Slot::Mean(0),
-                "y" => Slot::Mean(1),
-                "z" => Slot::Mean(2),
-                "f_dc_0" => Slot::Sh(0),
-                "f_dc_1" => Slot::Sh(1),
-                "f_dc_2" => Slot::Sh(2),
-                "opacity" => Slot::Opacity,
-                "scale_0" => Slot::Scale(0),
-                "scale_1" => Slot::Scale(1),
-                "scale_2" => Slot::Scale(2),
-                "rot_0" => Slot::Rot(0),
-                "rot_1" => Slot::Rot(1),
-                "rot_2" => Slot::Rot(2),
-                "rot_3" => Slot::Rot(3),
-                "class" => Slot::Class,
-                "class_conf" => Slot::ClassConf,
-                "instance" => Slot::Instance,
-                _ => Slot::Skip,
-            }
-        };
+        let slot = slot_of(p.name(), &counts)?;
         let ty = match p {
             PropertyDef::Scalar { ty, .. } => *ty,
             PropertyDef::List { name } => {
@@ -359,6 +344,69 @@ fn plan_layout(props: &[PropertyDef]) -> Result<Layout> {
         has_class: seen.contains("class"),
         has_conf: seen.contains("class_conf"),
         has_instance: seen.contains("instance"),
+    })
+}
+
+/// The SH degree whose rest coefficients (3 channels) number `rest_count`.
+fn sh_degree_of_rest_count(rest_count: usize) -> Result<u32> {
+    Ok(match rest_count {
+        0 => 0,
+        9 => 1,
+        24 => 2,
+        45 => 3,
+        n => bail!("{n} f_rest properties do not match an SH degree (expected 0, 9, 24 or 45 for degree 0..3)"),
+    })
+}
+
+/// How many `f_rest_<N>` and `sem_<N>` properties the vertex has.
+struct IndexedCounts {
+    rest: usize,
+    /// SH coefficients past the DC term, per color channel.
+    rest_per_channel: usize,
+    sem: usize,
+}
+
+/// Where the vertex property `name` goes.
+fn slot_of(name: &str, counts: &IndexedCounts) -> Result<Slot> {
+    if let Some(i) = indexed(name, "f_rest_") {
+        if i >= counts.rest {
+            bail!(
+                "f_rest indices must run 0..{} without gaps; found f_rest_{i}",
+                counts.rest - 1
+            );
+        }
+        // Channel-major on disk: f_rest_i is channel i / (K-1), coefficient 1 + i % (K-1).
+        let (channel, coeff) = (i / counts.rest_per_channel, 1 + i % counts.rest_per_channel);
+        return Ok(Slot::Sh(coeff * 3 + channel));
+    }
+    if let Some(i) = indexed(name, "sem_") {
+        if i >= counts.sem {
+            bail!(
+                "sem indices must run 0..{} without gaps; found sem_{i}",
+                counts.sem - 1
+            );
+        }
+        return Ok(Slot::Sem(i));
+    }
+    Ok(match name {
+        "x" => Slot::Mean(0),
+        "y" => Slot::Mean(1),
+        "z" => Slot::Mean(2),
+        "f_dc_0" => Slot::Sh(0),
+        "f_dc_1" => Slot::Sh(1),
+        "f_dc_2" => Slot::Sh(2),
+        "opacity" => Slot::Opacity,
+        "scale_0" => Slot::Scale(0),
+        "scale_1" => Slot::Scale(1),
+        "scale_2" => Slot::Scale(2),
+        "rot_0" => Slot::Rot(0),
+        "rot_1" => Slot::Rot(1),
+        "rot_2" => Slot::Rot(2),
+        "rot_3" => Slot::Rot(3),
+        "class" => Slot::Class,
+        "class_conf" => Slot::ClassConf,
+        "instance" => Slot::Instance,
+        _ => Slot::Skip,
     })
 }
 

@@ -134,40 +134,22 @@ pub fn apply_noise(
 
     let mut maps = Vec::with_capacity(views.len());
     let mut reports = Vec::with_capacity(views.len());
-    let mut measured = MeasuredNoise::default();
-    let (mut flicker_events, mut flicker_pairs, mut pixels) = (0u64, 0u64, 0u64);
-    let (mut boundary, mut salt, mut missing) = (0u64, 0u64, 0u64);
+    let mut tally = Tally::default();
     for (v, view) in views.iter().enumerate() {
         let mut rng = rng.fork(1 + v as u64);
         let mut report = ViewNoise {
             name: cameras[v].name.clone(),
             ..Default::default()
         };
-
-        // 1. Per-object class for this view: consistent mislabels, then flicker.
-        let mut class_of: Vec<u16> = room.instances.iter().map(|i| i.class_id as u16).collect();
-        for c in &consistent {
-            if c.wrong_views.contains(&report.name) {
-                class_of[c.instance as usize] = c.wrong_class as u16;
-                report.consistent.push(c.instance);
-            }
-        }
-        for inst in &room.instances {
-            // Draw for every instance so streams do not depend on visibility.
-            let (u, pick) = (rng.f64(), rng.next_u64());
-            let exempt = consistent.iter().any(|c| c.instance == inst.id);
-            if counts[v][inst.id as usize] == 0 || exempt {
-                continue;
-            }
-            flicker_pairs += 1;
-            let options = room.confusions.for_class(inst.class_id as usize);
-            if u < spec.flicker && !options.is_empty() {
-                let class = options[(pick % options.len() as u64) as usize];
-                class_of[inst.id as usize] = class as u16;
-                report.flickered.push([inst.id, class]);
-                flicker_events += 1;
-            }
-        }
+        let class_of = view_classes(
+            room,
+            &counts[v],
+            &consistent,
+            spec.flicker,
+            &mut rng,
+            &mut report,
+            &mut tally,
+        );
         let mut labels: Vec<u16> = view
             .instances
             .iter()
@@ -179,50 +161,12 @@ pub fn apply_noise(
                 }
             })
             .collect();
-
-        // 2. Boundary warp, 3. salt, 4. missing blobs.
-        if spec.boundary > 0 {
-            report.boundary_pixels = warp_boundaries(
-                &mut labels,
-                view.width,
-                view.height,
-                spec.boundary,
-                &mut rng,
-            );
-        }
-        if spec.salt > 0.0 && class_count > 1 {
-            for l in labels.iter_mut() {
-                if rng.f64() < spec.salt {
-                    let r = rng.below(if *l == IGNORE {
-                        class_count
-                    } else {
-                        class_count - 1
-                    }) as u16;
-                    // Skip over the current class so every salted pixel changes.
-                    *l = if *l != IGNORE && r >= *l { r + 1 } else { r };
-                    report.salt_pixels += 1;
-                }
-            }
-        }
-        if spec.missing > 0.0 {
-            report.missing_pixels =
-                drop_blobs(&mut labels, view.width, view.height, spec.missing, &mut rng);
-        }
-        pixels += labels.len() as u64;
-        boundary += report.boundary_pixels;
-        salt += report.salt_pixels;
-        missing += report.missing_pixels;
+        apply_pixel_noise(&mut labels, view, spec, class_count, &mut rng, &mut report);
+        tally.add_view(labels.len() as u64, &report);
         maps.push(labels);
         reports.push(report);
     }
-    measured.flicker = Rate::new(flicker_events, flicker_pairs);
-    measured.boundary = Rate::new(boundary, pixels);
-    measured.salt = Rate::new(salt, pixels);
-    measured.missing = Rate::new(missing, pixels);
-    let (wrong, visible) = consistent.iter().fold((0, 0), |(w, t), c| {
-        (w + c.views_wrong as u64, t + c.views_visible as u64)
-    });
-    measured.consistent = Rate::new(wrong, visible);
+    let measured = tally.measured(&consistent);
     let report = NoiseReport {
         spec: spec.to_string(),
         requested: spec.clone(),
@@ -232,6 +176,119 @@ pub fn apply_noise(
         views: reports,
     };
     NoisyLabels { maps, report }
+}
+
+/// Totals over the views, for the measured rates.
+#[derive(Default)]
+struct Tally {
+    flicker_events: u64,
+    /// (view, visible object) pairs flicker could relabel.
+    flicker_pairs: u64,
+    pixels: u64,
+    boundary: u64,
+    salt: u64,
+    missing: u64,
+}
+
+impl Tally {
+    fn add_view(&mut self, pixels: u64, report: &ViewNoise) {
+        self.pixels += pixels;
+        self.boundary += report.boundary_pixels;
+        self.salt += report.salt_pixels;
+        self.missing += report.missing_pixels;
+    }
+
+    fn measured(&self, consistent: &[ConsistentMislabel]) -> MeasuredNoise {
+        let (wrong, visible) = consistent.iter().fold((0, 0), |(w, t), c| {
+            (w + c.views_wrong as u64, t + c.views_visible as u64)
+        });
+        MeasuredNoise {
+            flicker: Rate::new(self.flicker_events, self.flicker_pairs),
+            consistent: Rate::new(wrong, visible),
+            boundary: Rate::new(self.boundary, self.pixels),
+            salt: Rate::new(self.salt, self.pixels),
+            missing: Rate::new(self.missing, self.pixels),
+        }
+    }
+}
+
+/// Step 1, per-object class for one view: consistent mislabels, then flicker (with
+/// probability `flicker` among the object's confusions). `counts`: the view's pixels per
+/// instance.
+fn view_classes(
+    room: &Room,
+    counts: &[u32],
+    consistent: &[ConsistentMislabel],
+    flicker: f64,
+    rng: &mut Rng,
+    report: &mut ViewNoise,
+    tally: &mut Tally,
+) -> Vec<u16> {
+    let mut class_of: Vec<u16> = room.instances.iter().map(|i| i.class_id as u16).collect();
+    for c in consistent {
+        if c.wrong_views.contains(&report.name) {
+            class_of[c.instance as usize] = c.wrong_class as u16;
+            report.consistent.push(c.instance);
+        }
+    }
+    for inst in &room.instances {
+        // Draw for every instance so streams do not depend on visibility.
+        let (u, pick) = (rng.f64(), rng.next_u64());
+        let exempt = consistent.iter().any(|c| c.instance == inst.id);
+        if counts[inst.id as usize] == 0 || exempt {
+            continue;
+        }
+        tally.flicker_pairs += 1;
+        let options = room.confusions.for_class(inst.class_id as usize);
+        if u < flicker && !options.is_empty() {
+            let class = options[(pick % options.len() as u64) as usize];
+            class_of[inst.id as usize] = class as u16;
+            report.flickered.push([inst.id, class]);
+            tally.flicker_events += 1;
+        }
+    }
+    class_of
+}
+
+/// Steps 2-4 on one view's labels: boundary warp, salt, missing blobs; the pixel counts go
+/// into `report`.
+fn apply_pixel_noise(
+    labels: &mut [u16],
+    view: &ViewTruth,
+    spec: &NoiseSpec,
+    class_count: u64,
+    rng: &mut Rng,
+    report: &mut ViewNoise,
+) {
+    if spec.boundary > 0 {
+        report.boundary_pixels =
+            warp_boundaries(labels, view.width, view.height, spec.boundary, rng);
+    }
+    if spec.salt > 0.0 && class_count > 1 {
+        report.salt_pixels = salt_labels(labels, class_count, spec.salt, rng);
+    }
+    if spec.missing > 0.0 {
+        report.missing_pixels = drop_blobs(labels, view.width, view.height, spec.missing, rng);
+    }
+}
+
+/// Sets each pixel with probability `rate` to a different random class (an ignored pixel to
+/// any class); returns how many were set.
+fn salt_labels(labels: &mut [u16], class_count: u64, rate: f64, rng: &mut Rng) -> u64 {
+    let mut salted = 0;
+    for l in labels.iter_mut() {
+        if rng.f64() < rate {
+            let r = rng.below(if *l == IGNORE {
+                class_count
+            } else {
+                class_count - 1
+            }) as u16;
+            // Skip over the current class so every salted pixel changes.
+            *l = if *l != IGNORE && r >= *l { r + 1 } else { r };
+            salted += 1;
+        }
+    }
+    salted
 }
 
 /// Picks `spec.consistent_objects` objects among the most widely visible ones and the views in

@@ -6,7 +6,7 @@ use glam::DVec3;
 
 use super::furniture::{self as f, looks, Placement, Wall};
 use super::materials::{Material, Pattern};
-use super::room_spec::{ClassSpec, RoomSpec};
+use super::room_spec::{ClassSpec, ObjectSpec, RoomSpec};
 use crate::util::Rng;
 
 /// Built-in preset names with a one-line description (for `--help` and errors).
@@ -94,6 +94,14 @@ fn office(rng: &mut Rng) -> RoomSpec {
     );
     let size = DVec3::from_array(r.size);
     let o = &mut r.objects;
+    office_desks(rng, size, o);
+    office_furniture(rng, size, o);
+    office_openings(rng, size, o);
+    r
+}
+
+/// Two desks against the Y1 wall, each with a monitor and a chair.
+fn office_desks(rng: &mut Rng, size: DVec3, o: &mut Vec<ObjectSpec>) {
     let desk_top = looks::wood(vary(rng, [176, 138, 96], 0.06));
     let desk_body = looks::plain(vary(rng, [210, 210, 205], 0.04));
     for (i, x) in [1.8, 4.3].into_iter().enumerate() {
@@ -128,6 +136,10 @@ fn office(rng: &mut Rng) -> RoomSpec {
             &looks::metal(),
         ));
     }
+}
+
+/// A free-standing chair, the cabinet, the shelf, a plant and a floor lamp.
+fn office_furniture(rng: &mut Rng, size: DVec3, o: &mut Vec<ObjectSpec>) {
     let seat = looks::fabric(vary(rng, [120, 52, 50], 0.15));
     let chair = Placement::at(
         1.3 + jitter(rng, 0.1),
@@ -175,6 +187,10 @@ fn office(rng: &mut Rng) -> RoomSpec {
         &looks::metal(),
         &looks::fabric(vary(rng, [236, 220, 180], 0.04)),
     ));
+}
+
+/// The door and two windows.
+fn office_openings(rng: &mut Rng, size: DVec3, o: &mut Vec<ObjectSpec>) {
     let door = Wall::Y0.placement(size, 1.5 + jitter(rng, 0.1), 0.0, 0.05);
     o.push(f::door(
         "door_0",
@@ -205,7 +221,6 @@ fn office(rng: &mut Rng) -> RoomSpec {
         &frame,
         &looks::glass(),
     ));
-    r
 }
 
 const LIVING_CLASSES: &[&str] = &[
@@ -253,7 +268,21 @@ fn living(rng: &mut Rng) -> RoomSpec {
     let size = DVec3::from_array(r.size);
     let o = &mut r.objects;
 
-    // Seating group around the rug and coffee table.
+    living_sofa_and_rug(rng, size, o);
+    living_coffee_table(rng, o);
+    living_armchair_corner(rng, o);
+    living_media_wall(rng, size, o);
+    living_bookshelf(rng, size, o);
+    living_boxes(rng, o);
+    living_dining_corner(rng, o);
+    living_plants_and_ball(rng, o);
+    living_openings(rng, size, o);
+    living_pictures(rng, size, o);
+    r
+}
+
+/// The sofa against the Y1 wall with its cushions, and the rug in front of it.
+fn living_sofa_and_rug(rng: &mut Rng, size: DVec3, o: &mut Vec<ObjectSpec>) {
     let sofa = Wall::Y1.placement(size, 3.2 + jitter(rng, 0.1), 0.0, 0.92);
     o.push(f::sofa(
         "sofa_0",
@@ -281,6 +310,10 @@ fn living(rng: &mut Rng) -> RoomSpec {
         v(2.6, 1.8, 0.01),
         &looks::stripes(vary(rng, [170, 60, 56], 0.08), [210, 190, 150], 0.2),
     ));
+}
+
+/// The coffee table on the rug with a cup, a bowl, a vase and two stacked books.
+fn living_coffee_table(rng: &mut Rng, o: &mut Vec<ObjectSpec>) {
     let coffee = Placement::at(
         3.2 + jitter(rng, 0.08),
         3.9 + jitter(rng, 0.05),
@@ -335,6 +368,10 @@ fn living(rng: &mut Rng) -> RoomSpec {
         v(0.2, 0.14, 0.025),
         &looks::plain(vary(rng, [40, 70, 140], 0.1)),
     ));
+}
+
+/// The armchair with its cushion, the side table with a table lamp, and a floor lamp.
+fn living_armchair_corner(rng: &mut Rng, o: &mut Vec<ObjectSpec>) {
     let armchair = Placement::at(
         1.2 + jitter(rng, 0.05),
         3.6 + jitter(rng, 0.1),
@@ -382,8 +419,10 @@ fn living(rng: &mut Rng) -> RoomSpec {
         &looks::metal(),
         &looks::fabric(vary(rng, [236, 214, 170], 0.05)),
     ));
+}
 
-    // Media wall.
+/// Media wall: tv stand, tv, two speakers and a clock.
+fn living_media_wall(rng: &mut Rng, size: DVec3, o: &mut Vec<ObjectSpec>) {
     let stand_size = v(1.6, 0.45, 0.5);
     let stand = Wall::Y0.placement(size, 3.2, 0.0, stand_size.y);
     o.push(f::block(
@@ -436,8 +475,10 @@ fn living(rng: &mut Rng) -> RoomSpec {
         &looks::plain([246, 244, 236]),
         &looks::plain([60, 50, 44]),
     ));
+}
 
-    // Bookshelf filled with books (many small, partly hidden instances).
+/// Bookshelf filled with books (many small, partly hidden instances).
+fn living_bookshelf(rng: &mut Rng, size: DVec3, o: &mut Vec<ObjectSpec>) {
     let shelf_size = v(1.4, 0.35, 1.9);
     let shelf = Wall::X1.placement(size, 4.2, 0.0, shelf_size.y);
     let (shelf_object, tops) = f::shelf(
@@ -482,6 +523,10 @@ fn living(rng: &mut Rng) -> RoomSpec {
             x += w + rng.range_f64(0.0, 0.01);
         }
     }
+}
+
+/// Two stacked boxes.
+fn living_boxes(rng: &mut Rng, o: &mut Vec<ObjectSpec>) {
     let box0 = Placement::at(
         6.2 + jitter(rng, 0.03),
         3.1 + jitter(rng, 0.03),
@@ -502,8 +547,10 @@ fn living(rng: &mut Rng) -> RoomSpec {
         v(0.28, 0.22, 0.18),
         &looks::plain(vary(rng, [200, 70, 70], 0.1)),
     ));
+}
 
-    // Dining corner.
+/// Dining corner: table with a bowl and two cups, four chairs.
+fn living_dining_corner(rng: &mut Rng, o: &mut Vec<ObjectSpec>) {
     let dining = Placement::at(
         5.5 + jitter(rng, 0.05),
         1.7 + jitter(rng, 0.05),
@@ -558,8 +605,10 @@ fn living(rng: &mut Rng) -> RoomSpec {
             &looks::wood([110, 80, 56]),
         ));
     }
+}
 
-    // Plants, toys, openings and decoration.
+/// Two potted plants and a ball.
+fn living_plants_and_ball(rng: &mut Rng, o: &mut Vec<ObjectSpec>) {
     let pot = looks::plain(vary(rng, [176, 90, 56], 0.08));
     o.push(f::plant(
         "plant_0",
@@ -583,6 +632,10 @@ fn living(rng: &mut Rng) -> RoomSpec {
         0.11,
         &looks::fabric(vary(rng, [220, 60, 50], 0.1)),
     ));
+}
+
+/// Door, windows and curtains.
+fn living_openings(rng: &mut Rng, size: DVec3, o: &mut Vec<ObjectSpec>) {
     let door = Wall::X0.placement(size, 5.0, 0.0, 0.05);
     o.push(f::door(
         "door_0",
@@ -621,6 +674,10 @@ fn living(rng: &mut Rng) -> RoomSpec {
             &curtain,
         ));
     }
+}
+
+/// Three pictures, one per wall.
+fn living_pictures(rng: &mut Rng, size: DVec3, o: &mut Vec<ObjectSpec>) {
     let art = [
         ([200, 120, 60], [60, 90, 160]),
         ([80, 150, 90], [230, 210, 120]),
@@ -644,7 +701,6 @@ fn living(rng: &mut Rng) -> RoomSpec {
             &canvas,
         ));
     }
-    r
 }
 
 fn tiny(rng: &mut Rng) -> RoomSpec {

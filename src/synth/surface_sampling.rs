@@ -10,7 +10,7 @@ use std::f64::consts::{PI, TAU};
 
 use glam::{DMat3, DQuat, DVec3};
 
-use super::primitives::{Face, Shape};
+use super::primitives::{Cylinder, Face, OrientedBox, Shape, Sphere};
 use super::room::Room;
 use crate::scene::Gaussians;
 use crate::util::Rng;
@@ -96,94 +96,9 @@ pub fn sample_surfaces(room: &Room, spacing: f64) -> Vec<SurfaceSample> {
         };
         match &prim.shape {
             Shape::Quad(q) => grid.rect(q.center, q.u, q.v, q.half.x, q.half.y, Face::Quad),
-            Shape::Box(b) => {
-                for face in 0..6u8 {
-                    let a = (face / 2) as usize;
-                    let sign = if face % 2 == 0 { 1.0 } else { -1.0 };
-                    let (mut t1, mut t2) = ((a + 1) % 3, (a + 2) % 3);
-                    if sign < 0.0 {
-                        std::mem::swap(&mut t1, &mut t2);
-                    }
-                    let center = b.center + b.rot.col(a) * (sign * b.half[a]);
-                    grid.rect(
-                        center,
-                        b.rot.col(t1),
-                        b.rot.col(t2),
-                        b.half[t1],
-                        b.half[t2],
-                        Face::Box(face),
-                    );
-                }
-            }
-            Shape::Cylinder(c) => {
-                let (ex, ey, ez) = (c.rot.x_axis, c.rot.y_axis, c.rot.z_axis);
-                let n_theta = ((TAU * c.radius / spacing).ceil() as usize).max(3);
-                let n_z = ((2.0 * c.half_height / spacing).ceil() as usize).max(1);
-                let (du, dv) = (
-                    TAU * c.radius / n_theta as f64,
-                    2.0 * c.half_height / n_z as f64,
-                );
-                for i in 0..n_theta {
-                    let theta = (i as f64 + 0.5) * TAU / n_theta as f64;
-                    let normal = ex * theta.cos() + ey * theta.sin();
-                    let tangent = -ex * theta.sin() + ey * theta.cos();
-                    for j in 0..n_z {
-                        let z = -c.half_height + (j as f64 + 0.5) * dv;
-                        let p = c.center + normal * c.radius + ez * z;
-                        let edge_z = c.half_height - z.abs();
-                        grid.push(
-                            p,
-                            tangent,
-                            ez,
-                            du,
-                            dv,
-                            // Past a radius along the curve a tangent disc leaves the
-                            // silhouette.
-                            c.radius,
-                            edge_z,
-                            Face::CylinderSide,
-                        );
-                    }
-                }
-                grid.disc(
-                    c.center + ez * c.half_height,
-                    ex,
-                    ey,
-                    c.radius,
-                    Face::CylinderTop,
-                );
-                grid.disc(
-                    c.center - ez * c.half_height,
-                    ey,
-                    ex,
-                    c.radius,
-                    Face::CylinderBottom,
-                );
-            }
-            Shape::Sphere(s) => {
-                let n = ((2.0 * TAU * s.radius * s.radius / (spacing * spacing)).round() as usize)
-                    .max(12);
-                let step = (2.0 * TAU * s.radius * s.radius / n as f64).sqrt();
-                let golden = PI * (3.0 - 5f64.sqrt());
-                for i in 0..n {
-                    let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
-                    let r = (1.0 - z * z).max(0.0).sqrt();
-                    let phi = i as f64 * golden;
-                    let normal = DVec3::new(r * phi.cos(), r * phi.sin(), z);
-                    let t1 = DVec3::Z.cross(normal).try_normalize().unwrap_or(DVec3::X);
-                    let t2 = normal.cross(t1);
-                    grid.push(
-                        s.center + normal * s.radius,
-                        t1,
-                        t2,
-                        step,
-                        step,
-                        s.radius,
-                        s.radius,
-                        Face::Sphere,
-                    );
-                }
-            }
+            Shape::Box(b) => grid.box_faces(b),
+            Shape::Cylinder(c) => grid.cylinder(c),
+            Shape::Sphere(s) => grid.sphere(s),
         }
     }
     out
@@ -243,6 +158,100 @@ impl Grid<'_> {
             primitive: self.primitive,
             face,
         });
+    }
+
+    /// The six faces of a box, each a rectangle with its normal pointing out.
+    fn box_faces(&mut self, b: &OrientedBox) {
+        for face in 0..6u8 {
+            let a = (face / 2) as usize;
+            let sign = if face % 2 == 0 { 1.0 } else { -1.0 };
+            let (mut t1, mut t2) = ((a + 1) % 3, (a + 2) % 3);
+            if sign < 0.0 {
+                std::mem::swap(&mut t1, &mut t2);
+            }
+            let center = b.center + b.rot.col(a) * (sign * b.half[a]);
+            self.rect(
+                center,
+                b.rot.col(t1),
+                b.rot.col(t2),
+                b.half[t1],
+                b.half[t2],
+                Face::Box(face),
+            );
+        }
+    }
+
+    /// A cylinder's side on a (angle, height) grid, then its top and bottom discs.
+    fn cylinder(&mut self, c: &Cylinder) {
+        let (ex, ey, ez) = (c.rot.x_axis, c.rot.y_axis, c.rot.z_axis);
+        let n_theta = ((TAU * c.radius / self.spacing).ceil() as usize).max(3);
+        let n_z = ((2.0 * c.half_height / self.spacing).ceil() as usize).max(1);
+        let (du, dv) = (
+            TAU * c.radius / n_theta as f64,
+            2.0 * c.half_height / n_z as f64,
+        );
+        for i in 0..n_theta {
+            let theta = (i as f64 + 0.5) * TAU / n_theta as f64;
+            let normal = ex * theta.cos() + ey * theta.sin();
+            let tangent = -ex * theta.sin() + ey * theta.cos();
+            for j in 0..n_z {
+                let z = -c.half_height + (j as f64 + 0.5) * dv;
+                let p = c.center + normal * c.radius + ez * z;
+                let edge_z = c.half_height - z.abs();
+                self.push(
+                    p,
+                    tangent,
+                    ez,
+                    du,
+                    dv,
+                    // Past a radius along the curve a tangent disc leaves the silhouette.
+                    c.radius,
+                    edge_z,
+                    Face::CylinderSide,
+                );
+            }
+        }
+        self.disc(
+            c.center + ez * c.half_height,
+            ex,
+            ey,
+            c.radius,
+            Face::CylinderTop,
+        );
+        self.disc(
+            c.center - ez * c.half_height,
+            ey,
+            ex,
+            c.radius,
+            Face::CylinderBottom,
+        );
+    }
+
+    /// A sphere on a golden-angle spiral of about one sample per spacing^2.
+    fn sphere(&mut self, s: &Sphere) {
+        let n = ((2.0 * TAU * s.radius * s.radius / (self.spacing * self.spacing)).round()
+            as usize)
+            .max(12);
+        let step = (2.0 * TAU * s.radius * s.radius / n as f64).sqrt();
+        let golden = PI * (3.0 - 5f64.sqrt());
+        for i in 0..n {
+            let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+            let r = (1.0 - z * z).max(0.0).sqrt();
+            let phi = i as f64 * golden;
+            let normal = DVec3::new(r * phi.cos(), r * phi.sin(), z);
+            let t1 = DVec3::Z.cross(normal).try_normalize().unwrap_or(DVec3::X);
+            let t2 = normal.cross(t1);
+            self.push(
+                s.center + normal * s.radius,
+                t1,
+                t2,
+                step,
+                step,
+                s.radius,
+                s.radius,
+                Face::Sphere,
+            );
+        }
     }
 
     /// Cell centers of a rectangle `center + a * t1 + b * t2`, |a| <= h1, |b| <= h2.
