@@ -13,15 +13,7 @@
 
 layout(local_size_x = 256) in;
 
-layout(push_constant) uniform ProjectBackwardParams {
-    vec4 rot_t0; // world-to-camera rows: (R00 R01 R02 t0)
-    vec4 rot_t1;
-    vec4 rot_t2;
-    vec4 intrinsics;  // fx fy cx cy
-    vec4 center_near; // camera center (world), -
-    uvec4 dims;       // width height - -
-    uvec4 counts;     // n sh_degree sh_coeffs -
-} pc;
+#include "project_params.glsl"
 
 layout(set = 0, binding = 0) readonly buffer MeansBuf { float data[]; } means;
 layout(set = 0, binding = 1) readonly buffer LogScalesBuf { float data[]; } log_scales;
@@ -78,7 +70,7 @@ vec3 sh_basis_grad(uint degree, vec3 dir, float g[16]) {
 
 void main() {
     uint i = gl_GlobalInvocationID.x;
-    uint n = pc.counts.x;
+    uint n = pc.n;
     if (i >= n || visible.data[i] == 0) {
         return;
     }
@@ -90,15 +82,15 @@ void main() {
 
     // Forward intermediates.
     vec3 mean = vec3(means.data[3 * i], means.data[3 * i + 1], means.data[3 * i + 2]);
-    mat3 w = transpose(mat3(pc.rot_t0.xyz, pc.rot_t1.xyz, pc.rot_t2.xyz)); // world -> camera
-    vec3 p = w * mean + vec3(pc.rot_t0.w, pc.rot_t1.w, pc.rot_t2.w);
+    mat3 w = transpose(mat3(pc.world_to_camera[0].xyz, pc.world_to_camera[1].xyz, pc.world_to_camera[2].xyz)); // world -> camera
+    vec3 p = w * mean + vec3(pc.world_to_camera[0].w, pc.world_to_camera[1].w, pc.world_to_camera[2].w);
     vec4 q_raw = vec4(quats.data[4 * i], quats.data[4 * i + 1], quats.data[4 * i + 2], quats.data[4 * i + 3]);
     float qn = length(q_raw);
     vec4 q = q_raw / qn;
     mat3 rq = quat_to_mat(q);
     vec3 s = exp(vec3(log_scales.data[3 * i], log_scales.data[3 * i + 1], log_scales.data[3 * i + 2]));
     mat3 covc = covar_world_to_cam(w, rot_scale_to_covar(rq, s));
-    float width = float(pc.dims.x), height = float(pc.dims.y);
+    float width = float(pc.width), height = float(pc.height);
     vec3 conic = cov2_to_conic(dilate_cov2(persp_proj_cov(p, covc, pc.intrinsics, vec2(width, height))));
 
     // Back along the chain; the dilation passes the gradient through unchanged.
@@ -113,9 +105,9 @@ void main() {
     vec4 v_q_raw = quat_normalize_vjp(q, qn, quat_to_mat_vjp(q, v_r));
 
     // Color = max(SH(dir) + 0.5, 0), dir = normalize(mean - camera center).
-    uint degree = pc.counts.y, coeffs = pc.counts.z;
+    uint degree = pc.sh_degree, coeffs = pc.sh_coeffs;
     uint base = i * coeffs * 3;
-    vec3 to_mean = mean - pc.center_near.xyz;
+    vec3 to_mean = mean - pc.camera_center;
     vec3 dir = normalize(to_mean);
     vec3 color;
     SH_EVAL(color, degree, dir, SH_COEFF);

@@ -12,16 +12,7 @@
 
 layout(local_size_x = 256) in;
 
-layout(push_constant) uniform ProjectParams {
-    vec4 rot_t0; // world-to-camera rows: (R00 R01 R02 t0)
-    vec4 rot_t1;
-    vec4 rot_t2;
-    vec4 intrinsics; // fx fy cx cy
-    vec4 center_near; // camera center (world), near plane
-    vec4 far_pad;     // far plane
-    uvec4 dims;       // width height tiles_x tiles_y
-    uvec4 counts;     // n sh_degree sh_coeffs -
-} pc;
+#include "project_params.glsl"
 
 layout(set = 0, binding = 0) readonly buffer MeansBuf { float data[]; } means;
 layout(set = 0, binding = 1) readonly buffer LogScalesBuf { float data[]; } log_scales;
@@ -44,7 +35,7 @@ layout(set = 0, binding = 12) readonly buffer Camera64Buf { double data[]; } cam
 
 void main() {
     uint i = gl_GlobalInvocationID.x;
-    uint n = pc.counts.x;
+    uint n = pc.n;
     if (i > n) {
         return;
     }
@@ -63,11 +54,11 @@ void main() {
                      camera64.data[8] * md.x + camera64.data[9] * md.y + camera64.data[10] * md.z + camera64.data[11]);
     vec3 p = vec3(pd);
 #else
-    vec3 p = vec3(dot(pc.rot_t0.xyz, mean) + pc.rot_t0.w,
-                  dot(pc.rot_t1.xyz, mean) + pc.rot_t1.w,
-                  dot(pc.rot_t2.xyz, mean) + pc.rot_t2.w);
+    vec3 p = vec3(dot(pc.world_to_camera[0].xyz, mean) + pc.world_to_camera[0].w,
+                  dot(pc.world_to_camera[1].xyz, mean) + pc.world_to_camera[1].w,
+                  dot(pc.world_to_camera[2].xyz, mean) + pc.world_to_camera[2].w);
 #endif
-    if (!(p.z > pc.center_near.w && p.z < pc.far_pad.x)) {
+    if (!(p.z > pc.near && p.z < pc.far)) {
         return;
     }
     vec4 q = vec4(quats.data[4 * i], quats.data[4 * i + 1], quats.data[4 * i + 2], quats.data[4 * i + 3]);
@@ -83,9 +74,9 @@ void main() {
     // 3D covariance R S S^T R^T, into camera space, then onto the image.
     mat3 rq = quat_to_mat(q / qn);
     vec3 s = exp(vec3(log_scales.data[3 * i], log_scales.data[3 * i + 1], log_scales.data[3 * i + 2]));
-    mat3 w = transpose(mat3(pc.rot_t0.xyz, pc.rot_t1.xyz, pc.rot_t2.xyz)); // rows -> matrix
+    mat3 w = transpose(mat3(pc.world_to_camera[0].xyz, pc.world_to_camera[1].xyz, pc.world_to_camera[2].xyz)); // rows -> matrix
     mat3 covc = covar_world_to_cam(w, rot_scale_to_covar(rq, s));
-    float width = float(pc.dims.x), height = float(pc.dims.y);
+    float width = float(pc.width), height = float(pc.height);
     vec3 cov2 = dilate_cov2(persp_proj_cov(p, covc, pc.intrinsics, vec2(width, height)));
     vec3 conic = cov2_to_conic(cov2);
 
@@ -110,10 +101,10 @@ void main() {
     uvec2 tlo = uvec2(lo) / TILE_SIZE;
     uvec2 thi = uvec2(hi) / TILE_SIZE + 1;
 
-    vec3 dir = normalize(mean - pc.center_near.xyz);
-    uint base = i * pc.counts.z * 3;
+    vec3 dir = normalize(mean - pc.camera_center);
+    uint base = i * pc.sh_coeffs * 3;
     vec3 color;
-    SH_EVAL(color, pc.counts.y, dir, SH_COEFF);
+    SH_EVAL(color, pc.sh_degree, dir, SH_COEFF);
     color = max(color + 0.5, vec3(0.0));
 
     xy_depth_opacity.data[i] = vec4(mean_int, p.z, opacity);

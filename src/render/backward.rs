@@ -8,8 +8,8 @@ use anyhow::{ensure, Result};
 use super::frame::RenderedFrame;
 use super::gpu_scene::{parameter_floats, parameter_ranges, GpuScene};
 use super::rasterizer::{Rasterizer, TileLists};
-use super::{camera_rows_f32, RenderOptions, SemanticMode};
-use crate::contract::params::{ProjectBackwardParams, SoftmaxParams};
+use super::{project_params, RenderOptions, SemanticMode};
+use crate::contract::params::SoftmaxParams;
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, Gpu, Recorder};
 use crate::scene::Camera;
@@ -294,17 +294,8 @@ impl TileLists<'_> {
         cam: &Camera,
         grads: &SceneGrads,
     ) -> Result<()> {
-        let c = cam.center();
-        let rows = camera_rows_f32(cam);
-        let params = ProjectBackwardParams {
-            rot_t0: rows[0],
-            rot_t1: rows[1],
-            rot_t2: rows[2],
-            intrinsics: [cam.fx as f32, cam.fy as f32, cam.cx as f32, cam.cy as f32],
-            center_near: [c.x as f32, c.y as f32, c.z as f32, 0.0],
-            dims: [cam.width, cam.height, 0, 0],
-            counts: [scene.n, scene.sh_degree, scene.sh_coeffs, 0],
-        };
+        // The backward culls nothing itself: it reads the forward's visibility flags.
+        let params = project_params(cam, scene, 0.0, f32::INFINITY);
         rec.dispatch(
             ids::RASTER_PROJECT_BACKWARD,
             &[

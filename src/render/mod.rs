@@ -24,6 +24,29 @@ pub(crate) fn camera_rows_f32(cam: &crate::scene::Camera) -> [[f32; 4]; 3] {
     })
 }
 
+/// Push constants of projection and its backward for `cam` over `scene`, culling center
+/// depths outside (near, far).
+pub(crate) fn project_params(
+    cam: &crate::scene::Camera,
+    scene: &GpuScene,
+    near: f32,
+    far: f32,
+) -> crate::contract::params::ProjectParams {
+    let c = cam.center();
+    crate::contract::params::ProjectParams {
+        world_to_camera: camera_rows_f32(cam),
+        intrinsics: [cam.fx as f32, cam.fy as f32, cam.cx as f32, cam.cy as f32],
+        camera_center: [c.x as f32, c.y as f32, c.z as f32],
+        near,
+        far,
+        width: cam.width,
+        height: cam.height,
+        n: scene.n,
+        sh_degree: scene.sh_degree,
+        sh_coeffs: scene.sh_coeffs,
+    }
+}
+
 /// What the semantic buffer blends (Gaussian Semantics and its softmax-before-blending ablation).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
 pub enum SemanticMode {

@@ -7,8 +7,8 @@ use anyhow::{ensure, Result};
 
 use super::frame::RenderedFrame;
 use super::gpu_scene::GpuScene;
-use super::{camera_rows_f32, RenderOptions, SemanticMode, StageTimes};
-use crate::contract::params::{BlendParams, CompactParams, EmitParams, ProjectParams};
+use super::{project_params, RenderOptions, SemanticMode, StageTimes};
+use crate::contract::params::{BlendParams, CompactParams, EmitParams};
 use crate::contract::{
     BLEND_CARRY_BASE, ST_ARGS_ISECT, ST_ARGS_VISIBLE, ST_ISECT, ST_ISECT_NEEDED, ST_N_PLUS1,
     ST_OVERFLOW, ST_VISIBLE, ST_VISIBLE_PLUS1, ST_WORDS,
@@ -390,18 +390,7 @@ impl Rasterizer {
 
         let r = cam.rotation;
         let t = cam.translation;
-        let c = cam.center();
-        let [rot_t0, rot_t1, rot_t2] = camera_rows_f32(cam);
-        let params = ProjectParams {
-            rot_t0,
-            rot_t1,
-            rot_t2,
-            intrinsics: [cam.fx as f32, cam.fy as f32, cam.cx as f32, cam.cy as f32],
-            center_near: [c.x as f32, c.y as f32, c.z as f32, opts.near],
-            far_pad: [opts.far, 0.0, 0.0, 0.0],
-            dims: [cam.width, cam.height, tiles_x, tiles_y],
-            counts: [n, scene.sh_degree, scene.sh_coeffs, 0],
-        };
+        let params = project_params(cam, scene, opts.near, opts.far);
         let mut bindings: Vec<(&str, &Buffer)> = vec![
             ("means", &scene.means),
             ("log_scales", &scene.log_scales),
