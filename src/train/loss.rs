@@ -104,6 +104,13 @@ struct CrossEntropyParams {
     lambda: f32,
 }
 
+/// The photometric loss's images: the render, its target, and the gradient written back.
+struct RgbImages<'a> {
+    rgb: &'a Buffer,
+    target: &'a Buffer,
+    v_rgb: &'a Buffer,
+}
+
 /// The loss scratch for views of one size (W x H, C semantic channels), and the values
 /// buffer every loss term of an iteration leaves its mean in.
 pub struct ImageLoss {
@@ -202,8 +209,49 @@ impl ImageLoss {
         v_rgb: &Buffer,
         semantics: Option<&SemanticTerm<'_>>,
     ) -> Result<()> {
-        let pixels = self.pixels();
-        let rgb_bytes = pixels as u64 * 3 * 4;
+        self.check_rgb(rgb, target, v_rgb)?;
+        if let Some(s) = semantics {
+            self.check_semantics(s)?;
+        }
+        let images = RgbImages { rgb, target, v_rgb };
+        // Four phases between barriers, each pairing an SSIM kernel with the semantic or
+        // reduction work that does not depend on it.
+        rec.barrier();
+        self.record_count_and_blur(rec, &images, semantics)?;
+        rec.barrier();
+        self.record_ssim_forward(rec, &images, semantics)?;
+        rec.barrier();
+        self.record_ce_and_blur_grads(rec, semantics)?;
+        rec.barrier();
+        self.record_rgb_backward_and_sums(rec, &images, semantics)?;
+        rec.barrier();
+        Ok(())
+    }
+
+    /// Workgroups of the 2D (ssim_*) kernels.
+    fn tiles(&self) -> [u32; 3] {
+        [self.width.div_ceil(TILE), self.height.div_ceil(TILE), 1]
+    }
+
+    /// Workgroups of the per-pixel 1D kernels.
+    fn pixel_groups(&self) -> u32 {
+        self.pixels().div_ceil(LOSS_WG)
+    }
+
+    fn dims(&self) -> ImageDims {
+        ImageDims {
+            width: self.width,
+            height: self.height,
+        }
+    }
+
+    /// Floats the photometric loss averages over.
+    fn rgb_count(&self) -> f32 {
+        3.0 * self.pixels() as f32
+    }
+
+    fn check_rgb(&self, rgb: &Buffer, target: &Buffer, v_rgb: &Buffer) -> Result<()> {
+        let rgb_bytes = self.pixels() as u64 * 3 * 4;
         for (what, buf) in [("rgb", rgb), ("target", target), ("v_rgb", v_rgb)] {
             ensure!(
                 buf.size() >= rgb_bytes,
@@ -213,48 +261,61 @@ impl ImageLoss {
                 self.height
             );
         }
-        if let Some(s) = semantics {
-            self.check_semantics(s)?;
-        }
-        let tiles = [self.width.div_ceil(TILE), self.height.div_ceil(TILE), 1];
-        let tile_count = tiles[0] * tiles[1];
-        let pixel_groups = pixels.div_ceil(LOSS_WG);
-        let dims = ImageDims {
-            width: self.width,
-            height: self.height,
-        };
-        let count = 3.0 * pixels as f32;
+        Ok(())
+    }
 
-        rec.barrier();
+    /// Phase 1: counting the labeled pixels (or zeroing the count and CE without
+    /// semantics) beside the blur of the SSIM moments.
+    fn record_count_and_blur(
+        &self,
+        rec: &mut Recorder,
+        images: &RgbImages<'_>,
+        semantics: Option<&SemanticTerm<'_>>,
+    ) -> Result<()> {
         match semantics {
             Some(s) => rec.dispatch(
                 ids::TRAIN_LOSS_COUNT_LABELS,
                 &[("labels", s.labels), ("partials", &self.partials)],
                 bytemuck::bytes_of(&CountParams {
-                    pixels,
+                    pixels: self.pixels(),
                     channels: self.channels,
                     stride: self.stride,
                 }),
-                [pixel_groups, 1, 1],
+                [self.pixel_groups(), 1, 1],
             )?,
             // The count and the CE are adjacent slots.
             None => rec.fill(&self.values, SLOT_LABELED as u64 * 4, 8, 0),
         }
         rec.dispatch(
             ids::TRAIN_SSIM_BLUR_INPUTS,
-            &[("rgb", rgb), ("target", target), ("moments", &self.moments)],
-            bytemuck::bytes_of(&dims),
-            tiles,
+            &[
+                ("rgb", images.rgb),
+                ("target", images.target),
+                ("moments", &self.moments),
+            ],
+            bytemuck::bytes_of(&self.dims()),
+            self.tiles(),
         )?;
-        rec.barrier();
+        Ok(())
+    }
+
+    /// Phase 2: reducing the labeled count beside the SSIM forward (per-pixel L1 and SSIM
+    /// partials, and the SSIM's gradient with respect to the blurred moments).
+    fn record_ssim_forward(
+        &self,
+        rec: &mut Recorder,
+        images: &RgbImages<'_>,
+        semantics: Option<&SemanticTerm<'_>>,
+    ) -> Result<()> {
         if semantics.is_some() {
-            self.record_reduce(rec, SLOT_LABELED, 1, pixel_groups)?;
+            self.record_reduce(rec, SLOT_LABELED, 1, self.pixel_groups())?;
         }
+        let count = self.rgb_count();
         rec.dispatch(
             ids::TRAIN_SSIM_FORWARD,
             &[
-                ("rgb", rgb),
-                ("target", target),
+                ("rgb", images.rgb),
+                ("target", images.target),
                 ("moments", &self.moments),
                 ("moment_grads", &self.moment_grads),
                 ("partials", &self.partials),
@@ -266,9 +327,18 @@ impl ImageLoss {
                 inv_count: 1.0 / count,
                 ssim_weight: -SSIM_WEIGHT / count,
             }),
-            tiles,
+            self.tiles(),
         )?;
-        rec.barrier();
+        Ok(())
+    }
+
+    /// Phase 3: the cross-entropy and its gradient (which read the labeled count) beside
+    /// the blur of the moment gradients.
+    fn record_ce_and_blur_grads(
+        &self,
+        rec: &mut Recorder,
+        semantics: Option<&SemanticTerm<'_>>,
+    ) -> Result<()> {
         if let Some(s) = semantics {
             rec.dispatch(
                 ids::TRAIN_LOSS_CROSS_ENTROPY,
@@ -280,7 +350,7 @@ impl ImageLoss {
                     ("partials", &self.partials),
                 ],
                 bytemuck::bytes_of(&CrossEntropyParams {
-                    pixels,
+                    pixels: self.pixels(),
                     channels: self.channels,
                     stride: self.stride,
                     mode: match s.mode {
@@ -289,7 +359,7 @@ impl ImageLoss {
                     },
                     lambda: s.lambda,
                 }),
-                [pixel_groups, 1, 1],
+                [self.pixel_groups(), 1, 1],
             )?;
         }
         rec.dispatch(
@@ -298,32 +368,42 @@ impl ImageLoss {
                 ("moment_grads", &self.moment_grads),
                 ("blurred", &self.moments),
             ],
-            bytemuck::bytes_of(&dims),
-            tiles,
+            bytemuck::bytes_of(&self.dims()),
+            self.tiles(),
         )?;
-        rec.barrier();
+        Ok(())
+    }
+
+    /// Phase 4: dL_rgb/d rgb into `v_rgb`, beside the reductions of the L1, SSIM, SE and
+    /// CE partials into their values.
+    fn record_rgb_backward_and_sums(
+        &self,
+        rec: &mut Recorder,
+        images: &RgbImages<'_>,
+        semantics: Option<&SemanticTerm<'_>>,
+    ) -> Result<()> {
         rec.dispatch(
             ids::TRAIN_SSIM_BACKWARD,
             &[
-                ("rgb", rgb),
-                ("target", target),
+                ("rgb", images.rgb),
+                ("target", images.target),
                 ("blurred", &self.moments),
-                ("v_rgb", v_rgb),
+                ("v_rgb", images.v_rgb),
             ],
             bytemuck::bytes_of(&SsimBackwardParams {
                 width: self.width,
                 height: self.height,
-                l1_weight: L1_WEIGHT / count,
+                l1_weight: L1_WEIGHT / self.rgb_count(),
             }),
-            tiles,
+            self.tiles(),
         )?;
         // L1, SSIM and SE are adjacent slots.
         const _: () = assert!(SLOT_SE == SLOT_L1 + 2);
-        self.record_reduce(rec, SLOT_L1, 3, tile_count)?;
+        let tiles = self.tiles();
+        self.record_reduce(rec, SLOT_L1, 3, tiles[0] * tiles[1])?;
         if semantics.is_some() {
-            self.record_reduce(rec, SLOT_CE, 1, pixel_groups)?;
+            self.record_reduce(rec, SLOT_CE, 1, self.pixel_groups())?;
         }
-        rec.barrier();
         Ok(())
     }
 
