@@ -79,20 +79,26 @@ fn errors(gpu: &HostGrads, cpu: &ParamGrads) -> Vec<(&'static str, f64)> {
             .collect::<Vec<f32>>()
     };
     let mut out = vec![
-        ("means", rel_l2(&gpu.means, flat3(&cpu.means).into_iter())),
+        (
+            "means",
+            rel_l2(&gpu.params.means, flat3(&cpu.means).into_iter()),
+        ),
         (
             "log_scales",
-            rel_l2(&gpu.log_scales, flat3(&cpu.log_scales).into_iter()),
+            rel_l2(&gpu.params.log_scales, flat3(&cpu.log_scales).into_iter()),
         ),
         (
             "quats",
-            rel_l2(&gpu.quats, cpu.quats.iter().flatten().copied()),
+            rel_l2(&gpu.params.quats, cpu.quats.iter().flatten().copied()),
         ),
         (
             "opacity_logits",
-            rel_l2(&gpu.opacity_logits, cpu.opacity_logits.iter().copied()),
+            rel_l2(
+                &gpu.params.opacity_logits,
+                cpu.opacity_logits.iter().copied(),
+            ),
         ),
-        ("sh", rel_l2(&gpu.sh, cpu.sh.iter().copied())),
+        ("sh", rel_l2(&gpu.params.sh, cpu.sh.iter().copied())),
         (
             "mean2d.x",
             rel_l2(&screen(0), cpu.mean2d.iter().map(|m| m[0])),
@@ -169,8 +175,8 @@ fn compare(case: &Case) -> f64 {
     let cpu = backward(&g, &case.cam, &settings, &host);
     let errs = if case.semantics_only {
         for (name, v) in [
-            ("means", &grads.means),
-            ("sh", &grads.sh),
+            ("means", &grads.params.means),
+            ("sh", &grads.params.sh),
             ("screen", &grads.screen),
         ] {
             assert!(
@@ -387,15 +393,21 @@ fn gpu_backward_matches_finite_differences() {
     };
     for i in 0..g.len() {
         for k in 0..3 {
-            check(&|p| &mut p.means[i][k], grads.means[3 * i + k]);
-            check(&|p| &mut p.log_scales[i][k], grads.log_scales[3 * i + k]);
+            check(&|p| &mut p.means[i][k], grads.params.means[3 * i + k]);
+            check(
+                &|p| &mut p.log_scales[i][k],
+                grads.params.log_scales[3 * i + k],
+            );
         }
         for k in 0..4 {
-            check(&|p| &mut p.quats[i][k], grads.quats[4 * i + k]);
+            check(&|p| &mut p.quats[i][k], grads.params.quats[4 * i + k]);
         }
-        check(&|p| &mut p.opacity_logits[i], grads.opacity_logits[i]);
+        check(
+            &|p| &mut p.opacity_logits[i],
+            grads.params.opacity_logits[i],
+        );
         for k in 0..12 {
-            check(&|p| &mut p.sh[12 * i + k], grads.sh[12 * i + k]);
+            check(&|p| &mut p.sh[12 * i + k], grads.params.sh[12 * i + k]);
         }
         for k in 0..3 {
             check(&|p| &mut p.logits[3 * i + k], grads.logits[3 * i + k]);

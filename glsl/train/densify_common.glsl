@@ -3,17 +3,9 @@
 #ifndef DENSIFY_COMMON_GLSL
 #define DENSIFY_COMMON_GLSL
 
-#define DENSIFY_WG_SIZE 256
-
-// Plan status buffer (u32 words), filled on the GPU and read once by the host.
-#define DS_SURVIVORS 0  // Gaussians not pruned
-#define DS_CANDIDATES 1 // survivors whose average gradient passes the threshold
-#define DS_DENSIFIED 2  // candidates that fit the budget (cloned or split)
-#define DS_CLONED 3
-#define DS_SPLIT 4
-#define DS_NEW_N 5      // Gaussians after the step
-#define DS_N_PLUS1 6    // n + 1: the length of the flag scans (host-written)
-#define DS_WORDS 8
+// DENSIFY_WG_SIZE and the plan status words DS_* (u32 words, filled on the GPU and read
+// once by the host).
+#include "shared_constants.glsl"
 
 // What an output slot holds, relative to its source Gaussian.
 #define SLOT_KEEP 0u   // the Gaussian itself (also the original of a clone)

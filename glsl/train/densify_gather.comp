@@ -6,10 +6,7 @@
 // count can pass 65,535 workgroups in one dimension).
 #include "densify_common.glsl"
 
-#define ROLE_COPY 0u
-#define ROLE_MOMENT 1u
-#define ROLE_MEANS 2u
-#define ROLE_LOG_SCALES 3u
+// ROLE_* (what a gathered tensor is) come from shared_constants.glsl.
 
 layout(local_size_x = DENSIFY_WG_SIZE) in;
 

@@ -1,19 +1,11 @@
 // Where the loss kernels leave their sums: each workgroup writes one partial per slot
 // into partials[slot * stride + group], and loss_reduce.comp adds a slot's partials in a
 // fixed order into values[slot]. No float atomics, and the same sums every run.
-// Slot numbers match src/train/loss_values.rs.
 #ifndef LOSS_SUMS_GLSL
 #define LOSS_SUMS_GLSL
 
-#define SLOT_L1 0u       // mean |x - y| over pixels and channels
-#define SLOT_SSIM 1u     // mean SSIM over pixels and channels
-#define SLOT_SE 2u       // mean (x - y)^2 (the MSE, for PSNR)
-#define SLOT_LABELED 3u  // number of labeled pixels
-#define SLOT_CE 4u       // mean cross-entropy over labeled pixels
-#define SLOT_ENTROPY 5u  // mean entropy over Gaussians
-
-// Every kernel that reduces runs 256 invocations per workgroup.
-#define LOSS_WG 256
+// The slots SLOT_* and LOSS_WG, the invocations per workgroup of every kernel that reduces.
+#include "shared_constants.glsl"
 
 shared vec4 loss_sum_scratch[LOSS_WG];
 

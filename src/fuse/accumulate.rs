@@ -362,7 +362,7 @@ fn dispatch_vote(
     rec.dispatch(
         ids::FUSE_VOTE,
         &[
-            ("means", &scene.means),
+            ("means", &scene.params.means),
             ("labels", labels),
             ("depth", depth.unwrap_or(labels)),
             ("votes", votes),

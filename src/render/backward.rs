@@ -6,7 +6,7 @@
 use anyhow::{ensure, Result};
 
 use super::frame::RenderedFrame;
-use super::gpu_scene::{parameter_floats, parameter_ranges, GpuScene};
+use super::gpu_scene::{GaussianParams, GpuScene};
 use super::rasterizer::{Rasterizer, TileLists};
 use super::{project_params, RenderOptions, SemanticMode};
 use crate::contract::params::SoftmaxParams;
@@ -32,11 +32,8 @@ pub struct SceneGrads {
     pub n: u32,
     pub channels: u32,
     pub sh_coeffs: u32,
-    pub means: Buffer,
-    pub log_scales: Buffer,
-    pub quats: Buffer,
-    pub opacity_logits: Buffer,
-    pub sh: Buffer,
+    /// dL/d of each parameter tensor, named `grad_` + the tensor's name.
+    pub params: GaussianParams<Buffer>,
     /// dL/d(logits) [n*C].
     pub logits: Buffer,
     /// dL/d(softmax probabilities) [n*C], the blended vectors of the softmax mode.
@@ -60,11 +57,7 @@ pub struct SceneGrads {
 /// Gradients downloaded to the host (tests, diagnostics).
 #[derive(Clone, Debug, Default)]
 pub struct HostGrads {
-    pub means: Vec<f32>,
-    pub log_scales: Vec<f32>,
-    pub quats: Vec<f32>,
-    pub opacity_logits: Vec<f32>,
-    pub sh: Vec<f32>,
+    pub params: GaussianParams<Vec<f32>>,
     pub logits: Vec<f32>,
     /// The last view's screen-space gradients, GRAD2D_STRIDE per Gaussian.
     pub screen: Vec<f32>,
@@ -78,16 +71,17 @@ impl SceneGrads {
         let n = scene.n.max(1) as u64;
         let c = scene.channels.max(1) as u64;
         let b = |name: &str, floats: u64| gpu.buffer(name, floats * 4);
-        let [means, log_scales, quats, opacity, sh] = parameter_floats(scene.sh_coeffs.max(1));
+        let sh_coeffs = scene.sh_coeffs.max(1);
         let grads = SceneGrads {
             n: scene.n,
             channels: scene.channels,
             sh_coeffs: scene.sh_coeffs,
-            means: b("grad_means", n * means)?,
-            log_scales: b("grad_log_scales", n * log_scales)?,
-            quats: b("grad_quats", n * quats)?,
-            opacity_logits: b("grad_opacity_logits", n * opacity)?,
-            sh: b("grad_sh", n * sh)?,
+            params: GaussianParams::try_from_fn(|p| {
+                b(
+                    &format!("grad_{}", p.name()),
+                    n * p.floats(sh_coeffs) as u64,
+                )
+            })?,
             logits: b("grad_logits", n * c)?,
             probs: b("grad_probs", n * c)?,
             densify_grad: b("densify_grad", n)?,
@@ -121,15 +115,14 @@ impl SceneGrads {
 
     /// Records zeroing of the parameter gradients (start of an iteration).
     pub fn record_zero(&self, rec: &mut Recorder) {
-        for b in [
-            &self.means,
-            &self.log_scales,
-            &self.quats,
-            &self.opacity_logits,
-            &self.sh,
-            &self.logits,
-            &self.probs,
-        ] {
+        let semantic = [&self.logits, &self.probs];
+        for b in self
+            .params
+            .as_ref()
+            .into_array()
+            .into_iter()
+            .chain(semantic)
+        {
             rec.fill(b, 0, b.size(), 0);
         }
         rec.barrier();
@@ -170,32 +163,23 @@ impl SceneGrads {
     pub fn download(&self, gpu: &Gpu) -> Result<HostGrads> {
         let n = self.n as u64;
         let c = self.channels as u64;
-        let params = [
-            &self.means,
-            &self.log_scales,
-            &self.quats,
-            &self.opacity_logits,
-            &self.sh,
-        ];
-        let mut ranges = parameter_ranges(params, n, self.sh_coeffs);
-        ranges.extend([
+        let extra = [
             (&self.logits, 0, n * c * 4),
             (&self.screen, 0, n * GRAD2D_STRIDE as u64 * 4),
             (&self.densify_grad, 0, n * 4),
             (&self.densify_count, 0, n * 4),
-        ]);
-        let parts = gpu.download_many(&ranges)?;
-        let f = |k: usize| -> Vec<f32> { bytemuck::pod_collect_to_vec(&parts[k]) };
+        ];
+        let (params, extra) = self
+            .params
+            .download_with(gpu, self.n, self.sh_coeffs, &extra)?;
+        let [logits, screen, densify_grad, densify_count] =
+            <[Vec<f32>; 4]>::try_from(extra).expect("one part per extra range");
         Ok(HostGrads {
-            means: f(0),
-            log_scales: f(1),
-            quats: f(2),
-            opacity_logits: f(3),
-            sh: f(4),
-            logits: f(5),
-            screen: f(6),
-            densify_grad: f(7),
-            densify_count: f(8),
+            params,
+            logits,
+            screen,
+            densify_grad,
+            densify_count,
         })
     }
 }
@@ -299,18 +283,18 @@ impl TileLists<'_> {
         rec.dispatch(
             ids::RASTER_PROJECT_BACKWARD,
             &[
-                ("means", &scene.means),
-                ("log_scales", &scene.log_scales),
-                ("quats", &scene.quats),
-                ("opacity_logits", &scene.opacity_logits),
-                ("sh", &scene.sh),
+                ("means", &scene.params.means),
+                ("log_scales", &scene.params.log_scales),
+                ("quats", &scene.params.quats),
+                ("opacity_logits", &scene.params.opacity_logits),
+                ("sh", &scene.params.sh),
                 ("visible", self.visible_flags()),
                 ("grad2d", &grads.screen),
-                ("grad_means", &grads.means),
-                ("grad_log_scales", &grads.log_scales),
-                ("grad_quats", &grads.quats),
-                ("grad_opacity_logits", &grads.opacity_logits),
-                ("grad_sh", &grads.sh),
+                ("grad_means", &grads.params.means),
+                ("grad_log_scales", &grads.params.log_scales),
+                ("grad_quats", &grads.params.quats),
+                ("grad_opacity_logits", &grads.params.opacity_logits),
+                ("grad_sh", &grads.params.sh),
                 ("densify_grad", &grads.densify_grad),
                 ("densify_count", &grads.densify_count),
             ],

@@ -1,29 +1,219 @@
-//! A scene's Gaussians uploaded once, structure-of-arrays as the kernels read them.
+//! A scene's Gaussians uploaded once, structure-of-arrays as the kernels read them, and
+//! [`GaussianParams`], the one list of their parameter tensors.
+
+use std::convert::Infallible;
+use std::ops::{Index, IndexMut};
 
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, Gpu, GpuResult, Recorder};
+use crate::scene::gaussians::SemanticLogits;
 use crate::scene::Gaussians;
 
 use super::SemanticMode;
 use crate::contract::params::SoftmaxParams;
 
-/// Floats per Gaussian of the parameter tensors, in the order means, log-scales,
-/// quaternions, opacity logits, SH: the layout of `GpuScene` and of its gradients.
-pub(crate) fn parameter_floats(sh_coeffs: u32) -> [u64; 5] {
-    [3, 3, 4, 1, 3 * sh_coeffs as u64]
+/// One of a Gaussian's parameter tensors; a key into [`GaussianParams`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ParamTensor {
+    Means,
+    LogScales,
+    Quats,
+    OpacityLogits,
+    Sh,
 }
 
-/// Download ranges of `n` Gaussians' parameter tensors (or their gradients), in that order.
-pub(crate) fn parameter_ranges(
-    tensors: [&Buffer; 5],
-    n: u64,
-    sh_coeffs: u32,
-) -> Vec<(&Buffer, u64, u64)> {
-    tensors
-        .into_iter()
-        .zip(parameter_floats(sh_coeffs))
-        .map(|(b, floats)| (b, 0, n * floats * 4))
-        .collect()
+impl ParamTensor {
+    /// Every tensor, in the order of [`GaussianParams`]'s fields (and of every loop over
+    /// them: uploads, downloads, Adam steps, densify gathers).
+    pub const ALL: [ParamTensor; 5] = [
+        ParamTensor::Means,
+        ParamTensor::LogScales,
+        ParamTensor::Quats,
+        ParamTensor::OpacityLogits,
+        ParamTensor::Sh,
+    ];
+
+    /// The tensor's name: its buffer's name, and its binding name in the kernels (the
+    /// gradient's is `grad_` + this).
+    pub fn name(self) -> &'static str {
+        match self {
+            ParamTensor::Means => "means",
+            ParamTensor::LogScales => "log_scales",
+            ParamTensor::Quats => "quats",
+            ParamTensor::OpacityLogits => "opacity_logits",
+            ParamTensor::Sh => "sh",
+        }
+    }
+
+    /// Floats per Gaussian: xyz, log-scale xyz, quaternion wxyz, one logit, RGB per SH
+    /// coefficient.
+    pub fn floats(self, sh_coeffs: u32) -> u32 {
+        match self {
+            ParamTensor::Means | ParamTensor::LogScales => 3,
+            ParamTensor::Quats => 4,
+            ParamTensor::OpacityLogits => 1,
+            ParamTensor::Sh => 3 * sh_coeffs,
+        }
+    }
+}
+
+/// One value per parameter tensor of a Gaussian set: the tensors themselves (on the device
+/// or the host), their gradients, their optimizer state, anything kept per tensor.
+///
+/// The semantic logits are not a field: fusion scenes have none, their width is the class
+/// count rather than a property of the Gaussian, and training treats them apart (frozen
+/// geometry trains them alone). Holders keep them in an `Option` beside this.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct GaussianParams<T> {
+    pub means: T,
+    pub log_scales: T,
+    pub quats: T,
+    pub opacity_logits: T,
+    pub sh: T,
+}
+
+impl<T> GaussianParams<T> {
+    /// Builds each field from its tensor, calling `f` in [`ParamTensor::ALL`] order.
+    pub fn from_fn(mut f: impl FnMut(ParamTensor) -> T) -> GaussianParams<T> {
+        GaussianParams {
+            means: f(ParamTensor::Means),
+            log_scales: f(ParamTensor::LogScales),
+            quats: f(ParamTensor::Quats),
+            opacity_logits: f(ParamTensor::OpacityLogits),
+            sh: f(ParamTensor::Sh),
+        }
+    }
+
+    /// [`GaussianParams::from_fn`] that stops at the first error.
+    pub fn try_from_fn<E>(
+        f: impl FnMut(ParamTensor) -> Result<T, E>,
+    ) -> Result<GaussianParams<T>, E> {
+        GaussianParams::from_fn(|p| p).try_map(f)
+    }
+
+    pub fn as_ref(&self) -> GaussianParams<&T> {
+        GaussianParams::from_fn(|p| &self[p])
+    }
+
+    /// Applies `f` to every field, in [`ParamTensor::ALL`] order.
+    pub fn map<U>(self, mut f: impl FnMut(T) -> U) -> GaussianParams<U> {
+        let Ok(mapped) = self.try_map(|t| Ok::<U, Infallible>(f(t)));
+        mapped
+    }
+
+    /// Applies `f` to every field, in [`ParamTensor::ALL`] order; stops at the first
+    /// error.
+    pub fn try_map<U, E>(
+        self,
+        mut f: impl FnMut(T) -> Result<U, E>,
+    ) -> Result<GaussianParams<U>, E> {
+        Ok(GaussianParams {
+            means: f(self.means)?,
+            log_scales: f(self.log_scales)?,
+            quats: f(self.quats)?,
+            opacity_logits: f(self.opacity_logits)?,
+            sh: f(self.sh)?,
+        })
+    }
+
+    /// The fields in [`ParamTensor::ALL`] order.
+    pub fn into_array(self) -> [T; 5] {
+        [
+            self.means,
+            self.log_scales,
+            self.quats,
+            self.opacity_logits,
+            self.sh,
+        ]
+    }
+
+    /// Every tensor with its value, in [`ParamTensor::ALL`] order.
+    pub fn iter(&self) -> impl Iterator<Item = (ParamTensor, &T)> {
+        ParamTensor::ALL.into_iter().map(move |p| (p, &self[p]))
+    }
+}
+
+impl<A, B> GaussianParams<(A, B)> {
+    pub fn unzip(self) -> (GaussianParams<A>, GaussianParams<B>) {
+        let [means, log_scales, quats, opacity_logits, sh] = self.into_array();
+        (
+            GaussianParams {
+                means: means.0,
+                log_scales: log_scales.0,
+                quats: quats.0,
+                opacity_logits: opacity_logits.0,
+                sh: sh.0,
+            },
+            GaussianParams {
+                means: means.1,
+                log_scales: log_scales.1,
+                quats: quats.1,
+                opacity_logits: opacity_logits.1,
+                sh: sh.1,
+            },
+        )
+    }
+}
+
+impl<T> Index<ParamTensor> for GaussianParams<T> {
+    type Output = T;
+
+    fn index(&self, p: ParamTensor) -> &T {
+        match p {
+            ParamTensor::Means => &self.means,
+            ParamTensor::LogScales => &self.log_scales,
+            ParamTensor::Quats => &self.quats,
+            ParamTensor::OpacityLogits => &self.opacity_logits,
+            ParamTensor::Sh => &self.sh,
+        }
+    }
+}
+
+impl<T> IndexMut<ParamTensor> for GaussianParams<T> {
+    fn index_mut(&mut self, p: ParamTensor) -> &mut T {
+        match p {
+            ParamTensor::Means => &mut self.means,
+            ParamTensor::LogScales => &mut self.log_scales,
+            ParamTensor::Quats => &mut self.quats,
+            ParamTensor::OpacityLogits => &mut self.opacity_logits,
+            ParamTensor::Sh => &mut self.sh,
+        }
+    }
+}
+
+impl GaussianParams<Buffer> {
+    /// Downloads the first `n` Gaussians of every tensor, and the `extra` ranges, in one
+    /// transfer; returns the tensors and the extra ranges, each as f32.
+    pub(crate) fn download_with(
+        &self,
+        gpu: &Gpu,
+        n: u32,
+        sh_coeffs: u32,
+        extra: &[(&Buffer, u64, u64)],
+    ) -> GpuResult<(GaussianParams<Vec<f32>>, Vec<Vec<f32>>)> {
+        let mut ranges: Vec<(&Buffer, u64, u64)> = self
+            .iter()
+            .map(|(p, b)| (b, 0, n as u64 * p.floats(sh_coeffs) as u64 * 4))
+            .collect();
+        ranges.extend_from_slice(extra);
+        let mut parts = gpu
+            .download_many(&ranges)?
+            .into_iter()
+            .map(|bytes| bytemuck::pod_collect_to_vec::<u8, f32>(&bytes));
+        let params = GaussianParams::from_fn(|_| parts.next().expect("one part per range"));
+        Ok((params, parts.collect()))
+    }
+}
+
+/// `g`'s parameter tensors as the flat f32 arrays the device holds.
+fn host_tensors(g: &Gaussians) -> GaussianParams<&[f32]> {
+    GaussianParams {
+        means: g.means.as_flattened(),
+        log_scales: g.log_scales.as_flattened(),
+        quats: g.quats.as_flattened(),
+        opacity_logits: &g.opacity_logits,
+        sh: &g.sh,
+    }
 }
 
 /// Gaussians on the device. Semantic logits are optional; their softmax is computed on
@@ -34,19 +224,14 @@ pub struct GpuScene {
     pub sh_coeffs: u32,
     /// Semantic channels C (0 without semantics).
     pub channels: u32,
-    pub(crate) means: Buffer,
-    pub(crate) log_scales: Buffer,
-    pub(crate) quats: Buffer,
-    pub(crate) opacity_logits: Buffer,
-    pub(crate) sh: Buffer,
+    pub(crate) params: GaussianParams<Buffer>,
+    /// [n * C]
     pub(crate) logits: Option<Buffer>,
     pub(crate) probs: std::sync::OnceLock<Buffer>,
 }
 
 impl GpuScene {
     pub fn upload(gpu: &Gpu, g: &Gaussians) -> GpuResult<GpuScene> {
-        let flat3 = |v: &[[f32; 3]]| -> Vec<f32> { v.iter().flatten().copied().collect() };
-        let quats: Vec<f32> = g.quats.iter().flatten().copied().collect();
         let (channels, logits) = match &g.semantics {
             Some(s) if s.channels > 0 => (
                 s.channels as u32,
@@ -54,16 +239,13 @@ impl GpuScene {
             ),
             _ => (0, None),
         };
+        let host = host_tensors(g);
         Ok(GpuScene {
             n: g.len() as u32,
             sh_degree: g.sh_degree,
             sh_coeffs: g.sh_coeffs() as u32,
             channels,
-            means: gpu.buffer_from("means", &flat3(&g.means))?,
-            log_scales: gpu.buffer_from("log_scales", &flat3(&g.log_scales))?,
-            quats: gpu.buffer_from("quats", &quats)?,
-            opacity_logits: gpu.buffer_from("opacity_logits", &g.opacity_logits)?,
-            sh: gpu.buffer_from("sh", &g.sh)?,
+            params: GaussianParams::try_from_fn(|p| gpu.buffer_from(p.name(), host[p]))?,
             logits,
             probs: std::sync::OnceLock::new(),
         })
@@ -111,42 +293,25 @@ impl GpuScene {
         Ok(())
     }
 
-    /// The parameter tensors in the order of [`parameter_floats`].
-    pub(crate) fn parameters(&self) -> [&Buffer; 5] {
-        [
-            &self.means,
-            &self.log_scales,
-            &self.quats,
-            &self.opacity_logits,
-            &self.sh,
-        ]
-    }
-
     /// Downloads the parameters into `g`'s arrays (which must have this scene's shape:
     /// training changes values, and densification rebuilds `g` to the new count first).
     pub fn download_into(&self, gpu: &Gpu, g: &mut Gaussians) -> GpuResult<()> {
-        let n = self.n as u64;
-        let c = self.channels as u64;
-        let mut ranges = parameter_ranges(self.parameters(), n, self.sh_coeffs);
-        if let Some(logits) = &self.logits {
-            ranges.push((logits, 0, n * c * 4));
-        }
-        let parts = gpu.download_many(&ranges)?;
-        let f = |k: usize| -> Vec<f32> { bytemuck::pod_collect_to_vec(&parts[k]) };
-        let triples = |v: Vec<f32>| v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
-        g.means = triples(f(0));
-        g.log_scales = triples(f(1));
-        g.quats = f(2)
-            .chunks_exact(4)
-            .map(|c| [c[0], c[1], c[2], c[3]])
-            .collect();
-        g.opacity_logits = f(3);
-        g.sh = f(4);
+        let logits_bytes = self.n as u64 * self.channels as u64 * 4;
+        let extra: Vec<(&Buffer, u64, u64)> =
+            self.logits.iter().map(|b| (b, 0, logits_bytes)).collect();
+        let (params, mut extra) = self
+            .params
+            .download_with(gpu, self.n, self.sh_coeffs, &extra)?;
+        g.means = bytemuck::cast_slice(&params.means).to_vec();
+        g.log_scales = bytemuck::cast_slice(&params.log_scales).to_vec();
+        g.quats = bytemuck::cast_slice(&params.quats).to_vec();
+        g.opacity_logits = params.opacity_logits;
+        g.sh = params.sh;
         g.sh_degree = self.sh_degree;
-        if self.logits.is_some() {
-            g.semantics = Some(crate::scene::gaussians::SemanticLogits {
+        if let Some(logits) = extra.pop() {
+            g.semantics = Some(SemanticLogits {
                 channels: self.channels as usize,
-                logits: f(5),
+                logits,
             });
         }
         Ok(())

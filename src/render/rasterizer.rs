@@ -392,11 +392,11 @@ impl Rasterizer {
         let t = cam.translation;
         let params = project_params(cam, scene, opts.near, opts.far);
         let mut bindings: Vec<(&str, &Buffer)> = vec![
-            ("means", &scene.means),
-            ("log_scales", &scene.log_scales),
-            ("quats", &scene.quats),
-            ("opacity_logits", &scene.opacity_logits),
-            ("sh", &scene.sh),
+            ("means", &scene.params.means),
+            ("log_scales", &scene.params.log_scales),
+            ("quats", &scene.params.quats),
+            ("opacity_logits", &scene.params.opacity_logits),
+            ("sh", &scene.params.sh),
             ("xy_depth_opacity", &b.xy),
             ("xy_frac", &b.xy_frac),
             ("conics", &b.conic),

@@ -2,15 +2,13 @@
 //! uses), and the 3DGS exponential learning-rate schedule for the positions.
 
 use anyhow::{ensure, Result};
-use bytemuck::{Pod, Zeroable};
 
+use crate::contract::params::AdamParams;
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, Gpu, Recorder};
 
 /// Most workgroups of one Adam dispatch; invocations stride over larger tensors.
 const MAX_GROUPS: u32 = 65_535;
-/// Invocations per workgroup (adam.comp: local_size_x).
-const WG: u32 = 256;
 
 /// The hyper-parameters of one step. `step` counts from 1 (the first update). In f64:
 /// the kernel gets lr / (1 - beta1^t), 1 - beta and the like rounded once from these.
@@ -73,19 +71,6 @@ impl AdamMoments {
     }
 }
 
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct AdamParams {
-    count: u32,
-    beta1: f32,
-    beta2: f32,
-    one_minus_beta1: f32,
-    one_minus_beta2: f32,
-    eps: f32,
-    step_size: f32,
-    sqrt_bc2: f32,
-}
-
 /// Records one Adam step on `t`: m = b1 m + (1-b1) g, v = b2 v + (1-b2) g^2,
 /// param -= lr / (1 - b1^t) * m / (sqrt(v) / sqrt(1 - b2^t) + eps). Barriers before (the
 /// gradient written earlier in `rec` is seen) and after (the new parameters are).
@@ -131,8 +116,8 @@ pub fn record_adam(rec: &mut Recorder, t: &AdamTensor<'_>, s: AdamStep) -> Resul
             ("exp_avg", t.exp_avg),
             ("exp_avg_sq", t.exp_avg_sq),
         ],
-        bytemuck::bytes_of(&params),
-        [t.count.div_ceil(WG).min(MAX_GROUPS), 1, 1],
+        &params,
+        [ids::TRAIN_ADAM.groups_for(t.count)[0].min(MAX_GROUPS), 1, 1],
     )?;
     rec.barrier();
     Ok(())

@@ -4,6 +4,7 @@
 
 use serde::Serialize;
 
+use crate::render::gpu_scene::ParamTensor;
 use crate::render::SemanticMode;
 
 /// 3DGS's schedule is written for this many iterations.
@@ -23,6 +24,20 @@ pub struct LearningRates {
     pub quats: f64,
     /// Semantic logits (not in 3DGS; chosen by measurement, see README).
     pub logits: f64,
+}
+
+impl LearningRates {
+    /// The constant rate of a parameter tensor; None for the means, whose rate follows
+    /// the position schedule ([`super::adam::ExponentialLr::positions`]).
+    pub fn constant(&self, param: ParamTensor) -> Option<f64> {
+        match param {
+            ParamTensor::Means => None,
+            ParamTensor::LogScales => Some(self.log_scales),
+            ParamTensor::Quats => Some(self.quats),
+            ParamTensor::OpacityLogits => Some(self.opacity),
+            ParamTensor::Sh => Some(self.sh),
+        }
+    }
 }
 
 impl Default for LearningRates {

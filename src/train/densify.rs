@@ -37,27 +37,28 @@
 //! (glsl/train/densify_common.glsl: `split_normal`).
 
 use anyhow::{ensure, Result};
-use bytemuck::{Pod, Zeroable};
 
+use crate::contract::params::{
+    DensifyClassifyParams, DensifyCompactParams, DensifyLayoutParams, GatherParams,
+    ResetOpacityParams,
+};
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, Gpu, GpuCount, PrefixScan, RadixSort, Recorder};
+use crate::render::gpu_scene::ParamTensor;
 
-/// Threads per workgroup of every densify kernel (densify_common.glsl: DENSIFY_WG_SIZE).
-const WG_SIZE: u32 = 256;
-/// Plan status words (densify_common.glsl: DS_*).
-const DS_SURVIVORS: usize = 0;
-const DS_CANDIDATES: usize = 1;
-const DS_DENSIFIED: usize = 2;
-const DS_CLONED: usize = 3;
-const DS_SPLIT: usize = 4;
-const DS_NEW_N: usize = 5;
-const DS_N_PLUS1: u32 = 6;
-const DS_WORDS: u64 = 8;
-/// Gather roles (densify_gather.comp: ROLE_*).
-const ROLE_COPY: u32 = 0;
-const ROLE_MOMENT: u32 = 1;
-const ROLE_MEANS: u32 = 2;
-const ROLE_LOG_SCALES: u32 = 3;
+use crate::contract::{
+    self, DENSIFY_WG_SIZE as WG_SIZE, DS_N_PLUS1, ROLE_COPY, ROLE_LOG_SCALES, ROLE_MEANS,
+    ROLE_MOMENT,
+};
+
+/// Plan status words, as indices into the downloaded status.
+const DS_SURVIVORS: usize = contract::DS_SURVIVORS as usize;
+const DS_CANDIDATES: usize = contract::DS_CANDIDATES as usize;
+const DS_DENSIFIED: usize = contract::DS_DENSIFIED as usize;
+const DS_CLONED: usize = contract::DS_CLONED as usize;
+const DS_SPLIT: usize = contract::DS_SPLIT as usize;
+const DS_NEW_N: usize = contract::DS_NEW_N as usize;
+const DS_WORDS: u64 = contract::DS_WORDS as u64;
 
 /// Opacity that 3DGS's opacity reset caps every Gaussian at.
 pub const OPACITY_RESET: f32 = 0.01;
@@ -119,6 +120,12 @@ impl DensifyConfig {
         );
         Ok(())
     }
+
+    /// ln(fraction * extent), computed in f64 on the host: the kernels compare log-scales
+    /// against it without exp, so they agree with any device's exp.
+    fn ln_extent(&self, fraction: f64) -> f32 {
+        (fraction * self.extent as f64).ln() as f32
+    }
 }
 
 /// The per-Gaussian tensors a plan reads (f32, structure-of-arrays, `n` Gaussians).
@@ -135,6 +142,34 @@ pub struct DensifyInputs<'a> {
     pub grad_accum: &'a Buffer,
     /// `[n]`: views in which the Gaussian was visible
     pub grad_count: &'a Buffer,
+}
+
+impl DensifyInputs<'_> {
+    /// Checks the count against the cap and every buffer against the count.
+    fn check(&self, config: &DensifyConfig) -> Result<()> {
+        let n = self.n;
+        ensure!(
+            n <= config.max_gaussians,
+            "densify: {n} Gaussians already exceed max_gaussians = {}",
+            config.max_gaussians
+        );
+        let n64 = n as u64;
+        for (name, buf, width) in [
+            ("log_scales", self.log_scales, 3),
+            ("quats", self.quats, 4),
+            ("opacity_logits", self.opacity_logits, 1),
+            ("grad_accum", self.grad_accum, 1),
+            ("grad_count", self.grad_count, 1),
+        ] {
+            ensure!(
+                buf.size() >= n64 * width * 4,
+                "densify: {name} holds {} bytes, {n} Gaussians need {}",
+                buf.size(),
+                n64 * width * 4
+            );
+        }
+        Ok(())
+    }
 }
 
 /// The outcome of [`Densifier::plan`]: counts for logging, and the key to apply it.
@@ -178,44 +213,16 @@ pub enum Role {
     Zeroed,
 }
 
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct ClassifyParams {
-    n: u32,
-    grad_threshold: f32,
-    opacity_logit_min: f32,
-    ln_prune_scale: f32,
-}
-
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct CompactParams {
-    n: u32,
-    max_gaussians: u32,
-}
-
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct LayoutParams {
-    n: u32,
-    ln_split_scale: f32,
-    seed: [u32; 2],
-}
-
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct GatherParams {
-    elements: u32,
-    width: u32,
-    role: u32,
-    ln_split_shrink: f32,
-}
-
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct ResetParams {
-    n: u32,
-    max_logit: f32,
+impl Role {
+    /// How a Gaussian parameter tensor is rebuilt: split children move their means and
+    /// shrink their scales; they copy everything else.
+    pub fn of(param: ParamTensor) -> Role {
+        match param {
+            ParamTensor::Means => Role::Means,
+            ParamTensor::LogScales => Role::LogScales,
+            ParamTensor::Quats | ParamTensor::OpacityLogits | ParamTensor::Sh => Role::Copy,
+        }
+    }
 }
 
 /// Scratch of a plan, sized for `n_cap` Gaussians in and `slot_cap` out.
@@ -259,6 +266,167 @@ impl PlanBuffers {
             scan: PrefixScan::new(gpu, n_cap + 1)?,
             sort: RadixSort::new(gpu, n_cap)?,
         })
+    }
+}
+
+impl PlanBuffers {
+    /// Records the choice of what each Gaussian becomes: classify (prune, candidate,
+    /// output slots), compact the candidates, sort them by gradient when the cap bites,
+    /// and select the densified ones.
+    fn record_select(
+        &self,
+        rec: &mut Recorder,
+        inputs: &DensifyInputs,
+        config: &DensifyConfig,
+    ) -> Result<()> {
+        let n = inputs.n;
+        let n64 = n as u64;
+        // The opacity threshold moves to logit space on the host (in f64), as the scale
+        // thresholds move to log space.
+        let logit = |p: f64| (p / (1.0 - p)).ln();
+        let classify = DensifyClassifyParams {
+            n,
+            grad_threshold: config.grad_threshold,
+            opacity_logit_min: logit(config.min_opacity as f64) as f32,
+            ln_prune_scale: if config.prune_large {
+                config.ln_extent(0.1)
+            } else {
+                f32::INFINITY
+            },
+        };
+        rec.fill(&self.status, 0, DS_WORDS * 4, 0);
+        rec.fill(&self.status, DS_N_PLUS1 as u64 * 4, 4, n + 1);
+        rec.barrier();
+        rec.dispatch(
+            ids::TRAIN_DENSIFY_CLASSIFY,
+            &[
+                ("log_scales", inputs.log_scales),
+                ("opacity_logits", inputs.opacity_logits),
+                ("grad_accum", inputs.grad_accum),
+                ("grad_count", inputs.grad_count),
+                ("candidate_flags", &self.candidate_flags),
+                ("out_count", &self.out_count),
+                ("status", &self.status),
+            ],
+            &classify,
+            groups(n64 + 1),
+        )?;
+        rec.barrier();
+        self.scan.record(
+            rec,
+            &self.candidate_flags,
+            &self.candidate_offsets,
+            GpuCount::at(&self.status, DS_N_PLUS1),
+        )?;
+        self.record_compact(rec, inputs, config)?;
+        rec.dispatch(
+            ids::TRAIN_DENSIFY_SELECT,
+            &[
+                ("status", &self.status),
+                ("candidate_ids", &self.candidate_ids),
+                ("out_count", &self.out_count),
+            ],
+            &(),
+            groups(n64),
+        )?;
+        rec.barrier();
+        Ok(())
+    }
+
+    /// Records compacting the candidates into sort keys and, when the cap can leave some
+    /// out, their sort.
+    fn record_compact(
+        &self,
+        rec: &mut Recorder,
+        inputs: &DensifyInputs,
+        config: &DensifyConfig,
+    ) -> Result<()> {
+        let n64 = inputs.n as u64;
+        rec.dispatch(
+            ids::TRAIN_DENSIFY_COMPACT,
+            &[
+                ("grad_accum", inputs.grad_accum),
+                ("grad_count", inputs.grad_count),
+                ("candidate_flags", &self.candidate_flags),
+                ("candidate_offsets", &self.candidate_offsets),
+                ("candidate_keys", &self.candidate_keys),
+                ("candidate_ids", &self.candidate_ids),
+                ("status", &self.status),
+            ],
+            &DensifyCompactParams {
+                n: inputs.n,
+                max_gaussians: config.max_gaussians,
+            },
+            groups(n64 + 1),
+        )?;
+        rec.barrier();
+        // Only a budget below 2n can leave candidates out; then the largest gradients go
+        // first. Otherwise every candidate is densified and their order does not matter.
+        if 2 * n64 > config.max_gaussians as u64 {
+            self.sort.record(
+                rec,
+                &self.candidate_keys,
+                &self.candidate_ids,
+                GpuCount::at(&self.status, DS_CANDIDATES as u32),
+                32,
+            )?;
+        }
+        Ok(())
+    }
+
+    /// Records the layout of the new set: each Gaussian's first output slot (a scan of
+    /// its output counts), and per slot its source, kind and mean offset.
+    fn record_layout(
+        &self,
+        rec: &mut Recorder,
+        inputs: &DensifyInputs,
+        config: &DensifyConfig,
+    ) -> Result<()> {
+        self.scan.record(
+            rec,
+            &self.out_count,
+            &self.out_offsets,
+            GpuCount::at(&self.status, DS_N_PLUS1),
+        )?;
+        let layout = DensifyLayoutParams {
+            n: inputs.n,
+            ln_split_scale: config.ln_extent(config.percent_dense as f64),
+            seed: [config.seed as u32, (config.seed >> 32) as u32],
+        };
+        rec.dispatch(
+            ids::TRAIN_DENSIFY_LAYOUT,
+            &[
+                ("log_scales", inputs.log_scales),
+                ("quats", inputs.quats),
+                ("out_offsets", &self.out_offsets),
+                ("slot_source", &self.slot_source),
+                ("slot_kind", &self.slot_kind),
+                ("slot_mean_delta", &self.slot_mean_delta),
+                ("status", &self.status),
+            ],
+            &layout,
+            groups(inputs.n as u64 + 1),
+        )?;
+        Ok(())
+    }
+
+    /// Downloads the plan's counts (after its submission) into `plan`, checking that they
+    /// agree with each other and the cap.
+    fn read_counts(&self, gpu: &Gpu, plan: &mut DensifyPlan, config: &DensifyConfig) -> Result<()> {
+        let status: Vec<u32> = gpu.download(&self.status, 0, DS_WORDS as usize)?;
+        plan.new_n = status[DS_NEW_N];
+        plan.pruned = plan.n - status[DS_SURVIVORS];
+        plan.cloned = status[DS_CLONED];
+        plan.split = status[DS_SPLIT];
+        plan.candidates = status[DS_CANDIDATES];
+        let densified = status[DS_DENSIFIED];
+        ensure!(
+            plan.cloned + plan.split == densified
+                && plan.new_n == status[DS_SURVIVORS] + densified
+                && plan.new_n <= config.max_gaussians,
+            "densify: inconsistent plan counts {status:?}"
+        );
+        Ok(())
     }
 }
 
@@ -331,27 +499,8 @@ impl Densifier {
     /// [`Densifier::apply`] until the next call.
     pub fn plan(&mut self, inputs: &DensifyInputs, config: &DensifyConfig) -> Result<DensifyPlan> {
         config.validate()?;
+        inputs.check(config)?;
         let n = inputs.n;
-        ensure!(
-            n <= config.max_gaussians,
-            "densify: {n} Gaussians already exceed max_gaussians = {}",
-            config.max_gaussians
-        );
-        let n64 = n as u64;
-        for (name, buf, width) in [
-            ("log_scales", inputs.log_scales, 3),
-            ("quats", inputs.quats, 4),
-            ("opacity_logits", inputs.opacity_logits, 1),
-            ("grad_accum", inputs.grad_accum, 1),
-            ("grad_count", inputs.grad_count, 1),
-        ] {
-            ensure!(
-                buf.size() >= n64 * width * 4,
-                "densify: {name} holds {} bytes, {n} Gaussians need {}",
-                buf.size(),
-                n64 * width * 4
-            );
-        }
         self.generation += 1;
         let mut plan = DensifyPlan {
             n,
@@ -365,123 +514,15 @@ impl Densifier {
         if n == 0 {
             return Ok(plan);
         }
+        let n64 = n as u64;
         let slots = (2 * n64).min(config.max_gaussians as u64);
         self.ensure(n64, slots)?;
         let b = self.bufs.as_ref().expect("ensured");
-
-        // Thresholds move to log and logit space on the host (in f64), so the kernels
-        // compare without exp and agree with any device's exp.
-        let logit = |p: f64| (p / (1.0 - p)).ln();
-        let ln_extent = |fraction: f64| (fraction * config.extent as f64).ln() as f32;
-        let classify = ClassifyParams {
-            n,
-            grad_threshold: config.grad_threshold,
-            opacity_logit_min: logit(config.min_opacity as f64) as f32,
-            ln_prune_scale: if config.prune_large {
-                ln_extent(0.1)
-            } else {
-                f32::INFINITY
-            },
-        };
-        let n_plus1 = GpuCount::at(&b.status, DS_N_PLUS1);
-
         let mut rec = Recorder::new(&self.gpu)?;
-        rec.fill(&b.status, 0, DS_WORDS * 4, 0);
-        rec.fill(&b.status, DS_N_PLUS1 as u64 * 4, 4, n + 1);
-        rec.barrier();
-        rec.dispatch(
-            ids::TRAIN_DENSIFY_CLASSIFY,
-            &[
-                ("log_scales", inputs.log_scales),
-                ("opacity_logits", inputs.opacity_logits),
-                ("grad_accum", inputs.grad_accum),
-                ("grad_count", inputs.grad_count),
-                ("candidate_flags", &b.candidate_flags),
-                ("out_count", &b.out_count),
-                ("status", &b.status),
-            ],
-            bytemuck::bytes_of(&classify),
-            groups(n64 + 1),
-        )?;
-        rec.barrier();
-        b.scan
-            .record(&mut rec, &b.candidate_flags, &b.candidate_offsets, n_plus1)?;
-        rec.dispatch(
-            ids::TRAIN_DENSIFY_COMPACT,
-            &[
-                ("grad_accum", inputs.grad_accum),
-                ("grad_count", inputs.grad_count),
-                ("candidate_flags", &b.candidate_flags),
-                ("candidate_offsets", &b.candidate_offsets),
-                ("candidate_keys", &b.candidate_keys),
-                ("candidate_ids", &b.candidate_ids),
-                ("status", &b.status),
-            ],
-            bytemuck::bytes_of(&CompactParams {
-                n,
-                max_gaussians: config.max_gaussians,
-            }),
-            groups(n64 + 1),
-        )?;
-        rec.barrier();
-        // Only a budget below 2n can leave candidates out; then the largest gradients go
-        // first. Otherwise every candidate is densified and their order does not matter.
-        if 2 * n64 > config.max_gaussians as u64 {
-            b.sort.record(
-                &mut rec,
-                &b.candidate_keys,
-                &b.candidate_ids,
-                GpuCount::at(&b.status, DS_CANDIDATES as u32),
-                32,
-            )?;
-        }
-        rec.dispatch(
-            ids::TRAIN_DENSIFY_SELECT,
-            &[
-                ("status", &b.status),
-                ("candidate_ids", &b.candidate_ids),
-                ("out_count", &b.out_count),
-            ],
-            &[],
-            groups(n64),
-        )?;
-        rec.barrier();
-        b.scan
-            .record(&mut rec, &b.out_count, &b.out_offsets, n_plus1)?;
-        let layout = LayoutParams {
-            n,
-            ln_split_scale: ln_extent(config.percent_dense as f64),
-            seed: [config.seed as u32, (config.seed >> 32) as u32],
-        };
-        rec.dispatch(
-            ids::TRAIN_DENSIFY_LAYOUT,
-            &[
-                ("log_scales", inputs.log_scales),
-                ("quats", inputs.quats),
-                ("out_offsets", &b.out_offsets),
-                ("slot_source", &b.slot_source),
-                ("slot_kind", &b.slot_kind),
-                ("slot_mean_delta", &b.slot_mean_delta),
-                ("status", &b.status),
-            ],
-            bytemuck::bytes_of(&layout),
-            groups(n64 + 1),
-        )?;
+        b.record_select(&mut rec, inputs, config)?;
+        b.record_layout(&mut rec, inputs, config)?;
         rec.submit_and_wait()?;
-
-        let status: Vec<u32> = self.gpu.download(&b.status, 0, DS_WORDS as usize)?;
-        plan.new_n = status[DS_NEW_N];
-        plan.pruned = n - status[DS_SURVIVORS];
-        plan.cloned = status[DS_CLONED];
-        plan.split = status[DS_SPLIT];
-        plan.candidates = status[DS_CANDIDATES];
-        let densified = status[DS_DENSIFIED];
-        ensure!(
-            plan.cloned + plan.split == densified
-                && plan.new_n == status[DS_SURVIVORS] + densified
-                && plan.new_n <= config.max_gaussians,
-            "densify: inconsistent plan counts {status:?}"
-        );
+        b.read_counts(&self.gpu, &mut plan, config)?;
         Ok(plan)
     }
 
@@ -497,6 +538,41 @@ impl Densifier {
         width: u32,
         role: Role,
     ) -> Result<Buffer> {
+        let elements = self.check_apply(plan, tensor, width, role)?;
+        let out = self.gpu.buffer(tensor.name(), elements * 4)?;
+        let role = match role {
+            Role::Zeroed => {
+                rec.fill(&out, 0, elements * 4, 0);
+                rec.barrier();
+                return Ok(out);
+            }
+            Role::Copy => ROLE_COPY,
+            Role::AdamMoment => ROLE_MOMENT,
+            Role::Means => ROLE_MEANS,
+            Role::LogScales => ROLE_LOG_SCALES,
+        };
+        if elements == 0 {
+            return Ok(out);
+        }
+        let params = GatherParams {
+            elements: elements as u32,
+            width,
+            role,
+            ln_split_shrink: 1.6f64.ln() as f32,
+        };
+        self.record_gather(rec, tensor, &out, &params)?;
+        Ok(out)
+    }
+
+    /// Checks that `plan` is this densifier's latest and that `tensor` fits it; returns
+    /// the floats of the tensor after the step.
+    fn check_apply(
+        &self,
+        plan: &DensifyPlan,
+        tensor: &Buffer,
+        width: u32,
+        role: Role,
+    ) -> Result<u64> {
         ensure!(
             plan.generation == self.generation,
             "densify: this plan was replaced by a later plan of the same densifier"
@@ -522,41 +598,30 @@ impl Densifier {
             plan.n
         );
         let elements = plan.new_n as u64 * width as u64;
-        let caps = self.gpu.caps();
         ensure!(
-            elements * 4 <= caps.max_storage_buffer_range,
+            elements * 4 <= self.gpu.caps().max_storage_buffer_range,
             "densify: {} after the step ({elements} f32) exceeds the device's binding limit",
             tensor.name()
         );
-        let out = self.gpu.buffer(tensor.name(), elements * 4)?;
-        let role = match role {
-            Role::Zeroed => {
-                rec.fill(&out, 0, elements * 4, 0);
-                rec.barrier();
-                return Ok(out);
-            }
-            Role::Copy => ROLE_COPY,
-            Role::AdamMoment => ROLE_MOMENT,
-            Role::Means => ROLE_MEANS,
-            Role::LogScales => ROLE_LOG_SCALES,
-        };
-        if elements == 0 {
-            return Ok(out);
-        }
+        Ok(elements)
+    }
+
+    /// Records the gather of `tensor` into `out` by the plan's slots.
+    fn record_gather(
+        &self,
+        rec: &mut Recorder,
+        tensor: &Buffer,
+        out: &Buffer,
+        params: &GatherParams,
+    ) -> Result<()> {
         let b = self
             .bufs
             .as_ref()
             .expect("a plan with Gaussians has buffers");
         // A 2D grid: one element per invocation can pass 65,535 workgroups.
-        let total = elements.div_ceil(WG_SIZE as u64);
-        let gx = total.min(caps.max_workgroup_count[0] as u64);
+        let total = (params.elements as u64).div_ceil(WG_SIZE as u64);
+        let gx = total.min(self.gpu.caps().max_workgroup_count[0] as u64);
         let gy = total.div_ceil(gx);
-        let params = GatherParams {
-            elements: elements as u32,
-            width,
-            role,
-            ln_split_shrink: 1.6f64.ln() as f32,
-        };
         rec.dispatch(
             ids::TRAIN_DENSIFY_GATHER,
             &[
@@ -564,13 +629,13 @@ impl Densifier {
                 ("slot_kind", &b.slot_kind),
                 ("slot_mean_delta", &b.slot_mean_delta),
                 ("src", tensor),
-                ("dst", &out),
+                ("dst", out),
             ],
-            bytemuck::bytes_of(&params),
+            params,
             [gx as u32, gy as u32, 1],
         )?;
         rec.barrier();
-        Ok(out)
+        Ok(())
     }
 }
 
@@ -599,14 +664,14 @@ pub fn reset_opacity(
         );
     }
     let p = max_opacity as f64;
-    let params = ResetParams {
+    let params = ResetOpacityParams {
         n,
         max_logit: (p / (1.0 - p)).ln() as f32,
     };
     rec.dispatch(
         ids::TRAIN_DENSIFY_RESET_OPACITY,
         &[("opacity_logits", opacity_logits)],
-        bytemuck::bytes_of(&params),
+        &params,
         groups(n as u64),
     )?;
     for m in moments {

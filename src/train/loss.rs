@@ -10,19 +10,22 @@
 //! semantic term; loss_reduce adds each workgroup's partials in a fixed order.
 
 use anyhow::{bail, ensure, Result};
-use bytemuck::{Pod, Zeroable};
 
 pub use super::loss_entropy::entropy_weight;
 pub use super::loss_values::LossValues;
 use super::loss_values::{L1_WEIGHT, SLOTS, SLOT_CE, SLOT_L1, SLOT_LABELED, SLOT_SE, SSIM_WEIGHT};
+use crate::contract::params::{
+    CountLabelsParams, CrossEntropyParams, ImageSizeParams, LossReduceParams, SsimBackwardParams,
+    SsimForwardParams,
+};
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, Gpu, Recorder};
 use crate::render::SemanticMode;
 
 /// Edge of the 2D workgroups of the ssim_* kernels (local_size 16 x 16).
 const TILE: u32 = 16;
-/// Invocations per workgroup of the 1D loss kernels (loss_sums.glsl: LOSS_WG).
-pub(crate) const LOSS_WG: u32 = 256;
+/// Invocations per workgroup of the 1D loss kernels.
+pub(crate) use crate::contract::LOSS_WG;
 /// Most workgroups one dispatch dimension may have on every Vulkan device.
 const MAX_GROUPS: u32 = 65_535;
 /// Loop iterations we let one invocation run: lavapipe ends every loop of an invocation
@@ -53,55 +56,11 @@ pub struct SemanticTerm<'a> {
 /// A pixel without a label.
 pub const IGNORE_LABEL: u32 = u32::MAX;
 
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct ImageDims {
-    width: u32,
-    height: u32,
-}
-
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct SsimForwardParams {
-    width: u32,
-    height: u32,
-    stride: u32,
-    inv_count: f32,
-    ssim_weight: f32,
-}
-
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct SsimBackwardParams {
-    width: u32,
-    height: u32,
-    l1_weight: f32,
-}
-
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct CountParams {
-    pixels: u32,
-    channels: u32,
-    stride: u32,
-}
-
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct ReduceParams {
-    first_slot: u32,
-    groups: u32,
-    stride: u32,
-}
-
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct CrossEntropyParams {
-    pixels: u32,
-    channels: u32,
-    stride: u32,
-    mode: u32,
-    lambda: f32,
+/// The photometric loss's images: the render, its target, and the gradient written back.
+struct RgbImages<'a> {
+    rgb: &'a Buffer,
+    target: &'a Buffer,
+    v_rgb: &'a Buffer,
 }
 
 /// The loss scratch for views of one size (W x H, C semantic channels), and the values
@@ -202,8 +161,49 @@ impl ImageLoss {
         v_rgb: &Buffer,
         semantics: Option<&SemanticTerm<'_>>,
     ) -> Result<()> {
-        let pixels = self.pixels();
-        let rgb_bytes = pixels as u64 * 3 * 4;
+        self.check_rgb(rgb, target, v_rgb)?;
+        if let Some(s) = semantics {
+            self.check_semantics(s)?;
+        }
+        let images = RgbImages { rgb, target, v_rgb };
+        // Four phases between barriers, each pairing an SSIM kernel with the semantic or
+        // reduction work that does not depend on it.
+        rec.barrier();
+        self.record_count_and_blur(rec, &images, semantics)?;
+        rec.barrier();
+        self.record_ssim_forward(rec, &images, semantics)?;
+        rec.barrier();
+        self.record_ce_and_blur_grads(rec, semantics)?;
+        rec.barrier();
+        self.record_rgb_backward_and_sums(rec, &images, semantics)?;
+        rec.barrier();
+        Ok(())
+    }
+
+    /// Workgroups of the 2D (ssim_*) kernels.
+    fn tiles(&self) -> [u32; 3] {
+        [self.width.div_ceil(TILE), self.height.div_ceil(TILE), 1]
+    }
+
+    /// Workgroups of the per-pixel 1D kernels.
+    fn pixel_groups(&self) -> u32 {
+        self.pixels().div_ceil(LOSS_WG)
+    }
+
+    fn dims(&self) -> ImageSizeParams {
+        ImageSizeParams {
+            width: self.width,
+            height: self.height,
+        }
+    }
+
+    /// Floats the photometric loss averages over.
+    fn rgb_count(&self) -> f32 {
+        3.0 * self.pixels() as f32
+    }
+
+    fn check_rgb(&self, rgb: &Buffer, target: &Buffer, v_rgb: &Buffer) -> Result<()> {
+        let rgb_bytes = self.pixels() as u64 * 3 * 4;
         for (what, buf) in [("rgb", rgb), ("target", target), ("v_rgb", v_rgb)] {
             ensure!(
                 buf.size() >= rgb_bytes,
@@ -213,62 +213,84 @@ impl ImageLoss {
                 self.height
             );
         }
-        if let Some(s) = semantics {
-            self.check_semantics(s)?;
-        }
-        let tiles = [self.width.div_ceil(TILE), self.height.div_ceil(TILE), 1];
-        let tile_count = tiles[0] * tiles[1];
-        let pixel_groups = pixels.div_ceil(LOSS_WG);
-        let dims = ImageDims {
-            width: self.width,
-            height: self.height,
-        };
-        let count = 3.0 * pixels as f32;
+        Ok(())
+    }
 
-        rec.barrier();
+    /// Phase 1: counting the labeled pixels (or zeroing the count and CE without
+    /// semantics) beside the blur of the SSIM moments.
+    fn record_count_and_blur(
+        &self,
+        rec: &mut Recorder,
+        images: &RgbImages<'_>,
+        semantics: Option<&SemanticTerm<'_>>,
+    ) -> Result<()> {
         match semantics {
             Some(s) => rec.dispatch(
                 ids::TRAIN_LOSS_COUNT_LABELS,
                 &[("labels", s.labels), ("partials", &self.partials)],
-                bytemuck::bytes_of(&CountParams {
-                    pixels,
+                &CountLabelsParams {
+                    pixels: self.pixels(),
                     channels: self.channels,
                     stride: self.stride,
-                }),
-                [pixel_groups, 1, 1],
+                },
+                [self.pixel_groups(), 1, 1],
             )?,
             // The count and the CE are adjacent slots.
             None => rec.fill(&self.values, SLOT_LABELED as u64 * 4, 8, 0),
         }
         rec.dispatch(
             ids::TRAIN_SSIM_BLUR_INPUTS,
-            &[("rgb", rgb), ("target", target), ("moments", &self.moments)],
-            bytemuck::bytes_of(&dims),
-            tiles,
+            &[
+                ("rgb", images.rgb),
+                ("target", images.target),
+                ("moments", &self.moments),
+            ],
+            &self.dims(),
+            self.tiles(),
         )?;
-        rec.barrier();
+        Ok(())
+    }
+
+    /// Phase 2: reducing the labeled count beside the SSIM forward (per-pixel L1 and SSIM
+    /// partials, and the SSIM's gradient with respect to the blurred moments).
+    fn record_ssim_forward(
+        &self,
+        rec: &mut Recorder,
+        images: &RgbImages<'_>,
+        semantics: Option<&SemanticTerm<'_>>,
+    ) -> Result<()> {
         if semantics.is_some() {
-            self.record_reduce(rec, SLOT_LABELED, 1, pixel_groups)?;
+            self.record_reduce(rec, SLOT_LABELED, 1, self.pixel_groups())?;
         }
+        let count = self.rgb_count();
         rec.dispatch(
             ids::TRAIN_SSIM_FORWARD,
             &[
-                ("rgb", rgb),
-                ("target", target),
+                ("rgb", images.rgb),
+                ("target", images.target),
                 ("moments", &self.moments),
                 ("moment_grads", &self.moment_grads),
                 ("partials", &self.partials),
             ],
-            bytemuck::bytes_of(&SsimForwardParams {
+            &SsimForwardParams {
                 width: self.width,
                 height: self.height,
                 stride: self.stride,
                 inv_count: 1.0 / count,
                 ssim_weight: -SSIM_WEIGHT / count,
-            }),
-            tiles,
+            },
+            self.tiles(),
         )?;
-        rec.barrier();
+        Ok(())
+    }
+
+    /// Phase 3: the cross-entropy and its gradient (which read the labeled count) beside
+    /// the blur of the moment gradients.
+    fn record_ce_and_blur_grads(
+        &self,
+        rec: &mut Recorder,
+        semantics: Option<&SemanticTerm<'_>>,
+    ) -> Result<()> {
         if let Some(s) = semantics {
             rec.dispatch(
                 ids::TRAIN_LOSS_CROSS_ENTROPY,
@@ -279,8 +301,8 @@ impl ImageLoss {
                     ("v_sem_norm", s.v_sem_norm),
                     ("partials", &self.partials),
                 ],
-                bytemuck::bytes_of(&CrossEntropyParams {
-                    pixels,
+                &CrossEntropyParams {
+                    pixels: self.pixels(),
                     channels: self.channels,
                     stride: self.stride,
                     mode: match s.mode {
@@ -288,8 +310,8 @@ impl ImageLoss {
                         SemanticMode::Softmax => 1,
                     },
                     lambda: s.lambda,
-                }),
-                [pixel_groups, 1, 1],
+                },
+                [self.pixel_groups(), 1, 1],
             )?;
         }
         rec.dispatch(
@@ -298,32 +320,42 @@ impl ImageLoss {
                 ("moment_grads", &self.moment_grads),
                 ("blurred", &self.moments),
             ],
-            bytemuck::bytes_of(&dims),
-            tiles,
+            &self.dims(),
+            self.tiles(),
         )?;
-        rec.barrier();
+        Ok(())
+    }
+
+    /// Phase 4: dL_rgb/d rgb into `v_rgb`, beside the reductions of the L1, SSIM, SE and
+    /// CE partials into their values.
+    fn record_rgb_backward_and_sums(
+        &self,
+        rec: &mut Recorder,
+        images: &RgbImages<'_>,
+        semantics: Option<&SemanticTerm<'_>>,
+    ) -> Result<()> {
         rec.dispatch(
             ids::TRAIN_SSIM_BACKWARD,
             &[
-                ("rgb", rgb),
-                ("target", target),
+                ("rgb", images.rgb),
+                ("target", images.target),
                 ("blurred", &self.moments),
-                ("v_rgb", v_rgb),
+                ("v_rgb", images.v_rgb),
             ],
-            bytemuck::bytes_of(&SsimBackwardParams {
+            &SsimBackwardParams {
                 width: self.width,
                 height: self.height,
-                l1_weight: L1_WEIGHT / count,
-            }),
-            tiles,
+                l1_weight: L1_WEIGHT / self.rgb_count(),
+            },
+            self.tiles(),
         )?;
         // L1, SSIM and SE are adjacent slots.
         const _: () = assert!(SLOT_SE == SLOT_L1 + 2);
-        self.record_reduce(rec, SLOT_L1, 3, tile_count)?;
+        let tiles = self.tiles();
+        self.record_reduce(rec, SLOT_L1, 3, tiles[0] * tiles[1])?;
         if semantics.is_some() {
-            self.record_reduce(rec, SLOT_CE, 1, pixel_groups)?;
+            self.record_reduce(rec, SLOT_CE, 1, self.pixel_groups())?;
         }
-        rec.barrier();
         Ok(())
     }
 
@@ -361,11 +393,11 @@ impl ImageLoss {
         rec.dispatch(
             ids::TRAIN_LOSS_REDUCE,
             &[("partials", &self.partials), ("values", &self.values)],
-            bytemuck::bytes_of(&ReduceParams {
+            &LossReduceParams {
                 first_slot,
                 groups,
                 stride: self.stride,
-            }),
+            },
             [slots, 1, 1],
         )?;
         Ok(())

@@ -2,26 +2,16 @@
 //! in the same values buffer as the image losses, so one download reads them all.
 
 use anyhow::{ensure, Result};
-use bytemuck::{Pod, Zeroable};
 
 use super::loss::{ImageLoss, LOOP_BUDGET, LOSS_WG};
 use super::loss_values::SLOT_ENTROPY;
+use crate::contract::params::EntropyParams;
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, Recorder};
 
 /// Most workgroups of the entropy kernel (its partials have a fixed size); each
 /// invocation strides over the Gaussians past that.
 pub(crate) const ENTROPY_GROUPS: u32 = 4096;
-
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct EntropyParams {
-    n: u32,
-    channels: u32,
-    stride: u32,
-    weight: f32,
-    inv_n: f32,
-}
 
 /// lambda_H at iteration `iter`: a linear warm-up from 0 over `warmup_iters` (0: none).
 pub fn entropy_weight(lambda_h: f32, iter: u32, warmup_iters: u32) -> f32 {
@@ -78,13 +68,13 @@ impl ImageLoss {
                 ("grad_logits", grad_logits),
                 ("partials", &self.partials),
             ],
-            bytemuck::bytes_of(&EntropyParams {
+            &EntropyParams {
                 n,
                 channels,
                 stride: self.stride,
                 weight: lambda_h / n as f32,
                 inv_n: 1.0 / n as f32,
-            }),
+            },
             [groups, 1, 1],
         )?;
         rec.barrier();

@@ -3,13 +3,10 @@
 
 use serde::Serialize;
 
-/// Slot of each value in the values buffer (glsl/train/loss_sums.glsl: SLOT_*).
-pub(crate) const SLOT_L1: u32 = 0;
-pub(crate) const SLOT_SSIM: u32 = 1;
-pub(crate) const SLOT_SE: u32 = 2;
-pub(crate) const SLOT_LABELED: u32 = 3;
-pub(crate) const SLOT_CE: u32 = 4;
-pub(crate) const SLOT_ENTROPY: u32 = 5;
+/// Slot of each value in the values buffer.
+pub(crate) use crate::contract::{
+    SLOT_CE, SLOT_ENTROPY, SLOT_L1, SLOT_LABELED, SLOT_SE, SLOT_SSIM,
+};
 /// Slots in the values and partials buffers (two spare).
 pub(crate) const SLOTS: u32 = 8;
 

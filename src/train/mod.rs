@@ -6,5 +6,6 @@ pub mod densify;
 pub mod loss;
 pub mod loss_entropy;
 pub mod loss_values;
+mod tensors;
 pub mod trainer;
 pub mod views;

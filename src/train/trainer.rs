@@ -21,6 +21,7 @@ use super::densify::{
 use super::loss::{ImageLoss, SemanticTerm};
 use super::loss_entropy::entropy_weight;
 use super::loss_values::LossValues;
+use super::tensors::{new_moments, tensors, PerTensor, TensorRef};
 use super::views::{DeviceView, TrainView};
 use crate::gpu::{Buffer, Gpu, Mark, Recorder};
 use crate::render::backward::{PixelGrads, SceneGrads};
@@ -73,24 +74,12 @@ pub struct TrainOutput {
     pub peak_device_bytes: u64,
 }
 
-/// A parameter tensor: its buffer, gradient, width per Gaussian, and how densification
-/// rebuilds it.
-struct TensorRef<'a> {
-    param: &'a Buffer,
-    grad: &'a Buffer,
-    width: u32,
-    role: Role,
-    lr: f64,
-    geometry: bool,
-}
-
 pub struct Trainer {
     gpu: Gpu,
     cfg: TrainConfig,
     scene: GpuScene,
     grads: SceneGrads,
-    /// Adam moments, in the order of [`Trainer::tensors`].
-    moments: Vec<AdamMoments>,
+    moments: PerTensor<AdamMoments>,
     riders: Vec<Buffer>,
     rasterizer: Rasterizer,
     losses: HashMap<(u32, u32), ImageLoss>,
@@ -160,12 +149,13 @@ impl Trainer {
         let mut rec = Recorder::new(gpu)?;
         rec.fill(&v_alpha, 0, v_alpha.size(), 0); // no loss reads the accumulated alpha
         rec.submit_and_wait()?;
-        let mut trainer = Trainer {
+        let moments = new_moments(gpu, &scene)?;
+        Ok(Trainer {
             gpu: gpu.clone(),
             position_lr: ExponentialLr::positions(extent, cfg.iters),
             scene,
             grads,
-            moments: Vec::new(),
+            moments,
             riders: riders
                 .iter()
                 .map(|r| gpu.buffer_from("rider", r))
@@ -185,61 +175,12 @@ impl Trainer {
             events: Vec::new(),
             last_loss: None,
             cfg,
-        };
-        trainer.moments = trainer.new_moments()?;
-        Ok(trainer)
+        })
     }
 
-    fn new_moments(&self) -> Result<Vec<AdamMoments>> {
-        self.tensors()
-            .iter()
-            .map(|t| AdamMoments::new(&self.gpu, t.param.name(), self.scene.n * t.width))
-            .collect()
-    }
-
-    /// The trainable tensors, in a fixed order.
-    fn tensors(&self) -> Vec<TensorRef<'_>> {
-        let (s, g, lr) = (&self.scene, &self.grads, &self.cfg.lr);
-        let t = |param, grad, width, role, lr, geometry| TensorRef {
-            param,
-            grad,
-            width,
-            role,
-            lr,
-            geometry,
-        };
-        let mut v = vec![
-            t(&s.means, &g.means, 3, Role::Means, 0.0, true),
-            t(
-                &s.log_scales,
-                &g.log_scales,
-                3,
-                Role::LogScales,
-                lr.log_scales,
-                true,
-            ),
-            t(&s.quats, &g.quats, 4, Role::Copy, lr.quats, true),
-            t(
-                &s.opacity_logits,
-                &g.opacity_logits,
-                1,
-                Role::Copy,
-                lr.opacity,
-                true,
-            ),
-            t(&s.sh, &g.sh, 3 * s.sh_coeffs, Role::Copy, lr.sh, true),
-        ];
-        if let Some(logits) = &s.logits {
-            v.push(t(
-                logits,
-                &g.logits,
-                s.channels,
-                Role::Copy,
-                lr.logits,
-                false,
-            ));
-        }
-        v
+    /// The trained tensors, in the order of [`PerTensor::iter`].
+    fn tensors(&self) -> PerTensor<TensorRef<'_>> {
+        tensors(&self.scene, &self.grads, &self.moments, &self.cfg.lr)
     }
 
     pub fn iteration(&self) -> u32 {
@@ -274,16 +215,41 @@ impl Trainer {
     pub fn step(&mut self) -> Result<Option<LossValues>> {
         let step = self.iter + 1;
         let vi = self.next_view();
-        let cam = self.views[vi].camera.clone();
+        let key = self.run_view(vi)?;
+        self.run_update(step, key)?;
+        self.iter = step;
+        self.times.iterations = step;
+        self.last_loss = Some(key);
+        self.densify_on_schedule(step)?;
+        let log = step % self.cfg.log_every.max(1) == 0 || step == self.cfg.iters;
+        if log {
+            Ok(Some(self.losses[&key].read_values()?))
+        } else {
+            Ok(None)
+        }
+    }
+
+    /// The loss scratch of views of `cam`'s size (made on first use; its key is the size),
+    /// with the backward carry sized for the view.
+    fn prepare_view(&mut self, cam: &Camera) -> Result<(u32, u32)> {
         let key = (cam.width, cam.height);
-        let channels = self.scene.channels;
         if !self.losses.contains_key(&key) {
-            let loss = ImageLoss::new(&self.gpu, cam.width, cam.height, channels)?;
+            let loss = ImageLoss::new(&self.gpu, cam.width, cam.height, self.scene.channels)?;
             self.losses.insert(key, loss);
         }
         let pixels = cam.width as u64 * cam.height as u64;
         let windows = self.rasterizer.windows_for(self.scene.n);
         self.grads.prepare_view(&self.gpu, pixels, windows)?;
+        Ok(key)
+    }
+
+    /// The first submission of an iteration: renders view `vi` (RGB + semantics), records
+    /// its losses and backward after the forward blend, and adds their GPU times. An
+    /// intersection-buffer overflow re-runs it whole. Returns the view's loss key.
+    fn run_view(&mut self, vi: usize) -> Result<(u32, u32)> {
+        let cam = self.views[vi].camera.clone();
+        let key = self.prepare_view(&cam)?;
+        let channels = self.scene.channels;
         let mode = self.cfg.semantic_mode;
         let opts = RenderOptions {
             background: self.cfg.background,
@@ -315,13 +281,8 @@ impl Trainer {
                     lambda: lambda_sem,
                     v_sem_norm,
                 };
-                loss.record(
-                    rec,
-                    tiles.rgb(),
-                    &view.rgb,
-                    v_rgb,
-                    (channels > 0).then_some(&term),
-                )?;
+                let semantics = (channels > 0).then_some(&term);
+                loss.record(rec, tiles.rgb(), &view.rgb, v_rgb, semantics)?;
                 marks[1] = rec.mark();
                 let upstream = PixelGrads {
                     rgb: v_rgb,
@@ -336,11 +297,15 @@ impl Trainer {
         self.times.forward_ms += ms(run.marks[0], marks[0]);
         self.times.loss_ms += ms(marks[0], marks[1]);
         self.times.backward_ms += ms(marks[1], marks[2]);
+        Ok(key)
+    }
 
-        // Softmax backward, entropy, Adam.
+    /// The second submission of iteration `step`: softmax backward, the entropy
+    /// regularizer (through the loss scratch of `key`), and Adam on every trained tensor.
+    fn run_update(&mut self, step: u32, key: (u32, u32)) -> Result<()> {
         let mut rec = Recorder::new(&self.gpu)?;
         let m0 = rec.mark();
-        if mode == SemanticMode::Softmax {
+        if self.cfg.semantic_mode == SemanticMode::Softmax {
             self.grads.record_softmax_backward(&mut rec, &self.scene)?;
         }
         let m1 = rec.mark();
@@ -355,28 +320,32 @@ impl Trainer {
             )?;
         }
         let pos_lr = self.position_lr.at(step);
-        for (t, m) in self.tensors().iter().zip(&self.moments) {
+        for t in self.tensors().iter() {
             if self.cfg.semantics_only && t.geometry {
                 continue;
             }
-            let lr = if t.role == Role::Means { pos_lr } else { t.lr };
             let tensor = AdamTensor {
                 param: t.param,
                 grad: t.grad,
-                exp_avg: &m.exp_avg,
-                exp_avg_sq: &m.exp_avg_sq,
+                exp_avg: &t.moments.exp_avg,
+                exp_avg_sq: &t.moments.exp_avg_sq,
                 count: self.scene.n * t.width,
             };
-            record_adam(&mut rec, &tensor, AdamStep::new(lr, step))?;
+            record_adam(
+                &mut rec,
+                &tensor,
+                AdamStep::new(t.lr.unwrap_or(pos_lr), step),
+            )?;
         }
         let m2 = rec.mark();
         let timings = rec.submit_and_wait()?;
         self.times.backward_ms += timings.between(m0, m1).unwrap_or(0.0) * 1e-6;
         self.times.optimizer_ms += timings.between(m1, m2).unwrap_or(0.0) * 1e-6;
-        self.iter = step;
-        self.times.iterations = step;
-        self.last_loss = Some(key);
+        Ok(())
+    }
 
+    /// Densifies and resets opacities when the schedule says so after iteration `step`.
+    fn densify_on_schedule(&mut self, step: u32) -> Result<()> {
         if let Some(d) = self.cfg.densify {
             let start = Instant::now();
             if step < d.until && step > d.from && step % d.every == 0 {
@@ -387,13 +356,7 @@ impl Trainer {
             }
             self.times.densify_ms += start.elapsed().as_secs_f64() * 1e3;
         }
-
-        let log = step % self.cfg.log_every.max(1) == 0 || step == self.cfg.iters;
-        if log {
-            Ok(Some(self.losses[&key].read_values()?))
-        } else {
-            Ok(None)
-        }
+        Ok(())
     }
 
     /// The loss values of the last iteration (one small download).
@@ -418,49 +381,48 @@ impl Trainer {
         };
         let inputs = DensifyInputs {
             n: self.scene.n,
-            log_scales: &self.scene.log_scales,
-            quats: &self.scene.quats,
-            opacity_logits: &self.scene.opacity_logits,
+            log_scales: &self.scene.params.log_scales,
+            quats: &self.scene.params.quats,
+            opacity_logits: &self.scene.params.opacity_logits,
             grad_accum: &self.grads.densify_grad,
             grad_count: &self.grads.densify_count,
         };
         let plan: DensifyPlan = self.densifier.plan(&inputs, &config)?;
         let mut rec = Recorder::new(&self.gpu)?;
-        let mut params = Vec::new();
-        let mut moments = Vec::new();
-        for (t, m) in self.tensors().iter().zip(&self.moments) {
-            let d = &self.densifier;
-            params.push(d.apply(&mut rec, &plan, t.param, t.width, t.role)?);
-            moments.push(AdamMoments {
-                exp_avg: d.apply(&mut rec, &plan, &m.exp_avg, t.width, Role::AdamMoment)?,
-                exp_avg_sq: d.apply(&mut rec, &plan, &m.exp_avg_sq, t.width, Role::AdamMoment)?,
-            });
-        }
+        let d = &self.densifier;
+        let rebuilt = self.tensors().try_map(|t| {
+            let param = d.apply(&mut rec, &plan, t.param, t.width, t.role)?;
+            let mut moment = |m: &Buffer| d.apply(&mut rec, &plan, m, t.width, Role::AdamMoment);
+            let moments = AdamMoments {
+                exp_avg: moment(&t.moments.exp_avg)?,
+                exp_avg_sq: moment(&t.moments.exp_avg_sq)?,
+            };
+            anyhow::Ok((param, moments))
+        })?;
         let riders = self
             .riders
             .iter()
             .map(|r| self.densifier.apply(&mut rec, &plan, r, 1, Role::Copy))
             .collect::<Result<Vec<_>>>()?;
         rec.submit_and_wait()?;
-        let mut params = params.into_iter();
-        let mut next = || params.next().expect("one per tensor");
+        let (params, param_moments) = rebuilt.params.unzip();
+        let (logits, logit_moments) = rebuilt.logits.unzip();
         let old = &self.scene;
         let scene = GpuScene {
             n: plan.new_n,
             sh_degree: old.sh_degree,
             sh_coeffs: old.sh_coeffs,
             channels: old.channels,
-            means: next(),
-            log_scales: next(),
-            quats: next(),
-            opacity_logits: next(),
-            sh: next(),
-            logits: old.logits.as_ref().map(|_| next()),
+            params,
+            logits,
             probs: OnceLock::new(),
         };
         self.grads = SceneGrads::new(&self.gpu, &scene)?;
         self.scene = scene;
-        self.moments = moments;
+        self.moments = PerTensor {
+            params: param_moments,
+            logits: logit_moments,
+        };
         self.riders = riders;
         self.events.push(DensifyEvent {
             iteration: self.iter,
@@ -477,16 +439,11 @@ impl Trainer {
     /// 3DGS's opacity reset: opacities capped at 0.01, their Adam moments restarted.
     fn reset_opacity(&mut self) -> Result<()> {
         let mut rec = Recorder::new(&self.gpu)?;
-        let slot = self
-            .tensors()
-            .iter()
-            .position(|t| std::ptr::eq(t.param, &self.scene.opacity_logits))
-            .expect("opacity is a tensor");
-        let m = &self.moments[slot];
+        let m = &self.moments.params.opacity_logits;
         reset_opacity(
             &mut rec,
             self.scene.n,
-            &self.scene.opacity_logits,
+            &self.scene.params.opacity_logits,
             &[&m.exp_avg, &m.exp_avg_sq],
             OPACITY_RESET,
         )?;
