@@ -2,7 +2,9 @@
 //! backend. See README.md for the architecture.
 
 pub mod bench;
+pub mod dataset;
 pub mod eval;
+pub mod experiment;
 pub mod fuse;
 pub mod gpu;
 pub mod render;

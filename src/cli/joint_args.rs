@@ -4,7 +4,7 @@
 use anyhow::{anyhow, Result};
 use clap::Args;
 
-use semsplat::eval::benchmark::{JointSchedule, Lifter, ALL_METHODS};
+use semsplat::experiment::{JointSchedule, Lifter, ALL_METHODS};
 
 #[derive(Args, Clone)]
 pub struct MethodArgs {

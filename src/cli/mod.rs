@@ -7,7 +7,6 @@ pub mod fuse;
 pub mod info;
 pub mod inspect;
 pub mod joint_args;
-pub mod label_classes;
 pub mod progress;
 pub mod render;
 pub mod sweep;

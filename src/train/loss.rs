@@ -51,7 +51,7 @@ pub struct SemanticTerm<'a> {
 }
 
 /// A pixel without a label.
-pub const IGNORE_LABEL: u32 = u32::MAX;
+pub use crate::dataset::NO_LABEL as IGNORE_LABEL;
 
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
