@@ -7,11 +7,11 @@ use anyhow::Result;
 use clap::Args;
 use serde::Serialize;
 
-use super::joint_args::MethodArgs;
+use super::joint_args::{room_config, MethodArgs};
 use semsplat::eval::image_quality::ImageQuality;
 use semsplat::experiment::{held_out_quality, score_methods, MethodScore, TrainLabels};
 use semsplat::gpu::Gpu;
-use semsplat::synth::{generate, NoiseSpec, RoomSource, SynthConfig, SynthScene};
+use semsplat::synth::{generate, NoiseSpec, SynthScene};
 use semsplat::util::write_bytes_atomic;
 #[cfg(feature = "charts")]
 use {
@@ -121,12 +121,13 @@ pub fn run(args: DemoArgs) -> Result<()> {
 
 /// The benchmark room the flags describe, generated in memory.
 fn build_room(args: &DemoArgs) -> Result<SynthScene> {
-    let mut cfg = SynthConfig::new(RoomSource::from_arg(&args.preset)?);
-    cfg.train_views = args.views;
-    cfg.test_views = args.test_views;
-    cfg.width = args.width;
-    cfg.height = args.height;
-    cfg.seed = args.seed;
+    let mut cfg = room_config(
+        &args.preset,
+        args.views,
+        args.test_views,
+        (args.width, args.height),
+        args.seed,
+    )?;
     cfg.noise = args.noise.clone();
     eprintln!(
         "building the {} room ({} + {} views at {}x{})",

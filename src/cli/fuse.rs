@@ -7,8 +7,9 @@ use anyhow::{anyhow, bail, Context, Result};
 use clap::{Args, ValueEnum};
 use serde::Serialize;
 
+use super::open_dataset;
 use super::progress::{follow, views_bar};
-use semsplat::dataset::{user_classes, Dataset, DatasetPaths};
+use semsplat::dataset::{user_classes, DatasetPaths};
 use semsplat::eval::label_render::LabelRenderer;
 use semsplat::fuse::{
     accumulate, assign_one_vs_rest, assign_semantic, Accumulation, ClassScores, FuseConfig,
@@ -287,18 +288,13 @@ fn fuse_views(
     let (Some(cameras), Some(labels)) = (&args.cameras, &args.labels) else {
         bail!("--cameras and --labels are needed (or --contrib to reassign from a saved matrix)");
     };
-    let data = Dataset::open(&DatasetPaths {
+    let paths = DatasetPaths {
         cameras,
         labels,
         class_table: args.classes.as_deref(),
         train_only: args.train_only,
-    })?;
-    if !data.labels.skipped().is_empty() {
-        eprintln!(
-            "note: {} views have no label map and are skipped",
-            data.labels.skipped().len()
-        );
-    }
+    };
+    let data = open_dataset(&paths, "are skipped")?;
     let gpu = Gpu::new()?;
     let scene = GpuScene::upload(&gpu, g)?;
     let cfg = FuseConfig {
@@ -456,4 +452,29 @@ fn per_class_counts(g: &Gaussians, table: &ClassTable) -> Vec<ClassCount> {
         gaussians: ids.iter().filter(|&&i| i == -1).count(),
     });
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::{Args, Command, ValueEnum};
+    use semsplat::fuse::SPELLINGS;
+
+    use super::{FuseArgs, MethodArg};
+
+    /// `selected_method` reads the variant flags by field; they must be the table's flags,
+    /// and `--method` must take exactly the table's bases.
+    #[test]
+    fn flags_and_bases_are_the_method_table_s() {
+        let cmd = FuseArgs::augment_args(Command::new("fuse"));
+        for s in SPELLINGS {
+            if let Some(flag) = s.flag {
+                assert!(cmd.get_arguments().any(|a| a.get_long() == Some(flag)));
+            }
+            assert!(MethodArg::value_variants().iter().any(|m| m
+                .to_possible_value()
+                .unwrap()
+                .get_name()
+                == s.base));
+        }
+    }
 }

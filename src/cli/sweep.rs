@@ -7,12 +7,12 @@ use anyhow::{bail, Result};
 use clap::{Args, ValueEnum};
 use serde::Serialize;
 
-use super::joint_args::MethodArgs;
+use super::joint_args::{room_config, MethodArgs};
 #[cfg(feature = "charts")]
 use semsplat::eval::chart::{lines, Line};
 use semsplat::experiment::{mislabel_follow, score_methods, Lifter, MislabelFollow, TrainLabels};
 use semsplat::gpu::Gpu;
-use semsplat::synth::{generate, NoiseSpec, RoomSource, SynthConfig};
+use semsplat::synth::{generate, NoiseSpec};
 use semsplat::util::write_bytes_atomic;
 
 #[derive(Clone, Copy, ValueEnum, PartialEq, Eq, Debug)]
@@ -134,12 +134,13 @@ pub fn run(args: SweepArgs) -> Result<()> {
 
 /// Generates the room with `level` of the noise and scores every method on it.
 fn run_level(args: &SweepArgs, gpu: &Gpu, methods: &[Lifter], level: f64) -> Result<LevelResult> {
-    let mut cfg = SynthConfig::new(RoomSource::from_arg(&args.preset)?);
-    cfg.train_views = args.views;
-    cfg.test_views = args.test_views;
-    cfg.width = args.width;
-    cfg.height = args.height;
-    cfg.seed = args.seed;
+    let mut cfg = room_config(
+        &args.preset,
+        args.views,
+        args.test_views,
+        (args.width, args.height),
+        args.seed,
+    )?;
     let spec = if args.noise == NoiseKind::Boundary {
         format!("boundary={}", level.round() as u32)
     } else {

@@ -8,6 +8,7 @@ use anyhow::{bail, Result};
 use clap::Args;
 use serde::Serialize;
 
+use super::open_dataset;
 use super::progress::iterations_bar;
 use semsplat::dataset::{user_classes, Dataset, DatasetPaths};
 use semsplat::gpu::Gpu;
@@ -171,18 +172,13 @@ pub fn run(args: TrainArgs) -> Result<()> {
 
 /// The cameras, their label maps and the classes present (at least one).
 fn load_dataset(args: &TrainArgs) -> Result<Dataset> {
-    let data = Dataset::open(&DatasetPaths {
+    let paths = DatasetPaths {
         cameras: &args.cameras,
         labels: &args.labels,
         class_table: args.classes.as_deref(),
         train_only: args.train_only,
-    })?;
-    if !data.labels.skipped().is_empty() {
-        eprintln!(
-            "note: {} views have no label map and train appearance only",
-            data.labels.skipped().len()
-        );
-    }
+    };
+    let data = open_dataset(&paths, "train appearance only")?;
     if data.classes.is_empty() {
         bail!("the label maps hold no class (every pixel is ignore)");
     }
