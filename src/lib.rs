@@ -3,7 +3,9 @@
 
 pub mod bench;
 pub mod contract;
+pub mod dataset;
 pub mod eval;
+pub mod experiment;
 pub mod fuse;
 pub mod gpu;
 pub mod render;

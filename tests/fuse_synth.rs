@@ -8,9 +8,9 @@
 mod common;
 
 use common::{check_validation, gpu};
+use semsplat::dataset::CompactClasses;
 use semsplat::fuse::{accumulate, assign_semantic, ClassScores, FuseConfig, Method, NO_LABEL};
 use semsplat::render::GpuScene;
-use semsplat::scene::classes::CompactClasses;
 use semsplat::synth::{generate, SynthConfig, SynthScene};
 
 /// `synth --preset office --noise flicker=0.2` at its defaults (24 views at 640x480), without

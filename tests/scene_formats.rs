@@ -4,14 +4,13 @@
 use std::path::Path;
 
 use glam::{DMat3, DQuat, DVec3};
+use semsplat::dataset::CompactClasses;
 use semsplat::scene::cameras::load_cameras;
 use semsplat::scene::cameras_json::{
     read_cameras_json, read_cameras_json_kind, write_inria_cameras, write_semsplat_cameras,
     CameraJsonKind,
 };
-use semsplat::scene::classes::{
-    default_color, read_class_table, write_class_table, ClassTable, CompactClasses,
-};
+use semsplat::scene::classes::{default_color, read_class_table, write_class_table, ClassTable};
 use semsplat::scene::colmap::{read_colmap_model, write_colmap_model, ColmapFormat};
 use semsplat::scene::gaussians::sh_coeffs_for_degree;
 use semsplat::scene::labels::{

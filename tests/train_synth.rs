@@ -4,12 +4,12 @@
 
 mod common;
 
-use semsplat::eval::benchmark::{synth_train_views, TrainLabels};
+use semsplat::dataset::CompactClasses;
 use semsplat::eval::label_render::LabelRenderer;
 use semsplat::eval::metrics::Confusion;
+use semsplat::experiment::{synth_train_views, TrainLabels};
 use semsplat::fuse::{accumulate, assign_semantic, FuseConfig, Method, NO_LABEL};
 use semsplat::render::{GpuScene, Rasterizer, RenderOptions};
-use semsplat::scene::classes::CompactClasses;
 use semsplat::scene::labels::LabelMap;
 use semsplat::scene::{Gaussians, Split};
 use semsplat::synth::{generate, SynthConfig, SynthScene};

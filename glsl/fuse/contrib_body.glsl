@@ -20,7 +20,8 @@
 #include "tile_vote.glsl"
 
 #define BATCH TILE_PIXELS
-#define NO_ROW 0xFFFFFFFFu
+// The row a step adds to when it adds nothing: an unlabeled pixel, or a weight of 0.
+#define NO_ROW NO_LABEL
 
 layout(local_size_x = TILE_PIXELS) in;
 
@@ -69,9 +70,9 @@ void main() {
 
     // Rows of A this pass holds: labels outside [row_begin, row_begin + rows) wait for
     // their own pass (unsigned wrap makes labels below row_begin fail the test too).
-    uint label = inside ? labels.data[pix] : NO_ROW;
+    uint label = inside ? labels.data[pix] : NO_LABEL;
     uint row = label - row_begin;
-    bool labeled = label != NO_ROW && row < rows;
+    bool labeled = label != NO_LABEL && row < rows;
     float T = 1.0;
     bool done = !labeled;
     if (window_start > 0 && labeled) {

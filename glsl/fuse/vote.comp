@@ -47,7 +47,7 @@ void main() {
         return;
     }
     uint pix = uint(uv.y) * pc.width + uint(uv.x);
-    uint row = labels.data[pix] - pc.row_begin; // unlabeled (0xFFFFFFFF) and other passes' rows fail below
+    uint row = labels.data[pix] - pc.row_begin; // unlabeled (NO_LABEL) and other passes' rows fail below
     if (row >= pc.rows) {
         return;
     }

@@ -1,5 +1,5 @@
 #version 460
-// Counts the labeled pixels (label < channels; 0xFFFFFFFF marks ignored ones), so the
+// Counts the labeled pixels (label < channels; NO_LABEL marks ignored ones), so the
 // cross-entropy kernel can take its mean without a host round trip.
 
 #include "loss_sums.glsl"

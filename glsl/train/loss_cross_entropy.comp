@@ -4,7 +4,7 @@
 // Mode 1 (softmax): s is already a distribution, CE = -log(max(s[label], 1e-6)), gradient
 // -1/s[label] at the label unless clamped. Both are scaled by lambda / labeled pixels (the
 // count comes from loss_count_labels + loss_reduce). Overwrites v_sem_norm; ignored pixels
-// (label 0xFFFFFFFF, or any label >= channels) get zeros.
+// (label NO_LABEL, or any label >= channels) get zeros.
 
 #include "loss_sums.glsl"
 

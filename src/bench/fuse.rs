@@ -8,7 +8,6 @@ use glam::DVec3;
 use serde::Serialize;
 
 use super::median;
-use crate::eval::benchmark::Lifter;
 use crate::fuse::{accumulate, FuseConfig, LabelSource, Method, NO_LABEL};
 use crate::gpu::Gpu;
 use crate::render::{GpuScene, Rasterizer, RenderOptions};
@@ -178,8 +177,55 @@ pub fn bench_fuse(
     gpu: &Gpu,
     spec: &FuseBenchSpec,
     methods: &[Method],
-    mut progress: impl FnMut(&str, usize, usize),
+    progress: impl FnMut(&str, usize, usize),
 ) -> Result<FuseBench> {
+    check_spec(gpu, spec, methods)?;
+    // SH degree 3 as a trained 3DGS scene (and `bench render`): projection evaluates it.
+    let g = random_scene(&RandomSceneSpec {
+        n: spec.n,
+        sh_degree: 3,
+        seed: spec.seed,
+        ..Default::default()
+    });
+    let scene = GpuScene::upload(gpu, &g)?;
+    drop(g);
+    let setup = Setup {
+        gpu,
+        scene: &scene,
+        cams: ring_cameras(spec.views, spec.width, spec.height),
+        labels: BlockLabels {
+            classes: spec.classes as u64,
+            rng: Rng::new(spec.seed).fork(0x1abe1),
+        },
+        classes: spec.classes,
+        opts: FuseConfig::default().render_options(),
+        cfgs: methods
+            .iter()
+            .map(|&method| FuseConfig {
+                method,
+                ..Default::default()
+            })
+            .collect(),
+    };
+    setup.warm_up()?;
+    let (forward_runs, method_runs) = setup.timed_runs(spec.iters, progress)?;
+    let forward = forward_bench(&forward_runs, spec.views);
+    let results = methods
+        .iter()
+        .zip(&method_runs)
+        .map(|(&method, runs)| method_bench(method, runs, &forward, spec.views))
+        .collect();
+    Ok(FuseBench {
+        spec: spec.clone(),
+        device: gpu.caps().name.clone(),
+        goal_ratio: GOAL_RATIO,
+        forward,
+        methods: results,
+    })
+}
+
+/// Refuses specs the benchmark cannot run or measure.
+fn check_spec(gpu: &Gpu, spec: &FuseBenchSpec, methods: &[Method]) -> Result<()> {
     ensure!(spec.n > 0, "--n must be at least 1 Gaussian");
     ensure!(
         spec.n <= u32::MAX as usize,
@@ -201,118 +247,128 @@ pub fn bench_fuse(
         gpu.caps().timestamps,
         "the device has no timestamp queries; GPU time cannot be measured"
     );
-    // SH degree 3 as a trained 3DGS scene (and `bench render`): projection evaluates it.
-    let g = random_scene(&RandomSceneSpec {
-        n: spec.n,
-        sh_degree: 3,
-        seed: spec.seed,
-        ..Default::default()
-    });
-    let scene = GpuScene::upload(gpu, &g)?;
-    drop(g);
-    let cams = ring_cameras(spec.views, spec.width, spec.height);
-    let labels = BlockLabels {
-        classes: spec.classes as u64,
-        rng: Rng::new(spec.seed).fork(0x1abe1),
-    };
-    let (iters, views) = (spec.iters, spec.views);
-    let cfgs: Vec<FuseConfig> = methods
-        .iter()
-        .map(|&method| FuseConfig {
-            method,
-            ..Default::default()
-        })
-        .collect();
+    Ok(())
+}
 
-    // Warm-ups on the first view compile the pipelines, so no run pays for them.
-    let opts = FuseConfig::default().render_options();
-    forward_run(gpu, &scene, &cams[..1], &opts, |_| {})?;
-    for cfg in &cfgs {
-        accumulate(
-            gpu,
-            &scene,
-            &cams[..1],
-            &labels,
-            spec.classes,
-            cfg,
-            |_, _| {},
-        )?;
+/// What every timed run works on.
+struct Setup<'a> {
+    gpu: &'a Gpu,
+    scene: &'a GpuScene,
+    cams: Vec<Camera>,
+    labels: BlockLabels,
+    classes: usize,
+    opts: RenderOptions,
+    /// One per method.
+    cfgs: Vec<FuseConfig>,
+}
+
+impl Setup<'_> {
+    /// Runs everything on the first view once, compiling the pipelines, so no timed run
+    /// pays for them.
+    fn warm_up(&self) -> Result<()> {
+        forward_run(self.gpu, self.scene, &self.cams[..1], &self.opts, |_| {})?;
+        for cfg in &self.cfgs {
+            accumulate(
+                self.gpu,
+                self.scene,
+                &self.cams[..1],
+                &self.labels,
+                self.classes,
+                cfg,
+                |_, _| {},
+            )?;
+        }
+        Ok(())
     }
-    // The forward render and the methods take turns on each round of views, so a slow
-    // spell of a shared machine slows them alike and the ratios stay meaningful.
-    let total = iters * views * (1 + methods.len());
-    let mut done = 0;
-    let mut forward_runs = Vec::with_capacity(iters);
-    let mut method_runs: Vec<Vec<RunTotal>> = vec![Vec::with_capacity(iters); methods.len()];
-    for _ in 0..iters {
-        let mut forward = RunTotal::default();
-        let mut per_method = vec![RunTotal::default(); methods.len()];
-        for (r, round) in cams.chunks(ROUND_VIEWS).enumerate() {
-            let first = r * ROUND_VIEWS;
-            let f = forward_run(gpu, &scene, round, &opts, |d| {
-                progress("forward render", done + d, total)
-            })?;
-            done += round.len();
-            forward.add(f.gpu_ms, f.wall_s, f.peak_device_bytes);
-            forward.visible += f.visible;
-            forward.intersections += f.intersections;
-            for (cfg, sum) in cfgs.iter().zip(&mut per_method) {
-                let shifted = Shifted {
-                    labels: &labels,
-                    first,
-                };
-                let (_, stats) =
-                    accumulate(gpu, &scene, round, &shifted, spec.classes, cfg, |d, _| {
-                        progress(cfg.method.name(), done + d, total)
-                    })?;
+
+    /// `iters` timed runs of the forward render and of every method. They take turns on
+    /// each round of views, so a slow spell of a shared machine slows them alike and the
+    /// ratios stay meaningful.
+    fn timed_runs(
+        &self,
+        iters: usize,
+        mut progress: impl FnMut(&str, usize, usize),
+    ) -> Result<(Vec<RunTotal>, Vec<Vec<RunTotal>>)> {
+        let methods = self.cfgs.len();
+        let total = iters * self.cams.len() * (1 + methods);
+        let mut done = 0;
+        let mut forward_runs = Vec::with_capacity(iters);
+        let mut method_runs: Vec<Vec<RunTotal>> = vec![Vec::with_capacity(iters); methods];
+        for _ in 0..iters {
+            let mut forward = RunTotal::default();
+            let mut per_method = vec![RunTotal::default(); methods];
+            for (r, round) in self.cams.chunks(ROUND_VIEWS).enumerate() {
+                let f = forward_run(self.gpu, self.scene, round, &self.opts, |d| {
+                    progress("forward render", done + d, total)
+                })?;
                 done += round.len();
-                sum.add(stats.gpu_ms, stats.wall_s, stats.peak_device_bytes);
-                sum.passes = stats.passes;
-                sum.rows_per_pass = stats.rows_per_pass;
+                forward.add(f.gpu_ms, f.wall_s, f.peak_device_bytes);
+                forward.visible += f.visible;
+                forward.intersections += f.intersections;
+                let shifted = Shifted {
+                    labels: &self.labels,
+                    first: r * ROUND_VIEWS,
+                };
+                for (cfg, sum) in self.cfgs.iter().zip(&mut per_method) {
+                    let (_, stats) = accumulate(
+                        self.gpu,
+                        self.scene,
+                        round,
+                        &shifted,
+                        self.classes,
+                        cfg,
+                        |d, _| progress(cfg.method.name(), done + d, total),
+                    )?;
+                    done += round.len();
+                    sum.add(stats.gpu_ms, stats.wall_s, stats.peak_device_bytes);
+                    sum.passes = stats.passes;
+                    sum.rows_per_pass = stats.rows_per_pass;
+                }
+            }
+            forward_runs.push(forward);
+            for (runs, sum) in method_runs.iter_mut().zip(per_method) {
+                runs.push(sum);
             }
         }
-        forward_runs.push(forward);
-        for (runs, sum) in method_runs.iter_mut().zip(per_method) {
-            runs.push(sum);
-        }
+        Ok((forward_runs, method_runs))
     }
-    let forward = RunTotal::median(&forward_runs);
+}
+
+/// The forward render's medians over `runs` of `views` views.
+fn forward_bench(runs: &[RunTotal], views: usize) -> ForwardBench {
+    let forward = RunTotal::median(runs);
     let n_views = views as f64;
-    let last = forward_runs.last().expect("at least one run");
-    let forward = ForwardBench {
+    let last = runs.last().expect("at least one run");
+    ForwardBench {
         gpu_ms: forward.gpu_ms,
         wall_s: forward.wall_s,
         views_per_s: n_views / forward.wall_s,
         visible_per_view: last.visible / n_views,
         intersections_per_view: last.intersections / n_views,
         peak_device_bytes: forward.peak_device_bytes,
-    };
-    let results = methods
-        .iter()
-        .zip(&method_runs)
-        .map(|(&method, runs)| {
-            let m = RunTotal::median(runs);
-            MethodBench {
-                method: method.name(),
-                key: Lifter::Fuse(method).key(),
-                wall_s: m.wall_s,
-                gpu_ms: m.gpu_ms,
-                views_per_s: (views * m.passes) as f64 / m.wall_s,
-                passes: m.passes,
-                rows_per_pass: m.rows_per_pass,
-                peak_device_bytes: m.peak_device_bytes,
-                gpu_ratio: m.gpu_ms / forward.gpu_ms,
-                wall_ratio: m.wall_s / forward.wall_s,
-            }
-        })
-        .collect();
-    Ok(FuseBench {
-        spec: spec.clone(),
-        device: gpu.caps().name.clone(),
-        goal_ratio: GOAL_RATIO,
-        forward,
-        methods: results,
-    })
+    }
+}
+
+/// A method's medians over `runs`, and their ratios to the forward render's.
+fn method_bench(
+    method: Method,
+    runs: &[RunTotal],
+    forward: &ForwardBench,
+    views: usize,
+) -> MethodBench {
+    let m = RunTotal::median(runs);
+    MethodBench {
+        method: method.name(),
+        key: method.key(),
+        wall_s: m.wall_s,
+        gpu_ms: m.gpu_ms,
+        views_per_s: (views * m.passes) as f64 / m.wall_s,
+        passes: m.passes,
+        rows_per_pass: m.rows_per_pass,
+        peak_device_bytes: m.peak_device_bytes,
+        gpu_ratio: m.gpu_ms / forward.gpu_ms,
+        wall_ratio: m.wall_s / forward.wall_s,
+    }
 }
 
 /// Views per round: see `bench_fuse`.

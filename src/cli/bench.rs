@@ -6,10 +6,10 @@ use clap::{Args, Subcommand};
 use serde::Serialize;
 
 use super::joint_args::parse_methods;
-use super::progress::views_bar;
+use super::progress::{follow, views_bar};
 use semsplat::bench::fuse::{bench_fuse, FuseBench, FuseBenchSpec};
 use semsplat::bench::{render::bench_render, scan::bench_scan, sort::bench_sort};
-use semsplat::eval::benchmark::{Lifter, ALL_METHODS};
+use semsplat::experiment::{Lifter, ALL_METHODS};
 use semsplat::gpu::timings::KernelTotal;
 use semsplat::gpu::Gpu;
 
@@ -192,115 +192,122 @@ fn print_fuse(r: &FuseBench) {
 pub fn run(cmd: BenchCommand) -> Result<()> {
     let gpu = Gpu::new()?;
     match cmd {
-        BenchCommand::Sort(a) => {
-            let r = bench_sort(&gpu, a.n, a.bits, a.common.iters, a.common.seed)?;
-            emit(a.common.json, &r, || {
-                println!(
-                    "radix sort: {} pairs, {} bits, on {} (median of {})",
-                    r.n, r.bits, r.device, r.iters
-                );
-                println!(
-                    "  GPU  {:>10.3} ms  {:>8.3} G pairs/s",
-                    r.gpu_ms,
-                    r.gpu_pairs_per_s * 1e-9
-                );
-                println!(
-                    "  CPU  {:>10.3} ms  {:>8.3} G pairs/s  (Rust stable sort_by_key)",
-                    r.cpu_ms,
-                    r.cpu_pairs_per_s * 1e-9
-                );
-                println!(
-                    "  ratio GPU/CPU: {:.2}x   (result verified against the CPU sort)",
-                    r.ratio
-                );
-                print_kernels(&r.kernels);
-            })
-        }
-        BenchCommand::Scan(a) => {
-            let r = bench_scan(&gpu, a.n, a.common.iters, a.common.seed)?;
-            emit(a.common.json, &r, || {
-                println!(
-                    "prefix scan: {} elements on {} (median of {})",
-                    r.n, r.device, r.iters
-                );
-                println!(
-                    "  GPU  {:>10.3} ms  {:>8.3} G elems/s",
-                    r.gpu_ms,
-                    r.gpu_elems_per_s * 1e-9
-                );
-                println!(
-                    "  CPU  {:>10.3} ms  {:>8.3} G elems/s",
-                    r.cpu_ms,
-                    r.cpu_elems_per_s * 1e-9
-                );
-                println!(
-                    "  ratio GPU/CPU: {:.2}x   (result verified against the CPU scan)",
-                    r.ratio
-                );
-                print_kernels(&r.kernels);
-            })
-        }
-        BenchCommand::Render(a) => {
-            let r = bench_render(
-                &gpu,
-                a.n,
-                a.width,
-                a.height,
-                a.channels as usize,
-                a.common.iters,
-                a.common.seed,
-            )?;
-            emit(a.common.json, &r, || {
-                println!(
-                    "render: {} Gaussians, {}x{}, C = {} on {} (median of {})",
-                    r.n, r.width, r.height, r.channels, r.device, r.iters
-                );
-                println!(
-                    "  frame      {:>10.3} ms  {:>8.1} frames/s",
-                    r.frame_ms, r.frames_per_s
-                );
-                let s = &r.stages;
-                println!("  project    {:>10.3} ms", s.project_ms);
-                println!("  depth sort {:>10.3} ms", s.depth_sort_ms);
-                println!("  bin        {:>10.3} ms", s.bin_ms);
-                println!("  blend      {:>10.3} ms", s.blend_ms);
-                println!(
-                    "  visible {} Gaussians, {} tile intersections",
-                    r.visible, r.intersections
-                );
-            })
-        }
-        BenchCommand::Fuse(a) => {
-            let fusion: Vec<Lifter> = ALL_METHODS
-                .into_iter()
-                .filter(|l| matches!(l, Lifter::Fuse(_)))
-                .collect();
-            let methods = parse_methods(&a.methods, &fusion)?
-                .into_iter()
-                .filter_map(|l| match l {
-                    Lifter::Fuse(m) => Some(m),
-                    _ => None,
-                })
-                .collect::<Vec<_>>();
-            let spec = FuseBenchSpec {
-                n: a.n,
-                views: a.views,
-                width: a.width,
-                height: a.height,
-                classes: a.classes,
-                iters: a.iters,
-                seed: a.seed,
-            };
-            let bar = views_bar(0);
-            let r = bench_fuse(&gpu, &spec, &methods, |phase, done, total| {
-                if bar.message() != phase {
-                    bar.set_message(phase.to_string());
-                }
-                bar.set_length(total as u64);
-                bar.set_position(done as u64);
-            })?;
-            bar.finish_and_clear();
-            emit(a.json, &r, || print_fuse(&r))
-        }
+        BenchCommand::Sort(a) => run_sort(&gpu, a),
+        BenchCommand::Scan(a) => run_scan(&gpu, a),
+        BenchCommand::Render(a) => run_render(&gpu, a),
+        BenchCommand::Fuse(a) => run_fuse(&gpu, a),
     }
+}
+
+fn run_sort(gpu: &Gpu, a: SortArgs) -> Result<()> {
+    let r = bench_sort(gpu, a.n, a.bits, a.common.iters, a.common.seed)?;
+    emit(a.common.json, &r, || {
+        println!(
+            "radix sort: {} pairs, {} bits, on {} (median of {})",
+            r.n, r.bits, r.device, r.iters
+        );
+        println!(
+            "  GPU  {:>10.3} ms  {:>8.3} G pairs/s",
+            r.gpu_ms,
+            r.gpu_pairs_per_s * 1e-9
+        );
+        println!(
+            "  CPU  {:>10.3} ms  {:>8.3} G pairs/s  (Rust stable sort_by_key)",
+            r.cpu_ms,
+            r.cpu_pairs_per_s * 1e-9
+        );
+        println!(
+            "  ratio GPU/CPU: {:.2}x   (result verified against the CPU sort)",
+            r.ratio
+        );
+        print_kernels(&r.kernels);
+    })
+}
+
+fn run_scan(gpu: &Gpu, a: ScanArgs) -> Result<()> {
+    let r = bench_scan(gpu, a.n, a.common.iters, a.common.seed)?;
+    emit(a.common.json, &r, || {
+        println!(
+            "prefix scan: {} elements on {} (median of {})",
+            r.n, r.device, r.iters
+        );
+        println!(
+            "  GPU  {:>10.3} ms  {:>8.3} G elems/s",
+            r.gpu_ms,
+            r.gpu_elems_per_s * 1e-9
+        );
+        println!(
+            "  CPU  {:>10.3} ms  {:>8.3} G elems/s",
+            r.cpu_ms,
+            r.cpu_elems_per_s * 1e-9
+        );
+        println!(
+            "  ratio GPU/CPU: {:.2}x   (result verified against the CPU scan)",
+            r.ratio
+        );
+        print_kernels(&r.kernels);
+    })
+}
+
+fn run_render(gpu: &Gpu, a: RenderArgs) -> Result<()> {
+    let r = bench_render(
+        gpu,
+        a.n,
+        a.width,
+        a.height,
+        a.channels as usize,
+        a.common.iters,
+        a.common.seed,
+    )?;
+    emit(a.common.json, &r, || {
+        println!(
+            "render: {} Gaussians, {}x{}, C = {} on {} (median of {})",
+            r.n, r.width, r.height, r.channels, r.device, r.iters
+        );
+        println!(
+            "  frame      {:>10.3} ms  {:>8.1} frames/s",
+            r.frame_ms, r.frames_per_s
+        );
+        let s = &r.stages;
+        println!("  project    {:>10.3} ms", s.project_ms);
+        println!("  depth sort {:>10.3} ms", s.depth_sort_ms);
+        println!("  bin        {:>10.3} ms", s.bin_ms);
+        println!("  blend      {:>10.3} ms", s.blend_ms);
+        println!(
+            "  visible {} Gaussians, {} tile intersections",
+            r.visible, r.intersections
+        );
+    })
+}
+
+fn run_fuse(gpu: &Gpu, a: FuseArgs) -> Result<()> {
+    let fusion: Vec<Lifter> = ALL_METHODS
+        .into_iter()
+        .filter(|l| matches!(l, Lifter::Fuse(_)))
+        .collect();
+    let methods = parse_methods(&a.methods, &fusion)?
+        .into_iter()
+        .filter_map(|l| match l {
+            Lifter::Fuse(m) => Some(m),
+            _ => None,
+        })
+        .collect::<Vec<_>>();
+    let spec = FuseBenchSpec {
+        n: a.n,
+        views: a.views,
+        width: a.width,
+        height: a.height,
+        classes: a.classes,
+        iters: a.iters,
+        seed: a.seed,
+    };
+    let bar = views_bar(0);
+    let r = bench_fuse(gpu, &spec, &methods, |phase, done, total| {
+        if bar.message() != phase {
+            bar.set_message(phase.to_string());
+        }
+        follow(&bar)(done, total);
+    })?;
+    bar.finish_and_clear();
+    emit(a.json, &r, || print_fuse(&r))
 }

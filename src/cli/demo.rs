@@ -3,21 +3,25 @@
 
 use std::path::PathBuf;
 
-use super::joint_args::MethodArgs;
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::Args;
 use serde::Serialize;
 
-use semsplat::eval::benchmark::{held_out_quality, score_methods, MethodScore, TrainLabels};
-use semsplat::eval::chart::{speed_vs_accuracy, SpeedPoint};
+use super::joint_args::{room_config, MethodArgs};
 use semsplat::eval::image_quality::ImageQuality;
-use semsplat::eval::label_render::LabelRenderer;
-use semsplat::eval::strip::write_strip;
+use semsplat::experiment::{held_out_quality, score_methods, MethodScore, TrainLabels};
 use semsplat::gpu::Gpu;
-use semsplat::scene::labels::LabelMap;
-use semsplat::scene::{ClassTable, Split};
-use semsplat::synth::{generate, NoiseSpec, RoomSource, SynthConfig};
+use semsplat::synth::{generate, NoiseSpec, SynthScene};
 use semsplat::util::write_bytes_atomic;
+#[cfg(feature = "charts")]
+use {
+    anyhow::Context,
+    semsplat::eval::chart::{speed_vs_accuracy, SpeedPoint},
+    semsplat::eval::label_render::LabelRenderer,
+    semsplat::eval::strip::write_strip,
+    semsplat::scene::labels::LabelMap,
+    semsplat::scene::{ClassTable, Split},
+};
 
 #[derive(Args)]
 pub struct DemoArgs {
@@ -62,6 +66,7 @@ struct DemoReport<'a> {
     input_image_quality: ImageQuality,
 }
 
+#[cfg(feature = "charts")]
 fn palette(labels: &[u16], table: &ClassTable) -> Vec<u8> {
     labels
         .iter()
@@ -76,18 +81,7 @@ fn palette(labels: &[u16], table: &ClassTable) -> Vec<u8> {
 }
 
 pub fn run(args: DemoArgs) -> Result<()> {
-    let mut cfg = SynthConfig::new(RoomSource::from_arg(&args.preset)?);
-    cfg.train_views = args.views;
-    cfg.test_views = args.test_views;
-    cfg.width = args.width;
-    cfg.height = args.height;
-    cfg.seed = args.seed;
-    cfg.noise = args.noise.clone();
-    eprintln!(
-        "building the {} room ({} + {} views at {}x{})",
-        args.preset, args.views, args.test_views, args.width, args.height
-    );
-    let s = generate(&cfg)?;
+    let s = build_room(&args)?;
     let methods = args.methods.methods()?;
     let gpu = Gpu::new()?;
     let which = if args.noise.is_some() {
@@ -98,24 +92,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     let scores = score_methods(&gpu, &s, which, &methods, &args.methods.schedule(), |m| {
         eprintln!("lifting with {m}")
     })?;
-
-    println!(
-        "{:<24} {:>9} {:>8} {:>10} {:>10} {:>10} {:>10}",
-        "method", "seconds", "mIoU", "pixel acc", "3D acc", "memory", "PSNR"
-    );
-    for r in &scores {
-        println!(
-            "{:<24} {:>9.2} {:>8.3} {:>10.3} {:>10.3} {:>7.0} MiB {:>10}",
-            r.method,
-            r.seconds,
-            r.miou,
-            r.pixel_accuracy,
-            r.gaussian_accuracy,
-            r.peak_device_bytes as f64 / (1 << 20) as f64,
-            r.image_quality
-                .map_or("-".to_string(), |q| format!("{:.2} dB", q.psnr))
-        );
-    }
+    print_scores(&scores);
 
     let input_image_quality = held_out_quality(&gpu, &s, &s.gaussians)?;
     println!(
@@ -135,11 +112,54 @@ pub fn run(args: DemoArgs) -> Result<()> {
         methods: &scores,
         input_image_quality,
     };
-    let out = &args.out;
     write_bytes_atomic(
-        &out.join("report.json"),
+        &args.out.join("report.json"),
         serde_json::to_string_pretty(&report)?.as_bytes(),
     )?;
+    write_charts(&args, &gpu, &s, &scores)
+}
+
+/// The benchmark room the flags describe, generated in memory.
+fn build_room(args: &DemoArgs) -> Result<SynthScene> {
+    let mut cfg = room_config(
+        &args.preset,
+        args.views,
+        args.test_views,
+        (args.width, args.height),
+        args.seed,
+    )?;
+    cfg.noise = args.noise.clone();
+    eprintln!(
+        "building the {} room ({} + {} views at {}x{})",
+        args.preset, args.views, args.test_views, args.width, args.height
+    );
+    generate(&cfg)
+}
+
+fn print_scores(scores: &[MethodScore]) {
+    println!(
+        "{:<24} {:>9} {:>8} {:>10} {:>10} {:>10} {:>10}",
+        "method", "seconds", "mIoU", "pixel acc", "3D acc", "memory", "PSNR"
+    );
+    for r in scores {
+        println!(
+            "{:<24} {:>9.2} {:>8.3} {:>10.3} {:>10.3} {:>7.0} MiB {:>10}",
+            r.method,
+            r.seconds,
+            r.miou,
+            r.pixel_accuracy,
+            r.gaussian_accuracy,
+            r.peak_device_bytes as f64 / (1 << 20) as f64,
+            r.image_quality
+                .map_or("-".to_string(), |q| format!("{:.2} dB", q.psnr))
+        );
+    }
+}
+
+/// speed_vs_accuracy.png and strip.png.
+#[cfg(feature = "charts")]
+fn write_charts(args: &DemoArgs, gpu: &Gpu, s: &SynthScene, scores: &[MethodScore]) -> Result<()> {
+    let out = &args.out;
     let points: Vec<SpeedPoint> = scores
         .iter()
         .map(|r| SpeedPoint {
@@ -160,8 +180,31 @@ pub fn run(args: DemoArgs) -> Result<()> {
         "mIoU on held-out views",
         &points,
     )?;
+    write_view_strip(gpu, s, scores, &out.join("strip.png"))?;
+    eprintln!(
+        "wrote {}/report.json, speed_vs_accuracy.png, strip.png",
+        out.display()
+    );
+    Ok(())
+}
 
-    // One held-out view: RGB, true labels, each method's rendered labels.
+#[cfg(not(feature = "charts"))]
+fn write_charts(args: &DemoArgs, _: &Gpu, _: &SynthScene, _: &[MethodScore]) -> Result<()> {
+    eprintln!(
+        "wrote {}/report.json (built without the charts feature: no PNGs)",
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// One held-out view: RGB, true labels, each method's rendered labels.
+#[cfg(feature = "charts")]
+fn write_view_strip(
+    gpu: &Gpu,
+    s: &SynthScene,
+    scores: &[MethodScore],
+    path: &std::path::Path,
+) -> Result<()> {
     let (i, cam) = s
         .cameras
         .iter()
@@ -173,8 +216,8 @@ pub fn run(args: DemoArgs) -> Result<()> {
         ("RGB".to_string(), s.views[i].rgb.clone()),
         ("true labels".into(), palette(&s.views[i].labels, table)),
     ];
-    for r in &scores {
-        let labels: Vec<u16> = LabelRenderer::new(&gpu, r.scene(&s.gaussians), &r.classes)?
+    for r in scores {
+        let labels: Vec<u16> = LabelRenderer::new(gpu, r.scene(&s.gaussians), &r.classes)?
             .render(cam)?
             .into_iter()
             .map(|l| l.unwrap_or(LabelMap::IGNORE))
@@ -185,10 +228,5 @@ pub fn run(args: DemoArgs) -> Result<()> {
         .iter()
         .map(|(t, p)| (t.as_str(), p.clone()))
         .collect();
-    write_strip(&out.join("strip.png"), cam.width, cam.height, &refs)?;
-    eprintln!(
-        "wrote {}/report.json, speed_vs_accuracy.png, strip.png",
-        out.display()
-    );
-    Ok(())
+    write_strip(path, cam.width, cam.height, &refs)
 }

@@ -2,21 +2,21 @@
 //! label maps: 2D mIoU and pixel accuracy (per class too) on the chosen views, and 3D
 //! per-Gaussian accuracy when a PLY with the true classes is given.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Result};
 use clap::{Args, ValueEnum};
 use serde::Serialize;
 
+use semsplat::dataset::open_truth_views;
 use semsplat::eval::image_quality::{image_quality, ImageQuality};
 use semsplat::eval::label_render::LabelRenderer;
 use semsplat::eval::metrics::{gaussian_accuracy, Confusion, SegmentationScores};
 use semsplat::gpu::Gpu;
-use semsplat::scene::cameras::load_cameras;
 use semsplat::scene::images::load_view_image;
-use semsplat::scene::labels::{LabelDir, LabelMap, MissingLabels};
+use semsplat::scene::labels::{LabelDir, LabelMap};
 use semsplat::scene::ply::read_ply;
-use semsplat::scene::{Camera, Split};
+use semsplat::scene::{Camera, Gaussians, Split};
 use semsplat::util::write_bytes_atomic;
 
 #[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
@@ -70,59 +70,30 @@ pub fn run(args: EvalArgs) -> Result<()> {
             args.scene.display()
         );
     };
-    let cams = load_cameras(&args.cameras)?;
-    let dir = LabelDir::open(&args.labels, &cams, None, MissingLabels::Skip)?;
-    let chosen: Vec<usize> = (0..dir.len())
-        .filter(|&i| {
-            let split = cams[dir.camera_index(i).expect("entry")].split;
-            args.views == Views::All || (args.views == Views::Test) == (split == Split::Test)
-        })
-        .collect();
-    if chosen.is_empty() {
-        bail!("no labeled view matches --views (cameras without splits are all train views; try --views all)");
-    }
+    let (cams, dir) = open_truth_views(&args.cameras, &args.labels)?;
+    let chosen = chosen_views(&args, &cams, &dir)?;
     let gaussian_accuracy = match &args.truth {
-        Some(path) => {
-            let truth = read_ply(path)?;
-            let Some(t) = truth.class_ids else {
-                bail!("{} has no `class` property", path.display())
-            };
-            if t.len() != classes.len() {
-                bail!(
-                    "{} has {} Gaussians, the scene {}",
-                    path.display(),
-                    t.len(),
-                    classes.len()
-                );
-            }
-            Some(gaussian_accuracy(&classes, &t))
-        }
+        Some(path) => Some(truth_accuracy(path, &classes)?),
         None => None,
     };
     let gpu = Gpu::new()?;
     let mut renderer = LabelRenderer::new(&gpu, &g, &classes)?;
     let mut confusion = Confusion::default();
     for &i in &chosen {
-        let cam = &cams[dir.camera_index(i).expect("entry")];
         let truth = dir.load(i)?;
-        confusion.add(&truth.labels, &renderer.render(cam)?, LabelMap::IGNORE);
+        confusion.add(
+            &truth.labels,
+            &renderer.render(chosen_camera(&cams, &dir, i))?,
+            LabelMap::IGNORE,
+        );
     }
     let image_quality = match &args.images {
         Some(image_dir) => {
             let views: Vec<&Camera> = chosen
                 .iter()
-                .map(|&i| &cams[dir.camera_index(i).expect("entry")])
+                .map(|&i| chosen_camera(&cams, &dir, i))
                 .collect();
-            let images = views
-                .iter()
-                .map(|cam| load_view_image(image_dir, cam))
-                .collect::<Result<Vec<_>>>()?;
-            let pairs: Vec<(&Camera, &[f32])> = views
-                .iter()
-                .zip(&images)
-                .map(|(c, im)| (*c, im.as_slice()))
-                .collect();
-            Some(image_quality(&gpu, &g, &pairs)?)
+            Some(rendered_quality(&gpu, &g, image_dir, &views)?)
         }
         None => None,
     };
@@ -132,6 +103,69 @@ pub fn run(args: EvalArgs) -> Result<()> {
         gaussian_accuracy,
         image_quality,
     };
+    print_report(&report);
+    if let Some(path) = &args.json {
+        write_bytes_atomic(path, serde_json::to_string_pretty(&report)?.as_bytes())?;
+    }
+    Ok(())
+}
+
+/// The label map entries of the views `--views` selects (at least one).
+fn chosen_views(args: &EvalArgs, cams: &[Camera], dir: &LabelDir) -> Result<Vec<usize>> {
+    let chosen: Vec<usize> = (0..dir.len())
+        .filter(|&i| {
+            let split = chosen_camera(cams, dir, i).split;
+            args.views == Views::All || (args.views == Views::Test) == (split == Split::Test)
+        })
+        .collect();
+    if chosen.is_empty() {
+        bail!("no labeled view matches --views (cameras without splits are all train views; try --views all)");
+    }
+    Ok(chosen)
+}
+
+/// The camera of label map entry `i`.
+fn chosen_camera<'a>(cams: &'a [Camera], dir: &LabelDir, i: usize) -> &'a Camera {
+    &cams[dir.camera_index(i).expect("entry")]
+}
+
+/// 3D accuracy of `classes` against the true classes in the PLY at `path`.
+fn truth_accuracy(path: &Path, classes: &[i32]) -> Result<f64> {
+    let truth = read_ply(path)?;
+    let Some(t) = truth.class_ids else {
+        bail!("{} has no `class` property", path.display())
+    };
+    if t.len() != classes.len() {
+        bail!(
+            "{} has {} Gaussians, the scene {}",
+            path.display(),
+            t.len(),
+            classes.len()
+        );
+    }
+    Ok(gaussian_accuracy(classes, &t))
+}
+
+/// PSNR and SSIM of the scene rendered from `views` against their images in `image_dir`.
+fn rendered_quality(
+    gpu: &Gpu,
+    g: &Gaussians,
+    image_dir: &Path,
+    views: &[&Camera],
+) -> Result<ImageQuality> {
+    let images = views
+        .iter()
+        .map(|cam| load_view_image(image_dir, cam))
+        .collect::<Result<Vec<_>>>()?;
+    let pairs: Vec<(&Camera, &[f32])> = views
+        .iter()
+        .zip(&images)
+        .map(|(c, im)| (*c, im.as_slice()))
+        .collect();
+    image_quality(gpu, g, &pairs)
+}
+
+fn print_report(report: &EvalReport) {
     println!("views: {}", report.views);
     println!("mIoU: {:.4}", report.segmentation.miou);
     println!("pixel accuracy: {:.4}", report.segmentation.pixel_accuracy);
@@ -144,8 +178,4 @@ pub fn run(args: EvalArgs) -> Result<()> {
     for c in &report.segmentation.per_class {
         println!("  class {:>5}: IoU {:.4} ({} px)", c.id, c.iou, c.pixels);
     }
-    if let Some(path) = &args.json {
-        write_bytes_atomic(path, serde_json::to_string_pretty(&report)?.as_bytes())?;
-    }
-    Ok(())
 }

@@ -1,31 +1,32 @@
 //! `semsplat fuse`: training-free lifting of per-view label maps onto a scene's Gaussians.
 
-use std::collections::HashMap;
 use std::path::{Path, PathBuf};
+use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use clap::{Args, ValueEnum};
 use serde::Serialize;
 
-use super::label_classes::{classes_in_labels, default_class_table};
-use super::progress::views_bar;
+use super::open_dataset;
+use super::progress::{follow, views_bar};
+use semsplat::dataset::{user_classes, DatasetPaths};
 use semsplat::eval::label_render::LabelRenderer;
 use semsplat::fuse::{
     accumulate, assign_one_vs_rest, assign_semantic, Accumulation, ClassScores, FuseConfig,
-    FuseStats, LabelSource, Method, NO_LABEL,
+    FuseStats, Method,
 };
 use semsplat::gpu::Gpu;
 use semsplat::render::GpuScene;
 use semsplat::scene::cameras::load_cameras;
-use semsplat::scene::classes::{read_class_table, write_class_table, ClassTable, CompactClasses};
-use semsplat::scene::labels::{
-    write_label_png, write_palette_png, LabelDir, LabelMap, MissingLabels,
-};
+use semsplat::scene::classes::{read_class_table, write_class_table, ClassTable};
+use semsplat::scene::labels::{write_label_png, write_palette_png, LabelMap};
 use semsplat::scene::ply::{read_ply, write_classes_sidecar, write_ply};
-use semsplat::scene::{Camera, Gaussians};
+use semsplat::scene::Gaussians;
 use semsplat::util::npy::write_npy_f32;
 use semsplat::util::write_bytes_atomic;
 
+/// The base methods of `--method`; their variant flags (`--occlusion`, `--weighted`,
+/// `--per-view`) pick the [`Method`] from `semsplat::fuse::SPELLINGS`.
 #[derive(Clone, Copy, ValueEnum)]
 enum MethodArg {
     /// Majority vote of the Gaussian centers projected into each view (Semantic Fusion).
@@ -139,36 +140,6 @@ fn parse_bytes(s: &str) -> Result<u64, String> {
     Ok((v * mul as f64) as u64)
 }
 
-/// Label maps streamed from the folder, as compact class indices.
-struct DirLabels<'a> {
-    dir: &'a LabelDir,
-    entry_of_camera: HashMap<usize, usize>,
-    compact: &'a CompactClasses,
-}
-
-impl LabelSource for DirLabels<'_> {
-    fn labels(&self, view: usize, _cam: &Camera) -> Result<Option<Vec<u32>>> {
-        let Some(&entry) = self.entry_of_camera.get(&view) else {
-            return Ok(None);
-        };
-        let map = self.dir.load(entry)?;
-        Ok(Some(
-            map.labels
-                .iter()
-                .map(|&l| {
-                    if l == LabelMap::IGNORE {
-                        NO_LABEL
-                    } else {
-                        self.compact
-                            .compact_of(l as u32)
-                            .map_or(NO_LABEL, u32::from)
-                    }
-                })
-                .collect(),
-        ))
-    }
-}
-
 fn contrib_sidecar(path: &Path) -> PathBuf {
     path.with_extension("classes.json")
 }
@@ -205,25 +176,17 @@ fn find_class(table: &ClassTable, key: &str) -> Result<u32> {
     bail!("no class '{key}' in the class table (classes: {names:?})")
 }
 
+/// The evidence matrix and its row table, with the fusion statistics when it was rendered.
+struct Evidence {
+    scores: ClassScores,
+    table: ClassTable,
+    stats: Option<FuseStats>,
+}
+
 pub fn run(args: FuseArgs) -> Result<()> {
-    let start = std::time::Instant::now();
+    let start = Instant::now();
     let mut g = read_ply(&args.scene)?;
-    let method = match (args.method, args.occlusion, args.weighted, args.per_view) {
-        (MethodArg::Vote, false, false, false) => Method::Vote,
-        (MethodArg::Vote, true, _, false) => Method::VoteOcclusion,
-        (MethodArg::Vote, _, true, false) => Method::VoteWeighted,
-        (MethodArg::Vote, _, _, true) => bail!("--per-view is a variant of --method flashsplat"),
-        (MethodArg::Flashsplat, false, false, per_view) => {
-            if per_view {
-                Method::FlashSplatPerView
-            } else {
-                Method::FlashSplat
-            }
-        }
-        (MethodArg::Flashsplat, ..) => {
-            bail!("--occlusion and --weighted are variants of --method vote")
-        }
-    };
+    let method = selected_method(&args)?;
     if !(-1.0..=1.0).contains(&args.gamma) {
         bail!("--gamma must lie in [-1, 1], got {}", args.gamma);
     }
@@ -232,161 +195,211 @@ pub fn run(args: FuseArgs) -> Result<()> {
     } else {
         Accumulation::FixedPoint
     };
-
-    // Evidence: from a saved matrix, or rendered from the views.
-    let (scores, table, stats) = if let Some(path) = &args.contrib {
-        let scores = ClassScores::load_npy(path)?;
-        let table = read_class_table(&contrib_sidecar(path)).with_context(|| {
-            format!(
-                "{} needs its row table {}",
-                path.display(),
-                contrib_sidecar(path).display()
-            )
-        })?;
-        if scores.n != g.len() || scores.classes != table.len() {
-            bail!(
-                "{} holds [{}, {}] but the scene has {} Gaussians and the row table {} classes",
-                path.display(),
-                scores.classes,
-                scores.n,
-                g.len(),
-                table.len()
-            );
-        }
-        (scores, table, None)
-    } else {
-        let (Some(cam_path), Some(label_path)) = (&args.cameras, &args.labels) else {
-            bail!(
-                "--cameras and --labels are needed (or --contrib to reassign from a saved matrix)"
-            );
-        };
-        let mut cams = load_cameras(cam_path)?;
-        if args.train_only {
-            cams.retain(|c| c.split == semsplat::scene::Split::Train);
-            if cams.is_empty() {
-                bail!("{} has no train cameras", cam_path.display());
-            }
-        }
-        let table_path = args
-            .classes
-            .clone()
-            .or_else(|| default_class_table(label_path));
-        let given = table_path.as_deref().map(read_class_table).transpose()?;
-        let dir = LabelDir::open(label_path, &cams, given.as_ref(), MissingLabels::Skip)?;
-        if dir.is_empty() {
-            bail!(
-                "no label map in {} matches a camera name",
-                label_path.display()
-            );
-        }
-        if !dir.skipped().is_empty() {
-            eprintln!(
-                "note: {} views have no label map and are skipped",
-                dir.skipped().len()
-            );
-        }
-        let (compact, table) = classes_in_labels(&dir, given.as_ref())?;
-        let entry_of_camera = (0..dir.len())
-            .filter_map(|i| dir.camera_index(i).map(|c| (c, i)))
-            .collect();
-        let source = DirLabels {
-            dir: &dir,
-            entry_of_camera,
-            compact: &compact,
-        };
-        let gpu = Gpu::new()?;
-        let scene = GpuScene::upload(&gpu, &g)?;
-        let cfg = FuseConfig {
-            method,
-            accumulation,
-            mem_budget: args.mem_budget,
-            depth_tolerance: args.depth_tol,
-            ..Default::default()
-        };
-        let bar = views_bar(cams.len());
-        let (scores, stats) = accumulate(
-            &gpu,
-            &scene,
-            &cams,
-            &source,
-            compact.len(),
-            &cfg,
-            |done, total| {
-                bar.set_length(total as u64);
-                bar.set_position(done as u64);
-            },
-        )?;
-        bar.finish_and_clear();
-        (scores, table, Some(stats))
+    let evidence = match &args.contrib {
+        Some(path) => load_evidence(path, g.len())?,
+        None => fuse_views(&args, &g, method, accumulation)?,
     };
-
+    let Evidence {
+        scores,
+        table,
+        stats,
+    } = evidence;
     if let Some(path) = &args.save_contrib {
         scores.save_npy(path)?;
         write_class_table(&contrib_sidecar(path), &table)?;
     }
 
-    let assign_start = std::time::Instant::now();
-    let assignment = assign_semantic(&scores);
-    g.class_ids = Some(
-        assignment
-            .class
-            .iter()
-            .map(|c| c.map_or(-1, |e| table.classes[e].id as i32))
-            .collect(),
-    );
-    g.class_conf = Some(assignment.confidence.clone());
+    let assign_start = Instant::now();
+    assign_classes(&mut g, &scores, &table);
     if let Some(path) = &args.save_membership {
-        let s_matrix = assign_one_vs_rest(&scores, args.gamma);
-        let flat: Vec<f32> = s_matrix
-            .iter()
-            .flatten()
-            .map(|&m| f32::from(u8::from(m)))
-            .collect();
-        write_npy_f32(path, &[scores.classes as u64, scores.n as u64], &flat)?;
+        save_membership(path, &scores, args.gamma)?;
     }
     if let Some(dir) = &args.render_views {
-        let cam_path = args.cameras.as_ref().expect("clap requires --cameras");
-        let cams = load_cameras(cam_path)?;
-        let gpu = Gpu::new()?;
-        let ids = g.class_ids.as_deref().expect("set above");
-        let mut renderer = LabelRenderer::new(&gpu, &g, ids)?;
-        for cam in &cams {
-            let labels: Vec<u16> = renderer
-                .render(cam)?
-                .into_iter()
-                .map(|l| l.unwrap_or(LabelMap::IGNORE))
-                .collect();
-            let map = LabelMap::new(cam.width, cam.height, labels)?;
-            write_label_png(&dir.join(format!("{}.labels.png", cam.name)), &map)?;
-            write_palette_png(&dir.join(format!("{}.palette.png", cam.name)), &map, &table)?;
-        }
+        render_label_views(&args, dir, &g, &table)?;
     }
-    let selected = match (&args.extract, &args.remove) {
-        (Some(name), _) | (_, Some(name)) => {
-            let id = find_class(&table, name)?;
-            let row = table
-                .classes
-                .iter()
-                .position(|c| c.id == id)
-                .expect("class in table");
-            let members = assign_one_vs_rest(&scores, args.gamma).swap_remove(row);
-            let keep: Vec<bool> = members
-                .iter()
-                .map(|&m| m == args.extract.is_some())
-                .collect();
-            g.select(&keep)
-        }
-        _ => g,
-    };
+    let selected = select_members(&args, g, &scores, &table)?;
     let assign_s = assign_start.elapsed().as_secs_f64();
 
-    write_ply(&args.out, &selected)?;
-    write_classes_sidecar(&args.out, &table)?;
+    write_outputs(&args, &selected, &table)?;
+    let report = Report {
+        method: method.name(),
+        accumulation,
+        gaussians: selected.len(),
+        classes: table.len(),
+        stats,
+        assign_s,
+        total_s: start.elapsed().as_secs_f64(),
+        per_class: per_class_counts(&selected, &table),
+    };
+    write_report(&args, &report)
+}
+
+/// The method `--method` and its variant flags name.
+fn selected_method(args: &FuseArgs) -> Result<Method> {
+    let base = args
+        .method
+        .to_possible_value()
+        .expect("no --method value is skipped");
+    let flags: Vec<&str> = [
+        ("occlusion", args.occlusion),
+        ("weighted", args.weighted),
+        ("per-view", args.per_view),
+    ]
+    .into_iter()
+    .filter_map(|(flag, set)| set.then_some(flag))
+    .collect();
+    Method::from_flags(base.get_name(), &flags).map_err(|e| anyhow!(e))
+}
+
+/// A saved evidence matrix (`--contrib`) and its row table, checked against the scene.
+fn load_evidence(path: &Path, gaussians: usize) -> Result<Evidence> {
+    let scores = ClassScores::load_npy(path)?;
+    let table = read_class_table(&contrib_sidecar(path)).with_context(|| {
+        format!(
+            "{} needs its row table {}",
+            path.display(),
+            contrib_sidecar(path).display()
+        )
+    })?;
+    if scores.n != gaussians || scores.classes != table.len() {
+        bail!(
+            "{} holds [{}, {}] but the scene has {} Gaussians and the row table {} classes",
+            path.display(),
+            scores.classes,
+            scores.n,
+            gaussians,
+            table.len()
+        );
+    }
+    Ok(Evidence {
+        scores,
+        table,
+        stats: None,
+    })
+}
+
+/// Accumulates the evidence of every labeled view on the GPU.
+fn fuse_views(
+    args: &FuseArgs,
+    g: &Gaussians,
+    method: Method,
+    accumulation: Accumulation,
+) -> Result<Evidence> {
+    let (Some(cameras), Some(labels)) = (&args.cameras, &args.labels) else {
+        bail!("--cameras and --labels are needed (or --contrib to reassign from a saved matrix)");
+    };
+    let paths = DatasetPaths {
+        cameras,
+        labels,
+        class_table: args.classes.as_deref(),
+        train_only: args.train_only,
+    };
+    let data = open_dataset(&paths, "are skipped")?;
+    let gpu = Gpu::new()?;
+    let scene = GpuScene::upload(&gpu, g)?;
+    let cfg = FuseConfig {
+        method,
+        accumulation,
+        mem_budget: args.mem_budget,
+        depth_tolerance: args.depth_tol,
+        ..Default::default()
+    };
+    let bar = views_bar(data.cameras.len());
+    let (scores, stats) = accumulate(
+        &gpu,
+        &scene,
+        &data.cameras,
+        &data,
+        data.classes.len(),
+        &cfg,
+        follow(&bar),
+    )?;
+    bar.finish_and_clear();
+    Ok(Evidence {
+        scores,
+        table: data.table,
+        stats: Some(stats),
+    })
+}
+
+/// Gives every Gaussian its winning class (user id, -1 unseen) and that class's share.
+fn assign_classes(g: &mut Gaussians, scores: &ClassScores, table: &ClassTable) {
+    let assignment = assign_semantic(scores);
+    let rows: Vec<u32> = table.classes.iter().map(|c| c.id).collect();
+    g.class_ids = Some(user_classes(&rows, assignment.class.iter().copied()));
+    g.class_conf = Some(assignment.confidence);
+}
+
+/// Writes the one-vs-rest membership matrix S as float32 0/1 [classes, Gaussians].
+fn save_membership(path: &Path, scores: &ClassScores, gamma: f64) -> Result<()> {
+    let s_matrix = assign_one_vs_rest(scores, gamma);
+    let flat: Vec<f32> = s_matrix
+        .iter()
+        .flatten()
+        .map(|&m| f32::from(u8::from(m)))
+        .collect();
+    write_npy_f32(path, &[scores.classes as u64, scores.n as u64], &flat)
+}
+
+/// Label and palette PNGs of every camera, rendered from the fused scene.
+fn render_label_views(
+    args: &FuseArgs,
+    dir: &Path,
+    g: &Gaussians,
+    table: &ClassTable,
+) -> Result<()> {
+    let cam_path = args.cameras.as_ref().expect("clap requires --cameras");
+    let cams = load_cameras(cam_path)?;
+    let gpu = Gpu::new()?;
+    let ids = g.class_ids.as_deref().expect("classes assigned");
+    let mut renderer = LabelRenderer::new(&gpu, g, ids)?;
+    for cam in &cams {
+        let labels: Vec<u16> = renderer
+            .render(cam)?
+            .into_iter()
+            .map(|l| l.unwrap_or(LabelMap::IGNORE))
+            .collect();
+        let map = LabelMap::new(cam.width, cam.height, labels)?;
+        write_label_png(&dir.join(format!("{}.labels.png", cam.name)), &map)?;
+        write_palette_png(&dir.join(format!("{}.palette.png", cam.name)), &map, table)?;
+    }
+    Ok(())
+}
+
+/// The Gaussians `--extract` keeps or `--remove` leaves (one-vs-rest with --gamma); all of
+/// them without either.
+fn select_members(
+    args: &FuseArgs,
+    g: Gaussians,
+    scores: &ClassScores,
+    table: &ClassTable,
+) -> Result<Gaussians> {
+    let ((Some(name), _) | (_, Some(name))) = (&args.extract, &args.remove) else {
+        return Ok(g);
+    };
+    let id = find_class(table, name)?;
+    let row = table
+        .classes
+        .iter()
+        .position(|c| c.id == id)
+        .expect("class in table");
+    let members = assign_one_vs_rest(scores, args.gamma).swap_remove(row);
+    let keep: Vec<bool> = members
+        .iter()
+        .map(|&m| m == args.extract.is_some())
+        .collect();
+    Ok(g.select(&keep))
+}
+
+/// The output PLY with its class table, and the palette-colored copy if asked for.
+fn write_outputs(args: &FuseArgs, selected: &Gaussians, table: &ClassTable) -> Result<()> {
+    write_ply(&args.out, selected)?;
+    write_classes_sidecar(&args.out, table)?;
     if let Some(path) = &args.palette_ply {
         let colors: Vec<[f32; 3]> = selected
             .class_ids
             .as_ref()
-            .expect("set above")
+            .expect("classes assigned")
             .iter()
             .map(|&c| {
                 if c < 0 {
@@ -398,20 +411,13 @@ pub fn run(args: FuseArgs) -> Result<()> {
             .collect();
         write_ply(path, &selected.with_flat_colors(&colors))?;
     }
+    Ok(())
+}
 
-    let per_class = per_class_counts(&selected, &table);
-    let report = Report {
-        method: method.name(),
-        accumulation,
-        gaussians: selected.len(),
-        classes: table.len(),
-        stats,
-        assign_s,
-        total_s: start.elapsed().as_secs_f64(),
-        per_class,
-    };
+/// The JSON report if asked for, and the summary line.
+fn write_report(args: &FuseArgs, report: &Report) -> Result<()> {
     if let Some(path) = &args.report {
-        write_bytes_atomic(path, serde_json::to_string_pretty(&report)?.as_bytes())?;
+        write_bytes_atomic(path, serde_json::to_string_pretty(report)?.as_bytes())?;
     }
     let unseen = report
         .per_class
@@ -420,8 +426,8 @@ pub fn run(args: FuseArgs) -> Result<()> {
         .map_or(0, |c| c.gaussians);
     eprintln!(
         "fused {} Gaussians into {} classes ({} unseen) in {:.2} s -> {}",
-        selected.len(),
-        table.len(),
+        report.gaussians,
+        report.classes,
         unseen,
         report.total_s,
         args.out.display()
@@ -446,4 +452,29 @@ fn per_class_counts(g: &Gaussians, table: &ClassTable) -> Vec<ClassCount> {
         gaussians: ids.iter().filter(|&&i| i == -1).count(),
     });
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::{Args, Command, ValueEnum};
+    use semsplat::fuse::SPELLINGS;
+
+    use super::{FuseArgs, MethodArg};
+
+    /// `selected_method` reads the variant flags by field; they must be the table's flags,
+    /// and `--method` must take exactly the table's bases.
+    #[test]
+    fn flags_and_bases_are_the_method_table_s() {
+        let cmd = FuseArgs::augment_args(Command::new("fuse"));
+        for s in SPELLINGS {
+            if let Some(flag) = s.flag {
+                assert!(cmd.get_arguments().any(|a| a.get_long() == Some(flag)));
+            }
+            assert!(MethodArg::value_variants().iter().any(|m| m
+                .to_possible_value()
+                .unwrap()
+                .get_name()
+                == s.base));
+        }
+    }
 }

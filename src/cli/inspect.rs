@@ -289,51 +289,9 @@ fn inspect_ply(path: &Path, table: Option<&ClassTable>) -> Result<Report> {
     r.add("gaussians", g.len());
     r.add("sh_degree", g.sh_degree);
     if !g.is_empty() {
-        let mut bmin = [f32::INFINITY; 3];
-        let mut bmax = [f32::NEG_INFINITY; 3];
-        for m in g.means.iter().filter(|m| m.iter().all(|v| v.is_finite())) {
-            for a in 0..3 {
-                bmin[a] = bmin[a].min(m[a]);
-                bmax[a] = bmax[a].max(m[a]);
-            }
-        }
-        if bmin[0].is_finite() {
-            r.add("bounds", json!({"min": bmin, "max": bmax}));
-        }
-        r.add(
-            "opacity",
-            range(g.opacity_logits.iter().map(|&o| sigmoid(o))),
-        );
-        r.add(
-            "scale",
-            range(g.log_scales.iter().flatten().map(|&s| (s as f64).exp())),
-        );
+        add_geometry(&mut r, &g);
     }
-    let mut semantic = Vec::new();
-    if g.class_ids.is_some() {
-        semantic.push("class".to_owned());
-    }
-    if g.class_conf.is_some() {
-        semantic.push("class_conf".to_owned());
-    }
-    if g.instance_ids.is_some() {
-        semantic.push("instance".to_owned());
-    }
-    if let Some(s) = &g.semantics {
-        semantic.push(format!(
-            "sem_0..sem_{} ({} channels)",
-            s.channels - 1,
-            s.channels
-        ));
-    }
-    r.add(
-        "semantic_fields",
-        if semantic.is_empty() {
-            vec!["none".to_owned()]
-        } else {
-            semantic
-        },
-    );
+    r.add("semantic_fields", semantic_fields(&g));
     if let Some(ids) = &g.class_ids {
         add_class_counts(&mut r, &g, ids, table);
         if let Some(conf) = &g.class_conf {
@@ -358,6 +316,55 @@ fn inspect_ply(path: &Path, table: Option<&ClassTable>) -> Result<Report> {
     r.problems
         .extend(g.value_problems().iter().map(|p| p.to_string()));
     Ok(r)
+}
+
+/// Bounds of the finite centers, opacity and scale ranges.
+fn add_geometry(r: &mut Report, g: &Gaussians) {
+    let mut bmin = [f32::INFINITY; 3];
+    let mut bmax = [f32::NEG_INFINITY; 3];
+    for m in g.means.iter().filter(|m| m.iter().all(|v| v.is_finite())) {
+        for a in 0..3 {
+            bmin[a] = bmin[a].min(m[a]);
+            bmax[a] = bmax[a].max(m[a]);
+        }
+    }
+    if bmin[0].is_finite() {
+        r.add("bounds", json!({"min": bmin, "max": bmax}));
+    }
+    r.add(
+        "opacity",
+        range(g.opacity_logits.iter().map(|&o| sigmoid(o))),
+    );
+    r.add(
+        "scale",
+        range(g.log_scales.iter().flatten().map(|&s| (s as f64).exp())),
+    );
+}
+
+/// The semantic properties the scene carries ("none" without any).
+fn semantic_fields(g: &Gaussians) -> Vec<String> {
+    let mut semantic = Vec::new();
+    if g.class_ids.is_some() {
+        semantic.push("class".to_owned());
+    }
+    if g.class_conf.is_some() {
+        semantic.push("class_conf".to_owned());
+    }
+    if g.instance_ids.is_some() {
+        semantic.push("instance".to_owned());
+    }
+    if let Some(s) = &g.semantics {
+        semantic.push(format!(
+            "sem_0..sem_{} ({} channels)",
+            s.channels - 1,
+            s.channels
+        ));
+    }
+    if semantic.is_empty() {
+        vec!["none".to_owned()]
+    } else {
+        semantic
+    }
 }
 
 fn add_class_counts(r: &mut Report, g: &Gaussians, ids: &[i32], table: Option<&ClassTable>) {
@@ -462,15 +469,69 @@ fn inspect_labels(
 ) -> Result<Report> {
     let mut r = Report::new(kind, path);
     let cams = cameras.map(load_cameras).transpose()?;
-    let by_name: BTreeMap<&str, &Camera> = cams
+    let tally = tally_label_maps(&mut r, files, cams.as_deref());
+    r.add("label_maps", tally.read);
+    let sizes: Vec<Value> = tally
+        .sizes
         .iter()
+        .map(|(&(w, h), &n)| json!({"size": format!("{w}x{h}"), "maps": n}))
+        .collect();
+    r.add("sizes", sizes);
+    add_label_classes(&mut r, &tally.counts, table);
+    if let Some(cams) = &cams {
+        let have: std::collections::HashSet<&str> = files.iter().map(|(s, _)| s.as_str()).collect();
+        let missing: Vec<&str> = cams
+            .iter()
+            .map(|c| c.name.as_str())
+            .filter(|n| !have.contains(n))
+            .collect();
+        if !missing.is_empty() {
+            let shown: Vec<&str> = missing.iter().take(5).copied().collect();
+            r.problems.push(format!(
+                "{} of {} cameras have no label map: {}{}",
+                missing.len(),
+                cams.len(),
+                shown.join(", "),
+                if missing.len() > 5 { ", ..." } else { "" }
+            ));
+        }
+        if !tally.unmatched.is_empty() {
+            r.add("maps_without_camera", tally.unmatched);
+        }
+    }
+    Ok(r)
+}
+
+/// What the label maps of a folder hold, summed over the maps.
+struct LabelTally {
+    /// Pixels per 16-bit label value (the last one: ignored pixels).
+    counts: Vec<u64>,
+    /// Maps per size.
+    sizes: BTreeMap<(u32, u32), usize>,
+    /// Maps read.
+    read: usize,
+    /// Maps whose name matches no camera (only with cameras).
+    unmatched: Vec<String>,
+}
+
+/// Reads every map, noting unreadable maps and size mismatches with their camera as
+/// problems.
+fn tally_label_maps(
+    r: &mut Report,
+    files: &[(String, PathBuf)],
+    cams: Option<&[Camera]>,
+) -> LabelTally {
+    let by_name: BTreeMap<&str, &Camera> = cams
+        .into_iter()
         .flatten()
         .map(|c| (c.name.as_str(), c))
         .collect();
-    let mut counts = vec![0u64; IGNORE_U16 as usize + 1];
-    let mut sizes: BTreeMap<(u32, u32), usize> = BTreeMap::new();
-    let mut read = 0usize;
-    let mut unmatched = Vec::new();
+    let mut tally = LabelTally {
+        counts: vec![0u64; IGNORE_U16 as usize + 1],
+        sizes: BTreeMap::new(),
+        read: 0,
+        unmatched: Vec::new(),
+    };
     for (stem, file) in files {
         let map = match read_label_png(file) {
             Ok(m) => m,
@@ -479,9 +540,9 @@ fn inspect_labels(
                 continue;
             }
         };
-        read += 1;
-        *sizes.entry((map.width, map.height)).or_default() += 1;
-        map.count_into(&mut counts);
+        tally.read += 1;
+        *tally.sizes.entry((map.width, map.height)).or_default() += 1;
+        map.count_into(&mut tally.counts);
         if cams.is_some() {
             match by_name.get(stem.as_str()) {
                 Some(c) if (c.width, c.height) != (map.width, map.height) => {
@@ -496,16 +557,15 @@ fn inspect_labels(
                     ))
                 }
                 Some(_) => {}
-                None => unmatched.push(stem.clone()),
+                None => tally.unmatched.push(stem.clone()),
             }
         }
     }
-    r.add("label_maps", read);
-    let sizes: Vec<Value> = sizes
-        .iter()
-        .map(|(&(w, h), &n)| json!({"size": format!("{w}x{h}"), "maps": n}))
-        .collect();
-    r.add("sizes", sizes);
+    tally
+}
+
+/// Pixel totals, the ignored share and a row per label id present (named from `table`).
+fn add_label_classes(r: &mut Report, counts: &[u64], table: Option<&ClassTable>) {
     let total: u64 = counts.iter().sum();
     let ignore = counts[LabelMap::IGNORE as usize];
     let share = |n: u64| {
@@ -543,28 +603,6 @@ fn inspect_labels(
             unknown.join(", ")
         ));
     }
-    if let Some(cams) = &cams {
-        let have: std::collections::HashSet<&str> = files.iter().map(|(s, _)| s.as_str()).collect();
-        let missing: Vec<&str> = cams
-            .iter()
-            .map(|c| c.name.as_str())
-            .filter(|n| !have.contains(n))
-            .collect();
-        if !missing.is_empty() {
-            let shown: Vec<&str> = missing.iter().take(5).copied().collect();
-            r.problems.push(format!(
-                "{} of {} cameras have no label map: {}{}",
-                missing.len(),
-                cams.len(),
-                shown.join(", "),
-                if missing.len() > 5 { ", ..." } else { "" }
-            ));
-        }
-        if !unmatched.is_empty() {
-            r.add("maps_without_camera", unmatched);
-        }
-    }
-    Ok(r)
 }
 
 // ---------------------------------------------------------------------------------------

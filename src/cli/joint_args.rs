@@ -1,10 +1,11 @@
-//! Which methods `demo`, `sweep` and `bench fuse` run, and the joint methods' schedule
-//! (shared flags).
+//! Which methods `demo`, `sweep` and `bench fuse` run, the joint methods' schedule
+//! (shared flags), and the room demo and sweep build.
 
 use anyhow::{anyhow, Result};
 use clap::Args;
 
-use semsplat::eval::benchmark::{JointSchedule, Lifter, ALL_METHODS};
+use semsplat::experiment::{JointSchedule, Lifter, ALL_METHODS};
+use semsplat::synth::{RoomSource, SynthConfig};
 
 #[derive(Args, Clone)]
 pub struct MethodArgs {
@@ -50,4 +51,21 @@ pub fn parse_methods(keys: &[String], known: &[Lifter]) -> Result<Vec<Lifter>> {
                 })
         })
         .collect()
+}
+
+/// The room of `demo` and `sweep`: `preset` (or a room file) seen by `train_views` +
+/// `test_views` cameras of `size` pixels, without label noise.
+pub fn room_config(
+    preset: &str,
+    train_views: usize,
+    test_views: usize,
+    size: (u32, u32),
+    seed: u64,
+) -> Result<SynthConfig> {
+    let mut cfg = SynthConfig::new(RoomSource::from_arg(preset)?);
+    cfg.train_views = train_views;
+    cfg.test_views = test_views;
+    (cfg.width, cfg.height) = size;
+    cfg.seed = seed;
+    Ok(cfg)
 }

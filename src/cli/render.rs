@@ -5,8 +5,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use indicatif::{ProgressBar, ProgressStyle};
 
+use super::progress::render_bar;
 use semsplat::gpu::Gpu;
 use semsplat::render::{GpuScene, Rasterizer, RenderOptions, RenderedFrame, SemanticMode};
 use semsplat::scene::cameras::load_cameras;
@@ -127,9 +127,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
         ClassTable::from_ids(0..g.semantics.as_ref().map_or(0, |s| s.channels as u32))
     });
     let mut raster = Rasterizer::new(&gpu);
-    let bar = ProgressBar::new(cams.len() as u64).with_style(
-        ProgressStyle::with_template("{bar:40} {pos}/{len} views {msg}").expect("valid template"),
-    );
+    let bar = render_bar(cams.len());
     for cam in &cams {
         bar.set_message(cam.name.clone());
         let f = raster.render(&scene, cam, &opts)?;

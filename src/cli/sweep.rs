@@ -3,15 +3,16 @@
 
 use std::path::PathBuf;
 
-use super::joint_args::MethodArgs;
 use anyhow::{bail, Result};
 use clap::{Args, ValueEnum};
 use serde::Serialize;
 
-use semsplat::eval::benchmark::{mislabel_follow, score_methods, MislabelFollow, TrainLabels};
+use super::joint_args::{room_config, MethodArgs};
+#[cfg(feature = "charts")]
 use semsplat::eval::chart::{lines, Line};
+use semsplat::experiment::{mislabel_follow, score_methods, Lifter, MislabelFollow, TrainLabels};
 use semsplat::gpu::Gpu;
-use semsplat::synth::{generate, NoiseSpec, RoomSource, SynthConfig};
+use semsplat::synth::{generate, NoiseSpec};
 use semsplat::util::write_bytes_atomic;
 
 #[derive(Clone, Copy, ValueEnum, PartialEq, Eq, Debug)]
@@ -106,88 +107,17 @@ pub fn run(args: SweepArgs) -> Result<()> {
     }
     let methods = args.methods.methods()?;
     let gpu = Gpu::new()?;
-    let mut results = Vec::new();
-    for &level in &levels {
-        let mut cfg = SynthConfig::new(RoomSource::from_arg(&args.preset)?);
-        cfg.train_views = args.views;
-        cfg.test_views = args.test_views;
-        cfg.width = args.width;
-        cfg.height = args.height;
-        cfg.seed = args.seed;
-        let spec = if args.noise == NoiseKind::Boundary {
-            format!("boundary={}", level.round() as u32)
-        } else {
-            format!("{}={level}", args.noise.key())
-        };
-        cfg.noise = Some(spec.parse::<NoiseSpec>()?);
-        eprintln!("{spec}");
-        let s = generate(&cfg)?;
-        let scores = score_methods(
-            &gpu,
-            &s,
-            TrainLabels::Noisy,
-            &methods,
-            &args.methods.schedule(),
-            |m| eprintln!("  {m}"),
-        )?;
-        for r in &scores {
-            println!(
-                "{spec:<16} {:<18} mIoU {:.4}  3D acc {:.4}",
-                r.method, r.miou, r.gaussian_accuracy
-            );
-        }
-        results.push(LevelResult {
-            level,
-            miou: scores
-                .iter()
-                .map(|r| (r.method.to_string(), r.miou))
-                .collect(),
-            gaussian_accuracy: scores
-                .iter()
-                .map(|r| (r.method.to_string(), r.gaussian_accuracy))
-                .collect(),
-            mislabeled: scores
-                .iter()
-                .map(|r| (r.method.to_string(), mislabel_follow(&s, r)))
-                .collect(),
-        });
-    }
-    let methods: Vec<String> = results[0].miou.iter().map(|(m, _)| m.clone()).collect();
-    let series: Vec<Line> = methods
+    let results = levels
         .iter()
-        .enumerate()
-        .map(|(k, m)| Line {
-            label: m,
-            points: results.iter().map(|r| (r.level, r.miou[k].1)).collect(),
-        })
-        .collect();
-    let breaks_at = methods
-        .iter()
-        .enumerate()
-        .map(|(k, m)| {
-            let clean = results[0].miou[k].1;
-            (
-                m.clone(),
-                results
-                    .iter()
-                    .find(|r| r.miou[k].1 < 0.5 * clean)
-                    .map(|r| r.level),
-            )
-        })
-        .collect();
+        .map(|&level| run_level(&args, &gpu, &methods, level))
+        .collect::<Result<Vec<_>>>()?;
     let key = args.noise.key();
-    lines(
-        &args.out.join(format!("robustness_{key}.png")),
-        &format!("{}: mIoU as {key} noise grows", args.preset),
-        &format!("{key} level"),
-        "mIoU on held-out views",
-        &series,
-    )?;
+    write_chart(&args, &results)?;
     let report = SweepReport {
         noise: key,
         preset: args.preset.clone(),
+        breaks_at: breaks_at(&results),
         levels: results,
-        breaks_at,
     };
     for (m, b) in &report.breaks_at {
         match b {
@@ -199,5 +129,104 @@ pub fn run(args: SweepArgs) -> Result<()> {
         &args.out.join(format!("robustness_{key}.json")),
         serde_json::to_string_pretty(&report)?.as_bytes(),
     )?;
+    Ok(())
+}
+
+/// Generates the room with `level` of the noise and scores every method on it.
+fn run_level(args: &SweepArgs, gpu: &Gpu, methods: &[Lifter], level: f64) -> Result<LevelResult> {
+    let mut cfg = room_config(
+        &args.preset,
+        args.views,
+        args.test_views,
+        (args.width, args.height),
+        args.seed,
+    )?;
+    let spec = if args.noise == NoiseKind::Boundary {
+        format!("boundary={}", level.round() as u32)
+    } else {
+        format!("{}={level}", args.noise.key())
+    };
+    cfg.noise = Some(spec.parse::<NoiseSpec>()?);
+    eprintln!("{spec}");
+    let s = generate(&cfg)?;
+    let scores = score_methods(
+        gpu,
+        &s,
+        TrainLabels::Noisy,
+        methods,
+        &args.methods.schedule(),
+        |m| eprintln!("  {m}"),
+    )?;
+    for r in &scores {
+        println!(
+            "{spec:<16} {:<18} mIoU {:.4}  3D acc {:.4}",
+            r.method, r.miou, r.gaussian_accuracy
+        );
+    }
+    Ok(LevelResult {
+        level,
+        miou: scores
+            .iter()
+            .map(|r| (r.method.to_string(), r.miou))
+            .collect(),
+        gaussian_accuracy: scores
+            .iter()
+            .map(|r| (r.method.to_string(), r.gaussian_accuracy))
+            .collect(),
+        mislabeled: scores
+            .iter()
+            .map(|r| (r.method.to_string(), mislabel_follow(&s, r)))
+            .collect(),
+    })
+}
+
+/// The methods, in the order of every level's results.
+fn method_names(results: &[LevelResult]) -> Vec<String> {
+    results[0].miou.iter().map(|(m, _)| m.clone()).collect()
+}
+
+/// Per method: the first level where mIoU fell below half of its value at the first level.
+fn breaks_at(results: &[LevelResult]) -> Vec<(String, Option<f64>)> {
+    method_names(results)
+        .into_iter()
+        .enumerate()
+        .map(|(k, m)| {
+            let clean = results[0].miou[k].1;
+            (
+                m,
+                results
+                    .iter()
+                    .find(|r| r.miou[k].1 < 0.5 * clean)
+                    .map(|r| r.level),
+            )
+        })
+        .collect()
+}
+
+/// robustness_<noise>.png: every method's mIoU against the noise level.
+#[cfg(feature = "charts")]
+fn write_chart(args: &SweepArgs, results: &[LevelResult]) -> Result<()> {
+    let methods = method_names(results);
+    let series: Vec<Line> = methods
+        .iter()
+        .enumerate()
+        .map(|(k, m)| Line {
+            label: m,
+            points: results.iter().map(|r| (r.level, r.miou[k].1)).collect(),
+        })
+        .collect();
+    let key = args.noise.key();
+    lines(
+        &args.out.join(format!("robustness_{key}.png")),
+        &format!("{}: mIoU as {key} noise grows", args.preset),
+        &format!("{key} level"),
+        "mIoU on held-out views",
+        &series,
+    )
+}
+
+#[cfg(not(feature = "charts"))]
+fn write_chart(_: &SweepArgs, _: &[LevelResult]) -> Result<()> {
+    eprintln!("built without the charts feature: no robustness chart");
     Ok(())
 }

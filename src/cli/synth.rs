@@ -7,8 +7,8 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use indicatif::{ProgressBar, ProgressStyle};
 
+use super::progress::{follow, phase_bar};
 use semsplat::synth::writer::OUTPUT_LAYOUT;
 use semsplat::synth::{
     self, NoiseSpec, RoomSource, SynthConfig, DEFAULT_HEIGHT, DEFAULT_HFOV_DEG,
@@ -116,12 +116,12 @@ pub fn run(args: SynthArgs) -> Result<()> {
     check_output_folder(&args.out, args.force)?;
 
     let start = Instant::now();
-    let bar = progress_bar("ray casting");
-    let scene = synth::generate_with_progress(&config, &bar)?;
+    let bar = phase_bar("ray casting");
+    let scene = synth::generate_with_progress(&config, &follow(&bar))?;
     bar.finish_and_clear();
     let generated = start.elapsed();
-    let bar = progress_bar("writing");
-    synth::write_synth_with_progress(&args.out, &scene, &bar)?;
+    let bar = phase_bar("writing");
+    synth::write_synth_with_progress(&args.out, &scene, &follow(&bar))?;
     bar.finish_and_clear();
 
     let room = &scene.room;
@@ -176,15 +176,4 @@ fn check_output_folder(out: &Path, force: bool) -> Result<()> {
         );
     }
     Ok(())
-}
-
-fn progress_bar(what: &'static str) -> ProgressBar {
-    let bar = ProgressBar::new(0);
-    if let Ok(style) =
-        ProgressStyle::with_template("{msg:>12} [{bar:32}] {pos}/{len} views ({elapsed})")
-    {
-        bar.set_style(style.progress_chars("=> "));
-    }
-    bar.set_message(what);
-    bar
 }

@@ -6,20 +6,17 @@ use std::time::Instant;
 
 use anyhow::{bail, Result};
 use clap::Args;
-use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 
-use super::label_classes::{classes_in_labels, default_class_table};
+use super::open_dataset;
+use super::progress::iterations_bar;
+use semsplat::dataset::{user_classes, Dataset, DatasetPaths};
 use semsplat::gpu::Gpu;
 use semsplat::render::SemanticMode;
-use semsplat::scene::cameras::load_cameras;
-use semsplat::scene::classes::{read_class_table, CompactClasses};
 use semsplat::scene::images::load_view_image;
-use semsplat::scene::labels::{LabelDir, LabelMap, MissingLabels};
 use semsplat::scene::ply::{read_ply, write_classes_sidecar, write_ply};
 use semsplat::scene::Gaussians;
 use semsplat::train::config::TrainConfig;
-use semsplat::train::loss::IGNORE_LABEL;
 use semsplat::train::trainer::{
     classes_from_logits, with_initial_logits, DensifyEvent, StageTotals, Trainer,
 };
@@ -120,73 +117,91 @@ struct TrainReport<'a> {
     densify: Vec<DensifyEvent>,
 }
 
-fn compact_labels(map: &LabelMap, compact: &CompactClasses) -> Vec<u32> {
-    map.labels
+pub fn run(args: TrainArgs) -> Result<()> {
+    let start = Instant::now();
+    let data = load_dataset(&args)?;
+    let views = train_views(&args, &data)?;
+    let init = read_ply(&args.init)?;
+    let init = with_initial_logits(&init, data.classes.len(), args.seed);
+    let cfg = train_config(&args, init.len())?;
+
+    let gpu = Gpu::new()?;
+    let mut trainer = Trainer::new(&gpu, &init, &views, cfg.clone(), &[])?;
+    let log = train_loop(&args, &mut trainer)?;
+    let out = trainer.finish()?;
+    let per_iter = per_iteration(&out.times);
+    let mut g: Gaussians = out.gaussians;
+    let (classes, conf) = classes_from_logits(&g, &out.seen);
+    g.class_ids = Some(user_classes(
+        data.classes.user_ids(),
+        classes.iter().map(|c| c.map(|c| c as usize)),
+    ));
+    g.class_conf = Some(conf);
+    write_ply(&args.out, &g)?;
+    write_classes_sidecar(&args.out, &data.table)?;
+
+    let seconds = start.elapsed().as_secs_f64();
+    eprintln!(
+        "trained {} iterations in {seconds:.1} s: {} -> {} Gaussians; GPU ms per iteration: forward {:.1}, loss {:.1}, backward {:.1}, optimizer {:.1}, densify {:.1}",
+        out.times.iterations,
+        init.len(),
+        g.len(),
+        per_iter.forward_ms,
+        per_iter.loss_ms,
+        per_iter.backward_ms,
+        per_iter.optimizer_ms,
+        per_iter.densify_ms
+    );
+    if let Some(path) = &args.report {
+        let report = TrainReport {
+            config: &cfg,
+            views: views.len(),
+            classes: data.classes.len(),
+            initial_gaussians: init.len(),
+            final_gaussians: g.len(),
+            seconds,
+            iterations_per_second: out.times.iterations.max(1) as f64 / seconds.max(1e-9),
+            stage_ms_per_iteration: per_iter,
+            log,
+            densify: out.densify_events,
+        };
+        write_bytes_atomic(path, serde_json::to_string_pretty(&report)?.as_bytes())?;
+    }
+    Ok(())
+}
+
+/// The cameras, their label maps and the classes present (at least one).
+fn load_dataset(args: &TrainArgs) -> Result<Dataset> {
+    let paths = DatasetPaths {
+        cameras: &args.cameras,
+        labels: &args.labels,
+        class_table: args.classes.as_deref(),
+        train_only: args.train_only,
+    };
+    let data = open_dataset(&paths, "train appearance only")?;
+    if data.classes.is_empty() {
+        bail!("the label maps hold no class (every pixel is ignore)");
+    }
+    Ok(data)
+}
+
+/// Every camera with its image and, where it has a label map, its compact labels.
+fn train_views(args: &TrainArgs, data: &Dataset) -> Result<Vec<TrainView>> {
+    data.cameras
         .iter()
-        .map(|&l| {
-            if l == LabelMap::IGNORE {
-                IGNORE_LABEL
-            } else {
-                compact.compact_of(l as u32).map_or(IGNORE_LABEL, u32::from)
-            }
+        .enumerate()
+        .map(|(i, cam)| {
+            Ok(TrainView {
+                camera: cam.clone(),
+                rgb: load_view_image(&args.images, cam)?,
+                labels: data.compact_labels(i)?.unwrap_or_default(),
+            })
         })
         .collect()
 }
 
-pub fn run(args: TrainArgs) -> Result<()> {
-    let start = Instant::now();
-    let mut cams = load_cameras(&args.cameras)?;
-    if args.train_only {
-        cams.retain(|c| c.split == semsplat::scene::Split::Train);
-        if cams.is_empty() {
-            bail!("{} has no train cameras", args.cameras.display());
-        }
-    }
-    let table_path = args
-        .classes
-        .clone()
-        .or_else(|| default_class_table(&args.labels));
-    let given = table_path.as_deref().map(read_class_table).transpose()?;
-    let dir = LabelDir::open(&args.labels, &cams, given.as_ref(), MissingLabels::Skip)?;
-    if dir.is_empty() {
-        bail!(
-            "no label map in {} matches a camera name",
-            args.labels.display()
-        );
-    }
-    if !dir.skipped().is_empty() {
-        eprintln!(
-            "note: {} views have no label map and train appearance only",
-            dir.skipped().len()
-        );
-    }
-    let (compact, table) = classes_in_labels(&dir, given.as_ref())?;
-    if compact.is_empty() {
-        bail!("the label maps hold no class (every pixel is ignore)");
-    }
-    let mut label_of_camera = vec![None; cams.len()];
-    for i in 0..dir.len() {
-        if let Some(c) = dir.camera_index(i) {
-            label_of_camera[c] = Some(i);
-        }
-    }
-    let views = cams
-        .iter()
-        .zip(&label_of_camera)
-        .map(|(cam, entry)| {
-            Ok(TrainView {
-                camera: cam.clone(),
-                rgb: load_view_image(&args.images, cam)?,
-                labels: match entry {
-                    Some(i) => compact_labels(&dir.load(*i)?, &compact),
-                    None => Vec::new(),
-                },
-            })
-        })
-        .collect::<Result<Vec<_>>>()?;
-
-    let init = read_ply(&args.init)?;
-    let init = with_initial_logits(&init, compact.len(), args.seed);
+/// The schedule and weights the flags ask for, checked against the initial scene's size.
+fn train_config(args: &TrainArgs, init_gaussians: usize) -> Result<TrainConfig> {
     let mut cfg = if args.semantics_only {
         TrainConfig::semantics_only(args.iters)
     } else {
@@ -210,20 +225,19 @@ pub fn run(args: TrainArgs) -> Result<()> {
     if let Some(d) = &mut cfg.densify {
         d.max_gaussians = args.max_gaussians;
     }
-    if init.len() > args.max_gaussians as usize {
+    if init_gaussians > args.max_gaussians as usize {
         bail!(
             "--init has {} Gaussians, more than --max-gaussians {}",
-            init.len(),
+            init_gaussians,
             args.max_gaussians
         );
     }
+    Ok(cfg)
+}
 
-    let gpu = Gpu::new()?;
-    let mut trainer = Trainer::new(&gpu, &init, &views, cfg.clone(), &[])?;
-    let bar = ProgressBar::new(args.iters as u64).with_style(
-        ProgressStyle::with_template("{bar:30} {pos}/{len} it {per_sec} eta {eta} {msg}")
-            .expect("valid template"),
-    );
+/// Runs every iteration with a progress bar, writing checkpoints; returns the loss log.
+fn train_loop(args: &TrainArgs, trainer: &mut Trainer) -> Result<Vec<LogLine>> {
+    let bar = iterations_bar(args.iters);
     let mut log = Vec::new();
     for _ in 0..args.iters {
         if let Some(l) = trainer.step()? {
@@ -252,59 +266,20 @@ pub fn run(args: TrainArgs) -> Result<()> {
         }
     }
     bar.finish();
-    let out = trainer.finish()?;
-    let mut g: Gaussians = out.gaussians;
-    let (classes, conf) = classes_from_logits(&g, &out.seen);
-    g.class_ids = Some(
-        classes
-            .iter()
-            .map(|c| {
-                c.and_then(|c| compact.user_of(c as usize))
-                    .map_or(-1, |u| u as i32)
-            })
-            .collect(),
-    );
-    g.class_conf = Some(conf);
-    write_ply(&args.out, &g)?;
-    write_classes_sidecar(&args.out, &table)?;
-    let seconds = start.elapsed().as_secs_f64();
-    let iters = out.times.iterations.max(1) as f64;
-    let t = out.times;
-    let per_iter = StageTotals {
+    Ok(log)
+}
+
+/// GPU milliseconds per iteration, by stage.
+fn per_iteration(t: &StageTotals) -> StageTotals {
+    let iters = t.iterations.max(1) as f64;
+    StageTotals {
         forward_ms: t.forward_ms / iters,
         loss_ms: t.loss_ms / iters,
         backward_ms: t.backward_ms / iters,
         optimizer_ms: t.optimizer_ms / iters,
         densify_ms: t.densify_ms / iters,
         iterations: t.iterations,
-    };
-    eprintln!(
-        "trained {} iterations in {seconds:.1} s: {} -> {} Gaussians; GPU ms per iteration: forward {:.1}, loss {:.1}, backward {:.1}, optimizer {:.1}, densify {:.1}",
-        t.iterations,
-        init.len(),
-        g.len(),
-        per_iter.forward_ms,
-        per_iter.loss_ms,
-        per_iter.backward_ms,
-        per_iter.optimizer_ms,
-        per_iter.densify_ms
-    );
-    if let Some(path) = &args.report {
-        let report = TrainReport {
-            config: &cfg,
-            views: views.len(),
-            classes: compact.len(),
-            initial_gaussians: init.len(),
-            final_gaussians: g.len(),
-            seconds,
-            iterations_per_second: iters / seconds.max(1e-9),
-            stage_ms_per_iteration: per_iter,
-            log,
-            densify: out.densify_events,
-        };
-        write_bytes_atomic(path, serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
-    Ok(())
 }
 
 fn checkpoint_path(out: &Path, iteration: u32) -> PathBuf {

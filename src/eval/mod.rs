@@ -1,9 +1,10 @@
-//! Evaluation: segmentation metrics, label maps rendered from lifted scenes, the method
-//! benchmark on synthetic scenes with exact truth, and charts.
+//! Evaluation: segmentation metrics, image quality, label maps rendered from lifted scenes,
+//! and (with the `charts` feature) charts and image strips.
 
-pub mod benchmark;
+#[cfg(feature = "charts")]
 pub mod chart;
 pub mod image_quality;
 pub mod label_render;
 pub mod metrics;
+#[cfg(feature = "charts")]
 pub mod strip;

@@ -16,7 +16,7 @@ use crate::render::{camera_rows_f32, GpuScene, Rasterizer, RenderOptions};
 use crate::scene::Camera;
 
 /// Marks a pixel without a label (or with a class outside the table).
-pub const NO_LABEL: u32 = u32::MAX;
+pub use crate::dataset::NO_LABEL;
 
 /// How the weighted methods accumulate on the GPU.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]

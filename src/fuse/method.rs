@@ -1,4 +1,7 @@
-//! The training-free lifting methods and how they are named.
+//! The training-free lifting methods and how they are named. [`SPELLINGS`] is the one
+//! source of every name: the display name ("vote --occlusion", as `fuse` reports it), the
+//! `--methods` key ("vote-occlusion", demo, sweep and bench fuse) and the `fuse` flags
+//! (`--method vote --occlusion`) are all built from a base method and a variant flag.
 
 use serde::Serialize;
 
@@ -21,15 +24,130 @@ pub enum Method {
     FlashSplatPerView,
 }
 
+/// How one method is spelled everywhere.
+#[derive(Clone, Copy, Debug)]
+pub struct Spelling {
+    pub method: Method,
+    /// `fuse --method <base>`.
+    pub base: &'static str,
+    /// The variant flag of `fuse` (without its dashes), if the method is a variant.
+    pub flag: Option<&'static str>,
+    /// "<base> --<flag>": how `fuse` and the reports name the method.
+    pub name: &'static str,
+    /// "<base>-<flag>": how `--methods` takes it.
+    pub key: &'static str,
+}
+
+/// Builds each spelling from the base and flag, so the name and key cannot disagree.
+macro_rules! spellings {
+    ($($method:ident: $base:literal $(--$flag:literal)?;)*) => {
+        [$(Spelling {
+            method: Method::$method,
+            base: $base,
+            flag: spellings!(@flag $($flag)?),
+            name: concat!($base $(, " --", $flag)?),
+            key: concat!($base $(, "-", $flag)?),
+        }),*]
+    };
+    (@flag) => { None };
+    (@flag $flag:literal) => { Some($flag) };
+}
+
+/// Every method, in the order tables and charts list them.
+pub const SPELLINGS: [Spelling; 5] = spellings! {
+    Vote: "vote";
+    VoteOcclusion: "vote" --"occlusion";
+    VoteWeighted: "vote" --"weighted";
+    FlashSplat: "flashsplat";
+    FlashSplatPerView: "flashsplat" --"per-view";
+};
+
 impl Method {
-    /// How the CLI spells the method.
+    fn spelling(self) -> &'static Spelling {
+        SPELLINGS
+            .iter()
+            .find(|s| s.method == self)
+            .expect("every method has a spelling")
+    }
+
+    /// How the CLI spells the method ("vote --occlusion").
     pub fn name(self) -> &'static str {
-        match self {
-            Method::Vote => "vote",
-            Method::VoteOcclusion => "vote --occlusion",
-            Method::VoteWeighted => "vote --weighted",
-            Method::FlashSplat => "flashsplat",
-            Method::FlashSplatPerView => "flashsplat --per-view",
+        self.spelling().name
+    }
+
+    /// The short name `--methods` takes ("vote-occlusion").
+    pub fn key(self) -> &'static str {
+        self.spelling().key
+    }
+
+    pub fn from_key(key: &str) -> Option<Method> {
+        SPELLINGS.iter().find(|s| s.key == key).map(|s| s.method)
+    }
+
+    /// The method `fuse --method <base>` with the variant `flags` given selects. A flag of
+    /// another base is an error naming that base's variants; of several variants of the
+    /// same base, the first in [`SPELLINGS`] wins.
+    pub fn from_flags(base: &str, flags: &[&str]) -> Result<Method, String> {
+        for &flag in flags {
+            let owner = SPELLINGS
+                .iter()
+                .find(|s| s.flag == Some(flag))
+                .ok_or_else(|| format!("unknown variant flag --{flag}"))?;
+            if owner.base != base {
+                return Err(variants_error(owner.base));
+            }
+        }
+        SPELLINGS
+            .iter()
+            .filter(|s| s.base == base)
+            .find(|s| s.flag.is_some_and(|f| flags.contains(&f)))
+            .or_else(|| {
+                SPELLINGS
+                    .iter()
+                    .find(|s| s.base == base && s.flag.is_none())
+            })
+            .map(|s| s.method)
+            .ok_or_else(|| format!("unknown method '{base}'"))
+    }
+}
+
+/// "--a is a variant of --method b", or "--a and --c are variants of --method b".
+fn variants_error(base: &str) -> String {
+    let flags: Vec<String> = SPELLINGS
+        .iter()
+        .filter(|s| s.base == base)
+        .filter_map(|s| s.flag.map(|f| format!("--{f}")))
+        .collect();
+    if flags.len() == 1 {
+        format!("{} is a variant of --method {base}", flags[0])
+    } else {
+        format!("{} are variants of --method {base}", flags.join(" and "))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn spellings_derive_from_base_and_flag() {
+        assert_eq!(Method::VoteOcclusion.name(), "vote --occlusion");
+        assert_eq!(Method::VoteOcclusion.key(), "vote-occlusion");
+        assert_eq!(Method::FlashSplat.name(), "flashsplat");
+        assert_eq!(
+            Method::from_flags("flashsplat", &["per-view"]),
+            Ok(Method::FlashSplatPerView)
+        );
+        assert_eq!(
+            Method::from_flags("vote", &["per-view"]).unwrap_err(),
+            "--per-view is a variant of --method flashsplat"
+        );
+        assert_eq!(
+            Method::from_flags("flashsplat", &["weighted"]).unwrap_err(),
+            "--occlusion and --weighted are variants of --method vote"
+        );
+        for s in SPELLINGS {
+            assert_eq!(Method::from_key(s.key), Some(s.method));
         }
     }
 }

@@ -8,5 +8,5 @@ pub mod scores;
 
 pub use accumulate::{accumulate, Accumulation, FuseConfig, FuseStats, LabelSource, NO_LABEL};
 pub use assign::{assign_one_vs_rest, assign_semantic, Assignment};
-pub use method::Method;
+pub use method::{Method, SPELLINGS};
 pub use scores::ClassScores;

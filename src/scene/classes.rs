@@ -1,7 +1,7 @@
-//! Class tables: the user's label ids with names and palette colors, and the compact
-//! remap to the classes actually present (C = classes present).
+//! Class tables: the user's label ids with names and palette colors. The compact remap to
+//! the classes actually present lives with the dataset (`crate::dataset::CompactClasses`).
 
-use std::collections::{BTreeMap, BTreeSet, HashSet};
+use std::collections::{BTreeSet, HashSet};
 use std::io::Write;
 use std::path::Path;
 
@@ -10,9 +10,14 @@ use serde::{Deserialize, Serialize};
 
 use crate::util::write_atomic;
 
-/// The ignore value of 8-bit label maps (16-bit maps use 65535).
+/// The ignore value of 8-bit label map files. It loads as [`LabelMap::IGNORE`], so only the
+/// PNG reader and writer see it.
+///
+/// [`LabelMap::IGNORE`]: super::labels::LabelMap::IGNORE
 pub const IGNORE_U8: u32 = 255;
-pub const IGNORE_U16: u32 = 65535;
+/// The ignore value of 16-bit label map files and of label maps in memory
+/// ([`LabelMap::IGNORE`](super::labels::LabelMap::IGNORE)), widened for id arithmetic.
+pub const IGNORE_U16: u32 = super::labels::LabelMap::IGNORE as u32;
 
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct ClassInfo {
@@ -203,91 +208,4 @@ pub fn write_class_table(path: &Path, table: &ClassTable) -> Result<()> {
         w.write_all(b"\n")?;
         Ok(())
     })
-}
-
-/// The classes actually present in a scene, numbered 0..C-1 in increasing user-id order:
-/// kernels see compact indices, files and reports see the user's ids.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct CompactClasses {
-    /// Compact index -> user id, sorted ascending.
-    user_ids: Vec<u32>,
-    /// User id -> compact index, for the ids present.
-    compact: BTreeMap<u32, u16>,
-}
-
-impl CompactClasses {
-    /// From the ids seen (e.g. in label maps); the ignore values and duplicates are dropped.
-    pub fn from_ids(ids: impl IntoIterator<Item = u32>) -> Result<CompactClasses> {
-        let set: BTreeSet<u32> = ids.into_iter().filter(|&id| id != IGNORE_U16).collect();
-        if set.len() >= IGNORE_U16 as usize {
-            bail!(
-                "too many classes ({}); at most {} are supported",
-                set.len(),
-                IGNORE_U16 - 1
-            );
-        }
-        if let Some(&bad) = set.iter().find(|&&id| id > IGNORE_U16) {
-            bail!("class id {bad} is out of range (ids must be below {IGNORE_U16})");
-        }
-        let user_ids: Vec<u32> = set.into_iter().collect();
-        let compact = user_ids
-            .iter()
-            .enumerate()
-            .map(|(i, &id)| (id, i as u16))
-            .collect();
-        Ok(CompactClasses { user_ids, compact })
-    }
-
-    /// Every class of a table, present or not.
-    pub fn from_table(table: &ClassTable) -> Result<CompactClasses> {
-        Self::from_ids(table.classes.iter().map(|c| c.id))
-    }
-
-    /// The number of compact classes C.
-    pub fn len(&self) -> usize {
-        self.user_ids.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.user_ids.is_empty()
-    }
-
-    /// Compact index of a user id, if present.
-    pub fn compact_of(&self, user_id: u32) -> Option<u16> {
-        self.compact.get(&user_id).copied()
-    }
-
-    /// User id of a compact index, if in range.
-    pub fn user_of(&self, compact: usize) -> Option<u32> {
-        self.user_ids.get(compact).copied()
-    }
-
-    /// The user ids in compact order.
-    pub fn user_ids(&self) -> &[u32] {
-        &self.user_ids
-    }
-
-    /// Dense lookup from a 16-bit label value to its compact index; ids not present and the
-    /// ignore value map to `u16::MAX`. Meant for remapping label maps pixel by pixel.
-    pub fn label_lut(&self) -> Vec<u16> {
-        let mut lut = vec![u16::MAX; IGNORE_U16 as usize + 1];
-        for (i, &id) in self.user_ids.iter().enumerate() {
-            lut[id as usize] = i as u16;
-        }
-        lut
-    }
-
-    /// The table restricted to the present classes, in compact order (for the PLY sidecar).
-    pub fn table(&self, names: &ClassTable) -> ClassTable {
-        let classes = self
-            .user_ids
-            .iter()
-            .map(|&id| ClassInfo {
-                id,
-                name: names.name_of(id),
-                color: names.color_of(id),
-            })
-            .collect();
-        ClassTable { classes }
-    }
 }

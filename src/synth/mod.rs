@@ -34,7 +34,6 @@ pub mod writer;
 use std::path::PathBuf;
 
 use anyhow::{bail, ensure, Result};
-use indicatif::ProgressBar;
 
 pub use noise::{NoiseReport, NoisyLabels};
 pub use noise_spec::{NoiseSpec, NOISE_KEYS_HELP};
@@ -213,13 +212,17 @@ pub struct SynthScene {
     pub noisy: Option<NoisyLabels>,
 }
 
+/// Reports `(done, total)` views as ray casting or writing goes, from any of the worker
+/// threads (the CLI draws it as a progress bar; the library draws nothing).
+pub type Progress<'a> = &'a (dyn Fn(usize, usize) + Sync);
+
 /// Builds the scene described by `config`.
 pub fn generate(config: &SynthConfig) -> Result<SynthScene> {
-    generate_with_progress(config, &ProgressBar::hidden())
+    generate_with_progress(config, &|_, _| {})
 }
 
-/// `generate`, ticking `progress` once per rendered view (its length is set here).
-pub fn generate_with_progress(config: &SynthConfig, progress: &ProgressBar) -> Result<SynthScene> {
+/// `generate`, calling `progress(done, total)` once per rendered view.
+pub fn generate_with_progress(config: &SynthConfig, progress: Progress) -> Result<SynthScene> {
     config.validate()?;
     let room = Room::build(config.room.resolve(config.seed)?)?;
     let estimate = surface_sampling::estimated_samples(&room, config.spacing);
@@ -237,7 +240,6 @@ pub fn generate_with_progress(config: &SynthConfig, progress: &ProgressBar) -> R
         test: config.test_views,
     };
     let cameras = views::place_cameras(&room, &view_cfg, &root.fork(1))?;
-    progress.set_length(cameras.len() as u64);
     let rendered = raycast::render_views(&room, &cameras, progress);
     let mut samples = surface_sampling::sample_surfaces(&room, config.spacing);
     if !config.keep_hidden {

@@ -1,16 +1,18 @@
 //! Ground-truth images by exact ray casting: one ray through each pixel center, first surface
 //! hit, its lit texture color, class and instance. Independent of any Gaussian renderer.
 
+use std::sync::Mutex;
+
 use glam::DVec3;
-use indicatif::ProgressBar;
 
 use super::room::{Room, SurfaceHit};
 use super::shading::to_rgb8;
+use super::Progress;
 use crate::scene::Camera;
 use crate::util::parallel_map;
 
 /// Label/instance value of pixels that see no surface (the 16-bit ignore value).
-pub const IGNORE: u16 = u16::MAX;
+pub const IGNORE: u16 = crate::scene::labels::LabelMap::IGNORE;
 
 /// What one view sees, row-major, `width * height` pixels.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -85,11 +87,17 @@ pub fn render_view(room: &Room, cam: &Camera) -> ViewTruth {
     view
 }
 
-/// Renders all views, several at a time, in camera order; ticks `progress` once per view.
-pub fn render_views(room: &Room, cameras: &[Camera], progress: &ProgressBar) -> Vec<ViewTruth> {
+/// Renders all views, several at a time, in camera order; calls `progress(done, total)`
+/// once per finished view.
+pub fn render_views(room: &Room, cameras: &[Camera], progress: Progress) -> Vec<ViewTruth> {
+    // Counted under a lock so the calls see `done` rising, whichever thread finishes first.
+    let done = Mutex::new(0);
     parallel_map(cameras.len(), |i| {
         let view = render_view(room, &cameras[i]);
-        progress.inc(1);
+        if let Ok(mut done) = done.lock() {
+            *done += 1;
+            progress(*done, cameras.len());
+        }
         view
     })
 }

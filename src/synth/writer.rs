@@ -9,11 +9,10 @@ use std::sync::Mutex;
 use anyhow::{Context, Result};
 use image::codecs::png::PngEncoder;
 use image::{ExtendedColorType, ImageEncoder};
-use indicatif::ProgressBar;
 use serde::Serialize;
 
 use super::raycast::ViewTruth;
-use super::SynthScene;
+use super::{Progress, SynthScene};
 use crate::scene::cameras_json::write_semsplat_cameras;
 use crate::scene::classes::write_class_table;
 use crate::scene::labels::{write_label_png, write_palette_png, LabelMap};
@@ -80,15 +79,11 @@ struct RunSummary<'a> {
 
 /// Writes `scene` into `dir` (created if needed).
 pub fn write_synth(dir: &Path, scene: &SynthScene) -> Result<()> {
-    write_synth_with_progress(dir, scene, &ProgressBar::hidden())
+    write_synth_with_progress(dir, scene, &|_, _| {})
 }
 
-/// `write_synth`, ticking `progress` once per written view (its length is set here).
-pub fn write_synth_with_progress(
-    dir: &Path,
-    scene: &SynthScene,
-    progress: &ProgressBar,
-) -> Result<()> {
+/// `write_synth`, calling `progress(done, total)` once per written view.
+pub fn write_synth_with_progress(dir: &Path, scene: &SynthScene, progress: Progress) -> Result<()> {
     std::fs::create_dir_all(dir)
         .with_context(|| format!("creating output folder {}", dir.display()))?;
     remove_stale(dir, scene)?;
@@ -116,8 +111,9 @@ pub fn write_synth_with_progress(
         write_json(&dir.join("labels_noisy").join("noise.json"), &noisy.report)?;
     }
 
-    progress.set_length(scene.views.len() as u64);
     let next = AtomicUsize::new(0);
+    // Counted under a lock so the calls see `done` rising, whichever thread finishes first.
+    let done = Mutex::new(0);
     let first_error: Mutex<Option<anyhow::Error>> = Mutex::new(None);
     let threads = std::thread::available_parallelism()
         .map_or(1, |n| n.get())
@@ -136,7 +132,10 @@ pub fn write_synth_with_progress(
                     }
                     break;
                 }
-                progress.inc(1);
+                if let Ok(mut done) = done.lock() {
+                    *done += 1;
+                    progress(*done, scene.views.len());
+                }
             });
         }
     });

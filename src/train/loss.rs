@@ -54,7 +54,7 @@ pub struct SemanticTerm<'a> {
 }
 
 /// A pixel without a label.
-pub const IGNORE_LABEL: u32 = u32::MAX;
+pub use crate::dataset::NO_LABEL as IGNORE_LABEL;
 
 /// The photometric loss's images: the render, its target, and the gradient written back.
 struct RgbImages<'a> {

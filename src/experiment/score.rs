@@ -1,96 +1,28 @@
 //! Runs lifting methods on a synthetic scene with exact truth and scores them: fuse on the
 //! train views (true or noisy labels), render labels of the held-out test views from the
 //! lifted scene (2D mIoU and pixel accuracy against the true maps), and compare every
-//! Gaussian's class with its true class (3D accuracy). Behind `semsplat demo` and `sweep`.
+//! Gaussian's class with its true class (3D accuracy).
 
 use std::time::Instant;
 
 use anyhow::{ensure, Result};
 use serde::Serialize;
 
-use super::image_quality::{image_quality, ImageQuality};
-use super::label_render::LabelRenderer;
-use super::metrics::{gaussian_accuracy, ClassIou, Confusion};
-use crate::fuse::{accumulate, assign_semantic, FuseConfig, Method, NO_LABEL};
+use super::lifter::{JointSchedule, Lifter};
+use crate::dataset::{user_classes, CompactClasses};
+use crate::eval::image_quality::{image_quality, ImageQuality};
+use crate::eval::label_render::LabelRenderer;
+use crate::eval::metrics::{gaussian_accuracy, ClassIou, Confusion};
+use crate::fuse::{accumulate, assign_semantic, FuseConfig, Method};
 use crate::gpu::Gpu;
 use crate::render::GpuScene;
-use crate::scene::classes::CompactClasses;
 use crate::scene::labels::LabelMap;
 use crate::scene::Gaussians;
 use crate::scene::{Camera, Split};
 use crate::synth::SynthScene;
 use crate::train::config::TrainConfig;
-use crate::train::loss::IGNORE_LABEL;
 use crate::train::trainer::{classes_from_logits, with_initial_logits, Trainer};
 use crate::train::views::TrainView;
-
-/// A way to lift labels: a training-free fusion method, or joint optimization.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Lifter {
-    Fuse(Method),
-    /// Joint optimization of the logits only, geometry frozen (`train --semantics-only`).
-    JointSemantics,
-    /// Joint optimization of geometry, appearance and logits (`train`).
-    JointFull,
-}
-
-/// The name a method goes by in tables and charts.
-pub fn method_name(m: Lifter) -> &'static str {
-    match m {
-        Lifter::Fuse(method) => method.name(),
-        Lifter::JointSemantics => "joint --semantics-only",
-        Lifter::JointFull => "joint",
-    }
-}
-
-impl Lifter {
-    /// The short name `--methods` takes.
-    pub fn key(self) -> &'static str {
-        match self {
-            Lifter::Fuse(Method::Vote) => "vote",
-            Lifter::Fuse(Method::VoteOcclusion) => "vote-occlusion",
-            Lifter::Fuse(Method::VoteWeighted) => "vote-weighted",
-            Lifter::Fuse(Method::FlashSplat) => "flashsplat",
-            Lifter::Fuse(Method::FlashSplatPerView) => "flashsplat-per-view",
-            Lifter::JointSemantics => "joint-semantics",
-            Lifter::JointFull => "joint",
-        }
-    }
-
-    pub fn from_key(key: &str) -> Option<Lifter> {
-        ALL_METHODS.into_iter().find(|l| l.key() == key)
-    }
-}
-
-pub const ALL_METHODS: [Lifter; 7] = [
-    Lifter::Fuse(Method::Vote),
-    Lifter::Fuse(Method::VoteOcclusion),
-    Lifter::Fuse(Method::VoteWeighted),
-    Lifter::Fuse(Method::FlashSplat),
-    Lifter::Fuse(Method::FlashSplatPerView),
-    Lifter::JointSemantics,
-    Lifter::JointFull,
-];
-
-/// Iterations of the joint methods in a benchmark (short schedules: the benchmark compares
-/// methods at a budget, not joint optimization at convergence).
-#[derive(Clone, Copy, Debug, Serialize)]
-pub struct JointSchedule {
-    pub semantics_only_iters: u32,
-    pub full_iters: u32,
-    /// Joint full may grow the model to this multiple of the input's Gaussians.
-    pub max_growth: f64,
-}
-
-impl Default for JointSchedule {
-    fn default() -> Self {
-        JointSchedule {
-            semantics_only_iters: 60,
-            full_iters: 60,
-            max_growth: 1.5,
-        }
-    }
-}
 
 #[derive(Clone, Debug, Serialize)]
 pub struct MethodScore {
@@ -135,62 +67,6 @@ impl MethodScore {
     }
 }
 
-/// How a method treated one consistently mislabeled object (Gaussian Semantics' limitation: a
-/// majority of wrong views wins), and whether its confidence flags it.
-#[derive(Clone, Debug, Serialize)]
-pub struct MislabelFollow {
-    pub object: String,
-    pub true_class: String,
-    pub wrong_class: String,
-    /// Fraction of the train views that showed the object with the wrong class.
-    pub wrong_view_rate: f64,
-    /// Fraction of the object's Gaussians assigned the wrong class.
-    pub assigned_wrong: f64,
-    /// Mean confidence on the object's Gaussians, and on every other seen Gaussian.
-    pub confidence_on_object: f64,
-    pub confidence_elsewhere: f64,
-}
-
-/// For every consistently mislabeled object of the scene's noise: what `score` assigned.
-pub fn mislabel_follow(s: &SynthScene, score: &MethodScore) -> Vec<MislabelFollow> {
-    let (Some(noisy), Some(input_instances)) = (&s.noisy, &s.gaussians.instance_ids) else {
-        return Vec::new();
-    };
-    let instances = score
-        .lifted
-        .as_ref()
-        .map_or(input_instances, |l| &l.instances);
-    noisy
-        .report
-        .consistent
-        .iter()
-        .map(|m| {
-            let on_object = |i: usize| instances[i] == m.instance as i32;
-            let mean = |sel: &dyn Fn(usize) -> bool| {
-                let v: Vec<f64> = (0..instances.len())
-                    .filter(|&i| sel(i) && score.classes[i] >= 0)
-                    .map(|i| score.confidence[i] as f64)
-                    .collect();
-                v.iter().sum::<f64>() / v.len().max(1) as f64
-            };
-            let members: Vec<usize> = (0..instances.len()).filter(|&i| on_object(i)).collect();
-            let wrong = members
-                .iter()
-                .filter(|&&i| score.classes[i] == m.wrong_class as i32)
-                .count();
-            MislabelFollow {
-                object: m.instance_name.clone(),
-                true_class: m.true_class_name.clone(),
-                wrong_class: m.wrong_class_name.clone(),
-                wrong_view_rate: m.rate,
-                assigned_wrong: wrong as f64 / members.len().max(1) as f64,
-                confidence_on_object: mean(&on_object),
-                confidence_elsewhere: mean(&|i| !on_object(i)),
-            }
-        })
-        .collect()
-}
-
 /// Which train labels the methods see.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum TrainLabels {
@@ -219,15 +95,7 @@ fn train_labels(
                     (TrainLabels::Noisy, Some(n)) => &n.maps[i],
                     _ => &s.views[i].labels,
                 };
-                map.iter()
-                    .map(|&l| {
-                        if l == LabelMap::IGNORE {
-                            NO_LABEL
-                        } else {
-                            compact.compact_of(l as u32).map_or(NO_LABEL, u32::from)
-                        }
-                    })
-                    .collect()
+                compact.compact_labels(map)
             })
         })
         .collect())
@@ -249,10 +117,7 @@ pub fn synth_train_views(
             labels.map(|labels| TrainView {
                 camera: cam.clone(),
                 rgb: view.rgb_unit(),
-                labels: labels
-                    .into_iter()
-                    .map(|l| if l == NO_LABEL { IGNORE_LABEL } else { l })
-                    .collect(),
+                labels,
             })
         })
         .collect())
@@ -282,7 +147,7 @@ pub fn score_methods(
     );
     let mut out = Vec::new();
     for &lifter in methods {
-        progress(method_name(lifter));
+        progress(lifter.name());
         let start = Instant::now();
         let lifted = match lifter {
             Lifter::Fuse(method) => fuse_lifted(gpu, s, method, &labels, &compact)?,
@@ -311,7 +176,7 @@ pub fn score_methods(
             None => None,
         };
         out.push(MethodScore {
-            method: method_name(lifter),
+            method: lifter.name(),
             seconds,
             miou: seg.miou,
             pixel_accuracy: seg.pixel_accuracy,
@@ -373,14 +238,7 @@ fn fuse_lifted(
         |_, _| {},
     )?;
     let assignment = assign_semantic(&evidence);
-    let classes = assignment
-        .class
-        .iter()
-        .map(|c| {
-            c.and_then(|e| compact.user_of(e))
-                .map_or(-1, |id| id as i32)
-        })
-        .collect();
+    let classes = user_classes(compact.user_ids(), assignment.class.iter().copied());
     Ok(Lifted {
         classes,
         confidence: assignment.confidence,
@@ -426,13 +284,10 @@ fn joint_lifted(
     }
     let out = trainer.finish()?;
     let (compact_classes, confidence) = classes_from_logits(&out.gaussians, &out.seen);
-    let classes = compact_classes
-        .iter()
-        .map(|c| {
-            c.and_then(|c| compact.user_of(c as usize))
-                .map_or(-1, |id| id as i32)
-        })
-        .collect();
+    let classes = user_classes(
+        compact.user_ids(),
+        compact_classes.iter().map(|c| c.map(|c| c as usize)),
+    );
     let ints = |v: &[f32]| v.iter().map(|&v| v as i32).collect();
     Ok(Lifted {
         classes,

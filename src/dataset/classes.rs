@@ -1,0 +1,142 @@
+//! Compact class indices: the classes a dataset's label maps actually use, numbered
+//! 0..C-1 ("model no more than the scene needs"), and the conversion between them and
+//! the user's class ids (one function each way).
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use anyhow::{bail, Result};
+
+use crate::scene::classes::{ClassInfo, ClassTable, IGNORE_U16};
+use crate::scene::labels::LabelDir;
+
+/// A pixel without a label, as a compact class index (fusion's label maps and training's
+/// label buffers; the kernels read the same value from shared_constants.txt). It differs
+/// from [`LabelMap::IGNORE`](crate::scene::labels::LabelMap::IGNORE), the 16-bit user-id
+/// value of unlabeled pixels: compact indices are u32 (what the kernels read), and any
+/// index >= C is skipped by the kernels, so the widest value can never be a class.
+pub use crate::contract::NO_LABEL;
+
+/// The classes actually present in a scene, numbered 0..C-1 in increasing user-id order:
+/// kernels see compact indices, files and reports see the user's ids.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct CompactClasses {
+    /// Compact index -> user id, sorted ascending.
+    user_ids: Vec<u32>,
+    /// User id -> compact index, for the ids present.
+    compact: BTreeMap<u32, u16>,
+}
+
+impl CompactClasses {
+    /// From the ids seen (e.g. in label maps); the ignore values and duplicates are dropped.
+    pub fn from_ids(ids: impl IntoIterator<Item = u32>) -> Result<CompactClasses> {
+        let set: BTreeSet<u32> = ids.into_iter().filter(|&id| id != IGNORE_U16).collect();
+        if set.len() >= IGNORE_U16 as usize {
+            bail!(
+                "too many classes ({}); at most {} are supported",
+                set.len(),
+                IGNORE_U16 - 1
+            );
+        }
+        if let Some(&bad) = set.iter().find(|&&id| id > IGNORE_U16) {
+            bail!("class id {bad} is out of range (ids must be below {IGNORE_U16})");
+        }
+        let user_ids: Vec<u32> = set.into_iter().collect();
+        let compact = user_ids
+            .iter()
+            .enumerate()
+            .map(|(i, &id)| (id, i as u16))
+            .collect();
+        Ok(CompactClasses { user_ids, compact })
+    }
+
+    /// Every class of a table, present or not.
+    pub fn from_table(table: &ClassTable) -> Result<CompactClasses> {
+        Self::from_ids(table.classes.iter().map(|c| c.id))
+    }
+
+    /// The number of compact classes C.
+    pub fn len(&self) -> usize {
+        self.user_ids.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.user_ids.is_empty()
+    }
+
+    /// Compact index of a user id, if present.
+    pub fn compact_of(&self, user_id: u32) -> Option<u16> {
+        self.compact.get(&user_id).copied()
+    }
+
+    /// A label map of user ids as compact class indices: [`NO_LABEL`] where the pixel is
+    /// ignored or its id is not one of the classes (user id -> compact index).
+    pub fn compact_labels(&self, labels: &[u16]) -> Vec<u32> {
+        labels
+            .iter()
+            .map(|&l| self.compact_of(l as u32).map_or(NO_LABEL, u32::from))
+            .collect()
+    }
+
+    /// User id of a compact index, if in range.
+    pub fn user_of(&self, compact: usize) -> Option<u32> {
+        self.user_ids.get(compact).copied()
+    }
+
+    /// The user ids in compact order.
+    pub fn user_ids(&self) -> &[u32] {
+        &self.user_ids
+    }
+
+    /// Dense lookup from a 16-bit label value to its compact index; ids not present and the
+    /// ignore value map to `u16::MAX` (a u16 table: [`NO_LABEL`] does not fit, and no
+    /// compact index reaches `u16::MAX` since C < 65535).
+    pub fn label_lut(&self) -> Vec<u16> {
+        let mut lut = vec![u16::MAX; IGNORE_U16 as usize + 1];
+        for (i, &id) in self.user_ids.iter().enumerate() {
+            lut[id as usize] = i as u16;
+        }
+        lut
+    }
+
+    /// The table restricted to the present classes, in compact order (for the PLY sidecar).
+    pub fn table(&self, names: &ClassTable) -> ClassTable {
+        let classes = self
+            .user_ids
+            .iter()
+            .map(|&id| ClassInfo {
+                id,
+                name: names.name_of(id),
+                color: names.color_of(id),
+            })
+            .collect();
+        ClassTable { classes }
+    }
+}
+
+/// The user class id of each compact class index, -1 for none (compact index -> user id).
+/// `user_ids` gives the user id of each compact index: [`CompactClasses::user_ids`], or the
+/// rows of a saved evidence matrix's class table.
+pub fn user_classes(
+    user_ids: &[u32],
+    compact: impl IntoIterator<Item = Option<usize>>,
+) -> Vec<i32> {
+    compact
+        .into_iter()
+        .map(|c| c.and_then(|c| user_ids.get(c)).map_or(-1, |&id| id as i32))
+        .collect()
+}
+
+/// The compact classes present in `dir`'s label maps and their table (names and colors
+/// from `given`, defaults otherwise). Reads every map once.
+pub fn classes_in_labels(
+    dir: &LabelDir,
+    given: Option<&ClassTable>,
+) -> Result<(CompactClasses, ClassTable)> {
+    let mut present = BTreeSet::new();
+    for i in 0..dir.len() {
+        present.extend(dir.load(i)?.present_ids());
+    }
+    let compact = CompactClasses::from_ids(present)?;
+    let table = compact.table(given.unwrap_or(&ClassTable::default()));
+    Ok((compact, table))
+}

@@ -1,0 +1,126 @@
+//! A labeled dataset as the commands read it: cameras, the label maps matched to them by
+//! image name, the class table, and the compact class indices the GPU works in.
+
+pub mod classes;
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Result};
+
+pub use classes::{classes_in_labels, user_classes, CompactClasses, NO_LABEL};
+
+use crate::fuse::LabelSource;
+use crate::scene::cameras::load_cameras;
+use crate::scene::classes::{read_class_table, ClassTable};
+use crate::scene::labels::{LabelDir, MissingLabels};
+use crate::scene::{Camera, Split};
+
+/// Where a dataset's parts are.
+pub struct DatasetPaths<'a> {
+    /// COLMAP model folder, INRIA cameras.json or semsplat cameras.json.
+    pub cameras: &'a Path,
+    /// Folder of label PNGs named like the cameras.
+    pub labels: &'a Path,
+    /// Class table; None: [`default_class_table`] of the label folder, if any.
+    pub class_table: Option<&'a Path>,
+    /// Keep only the cameras marked "train".
+    pub train_only: bool,
+}
+
+/// Cameras with their label maps (cameras without one are kept and have no labels) and the
+/// classes the maps use.
+pub struct Dataset {
+    pub cameras: Vec<Camera>,
+    pub labels: LabelDir,
+    /// The classes present in the label maps.
+    pub classes: CompactClasses,
+    /// Names and colors of `classes`, in compact order.
+    pub table: ClassTable,
+    /// Label map entry of each camera.
+    entry_of_camera: Vec<Option<usize>>,
+}
+
+impl Dataset {
+    /// Loads the cameras, matches the label folder to them (checking ids against the class
+    /// table when there is one) and reads every map once to find the classes present.
+    pub fn open(paths: &DatasetPaths) -> Result<Dataset> {
+        let cameras = load_split_cameras(paths.cameras, paths.train_only)?;
+        let table_path = paths
+            .class_table
+            .map(Path::to_path_buf)
+            .or_else(|| default_class_table(paths.labels));
+        let given = table_path.as_deref().map(read_class_table).transpose()?;
+        let labels = LabelDir::open(paths.labels, &cameras, given.as_ref(), MissingLabels::Skip)?;
+        if labels.is_empty() {
+            bail!(
+                "no label map in {} matches a camera name",
+                paths.labels.display()
+            );
+        }
+        let (classes, table) = classes_in_labels(&labels, given.as_ref())?;
+        let mut entry_of_camera = vec![None; cameras.len()];
+        for i in 0..labels.len() {
+            if let Some(c) = labels.camera_index(i) {
+                entry_of_camera[c] = Some(i);
+            }
+        }
+        Ok(Dataset {
+            cameras,
+            labels,
+            classes,
+            table,
+            entry_of_camera,
+        })
+    }
+
+    /// The label map of camera `view` as compact class indices ([`NO_LABEL`] where there is
+    /// none); None when the camera has no label map.
+    pub fn compact_labels(&self, view: usize) -> Result<Option<Vec<u32>>> {
+        match self.entry_of_camera.get(view).copied().flatten() {
+            Some(entry) => Ok(Some(
+                self.classes
+                    .compact_labels(&self.labels.load(entry)?.labels),
+            )),
+            None => Ok(None),
+        }
+    }
+}
+
+impl LabelSource for Dataset {
+    fn labels(&self, view: usize, _cam: &Camera) -> Result<Option<Vec<u32>>> {
+        self.compact_labels(view)
+    }
+}
+
+/// The cameras of `path`; with `train_only`, those marked "train" (an error if none is).
+pub fn load_split_cameras(path: &Path, train_only: bool) -> Result<Vec<Camera>> {
+    let mut cameras = load_cameras(path)?;
+    if train_only {
+        cameras.retain(|c| c.split == Split::Train);
+        if cameras.is_empty() {
+            bail!("{} has no train cameras", path.display());
+        }
+    }
+    Ok(cameras)
+}
+
+/// Cameras and the label maps matched to them, without a class table: for scoring against
+/// true maps, whose ids are compared as they are.
+pub fn open_truth_views(cameras: &Path, labels: &Path) -> Result<(Vec<Camera>, LabelDir)> {
+    let cameras = load_cameras(cameras)?;
+    let labels = LabelDir::open(labels, &cameras, None, MissingLabels::Skip)?;
+    Ok((cameras, labels))
+}
+
+/// classes.json inside the label folder or beside it, if there is one.
+pub fn default_class_table(labels: &Path) -> Option<PathBuf> {
+    [
+        labels.join("classes.json"),
+        labels
+            .parent()
+            .map(|p| p.join("classes.json"))
+            .unwrap_or_default(),
+    ]
+    .into_iter()
+    .find(|p| p.is_file())
+}

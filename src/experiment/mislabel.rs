@@ -1,0 +1,63 @@
+//! Whether a method follows a consistently mislabeled object, and whether its confidence
+//! flags the object.
+
+use serde::Serialize;
+
+use super::MethodScore;
+use crate::synth::SynthScene;
+
+/// How a method treated one consistently mislabeled object (Gaussian Semantics' limitation: a
+/// majority of wrong views wins), and whether its confidence flags it.
+#[derive(Clone, Debug, Serialize)]
+pub struct MislabelFollow {
+    pub object: String,
+    pub true_class: String,
+    pub wrong_class: String,
+    /// Fraction of the train views that showed the object with the wrong class.
+    pub wrong_view_rate: f64,
+    /// Fraction of the object's Gaussians assigned the wrong class.
+    pub assigned_wrong: f64,
+    /// Mean confidence on the object's Gaussians, and on every other seen Gaussian.
+    pub confidence_on_object: f64,
+    pub confidence_elsewhere: f64,
+}
+
+/// For every consistently mislabeled object of the scene's noise: what `score` assigned.
+pub fn mislabel_follow(s: &SynthScene, score: &MethodScore) -> Vec<MislabelFollow> {
+    let (Some(noisy), Some(input_instances)) = (&s.noisy, &s.gaussians.instance_ids) else {
+        return Vec::new();
+    };
+    let instances = score
+        .lifted
+        .as_ref()
+        .map_or(input_instances, |l| &l.instances);
+    noisy
+        .report
+        .consistent
+        .iter()
+        .map(|m| {
+            let on_object = |i: usize| instances[i] == m.instance as i32;
+            let mean = |sel: &dyn Fn(usize) -> bool| {
+                let v: Vec<f64> = (0..instances.len())
+                    .filter(|&i| sel(i) && score.classes[i] >= 0)
+                    .map(|i| score.confidence[i] as f64)
+                    .collect();
+                v.iter().sum::<f64>() / v.len().max(1) as f64
+            };
+            let members: Vec<usize> = (0..instances.len()).filter(|&i| on_object(i)).collect();
+            let wrong = members
+                .iter()
+                .filter(|&&i| score.classes[i] == m.wrong_class as i32)
+                .count();
+            MislabelFollow {
+                object: m.instance_name.clone(),
+                true_class: m.true_class_name.clone(),
+                wrong_class: m.wrong_class_name.clone(),
+                wrong_view_rate: m.rate,
+                assigned_wrong: wrong as f64 / members.len().max(1) as f64,
+                confidence_on_object: mean(&on_object),
+                confidence_elsewhere: mean(&|i| !on_object(i)),
+            }
+        })
+        .collect()
+}
