@@ -1,5 +1,6 @@
 //! Fusion on the GPU against plain CPU computations: vote counts exactly, FlashSplat's A
-//! against the CPU reference renderer, determinism, batching, and Listing 1.1.
+//! against the CPU reference renderer, determinism, batching, and FlashSplat's Listing 1.1
+//! (docs/papers.md).
 
 mod common;
 

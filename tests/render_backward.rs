@@ -217,8 +217,8 @@ fn spec(n: usize, sh_degree: u32, channels: usize, seed: u64) -> RandomSceneSpec
 /// relative accuracy per tensor (measured: 1e-6..1e-5, 1.1e-4 for the quaternions of the
 /// edge-case scene); a flipped skip decision (alpha within an
 /// ulp of 1/255, or T within an ulp of the stop) moves one pixel's share. 1e-3 is ~10x the
-/// worst case measured; a wrong term (a dropped Eq. 2 term, a sign, a missing window)
-/// gives errors of 1e-1 and more.
+/// worst case measured; a wrong term (a dropped Gaussian Semantics Eq. 2 term, a sign, a
+/// missing window) gives errors of 1e-1 and more.
 const TOLERANCE: f64 = 1e-3;
 
 #[test]
@@ -341,7 +341,8 @@ fn gpu_backward_handles_the_forward_edge_cases() {
 /// An end-to-end check that does not go through the reference backward at all: central
 /// differences of the f64 reference forward, at the parameters where the objective is
 /// smooth at this step (the forward is piecewise: a pixel crossing alpha = 1/255 makes its
-/// Eq. 2-normalized semantics jump, so differences at h and h/2 must agree first).
+/// normalized semantics (Gaussian Semantics Eq. 2) jump, so differences at h and h/2 must
+/// agree first).
 #[test]
 fn gpu_backward_matches_finite_differences() {
     let gpu = common::gpu();

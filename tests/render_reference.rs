@@ -953,7 +953,7 @@ fn sh_degree_setting_caps_evaluation() {
     );
 }
 
-// ---------------------------------------------------------------- semantics (Eq. 2)
+// ---------------------------------------------------------------- semantics (Gaussian Semantics Eq. 2)
 
 fn softmax(v: &[f32]) -> Vec<f64> {
     let e: Vec<f64> = v.iter().map(|&x| f64::from(x).exp()).collect();

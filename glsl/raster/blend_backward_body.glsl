@@ -8,7 +8,7 @@
 // Per pixel, contributors are walked back to front from the last blended entry, starting
 // from the saved final T and recovering T_i = T_{i+1} / (1 - alpha_i). The upstream
 // gradients are dL/d(rgb), dL/d(accumulated alpha) and dL/d(normalized semantics); the
-// Eq. 2 normalization (sem / (1 - T_final)) is undone per pixel first, which turns it into
+// Gaussian Semantics Eq. 2 normalization (sem / (1 - T_final)) is undone per pixel first, which turns it into
 // a gradient on the raw blend plus one on T_final. Each Gaussian's gradient is summed
 // across the subgroup before the atomics, and steps where no lane of a subgroup
 // contributes are skipped with a vote.
@@ -98,7 +98,7 @@ void main() {
             v_tfinal = dot(v_col, pc.background) - v_alpha.data[pix];
         }
 #endif
-        // Eq. 2: sem_norm = sem / (1 - T_final), so dL/dsem = v / (1 - T_final) and
+        // Gaussian Semantics Eq. 2: sem_norm = sem / (1 - T_final), so dL/dsem = v / (1 - T_final) and
         // dL/dT_final += sum_k v_k sem_norm_k / (1 - T_final).
         [[unroll]] for (uint k = 0; k < SEM_CHUNK; k++) {
             uint c = chunk_base + k;

@@ -12,6 +12,7 @@ use super::scores::ClassScores;
 use crate::contract::params::{ContribParams, VoteParams};
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, Gpu, Recorder};
+use crate::render::rasterizer::TileLists;
 use crate::render::{camera_rows_f32, GpuScene, Rasterizer, RenderOptions};
 use crate::scene::Camera;
 
@@ -126,6 +127,73 @@ pub fn rows_per_pass(gpu: &Gpu, cfg: &FuseConfig, classes: usize, n: usize) -> R
     Ok(rows.min(classes.max(1)))
 }
 
+/// Refuses an accumulation mode the device lacks the atomics for.
+fn check_atomics(gpu: &Gpu, acc: Accumulation) -> Result<()> {
+    let caps = gpu.caps();
+    match acc {
+        Accumulation::FixedPoint if !caps.int64_atomics => bail!(
+            "fixed-point accumulation needs 64-bit integer atomics, which {} lacks; use float atomics",
+            caps.name
+        ),
+        Accumulation::Float if !caps.float_atomic_add => bail!(
+            "float accumulation needs VK_EXT_shader_atomic_float, which {} lacks",
+            caps.name
+        ),
+        _ => Ok(()),
+    }
+}
+
+/// The class rows of the evidence one pass over the views accumulates.
+struct EvidencePass {
+    evidence: Buffer,
+    row_begin: usize,
+    rows: usize,
+}
+
+impl EvidencePass {
+    /// Zeroed evidence for rows `row_begin..row_begin + rows` of `n` Gaussians.
+    fn new(gpu: &Gpu, row_begin: usize, rows: usize, n: usize, entry: u64) -> Result<Self> {
+        let evidence = gpu.buffer("evidence", (rows * n) as u64 * entry)?;
+        let mut rec = Recorder::new(gpu)?;
+        rec.fill(&evidence, 0, evidence.size(), 0);
+        rec.submit_and_wait()?;
+        Ok(EvidencePass {
+            evidence,
+            row_begin,
+            rows,
+        })
+    }
+}
+
+/// The per-view device inputs, grown to the largest view: the label map (uploaded through
+/// one reused staging buffer) and the per-pixel state the tiled methods carry between
+/// windows.
+#[derive(Default)]
+struct ViewInputs {
+    labels: Option<Buffer>,
+    staging: Option<Buffer>,
+    carry: Option<Buffer>,
+}
+
+impl ViewInputs {
+    /// Uploads `map` (one compact class per pixel) and returns (labels, carry).
+    fn upload(&mut self, gpu: &Gpu, map: &[u32]) -> Result<(&Buffer, &Buffer)> {
+        let pixels = map.len() as u64;
+        if self.labels.as_ref().is_none_or(|b| b.size() < pixels * 4) {
+            self.labels = Some(gpu.buffer("labels", pixels * 4)?);
+            self.staging = Some(gpu.staging_buffer(pixels * 4)?);
+            self.carry = Some(gpu.buffer("contrib-carry", pixels * 8)?);
+        }
+        let (Some(labels), Some(staging), Some(carry)) =
+            (&self.labels, &mut self.staging, &self.carry)
+        else {
+            unreachable!("allocated together above");
+        };
+        gpu.upload_with(staging, labels, 0, map)?;
+        Ok((labels, carry))
+    }
+}
+
 /// Runs `cfg.method` over every view and returns the evidence [classes][n].
 pub fn accumulate(
     gpu: &Gpu,
@@ -138,15 +206,7 @@ pub fn accumulate(
 ) -> Result<(ClassScores, FuseStats)> {
     let start = std::time::Instant::now();
     let n = scene.n as usize;
-    if cfg.accumulation == Accumulation::FixedPoint && !gpu.caps().int64_atomics {
-        bail!("fixed-point accumulation needs 64-bit integer atomics, which {} lacks; use float atomics", gpu.caps().name);
-    }
-    if cfg.accumulation == Accumulation::Float && !gpu.caps().float_atomic_add {
-        bail!(
-            "float accumulation needs VK_EXT_shader_atomic_float, which {} lacks",
-            gpu.caps().name
-        );
-    }
+    check_atomics(gpu, cfg.accumulation)?;
     let rows = rows_per_pass(gpu, cfg, classes, n)?;
     let passes = classes.div_ceil(rows).max(1);
     let entry = bytes_per_entry(cfg.method, cfg.accumulation);
@@ -161,22 +221,12 @@ pub fn accumulate(
     if let Some(len) = cfg.window_len {
         raster.set_window_len(len);
     }
-    let opts = cfg.render_options();
-    let mut label_buf: Option<Buffer> = None;
-    let mut carry: Option<Buffer> = None;
-    let mut staging: Option<Buffer> = None;
-
-    for pass in 0..passes {
-        let row_begin = pass * rows;
-        let pass_rows = rows.min(classes - row_begin);
-        let evidence = gpu.buffer("evidence", (pass_rows * n) as u64 * entry)?;
-        {
-            let mut rec = Recorder::new(gpu)?;
-            rec.fill(&evidence, 0, evidence.size(), 0);
-            rec.submit_and_wait()?;
-        }
+    let mut inputs = ViewInputs::default();
+    for pass_index in 0..passes {
+        let row_begin = pass_index * rows;
+        let pass = EvidencePass::new(gpu, row_begin, rows.min(classes - row_begin), n, entry)?;
         for (view, cam) in cams.iter().enumerate() {
-            progress(pass * cams.len() + view, passes * cams.len());
+            progress(pass_index * cams.len() + view, passes * cams.len());
             let Some(map) = labels.labels(view, cam)? else {
                 continue;
             };
@@ -187,88 +237,14 @@ pub fn accumulate(
                 cam.name,
                 map.len()
             );
-            if pass == 0 {
+            if pass_index == 0 {
                 stats.views_with_labels += 1;
             }
-            if label_buf
-                .as_ref()
-                .is_none_or(|b| b.size() < pixels as u64 * 4)
-            {
-                label_buf = Some(gpu.buffer("labels", pixels as u64 * 4)?);
-                staging = Some(gpu.staging_buffer(pixels as u64 * 4)?);
-                carry = Some(gpu.buffer("contrib-carry", pixels as u64 * 8)?);
-            }
-            let lb = label_buf.as_ref().expect("allocated");
-            gpu.upload_with(staging.as_mut().expect("allocated"), lb, 0, &map)?;
-            let ms = match cfg.method {
-                Method::Vote => record_vote(
-                    gpu, scene, cam, lb, None, &evidence, row_begin, pass_rows, cfg,
-                )?,
-                Method::VoteOcclusion => {
-                    let run = raster.run_tiled(scene, cam, &opts, |rec, tiles| {
-                        tiles.record_blend(rec)?;
-                        rec.barrier();
-                        dispatch_vote(
-                            rec,
-                            scene,
-                            cam,
-                            lb,
-                            Some(tiles.depth()),
-                            &evidence,
-                            row_begin,
-                            pass_rows,
-                            cfg,
-                        )
-                    })?;
-                    run.timings.total_ns() * 1e-6
-                }
-                Method::VoteWeighted | Method::FlashSplat | Method::FlashSplatPerView => {
-                    let kernel = match cfg.accumulation {
-                        Accumulation::FixedPoint => ids::FUSE_CONTRIB_FIXED,
-                        Accumulation::Float => ids::FUSE_CONTRIB_FLOAT,
-                    };
-                    let cb = carry.as_ref().expect("allocated");
-                    let run = raster.run_tiled(scene, cam, &opts, |rec, tiles| {
-                        let f = &tiles.frame;
-                        for start in f.window_starts() {
-                            let params = ContribParams {
-                                width: cam.width,
-                                height: cam.height,
-                                tiles_x: f.tiles_x,
-                                n: n as u32,
-                                window_start: start,
-                                window_len: f.window_len,
-                                row_begin: row_begin as u32,
-                                rows: pass_rows as u32,
-                                center_only: u32::from(cfg.method == Method::VoteWeighted),
-                                per_view: u32::from(cfg.method == Method::FlashSplatPerView),
-                            };
-                            rec.dispatch(
-                                kernel,
-                                &[
-                                    ("tile_ranges", tiles.ranges()),
-                                    ("isect_ids", tiles.isect_ids()),
-                                    ("xy_depth_opacity", tiles.xy_depth_opacity()),
-                                    ("conics", tiles.conics()),
-                                    ("xy_frac", tiles.xy_frac()),
-                                    ("labels", lb),
-                                    ("carry", cb),
-                                    ("contrib", &evidence),
-                                ],
-                                &params,
-                                f.tile_groups(),
-                            )?;
-                            rec.barrier();
-                        }
-                        Ok(())
-                    })?;
-                    run.timings.total_ns() * 1e-6
-                }
-            };
-            stats.gpu_ms += ms;
+            let (label_buf, carry) = inputs.upload(gpu, &map)?;
+            stats.gpu_ms += accumulate_view(&mut raster, scene, cam, label_buf, carry, &pass, cfg)?;
             stats.peak_device_bytes = stats.peak_device_bytes.max(gpu.memory_reserved());
         }
-        download_rows(gpu, &evidence, cfg, n, row_begin, pass_rows, &mut scores)?;
+        download_rows(gpu, &pass, cfg, n, &mut scores)?;
     }
     progress(passes * cams.len(), passes * cams.len());
     stats.wall_s = start.elapsed().as_secs_f64();
@@ -276,15 +252,90 @@ pub fn accumulate(
     Ok((scores, stats))
 }
 
+/// Adds one view's evidence into `pass`; returns its GPU time in ms.
+fn accumulate_view(
+    raster: &mut Rasterizer,
+    scene: &GpuScene,
+    cam: &Camera,
+    labels: &Buffer,
+    carry: &Buffer,
+    pass: &EvidencePass,
+    cfg: &FuseConfig,
+) -> Result<f64> {
+    let opts = cfg.render_options();
+    let run = match cfg.method {
+        Method::Vote => return record_vote(raster.gpu(), scene, cam, labels, pass, cfg),
+        Method::VoteOcclusion => raster.run_tiled(scene, cam, &opts, |rec, tiles| {
+            tiles.record_blend(rec)?;
+            rec.barrier();
+            dispatch_vote(rec, scene, cam, labels, Some(tiles.depth()), pass, cfg)
+        })?,
+        Method::VoteWeighted | Method::FlashSplat | Method::FlashSplatPerView => {
+            raster.run_tiled(scene, cam, &opts, |rec, tiles| {
+                record_contrib(rec, tiles, scene.n, labels, carry, pass, cfg)
+            })?
+        }
+    };
+    Ok(run.timings.total_ns() * 1e-6)
+}
+
+/// Records the weighted methods' accumulation over the binned view: every window of the
+/// tile lists adds alpha * T per (label, Gaussian) into the pass's evidence.
+fn record_contrib(
+    rec: &mut Recorder,
+    tiles: &TileLists,
+    n: u32,
+    labels: &Buffer,
+    carry: &Buffer,
+    pass: &EvidencePass,
+    cfg: &FuseConfig,
+) -> Result<()> {
+    let kernel = match cfg.accumulation {
+        Accumulation::FixedPoint => ids::FUSE_CONTRIB_FIXED,
+        Accumulation::Float => ids::FUSE_CONTRIB_FLOAT,
+    };
+    let f = &tiles.frame;
+    for start in f.window_starts() {
+        let params = ContribParams {
+            width: f.cam.width,
+            height: f.cam.height,
+            tiles_x: f.tiles_x,
+            n,
+            window_start: start,
+            window_len: f.window_len,
+            row_begin: pass.row_begin as u32,
+            rows: pass.rows as u32,
+            center_only: u32::from(cfg.method == Method::VoteWeighted),
+            per_view: u32::from(cfg.method == Method::FlashSplatPerView),
+        };
+        rec.dispatch(
+            kernel,
+            &[
+                ("tile_ranges", tiles.ranges()),
+                ("isect_ids", tiles.isect_ids()),
+                ("xy_depth_opacity", tiles.xy_depth_opacity()),
+                ("conics", tiles.conics()),
+                ("xy_frac", tiles.xy_frac()),
+                ("labels", labels),
+                ("carry", carry),
+                ("contrib", &pass.evidence),
+            ],
+            &params,
+            f.tile_groups(),
+        )?;
+        rec.barrier();
+    }
+    Ok(())
+}
+
 fn download_rows(
     gpu: &Gpu,
-    evidence: &Buffer,
+    pass: &EvidencePass,
     cfg: &FuseConfig,
     n: usize,
-    row_begin: usize,
-    rows: usize,
     out: &mut ClassScores,
 ) -> Result<()> {
+    let (evidence, row_begin, rows) = (&pass.evidence, pass.row_begin, pass.rows);
     let count = rows * n;
     let values: Vec<f64> = match (cfg.method, cfg.accumulation) {
         (Method::Vote | Method::VoteOcclusion, _) => gpu
@@ -309,38 +360,32 @@ fn download_rows(
     Ok(())
 }
 
-#[allow(clippy::too_many_arguments)]
+/// Plain vote of one view in a submission of its own; returns its GPU time in ms.
 fn record_vote(
     gpu: &Gpu,
     scene: &GpuScene,
     cam: &Camera,
     labels: &Buffer,
-    depth: Option<&Buffer>,
-    votes: &Buffer,
-    row_begin: usize,
-    rows: usize,
+    pass: &EvidencePass,
     cfg: &FuseConfig,
 ) -> Result<f64> {
     let mut rec = Recorder::new(gpu)?;
     let m0 = rec.mark();
-    dispatch_vote(
-        &mut rec, scene, cam, labels, depth, votes, row_begin, rows, cfg,
-    )?;
+    dispatch_vote(&mut rec, scene, cam, labels, None, pass, cfg)?;
     let m1 = rec.mark();
     let t = rec.submit_and_wait()?;
     Ok(t.between(m0, m1).unwrap_or(0.0) * 1e-6)
 }
 
-#[allow(clippy::too_many_arguments)]
+/// Records the vote of every projected center into the pass's rows; with `depth`, only
+/// centers within the tolerance of the rendered depth vote.
 fn dispatch_vote(
     rec: &mut Recorder,
     scene: &GpuScene,
     cam: &Camera,
     labels: &Buffer,
     depth: Option<&Buffer>,
-    votes: &Buffer,
-    row_begin: usize,
-    rows: usize,
+    pass: &EvidencePass,
     cfg: &FuseConfig,
 ) -> Result<()> {
     let params = VoteParams {
@@ -356,8 +401,8 @@ fn dispatch_vote(
         width: cam.width,
         height: cam.height,
         n: scene.n,
-        row_begin: row_begin as u32,
-        rows: rows as u32,
+        row_begin: pass.row_begin as u32,
+        rows: pass.rows as u32,
     };
     rec.dispatch(
         ids::FUSE_VOTE,
@@ -365,7 +410,7 @@ fn dispatch_vote(
             ("means", &scene.params.means),
             ("labels", labels),
             ("depth", depth.unwrap_or(labels)),
-            ("votes", votes),
+            ("votes", &pass.evidence),
         ],
         &params,
         ids::FUSE_VOTE.groups_for(scene.n),

@@ -11,7 +11,7 @@ use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 
 use super::caps::{probe_device, DeviceCaps};
 use super::error::{GpuError, GpuResult, VkContext};
-use super::kernel::Kernel;
+use super::kernel::Pipeline;
 use super::validation::{debug_callback, ValidationLog};
 
 const VALIDATION_LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
@@ -37,7 +37,7 @@ pub(crate) struct Inner {
     pub(crate) allocator: Mutex<Option<Allocator>>,
     pub(crate) push_descriptor: ash::khr::push_descriptor::Device,
     pub(crate) caps: DeviceCaps,
-    pub(crate) kernels: Mutex<HashMap<usize, Arc<Kernel>>>,
+    pub(crate) kernels: Mutex<HashMap<usize, Arc<Pipeline>>>,
 }
 
 /// A shared handle to the Vulkan device. Cheap to clone; buffers keep it alive.

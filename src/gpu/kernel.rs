@@ -10,7 +10,7 @@ use super::error::{GpuResult, VkContext};
 use super::kernel_table::{KernelId, KernelInfo};
 
 /// A built kernel: pipeline plus the layouts derived from its reflection.
-pub struct Kernel {
+pub struct Pipeline {
     pub info: &'static KernelInfo,
     pub(crate) pipeline: vk::Pipeline,
     pub(crate) layout: vk::PipelineLayout,
@@ -18,7 +18,7 @@ pub struct Kernel {
     module: vk::ShaderModule,
 }
 
-impl Kernel {
+impl Pipeline {
     /// # Safety
     /// The device must be idle with respect to this kernel.
     pub(crate) unsafe fn destroy(&self, device: &ash::Device) {
@@ -33,7 +33,7 @@ impl Kernel {
 
 impl Gpu {
     /// The pipeline for a kernel, built on first use.
-    pub fn kernel(&self, id: KernelId) -> GpuResult<Arc<Kernel>> {
+    pub fn kernel(&self, id: KernelId) -> GpuResult<Arc<Pipeline>> {
         let mut cache = self.inner.kernels.lock().unwrap();
         if let Some(k) = cache.get(&id.0) {
             return Ok(k.clone());
@@ -43,7 +43,38 @@ impl Gpu {
         Ok(k)
     }
 
-    fn build_kernel(&self, info: &'static KernelInfo) -> GpuResult<Kernel> {
+    fn build_kernel(&self, info: &'static KernelInfo) -> GpuResult<Pipeline> {
+        let words =
+            ash::util::read_spv(&mut Cursor::new(info.spirv)).expect("build.rs wrote valid SPIR-V");
+        // SAFETY: what each step creates is destroyed if a later step fails.
+        unsafe {
+            let (set_layout, layout) = self.create_layouts(info)?;
+            match self.create_pipeline(info, layout, &words) {
+                Ok((module, pipeline)) => Ok(Pipeline {
+                    info,
+                    pipeline,
+                    layout,
+                    set_layout,
+                    module,
+                }),
+                Err(e) => {
+                    self.device().destroy_pipeline_layout(layout, None);
+                    self.device()
+                        .destroy_descriptor_set_layout(set_layout, None);
+                    Err(e)
+                }
+            }
+        }
+    }
+
+    /// The push-descriptor set layout and the pipeline layout of a kernel's reflection.
+    ///
+    /// # Safety
+    /// The caller destroys both when done with them.
+    unsafe fn create_layouts(
+        &self,
+        info: &KernelInfo,
+    ) -> GpuResult<(vk::DescriptorSetLayout, vk::PipelineLayout)> {
         let device = self.device();
         let bindings: Vec<_> = info
             .bindings
@@ -51,17 +82,11 @@ impl Gpu {
             .map(|b| {
                 vk::DescriptorSetLayoutBinding::default()
                     .binding(b.binding)
-                    .descriptor_type(if b.uniform {
-                        vk::DescriptorType::UNIFORM_BUFFER
-                    } else {
-                        vk::DescriptorType::STORAGE_BUFFER
-                    })
+                    .descriptor_type(b.descriptor_type())
                     .descriptor_count(1)
                     .stage_flags(vk::ShaderStageFlags::COMPUTE)
             })
             .collect();
-        let words =
-            ash::util::read_spv(&mut Cursor::new(info.spirv)).expect("build.rs wrote valid SPIR-V");
         let ranges = [vk::PushConstantRange::default()
             .stage_flags(vk::ShaderStageFlags::COMPUTE)
             .size(info.push_constant_size)];
@@ -70,16 +95,7 @@ impl Gpu {
         } else {
             &[]
         };
-        // Full subgroups make gl_SubgroupID * gl_SubgroupSize + gl_SubgroupInvocationID a
-        // bijection onto the workgroup, which the scans and the stable sort rely on.
-        let full_subgroups = info.workgroup_size[0] % self.caps().max_subgroup_size == 0;
-        let stage_flags = if full_subgroups {
-            vk::PipelineShaderStageCreateFlags::REQUIRE_FULL_SUBGROUPS
-        } else {
-            vk::PipelineShaderStageCreateFlags::empty()
-        };
-        // SAFETY: create infos reference locals that outlive each call; on error, what was
-        // created is destroyed before returning.
+        // SAFETY: create infos reference locals that outlive each call.
         unsafe {
             let set_layout = device
                 .create_descriptor_set_layout(
@@ -90,28 +106,45 @@ impl Gpu {
                 )
                 .vk("vkCreateDescriptorSetLayout")?;
             let set_layouts = [set_layout];
-            let layout = match device.create_pipeline_layout(
+            match device.create_pipeline_layout(
                 &vk::PipelineLayoutCreateInfo::default()
                     .set_layouts(&set_layouts)
                     .push_constant_ranges(ranges),
                 None,
             ) {
-                Ok(l) => l,
+                Ok(layout) => Ok((set_layout, layout)),
                 Err(e) => {
                     device.destroy_descriptor_set_layout(set_layout, None);
-                    return Err(e).vk("vkCreatePipelineLayout");
+                    Err(e).vk("vkCreatePipelineLayout")
                 }
-            };
-            let module = match device
-                .create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)
-            {
-                Ok(m) => m,
-                Err(e) => {
-                    device.destroy_pipeline_layout(layout, None);
-                    device.destroy_descriptor_set_layout(set_layout, None);
-                    return Err(e).vk("vkCreateShaderModule");
-                }
-            };
+            }
+        }
+    }
+
+    /// The shader module and compute pipeline of a kernel.
+    ///
+    /// # Safety
+    /// `layout` is a live pipeline layout; the caller destroys what this returns.
+    unsafe fn create_pipeline(
+        &self,
+        info: &KernelInfo,
+        layout: vk::PipelineLayout,
+        words: &[u32],
+    ) -> GpuResult<(vk::ShaderModule, vk::Pipeline)> {
+        let device = self.device();
+        // Full subgroups make gl_SubgroupID * gl_SubgroupSize + gl_SubgroupInvocationID a
+        // bijection onto the workgroup, which the scans and the stable sort rely on.
+        let full_subgroups = info.workgroup_size[0] % self.caps().max_subgroup_size == 0;
+        let stage_flags = if full_subgroups {
+            vk::PipelineShaderStageCreateFlags::REQUIRE_FULL_SUBGROUPS
+        } else {
+            vk::PipelineShaderStageCreateFlags::empty()
+        };
+        // SAFETY: create infos reference locals that outlive each call.
+        unsafe {
+            let module = device
+                .create_shader_module(&vk::ShaderModuleCreateInfo::default().code(words), None)
+                .vk("vkCreateShaderModule")?;
             let stage = vk::PipelineShaderStageCreateInfo::default()
                 .flags(stage_flags)
                 .stage(vk::ShaderStageFlags::COMPUTE)
@@ -121,17 +154,9 @@ impl Gpu {
                 .stage(stage)
                 .layout(layout)];
             match device.create_compute_pipelines(vk::PipelineCache::null(), &create, None) {
-                Ok(p) => Ok(Kernel {
-                    info,
-                    pipeline: p[0],
-                    layout,
-                    set_layout,
-                    module,
-                }),
+                Ok(p) => Ok((module, p[0])),
                 Err((_, e)) => {
                     device.destroy_shader_module(module, None);
-                    device.destroy_pipeline_layout(layout, None);
-                    device.destroy_descriptor_set_layout(set_layout, None);
                     Err(e).vk("vkCreateComputePipelines")
                 }
             }

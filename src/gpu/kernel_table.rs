@@ -12,6 +12,16 @@ pub struct BindingInfo {
     pub uniform: bool,
 }
 
+impl BindingInfo {
+    pub fn descriptor_type(&self) -> ash::vk::DescriptorType {
+        if self.uniform {
+            ash::vk::DescriptorType::UNIFORM_BUFFER
+        } else {
+            ash::vk::DescriptorType::STORAGE_BUFFER
+        }
+    }
+}
+
 /// A compiled compute kernel and its reflected interface.
 #[derive(Clone, Copy, Debug)]
 pub struct KernelInfo {

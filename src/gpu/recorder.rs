@@ -7,7 +7,7 @@ use ash::vk;
 use super::buffer::Buffer;
 use super::context::Gpu;
 use super::error::{GpuResult, VkContext};
-use super::kernel_table::{Kernel, KernelId};
+use super::kernel_table::{Kernel, KernelId, KernelInfo};
 use super::timings::{Mark, Timings};
 
 /// Timestamps one command buffer can hold; later dispatches go untimed.
@@ -128,37 +128,7 @@ impl Recorder {
             bindings.len(),
             info.bindings.iter().map(|b| b.name).collect::<Vec<_>>()
         );
-        let max_range = self.gpu.caps().max_storage_buffer_range;
-        let infos: Vec<[vk::DescriptorBufferInfo; 1]> = info
-            .bindings
-            .iter()
-            .map(|b| {
-                let buf = bindings
-                    .iter()
-                    .find(|(n, _)| *n == b.name)
-                    .map(|(_, buf)| *buf)
-                    .unwrap_or_else(|| {
-                        panic!(
-                            "{}: no buffer given for binding '{}' (given: {:?})",
-                            info.name,
-                            b.name,
-                            bindings.iter().map(|(n, _)| *n).collect::<Vec<_>>()
-                        )
-                    });
-                assert!(
-                    buf.size() <= max_range,
-                    "{}: buffer '{}' is {} bytes, over the device's {}-byte binding limit",
-                    info.name,
-                    buf.name(),
-                    buf.size(),
-                    max_range
-                );
-                [vk::DescriptorBufferInfo::default()
-                    .buffer(buf.raw)
-                    .offset(0)
-                    .range(vk::WHOLE_SIZE)]
-            })
-            .collect();
+        let infos = buffer_infos(info, bindings, self.gpu.caps().max_storage_buffer_range);
         let writes: Vec<_> = info
             .bindings
             .iter()
@@ -166,11 +136,7 @@ impl Recorder {
             .map(|(b, bi)| {
                 vk::WriteDescriptorSet::default()
                     .dst_binding(b.binding)
-                    .descriptor_type(if b.uniform {
-                        vk::DescriptorType::UNIFORM_BUFFER
-                    } else {
-                        vk::DescriptorType::STORAGE_BUFFER
-                    })
+                    .descriptor_type(b.descriptor_type())
                     .buffer_info(bi)
             })
             .collect();
@@ -426,4 +392,41 @@ impl Drop for Recorder {
             self.gpu.device().destroy_command_pool(self.pool, None);
         }
     }
+}
+
+/// The buffer given for each of the kernel's bindings, matched by GLSL name.
+fn buffer_infos(
+    info: &KernelInfo,
+    bindings: &[(&str, &Buffer)],
+    max_range: u64,
+) -> Vec<[vk::DescriptorBufferInfo; 1]> {
+    info.bindings
+        .iter()
+        .map(|b| {
+            let buf = bindings
+                .iter()
+                .find(|(n, _)| *n == b.name)
+                .map(|(_, buf)| *buf)
+                .unwrap_or_else(|| {
+                    panic!(
+                        "{}: no buffer given for binding '{}' (given: {:?})",
+                        info.name,
+                        b.name,
+                        bindings.iter().map(|(n, _)| *n).collect::<Vec<_>>()
+                    )
+                });
+            assert!(
+                buf.size() <= max_range,
+                "{}: buffer '{}' is {} bytes, over the device's {}-byte binding limit",
+                info.name,
+                buf.name(),
+                buf.size(),
+                max_range
+            );
+            [vk::DescriptorBufferInfo::default()
+                .buffer(buf.raw)
+                .offset(0)
+                .range(vk::WHOLE_SIZE)]
+        })
+        .collect()
 }

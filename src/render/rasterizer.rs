@@ -267,46 +267,8 @@ impl Rasterizer {
             "camera {} has an empty image",
             cam.name
         );
-        let semantics = match opts.semantics {
-            Some(mode) => scene.semantics(&self.gpu, mode)?.map(|buf| (mode, buf)),
-            None => None,
-        };
-        let frame = FrameSpec {
-            cam,
-            tiles_x: cam.width.div_ceil(TILE_SIZE),
-            tiles_y: cam.height.div_ceil(TILE_SIZE),
-            window_len: self.window_len,
-            windows: self.windows_for(scene.n),
-            channels: if semantics.is_some() {
-                scene.channels
-            } else {
-                0
-            },
-            semantics,
-            background: opts.background,
-        };
-        let (tiles_x, tiles_y, windows, channels) =
-            (frame.tiles_x, frame.tiles_y, frame.windows, frame.channels);
-        let pixels = cam.width as u64 * cam.height as u64;
-        let carry_stride = (BLEND_CARRY_BASE + if channels > 0 { SEM_CHUNK } else { 0 }) as u64;
-        let mut need = Need {
-            n: scene.n,
-            pixels,
-            tiles: tiles_x * tiles_y,
-            sem: pixels * channels as u64,
-            carry: if windows > 1 {
-                pixels * carry_stride
-            } else {
-                1
-            },
-            // A first guess; the GPU reports the real count and we grow on overflow.
-            isect: self
-                .bufs
-                .as_ref()
-                .map_or(0, |b| b.isect_cap)
-                .max(scene.n.saturating_mul(4))
-                .max(1 << 16),
-        };
+        let frame = self.frame_spec(scene, cam, opts)?;
+        let mut need = self.need(scene, &frame);
         loop {
             self.ensure(need)?;
             let b = self.bufs.as_ref().expect("ensured");
@@ -331,8 +293,60 @@ impl Rasterizer {
                 marks,
                 visible: status[ST_VISIBLE as usize],
                 intersections: status[ST_ISECT as usize],
-                channels,
+                channels: frame.channels,
             });
+        }
+    }
+
+    /// The frame every per-tile pass over `scene` seen by `cam` works on.
+    fn frame_spec<'a>(
+        &self,
+        scene: &'a GpuScene,
+        cam: &'a Camera,
+        opts: &RenderOptions,
+    ) -> Result<FrameSpec<'a>> {
+        let semantics = match opts.semantics {
+            Some(mode) => scene.semantics(&self.gpu, mode)?.map(|buf| (mode, buf)),
+            None => None,
+        };
+        Ok(FrameSpec {
+            cam,
+            tiles_x: cam.width.div_ceil(TILE_SIZE),
+            tiles_y: cam.height.div_ceil(TILE_SIZE),
+            window_len: self.window_len,
+            windows: self.windows_for(scene.n),
+            channels: if semantics.is_some() {
+                scene.channels
+            } else {
+                0
+            },
+            semantics,
+            background: opts.background,
+        })
+    }
+
+    /// The buffer sizes a frame needs, with a first guess at its intersections (the GPU
+    /// reports the real count and the buffers grow on overflow).
+    fn need(&self, scene: &GpuScene, frame: &FrameSpec) -> Need {
+        let pixels = frame.cam.width as u64 * frame.cam.height as u64;
+        let chunk = if frame.channels > 0 { SEM_CHUNK } else { 0 };
+        let carry_stride = (BLEND_CARRY_BASE + chunk) as u64;
+        Need {
+            n: scene.n,
+            pixels,
+            tiles: frame.tiles_x * frame.tiles_y,
+            sem: pixels * frame.channels as u64,
+            carry: if frame.windows > 1 {
+                pixels * carry_stride
+            } else {
+                1
+            },
+            isect: self
+                .bufs
+                .as_ref()
+                .map_or(0, |b| b.isect_cap)
+                .max(scene.n.saturating_mul(4))
+                .max(1 << 16),
         }
     }
 
@@ -379,17 +393,41 @@ impl Rasterizer {
         opts: &RenderOptions,
     ) -> Result<[Option<Mark>; 4]> {
         let b = self.bufs.as_ref().expect("ensured");
-        let n = scene.n;
         let tiles_x = cam.width.div_ceil(TILE_SIZE);
         let tiles_y = cam.height.div_ceil(TILE_SIZE);
         rec.fill(&b.status, 0, ST_WORDS as u64 * 4, 0);
-        rec.fill(&b.status, ST_N_PLUS1 as u64 * 4, 4, n + 1);
+        rec.fill(&b.status, ST_N_PLUS1 as u64 * 4, 4, scene.n + 1);
         rec.fill(&b.ranges, 0, (tiles_x * tiles_y) as u64 * 8, 0);
         rec.barrier();
         let m0 = rec.mark();
+        b.record_project(rec, scene, cam, opts, self.float64)?;
+        let m1 = rec.mark();
+        b.depth_sort.record(
+            rec,
+            &b.depth_keys,
+            &b.depth_ids,
+            GpuCount::at(&b.status, ST_VISIBLE),
+            32,
+        )?;
+        let m2 = rec.mark();
+        b.record_tile_lists(rec, tiles_x, tiles_y)?;
+        let m3 = rec.mark();
+        Ok([m0, m1, m2, m3])
+    }
+}
 
-        let r = cam.rotation;
-        let t = cam.translation;
+impl Buffers {
+    /// Projects every Gaussian, then compacts the visible ones into depth keys (a scan of
+    /// the visibility flags keeps their order deterministic).
+    fn record_project(
+        &self,
+        rec: &mut Recorder,
+        scene: &GpuScene,
+        cam: &Camera,
+        opts: &RenderOptions,
+        float64: bool,
+    ) -> Result<()> {
+        let (b, n) = (self, scene.n);
         let params = project_params(cam, scene, opts.near, opts.far);
         let mut bindings: Vec<(&str, &Buffer)> = vec![
             ("means", &scene.params.means),
@@ -407,10 +445,13 @@ impl Rasterizer {
         ];
         // With float64, the camera-space and 2D means are computed from the camera in
         // double precision (float32 loses ~1e-5 px, which shows in alpha).
-        let kernel = if self.float64 {
-            let rows = [r.row(0), r.row(1), r.row(2)];
+        let kernel = if float64 {
+            let (r, t) = (cam.rotation, cam.translation);
             let camera64: Vec<f64> = (0..3)
-                .flat_map(|k| [rows[k].x, rows[k].y, rows[k].z, t[k]])
+                .flat_map(|k| {
+                    let row = r.row(k);
+                    [row.x, row.y, row.z, t[k]]
+                })
                 .chain([cam.fx, cam.fy, cam.cx, cam.cy])
                 .collect();
             rec.update(&b.camera64, 0, bytemuck::cast_slice(&camera64));
@@ -442,17 +483,13 @@ impl Rasterizer {
             ids::RASTER_COMPACT.groups_for(n + 1),
         )?;
         rec.barrier();
-        let m1 = rec.mark();
+        Ok(())
+    }
 
-        b.depth_sort.record(
-            rec,
-            &b.depth_keys,
-            &b.depth_ids,
-            GpuCount::at(&b.status, ST_VISIBLE),
-            32,
-        )?;
-        let m2 = rec.mark();
-
+    /// From the depth-sorted visible Gaussians: (tile, Gaussian) pairs emitted in depth
+    /// order, a stable sort on the tile id's bits, and each tile's range of the list.
+    fn record_tile_lists(&self, rec: &mut Recorder, tiles_x: u32, tiles_y: u32) -> Result<()> {
+        let b = self;
         rec.dispatch_indirect(
             ids::RASTER_GATHER_TOUCHED,
             &[
@@ -509,11 +546,10 @@ impl Rasterizer {
             ST_ARGS_ISECT as u64 * 4,
         )?;
         rec.barrier();
-        let m3 = rec.mark();
-
-        Ok([m0, m1, m2, m3])
+        Ok(())
     }
 }
+
 /// What every per-tile pass of one binned view works on, fixed when the view is binned:
 /// passes read it from [`TileLists::frame`] instead of each caller supplying it again.
 #[derive(Clone)]
@@ -647,7 +683,7 @@ impl TileLists<'_> {
         &self.bufs.n_contrib
     }
 
-    /// Per pixel: the C normalized semantic channels (Eq. 2).
+    /// Per pixel: the C normalized semantic channels (Gaussian Semantics Eq. 2).
     pub fn sem_norm(&self) -> &Buffer {
         &self.bufs.sem_norm
     }

@@ -49,7 +49,7 @@ impl LossValues {
         L1_WEIGHT * self.l1 + SSIM_WEIGHT * (1.0 - self.ssim)
     }
 
-    /// The full loss of Eq. 3 with the weights used this iteration.
+    /// The full loss of Gaussian Semantics Eq. 3 with the weights used this iteration.
     pub fn total(&self, lambda_sem: f32, lambda_h: f32) -> f32 {
         self.rgb_loss() + lambda_sem * self.ce + lambda_h * self.entropy
     }

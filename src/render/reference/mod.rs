@@ -149,7 +149,8 @@ impl ReferenceImage {
     }
 
     /// Stores pixel `i`'s outputs from its blended sums (`sum w c`, `sum w z`, `sum w s`)
-    /// and what compositing left: background, normalization by `1 - T_final` (Eq. 2).
+    /// and what compositing left: background, normalization by `1 - T_final` (Gaussian
+    /// Semantics Eq. 2, docs/papers.md).
     pub(super) fn store_pixel(
         &mut self,
         i: usize,
