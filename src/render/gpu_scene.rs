@@ -154,6 +154,9 @@ impl<A, B> GaussianParams<(A, B)> {
     }
 }
 
+/// Parameter tensors (or their gradients) downloaded to the host, f32 each.
+pub type HostParams = GaussianParams<Vec<f32>>;
+
 impl<T> Index<ParamTensor> for GaussianParams<T> {
     type Output = T;
 
@@ -189,7 +192,7 @@ impl GaussianParams<Buffer> {
         n: u32,
         sh_coeffs: u32,
         extra: &[(&Buffer, u64, u64)],
-    ) -> GpuResult<(GaussianParams<Vec<f32>>, Vec<Vec<f32>>)> {
+    ) -> GpuResult<(HostParams, Vec<Vec<f32>>)> {
         let mut ranges: Vec<(&Buffer, u64, u64)> = self
             .iter()
             .map(|(p, b)| (b, 0, n as u64 * p.floats(sh_coeffs) as u64 * 4))
