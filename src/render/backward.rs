@@ -6,7 +6,7 @@
 use anyhow::{ensure, Result};
 
 use super::frame::RenderedFrame;
-use super::gpu_scene::{GaussianParams, GpuScene};
+use super::gpu_scene::{GaussianParams, GpuScene, HostParams};
 use super::rasterizer::{Rasterizer, TileLists};
 use super::{project_params, RenderOptions, SemanticMode};
 use crate::contract::params::SoftmaxParams;
@@ -57,7 +57,7 @@ pub struct SceneGrads {
 /// Gradients downloaded to the host (tests, diagnostics).
 #[derive(Clone, Debug, Default)]
 pub struct HostGrads {
-    pub params: GaussianParams<Vec<f32>>,
+    pub params: HostParams,
     pub logits: Vec<f32>,
     /// The last view's screen-space gradients, GRAD2D_STRIDE per Gaussian.
     pub screen: Vec<f32>,

@@ -1,8 +1,7 @@
 //! A scene's Gaussians uploaded once, structure-of-arrays as the kernels read them, and
 //! [`GaussianParams`], the one list of their parameter tensors.
 
-use std::convert::Infallible;
-use std::ops::{Index, IndexMut};
+use std::ops::Index;
 
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, Gpu, GpuResult, Recorder};
@@ -60,9 +59,9 @@ impl ParamTensor {
 /// One value per parameter tensor of a Gaussian set: the tensors themselves (on the device
 /// or the host), their gradients, their optimizer state, anything kept per tensor.
 ///
-/// The semantic logits are not a field: fusion scenes have none, their width is the class
-/// count rather than a property of the Gaussian, and training treats them apart (frozen
-/// geometry trains them alone). Holders keep them in an `Option` beside this.
+/// The semantic logits are not a field: fusion scenes have none, their width is the
+/// scene's class count (not set by the SH degree), and training treats them apart
+/// (`--semantics-only` trains them alone). Holders keep them in an `Option` beside this.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct GaussianParams<T> {
     pub means: T,
@@ -91,14 +90,9 @@ impl<T> GaussianParams<T> {
         GaussianParams::from_fn(|p| p).try_map(f)
     }
 
+    /// A reference to every field.
     pub fn as_ref(&self) -> GaussianParams<&T> {
         GaussianParams::from_fn(|p| &self[p])
-    }
-
-    /// Applies `f` to every field, in [`ParamTensor::ALL`] order.
-    pub fn map<U>(self, mut f: impl FnMut(T) -> U) -> GaussianParams<U> {
-        let Ok(mapped) = self.try_map(|t| Ok::<U, Infallible>(f(t)));
-        mapped
     }
 
     /// Applies `f` to every field, in [`ParamTensor::ALL`] order; stops at the first
@@ -134,6 +128,7 @@ impl<T> GaussianParams<T> {
 }
 
 impl<A, B> GaussianParams<(A, B)> {
+    /// Pairs per tensor into one set of each.
     pub fn unzip(self) -> (GaussianParams<A>, GaussianParams<B>) {
         let [means, log_scales, quats, opacity_logits, sh] = self.into_array();
         (
@@ -155,6 +150,9 @@ impl<A, B> GaussianParams<(A, B)> {
     }
 }
 
+/// Parameter tensors (or their gradients) downloaded to the host, f32 each.
+pub type HostParams = GaussianParams<Vec<f32>>;
+
 impl<T> Index<ParamTensor> for GaussianParams<T> {
     type Output = T;
 
@@ -169,18 +167,6 @@ impl<T> Index<ParamTensor> for GaussianParams<T> {
     }
 }
 
-impl<T> IndexMut<ParamTensor> for GaussianParams<T> {
-    fn index_mut(&mut self, p: ParamTensor) -> &mut T {
-        match p {
-            ParamTensor::Means => &mut self.means,
-            ParamTensor::LogScales => &mut self.log_scales,
-            ParamTensor::Quats => &mut self.quats,
-            ParamTensor::OpacityLogits => &mut self.opacity_logits,
-            ParamTensor::Sh => &mut self.sh,
-        }
-    }
-}
-
 impl GaussianParams<Buffer> {
     /// Downloads the first `n` Gaussians of every tensor, and the `extra` ranges, in one
     /// transfer; returns the tensors and the extra ranges, each as f32.
@@ -190,7 +176,7 @@ impl GaussianParams<Buffer> {
         n: u32,
         sh_coeffs: u32,
         extra: &[(&Buffer, u64, u64)],
-    ) -> GpuResult<(GaussianParams<Vec<f32>>, Vec<Vec<f32>>)> {
+    ) -> GpuResult<(HostParams, Vec<Vec<f32>>)> {
         let mut ranges: Vec<(&Buffer, u64, u64)> = self
             .iter()
             .map(|(p, b)| (b, 0, n as u64 * p.floats(sh_coeffs) as u64 * 4))
