@@ -6,7 +6,7 @@
 
 #include "ssim_window.glsl"
 
-layout(local_size_x = 16, local_size_y = 16) in;
+layout(local_size_x = SSIM_TILE, local_size_y = SSIM_TILE) in;
 
 layout(push_constant) uniform SsimBackwardParams {
     uint width;

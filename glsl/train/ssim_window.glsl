@@ -5,6 +5,8 @@
 #ifndef SSIM_WINDOW_GLSL
 #define SSIM_WINDOW_GLSL
 
+#include "shared_constants.glsl" // SSIM_TILE
+
 #extension GL_EXT_control_flow_attributes : require
 
 #define SSIM_RADIUS 5

@@ -44,6 +44,10 @@ pub struct DeviceCaps {
     pub max_storage_buffer_range: u64,
     pub max_workgroup_count: [u32; 3],
     pub max_shared_memory: u32,
+    /// Loop iterations one shader invocation may run in total before the driver silently
+    /// cuts its loops short, where the driver has such a cap (see [`loop_iteration_cap`]).
+    /// Kernels that walk long lists split the walk into dispatches that stay below it.
+    pub loop_iteration_cap: Option<u32>,
     pub heaps: Vec<Heap>,
     #[serde(skip)]
     pub compute_queue_family: Option<u32>,
@@ -118,11 +122,13 @@ pub fn probe_device(instance: &ash::Instance, pd: vk::PhysicalDevice) -> (Device
     };
     let (atomic_float, v12, base_features) =
         (&features.atomic_float, &features.v12, &features.base);
+    let driver_name = cstr(&props.driver.driver_name);
     let caps = DeviceCaps {
         name: cstr(&base.device_name),
         device_type: base.device_type,
         vendor_id: base.vendor_id,
-        driver_name: cstr(&props.driver.driver_name),
+        loop_iteration_cap: loop_iteration_cap(&driver_name),
+        driver_name,
         driver_info: cstr(&props.driver.driver_info),
         vulkan_version: format!(
             "{}.{}.{}",
@@ -318,19 +324,14 @@ impl DeviceCaps {
             .map(|h| h.size_bytes)
             .sum()
     }
-
-    /// Loop iterations one shader invocation may run in total before the driver silently
-    /// cuts its loops short, where the driver has such a cap: Mesa's llvmpipe (lavapipe)
-    /// stops every invocation after 65,535 iterations, shared by all its loops. Kernels
-    /// that walk long lists split the walk into dispatches that stay below it.
-    pub fn loop_iteration_cap(&self) -> Option<u32> {
-        self.driver_name
-            .to_lowercase()
-            .contains("llvmpipe")
-            .then_some(LLVMPIPE_LOOP_CAP)
-    }
 }
 
-/// llvmpipe's per-invocation loop budget (measured: a 100,000-iteration loop returns after
-/// 65,535; nested 300 x 300 loops after 65,100).
-const LLVMPIPE_LOOP_CAP: u32 = 65_535;
+/// The loop cap of a driver: Mesa's llvmpipe (lavapipe) stops every invocation after
+/// 65,535 loop iterations, shared by all its loops (measured: a 100,000-iteration loop
+/// returns after 65,535; nested 300 x 300 loops after 65,100), and says nothing.
+pub fn loop_iteration_cap(driver_name: &str) -> Option<u32> {
+    driver_name
+        .to_lowercase()
+        .contains("llvmpipe")
+        .then_some(65_535)
+}

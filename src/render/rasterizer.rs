@@ -160,7 +160,7 @@ impl Rasterizer {
         // half the cap, so the per-entry loops and their bookkeeping stay below it.
         let window_len = gpu
             .caps()
-            .loop_iteration_cap()
+            .loop_iteration_cap
             .map_or(UNCAPPED_WINDOW, |cap| cap.div_ceil(2));
         Rasterizer {
             gpu: gpu.clone(),

@@ -22,10 +22,10 @@ use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, Gpu, Recorder};
 use crate::render::SemanticMode;
 
-/// Edge of the 2D workgroups of the ssim_* kernels (local_size 16 x 16).
-const TILE: u32 = 16;
 /// Invocations per workgroup of the 1D loss kernels.
 pub(crate) use crate::contract::LOSS_WG;
+/// Edge of the 2D workgroups of the ssim_* kernels.
+use crate::contract::SSIM_TILE as TILE;
 /// Most workgroups one dispatch dimension may have on every Vulkan device.
 const MAX_GROUPS: u32 = 65_535;
 /// Loop iterations we let one invocation run: lavapipe ends every loop of an invocation
