@@ -400,6 +400,49 @@ fn intersection_buffer_grows_on_overflow() {
     check_validation(gpu);
 }
 
+/// `n` Gaussians, each covering every tile of a 4096x4096 view (65,536 tiles).
+fn view_covering(n: usize) -> (Gaussians, Camera) {
+    let mut g = random_scene(&RandomSceneSpec {
+        n,
+        seed: 35,
+        ..Default::default()
+    });
+    for (i, m) in g.means.iter_mut().enumerate() {
+        *m = [0.0, 0.0, 5.0 + i as f32 * 1e-3];
+    }
+    g.log_scales.iter_mut().for_each(|s| *s = [4.0; 3]);
+    g.opacity_logits.iter_mut().for_each(|o| *o = 5.0);
+    let cam = camera("huge", DVec3::ZERO, DVec3::new(0.0, 0.0, 1.0), 4096, 4096);
+    (g, cam)
+}
+
+/// Intersection totals past what 32 bits or one binding hold: a clear error, never a
+/// silent result. 65,536 view-covering Gaussians at 4096x4096 make exactly 2^32 pairs
+/// (a 32-bit total wraps to 0, which once read as "every Gaussian unseen"); one fewer
+/// makes 2^32 - 65,536, past lavapipe's 128 MiB binding (once a bare vkCreateBuffer error).
+#[test]
+fn intersection_totals_past_32_bits_or_a_binding_are_clear_errors() {
+    let gpu = gpu();
+    let opts = RenderOptions {
+        semantics: None,
+        ..Default::default()
+    };
+    for (n, expect) in [(65_536, "more than 2^32 - 1"), (65_535, "binding limit")] {
+        let (g, cam) = view_covering(n);
+        let scene = GpuScene::upload(gpu, &g).unwrap();
+        let mut raster = Rasterizer::new(gpu);
+        let err = match raster.run_tiled(&scene, &cam, &opts, |_, _| Ok(())) {
+            Ok(run) => panic!(
+                "{n} Gaussians: no error, {} intersections",
+                run.intersections
+            ),
+            Err(e) => format!("{e:#}"),
+        };
+        assert!(err.contains(expect), "{n} Gaussians: {err}");
+    }
+    check_validation(gpu);
+}
+
 #[test]
 fn frames_report_stage_times() {
     let gpu = gpu();

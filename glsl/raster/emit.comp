@@ -35,15 +35,27 @@ void main() {
         status.data[ST_ARGS_ISECT + 2] = 1;
         return;
     }
-    uint g = depth_ids.data[j];
     uint slot = isect_offsets.data[j];
+    // The offsets are a 32-bit exclusive scan of the tile counts: where the running total
+    // passes 2^32 - 1, the next offset is smaller than this one. Flag it for the host,
+    // which refuses the frame (every list after the wrap would be wrong).
+    if (isect_offsets.data[j + 1] < slot) {
+        status.data[ST_ISECT_WRAPPED] = 1;
+    }
+    // Pairs past the capacity are dropped: leave as soon as one is, so a frame that
+    // overflows costs no more than the capacity to find out.
+    if (slot >= pc.capacity) {
+        return;
+    }
+    uint g = depth_ids.data[j];
     uvec4 r = tile_rects.data[g];
     for (uint ty = r.y; ty < r.w; ty++) {
         for (uint tx = r.x; tx < r.z; tx++) {
-            if (slot < pc.capacity) {
-                isect_keys.data[slot] = ty * pc.tiles_x + tx;
-                isect_ids.data[slot] = g;
+            if (slot >= pc.capacity) {
+                return;
             }
+            isect_keys.data[slot] = ty * pc.tiles_x + tx;
+            isect_ids.data[slot] = g;
             slot++;
         }
     }

@@ -6,7 +6,7 @@ use ash::vk;
 
 use super::buffer::Buffer;
 use super::context::Gpu;
-use super::error::{GpuResult, VkContext};
+use super::error::{GpuError, GpuResult, VkContext};
 use super::kernel_table::{Kernel, KernelId, KernelInfo};
 use super::timings::{Mark, Timings};
 
@@ -128,7 +128,7 @@ impl Recorder {
             bindings.len(),
             info.bindings.iter().map(|b| b.name).collect::<Vec<_>>()
         );
-        let infos = buffer_infos(info, bindings, self.gpu.caps().max_storage_buffer_range);
+        let infos = buffer_infos(info, bindings, self.gpu.caps().max_storage_buffer_range)?;
         let writes: Vec<_> = info
             .bindings
             .iter()
@@ -394,12 +394,13 @@ impl Drop for Recorder {
     }
 }
 
-/// The buffer given for each of the kernel's bindings, matched by GLSL name.
+/// The buffer given for each of the kernel's bindings, matched by GLSL name. A buffer
+/// larger than one binding may hold is an error (the input was too large), not a panic.
 fn buffer_infos(
     info: &KernelInfo,
     bindings: &[(&str, &Buffer)],
     max_range: u64,
-) -> Vec<[vk::DescriptorBufferInfo; 1]> {
+) -> GpuResult<Vec<[vk::DescriptorBufferInfo; 1]>> {
     info.bindings
         .iter()
         .map(|b| {
@@ -415,18 +416,20 @@ fn buffer_infos(
                         bindings.iter().map(|(n, _)| *n).collect::<Vec<_>>()
                     )
                 });
-            assert!(
-                buf.size() <= max_range,
-                "{}: buffer '{}' is {} bytes, over the device's {}-byte binding limit",
-                info.name,
-                buf.name(),
-                buf.size(),
-                max_range
-            );
-            [vk::DescriptorBufferInfo::default()
+            if buf.size() > max_range {
+                return Err(GpuError::Limit(format!(
+                    "{}: buffer '{}' is {} bytes, over the device's {max_range}-byte binding \
+                     limit (maxStorageBufferRange): use a smaller image, fewer classes or fewer \
+                     Gaussians",
+                    info.name,
+                    buf.name(),
+                    buf.size()
+                )));
+            }
+            Ok([vk::DescriptorBufferInfo::default()
                 .buffer(buf.raw)
                 .offset(0)
-                .range(vk::WHOLE_SIZE)]
+                .range(vk::WHOLE_SIZE)])
         })
         .collect()
 }

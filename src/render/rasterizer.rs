@@ -10,8 +10,8 @@ use super::gpu_scene::GpuScene;
 use super::{project_params, RenderOptions, SemanticMode, StageTimes};
 use crate::contract::params::{BlendParams, CompactParams, EmitParams};
 use crate::contract::{
-    BLEND_CARRY_BASE, ST_ARGS_ISECT, ST_ARGS_VISIBLE, ST_ISECT, ST_ISECT_NEEDED, ST_N_PLUS1,
-    ST_OVERFLOW, ST_VISIBLE, ST_VISIBLE_PLUS1, ST_WORDS,
+    BLEND_CARRY_BASE, ST_ARGS_ISECT, ST_ARGS_VISIBLE, ST_ISECT, ST_ISECT_NEEDED, ST_ISECT_WRAPPED,
+    ST_N_PLUS1, ST_OVERFLOW, ST_VISIBLE, ST_VISIBLE_PLUS1, ST_WORDS,
 };
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, Gpu, GpuCount, Mark, PrefixScan, RadixSort, Recorder, Timings};
@@ -202,7 +202,11 @@ impl Rasterizer {
                     tiles: grow(b.tiles_cap as u64, need.tiles as u64) as u32,
                     sem: grow(b.sem_cap, need.sem),
                     carry: grow(b.carry_cap, need.carry),
-                    isect: grow(b.isect_cap as u64, need.isect as u64).min(u32::MAX as u64) as u32,
+                    // Growth past a need never exceeds what one binding holds.
+                    isect: grow(b.isect_cap as u64, need.isect as u64)
+                        .min(self.gpu.caps().max_storage_buffer_range / 4)
+                        .max(need.isect as u64)
+                        .min(u32::MAX as u64) as u32,
                 },
                 None => need,
             };
@@ -284,8 +288,18 @@ impl Rasterizer {
             let marks = tiles.marks;
             let timings = rec.submit_and_wait()?;
             let status: Vec<u32> = self.gpu.download(&b.status, 0, ST_WORDS as usize)?;
+            ensure!(
+                status[ST_ISECT_WRAPPED as usize] == 0,
+                "view {}: {} visible Gaussians cover more than 2^32 - 1 (tile, Gaussian) pairs at \
+                 {}x{}; render a smaller image or fewer (or smaller) Gaussians",
+                cam.name,
+                status[ST_VISIBLE as usize],
+                cam.width,
+                cam.height
+            );
             if status[ST_OVERFLOW as usize] != 0 {
                 need.isect = status[ST_ISECT_NEEDED as usize];
+                self.check_isect_fits(cam, need.isect)?;
                 continue;
             }
             return Ok(TiledRun {
@@ -296,6 +310,22 @@ impl Rasterizer {
                 channels: frame.channels,
             });
         }
+    }
+
+    /// Refuses a frame whose tile intersections cannot fit one buffer binding (the lists
+    /// are sorted and walked as single buffers).
+    fn check_isect_fits(&self, cam: &Camera, isect: u32) -> Result<()> {
+        let max_range = self.gpu.caps().max_storage_buffer_range;
+        let bytes = isect as u64 * 4;
+        ensure!(
+            bytes <= max_range,
+            "view {}: {isect} (tile, Gaussian) pairs at {}x{} need {bytes}-byte lists, over the \
+             device's {max_range}-byte binding limit; render a smaller image or fewer Gaussians",
+            cam.name,
+            cam.width,
+            cam.height
+        );
+        Ok(())
     }
 
     /// The frame every per-tile pass over `scene` seen by `cam` works on.
@@ -346,7 +376,8 @@ impl Rasterizer {
                 .as_ref()
                 .map_or(0, |b| b.isect_cap)
                 .max(scene.n.saturating_mul(4))
-                .max(1 << 16),
+                .max(1 << 16)
+                .min((self.gpu.caps().max_storage_buffer_range / 4).min(u32::MAX as u64) as u32),
         }
     }
 
