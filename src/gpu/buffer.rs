@@ -108,6 +108,7 @@ impl Gpu {
             }
             return Err(e).vk("vkBindBufferMemory");
         }
+        self.name_object(raw, name);
         Ok(Buffer {
             gpu: self.clone(),
             raw,
@@ -115,6 +116,21 @@ impl Gpu {
             size,
             name: name.to_string(),
         })
+    }
+
+    /// Gives `raw` its name in validation messages (only with validation on).
+    fn name_object(&self, raw: vk::Buffer, name: &str) {
+        let Some(names) = &self.inner.debug_names else {
+            return;
+        };
+        let Ok(name) = std::ffi::CString::new(name) else {
+            return;
+        };
+        let info = vk::DebugUtilsObjectNameInfoEXT::default()
+            .object_handle(raw)
+            .object_name(&name);
+        // SAFETY: `raw` is a live buffer of this device; a failure only loses the name.
+        let _ = unsafe { names.set_debug_utils_object_name(&info) };
     }
 
     /// A device-local buffer of `size` bytes (contents undefined).

@@ -19,8 +19,8 @@ const VALIDATION_LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
 /// How to open the device.
 #[derive(Clone, Debug, Default)]
 pub struct GpuOptions {
-    /// Enable VK_LAYER_KHRONOS_validation and collect its warnings and errors
-    /// (also turned on by `SEMSPLAT_VALIDATION=1`).
+    /// Enable VK_LAYER_KHRONOS_validation, with its synchronization validation, and collect
+    /// its warnings and errors (also turned on by `SEMSPLAT_VALIDATION=1`).
     pub validation: bool,
     /// Device index or name substring; defaults to `SEMSPLAT_DEVICE`.
     pub device: Option<String>,
@@ -30,7 +30,10 @@ pub(crate) struct Inner {
     pub(crate) _entry: ash::Entry,
     pub(crate) instance: ash::Instance,
     debug: Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)>,
+    /// With validation: names objects so the layer's messages say which buffer they mean.
+    pub(crate) debug_names: Option<ash::ext::debug_utils::Device>,
     pub(crate) validation_log: Arc<ValidationLog>,
+    sync_validation: bool,
     pub(crate) device: ash::Device,
     pub(crate) queue: Mutex<vk::Queue>,
     pub(crate) queue_family: u32,
@@ -69,7 +72,21 @@ fn has_layer(entry: &ash::Entry, name: &CStr) -> GpuResult<bool> {
         .any(|l| l.layer_name_as_c_str().is_ok_and(|n| n == name)))
 }
 
-fn create_instance(entry: &ash::Entry, validation: bool) -> GpuResult<ash::Instance> {
+/// Whether the validation layer offers VK_EXT_validation_features (how the synchronization
+/// validation is switched on).
+fn layer_has_validation_features(entry: &ash::Entry) -> GpuResult<bool> {
+    // SAFETY: plain query of the layer's instance extensions.
+    let exts = unsafe { entry.enumerate_instance_extension_properties(Some(VALIDATION_LAYER)) }
+        .vk("vkEnumerateInstanceExtensionProperties")?;
+    Ok(exts.iter().any(|e| {
+        e.extension_name_as_c_str()
+            .is_ok_and(|n| n == ash::ext::validation_features::NAME)
+    }))
+}
+
+/// The instance; with `validation`, the Khronos layer and debug utils, and with `sync` also
+/// the layer's synchronization validation (hazards between commands that lack a barrier).
+fn create_instance(entry: &ash::Entry, validation: bool, sync: bool) -> GpuResult<ash::Instance> {
     let app = vk::ApplicationInfo::default()
         .application_name(c"semsplat")
         .engine_name(c"semsplat")
@@ -79,15 +96,23 @@ fn create_instance(entry: &ash::Entry, validation: bool) -> GpuResult<ash::Insta
     } else {
         vec![]
     };
-    let exts = if validation {
-        vec![ash::ext::debug_utils::NAME.as_ptr()]
-    } else {
-        vec![]
-    };
-    let info = vk::InstanceCreateInfo::default()
+    let mut exts = vec![];
+    if validation {
+        exts.push(ash::ext::debug_utils::NAME.as_ptr());
+    }
+    let sync = validation && sync;
+    if sync {
+        exts.push(ash::ext::validation_features::NAME.as_ptr());
+    }
+    let enables = [vk::ValidationFeatureEnableEXT::SYNCHRONIZATION_VALIDATION];
+    let mut features = vk::ValidationFeaturesEXT::default().enabled_validation_features(&enables);
+    let mut info = vk::InstanceCreateInfo::default()
         .application_info(&app)
         .enabled_layer_names(&layers)
         .enabled_extension_names(&exts);
+    if sync {
+        info = info.push_next(&mut features);
+    }
     // SAFETY: all pointers in `info` outlive the call.
     unsafe { entry.create_instance(&info, None) }.map_err(|result| match result {
         vk::Result::ERROR_INCOMPATIBLE_DRIVER => GpuError::NoDevice,
@@ -101,7 +126,7 @@ fn create_instance(entry: &ash::Entry, validation: bool) -> GpuResult<ash::Insta
 /// Lists every device the loader reports, with capabilities and missing features.
 pub fn list_devices() -> GpuResult<Vec<DeviceCandidate>> {
     let entry = load_entry()?;
-    let instance = create_instance(&entry, false)?;
+    let instance = create_instance(&entry, false, false)?;
     let result = enumerate(&instance);
     // SAFETY: no objects created from this instance remain.
     unsafe { instance.destroy_instance(None) };
@@ -206,7 +231,8 @@ impl Gpu {
         if validation && !has_layer(&entry, VALIDATION_LAYER)? {
             return Err(GpuError::NoValidationLayer);
         }
-        let instance = create_instance(&entry, validation)?;
+        let sync_validation = validation && layer_has_validation_features(&entry)?;
+        let instance = create_instance(&entry, validation, sync_validation)?;
         let validation_log = Arc::new(ValidationLog::default());
         // On any error below, the partially built objects are destroyed by `guard`.
         let mut guard = InstanceGuard {
@@ -232,6 +258,9 @@ impl Gpu {
         let queue = unsafe { device.get_device_queue(queue_family, 0) };
         let allocator = create_allocator(&instance, &device, physical)?;
         let push_descriptor = ash::khr::push_descriptor::Device::new(&instance, &device);
+        let debug_names = debug
+            .as_ref()
+            .map(|_| ash::ext::debug_utils::Device::new(&instance, &device));
         guard.disarm();
 
         Ok(Gpu {
@@ -239,8 +268,9 @@ impl Gpu {
                 _entry: entry,
                 instance,
                 debug,
+                debug_names,
                 validation_log,
-
+                sync_validation,
                 device,
                 queue: Mutex::new(queue),
                 queue_family,
@@ -265,6 +295,13 @@ impl Gpu {
     /// Whether the validation layer is on.
     pub fn validation_enabled(&self) -> bool {
         self.inner.debug.is_some()
+    }
+
+    /// Whether the layer's synchronization validation is on too (with validation, whenever
+    /// the layer offers VK_EXT_validation_features): hazards between commands recorded
+    /// without a barrier between them are reported like any other validation error.
+    pub fn sync_validation_enabled(&self) -> bool {
+        self.validation_enabled() && self.inner.sync_validation
     }
 
     /// Device memory reserved by the allocator right now (blocks, in bytes).

@@ -426,8 +426,11 @@ impl Rasterizer {
         let b = self.bufs.as_ref().expect("ensured");
         let tiles_x = cam.width.div_ceil(TILE_SIZE);
         let tiles_y = cam.height.div_ceil(TILE_SIZE);
-        rec.fill(&b.status, 0, ST_WORDS as u64 * 4, 0);
-        rec.fill(&b.status, ST_N_PLUS1 as u64 * 4, 4, scene.n + 1);
+        // One write of the whole status (zeros and n + 1): two overlapping fills would
+        // race without a barrier between them.
+        let mut status = [0u32; ST_WORDS as usize];
+        status[ST_N_PLUS1 as usize] = scene.n + 1;
+        rec.update(&b.status, 0, bytemuck::cast_slice(&status));
         rec.fill(&b.ranges, 0, (tiles_x * tiles_y) as u64 * 8, 0);
         rec.barrier();
         let m0 = rec.mark();

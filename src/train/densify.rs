@@ -294,8 +294,11 @@ impl PlanBuffers {
                 f32::INFINITY
             },
         };
-        rec.fill(&self.status, 0, DS_WORDS * 4, 0);
-        rec.fill(&self.status, DS_N_PLUS1 as u64 * 4, 4, n + 1);
+        // One write of the whole status (zeros and n + 1): two overlapping fills would
+        // race without a barrier between them.
+        let mut status = [0u32; DS_WORDS as usize];
+        status[DS_N_PLUS1 as usize] = n + 1;
+        rec.update(&self.status, 0, bytemuck::cast_slice(&status));
         rec.barrier();
         rec.dispatch(
             ids::TRAIN_DENSIFY_CLASSIFY,

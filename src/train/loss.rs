@@ -76,6 +76,11 @@ pub struct ImageLoss {
     moment_grads: Buffer,
     /// [SLOTS][stride] one partial sum per workgroup and slot.
     pub(crate) partials: Buffer,
+    /// [SLOT_LABELED + 1][stride]: the labeled count's partials, apart from `partials` so
+    /// their reduce runs beside the SSIM forward writing those: in one buffer the
+    /// synchronization validation (which sees whole bindings, not slots) reports a
+    /// write-after-read hazard.
+    count_partials: Buffer,
     pub(crate) stride: u32,
     /// [SLOTS] the means (loss_values.rs: SLOT_*).
     pub(crate) values: Buffer,
@@ -115,6 +120,10 @@ impl ImageLoss {
         let moments = gpu.buffer("loss-moments", moment_bytes)?;
         let moment_grads = gpu.buffer("loss-moment-grads", GRAD_PLANES * pixels * 3 * 4)?;
         let partials = gpu.buffer("loss-partials", SLOTS as u64 * stride as u64 * 4)?;
+        let count_partials = gpu.buffer(
+            "loss-count-partials",
+            (SLOT_LABELED as u64 + 1) * stride as u64 * 4,
+        )?;
         // Zeros until a term is recorded: a loop that never records entropy reads 0.
         let values = gpu.buffer_from("loss-values", &[0f32; SLOTS as usize])?;
         Ok(ImageLoss {
@@ -125,6 +134,7 @@ impl ImageLoss {
             moments,
             moment_grads,
             partials,
+            count_partials,
             stride,
             values,
         })
@@ -227,7 +237,7 @@ impl ImageLoss {
         match semantics {
             Some(s) => rec.dispatch(
                 ids::TRAIN_LOSS_COUNT_LABELS,
-                &[("labels", s.labels), ("partials", &self.partials)],
+                &[("labels", s.labels), ("partials", &self.count_partials)],
                 &CountLabelsParams {
                     pixels: self.pixels(),
                     channels: self.channels,
@@ -260,7 +270,13 @@ impl ImageLoss {
         semantics: Option<&SemanticTerm<'_>>,
     ) -> Result<()> {
         if semantics.is_some() {
-            self.record_reduce(rec, SLOT_LABELED, 1, self.pixel_groups())?;
+            self.reduce_from(
+                rec,
+                &self.count_partials,
+                SLOT_LABELED,
+                1,
+                self.pixel_groups(),
+            )?;
         }
         let count = self.rgb_count();
         rec.dispatch(
@@ -390,9 +406,21 @@ impl ImageLoss {
         slots: u32,
         groups: u32,
     ) -> Result<()> {
+        self.reduce_from(rec, &self.partials, first_slot, slots, groups)
+    }
+
+    /// [`ImageLoss::record_reduce`] of the partials in `partials`.
+    fn reduce_from(
+        &self,
+        rec: &mut Recorder,
+        partials: &Buffer,
+        first_slot: u32,
+        slots: u32,
+        groups: u32,
+    ) -> Result<()> {
         rec.dispatch(
             ids::TRAIN_LOSS_REDUCE,
-            &[("partials", &self.partials), ("values", &self.values)],
+            &[("partials", partials), ("values", &self.values)],
             &LossReduceParams {
                 first_slot,
                 groups,

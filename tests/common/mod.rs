@@ -1,6 +1,6 @@
 //! Shared test fixture: one Vulkan device per test binary, with the Khronos validation
-//! layer on. Every GPU test calls `check_validation` at its end: any warning or error from
-//! the layer fails it.
+//! layer and its synchronization validation on. Every GPU test calls `check_validation` at
+//! its end: any warning, error or synchronization hazard from the layer fails it.
 #![allow(dead_code)]
 
 pub mod spec_scene;
@@ -26,6 +26,10 @@ pub fn check_validation(gpu: &Gpu) {
     assert!(
         gpu.validation_enabled(),
         "validation layer must be on in tests"
+    );
+    assert!(
+        gpu.sync_validation_enabled(),
+        "synchronization validation must be on in tests"
     );
     let messages = gpu.validation_messages();
     assert!(
