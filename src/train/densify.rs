@@ -280,7 +280,6 @@ impl PlanBuffers {
         config: &DensifyConfig,
     ) -> Result<()> {
         let n = inputs.n;
-        let n64 = n as u64;
         // The opacity threshold moves to logit space on the host (in f64), as the scale
         // thresholds move to log space.
         let logit = |p: f64| (p / (1.0 - p)).ln();
@@ -312,7 +311,7 @@ impl PlanBuffers {
                 ("status", &self.status),
             ],
             &classify,
-            groups(n64 + 1),
+            ids::TRAIN_DENSIFY_CLASSIFY.groups_for(n + 1),
         )?;
         rec.barrier();
         self.scan.record(
@@ -330,7 +329,7 @@ impl PlanBuffers {
                 ("out_count", &self.out_count),
             ],
             &(),
-            groups(n64),
+            ids::TRAIN_DENSIFY_SELECT.groups_for(n),
         )?;
         rec.barrier();
         Ok(())
@@ -360,7 +359,7 @@ impl PlanBuffers {
                 n: inputs.n,
                 max_gaussians: config.max_gaussians,
             },
-            groups(n64 + 1),
+            ids::TRAIN_DENSIFY_COMPACT.groups_for(inputs.n + 1),
         )?;
         rec.barrier();
         // Only a budget below 2n can leave candidates out; then the largest gradients go
@@ -408,7 +407,7 @@ impl PlanBuffers {
                 ("status", &self.status),
             ],
             &layout,
-            groups(inputs.n as u64 + 1),
+            ids::TRAIN_DENSIFY_LAYOUT.groups_for(inputs.n + 1),
         )?;
         Ok(())
     }
@@ -440,11 +439,6 @@ fn grow(current: u64, need: u64, limit: u64) -> u64 {
     } else {
         need.max((current + current / 2).min(limit))
     }
-}
-
-/// Workgroups covering `invocations` in one dimension.
-fn groups(invocations: u64) -> [u32; 3] {
-    [invocations.div_ceil(WG_SIZE as u64) as u32, 1, 1]
 }
 
 /// Plans and applies densify-and-prune steps; reuses its scratch buffers across steps.
@@ -675,7 +669,7 @@ pub fn reset_opacity(
         ids::TRAIN_DENSIFY_RESET_OPACITY,
         &[("opacity_logits", opacity_logits)],
         &params,
-        groups(n as u64),
+        ids::TRAIN_DENSIFY_RESET_OPACITY.groups_for(n),
     )?;
     for m in moments {
         rec.fill(m, 0, bytes, 0);
