@@ -498,3 +498,42 @@ fn many_windows_give_the_same_evidence() {
     }
     check_validation(gpu());
 }
+
+#[test]
+fn each_method_uploads_only_what_it_reads_and_gets_the_same_evidence() {
+    let gpu = gpu();
+    let g = random_scene(&RandomSceneSpec {
+        n: 2_000,
+        sh_degree: 3,
+        seed: 31,
+        scale: (0.01, 0.1),
+        ..Default::default()
+    });
+    let cams = cameras();
+    let labels = label_maps(&cams, 9);
+    let full = GpuScene::upload(gpu, &g).unwrap();
+    for spelling in semsplat::fuse::SPELLINGS {
+        let cfg = FuseConfig {
+            method: spelling.method,
+            ..Default::default()
+        };
+        let attributes = spelling.method.scene_attributes();
+        let partial = GpuScene::upload_for(gpu, &g, attributes).unwrap();
+        assert!(
+            partial.device_bytes() < full.device_bytes() / 2,
+            "{}: {attributes:?} holds {} of {} bytes",
+            spelling.name,
+            partial.device_bytes(),
+            full.device_bytes()
+        );
+        let evidence = |scene: &GpuScene| {
+            accumulate(gpu, scene, &cams, &labels, CLASSES, &cfg, |_, _| {})
+                .unwrap()
+                .0
+        };
+        let want = evidence(&full);
+        assert!(want.data.iter().sum::<f64>() > 10.0, "{}", spelling.name);
+        assert_eq!(evidence(&partial).data, want.data, "{}", spelling.name);
+    }
+    check_validation(gpu);
+}

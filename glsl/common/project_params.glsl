@@ -12,7 +12,7 @@ layout(push_constant) uniform ProjectParams {
     uint height;
     uint n;
     uint sh_degree;
-    uint sh_coeffs;          // SH coefficients stored per Gaussian (per color channel)
+    uint sh_coeffs;          // SH coefficients stored per Gaussian (per color channel); 0: no colour
 } pc;
 
 #endif

@@ -101,11 +101,14 @@ void main() {
     uvec2 tlo = uvec2(lo) / TILE_SIZE;
     uvec2 thi = uvec2(hi) / TILE_SIZE + 1;
 
-    vec3 dir = normalize(mean - pc.camera_center);
-    uint base = i * pc.sh_coeffs * 3;
-    vec3 color;
-    SH_EVAL(color, pc.sh_degree, dir, SH_COEFF);
-    color = max(color + 0.5, vec3(0.0));
+    // A scene uploaded without colour (the fusion methods never read it) has no SH.
+    vec3 color = vec3(0.0);
+    if (pc.sh_coeffs > 0) {
+        vec3 dir = normalize(mean - pc.camera_center);
+        uint base = i * pc.sh_coeffs * 3;
+        SH_EVAL(color, pc.sh_degree, dir, SH_COEFF);
+        color = max(color + 0.5, vec3(0.0));
+    }
 
     xy_depth_opacity.data[i] = vec4(mean_int, p.z, opacity);
     xy_frac.data[i] = mean_frac;

@@ -68,7 +68,10 @@ pub struct MethodBench {
     /// Passes over the views (the evidence matrix split into class-row batches).
     pub passes: usize,
     pub rows_per_pass: usize,
+    /// Device memory the allocator held at most (every method's scene is resident).
     pub peak_device_bytes: u64,
+    /// Device memory of the scene as this method uploads it (only what it reads).
+    pub scene_device_bytes: u64,
     /// gpu_ms / forward gpu_ms.
     pub gpu_ratio: f64,
     /// wall_s / forward wall_s.
@@ -187,11 +190,18 @@ pub fn bench_fuse(
         seed: spec.seed,
         ..Default::default()
     });
+    // Each method reads only its attributes (no SH colour, or only the centers), as `fuse`
+    // uploads them; the forward render reads all.
     let scene = GpuScene::upload(gpu, &g)?;
+    let method_scenes = methods
+        .iter()
+        .map(|m| GpuScene::upload_for(gpu, &g, m.scene_attributes()))
+        .collect::<Result<Vec<_>, _>>()?;
     drop(g);
     let setup = Setup {
         gpu,
         scene: &scene,
+        method_scenes: &method_scenes,
         cams: ring_cameras(spec.views, spec.width, spec.height),
         labels: BlockLabels {
             classes: spec.classes as u64,
@@ -213,7 +223,10 @@ pub fn bench_fuse(
     let results = methods
         .iter()
         .zip(&method_runs)
-        .map(|(&method, runs)| method_bench(method, runs, &forward, spec.views))
+        .zip(&method_scenes)
+        .map(|((&method, runs), scene)| {
+            method_bench(method, runs, &forward, spec.views, scene.device_bytes())
+        })
         .collect();
     Ok(FuseBench {
         spec: spec.clone(),
@@ -253,7 +266,10 @@ fn check_spec(gpu: &Gpu, spec: &FuseBenchSpec, methods: &[Method]) -> Result<()>
 /// What every timed run works on.
 struct Setup<'a> {
     gpu: &'a Gpu,
+    /// The whole scene, for the forward render.
     scene: &'a GpuScene,
+    /// Per method, what of the scene it reads.
+    method_scenes: &'a [GpuScene],
     cams: Vec<Camera>,
     labels: BlockLabels,
     classes: usize,
@@ -267,10 +283,10 @@ impl Setup<'_> {
     /// pays for them.
     fn warm_up(&self) -> Result<()> {
         forward_run(self.gpu, self.scene, &self.cams[..1], &self.opts, |_| {})?;
-        for cfg in &self.cfgs {
+        for (cfg, scene) in self.cfgs.iter().zip(self.method_scenes) {
             accumulate(
                 self.gpu,
-                self.scene,
+                scene,
                 &self.cams[..1],
                 &self.labels,
                 self.classes,
@@ -309,10 +325,11 @@ impl Setup<'_> {
                     labels: &self.labels,
                     first: r * ROUND_VIEWS,
                 };
-                for (cfg, sum) in self.cfgs.iter().zip(&mut per_method) {
+                let runs = self.cfgs.iter().zip(self.method_scenes);
+                for ((cfg, scene), sum) in runs.zip(&mut per_method) {
                     let (_, stats) = accumulate(
                         self.gpu,
-                        self.scene,
+                        scene,
                         round,
                         &shifted,
                         self.classes,
@@ -355,6 +372,7 @@ fn method_bench(
     runs: &[RunTotal],
     forward: &ForwardBench,
     views: usize,
+    scene_device_bytes: u64,
 ) -> MethodBench {
     let m = RunTotal::median(runs);
     MethodBench {
@@ -366,6 +384,7 @@ fn method_bench(
         passes: m.passes,
         rows_per_pass: m.rows_per_pass,
         peak_device_bytes: m.peak_device_bytes,
+        scene_device_bytes,
         gpu_ratio: m.gpu_ms / forward.gpu_ms,
         wall_ratio: m.wall_s / forward.wall_s,
     }

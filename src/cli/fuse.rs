@@ -296,7 +296,7 @@ fn fuse_views(
     };
     let data = open_dataset(&paths, "are skipped")?;
     let gpu = Gpu::new()?;
-    let scene = GpuScene::upload(&gpu, g)?;
+    let scene = GpuScene::upload_for(&gpu, g, method.scene_attributes())?;
     let cfg = FuseConfig {
         method,
         accumulation,

@@ -223,7 +223,7 @@ fn fuse_lifted(
     labels: &Vec<Option<Vec<u32>>>,
     compact: &CompactClasses,
 ) -> Result<Lifted> {
-    let scene = GpuScene::upload(gpu, &s.gaussians)?;
+    let scene = GpuScene::upload_for(gpu, &s.gaussians, method.scene_attributes())?;
     let cfg = FuseConfig {
         method,
         ..Default::default()

@@ -5,6 +5,8 @@
 
 use serde::Serialize;
 
+use crate::render::gpu_scene::SceneAttributes;
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Method {
@@ -22,6 +24,17 @@ pub enum Method {
     /// sees under each label, so every view counts about once, as in a vote, instead of in
     /// proportion to the pixels it covers. Robust to per-view label flicker.
     FlashSplatPerView,
+}
+
+impl Method {
+    /// What of the scene the method reads, so only that is uploaded: plain vote projects
+    /// the centers; the others project and blend shapes and opacities but never colour.
+    pub fn scene_attributes(self) -> SceneAttributes {
+        match self {
+            Method::Vote => SceneAttributes::Centers,
+            _ => SceneAttributes::Geometry,
+        }
+    }
 }
 
 /// How one method is spelled everywhere.

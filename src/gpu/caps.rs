@@ -42,6 +42,9 @@ pub struct DeviceCaps {
     #[serde(skip)]
     pub timestamp_valid_bits: u32,
     pub max_storage_buffer_range: u64,
+    /// Byte alignment of a storage buffer range's offset (minStorageBufferOffsetAlignment):
+    /// work split into chunks binds each chunk's range at a multiple of it.
+    pub min_storage_offset_alignment: u64,
     pub max_workgroup_count: [u32; 3],
     pub max_shared_memory: u32,
     /// Loop iterations one shader invocation may run in total before the driver silently
@@ -151,6 +154,7 @@ pub fn probe_device(instance: &ash::Instance, pd: vk::PhysicalDevice) -> (Device
         timestamp_period_ns: base.limits.timestamp_period as f64,
         timestamp_valid_bits,
         max_storage_buffer_range: base.limits.max_storage_buffer_range as u64,
+        min_storage_offset_alignment: base.limits.min_storage_buffer_offset_alignment,
         max_workgroup_count: base.limits.max_compute_work_group_count,
         max_shared_memory: base.limits.max_compute_shared_memory_size,
         heaps: memory_heaps(instance, pd),

@@ -5,6 +5,7 @@
 use ash::vk;
 
 use super::buffer::Buffer;
+use super::caps::DeviceCaps;
 use super::context::Gpu;
 use super::error::{GpuError, GpuResult, VkContext};
 use super::kernel_table::{Kernel, KernelId, KernelInfo};
@@ -107,7 +108,7 @@ impl Recorder {
     fn bind(
         &mut self,
         kernel: KernelId,
-        bindings: &[(&str, &Buffer)],
+        bindings: &[(&str, BufferRange)],
         push: &[u8],
     ) -> GpuResult<()> {
         let k = self.gpu.kernel(kernel)?;
@@ -128,7 +129,7 @@ impl Recorder {
             bindings.len(),
             info.bindings.iter().map(|b| b.name).collect::<Vec<_>>()
         );
-        let infos = buffer_infos(info, bindings, self.gpu.caps().max_storage_buffer_range)?;
+        let infos = buffer_infos(info, bindings, self.gpu.caps())?;
         let writes: Vec<_> = info
             .bindings
             .iter()
@@ -169,6 +170,18 @@ impl Recorder {
         &mut self,
         kernel: Kernel<P>,
         bindings: &[(&str, &Buffer)],
+        params: &P,
+        groups: [u32; 3],
+    ) -> GpuResult<()> {
+        self.dispatch_ranges(kernel, &whole(bindings), params, groups)
+    }
+
+    /// [`Recorder::dispatch`] binding byte ranges of buffers: a pass split into chunks binds
+    /// each chunk's part of a buffer larger than one binding may hold.
+    pub fn dispatch_ranges<P: bytemuck::Pod>(
+        &mut self,
+        kernel: Kernel<P>,
+        bindings: &[(&str, BufferRange)],
         params: &P,
         groups: [u32; 3],
     ) -> GpuResult<()> {
@@ -222,7 +235,7 @@ impl Recorder {
         args: &Buffer,
         offset: u64,
     ) -> GpuResult<()> {
-        self.bind(kernel.id(), bindings, bytemuck::bytes_of(params))?;
+        self.bind(kernel.id(), &whole(bindings), bytemuck::bytes_of(params))?;
         // SAFETY: recording into our command buffer; args has INDIRECT usage.
         unsafe {
             self.gpu
@@ -394,20 +407,56 @@ impl Drop for Recorder {
     }
 }
 
-/// The buffer given for each of the kernel's bindings, matched by GLSL name. A buffer
+/// A byte range of a buffer, bound to one kernel binding.
+#[derive(Clone, Copy)]
+pub struct BufferRange<'a> {
+    pub buffer: &'a Buffer,
+    pub offset: u64,
+    pub size: u64,
+}
+
+impl<'a> BufferRange<'a> {
+    /// All of `buffer`.
+    pub fn whole(buffer: &'a Buffer) -> Self {
+        BufferRange {
+            buffer,
+            offset: 0,
+            size: buffer.size(),
+        }
+    }
+
+    /// `size` bytes of `buffer` from `offset`.
+    pub fn new(buffer: &'a Buffer, offset: u64, size: u64) -> Self {
+        BufferRange {
+            buffer,
+            offset,
+            size,
+        }
+    }
+}
+
+fn whole<'a>(bindings: &[(&'a str, &'a Buffer)]) -> Vec<(&'a str, BufferRange<'a>)> {
+    bindings
+        .iter()
+        .map(|(name, buf)| (*name, BufferRange::whole(buf)))
+        .collect()
+}
+
+/// The buffer range given for each of the kernel's bindings, matched by GLSL name. A range
 /// larger than one binding may hold is an error (the input was too large), not a panic.
 fn buffer_infos(
     info: &KernelInfo,
-    bindings: &[(&str, &Buffer)],
-    max_range: u64,
+    bindings: &[(&str, BufferRange)],
+    caps: &DeviceCaps,
 ) -> GpuResult<Vec<[vk::DescriptorBufferInfo; 1]>> {
+    let max_range = caps.max_storage_buffer_range;
     info.bindings
         .iter()
         .map(|b| {
-            let buf = bindings
+            let range = bindings
                 .iter()
                 .find(|(n, _)| *n == b.name)
-                .map(|(_, buf)| *buf)
+                .map(|(_, range)| *range)
                 .unwrap_or_else(|| {
                     panic!(
                         "{}: no buffer given for binding '{}' (given: {:?})",
@@ -416,20 +465,35 @@ fn buffer_infos(
                         bindings.iter().map(|(n, _)| *n).collect::<Vec<_>>()
                     )
                 });
-            if buf.size() > max_range {
+            let buf = range.buffer;
+            assert!(
+                range.offset % caps.min_storage_offset_alignment == 0
+                    && range.offset + range.size <= buf.size(),
+                "{}: range {}+{} of buffer '{}' ({} bytes) is out of bounds or misaligned",
+                info.name,
+                range.offset,
+                range.size,
+                buf.name(),
+                buf.size()
+            );
+            if range.size > max_range {
                 return Err(GpuError::Limit(format!(
-                    "{}: buffer '{}' is {} bytes, over the device's {max_range}-byte binding \
-                     limit (maxStorageBufferRange): use a smaller image, fewer classes or fewer \
-                     Gaussians",
+                    "{}: buffer '{}' needs a {}-byte binding, over the device's {max_range}-byte \
+                     binding limit (maxStorageBufferRange): use a smaller image, fewer classes or \
+                     fewer Gaussians",
                     info.name,
                     buf.name(),
-                    buf.size()
+                    range.size
                 )));
             }
             Ok([vk::DescriptorBufferInfo::default()
                 .buffer(buf.raw)
-                .offset(0)
-                .range(vk::WHOLE_SIZE)])
+                .offset(range.offset)
+                .range(if range.size == 0 {
+                    vk::WHOLE_SIZE
+                } else {
+                    range.size
+                })])
         })
         .collect()
 }

@@ -1,10 +1,10 @@
 //! A scene's Gaussians uploaded once, structure-of-arrays as the kernels read them, and
 //! [`GaussianParams`], the one list of their parameter tensors.
 
-use std::ops::Index;
+use std::ops::{Index, Range};
 
 use crate::gpu::kernel_table::ids;
-use crate::gpu::{Buffer, Gpu, GpuResult, Recorder};
+use crate::gpu::{Buffer, BufferRange, Gpu, GpuResult, Recorder};
 use crate::scene::gaussians::SemanticLogits;
 use crate::scene::Gaussians;
 
@@ -202,14 +202,41 @@ fn host_tensors(g: &Gaussians) -> GaussianParams<&[f32]> {
     }
 }
 
+/// Which attributes of a scene the work on the device reads: each use uploads only those.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SceneAttributes {
+    /// The centers (plain vote).
+    Centers,
+    /// Centers, scales, rotations and opacity: what projection and blending read apart
+    /// from colour (the weighted fusion methods and the occlusion depth).
+    Geometry,
+    /// Everything: SH colour and semantic logits too (rendering, evaluation, training).
+    Full,
+}
+
+impl SceneAttributes {
+    /// Whether a scene uploaded with these attributes holds tensor `p`.
+    pub fn holds(self, p: ParamTensor) -> bool {
+        match p {
+            ParamTensor::Means => true,
+            ParamTensor::Sh => self == SceneAttributes::Full,
+            _ => self >= SceneAttributes::Geometry,
+        }
+    }
+}
+
 /// Gaussians on the device. Semantic logits are optional; their softmax is computed on
-/// the device the first time the softmax mode asks for it.
+/// the device the first time the softmax mode asks for it. Tensors a scene was not
+/// uploaded with ([`SceneAttributes`]) are 4-byte placeholders.
 pub struct GpuScene {
     pub n: u32,
+    /// SH degree, and coefficients per colour channel (0: uploaded without colour).
     pub sh_degree: u32,
     pub sh_coeffs: u32,
     /// Semantic channels C (0 without semantics).
     pub channels: u32,
+    pub attributes: SceneAttributes,
     pub(crate) params: GaussianParams<Buffer>,
     /// [n * C]
     pub(crate) logits: Option<Buffer>,
@@ -217,24 +244,63 @@ pub struct GpuScene {
 }
 
 impl GpuScene {
+    /// Uploads all of `g` (see [`GpuScene::upload_for`]).
     pub fn upload(gpu: &Gpu, g: &Gaussians) -> GpuResult<GpuScene> {
+        GpuScene::upload_for(gpu, g, SceneAttributes::Full)
+    }
+
+    /// Uploads the parts of `g` that `attributes` names.
+    pub fn upload_for(
+        gpu: &Gpu,
+        g: &Gaussians,
+        attributes: SceneAttributes,
+    ) -> GpuResult<GpuScene> {
         let (channels, logits) = match &g.semantics {
-            Some(s) if s.channels > 0 => (
+            Some(s) if s.channels > 0 && attributes == SceneAttributes::Full => (
                 s.channels as u32,
                 Some(gpu.buffer_from("logits", &s.logits)?),
             ),
             _ => (0, None),
         };
         let host = host_tensors(g);
+        let colour = attributes.holds(ParamTensor::Sh);
         Ok(GpuScene {
             n: g.len() as u32,
-            sh_degree: g.sh_degree,
-            sh_coeffs: g.sh_coeffs() as u32,
+            sh_degree: if colour { g.sh_degree } else { 0 },
+            sh_coeffs: if colour { g.sh_coeffs() as u32 } else { 0 },
             channels,
-            params: GaussianParams::try_from_fn(|p| gpu.buffer_from(p.name(), host[p]))?,
+            attributes,
+            params: GaussianParams::try_from_fn(|p| {
+                if attributes.holds(p) {
+                    gpu.buffer_from(p.name(), host[p])
+                } else {
+                    gpu.buffer(&format!("{} (not uploaded)", p.name()), 4)
+                }
+            })?,
             logits,
             probs: std::sync::OnceLock::new(),
         })
+    }
+
+    /// Bytes this scene holds on the device (parameters and semantic logits).
+    pub fn device_bytes(&self) -> u64 {
+        let params: u64 = self.params.iter().map(|(_, b)| b.size()).sum();
+        params + self.logits.as_ref().map_or(0, |b| b.size())
+    }
+
+    /// Gaussians `range` of tensor `p`, for a pass split into chunks; a placeholder (a
+    /// tensor not uploaded) is bound whole.
+    pub(crate) fn param_range(&self, p: ParamTensor, range: &Range<u32>) -> BufferRange<'_> {
+        let buf = &self.params[p];
+        if !self.attributes.holds(p) {
+            return BufferRange::whole(buf);
+        }
+        let stride = p.floats(self.sh_coeffs) as u64 * 4;
+        BufferRange::new(
+            buf,
+            range.start as u64 * stride,
+            range.len() as u64 * stride,
+        )
     }
 
     /// The per-Gaussian semantic vectors blended in `mode` (None without semantics).

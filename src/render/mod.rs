@@ -1,6 +1,7 @@
 //! Rendering: the GPU rasterizer and its independent CPU reference.
 
 pub mod backward;
+pub mod chunks;
 pub mod frame;
 pub mod gpu_scene;
 pub mod rasterizer;

@@ -3,10 +3,13 @@
 //! GPU (indirect dispatch); the only host read is after the frame, to fetch the images and
 //! the overflow flag that tells the buffers to grow.
 
+use std::ops::Range;
+
 use anyhow::{ensure, Result};
 
+use super::chunks::{chunk_len, chunks, CHUNK_GRANULE};
 use super::frame::RenderedFrame;
-use super::gpu_scene::GpuScene;
+use super::gpu_scene::{GpuScene, ParamTensor, SceneAttributes};
 use super::{project_params, RenderOptions, SemanticMode, StageTimes};
 use crate::contract::params::{BlendParams, CompactParams, EmitParams};
 use crate::contract::{
@@ -14,7 +17,9 @@ use crate::contract::{
     ST_N_PLUS1, ST_OVERFLOW, ST_VISIBLE, ST_VISIBLE_PLUS1, ST_WORDS,
 };
 use crate::gpu::kernel_table::ids;
-use crate::gpu::{Buffer, Gpu, GpuCount, Mark, PrefixScan, RadixSort, Recorder, Timings};
+use crate::gpu::{
+    Buffer, BufferRange, Gpu, GpuCount, Mark, PrefixScan, RadixSort, Recorder, Timings,
+};
 use crate::scene::Camera;
 
 pub use crate::contract::{SEM_CHUNK, TILE_SIZE};
@@ -72,6 +77,8 @@ pub struct Rasterizer {
     window_len: u32,
     /// Project means in float64 (on devices with shaderFloat64).
     float64: bool,
+    /// Gaussians per projection dispatch, when a test sets it (else from the binding limit).
+    projection_chunk: Option<u32>,
 }
 
 /// Sizes a frame needs.
@@ -167,6 +174,7 @@ impl Rasterizer {
             bufs: None,
             window_len,
             float64: gpu.caps().float64,
+            projection_chunk: None,
         }
     }
 
@@ -190,6 +198,34 @@ impl Rasterizer {
     /// small window to exercise the carried state on small scenes).
     pub fn set_window_len(&mut self, len: u32) {
         self.window_len = len.max(1);
+    }
+
+    /// Overrides how many Gaussians one projection dispatch covers (rounded to whole
+    /// granules; tests use a small chunk to split small scenes).
+    pub fn set_projection_chunk(&mut self, len: u32) {
+        self.projection_chunk = Some(len.div_ceil(CHUNK_GRANULE).max(1) * CHUNK_GRANULE);
+    }
+
+    /// Gaussians one projection dispatch covers: as many as the widest per-Gaussian range
+    /// (SH coefficients, or the 16-byte projected attributes) fits in one binding.
+    fn projection_chunk_len(&self, scene: &GpuScene) -> Result<u32> {
+        if let Some(len) = self.projection_chunk {
+            return Ok(len);
+        }
+        let widest = ParamTensor::ALL
+            .iter()
+            .filter(|&&p| scene.attributes.holds(p))
+            .map(|p| p.floats(scene.sh_coeffs) as u64 * 4)
+            .max()
+            .unwrap_or(0)
+            .max(16);
+        let max_range = self.gpu.caps().max_storage_buffer_range;
+        chunk_len(widest, 4, max_range).ok_or_else(|| {
+            anyhow::anyhow!(
+                "one Gaussian's parameters take {widest} bytes, too many for the device's \
+                 {max_range}-byte binding limit"
+            )
+        })
     }
 
     fn ensure(&mut self, need: Need) -> Result<()> {
@@ -434,7 +470,8 @@ impl Rasterizer {
         rec.fill(&b.ranges, 0, (tiles_x * tiles_y) as u64 * 8, 0);
         rec.barrier();
         let m0 = rec.mark();
-        b.record_project(rec, scene, cam, opts, self.float64)?;
+        let chunk_len = self.projection_chunk_len(scene)?;
+        b.record_project(rec, scene, cam, opts, (self.float64, chunk_len))?;
         let m1 = rec.mark();
         b.depth_sort.record(
             rec,
@@ -451,32 +488,23 @@ impl Rasterizer {
 }
 
 impl Buffers {
-    /// Projects every Gaussian, then compacts the visible ones into depth keys (a scan of
-    /// the visibility flags keeps their order deterministic).
+    /// Projects every Gaussian, in chunks of `chunk_len` whose per-Gaussian ranges each fit
+    /// one binding, then compacts the visible ones into depth keys (a scan of the
+    /// visibility flags keeps their order deterministic).
     fn record_project(
         &self,
         rec: &mut Recorder,
         scene: &GpuScene,
         cam: &Camera,
         opts: &RenderOptions,
-        float64: bool,
+        (float64, chunk_len): (bool, u32),
     ) -> Result<()> {
         let (b, n) = (self, scene.n);
-        let params = project_params(cam, scene, opts.near, opts.far);
-        let mut bindings: Vec<(&str, &Buffer)> = vec![
-            ("means", &scene.params.means),
-            ("log_scales", &scene.params.log_scales),
-            ("quats", &scene.params.quats),
-            ("opacity_logits", &scene.params.opacity_logits),
-            ("sh", &scene.params.sh),
-            ("xy_depth_opacity", &b.xy),
-            ("xy_frac", &b.xy_frac),
-            ("conics", &b.conic),
-            ("colors", &b.color),
-            ("tile_rects", &b.rect),
-            ("visible", &b.flags),
-            ("tiles_touched", &b.touched),
-        ];
+        ensure!(
+            scene.attributes >= SceneAttributes::Geometry,
+            "rendering needs the scene's shapes and opacities; it was uploaded with {:?}",
+            scene.attributes
+        );
         // With float64, the camera-space and 2D means are computed from the camera in
         // double precision (float32 loses ~1e-5 px, which shows in alpha).
         let kernel = if float64 {
@@ -490,12 +518,22 @@ impl Buffers {
                 .collect();
             rec.update(&b.camera64, 0, bytemuck::cast_slice(&camera64));
             rec.barrier();
-            bindings.push(("camera64", &b.camera64));
             ids::RASTER_PROJECT_F64
         } else {
             ids::RASTER_PROJECT
         };
-        rec.dispatch(kernel, &bindings, &params, kernel.groups_for(n + 1))?;
+        for (k, range) in chunks(n, chunk_len).enumerate() {
+            if k > 0 {
+                rec.barrier(); // this chunk's first flag overwrites the last one's tail zero
+            }
+            let mut params = project_params(cam, scene, opts.near, opts.far);
+            params.n = range.len() as u32;
+            let mut bindings = b.project_bindings(scene, &range);
+            if float64 {
+                bindings.push(("camera64", BufferRange::whole(&b.camera64)));
+            }
+            rec.dispatch_ranges(kernel, &bindings, &params, kernel.groups_for(params.n + 1))?;
+        }
         rec.barrier();
         b.scan_n.record(
             rec,
@@ -518,6 +556,33 @@ impl Buffers {
         )?;
         rec.barrier();
         Ok(())
+    }
+
+    /// The projection's bindings for Gaussians `range`: each per-Gaussian buffer's part
+    /// (the visibility flags one more, for the scan's trailing zero).
+    fn project_bindings<'a>(
+        &'a self,
+        scene: &'a GpuScene,
+        range: &Range<u32>,
+    ) -> Vec<(&'static str, BufferRange<'a>)> {
+        let (first, count) = (range.start as u64, range.len() as u64);
+        let part = |buf, stride: u64, extra: u64| {
+            BufferRange::new(buf, first * stride, (count + extra) * stride)
+        };
+        let mut bindings: Vec<(&str, BufferRange)> = ParamTensor::ALL
+            .iter()
+            .map(|&p| (p.name(), scene.param_range(p, range)))
+            .collect();
+        bindings.extend([
+            ("xy_depth_opacity", part(&self.xy, 16, 0)),
+            ("xy_frac", part(&self.xy_frac, 8, 0)),
+            ("conics", part(&self.conic, 16, 0)),
+            ("colors", part(&self.color, 16, 0)),
+            ("tile_rects", part(&self.rect, 16, 0)),
+            ("visible", part(&self.flags, 4, 1)),
+            ("tiles_touched", part(&self.touched, 4, 0)),
+        ]);
+        bindings
     }
 
     /// From the depth-sorted visible Gaussians: (tile, Gaussian) pairs emitted in depth

@@ -413,6 +413,7 @@ impl Trainer {
             sh_degree: old.sh_degree,
             sh_coeffs: old.sh_coeffs,
             channels: old.channels,
+            attributes: old.attributes,
             params,
             logits,
             probs: OnceLock::new(),
