@@ -470,7 +470,7 @@ fn host_arithmetic_overflow_panics() {
 /// once computed its window starts from a window length of u32::MAX / 2, which overflowed
 /// from the third window on.
 #[test]
-fn many_windows_give_the_same_evidence() {
+fn many_windows_and_bands_give_the_same_evidence() {
     let g = scene(600, 9);
     let cams = cameras();
     let labels = label_maps(&cams, 10);
@@ -480,21 +480,25 @@ fn many_windows_give_the_same_evidence() {
         Method::FlashSplat,
         Method::FlashSplatPerView,
     ] {
-        let cfg = |window_len| FuseConfig {
+        let cfg = |window_len, band_rows| FuseConfig {
             method,
             window_len,
+            band_rows,
             ..Default::default()
         };
-        let whole = run(&g, &cams, &labels, &cfg(None));
-        let windowed = run(&g, &cams, &labels, &cfg(Some(50)));
+        let whole = run(&g, &cams, &labels, &cfg(None, None));
         assert!(
             whole.data.iter().any(|&v| v > 0.0),
             "{method:?}: no evidence"
         );
-        assert_eq!(
-            whole.data, windowed.data,
-            "{method:?}: windows changed the evidence"
-        );
+        // Windows of 50 entries, bands of one tile row, and both.
+        for (window, band) in [(Some(50), None), (None, Some(1)), (Some(50), Some(1))] {
+            let split = run(&g, &cams, &labels, &cfg(window, band));
+            assert_eq!(
+                whole.data, split.data,
+                "{method:?}: windows {window:?} and bands {band:?} changed the evidence"
+            );
+        }
     }
     check_validation(gpu());
 }

@@ -333,6 +333,33 @@ fn small_windows_carry_state_between_blend_dispatches() {
 }
 
 #[test]
+fn bands_of_tile_rows_match_the_reference() {
+    // One tile row per dispatch, with windows of 50 entries (carried state) and 17
+    // channels (two chunks): every per-pixel buffer is bound band by band.
+    let gpu = gpu();
+    let mut raster = Rasterizer::new(gpu);
+    raster.set_band_rows(1);
+    raster.set_window_len(50);
+    let g = random_scene(&RandomSceneSpec {
+        n: 3_000,
+        channels: 17,
+        sh_degree: 1,
+        seed: 27,
+        ..Default::default()
+    });
+    for cam in poses(70, 53) {
+        compare(
+            &mut raster,
+            &g,
+            &cam,
+            Some(SemanticMode::Softmax),
+            &format!("bands of one row {}", cam.name),
+        );
+    }
+    check_validation(gpu);
+}
+
+#[test]
 fn a_tile_longer_than_lavapipes_loop_cap_renders_whole() {
     // 70,000 faint Gaussians in one 16x16 tile, each covering about one pixel, in front of
     // one bright Gaussian that sits last in depth order. A pixel's loop walks the whole

@@ -13,6 +13,7 @@ layout(push_constant) uniform BlendParams {
     uint chunk_base;   // first semantic channel of this dispatch
     uint write_rgb;    // forward only: 1 in the chunk that writes RGB, alpha, depth and T
     vec3 background;
+    uint tile_row_base; // forward only: first tile row of this dispatch's band
 } pc;
 
 #endif

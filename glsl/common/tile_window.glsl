@@ -10,7 +10,7 @@ struct TileWindow {
     uint t;     // lane-order index in the tile
     uint px;
     uint py;
-    uint pix;   // py * width + px
+    uint pix;   // (py - band's first pixel row) * width + px: see tile_window_in_band
     bool inside;
     uint len;   // entries in the tile's list
     uint start; // this window's first entry (absolute)
@@ -18,19 +18,30 @@ struct TileWindow {
     bool last;  // the window reaches the end of the list
 };
 
-TileWindow tile_window(uint width, uint height, uint tiles_x, uint window_start, uint window_len) {
+// A dispatch may cover a band of tile rows starting at `tile_row_base` (an image whose
+// per-pixel buffers pass one binding is walked band by band): workgroup y counts from the
+// band's first row, and per-pixel buffers are bound from the band's first pixel, so `pix`
+// counts from there too.
+TileWindow tile_window_in_band(uint width, uint height, uint tiles_x, uint window_start,
+                               uint window_len, uint tile_row_base) {
     TileWindow w;
+    uint tile_y = gl_WorkGroupID.y + tile_row_base;
     w.t = gl_SubgroupID * gl_SubgroupSize + gl_SubgroupInvocationID;
     w.px = gl_WorkGroupID.x * TILE_SIZE + w.t % TILE_SIZE;
-    w.py = gl_WorkGroupID.y * TILE_SIZE + w.t / TILE_SIZE;
+    w.py = tile_y * TILE_SIZE + w.t / TILE_SIZE;
     w.inside = w.px < width && w.py < height;
-    w.pix = w.py * width + w.px;
-    uvec2 range = tile_ranges.data[gl_WorkGroupID.y * tiles_x + gl_WorkGroupID.x];
+    w.pix = (w.py - tile_row_base * TILE_SIZE) * width + w.px;
+    uvec2 range = tile_ranges.data[tile_y * tiles_x + gl_WorkGroupID.x];
     w.len = range.y - range.x;
     w.start = range.x + min(window_start, w.len);
     w.end = range.x + min(w.len, window_start + window_len);
     w.last = window_start + window_len >= w.len;
     return w;
+}
+
+// The whole image in one dispatch.
+TileWindow tile_window(uint width, uint height, uint tiles_x, uint window_start, uint window_len) {
+    return tile_window_in_band(width, height, tiles_x, window_start, window_len, 0);
 }
 
 #endif

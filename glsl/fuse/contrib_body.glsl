@@ -36,6 +36,7 @@ layout(push_constant) uniform ContribParams {
     uint rows;         // class rows this pass holds
     uint center_only;  // 1: only the pixel holding the center counts (weighted vote); 0: every pixel (A)
     uint per_view;     // 1: each view's weights divided by the Gaussian's projected footprint
+    uint tile_row_base; // first tile row of this dispatch's band
 } pc;
 
 layout(set = 0, binding = 0) readonly buffer RangesBuf { uvec2 data[]; } tile_ranges;
@@ -58,7 +59,7 @@ void accumulate(uint row, uint gaussian, float w);
 void main() {
     uint width = pc.width, height = pc.height, n = pc.n;
     uint window_start = pc.window_start, window_len = pc.window_len, row_begin = pc.row_begin, rows = pc.rows;
-    TileWindow tw = tile_window(width, height, pc.tiles_x, window_start, window_len);
+    TileWindow tw = tile_window_in_band(width, height, pc.tiles_x, window_start, window_len, pc.tile_row_base);
     uint t = tw.t, px = tw.px, py = tw.py, pix = tw.pix;
     bool inside = tw.inside;
     vec2 pixel = vec2(px, py);

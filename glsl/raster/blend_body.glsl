@@ -51,7 +51,7 @@ void main() {
     uint width = pc.width, height = pc.height, channels = pc.channels;
     uint window_start = pc.window_start, window_len = pc.window_len, chunk_base = pc.chunk_base;
     bool write_rgb = pc.write_rgb != 0;
-    TileWindow tw = tile_window(width, height, pc.tiles_x, window_start, window_len);
+    TileWindow tw = tile_window_in_band(width, height, pc.tiles_x, window_start, window_len, pc.tile_row_base);
     uint t = tw.t, px = tw.px, py = tw.py, pix = tw.pix;
     bool inside = tw.inside;
     vec2 pixel = vec2(px, py);

@@ -11,7 +11,7 @@ use super::method::Method;
 use super::scores::ClassScores;
 use crate::contract::params::{ContribParams, VoteParams};
 use crate::gpu::kernel_table::ids;
-use crate::gpu::{Buffer, Gpu, Recorder};
+use crate::gpu::{Buffer, BufferRange, Gpu, Recorder};
 use crate::render::rasterizer::TileLists;
 use crate::render::{camera_rows_f32, GpuScene, Rasterizer, RenderOptions};
 use crate::scene::Camera;
@@ -44,6 +44,9 @@ pub struct FuseConfig {
     /// Entries of a tile's list one per-tile dispatch walks; None: the device's default
     /// (tests set a small window to walk many windows on small scenes).
     pub window_len: Option<u32>,
+    /// Tile rows one per-tile dispatch covers; None: as many as one binding holds (tests
+    /// set 1 to split small images into bands).
+    pub band_rows: Option<u32>,
 }
 
 impl Default for FuseConfig {
@@ -56,6 +59,7 @@ impl Default for FuseConfig {
             near: 0.01,
             far: 1e10,
             window_len: None,
+            band_rows: None,
         }
     }
 }
@@ -182,7 +186,7 @@ impl ViewInputs {
         if self.labels.as_ref().is_none_or(|b| b.size() < pixels * 4) {
             self.labels = Some(gpu.buffer("labels", pixels * 4)?);
             self.staging = Some(gpu.staging_buffer(pixels * 4)?);
-            self.carry = Some(gpu.buffer("contrib-carry", pixels * 8)?);
+            self.carry = Some(gpu.buffer("contrib-carry", pixels * CONTRIB_CARRY_BYTES)?);
         }
         let (Some(labels), Some(staging), Some(carry)) =
             (&self.labels, &mut self.staging, &self.carry)
@@ -193,6 +197,9 @@ impl ViewInputs {
         Ok((labels, carry))
     }
 }
+
+/// Bytes per pixel of the weighted methods' carried state between windows: (T, done).
+const CONTRIB_CARRY_BYTES: u64 = 8;
 
 /// Runs `cfg.method` over every view and returns the evidence [classes][n].
 pub fn accumulate(
@@ -220,6 +227,9 @@ pub fn accumulate(
     let mut raster = Rasterizer::new(gpu);
     if let Some(len) = cfg.window_len {
         raster.set_window_len(len);
+    }
+    if let Some(rows) = cfg.band_rows {
+        raster.set_band_rows(rows);
     }
     let mut inputs = ViewInputs::default();
     for pass_index in 0..passes {
@@ -295,34 +305,41 @@ fn record_contrib(
         Accumulation::Float => ids::FUSE_CONTRIB_FLOAT,
     };
     let f = &tiles.frame;
+    let bands = f.bands(CONTRIB_CARRY_BYTES)?;
     for start in f.window_starts() {
-        let params = ContribParams {
-            width: f.cam.width,
-            height: f.cam.height,
-            tiles_x: f.tiles_x,
-            n,
-            window_start: start,
-            window_len: f.window_len,
-            row_begin: pass.row_begin as u32,
-            rows: pass.rows as u32,
-            center_only: u32::from(cfg.method == Method::VoteWeighted),
-            per_view: u32::from(cfg.method == Method::FlashSplatPerView),
-        };
-        rec.dispatch(
-            kernel,
-            &[
-                ("tile_ranges", tiles.ranges()),
-                ("isect_ids", tiles.isect_ids()),
-                ("xy_depth_opacity", tiles.xy_depth_opacity()),
-                ("conics", tiles.conics()),
-                ("xy_frac", tiles.xy_frac()),
-                ("labels", labels),
-                ("carry", carry),
-                ("contrib", &pass.evidence),
-            ],
-            &params,
-            f.tile_groups(),
-        )?;
+        for band in &bands {
+            let params = ContribParams {
+                width: f.cam.width,
+                height: f.cam.height,
+                tiles_x: f.tiles_x,
+                n,
+                window_start: start,
+                window_len: f.window_len,
+                row_begin: pass.row_begin as u32,
+                rows: pass.rows as u32,
+                center_only: u32::from(cfg.method == Method::VoteWeighted),
+                per_view: u32::from(cfg.method == Method::FlashSplatPerView),
+                tile_row_base: band.first_tile_row,
+            };
+            rec.dispatch_ranges(
+                kernel,
+                &[
+                    ("tile_ranges", BufferRange::whole(tiles.ranges())),
+                    ("isect_ids", BufferRange::whole(tiles.isect_ids())),
+                    (
+                        "xy_depth_opacity",
+                        BufferRange::whole(tiles.xy_depth_opacity()),
+                    ),
+                    ("conics", BufferRange::whole(tiles.conics())),
+                    ("xy_frac", BufferRange::whole(tiles.xy_frac())),
+                    ("labels", band.range(labels, 4)),
+                    ("carry", band.range(carry, CONTRIB_CARRY_BYTES)),
+                    ("contrib", BufferRange::whole(&pass.evidence)),
+                ],
+                &params,
+                band.groups(f.tiles_x),
+            )?;
+        }
         rec.barrier();
     }
     Ok(())

@@ -7,7 +7,7 @@ use std::ops::Range;
 
 use anyhow::{ensure, Result};
 
-use super::chunks::{chunk_len, chunks, CHUNK_GRANULE};
+use super::chunks::{bands, chunk_len, chunks, Band, BandLimits, CHUNK_GRANULE};
 use super::frame::RenderedFrame;
 use super::gpu_scene::{GpuScene, ParamTensor, SceneAttributes};
 use super::{project_params, RenderOptions, SemanticMode, StageTimes};
@@ -79,6 +79,8 @@ pub struct Rasterizer {
     float64: bool,
     /// Gaussians per projection dispatch, when a test sets it (else from the binding limit).
     projection_chunk: Option<u32>,
+    /// Tile rows per band of a per-tile pass, when a test sets it (else as many as fit).
+    band_rows: Option<u32>,
 }
 
 /// Sizes a frame needs.
@@ -175,6 +177,7 @@ impl Rasterizer {
             window_len,
             float64: gpu.caps().float64,
             projection_chunk: None,
+            band_rows: None,
         }
     }
 
@@ -204,6 +207,11 @@ impl Rasterizer {
     /// granules; tests use a small chunk to split small scenes).
     pub fn set_projection_chunk(&mut self, len: u32) {
         self.projection_chunk = Some(len.div_ceil(CHUNK_GRANULE).max(1) * CHUNK_GRANULE);
+    }
+
+    /// Overrides how many tile rows one per-tile dispatch covers (tests split small images).
+    pub fn set_band_rows(&mut self, rows: u32) {
+        self.band_rows = Some(rows.max(1));
     }
 
     /// Gaussians one projection dispatch covers: as many as the widest per-Gaussian range
@@ -388,6 +396,11 @@ impl Rasterizer {
             },
             semantics,
             background: opts.background,
+            band_limits: BandLimits {
+                max_binding: self.gpu.caps().max_storage_buffer_range,
+                offset_alignment: self.gpu.caps().min_storage_offset_alignment,
+                tile_rows: self.band_rows,
+            },
         })
     }
 
@@ -395,18 +408,12 @@ impl Rasterizer {
     /// reports the real count and the buffers grow on overflow).
     fn need(&self, scene: &GpuScene, frame: &FrameSpec) -> Need {
         let pixels = frame.cam.width as u64 * frame.cam.height as u64;
-        let chunk = if frame.channels > 0 { SEM_CHUNK } else { 0 };
-        let carry_stride = (BLEND_CARRY_BASE + chunk) as u64;
         Need {
             n: scene.n,
             pixels,
             tiles: frame.tiles_x * frame.tiles_y,
             sem: pixels * frame.channels as u64,
-            carry: if frame.windows > 1 {
-                pixels * carry_stride
-            } else {
-                1
-            },
+            carry: (pixels * frame.blend_carry_floats()).max(1),
             isect: self
                 .bufs
                 .as_ref()
@@ -667,6 +674,8 @@ pub struct FrameSpec<'a> {
     /// What the semantic channels blend, and the per-Gaussian vectors (None: RGB only).
     pub semantics: Option<(SemanticMode, &'a Buffer)>,
     pub background: [f32; 3],
+    /// What sizes the bands of tile rows per-tile passes split the image into.
+    pub band_limits: BandLimits,
 }
 
 impl FrameSpec<'_> {
@@ -694,7 +703,29 @@ impl FrameSpec<'_> {
             chunk_base: chunk * SEM_CHUNK,
             write_rgb: u32::from(write_rgb),
             background: self.background,
+            tile_row_base: 0,
         }
+    }
+
+    /// Floats of state blending carries per pixel between windows (0 with one window).
+    pub fn blend_carry_floats(&self) -> u64 {
+        let chunk = if self.channels > 0 { SEM_CHUNK } else { 0 };
+        if self.windows > 1 {
+            (BLEND_CARRY_BASE + chunk) as u64
+        } else {
+            0
+        }
+    }
+
+    /// Bands of tile rows such that a per-pixel buffer of `bytes_per_pixel` fits one
+    /// binding per band (one band but for very large images or many classes).
+    pub fn bands(&self, bytes_per_pixel: u64) -> Result<Vec<Band>> {
+        bands(
+            self.cam.width,
+            self.cam.height,
+            bytes_per_pixel,
+            self.band_limits,
+        )
     }
 
     /// One workgroup per tile.
@@ -787,42 +818,71 @@ impl TileLists<'_> {
         &self.bufs.sem_norm
     }
 
-    /// Records forward blending of the frame into the rasterizer's output images.
+    /// Records forward blending of the frame into the rasterizer's output images, band by
+    /// band where the image's per-pixel buffers pass one binding.
     pub fn record_blend(&self, rec: &mut Recorder) -> Result<()> {
         let (b, f) = (self.bufs, &self.frame);
+        let carry_bytes = f.blend_carry_floats() * 4;
+        let sem_bytes = f.channels as u64 * 4;
+        let widest = [RGB_BYTES, sem_bytes, carry_bytes]
+            .into_iter()
+            .max()
+            .unwrap_or(4);
+        let bands = f.bands(widest)?;
         for chunk in 0..f.sem_chunks() {
             for start in f.window_starts() {
-                let params = f.blend_params(start, chunk, chunk == 0);
-                let mut bindings: Vec<(&str, &Buffer)> = vec![
-                    ("tile_ranges", &b.ranges),
-                    ("isect_ids", &b.isect_ids),
-                    ("xy_depth_opacity", &b.xy),
-                    ("conics", &b.conic),
-                    ("colors", &b.color),
-                    ("xy_frac", &b.xy_frac),
-                    ("carry", &b.carry),
-                    ("out_rgb", &b.rgb),
-                    ("out_alpha", &b.alpha),
-                    ("out_depth", &b.depth),
-                    ("out_final_t", &b.final_t),
-                    ("out_last", &b.last),
-                    ("out_n_contrib", &b.n_contrib),
-                ];
-                let kernel = match f.semantics {
-                    Some((_, sem)) => {
-                        bindings.extend([
-                            ("sem_in", sem),
-                            ("out_sem", &b.sem),
-                            ("out_sem_norm", &b.sem_norm),
-                        ]);
-                        ids::RASTER_BLEND_SEM
-                    }
-                    None => ids::RASTER_BLEND_RGB,
-                };
-                rec.dispatch(kernel, &bindings, &params, f.tile_groups())?;
+                for band in &bands {
+                    let mut params = f.blend_params(start, chunk, chunk == 0);
+                    params.tile_row_base = band.first_tile_row;
+                    let px = |buf, bytes| band.range(buf, bytes);
+                    let mut bindings: Vec<(&str, BufferRange)> = vec![
+                        ("tile_ranges", BufferRange::whole(&b.ranges)),
+                        ("isect_ids", BufferRange::whole(&b.isect_ids)),
+                        ("xy_depth_opacity", BufferRange::whole(&b.xy)),
+                        ("conics", BufferRange::whole(&b.conic)),
+                        ("colors", BufferRange::whole(&b.color)),
+                        ("xy_frac", BufferRange::whole(&b.xy_frac)),
+                        ("carry", carry_range(&b.carry, band, carry_bytes)),
+                        ("out_rgb", px(&b.rgb, RGB_BYTES)),
+                        ("out_alpha", px(&b.alpha, 4)),
+                        ("out_depth", px(&b.depth, 4)),
+                        ("out_final_t", px(&b.final_t, 4)),
+                        ("out_last", px(&b.last, 4)),
+                        ("out_n_contrib", px(&b.n_contrib, 4)),
+                    ];
+                    let kernel = match f.semantics {
+                        Some((_, sem)) => {
+                            bindings.extend([
+                                ("sem_in", BufferRange::whole(sem)),
+                                ("out_sem", px(&b.sem, sem_bytes)),
+                                ("out_sem_norm", px(&b.sem_norm, sem_bytes)),
+                            ]);
+                            ids::RASTER_BLEND_SEM
+                        }
+                        None => ids::RASTER_BLEND_RGB,
+                    };
+                    rec.dispatch_ranges(kernel, &bindings, &params, band.groups(f.tiles_x))?;
+                }
                 rec.barrier();
             }
         }
         Ok(())
+    }
+}
+
+/// Bytes of a pixel's RGB.
+const RGB_BYTES: u64 = 12;
+
+/// A band's part of a carry buffer of `bytes_per_pixel` (the whole placeholder when a
+/// frame needs no carried state: one window).
+pub(crate) fn carry_range<'a>(
+    carry: &'a Buffer,
+    band: &Band,
+    bytes_per_pixel: u64,
+) -> BufferRange<'a> {
+    if bytes_per_pixel == 0 {
+        BufferRange::whole(carry)
+    } else {
+        band.range(carry, bytes_per_pixel)
     }
 }
