@@ -10,6 +10,7 @@ use semsplat::fuse::{
     accumulate, assign_one_vs_rest, assign_semantic, Accumulation, ClassScores, FuseConfig, Method,
     NO_LABEL,
 };
+use semsplat::render::rasterizer::SplitSizes;
 use semsplat::render::reference::{self, RenderSettings};
 use semsplat::render::GpuScene;
 use semsplat::scene::random_scene::{random_scene, RandomSceneSpec};
@@ -480,23 +481,40 @@ fn many_windows_and_bands_give_the_same_evidence() {
         Method::FlashSplat,
         Method::FlashSplatPerView,
     ] {
-        let cfg = |window_len, band_rows| FuseConfig {
+        let cfg = |split| FuseConfig {
             method,
-            window_len,
-            band_rows,
+            split,
             ..Default::default()
         };
-        let whole = run(&g, &cams, &labels, &cfg(None, None));
+        let whole = run(&g, &cams, &labels, &cfg(SplitSizes::default()));
         assert!(
             whole.data.iter().any(|&v| v > 0.0),
             "{method:?}: no evidence"
         );
-        // Windows of 50 entries, bands of one tile row, and both.
-        for (window, band) in [(Some(50), None), (None, Some(1)), (Some(50), Some(1))] {
-            let split = run(&g, &cams, &labels, &cfg(window, band));
+        // Windows of 50 entries, one tile row per dispatch, lists of at most 400 pairs
+        // (views binned in bands of rows), and all three.
+        let window = SplitSizes {
+            window_len: Some(50),
+            ..Default::default()
+        };
+        let band = SplitSizes {
+            band_rows: Some(1),
+            ..Default::default()
+        };
+        let lists = SplitSizes {
+            list_capacity: Some(400),
+            ..Default::default()
+        };
+        let all = SplitSizes {
+            window_len: Some(50),
+            band_rows: Some(1),
+            list_capacity: Some(400),
+        };
+        for split in [window, band, lists, all] {
+            let split_run = run(&g, &cams, &labels, &cfg(split));
             assert_eq!(
-                whole.data, split.data,
-                "{method:?}: windows {window:?} and bands {band:?} changed the evidence"
+                whole.data, split_run.data,
+                "{method:?}: {split:?} changed the evidence"
             );
         }
     }

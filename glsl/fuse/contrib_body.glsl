@@ -47,6 +47,9 @@ layout(set = 0, binding = 3) readonly buffer ConicBuf { vec4 data[]; } conics;
 layout(set = 0, binding = 4) readonly buffer LabelsBuf { uint data[]; } labels; // compact class per pixel
 layout(set = 0, binding = 5) buffer CarryBuf { vec2 data[]; } carry;           // (T, done) between windows
 layout(set = 0, binding = 7) readonly buffer FracBuf { vec2 data[]; } xy_frac;
+// The binning's status words: a binning whose lists overflowed (or wrapped) is recorded
+// again with larger lists, so its accumulation must add nothing (A is a running sum).
+layout(set = 0, binding = 8) readonly buffer StatusBuf { uint data[]; } status;
 
 shared vec4 s_xy_depth_opacity[BATCH]; // floor(mean2d) depth opacity
 shared vec2 s_frac[BATCH];
@@ -59,6 +62,9 @@ void accumulate(uint row, uint gaussian, float w);
 void main() {
     uint width = pc.width, height = pc.height, n = pc.n;
     uint window_start = pc.window_start, window_len = pc.window_len, row_begin = pc.row_begin, rows = pc.rows;
+    if (status.data[ST_OVERFLOW] != 0 || status.data[ST_ISECT_WRAPPED] != 0) {
+        return;
+    }
     TileWindow tw = tile_window_in_band(width, height, pc.tiles_x, window_start, window_len, pc.tile_row_base);
     uint t = tw.t, px = tw.px, py = tw.py, pix = tw.pix;
     bool inside = tw.inside;

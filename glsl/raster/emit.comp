@@ -1,7 +1,8 @@
 #version 460
-// Emits one (tile id, Gaussian id) pair per tile each visible Gaussian covers, in depth
-// order, so a stable sort by tile id leaves every tile's list sorted by depth. Pairs past
-// the buffer's capacity are dropped and the overflow is flagged for the host to grow it.
+// Emits one (tile id, Gaussian id) pair per tile each visible Gaussian covers within the
+// rows this binning covers, in depth order, so a stable sort by tile id leaves every tile's
+// list sorted by depth. Pairs past the buffer's capacity are dropped and the overflow is
+// flagged for the host to grow it (or bin the view in smaller bands of rows).
 #include "raster_common.glsl"
 
 layout(local_size_x = 256) in;
@@ -9,6 +10,8 @@ layout(local_size_x = 256) in;
 layout(push_constant) uniform EmitParams {
     uint tiles_x;
     uint capacity;
+    uint row_begin; // first tile row binned (see gather_touched.comp)
+    uint row_end;   // one past the last
 } pc;
 
 layout(set = 0, binding = 0) buffer StatusBuf { uint data[]; } status;
@@ -49,7 +52,7 @@ void main() {
     }
     uint g = depth_ids.data[j];
     uvec4 r = tile_rects.data[g];
-    for (uint ty = r.y; ty < r.w; ty++) {
+    for (uint ty = max(r.y, pc.row_begin); ty < min(r.w, pc.row_end); ty++) {
         for (uint tx = r.x; tx < r.z; tx++) {
             if (slot >= pc.capacity) {
                 return;

@@ -1,20 +1,29 @@
 #version 460
 // Tile counts of the visible Gaussians in depth order (and a trailing zero), for the scan
-// that gives each Gaussian its first intersection slot.
+// that gives each Gaussian its first intersection slot: the tiles of its rectangle within
+// the rows this binning covers (a view whose lists pass one binding is binned in bands of
+// tile rows).
 #include "raster_common.glsl"
 
 layout(local_size_x = 256) in;
 
+layout(push_constant) uniform GatherTouchedParams {
+    uint row_begin; // first tile row binned
+    uint row_end;   // one past the last
+} pc;
+
 layout(set = 0, binding = 0) readonly buffer StatusBuf { uint data[]; } status;
 layout(set = 0, binding = 1) readonly buffer IdsBuf { uint data[]; } depth_ids;
-layout(set = 0, binding = 2) readonly buffer TouchedBuf { uint data[]; } tiles_touched;
+layout(set = 0, binding = 2) readonly buffer RectBuf { uvec4 data[]; } tile_rects;
 layout(set = 0, binding = 3) writeonly buffer SortedTouchedBuf { uint data[]; } sorted_touched;
 
 void main() {
     uint j = gl_GlobalInvocationID.x;
     uint v = status.data[ST_VISIBLE];
     if (j < v) {
-        sorted_touched.data[j] = tiles_touched.data[depth_ids.data[j]];
+        uvec4 r = tile_rects.data[depth_ids.data[j]];
+        uint y0 = max(r.y, pc.row_begin), y1 = min(r.w, pc.row_end);
+        sorted_touched.data[j] = y1 > y0 ? (r.z - r.x) * (y1 - y0) : 0;
     } else if (j == v) {
         sorted_touched.data[j] = 0;
     }

@@ -24,7 +24,6 @@ layout(set = 0, binding = 6) writeonly buffer ConicBuf { vec4 data[]; } conics; 
 layout(set = 0, binding = 7) writeonly buffer ColorBuf { vec4 data[]; } colors;  // r g b -
 layout(set = 0, binding = 8) writeonly buffer RectBuf { uvec4 data[]; } tile_rects; // x0 y0 x1 y1 (end-exclusive)
 layout(set = 0, binding = 9) writeonly buffer FlagsBuf { uint data[]; } visible;    // n + 1 entries
-layout(set = 0, binding = 10) writeonly buffer TouchedBuf { uint data[]; } tiles_touched;
 layout(set = 0, binding = 11) writeonly buffer FracBuf { vec2 data[]; } xy_frac;
 #ifdef PROJECT_F64
 // World-to-camera rows (R00 R01 R02 t0, ...), then fx fy cx cy, in float64.
@@ -44,7 +43,6 @@ void main() {
         return;
     }
     visible.data[i] = 0;
-    tiles_touched.data[i] = 0;
 
     vec3 mean = vec3(means.data[3 * i], means.data[3 * i + 1], means.data[3 * i + 2]);
 #ifdef PROJECT_F64
@@ -115,6 +113,5 @@ void main() {
     conics.data[i] = vec4(conic, 0.0);
     colors.data[i] = vec4(color, 0.0);
     tile_rects.data[i] = uvec4(tlo, thi);
-    tiles_touched.data[i] = (thi.x - tlo.x) * (thi.y - tlo.y);
     visible.data[i] = 1;
 }

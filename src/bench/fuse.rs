@@ -163,7 +163,8 @@ fn forward_run(
     let mut total = RunTotal::default();
     for (i, cam) in cams.iter().enumerate() {
         progress(i);
-        let run = raster.run_tiled(scene, cam, opts, |rec, tiles| tiles.record_blend(rec))?;
+        let run =
+            raster.run_tiled_in_bands(scene, cam, opts, |rec, tiles| tiles.record_blend(rec))?;
         total.add(run.timings.total_ns() * 1e-6, 0.0, gpu.memory_reserved());
         total.visible += f64::from(run.visible);
         total.intersections += f64::from(run.intersections);

@@ -12,7 +12,7 @@ use super::scores::ClassScores;
 use crate::contract::params::{ContribParams, VoteParams};
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, BufferRange, Gpu, Recorder};
-use crate::render::rasterizer::TileLists;
+use crate::render::rasterizer::{SplitSizes, TileLists};
 use crate::render::{camera_rows_f32, GpuScene, Rasterizer, RenderOptions};
 use crate::scene::Camera;
 
@@ -41,12 +41,9 @@ pub struct FuseConfig {
     pub depth_tolerance: f32,
     pub near: f32,
     pub far: f32,
-    /// Entries of a tile's list one per-tile dispatch walks; None: the device's default
-    /// (tests set a small window to walk many windows on small scenes).
-    pub window_len: Option<u32>,
-    /// Tile rows one per-tile dispatch covers; None: as many as one binding holds (tests
-    /// set 1 to split small images into bands).
-    pub band_rows: Option<u32>,
+    /// How finely views are split (windows of the tile lists, bands of tile rows); the
+    /// device's sizes by default, small ones in tests so small scenes walk the split paths.
+    pub split: SplitSizes,
 }
 
 impl Default for FuseConfig {
@@ -58,8 +55,7 @@ impl Default for FuseConfig {
             depth_tolerance: 0.05,
             near: 0.01,
             far: 1e10,
-            window_len: None,
-            band_rows: None,
+            split: SplitSizes::default(),
         }
     }
 }
@@ -225,12 +221,7 @@ pub fn accumulate(
         ..Default::default()
     };
     let mut raster = Rasterizer::new(gpu);
-    if let Some(len) = cfg.window_len {
-        raster.set_window_len(len);
-    }
-    if let Some(rows) = cfg.band_rows {
-        raster.set_band_rows(rows);
-    }
+    raster.set_split_sizes(cfg.split);
     let mut inputs = ViewInputs::default();
     for pass_index in 0..passes {
         let row_begin = pass_index * rows;
@@ -275,16 +266,30 @@ fn accumulate_view(
     let opts = cfg.render_options();
     let run = match cfg.method {
         Method::Vote => return record_vote(raster.gpu(), scene, cam, labels, pass, cfg),
-        Method::VoteOcclusion => raster.run_tiled(scene, cam, &opts, |rec, tiles| {
-            tiles.record_blend(rec)?;
-            rec.barrier();
-            dispatch_vote(rec, scene, cam, labels, Some(tiles.depth()), pass, cfg)
-        })?,
-        Method::VoteWeighted | Method::FlashSplat | Method::FlashSplatPerView => {
-            raster.run_tiled(scene, cam, &opts, |rec, tiles| {
-                record_contrib(rec, tiles, scene.n, labels, carry, pass, cfg)
-            })?
+        // Centers vote once the whole view's depth is rendered, in a submission of its own:
+        // a binning that overflowed runs again, and must not have voted.
+        Method::VoteOcclusion => {
+            let run = raster
+                .run_tiled_in_bands(scene, cam, &opts, |rec, tiles| tiles.record_blend(rec))?;
+            let mut rec = Recorder::new(raster.gpu())?;
+            let m0 = rec.mark();
+            dispatch_vote(
+                &mut rec,
+                scene,
+                cam,
+                labels,
+                Some(raster.depth()),
+                pass,
+                cfg,
+            )?;
+            let m1 = rec.mark();
+            let vote_ns = rec.submit_and_wait()?.between(m0, m1).unwrap_or(0.0);
+            return Ok((run.timings.total_ns() + vote_ns) * 1e-6);
         }
+        Method::VoteWeighted | Method::FlashSplat | Method::FlashSplatPerView => raster
+            .run_tiled_in_bands(scene, cam, &opts, |rec, tiles| {
+                record_contrib(rec, tiles, scene.n, labels, carry, pass, cfg)
+            })?,
     };
     Ok(run.timings.total_ns() * 1e-6)
 }
@@ -335,6 +340,7 @@ fn record_contrib(
                     ("labels", band.range(labels, 4)),
                     ("carry", band.range(carry, CONTRIB_CARRY_BYTES)),
                     ("contrib", BufferRange::whole(&pass.evidence)),
+                    ("status", tiles.status()),
                 ],
                 &params,
                 band.groups(f.tiles_x),

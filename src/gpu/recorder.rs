@@ -235,7 +235,19 @@ impl Recorder {
         args: &Buffer,
         offset: u64,
     ) -> GpuResult<()> {
-        self.bind(kernel.id(), &whole(bindings), bytemuck::bytes_of(params))?;
+        self.dispatch_indirect_ranges(kernel, &whole(bindings), params, args, offset)
+    }
+
+    /// [`Recorder::dispatch_indirect`] binding byte ranges of buffers.
+    pub fn dispatch_indirect_ranges<P: bytemuck::Pod>(
+        &mut self,
+        kernel: Kernel<P>,
+        bindings: &[(&str, BufferRange)],
+        params: &P,
+        args: &Buffer,
+        offset: u64,
+    ) -> GpuResult<()> {
+        self.bind(kernel.id(), bindings, bytemuck::bytes_of(params))?;
         // SAFETY: recording into our command buffer; args has INDIRECT usage.
         unsafe {
             self.gpu

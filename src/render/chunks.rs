@@ -75,25 +75,23 @@ pub struct BandLimits {
     pub tile_rows: Option<u32>,
 }
 
-/// Bands of as many tile rows as fit, for buffers of at most `bytes_per_pixel` (a multiple
-/// of 4) each; every band's offsets keep the device's alignment.
+/// Bands of as many tile rows as fit, covering tile rows `rows`, for buffers of at most
+/// `bytes_per_pixel` (a multiple of 4) each; every band's offsets keep the device's
+/// alignment.
 pub fn bands(
     width: u32,
     height: u32,
+    rows: Range<u32>,
     bytes_per_pixel: u64,
     limits: BandLimits,
 ) -> Result<Vec<Band>> {
-    let tiles_y = height.div_ceil(TILE_SIZE);
     let tile_row_bytes = TILE_SIZE as u64 * width as u64 * bytes_per_pixel.max(4);
-    // A band starting at tile row r starts r * 16 * width * (4 k) bytes in: a multiple of
-    // 64 * width, so bands of `step` rows keep every offset aligned.
-    let align = limits.offset_alignment.max(1);
-    let step = align / gcd(align, 64 * width as u64);
+    let step = row_step(width, limits.offset_alignment) as u64;
     let fit = limits.max_binding / tile_row_bytes.max(1);
-    let rows = limits
+    let per_band = limits
         .tile_rows
         .map_or(fit / step * step, |r| r as u64 * step);
-    if rows == 0 {
+    if per_band == 0 || rows.start as u64 % step != 0 {
         bail!(
             "one row of 16-pixel tiles at width {width} needs {tile_row_bytes} bytes per buffer \
              ({bytes_per_pixel} per pixel), over the device's {}-byte binding limit: use a \
@@ -101,15 +99,25 @@ pub fn bands(
             limits.max_binding
         );
     }
-    let rows = rows.min(tiles_y.max(1) as u64) as u32;
-    Ok((0..tiles_y.div_ceil(rows).max(1))
-        .map(|k| Band {
-            first_tile_row: k * rows,
-            tile_rows: rows.min(tiles_y - (k * rows).min(tiles_y)),
+    let per_band = per_band.min(rows.len().max(1) as u64) as u32;
+    Ok(rows
+        .clone()
+        .step_by(per_band as usize)
+        .map(|first| Band {
+            first_tile_row: first,
+            tile_rows: per_band.min(rows.end - first),
             width,
             height,
         })
         .collect())
+}
+
+/// Band starts are multiples of this many tile rows: a band starting at tile row r starts
+/// r * 16 * width * (4 k) bytes into a per-pixel buffer of 4 k bytes per pixel, a multiple
+/// of 64 * width, so starts at multiples of `step` rows keep every offset aligned.
+pub fn row_step(width: u32, offset_alignment: u64) -> u32 {
+    let align = offset_alignment.max(1);
+    (align / gcd(align, 64 * width as u64)) as u32
 }
 
 fn gcd(a: u64, b: u64) -> u64 {
@@ -150,7 +158,7 @@ mod tests {
             tile_rows: None,
         };
         // 1920x1080 with 64 classes: 256 bytes per pixel, 7.5 MiB per tile row.
-        let all = bands(1920, 1080, 256, limits).unwrap();
+        let all = bands(1920, 1080, 0..68, 256, limits).unwrap();
         let rows: u32 = all.iter().map(|b| b.tile_rows).sum();
         assert_eq!(rows, 1080u32.div_ceil(16));
         assert!(all.len() > 1);
@@ -158,9 +166,19 @@ mod tests {
             assert!(b.tile_rows as u64 * 16 * 1920 * 256 <= 128 << 20);
             assert_eq!((b.first_tile_row as u64 * 16 * 1920 * 4) % 256, 0);
         }
-        let small = bands(64, 48, 12, limits).unwrap();
+        let small = bands(64, 48, 0..3, 12, limits).unwrap();
         assert_eq!(small.len(), 1);
         assert_eq!(small[0].tile_rows, 3);
-        assert!(bands(1 << 20, 16, 4096, limits).is_err());
+        assert!(bands(1 << 20, 16, 0..1, 4096, limits).is_err());
+        let part = bands(64, 48, 1..3, 12, limits).unwrap();
+        assert_eq!(
+            part,
+            vec![Band {
+                first_tile_row: 1,
+                tile_rows: 2,
+                width: 64,
+                height: 48
+            }]
+        );
     }
 }

@@ -7,11 +7,11 @@ use std::ops::Range;
 
 use anyhow::{ensure, Result};
 
-use super::chunks::{bands, chunk_len, chunks, Band, BandLimits, CHUNK_GRANULE};
+use super::chunks::{bands, chunk_len, chunks, row_step, Band, BandLimits, CHUNK_GRANULE};
 use super::frame::RenderedFrame;
 use super::gpu_scene::{GpuScene, ParamTensor, SceneAttributes};
 use super::{project_params, RenderOptions, SemanticMode, StageTimes};
-use crate::contract::params::{BlendParams, CompactParams, EmitParams};
+use crate::contract::params::{BlendParams, CompactParams, EmitParams, GatherTouchedParams};
 use crate::contract::{
     BLEND_CARRY_BASE, ST_ARGS_ISECT, ST_ARGS_VISIBLE, ST_ISECT, ST_ISECT_NEEDED, ST_ISECT_WRAPPED,
     ST_N_PLUS1, ST_OVERFLOW, ST_VISIBLE, ST_VISIBLE_PLUS1, ST_WORDS,
@@ -45,7 +45,6 @@ struct Buffers {
     rect: Buffer,
     flags: Buffer,
     visible_offsets: Buffer,
-    touched: Buffer,
     depth_keys: Buffer,
     depth_ids: Buffer,
     sorted_touched: Buffer,
@@ -62,7 +61,10 @@ struct Buffers {
     n_contrib: Buffer,
     sem: Buffer,
     sem_norm: Buffer,
+    /// Frame status words (ST_*), one region of `status_stride` words per band of tile rows
+    /// a view is binned in; the frame-wide words are copied from band 0's into the others.
     status: Buffer,
+    status_stride: u32,
     scan_n: PrefixScan,
     scan_v: PrefixScan,
     depth_sort: RadixSort,
@@ -81,6 +83,48 @@ pub struct Rasterizer {
     projection_chunk: Option<u32>,
     /// Tile rows per band of a per-tile pass, when a test sets it (else as many as fit).
     band_rows: Option<u32>,
+    /// Bands of tile rows the last view was binned in (see `run_tiled_in_bands`).
+    list_bands: u32,
+    /// Entries one band's lists hold at most, when a test sets it (else one binding's).
+    list_capacity: Option<u32>,
+}
+
+/// How finely the rasterizer splits its work, where a test overrides the sizes the device
+/// dictates, so small scenes walk the split paths (None: the device's size).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SplitSizes {
+    /// Entries of a tile's list one per-tile dispatch walks.
+    pub window_len: Option<u32>,
+    /// Tile rows one per-tile dispatch covers.
+    pub band_rows: Option<u32>,
+    /// Entries one band's intersection lists may hold before the view is binned in
+    /// (more) bands of tile rows.
+    pub list_capacity: Option<u32>,
+}
+
+/// Most bands of tile rows one view's lists are split into (a status region each).
+const MAX_LIST_BANDS: u32 = 256;
+
+/// What [`Rasterizer::run_binned`] does after a run.
+enum Attempt {
+    Done,
+    /// Grow the intersection lists to this many entries and run again.
+    Grow(u32),
+    /// Bin the view in this many bands of tile rows and run again.
+    Split(u32),
+}
+
+/// `tiles_y` tile rows split into at most `bands` consecutive ranges of nearly equal size,
+/// each starting at a multiple of `step` rows.
+fn split_rows(tiles_y: u32, bands: u32, step: u32) -> Vec<Range<u32>> {
+    let per_band = tiles_y
+        .div_ceil(bands.max(1))
+        .next_multiple_of(step.max(1))
+        .max(1);
+    (0..tiles_y.max(1))
+        .step_by(per_band as usize)
+        .map(|first| first..(first + per_band).min(tiles_y))
+        .collect()
 }
 
 /// Sizes a frame needs.
@@ -108,6 +152,11 @@ impl Buffers {
         let p = need.pixels.max(1);
         let isect = need.isect.max(1) as u64;
         let b = |name: &str, bytes: u64| gpu.buffer(name, bytes);
+        // Each band's status region starts at an offset the device can bind.
+        let align_words = gpu.caps().min_storage_offset_alignment.div_ceil(4) as u32;
+        let status_stride = ST_WORDS
+            .max(align_words)
+            .next_multiple_of(align_words.max(1));
         Ok(Buffers {
             n_cap: n as u32,
             pixel_cap: p,
@@ -123,7 +172,6 @@ impl Buffers {
             rect: b("tile_rects", n * 16)?,
             flags: b("visible", (n + 1) * 4)?,
             visible_offsets: b("visible_offsets", (n + 1) * 4)?,
-            touched: b("tiles_touched", n * 4)?,
             depth_keys: b("depth_keys", n * 4)?,
             depth_ids: b("depth_ids", n * 4)?,
             sorted_touched: b("sorted_touched", (n + 1) * 4)?,
@@ -140,7 +188,8 @@ impl Buffers {
             n_contrib: b("n_contrib", p * 4)?,
             sem: b("sem", need.sem * 4)?,
             sem_norm: b("sem_norm", need.sem * 4)?,
-            status: b("status", ST_WORDS as u64 * 4)?,
+            status: b("status", MAX_LIST_BANDS as u64 * status_stride as u64 * 4)?,
+            status_stride,
             scan_n: PrefixScan::new(gpu, n + 1)?,
             scan_v: PrefixScan::new(gpu, n + 1)?,
             depth_sort: RadixSort::new(gpu, n)?,
@@ -178,6 +227,8 @@ impl Rasterizer {
             float64: gpu.caps().float64,
             projection_chunk: None,
             band_rows: None,
+            list_bands: 1,
+            list_capacity: None,
         }
     }
 
@@ -214,6 +265,28 @@ impl Rasterizer {
         self.band_rows = Some(rows.max(1));
     }
 
+    /// Overrides how many entries one band's intersection lists hold at most (tests bin
+    /// small views in bands of tile rows).
+    pub fn set_list_capacity(&mut self, entries: u32) {
+        self.list_capacity = Some(entries.max(1));
+    }
+
+    /// Applies every size `split` overrides.
+    pub fn set_split_sizes(&mut self, split: SplitSizes) {
+        split.window_len.map(|v| self.set_window_len(v));
+        split.band_rows.map(|v| self.set_band_rows(v));
+        split.list_capacity.map(|v| self.set_list_capacity(v));
+    }
+
+    /// Entries one intersection list may hold: one binding's worth (or a test's override).
+    fn list_capacity(&self) -> u32 {
+        let binding = self.gpu.caps().max_storage_buffer_range / 4;
+        self.list_capacity
+            .map_or(binding, |c| c as u64)
+            .min(binding)
+            .min(u32::MAX as u64) as u32
+    }
+
     /// Gaussians one projection dispatch covers: as many as the widest per-Gaussian range
     /// (SH coefficients, or the 16-byte projected attributes) fits in one binding.
     fn projection_chunk_len(&self, scene: &GpuScene) -> Result<u32> {
@@ -246,11 +319,10 @@ impl Rasterizer {
                     tiles: grow(b.tiles_cap as u64, need.tiles as u64) as u32,
                     sem: grow(b.sem_cap, need.sem),
                     carry: grow(b.carry_cap, need.carry),
-                    // Growth past a need never exceeds what one binding holds.
+                    // Growth past a need never exceeds what one list may hold.
                     isect: grow(b.isect_cap as u64, need.isect as u64)
-                        .min(self.gpu.caps().max_storage_buffer_range / 4)
-                        .max(need.isect as u64)
-                        .min(u32::MAX as u64) as u32,
+                        .min(self.list_capacity() as u64)
+                        .max(need.isect as u64) as u32,
                 },
                 None => need,
             };
@@ -267,14 +339,15 @@ impl Rasterizer {
         cam: &Camera,
         opts: &RenderOptions,
     ) -> Result<RenderedFrame> {
-        let frame = self.run_tiled(scene, cam, opts, |rec, tiles| tiles.record_blend(rec))?;
+        let frame =
+            self.run_tiled_in_bands(scene, cam, opts, |rec, tiles| tiles.record_blend(rec))?;
         self.download_frame(cam, &frame)
     }
 
     /// Downloads the images of the frame `run` just rendered.
     pub(crate) fn download_frame(&self, cam: &Camera, frame: &TiledRun) -> Result<RenderedFrame> {
         let b = self.bufs.as_ref().expect("ran");
-        let stages = StageTimes::from_marks(&frame.timings, &frame.marks);
+        let stages = frame.stages.clone();
         RenderedFrame::download(
             &self.gpu,
             cam,
@@ -299,12 +372,44 @@ impl Rasterizer {
     /// submission, records `per_tile`: the stage that consumes the tile lists (blending,
     /// or the fusion kernels). On an intersection overflow the buffers grow and everything
     /// is recorded again, so `per_tile` may run more than once. The tile lists carry the
-    /// frame (`opts`' semantics, background, windows) that every per-tile pass reads.
+    /// frame (`opts`' semantics, background, windows) that every per-tile pass reads. The
+    /// whole view is binned at once: a view whose lists pass one binding is an error (see
+    /// [`Rasterizer::run_tiled_in_bands`]).
     pub fn run_tiled<F>(
         &mut self,
         scene: &GpuScene,
         cam: &Camera,
         opts: &RenderOptions,
+        per_tile: F,
+    ) -> Result<TiledRun>
+    where
+        F: FnMut(&mut Recorder, &TileLists) -> Result<()>,
+    {
+        self.run_binned(scene, cam, opts, false, per_tile)
+    }
+
+    /// [`Rasterizer::run_tiled`] for passes that honour [`FrameSpec::rows`]: a view whose
+    /// (tile, Gaussian) pairs pass one binding (or 2^32) is binned in bands of tile rows,
+    /// each binned and passed to `per_tile` in turn.
+    pub fn run_tiled_in_bands<F>(
+        &mut self,
+        scene: &GpuScene,
+        cam: &Camera,
+        opts: &RenderOptions,
+        per_tile: F,
+    ) -> Result<TiledRun>
+    where
+        F: FnMut(&mut Recorder, &TileLists) -> Result<()>,
+    {
+        self.run_binned(scene, cam, opts, true, per_tile)
+    }
+
+    fn run_binned<F>(
+        &mut self,
+        scene: &GpuScene,
+        cam: &Camera,
+        opts: &RenderOptions,
+        banded: bool,
         mut per_tile: F,
     ) -> Result<TiledRun>
     where
@@ -317,59 +422,145 @@ impl Rasterizer {
         );
         let frame = self.frame_spec(scene, cam, opts)?;
         let mut need = self.need(scene, &frame);
+        // Start from the last view's band count: neighbouring views need about the same.
+        let mut bands = if banded {
+            self.list_bands.min(frame.tiles_y)
+        } else {
+            1
+        };
         loop {
             self.ensure(need)?;
-            let b = self.bufs.as_ref().expect("ensured");
-            let mut rec = Recorder::new(&self.gpu)?;
-            let marks = self.record_binning(&mut rec, scene, cam, opts)?;
-            let mut tiles = TileLists {
-                bufs: b,
-                frame: frame.clone(),
-                marks: [marks[0], marks[1], marks[2], marks[3], None],
-            };
-            per_tile(&mut rec, &tiles)?;
-            tiles.marks[4] = rec.mark();
-            let marks = tiles.marks;
-            let timings = rec.submit_and_wait()?;
-            let status: Vec<u32> = self.gpu.download(&b.status, 0, ST_WORDS as usize)?;
-            ensure!(
-                status[ST_ISECT_WRAPPED as usize] == 0,
-                "view {}: {} visible Gaussians cover more than 2^32 - 1 (tile, Gaussian) pairs at \
-                 {}x{}; render a smaller image or fewer (or smaller) Gaussians",
-                cam.name,
-                status[ST_VISIBLE as usize],
-                cam.width,
-                cam.height
-            );
-            if status[ST_OVERFLOW as usize] != 0 {
-                need.isect = status[ST_ISECT_NEEDED as usize];
-                self.check_isect_fits(cam, need.isect)?;
-                continue;
+            let step = row_step(cam.width, frame.band_limits.offset_alignment);
+            let rows = split_rows(frame.tiles_y, bands, step);
+            let (run, statuses) = self.record_and_run(scene, opts, &frame, &rows, &mut per_tile)?;
+            match self.next_attempt(cam, &statuses, bands, banded)? {
+                Attempt::Done => {
+                    self.list_bands = bands;
+                    return Ok(run);
+                }
+                Attempt::Grow(isect) => need.isect = isect,
+                Attempt::Split(more) => bands = more,
             }
-            return Ok(TiledRun {
-                timings,
-                marks,
-                visible: status[ST_VISIBLE as usize],
-                intersections: status[ST_ISECT as usize],
-                channels: frame.channels,
-            });
         }
     }
 
-    /// Refuses a frame whose tile intersections cannot fit one buffer binding (the lists
-    /// are sorted and walked as single buffers).
-    fn check_isect_fits(&self, cam: &Camera, isect: u32) -> Result<()> {
-        let max_range = self.gpu.caps().max_storage_buffer_range;
-        let bytes = isect as u64 * 4;
-        ensure!(
-            bytes <= max_range,
-            "view {}: {isect} (tile, Gaussian) pairs at {}x{} need {bytes}-byte lists, over the \
-             device's {max_range}-byte binding limit; render a smaller image or fewer Gaussians",
-            cam.name,
-            cam.width,
-            cam.height
-        );
-        Ok(())
+    /// Records the view's binning and `per_tile` band by band in one submission, runs it,
+    /// and returns the run with each band's status words.
+    fn record_and_run<F>(
+        &self,
+        scene: &GpuScene,
+        opts: &RenderOptions,
+        frame: &FrameSpec,
+        rows: &[Range<u32>],
+        per_tile: &mut F,
+    ) -> Result<(TiledRun, Vec<Vec<u32>>)>
+    where
+        F: FnMut(&mut Recorder, &TileLists) -> Result<()>,
+    {
+        let b = self.bufs.as_ref().expect("ensured");
+        let mut rec = Recorder::new(&self.gpu)?;
+        let [m0, m1, m2] =
+            self.record_project_and_sort(&mut rec, scene, frame, opts, rows.len())?;
+        let mut marks = [m0, m1, m2, None, None];
+        let mut spans = Vec::with_capacity(rows.len());
+        for (band, band_rows) in rows.iter().enumerate() {
+            let start = rec.mark();
+            b.record_tile_lists(
+                &mut rec,
+                frame.tiles_x,
+                frame.tiles_y,
+                band as u32,
+                band_rows,
+            )?;
+            let lists = rec.mark();
+            marks[3] = marks[3].or(lists);
+            let tiles = TileLists {
+                bufs: b,
+                band: band as u32,
+                frame: FrameSpec {
+                    rows: band_rows.clone(),
+                    ..frame.clone()
+                },
+                marks,
+            };
+            per_tile(&mut rec, &tiles)?;
+            rec.barrier(); // the next band reuses the lists
+            spans.push((start, lists, rec.mark()));
+        }
+        marks[4] = spans.last().and_then(|s| s.2);
+        let timings = rec.submit_and_wait()?;
+        let stride = b.status_stride as usize;
+        let words = self
+            .gpu
+            .download::<u32>(&b.status, 0, rows.len() * stride)?;
+        let statuses: Vec<Vec<u32>> = words.chunks(stride).map(|w| w.to_vec()).collect();
+        let mut stages = StageTimes::from_marks(&timings, &[m0, m1, m2, m2, m2]);
+        for (start, lists, end) in spans {
+            stages.bin_ms += timings.between(start, lists).unwrap_or(0.0) * 1e-6;
+            stages.blend_ms += timings.between(lists, end).unwrap_or(0.0) * 1e-6;
+        }
+        let run = TiledRun {
+            timings,
+            marks,
+            stages,
+            visible: statuses[0][ST_VISIBLE as usize],
+            intersections: statuses.iter().map(|s| s[ST_ISECT as usize]).sum(),
+            list_bands: rows.len() as u32,
+            channels: frame.channels,
+        };
+        Ok((run, statuses))
+    }
+
+    /// What to do after a run whose bands reported `statuses`: done, grow the lists, or
+    /// bin in more bands (a band's pairs past one binding, or past 2^32 - 1 where its
+    /// 32-bit scan wrapped).
+    fn next_attempt(
+        &self,
+        cam: &Camera,
+        statuses: &[Vec<u32>],
+        bands: u32,
+        banded: bool,
+    ) -> Result<Attempt> {
+        let fits = self.list_capacity();
+        let word = |s: &Vec<u32>, w: u32| s[w as usize];
+        let wrapped = statuses.iter().any(|s| word(s, ST_ISECT_WRAPPED) != 0);
+        let needed = statuses
+            .iter()
+            .filter(|s| word(s, ST_OVERFLOW) != 0)
+            .map(|s| word(s, ST_ISECT_NEEDED))
+            .max();
+        let too_many = wrapped || needed.is_some_and(|n| n > fits);
+        if too_many {
+            let tiles_y = cam.height.div_ceil(TILE_SIZE);
+            // Enough bands that an even split would fit, and at least twice as many.
+            let wanted = needed.map_or(0, |n| (n as u64 * bands as u64).div_ceil(fits as u64));
+            let more = (wanted as u32 + 1)
+                .max(bands * 2)
+                .min(tiles_y)
+                .min(MAX_LIST_BANDS);
+            ensure!(
+                banded && more > bands,
+                "view {}: {} visible Gaussians cover {} (tile, Gaussian) pairs at {}x{}, more \
+                 than one list holds within the binding limit ({} entries){}; render a smaller \
+                 image or fewer (or smaller) Gaussians",
+                cam.name,
+                word(&statuses[0], ST_VISIBLE),
+                if wrapped {
+                    "more than 2^32 - 1".to_string()
+                } else {
+                    needed.unwrap_or(0).to_string()
+                },
+                cam.width,
+                cam.height,
+                fits,
+                if banded { " even per row of tiles" } else { "" }
+            );
+            return Ok(Attempt::Split(more));
+        }
+        Ok(match needed {
+            Some(n) => Attempt::Grow(n),
+            None => Attempt::Done,
+        })
     }
 
     /// The frame every per-tile pass over `scene` seen by `cam` works on.
@@ -401,6 +592,7 @@ impl Rasterizer {
                 offset_alignment: self.gpu.caps().min_storage_offset_alignment,
                 tile_rows: self.band_rows,
             },
+            rows: 0..cam.height.div_ceil(TILE_SIZE),
         })
     }
 
@@ -420,7 +612,7 @@ impl Rasterizer {
                 .map_or(0, |b| b.isect_cap)
                 .max(scene.n.saturating_mul(4))
                 .max(1 << 16)
-                .min((self.gpu.caps().max_storage_buffer_range / 4).min(u32::MAX as u64) as u32),
+                .min(self.list_capacity()),
         }
     }
 
@@ -449,6 +641,14 @@ impl Rasterizer {
         Ok(keys.into_iter().zip(ids).collect())
     }
 
+    /// The expected depth per pixel of the last rendered frame.
+    ///
+    /// # Panics
+    /// Before the first frame.
+    pub fn depth(&self) -> &Buffer {
+        &self.bufs.as_ref().expect("a frame was rendered").depth
+    }
+
     /// Per Gaussian of the last frame: 1 where it was projected into the view.
     pub fn last_visible_flags(&self, n: u32) -> Result<Vec<u32>> {
         let Some(b) = &self.bufs else {
@@ -457,28 +657,34 @@ impl Rasterizer {
         Ok(self.gpu.download(&b.flags, 0, n as usize)?)
     }
 
-    /// Records projection, compaction, depth sort and tile binning; returns the marks
-    /// before and after each stage.
-    fn record_binning(
+    /// Records projection, compaction and the depth sort; returns the marks before and
+    /// after each stage. Every band's status region starts zeroed, with the frame-wide
+    /// words (visible count, dispatch sizes) copied from band 0's after compaction.
+    fn record_project_and_sort(
         &self,
         rec: &mut Recorder,
         scene: &GpuScene,
-        cam: &Camera,
+        frame: &FrameSpec,
         opts: &RenderOptions,
-    ) -> Result<[Option<Mark>; 4]> {
+        bands: usize,
+    ) -> Result<[Option<Mark>; 3]> {
         let b = self.bufs.as_ref().expect("ensured");
-        let tiles_x = cam.width.div_ceil(TILE_SIZE);
-        let tiles_y = cam.height.div_ceil(TILE_SIZE);
-        // One write of the whole status (zeros and n + 1): two overlapping fills would
-        // race without a barrier between them.
+        let stride = b.status_stride as u64 * 4;
+        // One write of band 0's status (zeros and n + 1) beside one fill of the other
+        // bands': overlapping writes would race without a barrier between them.
         let mut status = [0u32; ST_WORDS as usize];
         status[ST_N_PLUS1 as usize] = scene.n + 1;
         rec.update(&b.status, 0, bytemuck::cast_slice(&status));
-        rec.fill(&b.ranges, 0, (tiles_x * tiles_y) as u64 * 8, 0);
+        rec.fill(&b.status, stride, (bands as u64 - 1) * stride, 0);
+        rec.fill(&b.ranges, 0, (frame.tiles_x * frame.tiles_y) as u64 * 8, 0);
         rec.barrier();
         let m0 = rec.mark();
         let chunk_len = self.projection_chunk_len(scene)?;
-        b.record_project(rec, scene, cam, opts, (self.float64, chunk_len))?;
+        b.record_project(rec, scene, frame.cam, opts, (self.float64, chunk_len))?;
+        for band in 1..bands as u64 {
+            rec.copy(&b.status, 0, &b.status, band * stride, ST_WORDS as u64 * 4);
+        }
+        rec.barrier();
         let m1 = rec.mark();
         b.depth_sort.record(
             rec,
@@ -488,9 +694,7 @@ impl Rasterizer {
             32,
         )?;
         let m2 = rec.mark();
-        b.record_tile_lists(rec, tiles_x, tiles_y)?;
-        let m3 = rec.mark();
-        Ok([m0, m1, m2, m3])
+        Ok([m0, m1, m2])
     }
 }
 
@@ -587,69 +791,85 @@ impl Buffers {
             ("colors", part(&self.color, 16, 0)),
             ("tile_rects", part(&self.rect, 16, 0)),
             ("visible", part(&self.flags, 4, 1)),
-            ("tiles_touched", part(&self.touched, 4, 0)),
         ]);
         bindings
     }
 
-    /// From the depth-sorted visible Gaussians: (tile, Gaussian) pairs emitted in depth
-    /// order, a stable sort on the tile id's bits, and each tile's range of the list.
-    fn record_tile_lists(&self, rec: &mut Recorder, tiles_x: u32, tiles_y: u32) -> Result<()> {
+    /// From the depth-sorted visible Gaussians: (tile, Gaussian) pairs of the tile rows
+    /// `rows` emitted in depth order, a stable sort on the tile id's bits, and each tile's
+    /// range of the list. Band `band`'s status region counts them.
+    fn record_tile_lists(
+        &self,
+        rec: &mut Recorder,
+        tiles_x: u32,
+        tiles_y: u32,
+        band: u32,
+        rows: &Range<u32>,
+    ) -> Result<()> {
         let b = self;
-        rec.dispatch_indirect(
+        let base = band * b.status_stride;
+        let status = BufferRange::new(&b.status, base as u64 * 4, ST_WORDS as u64 * 4);
+        let whole = BufferRange::whole;
+        let rows_params = (rows.start, rows.end);
+        rec.dispatch_indirect_ranges(
             ids::RASTER_GATHER_TOUCHED,
             &[
-                ("status", &b.status),
-                ("depth_ids", &b.depth_ids),
-                ("tiles_touched", &b.touched),
-                ("sorted_touched", &b.sorted_touched),
+                ("status", status),
+                ("depth_ids", whole(&b.depth_ids)),
+                ("tile_rects", whole(&b.rect)),
+                ("sorted_touched", whole(&b.sorted_touched)),
             ],
-            &(),
+            &GatherTouchedParams {
+                row_begin: rows_params.0,
+                row_end: rows_params.1,
+            },
             &b.status,
-            ST_ARGS_VISIBLE as u64 * 4,
+            (base + ST_ARGS_VISIBLE) as u64 * 4,
         )?;
         rec.barrier();
         b.scan_v.record(
             rec,
             &b.sorted_touched,
             &b.isect_offsets,
-            GpuCount::at(&b.status, ST_VISIBLE_PLUS1),
+            GpuCount::at(&b.status, base + ST_VISIBLE_PLUS1),
         )?;
-        rec.dispatch_indirect(
+        rec.dispatch_indirect_ranges(
             ids::RASTER_EMIT,
             &[
-                ("status", &b.status),
-                ("depth_ids", &b.depth_ids),
-                ("isect_offsets", &b.isect_offsets),
-                ("tile_rects", &b.rect),
-                ("isect_keys", &b.isect_keys),
-                ("isect_ids", &b.isect_ids),
+                ("status", status),
+                ("depth_ids", whole(&b.depth_ids)),
+                ("isect_offsets", whole(&b.isect_offsets)),
+                ("tile_rects", whole(&b.rect)),
+                ("isect_keys", whole(&b.isect_keys)),
+                ("isect_ids", whole(&b.isect_ids)),
             ],
             &EmitParams {
                 tiles_x,
                 capacity: b.isect_cap,
+                row_begin: rows_params.0,
+                row_end: rows_params.1,
             },
             &b.status,
-            ST_ARGS_VISIBLE as u64 * 4,
+            (base + ST_ARGS_VISIBLE) as u64 * 4,
         )?;
         rec.barrier();
         b.tile_sort.record(
             rec,
             &b.isect_keys,
             &b.isect_ids,
-            GpuCount::at(&b.status, ST_ISECT),
+            GpuCount::at(&b.status, base + ST_ISECT),
             tile_bits(tiles_x * tiles_y),
         )?;
-        rec.dispatch_indirect(
+        rec.dispatch_indirect_ranges(
             ids::RASTER_TILE_RANGES,
             &[
-                ("status", &b.status),
-                ("isect_keys", &b.isect_keys),
-                ("tile_ranges", &b.ranges),
+                ("status", status),
+                ("isect_keys", whole(&b.isect_keys)),
+                ("tile_ranges", whole(&b.ranges)),
             ],
             &(),
             &b.status,
-            ST_ARGS_ISECT as u64 * 4,
+            (base + ST_ARGS_ISECT) as u64 * 4,
         )?;
         rec.barrier();
         Ok(())
@@ -676,6 +896,9 @@ pub struct FrameSpec<'a> {
     pub background: [f32; 3],
     /// What sizes the bands of tile rows per-tile passes split the image into.
     pub band_limits: BandLimits,
+    /// The tile rows these lists hold: all of them, or one band of a view binned in bands
+    /// ([`Rasterizer::run_tiled_in_bands`]); per-tile passes cover only these.
+    pub rows: Range<u32>,
 }
 
 impl FrameSpec<'_> {
@@ -720,12 +943,8 @@ impl FrameSpec<'_> {
     /// Bands of tile rows such that a per-pixel buffer of `bytes_per_pixel` fits one
     /// binding per band (one band but for very large images or many classes).
     pub fn bands(&self, bytes_per_pixel: u64) -> Result<Vec<Band>> {
-        bands(
-            self.cam.width,
-            self.cam.height,
-            bytes_per_pixel,
-            self.band_limits,
-        )
+        let (w, h) = (self.cam.width, self.cam.height);
+        bands(w, h, self.rows.clone(), bytes_per_pixel, self.band_limits)
     }
 
     /// One workgroup per tile.
@@ -737,6 +956,8 @@ impl FrameSpec<'_> {
 /// A binned view: the tile lists and per-Gaussian screen data a per-tile stage reads.
 pub struct TileLists<'a> {
     bufs: &'a Buffers,
+    /// Which band of tile rows of the view these lists hold (0 when binned whole).
+    band: u32,
     pub frame: FrameSpec<'a>,
     /// Marks around the stages (project, depth sort, bin, per-tile stage).
     pub marks: [Option<Mark>; 5],
@@ -745,7 +966,13 @@ pub struct TileLists<'a> {
 /// Timings and counts of one [`Rasterizer::run_tiled`].
 pub struct TiledRun {
     pub timings: Timings,
+    /// Marks around the stages (project, depth sort, bin, per-tile stage, end); with bands
+    /// of rows, bin and per-tile are the first band's.
     pub marks: [Option<Mark>; 5],
+    /// GPU time per stage, every band's summed.
+    pub stages: StageTimes,
+    /// Bands of tile rows the view was binned in (1: all at once).
+    pub list_bands: u32,
     pub visible: u32,
     pub intersections: u32,
     /// Semantic channels the per-tile stage saw in the frame.
@@ -753,6 +980,20 @@ pub struct TiledRun {
 }
 
 impl TileLists<'_> {
+    /// The status words (ST_*) of these lists' binning. Its intersection lists overflowed
+    /// where `ST_OVERFLOW` is set: the view is recorded again with larger lists (or in
+    /// more bands), so a pass that accumulates across views must add nothing then.
+    pub fn status(&self) -> BufferRange<'_> {
+        let b = self.bufs;
+        let offset = (self.band * b.status_stride) as u64 * 4;
+        BufferRange::new(&b.status, offset, ST_WORDS as u64 * 4)
+    }
+
+    /// Whether these lists hold the view's last band of tile rows (or the whole view).
+    pub fn is_last_band(&self) -> bool {
+        self.frame.rows.end >= self.frame.tiles_y
+    }
+
     /// Start and end of each tile's run in the sorted lists (uvec2 per tile).
     pub fn ranges(&self) -> &Buffer {
         &self.bufs.ranges
