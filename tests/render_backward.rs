@@ -126,6 +126,8 @@ struct Case {
     mode: SemanticMode,
     background: [f32; 3],
     window: Option<u32>,
+    /// The fixed-point accumulation (float_atomics is then ignored).
+    deterministic: bool,
     float_atomics: bool,
     semantics_only: bool,
 }
@@ -159,6 +161,7 @@ fn compare(case: &Case) -> f64 {
                 sem_norm: &sem,
             },
             BackwardVariant {
+                deterministic: case.deterministic,
                 float_atomics: case.float_atomics,
                 semantics_only: case.semantics_only,
             },
@@ -248,6 +251,7 @@ fn gpu_backward_matches_the_reference_backward() {
             mode,
             background: [0.2, 0.5, 0.1],
             window: None,
+            deterministic: false,
             float_atomics: true,
             semantics_only: false,
         });
@@ -260,6 +264,7 @@ fn gpu_backward_matches_the_reference_backward() {
         mode: SemanticMode::RawLogits,
         background: [0.0; 3],
         window: Some(7),
+        deterministic: false,
         float_atomics: true,
         semantics_only: false,
     });
@@ -271,6 +276,7 @@ fn gpu_backward_matches_the_reference_backward() {
         mode: SemanticMode::RawLogits,
         background: [0.0; 3],
         window: None,
+        deterministic: false,
         float_atomics: false,
         semantics_only: false,
     });
@@ -283,8 +289,27 @@ fn gpu_backward_matches_the_reference_backward() {
             mode: SemanticMode::RawLogits,
             background: [0.0; 3],
             window: Some(11),
+            deterministic: false,
             float_atomics,
             semantics_only: true,
+        });
+    }
+    // The deterministic 64-bit fixed-point sums, full (windows, several semantic chunks)
+    // and semantic-only.
+    for (name, semantics_only, channels) in [
+        ("fixed point", false, 20),
+        ("fixed point sem only", true, 6),
+    ] {
+        cases.push(Case {
+            name,
+            scene: random_scene(&spec(300, 2, channels, 43)),
+            cam: cam.clone(),
+            mode: SemanticMode::RawLogits,
+            background: [0.2, 0.5, 0.1],
+            window: Some(9),
+            deterministic: true,
+            float_atomics: false,
+            semantics_only,
         });
     }
     for case in &cases {
@@ -324,17 +349,23 @@ fn gpu_backward_handles_the_forward_edge_cases() {
         .append(&mut wide.semantics.unwrap().logits);
     g.log_scales[0] = [-6.0, 0.5, -6.0];
     g.means[1] = [0.01, 0.02, 0.05];
-    let worst = compare(&Case {
-        name: "edge cases",
-        scene: g,
-        cam,
-        mode: SemanticMode::RawLogits,
-        background: [1.0, 1.0, 1.0],
-        window: None,
-        float_atomics: true,
-        semantics_only: false,
-    });
-    assert!(worst < TOLERANCE, "edge cases: relative error {worst:.2e}");
+    for deterministic in [false, true] {
+        let worst = compare(&Case {
+            name: "edge cases",
+            scene: g.clone(),
+            cam: cam.clone(),
+            mode: SemanticMode::RawLogits,
+            background: [1.0, 1.0, 1.0],
+            window: None,
+            deterministic,
+            float_atomics: true,
+            semantics_only: false,
+        });
+        assert!(
+            worst < TOLERANCE,
+            "edge cases (fixed point: {deterministic}): relative error {worst:.2e}"
+        );
+    }
     common::check_validation(common::gpu());
 }
 

@@ -29,6 +29,10 @@ layout(set = 0, binding = 10) buffer GOpacityBuf { float data[]; } grad_opacity_
 layout(set = 0, binding = 11) buffer GShBuf { float data[]; } grad_sh;
 layout(set = 0, binding = 12) buffer DensifyGradBuf { float data[]; } densify_grad;
 layout(set = 0, binding = 13) buffer DensifyCountBuf { float data[]; } densify_count;
+// Fixed-point status of this view's blend backward (grad_fixed_common.glsl; zeros with
+// float atomics): after an overflow the view is redone, so it must add nothing here (the
+// densification statistics are not cleared between iterations).
+layout(set = 0, binding = 14) readonly buffer FixedStatusBuf { uint data[]; } fixed_status;
 
 #define SH_COEFF(k) vec3(sh.data[base + 3 * (k)], sh.data[base + 3 * (k) + 1], sh.data[base + 3 * (k) + 2])
 
@@ -71,7 +75,7 @@ vec3 sh_basis_grad(uint degree, vec3 dir, float g[16]) {
 void main() {
     uint i = gl_GlobalInvocationID.x;
     uint n = pc.n;
-    if (i >= n || visible.data[i] == 0) {
+    if (i >= n || visible.data[i] == 0 || fixed_status.data[FS_OVERFLOW] != 0) {
         return;
     }
     uint g0 = i * GRAD2D_STRIDE;

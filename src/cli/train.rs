@@ -87,8 +87,14 @@ pub struct TrainArgs {
     /// JSON report: configuration, losses over time, stage times, densification.
     #[arg(long)]
     report: Option<PathBuf>,
+    /// Seed of every random choice (initial logits, view order, densification): with the
+    /// same inputs and seed, training writes the same bytes on the same device and driver
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Sum gradients with float atomics (order-dependent: runs differ slightly) instead of
+    /// the default order-independent 64-bit fixed point
+    #[arg(long)]
+    nondeterministic: bool,
 }
 
 #[derive(Serialize)]
@@ -219,6 +225,7 @@ fn train_config(args: &TrainArgs, init_gaussians: usize) -> Result<TrainConfig> 
     }
     cfg.lr.logits = args.lr_logits;
     cfg.seed = args.seed;
+    cfg.deterministic = !args.nondeterministic;
     if args.no_densify {
         cfg.densify = None;
     }

@@ -2,14 +2,23 @@
 //! atomics into screen-space gradients) then projection backward (per Gaussian, into the
 //! stored parameters). Recorded into the same submission as the forward that produced the
 //! tile lists, so an iteration needs no host round trip.
+//!
+//! The blend backward adds per-Gaussian sums from many tiles at once. By default
+//! ([`Accumulation::FixedPoint`]) it adds them as 64-bit fixed-point integers, whose sums
+//! do not depend on the order of the atomics: the gradients are bit-identical run to run.
+//! The scale of each value group follows the gradients' magnitudes ([`FixedScale`]).
 
-use anyhow::{ensure, Result};
+use anyhow::{bail, ensure, Result};
 
 use super::frame::RenderedFrame;
 use super::gpu_scene::{GaussianParams, GpuScene, HostParams};
 use super::rasterizer::{Rasterizer, TileLists};
 use super::{project_params, RenderOptions, SemanticMode};
-use crate::contract::params::SoftmaxParams;
+use crate::contract::params::{FixedResolveParams, SoftmaxParams};
+use crate::contract::{
+    FIXED_GROUPS, FIXED_PARAM_WORDS, FS_NONFINITE, FS_OVERFLOW, FS_STEP_MAX, FS_TOTAL_MAX,
+    FS_WORDS, SEM_CHUNK, TILE_SIZE,
+};
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, Gpu, Recorder};
 use crate::scene::Camera;
@@ -46,12 +55,162 @@ pub struct SceneGrads {
     pub screen: Buffer,
     carry: Buffer,
     placeholder: Buffer,
-    /// Accumulate with float atomics (default where the device has them) or with the
-    /// compare-and-swap fallback.
-    pub float_atomics: bool,
+    /// How the blend backward adds its sums (see [`Accumulation`]).
+    pub accumulation: Accumulation,
+    /// Fixed-point sums of one view, two u32 words per value (FixedPoint only).
+    screen_fixed: Buffer,
+    sem_fixed: Buffer,
+    /// Scales and overflow status of the fixed-point sums.
+    pub fixed: FixedScale,
     /// Compute only the semantic vectors' gradient (training the logits with geometry
     /// frozen): a cheaper blend backward and no projection backward.
     pub semantics_only: bool,
+}
+
+/// How the blend backward adds per-Gaussian sums across tiles.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Accumulation {
+    /// 64-bit fixed-point integers (int64 atomics, or a pair of 32-bit ones where the
+    /// device lacks them): order-independent, so training is reproducible. The default.
+    FixedPoint,
+    /// float32 atomic adds: the sums depend on the order the atomics land in.
+    FloatAtomics,
+    /// Compare-and-swap on the float bits (devices without float atomics); order-dependent.
+    CompareAndSwap,
+}
+
+impl Accumulation {
+    /// `deterministic` picks FixedPoint; otherwise float atomics where the device has them.
+    pub fn choose(gpu: &Gpu, deterministic: bool) -> Accumulation {
+        if deterministic {
+            Accumulation::FixedPoint
+        } else if gpu.caps().float_atomic_add {
+            Accumulation::FloatAtomics
+        } else {
+            Accumulation::CompareAndSwap
+        }
+    }
+}
+
+/// Bits of headroom between the largest per-Gaussian total seen and the bound on one
+/// step's scaled value: steps may exceed totals (sums that cancel) and gradients grow
+/// between iterations; past the bound the view is redone with a smaller scale.
+const FIXED_HEADROOM_BITS: i32 = 10;
+/// The 64-bit sums stay below 2^62 (room for the sign and a margin).
+const FIXED_TOTAL_BITS: u32 = 62;
+/// A view is redone at most this many times for fixed-point overflow.
+pub const FIXED_MAX_REDOS: u32 = 8;
+
+/// The fixed-point scale per value group (mean2d, conic, opacity, color, semantics):
+/// scale = 2^e with e = step_bits - FIXED_HEADROOM_BITS - ceil(log2(magnitude)), where
+/// magnitude is the largest |per-Gaussian total| of the group in the last view (1 before
+/// the first) and 2^step_bits bounds one step's |value * scale| so that a view's adds
+/// (at most one per padded pixel and semantic chunk) keep every total below 2^62.
+pub struct FixedScale {
+    /// ceil(log2) of each group's magnitude.
+    log2_magnitude: [i32; FIXED_GROUPS as usize],
+    /// The current view's step bound exponent.
+    step_bits: u32,
+    /// [scale per group, 2^step_bits] (f32, FIXED_PARAM_WORDS).
+    params: Buffer,
+    /// FS_WORDS u32 (shared_constants.txt): overflow and non-finite flags, magnitudes.
+    pub status: Buffer,
+}
+
+/// What a view's fixed-point status says (see [`FixedScale::check`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FixedCheck {
+    /// The sums are exact; the scales follow the totals' magnitudes for the next view.
+    Done,
+    /// A step did not fit: the scales of the groups that overflowed were lowered, and the
+    /// view must be recorded again (its gradients and statistics were not applied).
+    Redo,
+    /// A step's value was NaN or infinite.
+    NonFinite,
+}
+
+impl FixedScale {
+    fn new(gpu: &Gpu) -> Result<FixedScale> {
+        let scale = FixedScale {
+            log2_magnitude: [0; FIXED_GROUPS as usize],
+            step_bits: 32,
+            params: gpu.buffer("fixed_params", FIXED_PARAM_WORDS as u64 * 4)?,
+            status: gpu.buffer("fixed_status", FS_WORDS as u64 * 4)?,
+        };
+        let mut rec = Recorder::new(gpu)?;
+        rec.fill(&scale.status, 0, scale.status.size(), 0);
+        rec.submit_and_wait()?;
+        Ok(scale)
+    }
+
+    /// Sets the step bound for views of `width` x `height` walked in `chunks` semantic
+    /// chunks; errors if no bound leaves room for a useful scale.
+    fn set_view(&mut self, width: u32, height: u32, chunks: u32) -> Result<()> {
+        let padded = |v: u32| v.div_ceil(TILE_SIZE) as u64 * TILE_SIZE as u64;
+        let adds = padded(width) * padded(height) * chunks.max(1) as u64;
+        let add_bits = 64 - (adds - 1).leading_zeros(); // ceil(log2(adds))
+        ensure!(
+            add_bits + 24 <= FIXED_TOTAL_BITS,
+            "a {width}x{height} view is too large for deterministic (fixed-point) gradients; \
+             train with --nondeterministic"
+        );
+        self.step_bits = FIXED_TOTAL_BITS - add_bits;
+        Ok(())
+    }
+
+    fn exponent(&self, group: usize) -> i32 {
+        let e = self.step_bits as i32 - FIXED_HEADROOM_BITS - self.log2_magnitude[group];
+        e.clamp(-120, 120)
+    }
+
+    /// Records the upload of the current scales (before the view's blend backward).
+    fn record_params(&self, rec: &mut Recorder) {
+        let mut words = [0f32; FIXED_PARAM_WORDS as usize];
+        for (g, w) in words.iter_mut().take(FIXED_GROUPS as usize).enumerate() {
+            *w = 2f32.powi(self.exponent(g));
+        }
+        words[FIXED_GROUPS as usize] = 2f32.powi(self.step_bits as i32);
+        rec.update(&self.params, 0, bytemuck::cast_slice(&words));
+    }
+
+    /// Records the clearing of the status (start of a gradient accumulation).
+    pub fn record_clear(&self, rec: &mut Recorder) {
+        rec.fill(&self.status, 0, self.status.size(), 0);
+    }
+
+    /// Reads the status of the views recorded since [`FixedScale::record_clear`] and
+    /// adapts the scales to the magnitudes it holds.
+    pub fn check(&mut self, gpu: &Gpu) -> Result<FixedCheck> {
+        let status: Vec<u32> = gpu.download(&self.status, 0, FS_WORDS as usize)?;
+        if status[FS_NONFINITE as usize] != 0 {
+            return Ok(FixedCheck::NonFinite);
+        }
+        let magnitude = |word: u32| {
+            let m = f32::from_bits(status[word as usize]);
+            (m > 0.0 && m.is_finite()).then(|| m.log2().ceil() as i32)
+        };
+        if status[FS_OVERFLOW as usize] != 0 {
+            for g in 0..FIXED_GROUPS as usize {
+                if let Some(bits) = magnitude(FS_STEP_MAX + g as u32) {
+                    // The step's own magnitude, and at least one bit lower than before.
+                    let lowered = self.log2_magnitude[g] + 1;
+                    self.log2_magnitude[g] = bits.max(lowered);
+                }
+            }
+            return Ok(FixedCheck::Redo);
+        }
+        for g in 0..FIXED_GROUPS as usize {
+            if let Some(bits) = magnitude(FS_TOTAL_MAX + g as u32) {
+                self.log2_magnitude[g] = bits;
+            }
+        }
+        Ok(FixedCheck::Done)
+    }
+
+    /// The scales of `other` (a model rebuilt by densification keeps its magnitudes).
+    pub fn adopt(&mut self, other: &FixedScale) {
+        self.log2_magnitude = other.log2_magnitude;
+    }
 }
 
 /// Gradients downloaded to the host (tests, diagnostics).
@@ -67,11 +226,16 @@ pub struct HostGrads {
 
 impl SceneGrads {
     /// Zeroed gradients for `scene`'s shape.
-    pub fn new(gpu: &Gpu, scene: &GpuScene) -> Result<SceneGrads> {
+    pub fn new(gpu: &Gpu, scene: &GpuScene, accumulation: Accumulation) -> Result<SceneGrads> {
         let n = scene.n.max(1) as u64;
         let c = scene.channels.max(1) as u64;
         let b = |name: &str, floats: u64| gpu.buffer(name, floats * 4);
         let sh_coeffs = scene.sh_coeffs.max(1);
+        // The fixed-point sums take two words per value, only in that mode.
+        let fixed_words = |floats: u64| match accumulation {
+            Accumulation::FixedPoint => floats * 2,
+            _ => 1,
+        };
         let grads = SceneGrads {
             n: scene.n,
             channels: scene.channels,
@@ -89,7 +253,10 @@ impl SceneGrads {
             screen: b("grad2d", n * GRAD2D_STRIDE as u64)?,
             carry: b("backward_carry", 1)?,
             placeholder: b("placeholder", 4)?,
-            float_atomics: gpu.caps().float_atomic_add,
+            screen_fixed: b("grad2d_fixed", fixed_words(n * GRAD2D_STRIDE as u64))?,
+            sem_fixed: b("grad_sem_fixed", fixed_words(n * c))?,
+            fixed: FixedScale::new(gpu)?,
+            accumulation,
             semantics_only: false,
         };
         let mut rec = Recorder::new(gpu)?;
@@ -99,9 +266,13 @@ impl SceneGrads {
         Ok(grads)
     }
 
-    /// Sizes the per-pixel carry buffer for views of `pixels` pixels walked in `windows`
-    /// windows (only needed when a tile list spans more than one window).
-    pub fn prepare_view(&mut self, gpu: &Gpu, pixels: u64, windows: u32) -> Result<()> {
+    /// Sizes the per-pixel carry buffer for views of `cam`'s size walked in `windows`
+    /// windows (only needed when a tile list spans more than one window), and sets the
+    /// fixed-point range for the view.
+    pub fn prepare_view(&mut self, gpu: &Gpu, cam: &Camera, windows: u32) -> Result<()> {
+        let pixels = cam.width as u64 * cam.height as u64;
+        let chunks = self.channels.div_ceil(SEM_CHUNK);
+        self.fixed.set_view(cam.width, cam.height, chunks)?;
         let need = if windows > 1 {
             pixels * CARRY_STRIDE * 4
         } else {
@@ -113,8 +284,10 @@ impl SceneGrads {
         Ok(())
     }
 
-    /// Records zeroing of the parameter gradients (start of an iteration).
+    /// Records zeroing of the parameter gradients and the fixed-point status (start of an
+    /// iteration).
     pub fn record_zero(&self, rec: &mut Recorder) {
+        self.fixed.record_clear(rec);
         let semantic = [&self.logits, &self.probs];
         for b in self
             .params
@@ -206,9 +379,18 @@ impl TileLists<'_> {
                     >= f.cam.width as u64 * f.cam.height as u64 * CARRY_STRIDE * 4,
             "SceneGrads::prepare_view was not called for this view size"
         );
+        let fixed = grads.accumulation == Accumulation::FixedPoint;
         rec.fill(&grads.screen, 0, grads.screen.size(), 0);
+        if fixed {
+            rec.fill(&grads.screen_fixed, 0, grads.screen_fixed.size(), 0);
+            rec.fill(&grads.sem_fixed, 0, grads.sem_fixed.size(), 0);
+            grads.fixed.record_params(rec);
+        }
         rec.barrier();
         self.record_blend_backward(rec, upstream, grads)?;
+        if fixed {
+            self.record_fixed_resolve(rec, grads)?;
+        }
         if grads.semantics_only {
             return Ok(());
         }
@@ -233,11 +415,25 @@ impl TileLists<'_> {
         } else {
             &grads.placeholder
         };
-        let kernel = match (grads.semantics_only, grads.float_atomics) {
-            (false, true) => ids::RASTER_BLEND_BACKWARD,
-            (false, false) => ids::RASTER_BLEND_BACKWARD_CAS,
-            (true, true) => ids::RASTER_BLEND_BACKWARD_SEM_ONLY,
-            (true, false) => ids::RASTER_BLEND_BACKWARD_SEM_ONLY_CAS,
+        let int64_atomics = rec.gpu().caps().int64_atomics;
+        let kernel = match (grads.semantics_only, grads.accumulation) {
+            (false, Accumulation::FloatAtomics) => ids::RASTER_BLEND_BACKWARD,
+            (false, Accumulation::CompareAndSwap) => ids::RASTER_BLEND_BACKWARD_CAS,
+            (false, Accumulation::FixedPoint) if int64_atomics => {
+                ids::RASTER_BLEND_BACKWARD_FIXED64
+            }
+            (false, Accumulation::FixedPoint) => ids::RASTER_BLEND_BACKWARD_FIXED32X2,
+            (true, Accumulation::FloatAtomics) => ids::RASTER_BLEND_BACKWARD_SEM_ONLY,
+            (true, Accumulation::CompareAndSwap) => ids::RASTER_BLEND_BACKWARD_SEM_ONLY_CAS,
+            (true, Accumulation::FixedPoint) if int64_atomics => {
+                ids::RASTER_BLEND_BACKWARD_SEM_ONLY_FIXED64
+            }
+            (true, Accumulation::FixedPoint) => ids::RASTER_BLEND_BACKWARD_SEM_ONLY_FIXED32X2,
+        };
+        // The fixed-point variants add into their integer buffers instead.
+        let (screen_target, sem_target) = match grads.accumulation {
+            Accumulation::FixedPoint => (&grads.screen_fixed, &grads.sem_fixed),
+            _ => (&grads.screen, sem_target),
         };
         for chunk in 0..f.sem_chunks() {
             for start in f.window_starts().rev() {
@@ -253,21 +449,63 @@ impl TileLists<'_> {
                     ("n_contrib", self.n_contrib()),
                     ("v_sem_norm", upstream.sem_norm),
                     ("carry", &grads.carry),
-                    ("grad2d", &grads.screen),
+                    ("grad2d", screen_target),
                     ("grad_sem", sem_target),
                 ];
                 // What the alpha and color gradients read (not the semantic-only variant).
-                let optional: [(&str, &Buffer); 5] = [
+                let optional: [(&str, &Buffer); 7] = [
                     ("colors", self.colors()),
                     ("sem_in", sem_in),
                     ("sem_norm", sem_norm),
                     ("v_rgb", upstream.rgb),
                     ("v_alpha", upstream.alpha),
+                    ("fixed_params", &grads.fixed.params),
+                    ("fixed_status", &grads.fixed.status),
                 ];
                 rec.dispatch_with_optional(kernel, &bindings, &optional, &params, f.tile_groups())?;
                 rec.barrier();
             }
         }
+        Ok(())
+    }
+
+    /// Turns the view's fixed-point sums into the float gradients: the screen-space ones
+    /// (overwritten: one view) and the semantic ones (added to what earlier views left).
+    fn record_fixed_resolve(&self, rec: &mut Recorder, grads: &SceneGrads) -> Result<()> {
+        let sem_target = match self.frame.semantics {
+            Some((SemanticMode::RawLogits, _)) => Some(&grads.logits),
+            Some((SemanticMode::Softmax, _)) => Some(&grads.probs),
+            None => None,
+        };
+        let screen = (!grads.semantics_only).then_some((&grads.screen_fixed, &grads.screen));
+        let semantic = sem_target.map(|t| (&grads.sem_fixed, t));
+        for (semantic_rows, parts) in [(false, screen), (true, semantic)] {
+            let Some((fixed, target)) = parts else {
+                continue;
+            };
+            let params = FixedResolveParams {
+                rows: grads.n,
+                stride: if semantic_rows {
+                    grads.channels
+                } else {
+                    GRAD2D_STRIDE
+                },
+                semantic: semantic_rows as u32,
+                accumulate: semantic_rows as u32,
+            };
+            rec.dispatch(
+                ids::TRAIN_GRAD_FIXED_RESOLVE,
+                &[
+                    ("fixed_sums", fixed),
+                    ("out_grad", target),
+                    ("fixed_params", &grads.fixed.params),
+                    ("fixed_status", &grads.fixed.status),
+                ],
+                &params,
+                ids::TRAIN_GRAD_FIXED_RESOLVE.groups_for(grads.n),
+            )?;
+        }
+        rec.barrier();
         Ok(())
     }
 
@@ -297,6 +535,7 @@ impl TileLists<'_> {
                 ("grad_sh", &grads.params.sh),
                 ("densify_grad", &grads.densify_grad),
                 ("densify_count", &grads.densify_count),
+                ("fixed_status", &grads.fixed.status),
             ],
             &params,
             ids::RASTER_PROJECT_BACKWARD.groups_for(scene.n),
@@ -309,6 +548,8 @@ impl TileLists<'_> {
 /// Which backward kernels [`Rasterizer::render_backward`] runs.
 #[derive(Clone, Copy, Debug)]
 pub struct BackwardVariant {
+    /// true: the deterministic fixed-point accumulation (float_atomics is then ignored).
+    pub deterministic: bool,
     /// false: the compare-and-swap accumulation, as on devices without float atomics.
     pub float_atomics: bool,
     /// Only the semantic vectors' gradient (see [`SceneGrads::semantics_only`]).
@@ -318,6 +559,7 @@ pub struct BackwardVariant {
 impl Default for BackwardVariant {
     fn default() -> Self {
         BackwardVariant {
+            deterministic: true,
             float_atomics: true,
             semantics_only: false,
         }
@@ -362,21 +604,40 @@ impl Rasterizer {
         } else {
             gpu.buffer("v_sem_norm", 4)?
         };
-        let mut grads = SceneGrads::new(&gpu, scene)?;
-        grads.float_atomics = variant.float_atomics && gpu.caps().float_atomic_add;
+        let accumulation = match (variant.deterministic, variant.float_atomics) {
+            (true, _) => Accumulation::FixedPoint,
+            (false, true) if gpu.caps().float_atomic_add => Accumulation::FloatAtomics,
+            (false, _) => Accumulation::CompareAndSwap,
+        };
+        let mut grads = SceneGrads::new(&gpu, scene, accumulation)?;
         grads.semantics_only = variant.semantics_only;
-        grads.prepare_view(&gpu, pixels, self.windows_for(scene.n))?;
+        grads.prepare_view(&gpu, cam, self.windows_for(scene.n))?;
         let pixel_grads = PixelGrads {
             rgb: &v_rgb,
             alpha: &v_alpha,
             sem_norm: &v_sem,
         };
-        let run = self.run_tiled(scene, cam, opts, |rec, tiles| {
-            tiles.record_blend(rec)?;
-            grads.record_zero(rec);
-            grads.record_zero_densify(rec);
-            tiles.record_backward(rec, scene, &pixel_grads, &grads)
-        })?;
+        let mut redos = 0;
+        let run = loop {
+            let run = self.run_tiled(scene, cam, opts, |rec, tiles| {
+                tiles.record_blend(rec)?;
+                grads.record_zero(rec);
+                grads.record_zero_densify(rec);
+                tiles.record_backward(rec, scene, &pixel_grads, &grads)
+            })?;
+            match grads.fixed.check(&gpu)? {
+                FixedCheck::Done => break run,
+                FixedCheck::NonFinite => bail!("a gradient of view {} is not finite", cam.name),
+                FixedCheck::Redo => {
+                    redos += 1;
+                    ensure!(
+                        redos <= FIXED_MAX_REDOS,
+                        "view {}: the fixed-point gradients overflow at every scale tried",
+                        cam.name
+                    );
+                }
+            }
+        };
         let mut rec = Recorder::new(&gpu)?;
         grads.record_softmax_backward(&mut rec, scene)?;
         rec.submit_and_wait()?;

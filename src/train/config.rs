@@ -102,6 +102,9 @@ pub struct TrainConfig {
     /// Read the losses back every this many iterations (a host sync).
     pub log_every: u32,
     pub seed: u64,
+    /// Order-independent (fixed-point) gradient sums: the same inputs and seed give the
+    /// same model on the same device and driver (see docs/joint-training.md).
+    pub deterministic: bool,
 }
 
 impl TrainConfig {
@@ -120,6 +123,7 @@ impl TrainConfig {
             background: [0.0; 3],
             log_every: 10,
             seed: 0,
+            deterministic: true,
         }
     }
 

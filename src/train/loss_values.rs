@@ -59,3 +59,12 @@ impl LossValues {
         -10.0 * self.mse.log10()
     }
 }
+
+impl LossValues {
+    /// Whether every value is finite (a NaN or infinity means training diverged).
+    pub fn is_finite(&self) -> bool {
+        [self.l1, self.ssim, self.mse, self.ce, self.entropy]
+            .iter()
+            .all(|v| v.is_finite())
+    }
+}

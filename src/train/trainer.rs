@@ -9,7 +9,7 @@ use std::collections::HashMap;
 use std::sync::OnceLock;
 use std::time::Instant;
 
-use anyhow::{ensure, Result};
+use anyhow::{bail, ensure, Result};
 use glam::DVec3;
 use serde::Serialize;
 
@@ -24,7 +24,7 @@ use super::loss_values::LossValues;
 use super::tensors::{new_moments, tensors, PerTensor, TensorRef};
 use super::views::{DeviceView, TrainView};
 use crate::gpu::{Buffer, Gpu, Mark, Recorder};
-use crate::render::backward::{PixelGrads, SceneGrads};
+use crate::render::backward::{Accumulation, FixedCheck, PixelGrads, SceneGrads, FIXED_MAX_REDOS};
 use crate::render::{GpuScene, Rasterizer, RenderOptions, SemanticMode};
 use crate::scene::gaussians::SemanticLogits;
 use crate::scene::{Camera, Gaussians};
@@ -132,7 +132,8 @@ impl Trainer {
             ensure!(r.len() == init.len(), "a rider has the wrong length");
         }
         let scene = GpuScene::upload(gpu, init)?;
-        let mut grads = SceneGrads::new(gpu, &scene)?;
+        let accumulation = Accumulation::choose(gpu, cfg.deterministic);
+        let mut grads = SceneGrads::new(gpu, &scene, accumulation)?;
         grads.semantics_only = cfg.semantics_only;
         let device_views = views
             .iter()
@@ -215,7 +216,7 @@ impl Trainer {
     pub fn step(&mut self) -> Result<Option<LossValues>> {
         let step = self.iter + 1;
         let vi = self.next_view();
-        let key = self.run_view(vi)?;
+        let key = self.run_view_checked(vi, step)?;
         self.run_update(step, key)?;
         self.iter = step;
         self.times.iterations = step;
@@ -223,10 +224,35 @@ impl Trainer {
         self.densify_on_schedule(step)?;
         let log = step % self.cfg.log_every.max(1) == 0 || step == self.cfg.iters;
         if log {
-            Ok(Some(self.losses[&key].read_values()?))
+            let values = self.losses[&key].read_values()?;
+            ensure!(
+                values.is_finite(),
+                "training diverged: the loss is not finite at iteration {step} ({values:?}); \
+                 lower the learning rates or the loss weights"
+            );
+            Ok(Some(values))
         } else {
             Ok(None)
         }
+    }
+
+    /// [`Trainer::run_view`], redone with smaller fixed-point scales while a gradient sum
+    /// does not fit (nothing of a redone view was applied); errors on a non-finite
+    /// gradient, naming the iteration.
+    fn run_view_checked(&mut self, vi: usize, step: u32) -> Result<(u32, u32)> {
+        for _ in 0..=FIXED_MAX_REDOS {
+            let key = self.run_view(vi)?;
+            match self.grads.fixed.check(&self.gpu)? {
+                FixedCheck::Done => return Ok(key),
+                FixedCheck::Redo => continue,
+                FixedCheck::NonFinite => bail!(
+                    "training diverged: a gradient is not finite at iteration {step} (view {}); \
+                     lower the learning rates or the loss weights",
+                    self.views[vi].camera.name
+                ),
+            }
+        }
+        bail!("iteration {step}: the fixed-point gradients overflow at every scale tried")
     }
 
     /// The loss scratch of views of `cam`'s size (made on first use; its key is the size),
@@ -237,9 +263,8 @@ impl Trainer {
             let loss = ImageLoss::new(&self.gpu, cam.width, cam.height, self.scene.channels)?;
             self.losses.insert(key, loss);
         }
-        let pixels = cam.width as u64 * cam.height as u64;
         let windows = self.rasterizer.windows_for(self.scene.n);
-        self.grads.prepare_view(&self.gpu, pixels, windows)?;
+        self.grads.prepare_view(&self.gpu, cam, windows)?;
         Ok(key)
     }
 
@@ -418,7 +443,10 @@ impl Trainer {
             logits,
             probs: OnceLock::new(),
         };
-        self.grads = SceneGrads::new(&self.gpu, &scene)?;
+        let mut grads = SceneGrads::new(&self.gpu, &scene, self.grads.accumulation)?;
+        grads.semantics_only = self.grads.semantics_only;
+        grads.fixed.adopt(&self.grads.fixed);
+        self.grads = grads;
         self.scene = scene;
         self.moments = PerTensor {
             params: param_moments,
