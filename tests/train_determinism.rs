@@ -62,6 +62,7 @@ fn train(d: &str, out: &Path, extra: &[&str]) -> Vec<u8> {
         "--train-only",
         "--seed",
         "7",
+        "--deterministic",
         "--out",
     ];
     let out_s = out.to_str().unwrap();

@@ -152,7 +152,7 @@ impl FixedScale {
         ensure!(
             add_bits + 24 <= FIXED_TOTAL_BITS,
             "a {width}x{height} view is too large for deterministic (fixed-point) gradients; \
-             train with --nondeterministic"
+             train without --deterministic"
         );
         self.step_bits = FIXED_TOTAL_BITS - add_bits;
         Ok(())

@@ -123,7 +123,7 @@ impl TrainConfig {
             background: [0.0; 3],
             log_every: 10,
             seed: 0,
-            deterministic: true,
+            deterministic: false,
         }
     }
 
