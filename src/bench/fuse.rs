@@ -87,6 +87,8 @@ pub struct FuseBench {
     pub goal_ratio: f64,
     pub forward: ForwardBench,
     pub methods: Vec<MethodBench>,
+    /// Peak resident memory of the whole benchmark process (scene generation included).
+    pub peak_host_bytes: Option<u64>,
 }
 
 /// Label maps like a segmenter's: square blocks of about a twelfth of the image, one class
@@ -235,6 +237,7 @@ pub fn bench_fuse(
         goal_ratio: GOAL_RATIO,
         forward,
         methods: results,
+        peak_host_bytes: crate::util::memory::peak_host_bytes(),
     })
 }
 

@@ -26,8 +26,22 @@ pub enum BenchCommand {
     Fuse(FuseArgs),
 }
 
+/// Scene sizes of trained 3DGS scenes at full HD, for `bench fuse --preset`.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+enum FusePreset {
+    /// 1,000,000 Gaussians (SH degree 3) at 1920x1080.
+    #[value(name = "1m")]
+    OneMillion,
+    /// 6,000,000 Gaussians (SH degree 3, about Mip-NeRF 360 garden) at 1920x1080.
+    #[value(name = "6m")]
+    SixMillion,
+}
+
 #[derive(Args)]
 pub struct FuseArgs {
+    /// A real-size scene: sets --n, --width and --height (given values are overridden).
+    #[arg(long)]
+    preset: Option<FusePreset>,
     /// Number of Gaussians (a random scene, SH degree 3).
     #[arg(long, default_value_t = 200_000)]
     n: usize,
@@ -187,6 +201,15 @@ fn print_fuse(r: &FuseBench) {
         "forward render: {:.0} visible Gaussians, {:.0} tile intersections per view",
         f.visible_per_view, f.intersections_per_view
     );
+    let scenes: Vec<String> = r
+        .methods
+        .iter()
+        .map(|m| format!("{} {:.0} MiB", m.key, mib(m.scene_device_bytes)))
+        .collect();
+    println!("scene on the device per method: {}", scenes.join(", "));
+    if let Some(peak) = r.peak_host_bytes {
+        println!("host memory peak: {:.0} MiB", mib(peak));
+    }
 }
 
 pub fn run(cmd: BenchCommand) -> Result<()> {
@@ -292,11 +315,16 @@ fn run_fuse(gpu: &Gpu, a: FuseArgs) -> Result<()> {
             _ => None,
         })
         .collect::<Vec<_>>();
+    let (n, width, height) = match a.preset {
+        Some(FusePreset::OneMillion) => (1_000_000, 1920, 1080),
+        Some(FusePreset::SixMillion) => (6_000_000, 1920, 1080),
+        None => (a.n, a.width, a.height),
+    };
     let spec = FuseBenchSpec {
-        n: a.n,
+        n,
         views: a.views,
-        width: a.width,
-        height: a.height,
+        width,
+        height,
         classes: a.classes,
         iters: a.iters,
         seed: a.seed,

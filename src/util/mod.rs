@@ -1,6 +1,7 @@
 //! Small shared utilities.
 
 pub mod atomic_write;
+pub mod memory;
 pub mod npy;
 pub mod parallel;
 pub mod rng;
