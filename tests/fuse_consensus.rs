@@ -1,4 +1,5 @@
 //! Segment consensus (issue 16).
+#![allow(clippy::needless_range_loop)] // index loops mirror the plain transcriptions
 
 mod common;
 
@@ -405,7 +406,7 @@ fn diagnose_segments() {
     let gpu = gpu();
     let classes = CompactClasses::from_table(&s.room.classes).unwrap();
     let labels = noisy_maps(&s, &classes);
-    let scene = GpuScene::upload(&gpu, &s.gaussians).unwrap();
+    let scene = GpuScene::upload(gpu, &s.gaussians).unwrap();
     let params = ConsensusParams::default();
     let (c, stats) = fuse_consensus(
         gpu,
@@ -479,6 +480,34 @@ fn diagnose_segments() {
         .count();
     let unseen = (0..n).filter(|&g| c.assignment.class[g].is_none()).count();
     eprintln!("n {n} segments {segs} in_big {in_big} impure_class {impure_class} impure_inst {impure_inst} seg_wrong(majority) {seg_wrong} from_segment {} acc {:.4} unseen {unseen} flagged {} wall {:.2}s", c.from_segment, right as f64 / n as f64, c.segments.iter().filter(|s| s.flagged).count(), stats.wall_s);
-    let _ = NO_LABEL;
+    let t = std::time::Instant::now();
+    let cfg = FuseConfig {
+        method: semsplat::fuse::Method::FlashSplat,
+        ..Default::default()
+    };
+    semsplat::fuse::accumulate(
+        gpu,
+        &scene,
+        &s.cameras,
+        &labels,
+        classes.len(),
+        &cfg,
+        |_, _| {},
+    )
+    .unwrap();
+    eprintln!("flashsplat accumulate {:.2}s", t.elapsed().as_secs_f64());
+    let t = std::time::Instant::now();
+    fuse_consensus(
+        gpu,
+        &scene,
+        &s.gaussians.means,
+        &s.cameras,
+        &labels,
+        classes.len(),
+        &FuseConfig::default(),
+        &params,
+    )
+    .unwrap();
+    eprintln!("segment consensus again {:.2}s", t.elapsed().as_secs_f64());
     check_validation(gpu);
 }

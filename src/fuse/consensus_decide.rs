@@ -160,9 +160,9 @@ pub fn merge_segments(
 fn dominant_regions(obs: &Observations, segment: &[u32]) -> Vec<Vec<(u32, u32)>> {
     let count = segment.iter().map(|&s| s as usize + 1).max().unwrap_or(0);
     let mut entries: Vec<(u32, u32, u32)> = Vec::with_capacity(obs.view.len());
-    for g in 0..obs.n {
+    for (g, &seg) in segment.iter().enumerate().take(obs.n) {
         for i in obs.row(g) {
-            entries.push((segment[g], obs.view[i], obs.region[i]));
+            entries.push((seg, obs.view[i], obs.region[i]));
         }
     }
     entries.sort_unstable();
@@ -238,9 +238,9 @@ fn segment_votes(
     classes: usize,
 ) -> (Vec<Vec<f64>>, Vec<Vec<f64>>, Vec<usize>) {
     let mut entries: Vec<(u32, u32, u32)> = Vec::with_capacity(obs.view.len());
-    for g in 0..obs.n {
+    for (g, &seg) in segment.iter().enumerate().take(obs.n) {
         for i in obs.row(g) {
-            entries.push((segment[g], obs.view[i], obs.label[i]));
+            entries.push((seg, obs.view[i], obs.label[i]));
         }
     }
     entries.sort_unstable();
