@@ -12,8 +12,8 @@ use super::progress::{follow, views_bar};
 use semsplat::dataset::{user_classes, DatasetPaths};
 use semsplat::eval::label_render::LabelRenderer;
 use semsplat::fuse::{
-    accumulate, assign_one_vs_rest, assign_semantic, Accumulation, ClassScores, FuseConfig,
-    FuseStats, Method,
+    accumulate, assign_one_vs_rest, assign_semantic_near, nearest_neighbours, Accumulation,
+    ClassScores, FuseConfig, FuseStats, Method,
 };
 use semsplat::gpu::Gpu;
 use semsplat::render::GpuScene;
@@ -33,6 +33,9 @@ enum MethodArg {
     Vote,
     /// FlashSplat: optimal assignment from every pixel's alpha*T contributions.
     Flashsplat,
+    /// Segment consensus: 3D segments from co-occurrence in connected label regions, one
+    /// vote per view and segment (robust to per-view label flicker).
+    SegmentConsensus,
 }
 
 #[derive(Args)]
@@ -324,7 +327,9 @@ fn fuse_views(
 
 /// Gives every Gaussian its winning class (user id, -1 unseen) and that class's share.
 fn assign_classes(g: &mut Gaussians, scores: &ClassScores, table: &ClassTable) {
-    let assignment = assign_semantic(scores);
+    // Ties go to the class the Gaussian's 8 nearest neighbours hold most evidence for.
+    let knn = nearest_neighbours(&g.means, 8);
+    let assignment = assign_semantic_near(scores, Some((&knn, 8)));
     let rows: Vec<u32> = table.classes.iter().map(|c| c.id).collect();
     g.class_ids = Some(user_classes(&rows, assignment.class.iter().copied()));
     g.class_conf = Some(assignment.confidence);

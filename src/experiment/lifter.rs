@@ -39,12 +39,13 @@ impl Lifter {
 }
 
 /// Every lifter: the fusion methods in [`SPELLINGS`] order, then the joint ones.
-pub const ALL_METHODS: [Lifter; 7] = [
+pub const ALL_METHODS: [Lifter; 8] = [
     Lifter::Fuse(SPELLINGS[0].method),
     Lifter::Fuse(SPELLINGS[1].method),
     Lifter::Fuse(SPELLINGS[2].method),
     Lifter::Fuse(SPELLINGS[3].method),
     Lifter::Fuse(SPELLINGS[4].method),
+    Lifter::Fuse(SPELLINGS[5].method),
     Lifter::JointSemantics,
     Lifter::JointFull,
 ];

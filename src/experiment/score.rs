@@ -13,7 +13,10 @@ use crate::dataset::{user_classes, CompactClasses};
 use crate::eval::image_quality::{image_quality, ImageQuality};
 use crate::eval::label_render::LabelRenderer;
 use crate::eval::metrics::{gaussian_accuracy, ClassIou, Confusion};
-use crate::fuse::{accumulate, assign_semantic, FuseConfig, Method};
+use crate::fuse::{
+    accumulate, assign_semantic_near, fuse_consensus, nearest_neighbours, ConsensusParams,
+    FuseConfig, Method, SegmentVotes,
+};
 use crate::gpu::Gpu;
 use crate::render::GpuScene;
 use crate::scene::labels::LabelMap;
@@ -49,6 +52,9 @@ pub struct MethodScore {
     /// PSNR and SSIM of the held-out views rendered from the lifted scene, for methods that
     /// change appearance (joint).
     pub image_quality: Option<ImageQuality>,
+    /// Segment consensus: its segments (vote split per class) and each Gaussian's segment.
+    #[serde(skip)]
+    pub segments: Option<(Vec<SegmentVotes>, Vec<u32>)>,
 }
 
 /// A scene a method rebuilt, with the truth carried through densification.
@@ -161,6 +167,7 @@ pub fn score_methods(
             confidence,
             lifted,
             peak_device_bytes,
+            segments,
         } = lifted;
         let scene = lifted.as_ref().map_or(&s.gaussians, |l| &l.gaussians);
         let truth = lifted.as_ref().map_or(&truth0, |l| &l.truth);
@@ -187,6 +194,7 @@ pub fn score_methods(
             confidence,
             lifted,
             image_quality,
+            segments,
         });
     }
     Ok(out)
@@ -214,6 +222,7 @@ struct Lifted {
     confidence: Vec<f32>,
     lifted: Option<LiftedScene>,
     peak_device_bytes: u64,
+    segments: Option<(Vec<SegmentVotes>, Vec<u32>)>,
 }
 
 fn fuse_lifted(
@@ -228,6 +237,26 @@ fn fuse_lifted(
         method,
         ..Default::default()
     };
+    if method == Method::SegmentConsensus {
+        let params = ConsensusParams::default();
+        let (c, stats) = fuse_consensus(
+            gpu,
+            &scene,
+            &s.gaussians.means,
+            &s.cameras,
+            labels,
+            compact.len(),
+            &cfg,
+            &params,
+        )?;
+        return Ok(Lifted {
+            classes: user_classes(compact.user_ids(), c.assignment.class.iter().copied()),
+            confidence: c.assignment.confidence,
+            lifted: None,
+            peak_device_bytes: stats.peak_device_bytes,
+            segments: Some((c.segments, c.segment)),
+        });
+    }
     let (evidence, stats) = accumulate(
         gpu,
         &scene,
@@ -237,13 +266,16 @@ fn fuse_lifted(
         &cfg,
         |_, _| {},
     )?;
-    let assignment = assign_semantic(&evidence);
+    // Ties go to the class the Gaussian's 8 nearest neighbours hold most evidence for.
+    let knn = nearest_neighbours(&s.gaussians.means, 8);
+    let assignment = assign_semantic_near(&evidence, Some((&knn, 8)));
     let classes = user_classes(compact.user_ids(), assignment.class.iter().copied());
     Ok(Lifted {
         classes,
         confidence: assignment.confidence,
         lifted: None,
         peak_device_bytes: stats.peak_device_bytes,
+        segments: None,
     })
 }
 
@@ -298,5 +330,6 @@ fn joint_lifted(
             gaussians: out.gaussians,
         }),
         peak_device_bytes: out.peak_device_bytes,
+        segments: None,
     })
 }

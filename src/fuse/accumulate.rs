@@ -207,6 +207,9 @@ pub fn accumulate(
     cfg: &FuseConfig,
     mut progress: impl FnMut(usize, usize),
 ) -> Result<(ClassScores, FuseStats)> {
+    if cfg.method == Method::SegmentConsensus {
+        return super::consensus::consensus_evidence(gpu, scene, cams, labels, classes, cfg);
+    }
     let start = std::time::Instant::now();
     let n = scene.n as usize;
     check_atomics(gpu, cfg.accumulation)?;
@@ -266,6 +269,7 @@ fn accumulate_view(
     let opts = cfg.render_options();
     let run = match cfg.method {
         Method::Vote => return record_vote(raster.gpu(), scene, cam, labels, pass, cfg),
+        Method::SegmentConsensus => bail!("segment consensus has no per-view evidence pass"),
         // Centers vote once the whole view's depth is rendered, in a submission of its own:
         // a binning that overflowed runs again, and must not have voted.
         Method::VoteOcclusion => {

@@ -11,26 +11,55 @@ pub struct Assignment {
     pub confidence: Vec<f32>,
 }
 
-/// Semantic mode: the class with the most evidence (ties: the lower class index).
+/// Semantic mode: the class with the most evidence. Ties are never broken by class index
+/// (that favoured floor, wall and ceiling, the lowest ids): see [`assign_semantic_near`];
+/// without neighbours, the tied class with the most evidence over the whole scene wins.
 pub fn assign_semantic(a: &ClassScores) -> Assignment {
+    assign_semantic_near(a, None)
+}
+
+/// Semantic mode with ties broken by neighbours: among the tied classes, the one with the
+/// most evidence summed over the Gaussian's neighbours (`knn`: [n][k] rows, `u32::MAX` for
+/// none); then the one with the most evidence over the whole scene (the scene's prior); a
+/// tie that remains leaves the Gaussian undecided (None, confidence 0).
+pub fn assign_semantic_near(a: &ClassScores, knn: Option<(&[u32], usize)>) -> Assignment {
+    let scene_mass: Vec<f64> = (0..a.classes).map(|e| a.row(e).iter().sum()).collect();
     let mut class = vec![None; a.n];
     let mut confidence = vec![0.0f32; a.n];
     for g in 0..a.n {
-        let mut total = 0.0;
-        let mut best: Option<(usize, f64)> = None;
-        for e in 0..a.classes {
-            let v = a.get(e, g);
-            total += v;
-            if v > 0.0 && best.is_none_or(|(_, b)| v > b) {
-                best = Some((e, v));
-            }
+        let total: f64 = (0..a.classes).map(|e| a.get(e, g)).sum();
+        let top = (0..a.classes).map(|e| a.get(e, g)).fold(0.0f64, f64::max);
+        if top <= 0.0 {
+            continue;
         }
-        if let Some((e, v)) = best {
+        let mut tied: Vec<usize> = (0..a.classes).filter(|&e| a.get(e, g) == top).collect();
+        if let (Some((knn, k)), true) = (knn, tied.len() > 1) {
+            tied = strongest(&tied, |e| {
+                knn[g * k..(g + 1) * k]
+                    .iter()
+                    .filter(|&&h| h != u32::MAX)
+                    .map(|&h| a.get(e, h as usize))
+                    .sum()
+            });
+        }
+        let prior = tied.iter().map(|&e| scene_mass[e]).fold(f64::MIN, f64::max);
+        let mut winners = tied.into_iter().filter(|&e| scene_mass[e] == prior);
+        if let (Some(e), None) = (winners.next(), winners.next()) {
             class[g] = Some(e);
-            confidence[g] = (v / total) as f32;
+            confidence[g] = (top / total) as f32;
         }
     }
     Assignment { class, confidence }
+}
+
+/// The classes of `among` with the largest `score`.
+fn strongest(among: &[usize], score: impl Fn(usize) -> f64) -> Vec<usize> {
+    let best = among.iter().map(|&e| score(e)).fold(f64::MIN, f64::max);
+    among
+        .iter()
+        .copied()
+        .filter(|&e| score(e) == best)
+        .collect()
 }
 
 /// Listing 1.1 of FlashSplat: for each class e, the pair (rest, e) of every Gaussian is

@@ -24,6 +24,11 @@ pub enum Method {
     /// sees under each label, so every view counts about once, as in a vote, instead of in
     /// proportion to the pixels it covers. Robust to per-view label flicker.
     FlashSplatPerView,
+    /// Segment consensus: neighbouring Gaussians that share a connected label region in the
+    /// views that see both form 3D segments; each segment's class is voted with every view
+    /// counting once, and each Gaussian takes its segment's class (src/fuse/consensus.rs).
+    /// Robust to per-view label flicker.
+    SegmentConsensus,
 }
 
 impl Method {
@@ -67,12 +72,13 @@ macro_rules! spellings {
 }
 
 /// Every method, in the order tables and charts list them.
-pub const SPELLINGS: [Spelling; 5] = spellings! {
+pub const SPELLINGS: [Spelling; 6] = spellings! {
     Vote: "vote";
     VoteOcclusion: "vote" --"occlusion";
     VoteWeighted: "vote" --"weighted";
     FlashSplat: "flashsplat";
     FlashSplatPerView: "flashsplat" --"per-view";
+    SegmentConsensus: "segment-consensus";
 };
 
 impl Method {

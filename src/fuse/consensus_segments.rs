@@ -1,0 +1,261 @@
+//! The host side of segment consensus (src/fuse/consensus.rs): connected label regions of a
+//! view, the Gaussians' nearest neighbours, the 3D segments built from co-occurrence in
+//! regions, and each segment's and Gaussian's class with each view counted once.
+//!
+//! Why regions: flicker relabels a whole object in a view but does not move its edges, so two
+//! neighbouring Gaussians of one object fall in the same connected label region in (nearly)
+//! every view that sees both, whatever class the view gives it; Gaussians of two objects fall
+//! in different regions except in views where noise gave both the same class. Class ids only
+//! find region boundaries here; they vote once per view, per segment.
+
+use super::accumulate::NO_LABEL;
+
+/// Per Gaussian, the views that observed it (center visible on a labeled pixel), in
+/// compressed rows sorted by view: what a view says about a Gaussian.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Observations {
+    pub n: usize,
+    /// Rows: Gaussian g's observations are `offsets[g]..offsets[g + 1]`.
+    pub offsets: Vec<u32>,
+    pub view: Vec<u32>,
+    /// Compact class of the pixel under the center.
+    pub label: Vec<u32>,
+    /// Connected label region of that pixel, unique within the view.
+    pub region: Vec<u32>,
+}
+
+impl Observations {
+    /// From per-view lists of (Gaussian, label, region), views in order.
+    pub fn from_views(n: usize, per_view: &[Vec<(u32, u32, u32)>]) -> Observations {
+        let mut counts = vec![0u32; n + 1];
+        for list in per_view {
+            for &(g, _, _) in list {
+                counts[g as usize + 1] += 1;
+            }
+        }
+        for g in 0..n {
+            counts[g + 1] += counts[g];
+        }
+        let total = counts[n] as usize;
+        let mut next = counts.clone();
+        let (mut view, mut label, mut region) = (vec![0; total], vec![0; total], vec![0; total]);
+        // Views in order, so every row ends up sorted by view.
+        for (v, list) in per_view.iter().enumerate() {
+            for &(g, l, r) in list {
+                let at = next[g as usize] as usize;
+                next[g as usize] += 1;
+                (view[at], label[at], region[at]) = (v as u32, l, r);
+            }
+        }
+        Observations {
+            n,
+            offsets: counts,
+            view,
+            label,
+            region,
+        }
+    }
+
+    pub fn row(&self, g: usize) -> std::ops::Range<usize> {
+        self.offsets[g] as usize..self.offsets[g + 1] as usize
+    }
+}
+
+/// Connected regions (4-neighbourhood) of equal labels; unlabeled pixels get [`NO_LABEL`].
+/// Region ids are numbered in scan order of their first pixel, so they are deterministic.
+pub fn label_regions(labels: &[u32], width: usize) -> Vec<u32> {
+    let mut parent: Vec<u32> = (0..labels.len() as u32).collect();
+    for p in 0..labels.len() {
+        if labels[p] == NO_LABEL {
+            continue;
+        }
+        if p % width > 0 && labels[p - 1] == labels[p] {
+            union(&mut parent, p as u32, p as u32 - 1);
+        }
+        if p >= width && labels[p - width] == labels[p] {
+            union(&mut parent, p as u32, (p - width) as u32);
+        }
+    }
+    let mut id = vec![NO_LABEL; labels.len()];
+    let mut next = 0u32;
+    for p in 0..labels.len() {
+        if labels[p] == NO_LABEL {
+            continue;
+        }
+        let root = find(&mut parent, p as u32) as usize;
+        if id[root] == NO_LABEL {
+            id[root] = next;
+            next += 1;
+        }
+        id[p] = id[root];
+    }
+    id
+}
+
+pub(crate) fn find(parent: &mut [u32], mut x: u32) -> u32 {
+    while parent[x as usize] != x {
+        let up = parent[parent[x as usize] as usize];
+        parent[x as usize] = up;
+        x = up;
+    }
+    x
+}
+
+/// Joins the sets of a and b under the smaller root (deterministic whatever the order).
+pub(crate) fn union(parent: &mut [u32], a: u32, b: u32) {
+    let (ra, rb) = (find(parent, a), find(parent, b));
+    if ra != rb {
+        let (lo, hi) = (ra.min(rb), ra.max(rb));
+        parent[hi as usize] = lo;
+    }
+}
+
+/// The `k` nearest other Gaussians of each (by center distance, ties by index), [n][k]
+/// row-major, `u32::MAX` where fewer exist. Uniform grid, searched in growing shells.
+pub fn nearest_neighbours(means: &[[f32; 3]], k: usize) -> Vec<u32> {
+    let n = means.len();
+    let mut out = vec![u32::MAX; n * k];
+    if n < 2 || k == 0 {
+        return out;
+    }
+    let grid = Grid::new(means);
+    let mut best: Vec<(f64, u32)> = Vec::with_capacity(4 * k);
+    for g in 0..n {
+        best.clear();
+        let home = grid.cell_of(means[g]);
+        for ring in 0..=Grid::MAX_RING {
+            grid.for_shell(home, ring, |h| {
+                if h as usize != g {
+                    best.push((dist2(means[g], means[h as usize]), h));
+                }
+            });
+            best.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            best.truncate(k);
+            // Every Gaussian outside the searched cube is farther than ring * cell.
+            let reach = ring as f64 * grid.cell;
+            if best.len() == k && best[k - 1].0 <= reach * reach {
+                break;
+            }
+        }
+        for (slot, &(_, h)) in out[g * k..].iter_mut().zip(&best) {
+            *slot = h;
+        }
+    }
+    out
+}
+
+fn dist2(a: [f32; 3], b: [f32; 3]) -> f64 {
+    (0..3).map(|i| (a[i] as f64 - b[i] as f64).powi(2)).sum()
+}
+
+/// Gaussians binned in cubic cells.
+struct Grid {
+    origin: [f64; 3],
+    cell: f64,
+    dims: [i64; 3],
+    /// Gaussians sorted by cell; cell c holds `members[starts[c]..starts[c + 1]]`.
+    starts: Vec<u32>,
+    members: Vec<u32>,
+}
+
+impl Grid {
+    /// Shells searched at most: past it a Gaussian keeps the neighbours found.
+    const MAX_RING: i64 = 6;
+
+    fn new(means: &[[f32; 3]]) -> Grid {
+        let mut lo = [f64::MAX; 3];
+        let mut hi = [f64::MIN; 3];
+        for m in means {
+            for i in 0..3 {
+                lo[i] = lo[i].min(m[i] as f64);
+                hi[i] = hi[i].max(m[i] as f64);
+            }
+        }
+        // Surfaces dominate: about 4 Gaussians per occupied cell when spread over the
+        // bounding box's largest face.
+        let ext: Vec<f64> = (0..3).map(|i| (hi[i] - lo[i]).max(1e-6)).collect();
+        let mut faces = [ext[0] * ext[1], ext[1] * ext[2], ext[0] * ext[2]];
+        faces.sort_by(f64::total_cmp);
+        let cell = (faces[2] * 4.0 / means.len() as f64).sqrt().max(1e-6);
+        let dims = [0, 1, 2].map(|i| ((ext[i] / cell).floor() as i64 + 1).min(1 << 20));
+        let mut grid = Grid {
+            origin: lo,
+            cell,
+            dims,
+            starts: Vec::new(),
+            members: Vec::new(),
+        };
+        let cells: Vec<usize> = means.iter().map(|&m| grid.index(grid.cell_of(m))).collect();
+        let total = (dims[0] * dims[1] * dims[2]) as usize;
+        let mut starts = vec![0u32; total + 1];
+        for &c in &cells {
+            starts[c + 1] += 1;
+        }
+        for c in 0..total {
+            starts[c + 1] += starts[c];
+        }
+        let mut next = starts.clone();
+        let mut members = vec![0u32; means.len()];
+        for (g, &c) in cells.iter().enumerate() {
+            members[next[c] as usize] = g as u32;
+            next[c] += 1;
+        }
+        (grid.starts, grid.members) = (starts, members);
+        grid
+    }
+
+    fn cell_of(&self, m: [f32; 3]) -> [i64; 3] {
+        [0, 1, 2].map(|i| {
+            (((m[i] as f64 - self.origin[i]) / self.cell).floor() as i64).clamp(0, self.dims[i] - 1)
+        })
+    }
+
+    fn index(&self, c: [i64; 3]) -> usize {
+        ((c[2] * self.dims[1] + c[1]) * self.dims[0] + c[0]) as usize
+    }
+
+    /// Calls `f` on every Gaussian in the cells at Chebyshev distance exactly `ring`.
+    fn for_shell(&self, home: [i64; 3], ring: i64, mut f: impl FnMut(u32)) {
+        for dz in -ring..=ring {
+            for dy in -ring..=ring {
+                for dx in -ring..=ring {
+                    if dx.abs().max(dy.abs()).max(dz.abs()) != ring {
+                        continue;
+                    }
+                    let c = [home[0] + dx, home[1] + dy, home[2] + dz];
+                    if (0..3).any(|i| c[i] < 0 || c[i] >= self.dims[i]) {
+                        continue;
+                    }
+                    let i = self.index(c);
+                    for &g in &self.members[self.starts[i] as usize..self.starts[i + 1] as usize] {
+                        f(g);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Of the views that observed both rows: how many put them in the same region, and how many
+/// in different ones. Rows are sorted by view.
+pub fn co_occurrence(obs: &Observations, a: usize, b: usize) -> (u32, u32) {
+    let (ra, rb) = (obs.row(a), obs.row(b));
+    let (mut i, mut j) = (ra.start, rb.start);
+    let (mut together, mut apart) = (0, 0);
+    while i < ra.end && j < rb.end {
+        match obs.view[i].cmp(&obs.view[j]) {
+            std::cmp::Ordering::Less => i += 1,
+            std::cmp::Ordering::Greater => j += 1,
+            std::cmp::Ordering::Equal => {
+                if obs.region[i] == obs.region[j] {
+                    together += 1;
+                } else {
+                    apart += 1;
+                }
+                i += 1;
+                j += 1;
+            }
+        }
+    }
+    (together, apart)
+}
