@@ -3,13 +3,17 @@
 //! SuperSplat compressed PLY, class ids written unsigned. Every file here is built byte by
 //! byte (or by a small generator following the other tool's writer), no network.
 
+use std::io::{Read, Write};
 use std::path::Path;
 use std::process::Command;
 
 use semsplat::fuse::ClassScores;
-use semsplat::scene::ply::{read_ply, write_ply};
+use semsplat::scene::gaussians::sh_coeffs_for_degree;
+use semsplat::scene::ply::{read_ply, read_ply_from, write_ply, write_ply_to};
+use semsplat::scene::scene_file::read_scene;
 use semsplat::scene::Gaussians;
 use semsplat::util::npy::parse_npy_f64;
+use semsplat::util::Rng;
 
 fn semsplat(args: &[&str]) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_semsplat"))
@@ -151,4 +155,450 @@ fn fuse_contrib_reads_fortran_order_evidence() {
     ]);
     let fused = read_ply(&d.join("out.ply")).unwrap();
     assert_eq!(fused.class_ids.unwrap(), vec![3, 7, 7]);
+}
+
+// ---------------------------------------------------------------------------------------
+// Splat files written the way other tools write them, compared with the standard PLY reading
+// of the same Gaussians within each format's quantization.
+
+const SH_C0: f64 = 0.282_094_791_773_878_14;
+
+fn sigmoid(x: f64) -> f64 {
+    1.0 / (1.0 + (-x).exp())
+}
+
+/// Gaussians inside every format's range: |DC| < 1.7 (.splat clips colour to [0, 1]), SH
+/// rest in [-0.9, 0.9] (spz's [-1, 1]), log-scales in [-6, 0], w the largest quaternion
+/// component of moderate size (so spz version 2's derived w stays accurate).
+fn format_gaussians(n: usize, sh_degree: u32, seed: u64) -> Gaussians {
+    let mut rng = Rng::new(seed);
+    let mut u = |a: f64, b: f64| rng.range_f64(a, b) as f32;
+    let k = sh_coeffs_for_degree(sh_degree);
+    let mut g = Gaussians {
+        sh_degree,
+        ..Default::default()
+    };
+    for _ in 0..n {
+        g.means.push([u(-3.0, 3.0), u(-3.0, 3.0), u(-3.0, 3.0)]);
+        g.log_scales
+            .push([u(-6.0, 0.0), u(-6.0, 0.0), u(-6.0, 0.0)]);
+        g.quats
+            .push([u(1.0, 2.0), u(-0.8, 0.8), u(-0.8, 0.8), u(-0.8, 0.8)]);
+        g.opacity_logits.push(u(-3.0, 3.0));
+        for c in 0..k * 3 {
+            g.sh.push(if c < 3 { u(-1.7, 1.7) } else { u(-0.9, 0.9) });
+        }
+    }
+    g
+}
+
+/// The standard PLY reading of `g` (what a user's scene.ply would load as).
+fn via_standard_ply(g: &Gaussians) -> Gaussians {
+    let mut bytes = Vec::new();
+    write_ply_to(&mut bytes, g).unwrap();
+    read_ply_from(&bytes[..], Some(bytes.len() as u64)).unwrap()
+}
+
+fn unit_quat(q: [f32; 4]) -> [f64; 4] {
+    let n = q.iter().map(|&v| (v as f64).powi(2)).sum::<f64>().sqrt();
+    q.map(|v| v as f64 / n)
+}
+
+/// Per-field tolerances of a lossy format.
+struct Tol {
+    mean: f64,
+    log_scale: f64,
+    /// On sigmoid(opacity).
+    alpha: f64,
+    dc: f64,
+    rest: f64,
+    /// Lower bound of |dot| of the unit quaternions.
+    quat_dot: f64,
+}
+
+fn assert_close(got: &Gaussians, want: &Gaussians, tol: &Tol, what: &str) {
+    assert_eq!(got.len(), want.len(), "{what}: count");
+    assert_eq!(got.sh_degree, want.sh_degree, "{what}: SH degree");
+    got.validate().unwrap();
+    let k3 = want.sh_coeffs() * 3;
+    for i in 0..want.len() {
+        for a in 0..3 {
+            let d = (got.means[i][a] - want.means[i][a]).abs() as f64;
+            assert!(d <= tol.mean, "{what}: Gaussian {i} mean {a} off by {d}");
+            let d = (got.log_scales[i][a] - want.log_scales[i][a]).abs() as f64;
+            assert!(
+                d <= tol.log_scale,
+                "{what}: Gaussian {i} log-scale {a} off by {d}"
+            );
+        }
+        let d =
+            (sigmoid(got.opacity_logits[i] as f64) - sigmoid(want.opacity_logits[i] as f64)).abs();
+        assert!(d <= tol.alpha, "{what}: Gaussian {i} opacity off by {d}");
+        let (qa, qb) = (unit_quat(got.quats[i]), unit_quat(want.quats[i]));
+        let dot: f64 = qa.iter().zip(&qb).map(|(a, b)| a * b).sum::<f64>().abs();
+        assert!(
+            dot >= tol.quat_dot,
+            "{what}: Gaussian {i} rotation: |dot| {dot}"
+        );
+        for c in 0..k3 {
+            let d = (got.sh[i * k3 + c] - want.sh[i * k3 + c]).abs() as f64;
+            let t = if c < 3 { tol.dc } else { tol.rest };
+            assert!(
+                d <= t,
+                "{what}: Gaussian {i} SH value {c} off by {d} (tolerance {t})"
+            );
+        }
+    }
+}
+
+/// A `.splat` as antimatter15's `convert.py` writes it: float32 position and exp(scale),
+/// `(0.5 + SH_C0 f_dc, sigmoid(opacity)) * 255` clipped and truncated to u8, and
+/// `q / |q| * 128 + 128` clipped and truncated to u8 (w x y z).
+fn write_splat_like_convert_py(g: &Gaussians) -> Vec<u8> {
+    let to_u8 = |v: f64| v.clamp(0.0, 255.0) as u8;
+    let mut out = Vec::new();
+    for i in 0..g.len() {
+        for v in g.means[i] {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        for v in g.log_scales[i] {
+            out.extend_from_slice(&v.exp().to_le_bytes());
+        }
+        for c in 0..3 {
+            out.push(to_u8((0.5 + SH_C0 * g.sh[i * 3 + c] as f64) * 255.0));
+        }
+        out.push(to_u8(sigmoid(g.opacity_logits[i] as f64) * 255.0));
+        for v in unit_quat(g.quats[i]) {
+            out.push(to_u8(v * 128.0 + 128.0));
+        }
+    }
+    out
+}
+
+#[test]
+fn splat_file_matches_the_standard_ply_within_its_quantization() {
+    let g = format_gaussians(200, 0, 11);
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("scene.splat");
+    std::fs::write(&path, write_splat_like_convert_py(&g)).unwrap();
+    let tol = Tol {
+        mean: 0.0,
+        log_scale: 1e-5,
+        // Truncation to u8: up to one step, plus the clamp of 0 and 255.
+        alpha: 1.0 / 255.0 + 1e-6,
+        dc: 1.0 / 255.0 / SH_C0 + 1e-5,
+        rest: 0.0,
+        quat_dot: 0.999,
+    };
+    assert_close(
+        &read_scene(&path).unwrap(),
+        &via_standard_ply(&g),
+        &tol,
+        ".splat",
+    );
+    // A cut record is named as such.
+    let mut bytes = std::fs::read(&path).unwrap();
+    bytes.truncate(bytes.len() - 3);
+    std::fs::write(&path, bytes).unwrap();
+    let err = format!("{:#}", read_scene(&path).unwrap_err());
+    assert!(
+        err.contains("scene.splat") && err.contains("multiple of 32"),
+        "{err}"
+    );
+}
+
+/// spz's `flipSh` signs for RDF <-> RUB (x 1, y -1, z -1), per coefficient past DC.
+const SPZ_FLIP_SH: [f32; 15] = [
+    -1., -1., 1., -1., 1., 1., -1., 1., -1., 1., -1., -1., 1., -1., 1.,
+];
+
+/// An .spz as nianticlabs/spz `packGaussians` + `serializePackedGaussians` write it from an
+/// RDF (PLY) scene, gzip-compressed: 12 fractional bits, SH quantized with 5 bits (degree 1)
+/// and 4 bits (higher), rotations as version 2 (first three) or 3 (smallest three).
+fn write_spz_like_niantic(g: &Gaussians, version: u32) -> Vec<u8> {
+    let to_u8 = |x: f32| x.round().clamp(0.0, 255.0) as u8;
+    let quantize_sh = |x: f32, bucket: i32| {
+        let q = (x * 128.0).round() as i32 + 128;
+        (((q + bucket / 2) / bucket) * bucket).clamp(0, 255) as u8
+    };
+    let n = g.len();
+    let rest = g.sh_coeffs() - 1;
+    let mut raw = Vec::new();
+    raw.extend_from_slice(&0x5053_474e_u32.to_le_bytes());
+    raw.extend_from_slice(&version.to_le_bytes());
+    raw.extend_from_slice(&(n as u32).to_le_bytes());
+    raw.extend_from_slice(&[g.sh_degree as u8, 12, 0, 0]);
+    let flip_p = [1.0f32, -1.0, -1.0];
+    for i in 0..n {
+        for a in 0..3 {
+            let fixed = (flip_p[a] * g.means[i][a] * 4096.0).round() as i32;
+            raw.extend_from_slice(&fixed.to_le_bytes()[..3]);
+        }
+    }
+    for i in 0..n {
+        raw.push(to_u8(sigmoid(g.opacity_logits[i] as f64) as f32 * 255.0));
+    }
+    for i in 0..n {
+        for c in 0..3 {
+            raw.push(to_u8(
+                g.sh[i * g.sh_coeffs() * 3 + c] * (0.15 * 255.0) + 0.5 * 255.0,
+            ));
+        }
+    }
+    for i in 0..n {
+        for a in 0..3 {
+            raw.push(to_u8((g.log_scales[i][a] + 10.0) * 16.0));
+        }
+    }
+    for i in 0..n {
+        let w = unit_quat(g.quats[i]);
+        // xyzw in RUB: x y z times (1, -1, -1).
+        let q = [w[1] as f32, -w[2] as f32, -w[3] as f32, w[0] as f32];
+        if version >= 3 {
+            raw.extend_from_slice(&pack_smallest_three(q));
+        } else {
+            let s = if q[3] < 0.0 { -127.5 } else { 127.5 };
+            for v in &q[..3] {
+                raw.push(to_u8(v * s + 127.5));
+            }
+        }
+    }
+    for i in 0..n {
+        for k in 0..rest {
+            for c in 0..3 {
+                let v = SPZ_FLIP_SH[k] * g.sh[i * g.sh_coeffs() * 3 + (1 + k) * 3 + c];
+                raw.push(quantize_sh(v, if k < 3 { 8 } else { 16 }));
+            }
+        }
+    }
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+    gz.write_all(&raw).unwrap();
+    gz.finish().unwrap()
+}
+
+/// spz's `packQuaternionSmallestThree` (xyzw order).
+fn pack_smallest_three(q: [f32; 4]) -> [u8; 4] {
+    let largest = (0..4)
+        .max_by(|&a, &b| q[a].abs().partial_cmp(&q[b].abs()).unwrap())
+        .unwrap();
+    let negate = q[largest] < 0.0;
+    let mut comp = largest as u32;
+    for (i, v) in q.iter().enumerate() {
+        if i != largest {
+            let negbit = ((*v < 0.0) ^ negate) as u32;
+            let mag = (511.0 * (v.abs() / std::f32::consts::FRAC_1_SQRT_2) + 0.5) as u32;
+            comp = (comp << 10) | (negbit << 9) | mag;
+        }
+    }
+    comp.to_le_bytes()
+}
+
+#[test]
+fn spz_versions_2_and_3_match_the_standard_ply_within_their_quantization() {
+    let g = format_gaussians(150, 3, 12);
+    let tmp = tempfile::tempdir().unwrap();
+    let tol = |quat_dot| Tol {
+        mean: 0.5 / 4096.0 + 1e-5,
+        log_scale: 0.5 / 16.0 + 1e-5,
+        alpha: 0.5 / 255.0 + 1e-5,
+        dc: 0.5 / (0.15 * 255.0) + 1e-5,
+        // 4-bit buckets of 16/128 (degree 2 and 3): half a bucket plus the 1/128 rounding.
+        rest: 8.0 / 128.0 + 1.0 / 128.0 + 1e-5,
+        quat_dot,
+    };
+    for (version, quat_dot) in [(2, 0.999), (3, 0.99999)] {
+        let path = tmp.path().join(format!("v{version}.spz"));
+        std::fs::write(&path, write_spz_like_niantic(&g, version)).unwrap();
+        let got = read_scene(&path).unwrap();
+        assert_close(
+            &got,
+            &via_standard_ply(&g),
+            &tol(quat_dot),
+            &format!("spz v{version}"),
+        );
+    }
+    // Degree 1 keeps 5 bits: half of an 8/128 bucket.
+    let g1 = format_gaussians(50, 1, 13);
+    let path = tmp.path().join("d1.spz");
+    std::fs::write(&path, write_spz_like_niantic(&g1, 2)).unwrap();
+    let t = Tol {
+        rest: 4.0 / 128.0 + 1.0 / 128.0 + 1e-5,
+        ..tol(0.999)
+    };
+    assert_close(
+        &read_scene(&path).unwrap(),
+        &via_standard_ply(&g1),
+        &t,
+        "spz degree 1",
+    );
+    // Not gzip, and a version this build does not read, are named.
+    std::fs::write(&path, b"NGSP but not gzip").unwrap();
+    let err = format!("{:#}", read_scene(&path).unwrap_err());
+    assert!(err.contains("d1.spz") && err.contains("gzip"), "{err}");
+    let mut v4 = write_spz_like_niantic(&g1, 2);
+    let mut raw = Vec::new();
+    flate2::read::GzDecoder::new(&v4[..])
+        .read_to_end(&mut raw)
+        .unwrap();
+    raw[4] = 4;
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+    gz.write_all(&raw).unwrap();
+    v4 = gz.finish().unwrap();
+    std::fs::write(&path, v4).unwrap();
+    let err = format!("{:#}", read_scene(&path).unwrap_err());
+    assert!(err.contains("version 4"), "{err}");
+}
+
+/// A compressed PLY as PlayCanvas splat-transform's `writeCompressedPly` / `CompressedChunk`
+/// write it: chunks of 256 with float min/max of position, log-scale and colour, uint32
+/// packed 11-10-11 position and scale, 2-10-10-10 rotation, 8-8-8-8 colour + opacity, and a
+/// `sh` element of `trunc((v / 8 + 0.5) * 256)` bytes. (splat-transform also sorts splats in
+/// Morton order; order is the writer's choice, so it is kept here.)
+fn write_compressed_ply_like_splat_transform(g: &Gaussians) -> Vec<u8> {
+    const CHUNK: usize = 256;
+    let n = g.len();
+    let chunks = n.div_ceil(CHUNK);
+    let rest = (g.sh_coeffs() - 1) * 3;
+    let mut header =
+        String::from("ply\nformat binary_little_endian 1.0\ncomment Generated by a test\n");
+    header += &format!("element chunk {chunks}\n");
+    for p in [
+        "min_x",
+        "min_y",
+        "min_z",
+        "max_x",
+        "max_y",
+        "max_z",
+        "min_scale_x",
+        "min_scale_y",
+        "min_scale_z",
+        "max_scale_x",
+        "max_scale_y",
+        "max_scale_z",
+        "min_r",
+        "min_g",
+        "min_b",
+        "max_r",
+        "max_g",
+        "max_b",
+    ] {
+        header += &format!("property float {p}\n");
+    }
+    header += &format!("element vertex {n}\n");
+    for p in [
+        "packed_position",
+        "packed_rotation",
+        "packed_scale",
+        "packed_color",
+    ] {
+        header += &format!("property uint {p}\n");
+    }
+    if rest > 0 {
+        header += &format!("element sh {n}\n");
+        for i in 0..rest {
+            header += &format!("property uchar f_rest_{i}\n");
+        }
+    }
+    header += "end_header\n";
+    let unorm = |v: f64, bits: u32| {
+        let t = ((1u32 << bits) - 1) as f64;
+        (v * t + 0.5).floor().clamp(0.0, t) as u32
+    };
+    let normalize = |x: f64, lo: f64, hi: f64| {
+        if x <= lo {
+            0.0
+        } else if x >= hi {
+            1.0
+        } else if hi - lo < 1e-5 {
+            0.0
+        } else {
+            (x - lo) / (hi - lo)
+        }
+    };
+    let k3 = g.sh_coeffs() * 3;
+    let mut chunk_data = Vec::new();
+    let mut vertex_data = Vec::new();
+    for c in 0..chunks {
+        let rows: Vec<usize> = (c * CHUNK..((c + 1) * CHUNK).min(n)).collect();
+        // Per-chunk min/max of x y z, log-scales and colours 0.5 + SH_C0 f_dc.
+        let field = |i: usize, f: usize| -> f64 {
+            match f {
+                0..=2 => g.means[i][f] as f64,
+                3..=5 => g.log_scales[i][f - 3] as f64,
+                _ => 0.5 + SH_C0 * g.sh[i * k3 + f - 6] as f64,
+            }
+        };
+        let lo: Vec<f64> = (0..9)
+            .map(|f| rows.iter().map(|&i| field(i, f)).fold(f64::MAX, f64::min))
+            .collect();
+        let hi: Vec<f64> = (0..9)
+            .map(|f| rows.iter().map(|&i| field(i, f)).fold(f64::MIN, f64::max))
+            .collect();
+        for group in [0, 3, 6] {
+            for f in group..group + 3 {
+                chunk_data.extend_from_slice(&(lo[f] as f32).to_le_bytes());
+            }
+            for f in group..group + 3 {
+                chunk_data.extend_from_slice(&(hi[f] as f32).to_le_bytes());
+            }
+        }
+        for &i in &rows {
+            let t = |f: usize| normalize(field(i, f), lo[f] as f32 as f64, hi[f] as f32 as f64);
+            let p111011 =
+                |a: usize| unorm(t(a), 11) << 21 | unorm(t(a + 1), 10) << 11 | unorm(t(a + 2), 11);
+            let mut q = unit_quat(g.quats[i]);
+            let largest = (0..4)
+                .max_by(|&a, &b| q[a].abs().partial_cmp(&q[b].abs()).unwrap())
+                .unwrap();
+            if q[largest] < 0.0 {
+                q = q.map(|v| -v);
+            }
+            let mut rot = largest as u32;
+            for (k, v) in q.iter().enumerate() {
+                if k != largest {
+                    rot = (rot << 10) | unorm(v * std::f64::consts::FRAC_1_SQRT_2 + 0.5, 10);
+                }
+            }
+            let color = unorm(t(6), 8) << 24
+                | unorm(t(7), 8) << 16
+                | unorm(t(8), 8) << 8
+                | unorm(sigmoid(g.opacity_logits[i] as f64), 8);
+            for word in [p111011(0), rot, p111011(3), color] {
+                vertex_data.extend_from_slice(&word.to_le_bytes());
+            }
+        }
+    }
+    let mut out = header.into_bytes();
+    out.extend_from_slice(&chunk_data);
+    out.extend_from_slice(&vertex_data);
+    // f_rest_j is channel-major: channel j / (K-1), coefficient 1 + j % (K-1).
+    let per = g.sh_coeffs() - 1;
+    for i in 0..n {
+        for j in 0..rest {
+            let v = g.sh[i * k3 + (1 + j % per) * 3 + j / per] as f64;
+            out.push(((v / 8.0 + 0.5) * 256.0).trunc().clamp(0.0, 255.0) as u8);
+        }
+    }
+    out
+}
+
+#[test]
+fn supersplat_compressed_ply_matches_the_standard_ply_within_its_quantization() {
+    // 300 splats: two chunks, the second partial.
+    let g = format_gaussians(300, 2, 14);
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("scene.compressed.ply");
+    std::fs::write(&path, write_compressed_ply_like_splat_transform(&g)).unwrap();
+    // Steps: position and scale 11/10 bits over the chunk's range (6 units), colour 8 bits
+    // over at most [0.02, 0.98], SH 8 bits over [-4, 4].
+    let tol = Tol {
+        mean: 6.0 / 1023.0 + 1e-4,
+        log_scale: 6.0 / 1023.0 + 1e-4,
+        alpha: 0.5 / 255.0 + 1e-5,
+        dc: 1.0 / 255.0 / SH_C0 + 1e-4,
+        rest: 8.0 / 256.0 + 1e-5,
+        quat_dot: 0.9999,
+    };
+    let got = read_scene(&path).unwrap();
+    assert_close(&got, &via_standard_ply(&g), &tol, "compressed PLY");
 }

@@ -20,7 +20,8 @@ use semsplat::render::GpuScene;
 use semsplat::scene::cameras::load_cameras;
 use semsplat::scene::classes::{read_class_table, write_class_table, ClassTable};
 use semsplat::scene::labels::{write_label_png, write_palette_png, LabelMap};
-use semsplat::scene::ply::{read_ply, write_classes_sidecar, write_ply};
+use semsplat::scene::ply::{write_classes_sidecar, write_ply};
+use semsplat::scene::scene_file::read_scene;
 use semsplat::scene::Gaussians;
 use semsplat::util::npy::write_npy_f32;
 use semsplat::util::write_bytes_atomic;
@@ -164,16 +165,7 @@ struct Report<'a> {
 }
 
 fn find_class(table: &ClassTable, key: &str) -> Result<u32> {
-    if let Some(c) = table.by_name(key) {
-        return Ok(c.id);
-    }
-    if let Ok(id) = key.parse::<u32>() {
-        if table.contains(id) {
-            return Ok(id);
-        }
-    }
-    let names: Vec<&str> = table.classes.iter().map(|c| c.name.as_str()).collect();
-    bail!("no class '{key}' in the class table (classes: {names:?})")
+    table.find(key).map(|c| c.id)
 }
 
 /// The evidence matrix and its row table, with the fusion statistics when it was rendered.
@@ -185,7 +177,7 @@ struct Evidence {
 
 pub fn run(args: FuseArgs) -> Result<()> {
     let start = Instant::now();
-    let mut g = read_ply(&args.scene)?;
+    let mut g = read_scene(&args.scene)?;
     let method = selected_method(&args)?;
     if !(-1.0..=1.0).contains(&args.gamma) {
         bail!("--gamma must lie in [-1, 1], got {}", args.gamma);

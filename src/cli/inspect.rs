@@ -421,6 +421,7 @@ fn inspect_cameras(path: &Path) -> Result<Report> {
         let kind = match kind {
             CameraJsonKind::Inria => "INRIA cameras.json",
             CameraJsonKind::Semsplat => "semsplat camera JSON",
+            CameraJsonKind::Nerfstudio => "nerfstudio transforms.json",
         };
         (kind, cams)
     } else {

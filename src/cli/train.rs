@@ -14,7 +14,8 @@ use semsplat::dataset::{user_classes, Dataset, DatasetPaths};
 use semsplat::gpu::Gpu;
 use semsplat::render::SemanticMode;
 use semsplat::scene::images::load_view_image;
-use semsplat::scene::ply::{read_ply, write_classes_sidecar, write_ply};
+use semsplat::scene::ply::{write_classes_sidecar, write_ply};
+use semsplat::scene::scene_file::read_scene;
 use semsplat::scene::Gaussians;
 use semsplat::train::config::TrainConfig;
 use semsplat::train::trainer::{
@@ -121,7 +122,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
     let start = Instant::now();
     let data = load_dataset(&args)?;
     let views = train_views(&args, &data)?;
-    let init = read_ply(&args.init)?;
+    let init = read_scene(&args.init)?;
     let init = with_initial_logits(&init, data.classes.len(), args.seed);
     let cfg = train_config(&args, init.len())?;
 
