@@ -7,11 +7,16 @@ use std::io::{Read, Write};
 use std::path::Path;
 use std::process::Command;
 
+use glam::{DMat3, DVec3};
 use semsplat::fuse::ClassScores;
+use semsplat::scene::cameras::load_cameras;
+use semsplat::scene::cameras_json::write_inria_cameras;
+use semsplat::scene::classes::ClassTable;
+use semsplat::scene::colmap::read_images_txt_from;
 use semsplat::scene::gaussians::sh_coeffs_for_degree;
 use semsplat::scene::ply::{read_ply, read_ply_from, write_ply, write_ply_to};
-use semsplat::scene::scene_file::read_scene;
-use semsplat::scene::Gaussians;
+use semsplat::scene::scene_file::{read_scene, resolve_scene_path};
+use semsplat::scene::{Camera, Gaussians, SemanticLogits, Split};
 use semsplat::util::npy::parse_npy_f64;
 use semsplat::util::Rng;
 
@@ -601,4 +606,265 @@ fn supersplat_compressed_ply_matches_the_standard_ply_within_its_quantization() 
     };
     let got = read_scene(&path).unwrap();
     assert_close(&got, &via_standard_ply(&g), &tol, "compressed PLY");
+}
+
+// ---------------------------------------------------------------------------------------
+// COLMAP images.txt as pycolmap writes it
+
+const CAMERAS_TXT: &str = "# Camera list\n1 PINHOLE 64 48 50 50 32 24\n";
+
+fn images_txt_lines(points_line: Option<&str>) -> String {
+    let mut text = String::from("# Image list with two lines of data per image:\n");
+    let names = [
+        "cam0/0001.jpg",
+        "cam1/0002.jpg",
+        "cam0/0003.jpg",
+        "cam1/0004.jpg",
+    ];
+    for (i, name) in names.iter().enumerate() {
+        text += &format!("{} 1 0 0 0 {} 0 0 1 {name}\n", i + 1, i as f64 * 0.5);
+        if let Some(p) = points_line {
+            text += p;
+            text += "\n";
+        }
+    }
+    text
+}
+
+/// The three shapes of images.txt: COLMAP's (a points line per image), an empty second line,
+/// and pycolmap's one line per image. All four images (rig names with subfolders) come back.
+#[test]
+fn colmap_images_txt_with_or_without_points_lines_keeps_every_image() {
+    for (what, points) in [
+        ("points lines", Some("10.5 20.25 7 11.0 3.5 -1")),
+        ("empty second lines", Some("")),
+        ("one line per image", None),
+    ] {
+        let text = images_txt_lines(points);
+        let images = read_images_txt_from(&mut text.as_bytes()).unwrap();
+        let names: Vec<&str> = images.iter().map(|i| i.name.as_str()).collect();
+        assert_eq!(
+            names,
+            [
+                "cam0/0001.jpg",
+                "cam1/0002.jpg",
+                "cam0/0003.jpg",
+                "cam1/0004.jpg"
+            ],
+            "{what}"
+        );
+        assert_eq!(images[3].tvec, [1.5, 0.0, 0.0], "{what}");
+        let tmp = tempfile::tempdir().unwrap();
+        std::fs::write(tmp.path().join("cameras.txt"), CAMERAS_TXT).unwrap();
+        std::fs::write(tmp.path().join("images.txt"), &text).unwrap();
+        let cams = load_cameras(tmp.path()).unwrap();
+        assert_eq!(cams.len(), 4, "{what}");
+    }
+    // A line that is neither is an error naming its line.
+    let bad = "1 1 0 0 0 0 0 0 1 a.jpg\n1 2 3 4\n";
+    let err = format!(
+        "{:#}",
+        read_images_txt_from(&mut bad.as_bytes()).unwrap_err()
+    );
+    assert!(err.contains("line 2"), "{err}");
+}
+
+// ---------------------------------------------------------------------------------------
+// INRIA run folders
+
+#[test]
+fn inria_run_folder_gives_the_latest_iteration_and_its_cameras() {
+    let tmp = tempfile::tempdir().unwrap();
+    let run = tmp.path().join("output/run");
+    // Lexically 7000 > 30000; numerically 30000 is the latest.
+    for (iters, n) in [(7000, 2), (30000, 3), (999, 4)] {
+        let dir = run.join(format!("point_cloud/iteration_{iters}"));
+        std::fs::create_dir_all(&dir).unwrap();
+        write_ply(&dir.join("point_cloud.ply"), &line_of_gaussians(n)).unwrap();
+    }
+    for p in [run.clone(), run.join("point_cloud")] {
+        assert_eq!(
+            resolve_scene_path(&p).unwrap(),
+            run.join("point_cloud/iteration_30000/point_cloud.ply")
+        );
+        assert_eq!(read_scene(&p).unwrap().len(), 3);
+    }
+    let cams = vec![Camera {
+        name: "frame_1".into(),
+        width: 64,
+        height: 48,
+        fx: 50.0,
+        fy: 50.0,
+        cx: 32.0,
+        cy: 24.0,
+        rotation: DMat3::IDENTITY,
+        translation: DVec3::new(0.0, 0.0, 1.0),
+        split: Split::Train,
+    }];
+    write_inria_cameras(&run.join("cameras.json"), &cams).unwrap();
+    assert_eq!(load_cameras(&run).unwrap()[0].name, "frame_1");
+    // An empty folder says what it expected.
+    let empty = tmp.path().join("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    let err = format!("{:#}", read_scene(&empty).unwrap_err());
+    assert!(err.contains("iteration_<N>"), "{err}");
+}
+
+/// An SfM point cloud (INRIA's input.ply: x y z, normals, uchar colours) and a 2DGS scene
+/// are named as what they are.
+#[test]
+fn point_cloud_and_2dgs_plys_are_named() {
+    let tmp = tempfile::tempdir().unwrap();
+    let pc = tmp.path().join("input.ply");
+    let mut bytes = b"ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\nproperty float nz\nproperty uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n".to_vec();
+    bytes.extend_from_slice(&[0u8; 24]);
+    bytes.extend_from_slice(&[10, 20, 30]);
+    std::fs::write(&pc, bytes).unwrap();
+    let err = format!("{:#}", read_scene(&pc).unwrap_err());
+    assert!(
+        err.contains("point cloud") && err.contains("input.ply"),
+        "{err}"
+    );
+
+    let mut header = String::from("ply\nformat ascii 1.0\nelement vertex 1\n");
+    for p in [
+        "x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "rot_0",
+        "rot_1", "rot_2", "rot_3",
+    ] {
+        header += &format!("property float {p}\n");
+    }
+    header += "end_header\n0 0 0 0 0 0 0 -3 -3 1 0 0 0\n";
+    let surfels = tmp.path().join("2dgs.ply");
+    std::fs::write(&surfels, header).unwrap();
+    let err = format!("{:#}", read_scene(&surfels).unwrap_err());
+    assert!(err.contains("2DGS scenes are not supported"), "{err}");
+}
+
+// ---------------------------------------------------------------------------------------
+// nerfstudio transforms.json
+
+/// A camera at (1, 2, 3) whose OpenGL camera-to-world rotation is a 90 degree turn about the
+/// world y axis: its -z (viewing) axis becomes world -x... worked by hand below.
+#[test]
+fn nerfstudio_transforms_convert_the_opengl_pose() {
+    // c2w (OpenGL) columns: camera x -> world (0, 0, -1), camera y -> world (0, 1, 0),
+    // camera z -> world (1, 0, 0); so the camera looks along world -x.
+    let json = r#"{
+        "camera_model": "OPENCV", "fl_x": 100, "fl_y": 110, "cx": 31.5, "cy": 24.5,
+        "w": 64, "h": 48, "k1": 0, "k2": 0, "p1": 0, "p2": 0,
+        "frames": [
+            {"file_path": "images/frame_00001.png",
+             "transform_matrix": [[0, 0, 1, 1], [0, 1, 0, 2], [-1, 0, 0, 3], [0, 0, 0, 1]]},
+            {"file_path": "images/frame_00002.png", "fl_x": 90, "w": 64, "h": 48,
+             "transform_matrix": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 5], [0, 0, 0, 1]]}
+        ]}"#;
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("transforms.json");
+    std::fs::write(&path, json).unwrap();
+    let cams = load_cameras(&path).unwrap();
+    assert_eq!(cams.len(), 2);
+    let c = &cams[0];
+    assert_eq!(c.name, "frame_00001");
+    assert!((c.center() - DVec3::new(1.0, 2.0, 3.0)).length() < 1e-12);
+    // By hand: a point 2 m in front (world (-1, 2, 3)) projects to the principal point; a
+    // point 1 m above it in world y (up) lands above it in the image (v smaller by fy / 2);
+    // world -z is the camera's right (OpenCV x): u larger by fx / 2.
+    let project = |p: DVec3| c.project_camera_point(c.world_to_camera(p));
+    let (u, v) = project(DVec3::new(-1.0, 2.0, 3.0));
+    assert!(
+        (u - 31.5).abs() < 1e-9 && (v - 24.5).abs() < 1e-9,
+        "{u} {v}"
+    );
+    let (u, v) = project(DVec3::new(-1.0, 3.0, 3.0));
+    assert!(
+        (u - 31.5).abs() < 1e-9 && (v - (24.5 - 55.0)).abs() < 1e-9,
+        "{u} {v}"
+    );
+    let (u, v) = project(DVec3::new(-1.0, 2.0, 2.0));
+    assert!(
+        (u - (31.5 + 50.0)).abs() < 1e-9 && (v - 24.5).abs() < 1e-9,
+        "{u} {v}"
+    );
+    assert!(c.world_to_camera(DVec3::new(-1.0, 2.0, 3.0)).z > 0.0);
+    // The second frame's own fl_x wins; fl_y falls back to the top level.
+    assert_eq!((cams[1].fx, cams[1].fy), (90.0, 110.0));
+    // The folder finds its transforms.json too.
+    assert_eq!(load_cameras(tmp.path()).unwrap().len(), 2);
+
+    for (bad, expect) in [
+        (json.replace("\"k1\": 0", "\"k1\": 0.01"), "k1"),
+        (json.replace("OPENCV", "OPENCV_FISHEYE"), "OPENCV_FISHEYE"),
+    ] {
+        std::fs::write(&path, bad).unwrap();
+        let err = format!("{:#}", load_cameras(&path).unwrap_err());
+        assert!(err.contains(expect) && err.contains("undistort"), "{err}");
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Semantic properties other tools rewrite; class tables; the PLY writer
+
+/// splat-transform rewrites `class` as uint: -1 comes back as 4294967295, which is unseen.
+#[test]
+fn unsigned_class_4294967295_reads_as_unseen() {
+    let mut text = String::from("ply\nformat ascii 1.0\nelement vertex 2\n");
+    for p in ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity"] {
+        text += &format!("property float {p}\n");
+    }
+    for p in [
+        "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3",
+    ] {
+        text += &format!("property float {p}\n");
+    }
+    text += "property uint class\nproperty uint instance\nend_header\n";
+    text += "0 0 0 0 0 0 0 -3 -3 -3 1 0 0 0 4294967295 4294967295\n";
+    text += "1 0 0 0 0 0 0 -3 -3 -3 1 0 0 0 5 2\n";
+    let g = read_ply_from(text.as_bytes(), None).unwrap();
+    assert_eq!(g.class_ids.unwrap(), vec![-1, 5]);
+    assert_eq!(g.instance_ids.unwrap(), vec![-1, 2]);
+    // Other values past i32::MAX are still refused.
+    let bad = text.replace(" 5 2\n", " 4294967294 2\n");
+    assert!(read_ply_from(bad.as_bytes(), None).is_err());
+}
+
+#[test]
+fn class_table_errors_name_the_entry_and_names_match_any_case() {
+    let err = format!(
+        "{:#}",
+        ClassTable::from_json_str(r#"[{"id": 1, "name": "wall"}, {"id": "two", "name": "floor"}]"#)
+            .unwrap_err()
+    );
+    assert!(
+        err.contains("class entry 1") && err.contains("\"two\""),
+        "{err}"
+    );
+    assert!(!err.contains("untagged"), "{err}");
+    let t = ClassTable::from_json_str(r#"{"classes": [{"id": 1, "name": "Chair"}, {"id": 4}]}"#)
+        .unwrap();
+    assert_eq!(t.find("chair").unwrap().id, 1);
+    assert_eq!(t.find("CHAIR").unwrap().id, 1);
+    assert_eq!(t.find("4").unwrap().id, 4);
+    let err = format!("{:#}", t.find("table").unwrap_err());
+    assert!(err.contains("Chair"), "{err}");
+}
+
+#[test]
+fn ply_writer_refuses_non_finite_values_naming_property_and_index() {
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("nan.ply");
+    let mut g = line_of_gaussians(4);
+    g.opacity_logits[2] = f32::NAN;
+    let err = format!("{:#}", write_ply(&path, &g).unwrap_err());
+    assert!(
+        err.contains("Gaussian 2") && err.contains("opacity"),
+        "{err}"
+    );
+    assert!(!path.exists());
+    let mut g = line_of_gaussians(4);
+    g.semantics = Some(SemanticLogits {
+        channels: 2,
+        logits: vec![0.0, 0.0, 0.0, f32::INFINITY, 0.0, 0.0, 0.0, 0.0],
+    });
+    let err = format!("{:#}", write_ply(&path, &g).unwrap_err());
+    assert!(err.contains("Gaussian 1") && err.contains("sem_1"), "{err}");
 }
