@@ -868,3 +868,115 @@ fn ply_writer_refuses_non_finite_values_naming_property_and_index() {
     let err = format!("{:#}", write_ply(&path, &g).unwrap_err());
     assert!(err.contains("Gaussian 1") && err.contains("sem_1"), "{err}");
 }
+
+// ---------------------------------------------------------------------------------------
+// Working with a fused scene
+
+fn synth_tiny(dir: &Path) {
+    ok(&[
+        "synth",
+        "--preset",
+        "tiny",
+        "--out",
+        s(dir),
+        "--views",
+        "3",
+        "--test-views",
+        "0",
+        "--width",
+        "48",
+        "--height",
+        "32",
+    ]);
+}
+
+/// A fused PLY (class, no logits): `render --semantics` draws the same labels `fuse
+/// --render-views` drew from it, and `fuse --extract/--remove` select by its class without
+/// re-fusing, the class named in any case.
+#[test]
+fn fused_scene_renders_its_classes_and_selects_without_refusing() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    synth_tiny(d);
+    let (fused, views, rendered) = (d.join("fused.ply"), d.join("views"), d.join("rendered"));
+    ok(&[
+        "fuse",
+        "--scene",
+        s(&d.join("scene.ply")),
+        "--cameras",
+        s(&d.join("cameras.json")),
+        "--labels",
+        s(&d.join("labels")),
+        "--out",
+        s(&fused),
+        "--render-views",
+        s(&views),
+    ]);
+    let g = read_ply(&fused).unwrap();
+    assert!(g.semantics.is_none() && g.class_ids.is_some());
+    ok(&[
+        "render",
+        "--scene",
+        s(&fused),
+        "--cameras",
+        s(&d.join("cameras.json")),
+        "--semantics",
+        "--out",
+        s(&rendered),
+    ]);
+    let mut compared = 0;
+    for entry in std::fs::read_dir(&views).unwrap() {
+        let name = entry.unwrap().file_name();
+        let want = std::fs::read(views.join(&name)).unwrap();
+        let got = std::fs::read(rendered.join(&name)).unwrap();
+        assert!(
+            want == got,
+            "{name:?} differs between fuse --render-views and render"
+        );
+        compared += 1;
+    }
+    assert_eq!(compared, 6, "3 views x (labels, palette)");
+
+    let ids = g.class_ids.clone().unwrap();
+    let wall = 1;
+    let walls = ids.iter().filter(|&&c| c == wall).count();
+    assert!(walls > 0 && walls < ids.len());
+    let (only, without) = (d.join("wall.ply"), d.join("no_wall.ply"));
+    ok(&[
+        "fuse",
+        "--scene",
+        s(&fused),
+        "--extract",
+        "WALL",
+        "--out",
+        s(&only),
+    ]);
+    ok(&[
+        "fuse",
+        "--scene",
+        s(&fused),
+        "--remove",
+        "Wall",
+        "--out",
+        s(&without),
+    ]);
+    let only = read_ply(&only).unwrap().class_ids.unwrap();
+    let without = read_ply(&without).unwrap().class_ids.unwrap();
+    assert_eq!(only.len(), walls);
+    assert!(only.iter().all(|&c| c == wall));
+    assert_eq!(without.len(), ids.len() - walls);
+    assert!(without.iter().all(|&c| c != wall));
+    // Outputs that need the evidence matrix are refused in this mode, not skipped.
+    let err = fails(&[
+        "fuse",
+        "--scene",
+        s(&fused),
+        "--extract",
+        "wall",
+        "--out",
+        s(&d.join("x.ply")),
+        "--save-membership",
+        s(&d.join("m.npy")),
+    ]);
+    assert!(err.contains("--save-membership"), "{err}");
+}

@@ -36,8 +36,8 @@ pub struct TrainArgs {
     /// Cameras: COLMAP model folder, INRIA cameras.json or semsplat cameras.json.
     #[arg(long)]
     cameras: PathBuf,
-    /// Initial scene (any 3DGS PLY: a trained scene, or an SfM point cloud converted to
-    /// Gaussians such as a synth room's init.ply). Its logits, if any, are replaced by
+    /// Initial scene (a 3DGS PLY, compressed PLY, .splat, .spz or INRIA run folder: a trained
+    /// scene, or an SfM point cloud converted to Gaussians such as a synth room's init.ply). Its logits, if any, are replaced by
     /// small random values over the classes present in the labels.
     #[arg(long)]
     init: PathBuf,
@@ -45,7 +45,7 @@ pub struct TrainArgs {
     /// follow 3DGS's 30k schedule scaled to this.
     #[arg(long, default_value_t = 30_000)]
     iters: u32,
-    /// Output PLY: the trained Gaussians with their logits (f_sem_*), `class` (label id,
+    /// Output PLY: the trained Gaussians with their logits (sem_0..sem_{C-1}), `class` (label id,
     /// -1 for Gaussians no view sees) and `class_conf` (softmax probability of the class).
     #[arg(long)]
     out: PathBuf,
