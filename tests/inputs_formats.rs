@@ -15,7 +15,7 @@ use semsplat::scene::classes::ClassTable;
 use semsplat::scene::colmap::read_images_txt_from;
 use semsplat::scene::gaussians::sh_coeffs_for_degree;
 use semsplat::scene::ply::{read_ply, read_ply_from, write_ply, write_ply_to};
-use semsplat::scene::scene_file::{read_scene, resolve_scene_path};
+use semsplat::scene::scene_file::{read_scene, read_scene_or_point_cloud, resolve_scene_path};
 use semsplat::scene::{Camera, Gaussians, SemanticLogits, Split};
 use semsplat::util::npy::parse_npy_f64;
 use semsplat::util::Rng;
@@ -979,4 +979,59 @@ fn fused_scene_renders_its_classes_and_selects_without_refusing() {
         s(&d.join("m.npy")),
     ]);
     assert!(err.contains("--save-membership"), "{err}");
+}
+
+/// INRIA's input.ply seeds Gaussians as `create_from_pcd` does: scale = sqrt of the mean
+/// squared distance to the 3 nearest neighbours (checked against brute force in f64),
+/// opacity 0.1, identity rotation, colour as DC.
+#[test]
+fn point_cloud_seeds_gaussians_like_inria() {
+    let mut rng = Rng::new(21);
+    let n = 300;
+    let points: Vec<[f32; 3]> = (0..n)
+        .map(|_| [0, 1, 2].map(|_| rng.range_f64(-2.0, 2.0) as f32))
+        .collect();
+    let mut bytes = format!(
+        "ply\nformat binary_little_endian 1.0\nelement vertex {n}\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\nproperty float nz\nproperty uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n"
+    )
+    .into_bytes();
+    for (i, p) in points.iter().enumerate() {
+        for v in p.iter().chain(&[0.0; 3]) {
+            bytes.extend_from_slice(&v.to_le_bytes());
+        }
+        bytes.extend_from_slice(&[(i % 256) as u8, 128, 255]);
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("input.ply");
+    std::fs::write(&path, bytes).unwrap();
+    let g = read_scene_or_point_cloud(&path).unwrap();
+    assert_eq!(g.len(), n);
+    for i in 0..n {
+        let mut d2: Vec<f64> = (0..n)
+            .filter(|&j| j != i)
+            .map(|j| {
+                (0..3)
+                    .map(|a| (points[i][a] as f64 - points[j][a] as f64).powi(2))
+                    .sum()
+            })
+            .collect();
+        d2.sort_by(f64::total_cmp);
+        let want = (d2[..3].iter().sum::<f64>() / 3.0).sqrt().ln();
+        for a in 0..3 {
+            assert!((g.log_scales[i][a] as f64 - want).abs() < 1e-5, "point {i}");
+        }
+        assert_eq!(g.means[i], points[i]);
+        assert!((sigmoid(g.opacity_logits[i] as f64) - 0.1).abs() < 1e-6);
+        assert_eq!(g.quats[i], [1.0, 0.0, 0.0, 0.0]);
+        let rgb = [(i % 256) as f64 / 255.0, 128.0 / 255.0, 1.0];
+        for c in 0..3 {
+            assert!((g.sh[i * 3 + c] as f64 - (rgb[c] - 0.5) / SH_C0).abs() < 1e-5);
+        }
+    }
+    // Everywhere else a point cloud is refused as such.
+    let err = format!("{:#}", read_scene(&path).unwrap_err());
+    assert!(
+        err.contains("point cloud") && err.contains("--init"),
+        "{err}"
+    );
 }

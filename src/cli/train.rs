@@ -15,7 +15,7 @@ use semsplat::gpu::Gpu;
 use semsplat::render::SemanticMode;
 use semsplat::scene::images::load_view_image;
 use semsplat::scene::ply::{write_classes_sidecar, write_ply};
-use semsplat::scene::scene_file::read_scene;
+use semsplat::scene::scene_file::read_scene_or_point_cloud;
 use semsplat::scene::Gaussians;
 use semsplat::train::config::TrainConfig;
 use semsplat::train::trainer::{
@@ -36,8 +36,9 @@ pub struct TrainArgs {
     /// Cameras: COLMAP model folder, INRIA cameras.json or semsplat cameras.json.
     #[arg(long)]
     cameras: PathBuf,
-    /// Initial scene (a 3DGS PLY, compressed PLY, .splat, .spz or INRIA run folder: a trained
-    /// scene, or an SfM point cloud converted to Gaussians such as a synth room's init.ply). Its logits, if any, are replaced by
+    /// Initial scene: a 3DGS PLY (a trained scene, or a synth room's init.ply), compressed PLY,
+    /// .splat, .spz or INRIA run folder, or a plain point-cloud PLY such as an SfM input.ply
+    /// (x y z [red green blue]), seeded into Gaussians as INRIA 3DGS does. Its logits, if any, are replaced by
     /// small random values over the classes present in the labels.
     #[arg(long)]
     init: PathBuf,
@@ -122,7 +123,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
     let start = Instant::now();
     let data = load_dataset(&args)?;
     let views = train_views(&args, &data)?;
-    let init = read_scene(&args.init)?;
+    let init = read_scene_or_point_cloud(&args.init)?;
     let init = with_initial_logits(&init, data.classes.len(), args.seed);
     let cfg = train_config(&args, init.len())?;
 

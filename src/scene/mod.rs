@@ -12,6 +12,7 @@ pub mod labels;
 pub mod look_at;
 pub mod nerfstudio;
 pub mod ply;
+pub mod point_cloud;
 pub mod random_scene;
 pub mod scene_file;
 pub mod select;

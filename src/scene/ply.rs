@@ -339,8 +339,9 @@ fn plan_layout(props: &[PropertyDef]) -> Result<Layout> {
     if is_point_cloud(&seen) {
         bail!(
             "this is a point cloud (x y z{} without Gaussian properties, e.g. an SfM \
-             input.ply), not a Gaussian scene; semsplat needs trained Gaussians (an INRIA \
-             run's point_cloud/iteration_*/point_cloud.ply, a .splat or an .spz)",
+             input.ply), not Gaussians: use a trained scene (an INRIA run's \
+             point_cloud/iteration_*/point_cloud.ply, a .splat or an .spz); a point cloud can \
+             only seed training (`semsplat train --init`)",
             if seen.contains("red") {
                 " red green blue"
             } else {
@@ -574,6 +575,56 @@ fn read_columns(r: &mut impl Read, header: &Header) -> Result<Columns> {
         elements.push((el.name.clone(), names.zip(cols).collect()));
     }
     Ok(Columns { elements })
+}
+
+/// Points (and colours in [0, 1], when the file has `red green blue`) of a plain point-cloud
+/// PLY such as INRIA's `input.ply` (x y z, normals, uchar colours). `None` when the PLY is
+/// not a point cloud (it has Gaussian properties).
+pub fn read_point_cloud_ply(path: &Path) -> Result<Option<PointCloud>> {
+    let file = File::open(path).with_context(|| format!("opening PLY {}", path.display()))?;
+    let mut r = BufReader::new(file);
+    let header = parse_header(&mut r).with_context(|| format!("PLY {}", path.display()))?;
+    let Some(vertex) = header.elements.iter().find(|e| e.name == "vertex") else {
+        return Ok(None);
+    };
+    let names: std::collections::HashSet<&str> = vertex.props.iter().map(|p| p.name()).collect();
+    if !is_point_cloud(&names) {
+        return Ok(None);
+    }
+    // uchar colours are 0..255; float ones 0..1.
+    let colour_scale = match vertex.props.iter().find(|p| p.name() == "red") {
+        Some(PropertyDef::Scalar {
+            ty: Scalar::F32 | Scalar::F64,
+            ..
+        }) => 1.0,
+        Some(PropertyDef::Scalar {
+            ty: Scalar::U16, ..
+        }) => 1.0 / 65535.0,
+        _ => 1.0 / 255.0,
+    };
+    let cols = read_columns(&mut r, &header).with_context(|| format!("PLY {}", path.display()))?;
+    let xyz = ["x", "y", "z"].map(|a| cols.get("vertex", a));
+    let [x, y, z] = [&xyz[0], &xyz[1], &xyz[2]].map(|c| c.as_ref().map_err(|e| anyhow!("{e}")));
+    let (x, y, z) = (x?, y?, z?);
+    let points = (0..x.len())
+        .map(|i| [x[i] as f32, y[i] as f32, z[i] as f32])
+        .collect();
+    let colours = match ["red", "green", "blue"].map(|c| cols.get("vertex", c).ok()) {
+        [Some(r), Some(g), Some(b)] => Some(
+            (0..r.len())
+                .map(|i| [r[i], g[i], b[i]].map(|v| (v * colour_scale) as f32))
+                .collect(),
+        ),
+        _ => None,
+    };
+    Ok(Some(PointCloud { points, colours }))
+}
+
+/// A plain point cloud read from a PLY.
+pub struct PointCloud {
+    pub points: Vec<[f32; 3]>,
+    /// RGB in [0, 1] per point, when the file has colours.
+    pub colours: Option<Vec<[f32; 3]>>,
 }
 
 /// Empty Gaussians shaped by the layout, with room for `reserve` vertices.

@@ -8,7 +8,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 
 use super::gaussians::Gaussians;
-use super::ply::read_ply_unchecked;
+use super::ply::{read_ply_unchecked, read_point_cloud_ply};
+use super::point_cloud::gaussians_from_point_cloud;
 use super::splat_formats::{parse_splat, parse_spz};
 
 /// The scene file a user's `--scene` path names: the path itself for a file; for an INRIA
@@ -115,4 +116,26 @@ pub fn read_scene_unchecked(path: &Path) -> Result<Gaussians> {
             parse_spz(&bytes()?).with_context(|| format!(".spz file {}", file.display()))
         }
     }
+}
+
+/// A scene to start training from: any scene [`read_scene`] reads, or a plain point-cloud PLY
+/// (an SfM `input.ply`) seeded into Gaussians by [`gaussians_from_point_cloud`] (said on
+/// stderr, since the seed's scales and opacities are guesses, as in INRIA 3DGS).
+pub fn read_scene_or_point_cloud(path: &Path) -> Result<Gaussians> {
+    let file = resolve_scene_path(path)?;
+    if scene_format(&file)? == SceneFormat::Ply {
+        if let Some(cloud) = read_point_cloud_ply(&file)? {
+            let g = gaussians_from_point_cloud(&cloud)
+                .with_context(|| format!("point cloud {}", file.display()))?;
+            eprintln!(
+                "{} is a point cloud: seeded {} Gaussians from its points (INRIA 3DGS's \
+                 initialization)",
+                file.display(),
+                g.len()
+            );
+            g.validate()?;
+            return Ok(g);
+        }
+    }
+    read_scene(&file)
 }
