@@ -58,8 +58,8 @@ fn load_camera_dir(path: &Path) -> Result<Vec<Camera>> {
         }
     }
     bail!(
-        "{} holds no cameras: expected a COLMAP model (cameras/images .bin or .txt, here, in \
-         sparse/0 or in sparse), an INRIA run's cameras.json or a nerfstudio transforms.json",
+        "{} is not a COLMAP model (cameras/images .bin or .txt, here, in sparse/0 or in \
+         sparse) and holds no INRIA cameras.json or nerfstudio transforms.json",
         path.display()
     )
 }

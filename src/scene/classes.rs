@@ -109,7 +109,7 @@ impl ClassTable {
                 let e = ClassEntryJson::deserialize(v).map_err(|err| {
                     let shown: String = v.to_string().chars().take(120).collect();
                     anyhow::anyhow!(
-                        "class entry {i} ({shown}) is not {{\"id\": non-negative integer, \
+                        "not a class table: class entry {i} ({shown}) is not {{\"id\": non-negative integer, \
                          \"name\": text, \"color\": [r, g, b] in 0..=255}}: {err}"
                     )
                 })?;

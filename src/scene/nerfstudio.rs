@@ -127,6 +127,9 @@ pub fn parse_transforms(top: &Map<String, Value>) -> Result<Vec<Camera>> {
         .get("frames")
         .and_then(Value::as_array)
         .ok_or_else(|| anyhow!("transforms.json: 'frames' is not a list"))?;
+    if frames.is_empty() {
+        bail!("the transforms.json lists no frames");
+    }
     frames
         .iter()
         .enumerate()
