@@ -335,8 +335,8 @@ fn write_spz_like_niantic(g: &Gaussians, version: u32) -> Vec<u8> {
     raw.extend_from_slice(&[g.sh_degree as u8, 12, 0, 0]);
     let flip_p = [1.0f32, -1.0, -1.0];
     for i in 0..n {
-        for a in 0..3 {
-            let fixed = (flip_p[a] * g.means[i][a] * 4096.0).round() as i32;
+        for (flip, v) in flip_p.iter().zip(g.means[i]) {
+            let fixed = (flip * v * 4096.0).round() as i32;
             raw.extend_from_slice(&fixed.to_le_bytes()[..3]);
         }
     }
@@ -369,9 +369,9 @@ fn write_spz_like_niantic(g: &Gaussians, version: u32) -> Vec<u8> {
         }
     }
     for i in 0..n {
-        for k in 0..rest {
+        for (k, flip) in SPZ_FLIP_SH.iter().enumerate().take(rest) {
             for c in 0..3 {
-                let v = SPZ_FLIP_SH[k] * g.sh[i * g.sh_coeffs() * 3 + (1 + k) * 3 + c];
+                let v = flip * g.sh[i * g.sh_coeffs() * 3 + (1 + k) * 3 + c];
                 raw.push(quantize_sh(v, if k < 3 { 8 } else { 16 }));
             }
         }
@@ -540,11 +540,8 @@ fn write_compressed_ply_like_splat_transform(g: &Gaussians) -> Vec<u8> {
             .map(|f| rows.iter().map(|&i| field(i, f)).fold(f64::MIN, f64::max))
             .collect();
         for group in [0, 3, 6] {
-            for f in group..group + 3 {
-                chunk_data.extend_from_slice(&(lo[f] as f32).to_le_bytes());
-            }
-            for f in group..group + 3 {
-                chunk_data.extend_from_slice(&(hi[f] as f32).to_le_bytes());
+            for v in lo[group..group + 3].iter().chain(&hi[group..group + 3]) {
+                chunk_data.extend_from_slice(&(*v as f32).to_le_bytes());
             }
         }
         for &i in &rows {
@@ -1024,8 +1021,8 @@ fn point_cloud_seeds_gaussians_like_inria() {
         assert!((sigmoid(g.opacity_logits[i] as f64) - 0.1).abs() < 1e-6);
         assert_eq!(g.quats[i], [1.0, 0.0, 0.0, 0.0]);
         let rgb = [(i % 256) as f64 / 255.0, 128.0 / 255.0, 1.0];
-        for c in 0..3 {
-            assert!((g.sh[i * 3 + c] as f64 - (rgb[c] - 0.5) / SH_C0).abs() < 1e-5);
+        for (c, v) in rgb.iter().enumerate() {
+            assert!((g.sh[i * 3 + c] as f64 - (v - 0.5) / SH_C0).abs() < 1e-5);
         }
     }
     // Everywhere else a point cloud is refused as such.

@@ -105,7 +105,7 @@ fn label_map(f: &RenderedFrame, table: Option<&ClassTable>) -> Result<LabelMap> 
 enum LabelSource {
     None,
     Logits,
-    Classes(LabelRenderer),
+    Classes(Box<LabelRenderer>),
 }
 
 fn label_source(args: &RenderArgs, g: &Gaussians, gpu: &Gpu) -> Result<LabelSource> {
@@ -128,7 +128,9 @@ fn label_source(args: &RenderArgs, g: &Gaussians, gpu: &Gpu) -> Result<LabelSour
             args.scene.display()
         );
     }
-    Ok(LabelSource::Classes(LabelRenderer::new(gpu, g, ids)?))
+    Ok(LabelSource::Classes(Box::new(LabelRenderer::new(
+        gpu, g, ids,
+    )?)))
 }
 
 pub fn run(args: RenderArgs) -> Result<()> {

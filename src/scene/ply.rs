@@ -518,9 +518,12 @@ pub fn read_ply_from(mut r: impl BufRead, total_len: Option<u64>) -> Result<Gaus
 /// Every element of a binary PLY as named columns of values (for small packed layouts such
 /// as SuperSplat's compressed PLY, whose data is a few integers per splat).
 pub(crate) struct Columns {
-    /// (element name, its property names and one column of values per property).
-    pub(crate) elements: Vec<(String, Vec<(String, Vec<f64>)>)>,
+    /// (element name, its properties in file order).
+    pub(crate) elements: Vec<(String, Vec<NamedColumn>)>,
 }
+
+/// One property of an element: its name and one value per row.
+pub(crate) type NamedColumn = (String, Vec<f64>);
 
 impl Columns {
     /// The column `prop` of element `element`.
