@@ -864,6 +864,14 @@ fn ply_writer_refuses_non_finite_values_naming_property_and_index() {
     });
     let err = format!("{:#}", write_ply(&path, &g).unwrap_err());
     assert!(err.contains("Gaussian 1") && err.contains("sem_1"), "{err}");
+    // Results are standard PLYs: a name promising another format is refused.
+    let splat = tmp.path().join("fused.splat");
+    let err = format!(
+        "{:#}",
+        write_ply(&splat, &line_of_gaussians(2)).unwrap_err()
+    );
+    assert!(err.contains("standard 3DGS PLY only"), "{err}");
+    assert!(!splat.exists());
 }
 
 // ---------------------------------------------------------------------------------------

@@ -947,10 +947,31 @@ fn property_names(g: &Gaussians) -> Vec<(String, &'static str)> {
 
 /// Writes a binary little-endian 3DGS PLY atomically, with the semantic fields that are set.
 pub fn write_ply(path: &Path, g: &Gaussians) -> Result<()> {
+    refuse_other_splat_extension(path)?;
     g.check_layout()
         .and_then(|()| check_finite(g))
         .with_context(|| format!("refusing to write PLY {}", path.display()))?;
     write_atomic(path, |w| write_ply_to(w, g))
+}
+
+/// semsplat writes only the standard PLY: a name promising another splat format would
+/// hold bytes its readers cannot parse.
+fn refuse_other_splat_extension(path: &Path) -> Result<()> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or_default();
+    if ["splat", "spz", "ksplat", "sog"]
+        .iter()
+        .any(|e| e.eq_ignore_ascii_case(ext))
+    {
+        bail!(
+            "refusing to write {}: semsplat writes the standard 3DGS PLY only (name it .ply; \
+             convert afterwards with e.g. PlayCanvas splat-transform)",
+            path.display()
+        );
+    }
+    Ok(())
 }
 
 /// The first non-finite float a PLY would hold, named by property and Gaussian index (a NaN
