@@ -159,13 +159,27 @@ fn missing_or_inconsistent_ply_properties_are_errors() {
     assert_error(&error_of(read_ply(&p)), &p, &["sem_2"]);
 }
 
+/// Writes `g` as a PLY whose one `marker` value is then replaced by `bad` (the writer itself
+/// refuses non-finite values, so a file another tool wrote is made by patching bytes).
+fn write_ply_patched(p: &Path, g: &Gaussians, marker: f32, bad: f32) {
+    write_ply(p, g).unwrap();
+    let mut bytes = std::fs::read(p).unwrap();
+    let m = marker.to_le_bytes();
+    let at = bytes
+        .windows(4)
+        .position(|w| w == m)
+        .expect("marker written");
+    bytes[at..at + 4].copy_from_slice(&bad.to_le_bytes());
+    std::fs::write(p, bytes).unwrap();
+}
+
 #[test]
 fn nan_inf_and_zero_quaternions_are_errors() {
     let dir = tempfile::tempdir().unwrap();
     let mut nan = one_gaussian();
-    nan.opacity_logits[1] = f32::NAN;
+    nan.opacity_logits[1] = 12345.5;
     let p = dir.path().join("nan.ply");
-    write_ply(&p, &nan).unwrap();
+    write_ply_patched(&p, &nan, 12345.5, f32::NAN);
     assert_error(
         &error_of(read_ply(&p)),
         &p,
@@ -175,9 +189,9 @@ fn nan_inf_and_zero_quaternions_are_errors() {
     assert!(read_ply_unchecked(&p).unwrap().opacity_logits[1].is_nan());
 
     let mut inf = one_gaussian();
-    inf.means[0][2] = f32::INFINITY;
+    inf.means[0][2] = 12345.5;
     let p = dir.path().join("inf.ply");
-    write_ply(&p, &inf).unwrap();
+    write_ply_patched(&p, &inf, 12345.5, f32::INFINITY);
     assert_error(
         &error_of(read_ply(&p)),
         &p,

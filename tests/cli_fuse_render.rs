@@ -373,10 +373,11 @@ fn bad_input_is_one_clear_error_and_writes_nothing() {
             "cameras.json",
         ),
         (
+            // init.ply has neither logits nor classes (scene.ply's classes would be drawn).
             vec![
                 "render".into(),
                 "--scene".into(),
-                p("scene.ply"),
+                p("init.ply"),
                 "--cameras".into(),
                 p("cameras.json"),
                 "--out".into(),

@@ -844,8 +844,16 @@ fn inspect_summarizes_files_and_fails_on_problems() {
     );
 
     g.quats[4] = [0.0; 4];
-    g.means[7][0] = f32::NAN;
+    // The writer refuses NaN: write a marker and patch it into NaN, as another tool's file.
+    g.means[7][0] = 12345.5;
     write_ply(&ply, &g).unwrap();
+    let mut bytes = std::fs::read(&ply).unwrap();
+    let at = bytes
+        .windows(4)
+        .position(|w| w == 12345.5f32.to_le_bytes())
+        .unwrap();
+    bytes[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+    std::fs::write(&ply, bytes).unwrap();
     let (ok, stdout, stderr) = inspect(&[ply.as_os_str()]);
     assert!(!ok);
     assert!(

@@ -16,6 +16,7 @@ use semsplat::gpu::Gpu;
 use semsplat::scene::images::load_view_image;
 use semsplat::scene::labels::{LabelDir, LabelMap};
 use semsplat::scene::ply::read_ply;
+use semsplat::scene::scene_file::read_scene;
 use semsplat::scene::{Camera, Gaussians, Split};
 use semsplat::util::write_bytes_atomic;
 
@@ -63,7 +64,7 @@ struct EvalReport {
 }
 
 pub fn run(args: EvalArgs) -> Result<()> {
-    let g = read_ply(&args.scene)?;
+    let g = read_scene(&args.scene)?;
     let Some(classes) = g.class_ids.clone() else {
         bail!(
             "{} has no `class` property: run `semsplat fuse` first",

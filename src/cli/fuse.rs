@@ -20,7 +20,8 @@ use semsplat::render::GpuScene;
 use semsplat::scene::cameras::load_cameras;
 use semsplat::scene::classes::{read_class_table, write_class_table, ClassTable};
 use semsplat::scene::labels::{write_label_png, write_palette_png, LabelMap};
-use semsplat::scene::ply::{read_ply, write_classes_sidecar, write_ply};
+use semsplat::scene::ply::{read_classes_sidecar, write_classes_sidecar, write_ply};
+use semsplat::scene::scene_file::{read_scene, resolve_scene_path};
 use semsplat::scene::Gaussians;
 use semsplat::util::npy::write_npy_f32;
 use semsplat::util::write_bytes_atomic;
@@ -40,7 +41,9 @@ enum MethodArg {
 
 #[derive(Args)]
 pub struct FuseArgs {
-    /// The scene: a 3DGS PLY (INRIA layout).
+    /// The scene: a 3DGS PLY (INRIA layout, or SuperSplat's compressed PLY), a .splat, an
+    /// .spz, or an INRIA training-output folder (its latest iteration). --out is always a
+    /// standard PLY.
     #[arg(long)]
     scene: PathBuf,
     /// Cameras: COLMAP model folder, INRIA cameras.json or semsplat cameras.json.
@@ -93,11 +96,13 @@ pub struct FuseArgs {
     /// try another --gamma.
     #[arg(long, conflicts_with_all = ["labels", "save_contrib"])]
     contrib: Option<PathBuf>,
-    /// Keep only the Gaussians of this class (name or id) in --out, by one-vs-rest
-    /// assignment with --gamma.
+    /// Keep only the Gaussians of this class (name, any case, or id) in --out, by one-vs-rest
+    /// assignment with --gamma. On an already fused scene (a `class` property) without
+    /// --labels or --contrib, selects by that class directly (no re-fusing).
     #[arg(long, conflicts_with = "remove")]
     extract: Option<String>,
-    /// Drop the Gaussians of this class (name or id) from --out.
+    /// Drop the Gaussians of this class (name, any case, or id) from --out; on a fused scene
+    /// without --labels or --contrib, by its `class` property.
     #[arg(long)]
     remove: Option<String>,
     /// Render label and palette PNGs of every view from the fused scene into DIR
@@ -167,16 +172,7 @@ struct Report<'a> {
 }
 
 fn find_class(table: &ClassTable, key: &str) -> Result<u32> {
-    if let Some(c) = table.by_name(key) {
-        return Ok(c.id);
-    }
-    if let Ok(id) = key.parse::<u32>() {
-        if table.contains(id) {
-            return Ok(id);
-        }
-    }
-    let names: Vec<&str> = table.classes.iter().map(|c| c.name.as_str()).collect();
-    bail!("no class '{key}' in the class table (classes: {names:?})")
+    table.find(key).map(|c| c.id)
 }
 
 /// The evidence matrix and its row table, with the fusion statistics when it was rendered.
@@ -188,7 +184,7 @@ struct Evidence {
 
 pub fn run(args: FuseArgs) -> Result<()> {
     let start = Instant::now();
-    let mut g = read_ply(&args.scene)?;
+    let mut g = read_scene(&args.scene)?;
     let method = selected_method(&args)?;
     if !(-1.0..=1.0).contains(&args.gamma) {
         bail!("--gamma must lie in [-1, 1], got {}", args.gamma);
@@ -198,6 +194,9 @@ pub fn run(args: FuseArgs) -> Result<()> {
     } else {
         Accumulation::FixedPoint
     };
+    if let Some(table) = fused_scene_table(&args, &g)? {
+        return select_from_fused(&args, g, &table, start);
+    }
     let evidence = match &args.contrib {
         Some(path) => load_evidence(path, g.len())?,
         None => fuse_views(&args, &g, method, accumulation)?,
@@ -235,6 +234,68 @@ pub fn run(args: FuseArgs) -> Result<()> {
         per_class: per_class_counts(&selected, &table),
     };
     write_report(&args, &report)
+}
+
+/// With --extract/--remove on an already fused scene (a `class` property) and no evidence
+/// to fuse from (neither --labels nor --contrib), the class table to select with: the
+/// scene's `.classes.json` sidecar, else the ids present. `None` when fusing as usual.
+fn fused_scene_table(args: &FuseArgs, g: &Gaussians) -> Result<Option<ClassTable>> {
+    let selecting = args.extract.is_some() || args.remove.is_some();
+    if !selecting || args.labels.is_some() || args.contrib.is_some() {
+        return Ok(None);
+    }
+    let Some(ids) = &g.class_ids else {
+        return Ok(None);
+    };
+    if args.save_contrib.is_some() || args.save_membership.is_some() || args.render_views.is_some()
+    {
+        bail!(
+            "selecting from a fused scene's class (no --labels or --contrib) has no evidence \
+             matrix: --save-contrib, --save-membership and --render-views need --labels or \
+             --contrib (render a fused scene with `semsplat render --semantics`)"
+        );
+    }
+    let scene_file = resolve_scene_path(&args.scene)?;
+    Ok(Some(match read_classes_sidecar(&scene_file)? {
+        Some(table) => table,
+        None => ClassTable::from_ids(ids.iter().filter(|&&c| c >= 0).map(|&c| c as u32)),
+    }))
+}
+
+/// --extract/--remove straight from a fused scene's `class` (no re-fusing): keeps (or drops)
+/// the Gaussians whose class is the one named. --gamma does not apply: it needs the evidence
+/// matrix (--contrib).
+fn select_from_fused(
+    args: &FuseArgs,
+    g: Gaussians,
+    table: &ClassTable,
+    start: Instant,
+) -> Result<()> {
+    let ((Some(name), _) | (_, Some(name))) = (&args.extract, &args.remove) else {
+        unreachable!("fused_scene_table checked --extract/--remove");
+    };
+    let id = find_class(table, name)? as i32;
+    let ids = g
+        .class_ids
+        .as_deref()
+        .expect("fused_scene_table checked class");
+    let keep: Vec<bool> = ids
+        .iter()
+        .map(|&c| (c == id) == args.extract.is_some())
+        .collect();
+    let selected = g.select(&keep);
+    write_outputs(args, &selected, table)?;
+    let report = Report {
+        method: "class property of a fused scene",
+        accumulation: Accumulation::FixedPoint,
+        gaussians: selected.len(),
+        classes: table.len(),
+        stats: None,
+        assign_s: 0.0,
+        total_s: start.elapsed().as_secs_f64(),
+        per_class: per_class_counts(&selected, table),
+    };
+    write_report(args, &report)
 }
 
 /// The method `--method` and its variant flags name.

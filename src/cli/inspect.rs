@@ -13,7 +13,8 @@ use semsplat::scene::cameras_json::{read_cameras_json_kind, CameraJsonKind};
 use semsplat::scene::classes::{read_class_table, ClassTable, IGNORE_U16};
 use semsplat::scene::colmap::{find_colmap_model, ColmapFormat};
 use semsplat::scene::labels::{list_label_pngs, read_label_png, LabelMap};
-use semsplat::scene::ply::{classes_sidecar_path, read_classes_sidecar, read_ply_unchecked};
+use semsplat::scene::ply::{classes_sidecar_path, read_classes_sidecar};
+use semsplat::scene::scene_file::read_scene_unchecked;
 use semsplat::scene::{Camera, Gaussians, Split};
 
 const INSPECT_DETAILS: &str = "\
@@ -221,7 +222,7 @@ fn inspect_path(path: &Path, table: Option<&ClassTable>, cameras: Option<&Path>)
         return inspect_labels(path, "label folder", &files, table, cameras);
     }
     match ext.as_str() {
-        "ply" => inspect_ply(path, table),
+        "ply" | "splat" | "spz" => inspect_ply(path, table),
         "png" => {
             let stem = path
                 .file_stem()
@@ -278,8 +279,8 @@ fn range(values: impl Iterator<Item = f64>) -> Value {
 }
 
 fn inspect_ply(path: &Path, table: Option<&ClassTable>) -> Result<Report> {
-    let g = read_ply_unchecked(path)?;
-    let mut r = Report::new("3DGS PLY", path);
+    let g = read_scene_unchecked(path)?;
+    let mut r = Report::new("3DGS scene", path);
     let sidecar = if table.is_none() {
         read_classes_sidecar(path)?
     } else {
@@ -421,6 +422,7 @@ fn inspect_cameras(path: &Path) -> Result<Report> {
         let kind = match kind {
             CameraJsonKind::Inria => "INRIA cameras.json",
             CameraJsonKind::Semsplat => "semsplat camera JSON",
+            CameraJsonKind::Nerfstudio => "nerfstudio transforms.json",
         };
         (kind, cams)
     } else {

@@ -7,20 +7,24 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 
 use super::progress::render_bar;
+use semsplat::eval::label_render::LabelRenderer;
 use semsplat::gpu::Gpu;
 use semsplat::render::{GpuScene, Rasterizer, RenderOptions, RenderedFrame, SemanticMode};
 use semsplat::scene::cameras::load_cameras;
 use semsplat::scene::classes::ClassTable;
 use semsplat::scene::labels::{write_label_png, write_palette_png, LabelMap};
-use semsplat::scene::ply::{read_classes_sidecar, read_ply};
-use semsplat::scene::Camera;
+use semsplat::scene::ply::read_classes_sidecar;
+use semsplat::scene::scene_file::{read_scene, resolve_scene_path};
+use semsplat::scene::{Camera, Gaussians};
 use semsplat::util::npy::write_npy_f32;
 use semsplat::util::write_bytes_atomic;
 
 #[derive(Args)]
 pub struct RenderArgs {
-    /// The scene: a 3DGS PLY (INRIA layout). Semantic logits come from its sem_0..sem_{C-1}
-    /// properties; class ids and colors from the `<scene>.classes.json` sidecar if present.
+    /// The scene: a 3DGS PLY (INRIA layout, or SuperSplat's compressed PLY), a .splat, an
+    /// .spz, or an INRIA training-output folder (its latest iteration). --semantics uses the
+    /// sem_0..sem_{C-1} logits, or a fused PLY's `class` property when it has no logits;
+    /// class ids and colors come from the `<scene>.classes.json` sidecar if present.
     #[arg(long)]
     scene: PathBuf,
     /// Cameras: a COLMAP model folder (cameras/images .bin or .txt, or a folder with
@@ -34,7 +38,8 @@ pub struct RenderArgs {
     /// 255/65535 where nothing was drawn) and <view>.palette.png (class colors).
     #[arg(long)]
     out: PathBuf,
-    /// Also render the semantic channels (the argmax class per pixel).
+    /// Also render the semantic channels (the argmax class per pixel), or for a fused PLY
+    /// without logits the class the Gaussians carry.
     #[arg(long)]
     semantics: bool,
     /// Blend softmax(logits) per Gaussian instead of raw logits.
@@ -95,6 +100,39 @@ fn label_map(f: &RenderedFrame, table: Option<&ClassTable>) -> Result<LabelMap> 
     LabelMap::new(f.width, f.height, labels)
 }
 
+/// Where `--semantics` labels come from: the scene's `sem_*` logits, or (a fused PLY without
+/// logits) its per-Gaussian `class`, rendered as one-hot channels.
+enum LabelSource {
+    None,
+    Logits,
+    Classes(Box<LabelRenderer>),
+}
+
+fn label_source(args: &RenderArgs, g: &Gaussians, gpu: &Gpu) -> Result<LabelSource> {
+    if !args.semantics {
+        return Ok(LabelSource::None);
+    }
+    if g.semantics.is_some() {
+        return Ok(LabelSource::Logits);
+    }
+    let Some(ids) = &g.class_ids else {
+        bail!(
+            "{} has neither sem_* logits nor a class property: nothing to render with --semantics",
+            args.scene.display()
+        );
+    };
+    if args.softmax || args.raw {
+        bail!(
+            "{} has a class per Gaussian but no sem_* logits: --softmax and --raw's semantic \
+             arrays need logits (drop them to render the classes)",
+            args.scene.display()
+        );
+    }
+    Ok(LabelSource::Classes(Box::new(LabelRenderer::new(
+        gpu, g, ids,
+    )?)))
+}
+
 pub fn run(args: RenderArgs) -> Result<()> {
     if args.background.iter().any(|v| !(0.0..=1.0).contains(v)) {
         bail!(
@@ -102,16 +140,12 @@ pub fn run(args: RenderArgs) -> Result<()> {
             args.background
         );
     }
-    let g = read_ply(&args.scene)?;
-    let table = read_classes_sidecar(&args.scene)?;
+    let scene_file = resolve_scene_path(&args.scene)?;
+    let g = read_scene(&scene_file)?;
+    let table = read_classes_sidecar(&scene_file)?;
     let cams = select_views(load_cameras(&args.cameras)?, &args.views)?;
-    if args.semantics && g.semantics.is_none() {
-        bail!(
-            "{} has no sem_* properties: nothing to render with --semantics",
-            args.scene.display()
-        );
-    }
     let gpu = Gpu::new()?;
+    let mut labels_from = label_source(&args, &g, &gpu)?;
     let scene = GpuScene::upload(&gpu, &g)?;
     let mode = if args.softmax {
         SemanticMode::Softmax
@@ -120,11 +154,18 @@ pub fn run(args: RenderArgs) -> Result<()> {
     };
     let opts = RenderOptions {
         background: [args.background[0], args.background[1], args.background[2]],
-        semantics: args.semantics.then_some(mode),
+        semantics: matches!(labels_from, LabelSource::Logits).then_some(mode),
         ..Default::default()
     };
-    let palette_table = table.clone().unwrap_or_else(|| {
-        ClassTable::from_ids(0..g.semantics.as_ref().map_or(0, |s| s.channels as u32))
+    let palette_table = table.clone().unwrap_or_else(|| match &g.semantics {
+        Some(s) => ClassTable::from_ids(0..s.channels as u32),
+        None => ClassTable::from_ids(
+            g.class_ids
+                .iter()
+                .flatten()
+                .filter(|&&c| c >= 0)
+                .map(|&c| c as u32),
+        ),
     });
     let mut raster = Rasterizer::new(&gpu);
     let bar = render_bar(cams.len());
@@ -133,24 +174,43 @@ pub fn run(args: RenderArgs) -> Result<()> {
         let f = raster.render(&scene, cam, &opts)?;
         let out = |suffix: &str| args.out.join(format!("{}{suffix}", cam.name));
         write_rgb_png(&out(".png"), &f)?;
-        if args.semantics {
-            let labels = label_map(&f, table.as_ref())?;
-            write_label_png(&out(".labels.png"), &labels)?;
-            write_palette_png(&out(".palette.png"), &labels, &palette_table)?;
+        let labels = match &mut labels_from {
+            LabelSource::None => None,
+            LabelSource::Logits => Some(label_map(&f, table.as_ref())?),
+            LabelSource::Classes(r) => Some(class_label_map(r, cam)?),
+        };
+        if let Some(labels) = &labels {
+            write_label_png(&out(".labels.png"), labels)?;
+            write_palette_png(&out(".palette.png"), labels, &palette_table)?;
         }
         if args.raw {
-            let (h, w, c) = (f.height as u64, f.width as u64, f.channels as u64);
-            write_npy_f32(&out(".rgb.npy"), &[h, w, 3], &f.rgb)?;
-            write_npy_f32(&out(".alpha.npy"), &[h, w], &f.alpha)?;
-            write_npy_f32(&out(".depth.npy"), &[h, w], &f.depth)?;
-            if args.semantics {
-                write_npy_f32(&out(".sem.npy"), &[h, w, c], &f.sem)?;
-                write_npy_f32(&out(".sem_norm.npy"), &[h, w, c], &f.sem_norm)?;
-            }
+            write_raw(&f, &out, args.semantics)?;
         }
         bar.inc(1);
     }
     bar.finish_and_clear();
     eprintln!("rendered {} views into {}", cams.len(), args.out.display());
+    Ok(())
+}
+
+/// Labels of a fused scene's classes (user ids; ignore where no classified Gaussian shows).
+fn class_label_map(r: &mut LabelRenderer, cam: &Camera) -> Result<LabelMap> {
+    let labels = r
+        .render(cam)?
+        .into_iter()
+        .map(|l| l.unwrap_or(LabelMap::IGNORE))
+        .collect();
+    LabelMap::new(cam.width, cam.height, labels)
+}
+
+fn write_raw(f: &RenderedFrame, out: &dyn Fn(&str) -> PathBuf, semantics: bool) -> Result<()> {
+    let (h, w, c) = (f.height as u64, f.width as u64, f.channels as u64);
+    write_npy_f32(&out(".rgb.npy"), &[h, w, 3], &f.rgb)?;
+    write_npy_f32(&out(".alpha.npy"), &[h, w], &f.alpha)?;
+    write_npy_f32(&out(".depth.npy"), &[h, w], &f.depth)?;
+    if semantics {
+        write_npy_f32(&out(".sem.npy"), &[h, w, c], &f.sem)?;
+        write_npy_f32(&out(".sem_norm.npy"), &[h, w, c], &f.sem_norm)?;
+    }
     Ok(())
 }

@@ -14,7 +14,8 @@ use semsplat::dataset::{user_classes, Dataset, DatasetPaths};
 use semsplat::gpu::Gpu;
 use semsplat::render::SemanticMode;
 use semsplat::scene::images::load_view_image;
-use semsplat::scene::ply::{read_ply, write_classes_sidecar, write_ply};
+use semsplat::scene::ply::{write_classes_sidecar, write_ply};
+use semsplat::scene::scene_file::read_scene_or_point_cloud;
 use semsplat::scene::Gaussians;
 use semsplat::train::config::TrainConfig;
 use semsplat::train::trainer::{
@@ -35,8 +36,9 @@ pub struct TrainArgs {
     /// Cameras: COLMAP model folder, INRIA cameras.json or semsplat cameras.json.
     #[arg(long)]
     cameras: PathBuf,
-    /// Initial scene (any 3DGS PLY: a trained scene, or an SfM point cloud converted to
-    /// Gaussians such as a synth room's init.ply). Its logits, if any, are replaced by
+    /// Initial scene: a 3DGS PLY (a trained scene, or a synth room's init.ply), compressed PLY,
+    /// .splat, .spz or INRIA run folder, or a plain point-cloud PLY such as an SfM input.ply
+    /// (x y z [red green blue]), seeded into Gaussians as INRIA 3DGS does. Its logits, if any, are replaced by
     /// small random values over the classes present in the labels.
     #[arg(long)]
     init: PathBuf,
@@ -44,7 +46,7 @@ pub struct TrainArgs {
     /// follow 3DGS's 30k schedule scaled to this.
     #[arg(long, default_value_t = 30_000)]
     iters: u32,
-    /// Output PLY: the trained Gaussians with their logits (f_sem_*), `class` (label id,
+    /// Output PLY: the trained Gaussians with their logits (sem_0..sem_{C-1}), `class` (label id,
     /// -1 for Gaussians no view sees) and `class_conf` (softmax probability of the class).
     #[arg(long)]
     out: PathBuf,
@@ -128,7 +130,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
     let start = Instant::now();
     let data = load_dataset(&args)?;
     let views = train_views(&args, &data)?;
-    let init = read_ply(&args.init)?;
+    let init = read_scene_or_point_cloud(&args.init)?;
     let init = with_initial_logits(&init, data.classes.len(), args.seed);
     let cfg = train_config(&args, init.len())?;
 

@@ -3,9 +3,9 @@
 
 use std::path::Path;
 
-use anyhow::{ensure, Context, Result};
+use anyhow::{ensure, Result};
 
-use crate::util::npy::write_npy_f64;
+use crate::util::npy::{read_npy_f64, write_npy_f64, NpyArray};
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct ClassScores {
@@ -39,33 +39,15 @@ impl ClassScores {
         write_npy_f64(path, &[self.classes as u64, self.n as u64], &self.data)
     }
 
-    /// Reads an [E, N] float64 (or float32) NumPy array.
+    /// Reads an [E, N] float64 (or float32) NumPy array, C or Fortran order
+    /// ([`read_npy_f64`]).
     pub fn load_npy(path: &Path) -> Result<ClassScores> {
-        let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-        let npy = npyz::NpyFile::new(&bytes[..])
-            .with_context(|| format!("{} is not a .npy file", path.display()))?;
-        let shape = npy.shape().to_vec();
+        let NpyArray { shape, data } = read_npy_f64(path)?;
         ensure!(
             shape.len() == 2,
             "{}: expected a 2-D array [classes, gaussians], got shape {shape:?}",
             path.display()
         );
-        let data: Vec<f64> = match npy.dtype() {
-            npyz::DType::Plain(t)
-                if t.type_char() == npyz::TypeChar::Float && t.size_field() == 8 =>
-            {
-                npy.into_vec::<f64>()?
-            }
-            npyz::DType::Plain(t)
-                if t.type_char() == npyz::TypeChar::Float && t.size_field() == 4 =>
-            {
-                npy.into_vec::<f32>()?.into_iter().map(f64::from).collect()
-            }
-            other => anyhow::bail!(
-                "{}: expected float64 or float32 data, got {other:?}",
-                path.display()
-            ),
-        };
         ensure!(
             data.iter().all(|v| v.is_finite() && *v >= 0.0),
             "{}: contributions must be finite and >= 0",

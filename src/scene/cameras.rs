@@ -46,15 +46,34 @@ pub fn validate_cameras(cameras: &[Camera]) -> Result<()> {
     Ok(())
 }
 
+/// A folder: a COLMAP model (itself, `sparse/0` or `sparse`), else an INRIA training output's
+/// `cameras.json`, else a nerfstudio `transforms.json`.
+fn load_camera_dir(path: &Path) -> Result<Vec<Camera>> {
+    if colmap::find_colmap_model(path).is_ok() {
+        return colmap::read_colmap_model(path);
+    }
+    for file in ["cameras.json", "transforms.json"] {
+        if path.join(file).is_file() {
+            return cameras_json::read_cameras_json(&path.join(file));
+        }
+    }
+    bail!(
+        "{} is not a COLMAP model (cameras/images .bin or .txt, here, in sparse/0 or in \
+         sparse) and holds no INRIA cameras.json or nerfstudio transforms.json",
+        path.display()
+    )
+}
+
 /// Loads cameras from a COLMAP model folder (or a dataset folder with `sparse/0`, or one of
-/// the model's files), an INRIA `cameras.json`, or a semsplat camera JSON. The cameras are
+/// the model's files), an INRIA `cameras.json` (or a training-output folder holding one), a
+/// nerfstudio `transforms.json` (or its folder), or a semsplat camera JSON. The cameras are
 /// validated; errors name the file and the problem.
 pub fn load_cameras(path: &Path) -> Result<Vec<Camera>> {
     if !path.exists() {
         bail!("camera path {} does not exist", path.display());
     }
     if path.is_dir() {
-        return colmap::read_colmap_model(path);
+        return load_camera_dir(path);
     }
     let file_name = path
         .file_name()

@@ -29,6 +29,8 @@ pub const SEMSPLAT_CAMERAS_VERSION: u32 = 1;
 pub enum CameraJsonKind {
     Inria,
     Semsplat,
+    /// nerfstudio / instant-ngp `transforms.json` (see `scene::nerfstudio`).
+    Nerfstudio,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -94,9 +96,9 @@ pub fn parse_cameras_json(bytes: &[u8]) -> Result<(CameraJsonKind, Vec<Camera>)>
             Some(other) => {
                 bail!("unknown camera format '{other}' (expected '{SEMSPLAT_CAMERAS_FORMAT}')")
             }
-            None if obj.contains_key("frames") => bail!(
-                "this looks like a NeRF transforms.json, which is not supported: use an INRIA \
-                 cameras.json, a semsplat camera JSON or a COLMAP model"
+            None if obj.contains_key("frames") => (
+                CameraJsonKind::Nerfstudio,
+                super::nerfstudio::parse_transforms(obj)?,
             ),
             None if obj.contains_key("classes") => bail!("this is a class table, not cameras"),
             None => bail!(

@@ -71,13 +71,6 @@ struct ClassEntryJson {
     color: Option<[u8; 3]>,
 }
 
-#[derive(Deserialize)]
-#[serde(untagged)]
-enum ClassTableJson {
-    List(Vec<ClassEntryJson>),
-    Object { classes: Vec<ClassEntryJson> },
-}
-
 impl ClassTable {
     /// Builds a table for ids without names or colors ("class_<id>", default palette).
     pub fn from_ids(ids: impl IntoIterator<Item = u32>) -> ClassTable {
@@ -94,28 +87,68 @@ impl ClassTable {
     }
 
     /// Parses a class table from JSON: a list of `{id, name, color}` or `{"classes": [...]}`.
-    /// Missing names become `class_<id>`, missing colors come from [`default_color`].
+    /// Missing names become `class_<id>`, missing colors come from [`default_color`]. An
+    /// entry that does not parse is named in the error by its index and text.
     pub fn from_json_str(text: &str) -> Result<ClassTable> {
-        let parsed: ClassTableJson = serde_json::from_str(text).map_err(|e| {
-            anyhow::anyhow!(
-                "not a class table ({e}); expected a JSON list of {{\"id\", \"name\", \"color\": [r, g, b]}} \
-                 or {{\"classes\": [...]}}"
-            )
-        })?;
-        let entries = match parsed {
-            ClassTableJson::List(v) | ClassTableJson::Object { classes: v } => v,
+        const SHAPE: &str = "expected a JSON list of {\"id\", \"name\", \"color\": [r, g, b]} \
+                             or {\"classes\": [...]}";
+        let value: serde_json::Value = serde_json::from_str(text)
+            .map_err(|e| anyhow::anyhow!("not a class table ({e}); {SHAPE}"))?;
+        let entries = match &value {
+            serde_json::Value::Array(v) => v,
+            serde_json::Value::Object(o) => match o.get("classes") {
+                Some(serde_json::Value::Array(v)) => v,
+                _ => bail!("not a class table (an object without a \"classes\" list); {SHAPE}"),
+            },
+            _ => bail!("not a class table; {SHAPE}"),
         };
         let classes = entries
-            .into_iter()
-            .map(|e| ClassInfo {
-                id: e.id,
-                name: e.name.unwrap_or_else(|| format!("class_{}", e.id)),
-                color: e.color.unwrap_or_else(|| default_color(e.id)),
+            .iter()
+            .enumerate()
+            .map(|(i, v)| {
+                let e = ClassEntryJson::deserialize(v).map_err(|err| {
+                    let shown: String = v.to_string().chars().take(120).collect();
+                    anyhow::anyhow!(
+                        "not a class table: class entry {i} ({shown}) is not {{\"id\": non-negative integer, \
+                         \"name\": text, \"color\": [r, g, b] in 0..=255}}: {err}"
+                    )
+                })?;
+                Ok(ClassInfo {
+                    id: e.id,
+                    name: e.name.unwrap_or_else(|| format!("class_{}", e.id)),
+                    color: e.color.unwrap_or_else(|| default_color(e.id)),
+                })
             })
-            .collect();
+            .collect::<Result<Vec<_>>>()?;
         let table = ClassTable { classes };
         table.validate()?;
         Ok(table)
+    }
+
+    /// The class a user names on the command line: an exact name, else a name matched
+    /// case-insensitively (when only one matches), else an id. The error lists the names.
+    pub fn find(&self, key: &str) -> Result<&ClassInfo> {
+        if let Some(c) = self.by_name(key) {
+            return Ok(c);
+        }
+        let folded: Vec<&ClassInfo> = self
+            .classes
+            .iter()
+            .filter(|c| c.name.to_lowercase() == key.to_lowercase())
+            .collect();
+        match folded.as_slice() {
+            [one] => return Ok(one),
+            [] => {}
+            several => {
+                let names: Vec<&str> = several.iter().map(|c| c.name.as_str()).collect();
+                bail!("class '{key}' matches several names when case is ignored: {names:?}; give the exact name or the id")
+            }
+        }
+        if let Some(c) = key.trim().parse::<u32>().ok().and_then(|id| self.get(id)) {
+            return Ok(c);
+        }
+        let names: Vec<&str> = self.classes.iter().map(|c| c.name.as_str()).collect();
+        bail!("no class '{key}' in the class table (classes: {names:?})")
     }
 
     /// Checks for duplicate ids or names, empty names, and ids that collide with the

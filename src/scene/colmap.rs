@@ -410,49 +410,70 @@ pub fn read_cameras_txt_from(r: &mut impl BufRead) -> Result<Vec<ColmapCamera>> 
 }
 
 /// Parses images.txt from any reader: per image a pose line
-/// `IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME` followed by a 2D-points line, which is
-/// skipped (it may be empty). Like COLMAP, the line right after a pose line is always taken
-/// as its points line.
+/// `IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME`, usually followed by a 2D-points line of
+/// `X Y POINT3D_ID` triples (skipped). Writers differ on that second line: COLMAP writes it
+/// (empty when there are no points), some pycolmap exports leave it out entirely. Taking
+/// "the line after a pose line" blindly would swallow every other image of the latter, so
+/// each line is recognised by its shape instead: a points line holds only numbers, in
+/// triples whose third is an integer; anything else must be a pose line.
 pub fn read_images_txt_from(r: &mut impl BufRead) -> Result<Vec<ColmapImage>> {
     let mut images = Vec::new();
-    let mut lines = r.lines().enumerate();
-    while let Some((i, line)) = lines.next() {
+    // A points line may only follow a pose line.
+    let mut after_pose = false;
+    for (i, line) in r.lines().enumerate() {
         let line_no = i + 1;
         let line = line.with_context(|| format!("line {line_no}: read error"))?;
         let Some(data) = data_line(&line) else {
             continue;
         };
         let toks: Vec<&str> = data.split_whitespace().collect();
-        if toks.len() < 10 {
-            bail!(
-                "line {line_no}: expected IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME, got '{}'",
-                truncate_for_error(data)
-            );
+        if after_pose && is_points_line(&toks) {
+            after_pose = false;
+            continue;
         }
-        let id = parse_num(toks[0], "IMAGE_ID", line_no)?;
-        let mut q = [0.0; 4];
-        for (k, v) in q.iter_mut().enumerate() {
-            *v = parse_num(toks[1 + k], "the quaternion", line_no)?;
-        }
-        let mut t = [0.0; 3];
-        for (k, v) in t.iter_mut().enumerate() {
-            *v = parse_num(toks[5 + k], "the translation", line_no)?;
-        }
-        let camera_id = parse_num(toks[8], "CAMERA_ID", line_no)?;
-        let name = toks[9..].join(" ");
-        images.push(ColmapImage {
-            id,
-            qvec: q,
-            tvec: t,
-            camera_id,
-            name,
-        });
-        // The points line; its contents are not needed.
-        if let Some((_, points)) = lines.next() {
-            points.with_context(|| format!("line {}: read error", line_no + 1))?;
-        }
+        images.push(parse_pose_line(&toks, data, line_no)?);
+        after_pose = true;
     }
     Ok(images)
+}
+
+/// True for a 2D-points line: `X Y POINT3D_ID` triples (POINT3D_ID is -1 when unmatched).
+fn is_points_line(toks: &[&str]) -> bool {
+    toks.len() % 3 == 0
+        && toks.chunks(3).all(|t| {
+            t[0].parse::<f64>().is_ok()
+                && t[1].parse::<f64>().is_ok()
+                && t[2].parse::<i64>().is_ok()
+        })
+}
+
+/// One `IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME` line (the name may hold spaces and
+/// subfolders, e.g. `cam0/0001.jpg` in a rig).
+fn parse_pose_line(toks: &[&str], data: &str, line_no: usize) -> Result<ColmapImage> {
+    if toks.len() < 10 {
+        bail!(
+            "line {line_no}: expected IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME (or a 2D-points \
+             line of X Y POINT3D_ID triples after it), got '{}'",
+            truncate_for_error(data)
+        );
+    }
+    let id = parse_num(toks[0], "IMAGE_ID", line_no)?;
+    let mut qvec = [0.0; 4];
+    for (k, v) in qvec.iter_mut().enumerate() {
+        *v = parse_num(toks[1 + k], "the quaternion", line_no)?;
+    }
+    let mut tvec = [0.0; 3];
+    for (k, v) in tvec.iter_mut().enumerate() {
+        *v = parse_num(toks[5 + k], "the translation", line_no)?;
+    }
+    let camera_id = parse_num(toks[8], "CAMERA_ID", line_no)?;
+    Ok(ColmapImage {
+        id,
+        qvec,
+        tvec,
+        camera_id,
+        name: toks[9..].join(" "),
+    })
 }
 
 fn truncate_for_error(s: &str) -> String {

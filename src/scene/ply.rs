@@ -43,7 +43,7 @@ pub enum PlyFormat {
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Scalar {
+pub(crate) enum Scalar {
     I8,
     U8,
     I16,
@@ -105,13 +105,13 @@ impl Scalar {
 }
 
 #[derive(Clone, Debug)]
-enum PropertyDef {
+pub(crate) enum PropertyDef {
     Scalar { name: String, ty: Scalar },
     List { name: String },
 }
 
 impl PropertyDef {
-    fn name(&self) -> &str {
+    pub(crate) fn name(&self) -> &str {
         match self {
             PropertyDef::Scalar { name, .. } | PropertyDef::List { name } => name,
         }
@@ -119,16 +119,16 @@ impl PropertyDef {
 }
 
 #[derive(Clone, Debug)]
-struct ElementDef {
-    name: String,
-    count: u64,
-    props: Vec<PropertyDef>,
+pub(crate) struct ElementDef {
+    pub(crate) name: String,
+    pub(crate) count: u64,
+    pub(crate) props: Vec<PropertyDef>,
 }
 
 #[derive(Debug)]
-struct Header {
-    format: PlyFormat,
-    elements: Vec<ElementDef>,
+pub(crate) struct Header {
+    pub(crate) format: PlyFormat,
+    pub(crate) elements: Vec<ElementDef>,
     /// Bytes the header took, `end_header` line included.
     len: u64,
 }
@@ -330,6 +330,25 @@ fn plan_layout(props: &[PropertyDef]) -> Result<Layout> {
         .copied()
         .filter(|r| !seen.contains(r))
         .collect();
+    if missing == ["scale_2"] {
+        bail!(
+            "this is a 2DGS scene (scale_0 and scale_1 but no scale_2: flat surfels); 2DGS \
+             scenes are not supported, semsplat renders 3D Gaussians"
+        );
+    }
+    if is_point_cloud(&seen) {
+        bail!(
+            "this is a point cloud (x y z{} without Gaussian properties, e.g. an SfM \
+             input.ply), not Gaussians: use a trained scene (an INRIA run's \
+             point_cloud/iteration_*/point_cloud.ply, a .splat or an .spz); a point cloud can \
+             only seed training (`semsplat train --init`)",
+            if seen.contains("red") {
+                " red green blue"
+            } else {
+                ""
+            }
+        );
+    }
     if !missing.is_empty() {
         bail!(
             "missing required vertex properties: {} (a 3DGS PLY needs x y z f_dc_0..2 opacity \
@@ -345,6 +364,13 @@ fn plan_layout(props: &[PropertyDef]) -> Result<Layout> {
         has_conf: seen.contains("class_conf"),
         has_instance: seen.contains("instance"),
     })
+}
+
+/// A plain point cloud: positions (maybe colours and normals) but none of the Gaussian
+/// properties.
+pub(crate) fn is_point_cloud(seen: &std::collections::HashSet<&str>) -> bool {
+    let gaussian = ["f_dc_0", "opacity", "scale_0", "rot_0"];
+    ["x", "y", "z"].iter().all(|p| seen.contains(p)) && !gaussian.iter().any(|p| seen.contains(p))
 }
 
 /// The SH degree whose rest coefficients (3 channels) number `rest_count`.
@@ -434,6 +460,10 @@ pub fn read_ply_unchecked(path: &Path) -> Result<Gaussians> {
 /// length, when known) lets a vertex count the data cannot hold fail before allocating.
 pub fn read_ply_from(mut r: impl BufRead, total_len: Option<u64>) -> Result<Gaussians> {
     let header = parse_header(&mut r)?;
+    if super::compressed_ply::is_compressed(&header) {
+        let columns = read_columns(&mut r, &header)?;
+        return super::compressed_ply::decode(&columns);
+    }
     let vi = header
         .elements
         .iter()
@@ -483,6 +513,121 @@ pub fn read_ply_from(mut r: impl BufRead, total_len: Option<u64>) -> Result<Gaus
         )?,
     }
     Ok(g)
+}
+
+/// Every element of a binary PLY as named columns of values (for small packed layouts such
+/// as SuperSplat's compressed PLY, whose data is a few integers per splat).
+pub(crate) struct Columns {
+    /// (element name, its properties in file order).
+    pub(crate) elements: Vec<(String, Vec<NamedColumn>)>,
+}
+
+/// One property of an element: its name and one value per row.
+pub(crate) type NamedColumn = (String, Vec<f64>);
+
+impl Columns {
+    /// The column `prop` of element `element`.
+    pub(crate) fn get(&self, element: &str, prop: &str) -> Result<&[f64]> {
+        let (_, props) = self
+            .elements
+            .iter()
+            .find(|(name, _)| name == element)
+            .ok_or_else(|| anyhow!("no '{element}' element"))?;
+        props
+            .iter()
+            .find(|(name, _)| name == prop)
+            .map(|(_, v)| v.as_slice())
+            .ok_or_else(|| anyhow!("element '{element}' has no property '{prop}'"))
+    }
+}
+
+fn read_columns(r: &mut impl Read, header: &Header) -> Result<Columns> {
+    if header.format == PlyFormat::Ascii {
+        bail!("an ASCII compressed PLY is not supported (SuperSplat writes binary)");
+    }
+    let big_endian = header.format == PlyFormat::BinaryBigEndian;
+    let mut elements = Vec::new();
+    for el in &header.elements {
+        let mut types = Vec::new();
+        for p in &el.props {
+            match p {
+                PropertyDef::Scalar { ty, .. } => types.push(*ty),
+                PropertyDef::List { name } => {
+                    bail!("element '{}' has a list property '{name}'", el.name)
+                }
+            }
+        }
+        let record_len: usize = types.iter().map(|t| t.size()).sum();
+        let mut cols: Vec<Vec<f64>> = vec![Vec::new(); types.len()];
+        let mut record = vec![0u8; record_len];
+        for row in 0..el.count {
+            r.read_exact(&mut record).map_err(|_| {
+                anyhow!(
+                    "truncated file: element '{}' ends in row {row} of {}",
+                    el.name,
+                    el.count
+                )
+            })?;
+            let mut at = 0;
+            for (col, ty) in cols.iter_mut().zip(&types) {
+                col.push(ty.decode(&record[at..at + ty.size()], big_endian));
+                at += ty.size();
+            }
+        }
+        let names = el.props.iter().map(|p| p.name().to_owned());
+        elements.push((el.name.clone(), names.zip(cols).collect()));
+    }
+    Ok(Columns { elements })
+}
+
+/// Points (and colours in [0, 1], when the file has `red green blue`) of a plain point-cloud
+/// PLY such as INRIA's `input.ply` (x y z, normals, uchar colours). `None` when the PLY is
+/// not a point cloud (it has Gaussian properties).
+pub fn read_point_cloud_ply(path: &Path) -> Result<Option<PointCloud>> {
+    let file = File::open(path).with_context(|| format!("opening PLY {}", path.display()))?;
+    let mut r = BufReader::new(file);
+    let header = parse_header(&mut r).with_context(|| format!("PLY {}", path.display()))?;
+    let Some(vertex) = header.elements.iter().find(|e| e.name == "vertex") else {
+        return Ok(None);
+    };
+    let names: std::collections::HashSet<&str> = vertex.props.iter().map(|p| p.name()).collect();
+    if !is_point_cloud(&names) {
+        return Ok(None);
+    }
+    // uchar colours are 0..255; float ones 0..1.
+    let colour_scale = match vertex.props.iter().find(|p| p.name() == "red") {
+        Some(PropertyDef::Scalar {
+            ty: Scalar::F32 | Scalar::F64,
+            ..
+        }) => 1.0,
+        Some(PropertyDef::Scalar {
+            ty: Scalar::U16, ..
+        }) => 1.0 / 65535.0,
+        _ => 1.0 / 255.0,
+    };
+    let cols = read_columns(&mut r, &header).with_context(|| format!("PLY {}", path.display()))?;
+    let xyz = ["x", "y", "z"].map(|a| cols.get("vertex", a));
+    let [x, y, z] = [&xyz[0], &xyz[1], &xyz[2]].map(|c| c.as_ref().map_err(|e| anyhow!("{e}")));
+    let (x, y, z) = (x?, y?, z?);
+    let points = (0..x.len())
+        .map(|i| [x[i] as f32, y[i] as f32, z[i] as f32])
+        .collect();
+    let colours = match ["red", "green", "blue"].map(|c| cols.get("vertex", c).ok()) {
+        [Some(r), Some(g), Some(b)] => Some(
+            (0..r.len())
+                .map(|i| [r[i], g[i], b[i]].map(|v| (v * colour_scale) as f32))
+                .collect(),
+        ),
+        _ => None,
+    };
+    Ok(Some(PointCloud { points, colours }))
+}
+
+/// A plain point cloud read from a PLY.
+pub struct PointCloud {
+    pub points: Vec<[f32; 3]>,
+    /// RGB in [0, 1] per point, when the file has colours.
+    pub colours: Option<Vec<[f32; 3]>>,
 }
 
 /// Empty Gaussians shaped by the layout, with room for `reserve` vertices.
@@ -570,7 +715,17 @@ impl VertexValues {
     }
 }
 
+/// `-1` (unseen / none) as it comes back from tools that read `class` and `instance` as
+/// unsigned 32-bit (PlayCanvas splat-transform rewrites our `int` as `uint`): 2^32 - 1.
+const UNSEEN_AS_U32: f64 = u32::MAX as f64;
+
+/// An id property as a 32-bit signed integer. 4294967295 is taken as -1 (see
+/// [`UNSEEN_AS_U32`]): no real class or instance id comes near it, and a file that went
+/// through an unsigned reader must still load. Other values above i32::MAX are refused.
 fn to_i32(v: f64, what: &str, vertex: usize) -> Result<i32> {
+    if v == UNSEEN_AS_U32 {
+        return Ok(-1);
+    }
     if v.fract() != 0.0 || v < i32::MIN as f64 || v > i32::MAX as f64 {
         bail!("vertex {vertex}: '{what}' value {v} is not a 32-bit integer");
     }
@@ -792,14 +947,77 @@ fn property_names(g: &Gaussians) -> Vec<(String, &'static str)> {
 
 /// Writes a binary little-endian 3DGS PLY atomically, with the semantic fields that are set.
 pub fn write_ply(path: &Path, g: &Gaussians) -> Result<()> {
+    refuse_other_splat_extension(path)?;
     g.check_layout()
+        .and_then(|()| check_finite(g))
         .with_context(|| format!("refusing to write PLY {}", path.display()))?;
     write_atomic(path, |w| write_ply_to(w, g))
 }
 
-/// Writes a binary little-endian 3DGS PLY to any writer.
+/// semsplat writes only the standard PLY: a name promising another splat format would
+/// hold bytes its readers cannot parse.
+fn refuse_other_splat_extension(path: &Path) -> Result<()> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or_default();
+    if ["splat", "spz", "ksplat", "sog"]
+        .iter()
+        .any(|e| e.eq_ignore_ascii_case(ext))
+    {
+        bail!(
+            "refusing to write {}: semsplat writes the standard 3DGS PLY only (name it .ply; \
+             convert afterwards with e.g. PlayCanvas splat-transform)",
+            path.display()
+        );
+    }
+    Ok(())
+}
+
+/// The first non-finite float a PLY would hold, named by property and Gaussian index (a NaN
+/// model must never be written as if it were a result).
+pub fn check_finite(g: &Gaussians) -> Result<()> {
+    let bad = |v: &[f32]| v.iter().position(|x| !x.is_finite());
+    let k3 = g.sh_coeffs() * 3;
+    for i in 0..g.len() {
+        let fields: [(&str, &[f32]); 4] = [
+            ("x y z", &g.means[i]),
+            ("scale_*", &g.log_scales[i]),
+            ("rot_*", &g.quats[i]),
+            ("opacity", std::slice::from_ref(&g.opacity_logits[i])),
+        ];
+        for (name, v) in fields {
+            if let Some(k) = bad(v) {
+                bail!(
+                    "Gaussian {i} has a non-finite {name} value ({}, component {k})",
+                    v[k]
+                );
+            }
+        }
+        if let Some(k) = bad(&g.sh[i * k3..(i + 1) * k3]) {
+            let what = if k < 3 {
+                format!("f_dc_{k}")
+            } else {
+                format!("SH coefficient {} channel {}", k / 3, k % 3)
+            };
+            bail!("Gaussian {i} has a non-finite {what}");
+        }
+        if let Some(s) = &g.semantics {
+            if let Some(k) = bad(&s.logits[i * s.channels..(i + 1) * s.channels]) {
+                bail!("Gaussian {i} has a non-finite sem_{k}");
+            }
+        }
+        if let Some(k) = g.class_conf.as_ref().filter(|c| !c[i].is_finite()) {
+            bail!("Gaussian {i} has a non-finite class_conf ({})", k[i]);
+        }
+    }
+    Ok(())
+}
+
+/// Writes a binary little-endian 3DGS PLY to any writer (non-finite values refused).
 pub fn write_ply_to(w: &mut impl Write, g: &Gaussians) -> Result<()> {
     g.check_layout()?;
+    check_finite(g)?;
     let names = property_names(g);
     let mut header = format!(
         "ply\nformat binary_little_endian 1.0\ncomment written by semsplat {}\nelement vertex {}\n",

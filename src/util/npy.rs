@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use anyhow::{ensure, Result};
+use anyhow::{anyhow, bail, ensure, Context, Result};
 use npyz::WriterBuilder;
 
 use super::atomic_write::write_atomic;
@@ -35,4 +35,91 @@ fn write_npy<T: npyz::AutoSerialize + Copy>(path: &Path, shape: &[u64], data: &[
         writer.finish()?;
         Ok(())
     })
+}
+
+/// A float array read from a .npy file, always in C (row-major) order.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NpyArray {
+    pub shape: Vec<u64>,
+    /// Row-major values (the last axis varies fastest), whatever order the file used.
+    pub data: Vec<f64>,
+}
+
+/// Reads a float32 or float64 .npy file (either endianness). A file written in Fortran order
+/// (`fortran_order: True`, e.g. `np.save(p, B.T)` or an `order='F'` array) is transposed to
+/// row-major on read, so the values always mean what `shape` says. A file whose data is
+/// shorter or longer than its header promises is an error naming both byte counts.
+pub fn read_npy_f64(path: &Path) -> Result<NpyArray> {
+    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    parse_npy_f64(&bytes).with_context(|| format!("NumPy file {}", path.display()))
+}
+
+/// [`read_npy_f64`] from memory.
+pub fn parse_npy_f64(bytes: &[u8]) -> Result<NpyArray> {
+    let mut data_bytes = bytes;
+    let header = npyz::NpyHeader::from_reader(&mut data_bytes)
+        .map_err(|e| anyhow!("not a .npy file: {e}"))?;
+    let actual = data_bytes.len() as u64;
+    let npy = npyz::NpyFile::with_header(header, data_bytes);
+    let shape = npy.shape().to_vec();
+    let order = npy.order();
+    let dtype = npy.dtype();
+    let item_bytes = match &dtype {
+        npyz::DType::Plain(t) if t.type_char() == npyz::TypeChar::Float => t.size_field(),
+        other => bail!("expected float64 or float32 data, got {}", other.descr()),
+    };
+    ensure!(
+        item_bytes == 4 || item_bytes == 8,
+        "expected float64 or float32 data, got {}-byte floats",
+        item_bytes
+    );
+    let expected = npy
+        .len()
+        .checked_mul(item_bytes as u64)
+        .ok_or_else(|| anyhow!("shape {shape:?} is too large"))?;
+    ensure!(
+        actual == expected,
+        "the header promises shape {shape:?} of {item_bytes}-byte floats ({expected} bytes of \
+         data) but the file holds {actual} bytes of data{}",
+        if actual < expected {
+            " (truncated file?)"
+        } else {
+            ""
+        }
+    );
+    let stored: Vec<f64> = if item_bytes == 8 {
+        npy.into_vec::<f64>()?
+    } else {
+        npy.into_vec::<f32>()?.into_iter().map(f64::from).collect()
+    };
+    let data = match order {
+        npyz::Order::C => stored,
+        npyz::Order::Fortran => fortran_to_c_order(&shape, &stored),
+    };
+    Ok(NpyArray { shape, data })
+}
+
+/// Reorders values stored column-major (the first axis fastest) into row-major order.
+fn fortran_to_c_order(shape: &[u64], stored: &[f64]) -> Vec<f64> {
+    let dims: Vec<usize> = shape.iter().map(|&d| d as usize).collect();
+    // Column-major stride of each axis.
+    let mut f_strides = vec![1usize; dims.len()];
+    for a in 1..dims.len() {
+        f_strides[a] = f_strides[a - 1] * dims[a - 1];
+    }
+    let mut out = Vec::with_capacity(stored.len());
+    let mut index = vec![0usize; dims.len()];
+    for _ in 0..stored.len() {
+        let at: usize = index.iter().zip(&f_strides).map(|(i, s)| i * s).sum();
+        out.push(stored[at]);
+        // Advance the row-major multi-index: the last axis fastest.
+        for a in (0..dims.len()).rev() {
+            index[a] += 1;
+            if index[a] < dims[a] {
+                break;
+            }
+            index[a] = 0;
+        }
+    }
+    out
 }

@@ -1,0 +1,141 @@
+//! Opening a scene whatever form it comes in: a PLY (standard INRIA layout or SuperSplat's
+//! compressed PLY), an antimatter15 `.splat`, a Niantic `.spz`, or an INRIA training-output
+//! folder (`output/run` or `output/run/point_cloud`, whose latest `iteration_*/point_cloud.ply`
+//! is used). semsplat writes only the standard PLY.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+
+use super::gaussians::Gaussians;
+use super::ply::{read_ply_unchecked, read_point_cloud_ply};
+use super::point_cloud::gaussians_from_point_cloud;
+use super::splat_formats::{parse_splat, parse_spz};
+
+/// The scene file a user's `--scene` path names: the path itself for a file; for an INRIA
+/// run folder (or its `point_cloud` folder) the `point_cloud.ply` of the numerically latest
+/// `iteration_<N>` (so `iteration_30000` beats `iteration_7000`).
+pub fn resolve_scene_path(path: &Path) -> Result<PathBuf> {
+    if !path.is_dir() {
+        if !path.exists() {
+            bail!("scene {} does not exist", path.display());
+        }
+        return Ok(path.to_path_buf());
+    }
+    let iterations_dir = if path.join("point_cloud").is_dir() {
+        path.join("point_cloud")
+    } else {
+        path.to_path_buf()
+    };
+    let latest = latest_iteration(&iterations_dir)?;
+    match latest {
+        Some(dir) => Ok(dir.join("point_cloud.ply")),
+        None if path.join("point_cloud.ply").is_file() => Ok(path.join("point_cloud.ply")),
+        None => bail!(
+            "{} is a folder but not an INRIA training output: expected point_cloud/iteration_<N>/\
+             point_cloud.ply in it (or iteration_<N>/point_cloud.ply); pass a .ply, .splat or .spz file",
+            path.display()
+        ),
+    }
+}
+
+/// The `iteration_<N>` folder with the largest N that holds a `point_cloud.ply`.
+fn latest_iteration(dir: &Path) -> Result<Option<PathBuf>> {
+    let mut best: Option<(u64, PathBuf)> = None;
+    for entry in std::fs::read_dir(dir).with_context(|| format!("listing {}", dir.display()))? {
+        let entry = entry?;
+        let name = entry.file_name();
+        let Some(n) = name
+            .to_str()
+            .and_then(|s| s.strip_prefix("iteration_"))
+            .and_then(|s| s.parse::<u64>().ok())
+        else {
+            continue;
+        };
+        if entry.path().join("point_cloud.ply").is_file() && best.as_ref().is_none_or(|b| n > b.0) {
+            best = Some((n, entry.path()));
+        }
+    }
+    Ok(best.map(|b| b.1))
+}
+
+/// Which reader a scene file needs, from its extension (PLY variants are told apart by their
+/// header).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SceneFormat {
+    Ply,
+    Splat,
+    Spz,
+}
+
+pub fn scene_format(path: &Path) -> Result<SceneFormat> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or_default()
+        .to_ascii_lowercase();
+    Ok(match ext.as_str() {
+        "ply" => SceneFormat::Ply,
+        "splat" => SceneFormat::Splat,
+        "spz" => SceneFormat::Spz,
+        "ksplat" => bail!(
+            "{}: .ksplat (mkkellogg's GaussianSplats3D format) is not supported; convert it to PLY \
+             first (e.g. with that viewer's exporter)",
+            path.display()
+        ),
+        "sog" | "json" | "glb" | "gltf" => bail!(
+            "{}: .{ext} is not a supported scene format (supported: .ply, SuperSplat's \
+             .compressed.ply, .splat, .spz); convert it to PLY first (e.g. with PlayCanvas \
+             splat-transform)",
+            path.display()
+        ),
+        _ => SceneFormat::Ply,
+    })
+}
+
+/// Reads a scene in any supported form (see the module docs), values checked.
+pub fn read_scene(path: &Path) -> Result<Gaussians> {
+    let g = read_scene_unchecked(path)?;
+    let file = resolve_scene_path(path)?;
+    g.validate()
+        .with_context(|| format!("scene {}", file.display()))?;
+    Ok(g)
+}
+
+/// Like [`read_scene`] without the value checks (for `inspect`).
+pub fn read_scene_unchecked(path: &Path) -> Result<Gaussians> {
+    let file = resolve_scene_path(path)?;
+    let format = scene_format(&file)?;
+    let bytes = || std::fs::read(&file).with_context(|| format!("reading {}", file.display()));
+    match format {
+        SceneFormat::Ply => read_ply_unchecked(&file),
+        SceneFormat::Splat => {
+            parse_splat(&bytes()?).with_context(|| format!(".splat file {}", file.display()))
+        }
+        SceneFormat::Spz => {
+            parse_spz(&bytes()?).with_context(|| format!(".spz file {}", file.display()))
+        }
+    }
+}
+
+/// A scene to start training from: any scene [`read_scene`] reads, or a plain point-cloud PLY
+/// (an SfM `input.ply`) seeded into Gaussians by [`gaussians_from_point_cloud`] (said on
+/// stderr, since the seed's scales and opacities are guesses, as in INRIA 3DGS).
+pub fn read_scene_or_point_cloud(path: &Path) -> Result<Gaussians> {
+    let file = resolve_scene_path(path)?;
+    if scene_format(&file)? == SceneFormat::Ply {
+        if let Some(cloud) = read_point_cloud_ply(&file)? {
+            let g = gaussians_from_point_cloud(&cloud)
+                .with_context(|| format!("point cloud {}", file.display()))?;
+            eprintln!(
+                "{} is a point cloud: seeded {} Gaussians from its points (INRIA 3DGS's \
+                 initialization)",
+                file.display(),
+                g.len()
+            );
+            g.validate()?;
+            return Ok(g);
+        }
+    }
+    read_scene(&file)
+}
