@@ -18,7 +18,9 @@ use image::{ExtendedColorType, ImageEncoder};
 use super::classes::{ClassTable, IGNORE_U16, IGNORE_U8};
 use crate::util::write_atomic;
 
-pub use decode::{read_label_png_as, read_png_header, LabelFormat, PngHeader, MAX_DECODE_BYTES};
+pub use decode::{
+    read_label_png_as, read_png_header, LabelFormat, PngHeader, MAX_DECODE_BYTES, MAX_LABEL_PIXELS,
+};
 pub use folder::{
     binary_mask_warning, label_size_fit, list_label_pngs, load_label_dir, LabelDir, MissingLabels,
     SizeFit,

@@ -19,6 +19,10 @@ use crate::scene::classes::{ClassTable, IGNORE_U16, IGNORE_U8};
 /// exhaust memory): checked from the header, and again as the decoder's allocation limit.
 pub const MAX_DECODE_BYTES: u64 = 1 << 30;
 
+/// Label maps with more pixels than this (16384 x 16384) are refused from their header:
+/// reading one takes its samples plus 2 bytes a pixel, and no camera needs more.
+pub const MAX_LABEL_PIXELS: u64 = 1 << 28;
+
 /// How label map files are read: the one place the reading options live, carried by the
 /// dataset loader ([`LabelDir`](super::LabelDir)) to every command that reads labels.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -104,12 +108,15 @@ impl PngHeader {
                 self.bit_depth
             );
         }
-        if self.width == 0 || self.height == 0 || self.decoded_bytes() > MAX_DECODE_BYTES {
+        let pixels = self.width as u64 * self.height as u64;
+        if pixels == 0 || pixels > MAX_LABEL_PIXELS || self.decoded_bytes() > MAX_DECODE_BYTES {
             bail!(
-                "is {}x{} ({} PNG): over the {} MiB a label map may take decoded",
+                "is {}x{} ({} PNG): refused from its header, over the {} pixels ({} MiB \
+                 decoded) a label map may have",
                 self.width,
                 self.height,
                 self.kind(),
+                MAX_LABEL_PIXELS,
                 MAX_DECODE_BYTES >> 20
             );
         }
@@ -182,30 +189,27 @@ enum RawPixel {
     Transparent,
 }
 
-fn raw_pixels(samples: &[u8], line: usize, h: &PngHeader) -> Vec<RawPixel> {
-    let mut out = Vec::with_capacity(h.width as usize * h.height as usize);
-    for row in samples.chunks_exact(line).take(h.height as usize) {
-        for x in 0..h.width as usize {
-            let s = |c| sample(row, x, c, h);
-            out.push(match h.color_type {
-                4 if s(1) == 0 => RawPixel::Transparent,
-                6 if s(3) == 0 => RawPixel::Transparent,
-                2 | 6 if s(0) != s(1) || s(1) != s(2) => {
-                    // 16-bit colours keep their high byte: tables hold 8-bit colours.
-                    let c8 = |c| {
-                        if h.bit_depth == 16 {
-                            (s(c) >> 8) as u8
-                        } else {
-                            s(c) as u8
-                        }
-                    };
-                    RawPixel::Color([c8(0), c8(1), c8(2)])
+/// Pixel `i` (row-major) of the decoded samples.
+fn raw_pixel(samples: &[u8], line: usize, h: &PngHeader, i: usize) -> RawPixel {
+    let (x, y) = (i % h.width as usize, i / h.width as usize);
+    let row = &samples[y * line..(y + 1) * line];
+    let s = |c| sample(row, x, c, h);
+    match h.color_type {
+        4 if s(1) == 0 => RawPixel::Transparent,
+        6 if s(3) == 0 => RawPixel::Transparent,
+        2 | 6 if s(0) != s(1) || s(1) != s(2) => {
+            // 16-bit colours keep their high byte: tables hold 8-bit colours.
+            let c8 = |c| {
+                if h.bit_depth == 16 {
+                    (s(c) >> 8) as u8
+                } else {
+                    s(c) as u8
                 }
-                _ => RawPixel::Id(s(0)),
-            });
+            };
+            RawPixel::Color([c8(0), c8(1), c8(2)])
         }
+        _ => RawPixel::Id(s(0)),
     }
-    out
 }
 
 /// Reads a label map PNG (any form in the module doc) as class ids; the ignore id (see
@@ -220,67 +224,63 @@ pub fn read_label_png_as(
 }
 
 fn read_inner(path: &Path, format: &LabelFormat, table: Option<&ClassTable>) -> Result<LabelMap> {
-    let header = read_png_header(path)?;
+    let h = read_png_header(path)?;
     let (samples, line) = decode_samples(path)?;
-    let raw = raw_pixels(&samples, line, &header);
-    drop(samples);
-    let ignore = format.ignore_for_depth(header.bit_depth);
-    let to_label = |id: u16| {
-        if id == ignore {
-            LabelMap::IGNORE
-        } else {
-            id
-        }
-    };
-    let colored = raw.iter().any(|p| matches!(p, RawPixel::Color(_)));
-    let labels: Vec<u16> = if colored || gray_rgb_is_color_coded(&raw, &header, table) {
-        let by_color = color_lookup(&header, table)?;
-        let mut labels = Vec::with_capacity(raw.len());
-        for (i, &p) in raw.iter().enumerate() {
-            labels.push(match p {
-                RawPixel::Transparent => LabelMap::IGNORE,
-                RawPixel::Id(v) => color_id(&by_color, [v as u8; 3], i, &header)?
-                    .map_or(LabelMap::IGNORE, to_label),
-                RawPixel::Color(c) => {
-                    color_id(&by_color, c, i, &header)?.map_or(LabelMap::IGNORE, to_label)
+    if samples.len() < line * h.height as usize {
+        bail!("cannot decode PNG: fewer rows than its header says");
+    }
+    let n = h.width as usize * h.height as usize;
+    let raw = |i| raw_pixel(&samples, line, &h, i);
+    let ignore = format.ignore_for_depth(h.bit_depth);
+    let to_label = |id: u16| if id == ignore { LabelMap::IGNORE } else { id };
+    let colored = (0..n).any(|i| matches!(raw(i), RawPixel::Color(_)));
+    let mut labels = Vec::with_capacity(n);
+    if colored || gray_rgb_is_color_coded(n, &raw, &h, table) {
+        let by_color = color_lookup(&h, table)?;
+        for i in 0..n {
+            let color = match raw(i) {
+                RawPixel::Transparent => {
+                    labels.push(LabelMap::IGNORE);
+                    continue;
                 }
-            });
+                RawPixel::Id(v) => [v as u8; 3],
+                RawPixel::Color(c) => c,
+            };
+            let id = color_id(&by_color, color, i, &h)?;
+            labels.push(id.map_or(LabelMap::IGNORE, to_label));
         }
-        labels
     } else {
-        raw.iter()
-            .map(|&p| match p {
-                RawPixel::Id(v) => to_label(v),
-                _ => LabelMap::IGNORE,
-            })
-            .collect()
-    };
-    LabelMap::new(header.width, header.height, labels)
+        labels.extend((0..n).map(|i| match raw(i) {
+            RawPixel::Id(v) => to_label(v),
+            _ => LabelMap::IGNORE,
+        }));
+    }
+    LabelMap::new(h.width, h.height, labels)
 }
 
 /// An RGB map whose pixels are all gray holds gray ids, unless a class table is given, some
 /// gray value is not one of its ids, and every pixel's colour is one of its colours (a
 /// colour-coded map that happens to use only gray colours, e.g. Cityscapes' buildings).
-fn gray_rgb_is_color_coded(raw: &[RawPixel], h: &PngHeader, table: Option<&ClassTable>) -> bool {
+fn gray_rgb_is_color_coded(
+    n: usize,
+    raw: &dyn Fn(usize) -> RawPixel,
+    h: &PngHeader,
+    table: Option<&ClassTable>,
+) -> bool {
     let Some(table) = table else { return false };
     if !matches!(h.color_type, 2 | 6) || h.bit_depth != 8 {
         return false;
     }
-    let ids: std::collections::HashSet<u32> = table.classes.iter().map(|c| c.id).collect();
-    let gray_colors: std::collections::HashSet<u8> = table
-        .classes
-        .iter()
-        .filter(|c| c.color[0] == c.color[1] && c.color[1] == c.color[2])
-        .map(|c| c.color[0])
-        .collect();
-    let gray_values = || {
-        raw.iter().filter_map(|p| match p {
-            RawPixel::Id(v) => Some(*v),
-            _ => None,
-        })
-    };
-    !gray_values().all(|v| ids.contains(&(v as u32)))
-        && gray_values().all(|v| gray_colors.contains(&(v as u8)))
+    let mut seen = [false; 256];
+    for i in 0..n {
+        if let RawPixel::Id(v) = raw(i) {
+            seen[v as usize] = true;
+        }
+    }
+    let values = || (0..256u32).filter(|&v| seen[v as usize]);
+    let all_ids = values().all(|v| table.contains(v));
+    let all_colors = values().all(|v| table.classes.iter().any(|c| c.color == [v as u8; 3]));
+    !all_ids && all_colors
 }
 
 /// Colour -> class id of the table; ambiguous colours are an error.
