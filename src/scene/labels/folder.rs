@@ -119,6 +119,11 @@ pub fn label_size_fit(camera: (u32, u32), label: (u32, u32)) -> SizeFit {
     if camera == label {
         return SizeFit::Same;
     }
+    // No pipeline resizes by a factor that moves each side by at most a pixel: that is an
+    // off-by-one crop or pad, and scaling the camera for it would hide the mistake.
+    if camera.0.abs_diff(label.0) <= 1 && camera.1.abs_diff(label.1) <= 1 {
+        return SizeFit::Mismatch;
+    }
     let (cw, ch) = (camera.0 as f64, camera.1 as f64);
     let (lw, lh) = (label.0 as f64, label.1 as f64);
     // Downscaled copies round each side on its own (3DGS: round(W / r)), so each side may
