@@ -134,7 +134,7 @@ mod tests {
         let mut c = Confusion::default();
         c.add(
             &[0, 0, 1, 1, 255],
-            &[Some(0), Some(1), Some(1), None, Some(2)],
+            &[Some(0u16), Some(1), Some(1), None, Some(2)],
             255,
         );
         let s = c.scores();
@@ -167,7 +167,7 @@ mod tests {
         // A class predicted but never true adds false positives to no class's IoU mean
         // entry of its own, yet lowers the IoU of the class it overwrote.
         let mut c = Confusion::default();
-        c.add(&[3, 3, 3, 3], &[Some(3), Some(3), Some(7), Some(7)], 255);
+        c.add(&[3, 3, 3, 3], &[Some(3u16), Some(3), Some(7), Some(7)], 255);
         let s = c.scores();
         assert_eq!(s.per_class.len(), 1);
         assert_eq!(s.per_class[0].iou, 0.5);

@@ -233,7 +233,8 @@ fn read_inner(path: &Path, format: &LabelFormat, table: Option<&ClassTable>) -> 
     let raw = |i| raw_pixel(&samples, line, &h, i);
     let ignore = format.ignore_for_depth(h.bit_depth);
     let to_label = |id: u16| if id == ignore { LabelMap::IGNORE } else { id };
-    let colored = (0..n).any(|i| matches!(raw(i), RawPixel::Color(_)));
+    let colored =
+        matches!(h.color_type, 2 | 6) && (0..n).any(|i| matches!(raw(i), RawPixel::Color(_)));
     let mut labels = Vec::with_capacity(n);
     if colored || gray_rgb_is_color_coded(n, &raw, &h, table) {
         let by_color = color_lookup(&h, table)?;
