@@ -51,7 +51,7 @@ impl LabelFormat {
     pub fn describe_ignore(&self) -> String {
         match self.ignore_id {
             Some(id) => format!("{id} (--ignore-id)"),
-            None => format!("{IGNORE_U8} in 8-bit maps, {IGNORE_U16} in 16-bit maps (the default)"),
+            None => format!("{IGNORE_U8} in 8-bit maps, {IGNORE_U16} in 16-bit maps: the default"),
         }
     }
 }
