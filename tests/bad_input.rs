@@ -483,14 +483,15 @@ fn color_and_broken_label_pngs_are_errors() {
         &["RGB PNG", "single-channel class ids"],
     );
 
-    // A palette PNG header (color type 3): refused before decoding.
-    let mut pal = b"\x89PNG\r\n\x1a\n\0\0\0\x0dIHDR\0\0\0\x02\0\0\0\x02\x08\x03\0\0\0".to_vec();
+    // A 16-bit palette PNG header (no such PNG): refused before decoding. (Valid palette
+    // PNGs are label maps: tests/inputs_labels.rs.)
+    let mut pal = b"\x89PNG\r\n\x1a\n\0\0\0\x0dIHDR\0\0\0\x02\0\0\0\x02\x10\x03\0\0\0".to_vec();
     pal.extend_from_slice(&[0; 4]);
     let p = write_tmp(dir.path(), "pal.png", pal);
     assert_error(
         &error_of(read_label_png(&p)),
         &p,
-        &["palette", "single-channel"],
+        &["palette", "bit depth 16"],
     );
 
     let p = write_tmp(dir.path(), "text.png", "not a png at all, just text");

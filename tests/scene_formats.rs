@@ -881,6 +881,12 @@ fn inspect_summarizes_files_and_fails_on_problems() {
         &LabelMap::new(2, 1, vec![1, LabelMap::IGNORE]).unwrap(),
     )
     .unwrap();
+    // A second class: one class and the ignore id alone is flagged as binary masks.
+    write_label_png(
+        &labels.join("c.png"),
+        &LabelMap::new(2, 1, vec![2, LabelMap::IGNORE]).unwrap(),
+    )
+    .unwrap();
     let (ok, stdout, _) = inspect(&[labels.as_os_str(), "--json".as_ref()]);
     assert!(ok, "{stdout}");
     let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();

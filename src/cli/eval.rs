@@ -8,14 +8,15 @@ use anyhow::{bail, Result};
 use clap::{Args, ValueEnum};
 use serde::Serialize;
 
-use semsplat::dataset::open_truth_views;
+use semsplat::dataset::{default_class_table, open_truth_views};
 use semsplat::eval::image_quality::{image_quality, ImageQuality};
 use semsplat::eval::label_render::LabelRenderer;
 use semsplat::eval::metrics::{gaussian_accuracy, Confusion, SegmentationScores};
 use semsplat::gpu::Gpu;
+use semsplat::scene::classes::{read_class_table, ClassTable};
 use semsplat::scene::images::load_view_image;
-use semsplat::scene::labels::{LabelDir, LabelMap};
-use semsplat::scene::ply::read_ply;
+use semsplat::scene::labels::{binary_mask_warning, LabelDir, LabelMap};
+use semsplat::scene::ply::{read_classes_sidecar, read_ply};
 use semsplat::scene::scene_file::read_scene;
 use semsplat::scene::{Camera, Gaussians, Split};
 use semsplat::util::write_bytes_atomic;
@@ -37,9 +38,17 @@ pub struct EvalArgs {
     scene: PathBuf,
     #[arg(long)]
     cameras: PathBuf,
-    /// True label maps (PNG class ids, 255/65535 = ignore), matched by image name.
+    /// True label maps (gray or palette class ids, or colour-coded through the class table;
+    /// see --ignore-id and docs/label-maps.md), matched by image name.
     #[arg(long)]
     labels: PathBuf,
+    /// Class table (JSON: id, name, color) naming the classes in the per-class IoU and giving
+    /// the colours of colour-coded maps. Default: <scene>.classes.json (written by `fuse`),
+    /// else classes.json in or beside the label folder.
+    #[arg(long, value_name = "FILE")]
+    classes: Option<PathBuf>,
+    #[command(flatten)]
+    label_format: super::LabelFormatArgs,
     #[arg(long, value_enum, default_value_t = Views::Test)]
     views: Views,
     /// A PLY with the true class of every Gaussian (e.g. a synth scene.ply), for 3D accuracy.
@@ -71,7 +80,12 @@ pub fn run(args: EvalArgs) -> Result<()> {
             args.scene.display()
         );
     };
-    let (cams, dir) = open_truth_views(&args.cameras, &args.labels)?;
+    let table = eval_class_table(&args)?;
+    let format = args.label_format.format();
+    let (cams, dir) = open_truth_views(&args.cameras, &args.labels, table.as_ref(), &format)?;
+    for note in dir.notes() {
+        eprintln!("{note}");
+    }
     let chosen = chosen_views(&args, &cams, &dir)?;
     let gaussian_accuracy = match &args.truth {
         Some(path) => Some(truth_accuracy(path, &classes)?),
@@ -80,13 +94,27 @@ pub fn run(args: EvalArgs) -> Result<()> {
     let gpu = Gpu::new()?;
     let mut renderer = LabelRenderer::new(&gpu, &g, &classes)?;
     let mut confusion = Confusion::default();
+    let mut ignored = 0u64;
     for &i in &chosen {
         let truth = dir.load(i)?;
+        ignored += truth
+            .labels
+            .iter()
+            .filter(|&&l| l == LabelMap::IGNORE)
+            .count() as u64;
         confusion.add(
             &truth.labels,
-            &renderer.render(chosen_camera(&cams, &dir, i))?,
+            &renderer.render_ids(chosen_camera(&cams, &dir, i))?,
             LabelMap::IGNORE,
         );
+    }
+    let mut segmentation = confusion.scores();
+    let true_ids: Vec<u32> = segmentation.per_class.iter().map(|c| c.id).collect();
+    if let Some(w) = binary_mask_warning(&args.labels, &true_ids, ignored, &format) {
+        eprintln!("{w}");
+    }
+    if let Some(table) = &table {
+        segmentation.name_classes(table);
     }
     let image_quality = match &args.images {
         Some(image_dir) => {
@@ -100,7 +128,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
     };
     let report = EvalReport {
         views: chosen.len(),
-        segmentation: confusion.scores(),
+        segmentation,
         gaussian_accuracy,
         image_quality,
     };
@@ -109,6 +137,19 @@ pub fn run(args: EvalArgs) -> Result<()> {
         write_bytes_atomic(path, serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
     Ok(())
+}
+
+/// `--classes`, else the scene's sidecar, else classes.json in or beside the label folder.
+fn eval_class_table(args: &EvalArgs) -> Result<Option<ClassTable>> {
+    if let Some(path) = &args.classes {
+        return read_class_table(path).map(Some);
+    }
+    if let Some(table) = read_classes_sidecar(&args.scene)? {
+        return Ok(Some(table));
+    }
+    default_class_table(&args.labels)
+        .map(|p| read_class_table(&p))
+        .transpose()
 }
 
 /// The label map entries of the views `--views` selects (at least one).
@@ -177,6 +218,14 @@ fn print_report(report: &EvalReport) {
         println!("PSNR: {:.2} dB, SSIM: {:.4}", q.psnr, q.ssim);
     }
     for c in &report.segmentation.per_class {
-        println!("  class {:>5}: IoU {:.4} ({} px)", c.id, c.iou, c.pixels);
+        let name = c
+            .name
+            .as_deref()
+            .map(|n| format!(" {n}"))
+            .unwrap_or_default();
+        println!(
+            "  class {:>5}{name}: IoU {:.4} ({} px)",
+            c.id, c.iou, c.pixels
+        );
     }
 }

@@ -49,8 +49,9 @@ pub struct FuseArgs {
     /// Cameras: COLMAP model folder, INRIA cameras.json or semsplat cameras.json.
     #[arg(long)]
     cameras: Option<PathBuf>,
-    /// Folder of label PNGs (8/16-bit gray class ids, 255/65535 = no label), matched to
-    /// cameras by image name. Views without a label map are skipped.
+    /// Folder of label PNGs (gray or palette class ids, or colour-coded through the class
+    /// table; see --ignore-id and docs/label-maps.md), matched to cameras by image name
+    /// (subfolders mirror the images'). Views without a label map are skipped.
     #[arg(long)]
     labels: Option<PathBuf>,
     #[arg(long, value_enum, default_value_t = MethodArg::Flashsplat)]
@@ -80,6 +81,8 @@ pub struct FuseArgs {
     /// folder, else the ids found in the label maps.
     #[arg(long)]
     classes: Option<PathBuf>,
+    #[command(flatten)]
+    label_format: super::LabelFormatArgs,
     /// Output PLY: the input Gaussians with `class` (label id, -1 for Gaussians no view saw)
     /// and `class_conf` (the winning class's share of the evidence). The class table goes to
     /// <out>.classes.json.
@@ -357,6 +360,7 @@ fn fuse_views(
         labels,
         class_table: args.classes.as_deref(),
         train_only: args.train_only,
+        format: args.label_format.format(),
     };
     let data = open_dataset(&paths, "are skipped")?;
     let gpu = Gpu::new()?;

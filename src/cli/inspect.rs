@@ -8,11 +8,15 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use serde_json::{json, Map, Value};
 
+use semsplat::dataset::default_class_table;
 use semsplat::scene::cameras::load_cameras;
 use semsplat::scene::cameras_json::{read_cameras_json_kind, CameraJsonKind};
 use semsplat::scene::classes::{read_class_table, ClassTable, IGNORE_U16};
 use semsplat::scene::colmap::{find_colmap_model, ColmapFormat};
-use semsplat::scene::labels::{list_label_pngs, read_label_png, LabelMap};
+use semsplat::scene::labels::{
+    binary_mask_warning, label_size_fit, list_label_pngs, read_label_png_as, LabelFormat, LabelMap,
+    SizeFit,
+};
 use semsplat::scene::ply::{classes_sidecar_path, read_classes_sidecar};
 use semsplat::scene::scene_file::read_scene_unchecked;
 use semsplat::scene::{Camera, Gaussians, Split};
@@ -23,8 +27,11 @@ PATH can be:
     ranges, semantic fields, per-class counts (named from <scene>.classes.json or --classes)
   - cameras: a COLMAP model folder (or a dataset folder with sparse/0), an INRIA cameras.json,
     or a semsplat camera JSON: count, resolutions, intrinsics ranges, splits
-  - a folder of PNG label maps (or one label PNG): sizes, class pixel shares, ignore share
-    (255 in 8-bit maps, 65535 in 16-bit maps); --cameras and --classes add consistency checks
+  - a folder of PNG label maps (or one label PNG; gray, palette, gray+alpha, or RGB coded with
+    the class table's colours, see docs/label-maps.md): sizes, class pixel shares, ignore share
+    (--ignore-id; default 255 in 8-bit maps, 65535 in 16-bit maps); --cameras and --classes add
+    consistency checks. A folder holding one class and the ignore id only (binary masks whose
+    object would vanish) is a problem
   - a class table JSON
 
 Problems found (NaN/Inf values, zero quaternions, unreadable or mismatched label maps, class ids
@@ -48,9 +55,13 @@ pub struct InspectArgs {
     #[arg(long, value_name = "FILE")]
     pub classes: Option<PathBuf>,
 
-    /// Cameras to check a label folder against: every camera needs <name>.png of its size.
+    /// Cameras to check a label folder against: every camera needs <name>.png of its size
+    /// (or of the same aspect ratio: a resized copy).
     #[arg(long, value_name = "PATH")]
     pub cameras: Option<PathBuf>,
+
+    #[command(flatten)]
+    pub label_format: super::LabelFormatArgs,
 }
 
 /// What `inspect` found: ordered fields for printing, and the problems.
@@ -184,7 +195,12 @@ pub fn run(args: InspectArgs) -> Result<()> {
         bail!("{} does not exist", path.display());
     }
     let table = args.classes.as_deref().map(read_class_table).transpose()?;
-    let report = inspect_path(path, table.as_ref(), args.cameras.as_deref())?;
+    let labels = LabelInputs {
+        table: table.as_ref(),
+        cameras: args.cameras.as_deref(),
+        format: args.label_format.format(),
+    };
+    let report = inspect_path(path, &labels)?;
     if args.json {
         print_stdout(&(serde_json::to_string_pretty(&report.to_json())? + "\n"))?;
     } else {
@@ -200,7 +216,15 @@ pub fn run(args: InspectArgs) -> Result<()> {
     Ok(())
 }
 
-fn inspect_path(path: &Path, table: Option<&ClassTable>, cameras: Option<&Path>) -> Result<Report> {
+/// What the label checks use besides the maps.
+struct LabelInputs<'a> {
+    table: Option<&'a ClassTable>,
+    cameras: Option<&'a Path>,
+    format: LabelFormat,
+}
+
+fn inspect_path(path: &Path, labels: &LabelInputs) -> Result<Report> {
+    let table = labels.table;
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
@@ -219,7 +243,7 @@ fn inspect_path(path: &Path, table: Option<&ClassTable>, cameras: Option<&Path>)
             );
         }
         let files: Vec<(String, PathBuf)> = pngs.into_iter().collect();
-        return inspect_labels(path, "label folder", &files, table, cameras);
+        return inspect_labels(path, "label folder", &files, labels);
     }
     match ext.as_str() {
         "ply" | "splat" | "spz" => inspect_ply(path, table),
@@ -229,13 +253,7 @@ fn inspect_path(path: &Path, table: Option<&ClassTable>, cameras: Option<&Path>)
                 .and_then(|s| s.to_str())
                 .unwrap_or_default()
                 .to_owned();
-            inspect_labels(
-                path,
-                "label map",
-                &[(stem, path.to_owned())],
-                table,
-                cameras,
-            )
+            inspect_labels(path, "label map", &[(stem, path.to_owned())], labels)
         }
         "json" if looks_like_class_table(path)? => inspect_class_table(path),
         _ => inspect_cameras(path),
@@ -466,12 +484,23 @@ fn inspect_labels(
     path: &Path,
     kind: &'static str,
     files: &[(String, PathBuf)],
-    table: Option<&ClassTable>,
-    cameras: Option<&Path>,
+    labels: &LabelInputs,
 ) -> Result<Report> {
+    let table = labels.table;
     let mut r = Report::new(kind, path);
-    let cams = cameras.map(load_cameras).transpose()?;
-    let tally = tally_label_maps(&mut r, files, cams.as_deref());
+    let cams = labels.cameras.map(load_cameras).transpose()?;
+    // Colour-coded maps decode through --classes, else the folder's classes.json.
+    let folder = if path.is_dir() {
+        path
+    } else {
+        path.parent().unwrap_or(path)
+    };
+    let default_table = match table {
+        Some(_) => None,
+        None => default_class_table(folder).and_then(|p| read_class_table(&p).ok()),
+    };
+    let colors = table.or(default_table.as_ref());
+    let tally = tally_label_maps(&mut r, files, cams.as_deref(), colors, &labels.format);
     r.add("label_maps", tally.read);
     let sizes: Vec<Value> = tally
         .sizes
@@ -480,8 +509,19 @@ fn inspect_labels(
         .collect();
     r.add("sizes", sizes);
     add_label_classes(&mut r, &tally.counts, table);
+    let present: Vec<u32> = (0..IGNORE_U16)
+        .filter(|&id| tally.counts[id as usize] > 0)
+        .collect();
+    let ignored = tally.counts[LabelMap::IGNORE as usize];
+    if let Some(w) = binary_mask_warning(path, &present, ignored, &labels.format) {
+        r.problems
+            .push(w.trim_start_matches("warning: ").to_owned());
+    }
     if let Some(cams) = &cams {
-        let have: std::collections::HashSet<&str> = files.iter().map(|(s, _)| s.as_str()).collect();
+        let have: std::collections::HashSet<&str> = files
+            .iter()
+            .flat_map(|(key, _)| [key.as_str(), key_stem(key)])
+            .collect();
         let missing: Vec<&str> = cams
             .iter()
             .map(|c| c.name.as_str())
@@ -522,6 +562,8 @@ fn tally_label_maps(
     r: &mut Report,
     files: &[(String, PathBuf)],
     cams: Option<&[Camera]>,
+    colors: Option<&ClassTable>,
+    format: &LabelFormat,
 ) -> LabelTally {
     let by_name: BTreeMap<&str, &Camera> = cams
         .into_iter()
@@ -535,7 +577,7 @@ fn tally_label_maps(
         unmatched: Vec::new(),
     };
     for (stem, file) in files {
-        let map = match read_label_png(file) {
+        let map = match read_label_png_as(file, format, colors) {
             Ok(m) => m,
             Err(e) => {
                 r.problems.push(format!("{e:#}"));
@@ -546,10 +588,16 @@ fn tally_label_maps(
         *tally.sizes.entry((map.width, map.height)).or_default() += 1;
         map.count_into(&mut tally.counts);
         if cams.is_some() {
-            match by_name.get(stem.as_str()) {
-                Some(c) if (c.width, c.height) != (map.width, map.height) => {
+            let camera = by_name
+                .get(stem.as_str())
+                .or_else(|| by_name.get(key_stem(stem)));
+            match camera {
+                Some(c)
+                    if label_size_fit((c.width, c.height), (map.width, map.height))
+                        == SizeFit::Mismatch =>
+                {
                     r.problems.push(format!(
-                        "label map {} is {}x{} but camera '{}' is {}x{}",
+                        "label map {} is {}x{} but camera '{}' is {}x{} (another aspect ratio)",
                         file.display(),
                         map.width,
                         map.height,
@@ -564,6 +612,11 @@ fn tally_label_maps(
         }
     }
     tally
+}
+
+/// The last component of a label key (`cam0/00001` -> `00001`).
+fn key_stem(key: &str) -> &str {
+    key.rsplit('/').next().unwrap_or(key)
 }
 
 /// Pixel totals, the ignored share and a row per label id present (named from `table`).
@@ -622,7 +675,8 @@ fn inspect_class_table(path: &Path) -> Result<Report> {
     if table.classes.iter().any(|c| c.id == 255) {
         r.add(
             "note",
-            "id 255 is the ignore value of 8-bit label maps: its maps must be 16-bit",
+            "id 255 is the default ignore value of 8-bit label maps: its maps must be 16-bit, or \
+             pass --ignore-id with another value",
         );
     }
     Ok(r)

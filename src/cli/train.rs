@@ -29,8 +29,9 @@ pub struct TrainArgs {
     /// Folder of RGB images (PNG or JPEG) named like the cameras (<image name>.png).
     #[arg(long)]
     images: PathBuf,
-    /// Folder of label PNGs (8/16-bit class ids, 255/65535 = no label) named like the
-    /// cameras. Views without a label map train appearance only.
+    /// Folder of label PNGs (gray or palette class ids, or colour-coded through the class
+    /// table; see --ignore-id and docs/label-maps.md) named like the cameras. Views without
+    /// a label map train appearance only.
     #[arg(long)]
     labels: PathBuf,
     /// Cameras: COLMAP model folder, INRIA cameras.json or semsplat cameras.json.
@@ -80,6 +81,8 @@ pub struct TrainArgs {
     /// label folder.
     #[arg(long)]
     classes: Option<PathBuf>,
+    #[command(flatten)]
+    label_format: super::LabelFormatArgs,
     /// Train on the cameras marked "train" only (semsplat cameras.json).
     #[arg(long)]
     train_only: bool,
@@ -186,6 +189,7 @@ fn load_dataset(args: &TrainArgs) -> Result<Dataset> {
         labels: &args.labels,
         class_table: args.classes.as_deref(),
         train_only: args.train_only,
+        format: args.label_format.format(),
     };
     let data = open_dataset(&paths, "train appearance only")?;
     if data.classes.is_empty() {

@@ -7,7 +7,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use anyhow::{bail, Result};
 
 use crate::scene::classes::{ClassInfo, ClassTable, IGNORE_U16};
-use crate::scene::labels::LabelDir;
+use crate::scene::labels::{LabelDir, LabelMap};
 
 /// A pixel without a label, as a compact class index (fusion's label maps and training's
 /// label buffers; the kernels read the same value from shared_constants.txt). It differs
@@ -126,17 +126,24 @@ pub fn user_classes(
         .collect()
 }
 
-/// The compact classes present in `dir`'s label maps and their table (names and colors
-/// from `given`, defaults otherwise). Reads every map once.
+/// The compact classes present in `dir`'s label maps, their table (names and colors from
+/// `given`, defaults otherwise) and the number of ignored pixels. Reads every map once.
 pub fn classes_in_labels(
     dir: &LabelDir,
     given: Option<&ClassTable>,
-) -> Result<(CompactClasses, ClassTable)> {
+) -> Result<(CompactClasses, ClassTable, u64)> {
     let mut present = BTreeSet::new();
+    let mut ignored = 0u64;
     for i in 0..dir.len() {
-        present.extend(dir.load(i)?.present_ids());
+        let map = dir.load(i)?;
+        ignored += map
+            .labels
+            .iter()
+            .filter(|&&l| l == LabelMap::IGNORE)
+            .count() as u64;
+        present.extend(map.present_ids());
     }
     let compact = CompactClasses::from_ids(present)?;
     let table = compact.table(given.unwrap_or(&ClassTable::default()));
-    Ok((compact, table))
+    Ok((compact, table, ignored))
 }

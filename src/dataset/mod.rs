@@ -12,7 +12,7 @@ pub use classes::{classes_in_labels, user_classes, CompactClasses, NO_LABEL};
 use crate::fuse::LabelSource;
 use crate::scene::cameras::load_cameras;
 use crate::scene::classes::{read_class_table, ClassTable};
-use crate::scene::labels::{LabelDir, MissingLabels};
+use crate::scene::labels::{binary_mask_warning, LabelDir, LabelFormat, MissingLabels};
 use crate::scene::{Camera, Split};
 
 /// Where a dataset's parts are.
@@ -25,6 +25,8 @@ pub struct DatasetPaths<'a> {
     pub class_table: Option<&'a Path>,
     /// Keep only the cameras marked "train".
     pub train_only: bool,
+    /// How the label maps are read (`--ignore-id`).
+    pub format: LabelFormat,
 }
 
 /// Cameras with their label maps (cameras without one are kept and have no labels) and the
@@ -38,26 +40,36 @@ pub struct Dataset {
     pub table: ClassTable,
     /// Label map entry of each camera.
     entry_of_camera: Vec<Option<usize>>,
+    /// What the user should be told once on stderr (scaled intrinsics, binary masks).
+    pub warnings: Vec<String>,
 }
 
 impl Dataset {
     /// Loads the cameras, matches the label folder to them (checking ids against the class
     /// table when there is one) and reads every map once to find the classes present.
     pub fn open(paths: &DatasetPaths) -> Result<Dataset> {
-        let cameras = load_split_cameras(paths.cameras, paths.train_only)?;
+        let mut cameras = load_split_cameras(paths.cameras, paths.train_only)?;
         let table_path = paths
             .class_table
             .map(Path::to_path_buf)
             .or_else(|| default_class_table(paths.labels));
         let given = table_path.as_deref().map(read_class_table).transpose()?;
-        let labels = LabelDir::open(paths.labels, &cameras, given.as_ref(), MissingLabels::Skip)?;
-        if labels.is_empty() {
-            bail!(
-                "no label map in {} matches a camera name",
-                paths.labels.display()
-            );
-        }
-        let (classes, table) = classes_in_labels(&labels, given.as_ref())?;
+        let labels = LabelDir::open_as(
+            paths.labels,
+            &cameras,
+            given.as_ref(),
+            &paths.format,
+            MissingLabels::Skip,
+        )?;
+        labels.fit_cameras(&mut cameras);
+        let (classes, table, ignored) = classes_in_labels(&labels, given.as_ref())?;
+        let mut warnings = labels.notes().to_vec();
+        warnings.extend(binary_mask_warning(
+            paths.labels,
+            classes.user_ids(),
+            ignored,
+            &paths.format,
+        ));
         let mut entry_of_camera = vec![None; cameras.len()];
         for i in 0..labels.len() {
             if let Some(c) = labels.camera_index(i) {
@@ -70,6 +82,7 @@ impl Dataset {
             classes,
             table,
             entry_of_camera,
+            warnings,
         })
     }
 
@@ -104,11 +117,19 @@ pub fn load_split_cameras(path: &Path, train_only: bool) -> Result<Vec<Camera>> 
     Ok(cameras)
 }
 
-/// Cameras and the label maps matched to them, without a class table: for scoring against
-/// true maps, whose ids are compared as they are.
-pub fn open_truth_views(cameras: &Path, labels: &Path) -> Result<(Vec<Camera>, LabelDir)> {
-    let cameras = load_cameras(cameras)?;
-    let labels = LabelDir::open(labels, &cameras, None, MissingLabels::Skip)?;
+/// Cameras (scaled to their label maps' size when those are resized copies) and the label
+/// maps matched to them: for scoring against true maps, whose ids are compared as they are.
+/// `table` only decodes colour-coded maps; ids outside it are not refused.
+pub fn open_truth_views(
+    cameras: &Path,
+    labels: &Path,
+    table: Option<&ClassTable>,
+    format: &LabelFormat,
+) -> Result<(Vec<Camera>, LabelDir)> {
+    let mut cameras = load_cameras(cameras)?;
+    let labels =
+        LabelDir::open_as(labels, &cameras, table, format, MissingLabels::Skip)?.without_id_check();
+    labels.fit_cameras(&mut cameras);
     Ok((cameras, labels))
 }
 

@@ -2,10 +2,11 @@
 //! one-hot vector of its class (unseen Gaussians blend zeros but still occlude), and the
 //! pixel takes the argmax of the normalized semantics (Gaussian Semantics Eq. 2).
 
-use anyhow::Result;
+use anyhow::{bail, Result};
 
 use crate::gpu::Gpu;
 use crate::render::{GpuScene, Rasterizer, RenderOptions, SemanticMode};
+use crate::scene::classes::IGNORE_U16;
 use crate::scene::{Camera, Gaussians, SemanticLogits};
 
 /// Renders the class of every pixel of `cams` (None where no classified Gaussian shows).
@@ -48,7 +49,8 @@ impl LabelRenderer {
         })
     }
 
-    pub fn render(&mut self, cam: &Camera) -> Result<Vec<Option<u16>>> {
+    /// The user class id of every pixel, full width (ids are u32 all through).
+    pub fn render_ids(&mut self, cam: &Camera) -> Result<Vec<Option<u32>>> {
         let opts = RenderOptions {
             semantics: Some(SemanticMode::RawLogits),
             ..Default::default()
@@ -60,9 +62,22 @@ impl LabelRenderer {
                 let s = &f.sem_norm[p * c..(p + 1) * c];
                 let (k, &v) = s.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1))?;
                 (v > 0.0)
-                    .then(|| self.channel_ids.get(k).map(|&id| id as u16))
+                    .then(|| self.channel_ids.get(k).copied())
                     .flatten()
             })
+            .collect())
+    }
+
+    /// [`LabelRenderer::render_ids`] for writing a 16-bit label map: an error when a class id
+    /// does not fit below the 16-bit ignore value, never a silently cut id.
+    pub fn render(&mut self, cam: &Camera) -> Result<Vec<Option<u16>>> {
+        if let Some(&id) = self.channel_ids.iter().find(|&&id| id >= IGNORE_U16) {
+            bail!("class id {id} does not fit a 16-bit label map (ids must be below {IGNORE_U16})");
+        }
+        Ok(self
+            .render_ids(cam)?
+            .into_iter()
+            .map(|p| p.map(|id| id as u16))
             .collect())
     }
 }

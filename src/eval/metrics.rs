@@ -5,6 +5,8 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
+use crate::scene::classes::ClassTable;
+
 /// Counts of (true class, predicted class) over labeled pixels; a prediction of `None`
 /// (nothing rendered there) counts against the true class.
 #[derive(Clone, Debug, Default)]
@@ -15,6 +17,9 @@ pub struct Confusion {
 #[derive(Clone, Debug, Serialize, PartialEq)]
 pub struct ClassIou {
     pub id: u32,
+    /// From the class table, when the caller has one ([`SegmentationScores::name_classes`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
     pub iou: f64,
     /// Ground-truth pixels of this class.
     pub pixels: u64,
@@ -29,13 +34,27 @@ pub struct SegmentationScores {
     pub labeled_pixels: u64,
 }
 
+impl SegmentationScores {
+    /// Names every class of `per_class` from `table` (ids it does not list stay unnamed).
+    pub fn name_classes(&mut self, table: &ClassTable) {
+        for c in &mut self.per_class {
+            c.name = table.get(c.id).map(|info| info.name.clone());
+        }
+    }
+}
+
 impl Confusion {
     /// Adds one view. `ignore` marks unlabeled ground-truth pixels (left out entirely).
-    pub fn add(&mut self, truth: &[u16], pred: &[Option<u16>], ignore: u16) {
+    /// Predictions are user class ids of any width up to 32 bits (never cut to the 16 bits
+    /// of a label map: a predicted id 65537 is not truth id 1).
+    pub fn add<P: Into<u32> + Copy>(&mut self, truth: &[u16], pred: &[Option<P>], ignore: u16) {
         assert_eq!(truth.len(), pred.len(), "one prediction per pixel");
         for (&t, &p) in truth.iter().zip(pred) {
             if t != ignore {
-                *self.counts.entry((t as u32, p.map(u32::from))).or_insert(0) += 1;
+                *self
+                    .counts
+                    .entry((t as u32, p.map(Into::into)))
+                    .or_insert(0) += 1;
             }
         }
     }
@@ -64,6 +83,7 @@ impl Confusion {
                 let fn_ = pixels - tp;
                 ClassIou {
                     id,
+                    name: None,
                     iou: tp as f64 / (tp + fp + fn_) as f64,
                     pixels,
                 }
@@ -114,7 +134,7 @@ mod tests {
         let mut c = Confusion::default();
         c.add(
             &[0, 0, 1, 1, 255],
-            &[Some(0), Some(1), Some(1), None, Some(2)],
+            &[Some(0u16), Some(1), Some(1), None, Some(2)],
             255,
         );
         let s = c.scores();
@@ -127,11 +147,13 @@ mod tests {
             vec![
                 ClassIou {
                     id: 0,
+                    name: None,
                     iou: 0.5,
                     pixels: 2
                 },
                 ClassIou {
                     id: 1,
+                    name: None,
                     iou: 1.0 / 3.0,
                     pixels: 2
                 },
@@ -145,11 +167,24 @@ mod tests {
         // A class predicted but never true adds false positives to no class's IoU mean
         // entry of its own, yet lowers the IoU of the class it overwrote.
         let mut c = Confusion::default();
-        c.add(&[3, 3, 3, 3], &[Some(3), Some(3), Some(7), Some(7)], 255);
+        c.add(&[3, 3, 3, 3], &[Some(3u16), Some(3), Some(7), Some(7)], 255);
         let s = c.scores();
         assert_eq!(s.per_class.len(), 1);
         assert_eq!(s.per_class[0].iou, 0.5);
         assert_eq!(s.miou, 0.5);
+    }
+
+    #[test]
+    fn predictions_above_16_bits_are_not_cut() {
+        // 65537 cut to 16 bits would be 1, the true class: it must count as a miss.
+        let mut c = Confusion::default();
+        c.add(&[1, 1], &[Some(65_537u32), Some(1u32)], 255);
+        let mut s = c.scores();
+        assert_eq!(s.pixel_accuracy, 0.5);
+        assert_eq!(s.per_class.len(), 1);
+        assert_eq!(s.per_class[0].iou, 0.5);
+        s.name_classes(&ClassTable::from_ids([1]));
+        assert_eq!(s.per_class[0].name.as_deref(), Some("class_1"));
     }
 
     #[test]

@@ -175,7 +175,11 @@ pub fn score_methods(
         let mut confusion = Confusion::default();
         let mut renderer = LabelRenderer::new(gpu, scene, &classes)?;
         for &(i, cam) in &test {
-            confusion.add(&s.views[i].labels, &renderer.render(cam)?, LabelMap::IGNORE);
+            confusion.add(
+                &s.views[i].labels,
+                &renderer.render_ids(cam)?,
+                LabelMap::IGNORE,
+            );
         }
         let seg = confusion.scores();
         let image_quality = match &lifted {

@@ -6,9 +6,10 @@ use anyhow::{bail, Context, Result};
 
 use super::Camera;
 
-/// Loads `<name>.png|jpg|jpeg` for a camera as [H, W, 3] floats in [0, 1].
+/// Loads `<name>.png|jpg|jpeg` (any case) for a camera as [H, W, 3] floats in [0, 1]; a
+/// name with subfolders (`cam0/00001`) reads from the same subfolders of `dir`.
 pub fn load_view_image(dir: &Path, cam: &Camera) -> Result<Vec<f32>> {
-    let path = ["png", "jpg", "jpeg", "PNG", "JPG"]
+    let path = ["png", "jpg", "jpeg", "PNG", "JPG", "JPEG"]
         .iter()
         .map(|ext| dir.join(format!("{}.{ext}", cam.name)))
         .find(|p| p.is_file())

@@ -1,0 +1,335 @@
+//! Reading label map PNGs in the forms segmenters and mask trackers write them: gray
+//! (1/2/4/8/16-bit), palette (the index is the class id: VOC, DAVIS, DEVA, XMem), gray+alpha,
+//! RGB/RGBA that is gray (R = G = B) or colour-coded through the class table's colours.
+//!
+//! The header is read and checked (size, bit depth, colour type) before any pixel is
+//! decoded, so a huge image costs 33 bytes of reading to refuse, not gigabytes.
+
+use std::collections::HashMap;
+use std::fs::File;
+use std::io::{BufReader, Read};
+use std::path::Path;
+
+use anyhow::{anyhow, bail, Context, Result};
+
+use super::LabelMap;
+use crate::scene::classes::{ClassTable, IGNORE_U16, IGNORE_U8};
+
+/// Decoded label maps above this size are refused (a corrupt or huge header must not
+/// exhaust memory): checked from the header, and again as the decoder's allocation limit.
+pub const MAX_DECODE_BYTES: u64 = 1 << 30;
+
+/// Label maps with more pixels than this (16384 x 16384) are refused from their header:
+/// reading one takes its samples plus 2 bytes a pixel, and no camera needs more.
+pub const MAX_LABEL_PIXELS: u64 = 1 << 28;
+
+/// How label map files are read: the one place the reading options live, carried by the
+/// dataset loader ([`LabelDir`](super::LabelDir)) to every command that reads labels.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct LabelFormat {
+    /// The pixel value that means "no label" (`--ignore-id`); None: 255 in 8-bit (and
+    /// palette, RGB) maps, 65535 in 16-bit maps. 65535 in a 16-bit map is always ignored: it
+    /// cannot be a class id.
+    pub ignore_id: Option<u16>,
+}
+
+impl LabelFormat {
+    pub fn with_ignore_id(ignore_id: Option<u16>) -> LabelFormat {
+        LabelFormat { ignore_id }
+    }
+
+    /// The raw value ignored in a map whose samples are `bit_depth` bits wide.
+    pub fn ignore_for_depth(&self, bit_depth: u8) -> u16 {
+        match (self.ignore_id, bit_depth) {
+            (Some(id), _) => id,
+            (None, 16) => IGNORE_U16 as u16,
+            (None, _) => IGNORE_U8 as u16,
+        }
+    }
+
+    /// "255 (8-bit maps) / 65535 (16-bit maps)" or "0 (--ignore-id)", for messages.
+    pub fn describe_ignore(&self) -> String {
+        match self.ignore_id {
+            Some(id) => format!("{id} (--ignore-id)"),
+            None => format!("{IGNORE_U8} in 8-bit maps, {IGNORE_U16} in 16-bit maps: the default"),
+        }
+    }
+}
+
+/// What a PNG header says, read before decoding.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PngHeader {
+    pub width: u32,
+    pub height: u32,
+    pub bit_depth: u8,
+    /// The PNG colour type: 0 gray, 2 RGB, 3 palette, 4 gray+alpha, 6 RGBA.
+    pub color_type: u8,
+}
+
+impl PngHeader {
+    fn channels(&self) -> usize {
+        match self.color_type {
+            2 => 3,
+            4 => 2,
+            6 => 4,
+            _ => 1,
+        }
+    }
+
+    /// Bytes the decoded samples take (sub-byte depths counted as bytes, as we expand them).
+    pub fn decoded_bytes(&self) -> u64 {
+        let per_sample = if self.bit_depth == 16 { 2 } else { 1 };
+        self.width as u64 * self.height as u64 * self.channels() as u64 * per_sample
+    }
+
+    fn kind(&self) -> &'static str {
+        match self.color_type {
+            0 => "a grayscale",
+            2 => "an RGB",
+            3 => "a palette (indexed colour)",
+            4 => "a grayscale-with-alpha",
+            6 => "an RGBA",
+            _ => "an unknown colour type",
+        }
+    }
+
+    /// Refuses colour types and depths label maps cannot be, and sizes over the limit.
+    fn check(&self) -> Result<()> {
+        let depth_ok = match self.color_type {
+            0 => matches!(self.bit_depth, 1 | 2 | 4 | 8 | 16),
+            3 => matches!(self.bit_depth, 1 | 2 | 4 | 8),
+            2 | 4 | 6 => matches!(self.bit_depth, 8 | 16),
+            other => bail!("has PNG colour type {other}, which is not a valid PNG"),
+        };
+        if !depth_ok {
+            bail!(
+                "is {} PNG of bit depth {}, which is not valid PNG",
+                self.kind(),
+                self.bit_depth
+            );
+        }
+        let pixels = self.width as u64 * self.height as u64;
+        if pixels == 0 || pixels > MAX_LABEL_PIXELS || self.decoded_bytes() > MAX_DECODE_BYTES {
+            bail!(
+                "is {}x{} ({} PNG): refused from its header, over the {} pixels ({} MiB \
+                 decoded) a label map may have",
+                self.width,
+                self.height,
+                self.kind(),
+                MAX_LABEL_PIXELS,
+                MAX_DECODE_BYTES >> 20
+            );
+        }
+        Ok(())
+    }
+}
+
+/// Reads and checks a PNG's header (signature and IHDR) without decoding any pixel.
+pub fn read_png_header(path: &Path) -> Result<PngHeader> {
+    let mut head = [0u8; 33];
+    let mut file = File::open(path).context("cannot open")?;
+    file.read_exact(&mut head)
+        .map_err(|_| anyhow!("not a PNG file (too short)"))?;
+    if &head[..8] != b"\x89PNG\r\n\x1a\n" || &head[12..16] != b"IHDR" {
+        bail!("not a PNG file");
+    }
+    let be32 = |i: usize| u32::from_be_bytes([head[i], head[i + 1], head[i + 2], head[i + 3]]);
+    let header = PngHeader {
+        width: be32(16),
+        height: be32(20),
+        bit_depth: head[24],
+        color_type: head[25],
+    };
+    header.check()?;
+    Ok(header)
+}
+
+/// The raw samples of a PNG exactly as stored (no palette expansion: an index is a class
+/// id), with the byte length of each row.
+fn decode_samples(path: &Path) -> Result<(Vec<u8>, usize)> {
+    let file = BufReader::new(File::open(path).context("cannot open")?);
+    let limits = png::Limits {
+        bytes: MAX_DECODE_BYTES as usize,
+    };
+    let mut decoder = png::Decoder::new_with_limits(file, limits);
+    decoder.set_transformations(png::Transformations::IDENTITY);
+    let mut reader = decoder.read_info().context("cannot decode PNG")?;
+    let size = reader
+        .output_buffer_size()
+        .ok_or_else(|| anyhow!("cannot decode PNG: image too large"))?;
+    let mut buf = vec![0u8; size];
+    let info = reader.next_frame(&mut buf).context("cannot decode PNG")?;
+    buf.truncate(info.buffer_size());
+    Ok((buf, info.line_size))
+}
+
+/// Sample `channel` of pixel `x` in one decoded row.
+fn sample(row: &[u8], x: usize, channel: usize, h: &PngHeader) -> u16 {
+    let i = x * h.channels() + channel;
+    match h.bit_depth {
+        16 => u16::from_be_bytes([row[2 * i], row[2 * i + 1]]),
+        8 => row[i] as u16,
+        depth => {
+            // Sub-byte samples (gray or palette, one channel) are packed high bits first.
+            let bit = i * depth as usize;
+            let shift = 8 - depth as usize - bit % 8;
+            ((row[bit / 8] >> shift) & ((1u8 << depth) - 1)) as u16
+        }
+    }
+}
+
+/// A pixel before the class table and the ignore id are applied.
+#[derive(Clone, Copy, PartialEq, Eq, Hash)]
+enum RawPixel {
+    /// A class id as stored (gray value or palette index).
+    Id(u16),
+    /// An RGB colour that is not gray.
+    Color([u8; 3]),
+    /// Alpha 0: no label.
+    Transparent,
+}
+
+/// Pixel `i` (row-major) of the decoded samples.
+fn raw_pixel(samples: &[u8], line: usize, h: &PngHeader, i: usize) -> RawPixel {
+    let (x, y) = (i % h.width as usize, i / h.width as usize);
+    let row = &samples[y * line..(y + 1) * line];
+    let s = |c| sample(row, x, c, h);
+    match h.color_type {
+        4 if s(1) == 0 => RawPixel::Transparent,
+        6 if s(3) == 0 => RawPixel::Transparent,
+        2 | 6 if s(0) != s(1) || s(1) != s(2) => {
+            // 16-bit colours keep their high byte: tables hold 8-bit colours.
+            let c8 = |c| {
+                if h.bit_depth == 16 {
+                    (s(c) >> 8) as u8
+                } else {
+                    s(c) as u8
+                }
+            };
+            RawPixel::Color([c8(0), c8(1), c8(2)])
+        }
+        _ => RawPixel::Id(s(0)),
+    }
+}
+
+/// Reads a label map PNG (any form in the module doc) as class ids; the ignore id (see
+/// [`LabelFormat`]) and transparent pixels load as [`LabelMap::IGNORE`]. `table` gives the
+/// colours of colour-coded RGB maps.
+pub fn read_label_png_as(
+    path: &Path,
+    format: &LabelFormat,
+    table: Option<&ClassTable>,
+) -> Result<LabelMap> {
+    read_inner(path, format, table).with_context(|| format!("label map {}", path.display()))
+}
+
+fn read_inner(path: &Path, format: &LabelFormat, table: Option<&ClassTable>) -> Result<LabelMap> {
+    let h = read_png_header(path)?;
+    let (samples, line) = decode_samples(path)?;
+    if samples.len() < line * h.height as usize {
+        bail!("cannot decode PNG: fewer rows than its header says");
+    }
+    let n = h.width as usize * h.height as usize;
+    let raw = |i| raw_pixel(&samples, line, &h, i);
+    let ignore = format.ignore_for_depth(h.bit_depth);
+    let to_label = |id: u16| if id == ignore { LabelMap::IGNORE } else { id };
+    let colored =
+        matches!(h.color_type, 2 | 6) && (0..n).any(|i| matches!(raw(i), RawPixel::Color(_)));
+    let mut labels = Vec::with_capacity(n);
+    if colored || gray_rgb_is_color_coded(n, &raw, &h, table) {
+        let by_color = color_lookup(&h, table)?;
+        for i in 0..n {
+            let color = match raw(i) {
+                RawPixel::Transparent => {
+                    labels.push(LabelMap::IGNORE);
+                    continue;
+                }
+                RawPixel::Id(v) => [v as u8; 3],
+                RawPixel::Color(c) => c,
+            };
+            let id = color_id(&by_color, color, i, &h)?;
+            labels.push(id.map_or(LabelMap::IGNORE, to_label));
+        }
+    } else {
+        labels.extend((0..n).map(|i| match raw(i) {
+            RawPixel::Id(v) => to_label(v),
+            _ => LabelMap::IGNORE,
+        }));
+    }
+    LabelMap::new(h.width, h.height, labels)
+}
+
+/// An RGB map whose pixels are all gray holds gray ids, unless a class table is given, some
+/// gray value is not one of its ids, and every pixel's colour is one of its colours (a
+/// colour-coded map that happens to use only gray colours, e.g. Cityscapes' buildings).
+fn gray_rgb_is_color_coded(
+    n: usize,
+    raw: &dyn Fn(usize) -> RawPixel,
+    h: &PngHeader,
+    table: Option<&ClassTable>,
+) -> bool {
+    let Some(table) = table else { return false };
+    if !matches!(h.color_type, 2 | 6) || h.bit_depth != 8 {
+        return false;
+    }
+    let mut seen = [false; 256];
+    for i in 0..n {
+        if let RawPixel::Id(v) = raw(i) {
+            seen[v as usize] = true;
+        }
+    }
+    let values = || (0..256u32).filter(|&v| seen[v as usize]);
+    let all_ids = values().all(|v| table.contains(v));
+    let all_colors = values().all(|v| table.classes.iter().any(|c| c.color == [v as u8; 3]));
+    !all_ids && all_colors
+}
+
+/// Colour -> class id of the table; ambiguous colours are an error.
+fn color_lookup(h: &PngHeader, table: Option<&ClassTable>) -> Result<HashMap<[u8; 3], u16>> {
+    let Some(table) = table else {
+        bail!(
+            "is {} PNG with colours that are not gray, but label maps must be single-channel class \
+             ids (gray or palette PNG; {} = ignore) or colour-coded maps read through a class \
+             table's colours: give the class table (--classes, or classes.json in or beside the \
+             label folder)",
+            h.kind(),
+            IGNORE_U8
+        );
+    };
+    let mut by_color = HashMap::with_capacity(table.len());
+    for c in &table.classes {
+        if let Some(other) = by_color.insert(c.color, c.id as u16) {
+            bail!(
+                "is a colour-coded map, but classes {other} and {} of the class table share the \
+                 colour {:?}: colours must be unique to read it",
+                c.id,
+                c.color
+            );
+        }
+    }
+    Ok(by_color)
+}
+
+/// The class of a colour; black that is no class's colour is unlabeled (as semsplat's own
+/// palette images write it). Any other unknown colour is an error naming it and the pixel.
+fn color_id(
+    by_color: &HashMap<[u8; 3], u16>,
+    color: [u8; 3],
+    pixel: usize,
+    h: &PngHeader,
+) -> Result<Option<u16>> {
+    if let Some(&id) = by_color.get(&color) {
+        return Ok(Some(id));
+    }
+    if color == [0, 0, 0] {
+        return Ok(None);
+    }
+    let (x, y) = (pixel % h.width as usize, pixel / h.width as usize);
+    bail!(
+        "is a colour-coded map, but the colour ({}, {}, {}) at pixel ({x}, {y}) is not the \
+         colour of any class in the class table",
+        color[0],
+        color[1],
+        color[2]
+    )
+}

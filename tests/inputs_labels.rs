@@ -1,0 +1,667 @@
+//! Label maps and images in the forms other tools write them: palette PNGs (VOC, DAVIS,
+//! XMem: the index is the class id), colour-coded RGB through the class table, 3-channel
+//! gray, gray+alpha, sub-byte gray; `--ignore-id` and the binary-mask warning; labels at
+//! another resolution than the cameras; rig subfolders; huge headers refused before
+//! decoding; JPEG images; eval with ids above 16 bits and named classes.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use glam::{DMat3, DVec3};
+use semsplat::dataset::{Dataset, DatasetPaths};
+use semsplat::scene::cameras_json::write_semsplat_cameras;
+use semsplat::scene::classes::{write_class_table, ClassInfo, ClassTable};
+use semsplat::scene::images::load_view_image;
+use semsplat::scene::labels::{
+    read_label_png, read_label_png_as, LabelDir, LabelFormat, LabelMap, MissingLabels,
+};
+use semsplat::scene::ply::{read_ply, write_ply};
+use semsplat::scene::{Camera, Split};
+
+const IGN: u16 = LabelMap::IGNORE;
+
+/// Writes a PNG the way other tools do, with the `png` crate (no conversion on our side).
+fn write_png(
+    path: &Path,
+    (w, h): (u32, u32),
+    color: png::ColorType,
+    depth: png::BitDepth,
+    palette: Option<Vec<u8>>,
+    data: &[u8],
+) {
+    std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+    let file = std::fs::File::create(path).unwrap();
+    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), w, h);
+    enc.set_color(color);
+    enc.set_depth(depth);
+    if let Some(p) = palette {
+        enc.set_palette(p);
+    }
+    enc.write_header().unwrap().write_image_data(data).unwrap();
+}
+
+/// A VOC-style 256-entry palette (bit-interleaved colours, so index i is not colour i).
+fn voc_palette() -> Vec<u8> {
+    let mut pal = Vec::with_capacity(768);
+    for i in 0..256u32 {
+        let (mut r, mut g, mut b, mut c) = (0u8, 0u8, 0u8, i);
+        for j in 0..8 {
+            r |= ((c & 1) as u8) << (7 - j);
+            g |= (((c >> 1) & 1) as u8) << (7 - j);
+            b |= (((c >> 2) & 1) as u8) << (7 - j);
+            c >>= 3;
+        }
+        pal.extend([r, g, b]);
+    }
+    pal
+}
+
+fn camera(name: &str, (w, h): (u32, u32)) -> Camera {
+    Camera {
+        name: name.into(),
+        width: w,
+        height: h,
+        fx: w as f64,
+        fy: w as f64,
+        cx: w as f64 / 2.0,
+        cy: h as f64 / 2.0,
+        rotation: DMat3::IDENTITY,
+        translation: DVec3::new(0.0, 0.0, 3.0),
+        split: Split::Train,
+    }
+}
+
+fn err<T>(r: anyhow::Result<T>) -> String {
+    match r {
+        Ok(_) => panic!("expected an error"),
+        Err(e) => format!("{e:#}"),
+    }
+}
+
+#[test]
+fn palette_pngs_give_their_indices_not_their_colours() {
+    let dir = tempfile::tempdir().unwrap();
+    // 8-bit palette as VOC/DAVIS/XMem write it; 255 is VOC's "void" boundary.
+    let p8 = dir.path().join("voc.png");
+    write_png(
+        &p8,
+        (3, 2),
+        png::ColorType::Indexed,
+        png::BitDepth::Eight,
+        Some(voc_palette()),
+        &[0, 1, 2, 255, 7, 1],
+    );
+    assert_eq!(read_label_png(&p8).unwrap().labels, [0, 1, 2, IGN, 7, 1]);
+    let zero_ignored = LabelFormat::with_ignore_id(Some(0));
+    assert_eq!(
+        read_label_png_as(&p8, &zero_ignored, None).unwrap().labels,
+        [IGN, 1, 2, 255, 7, 1]
+    );
+    // 4-bit palette (PIL writes small palettes with fewer bits): packed, rows padded.
+    let p4 = dir.path().join("small.png");
+    let palette: Vec<u8> = voc_palette()[..16 * 3].to_vec();
+    write_png(
+        &p4,
+        (3, 2),
+        png::ColorType::Indexed,
+        png::BitDepth::Four,
+        Some(palette),
+        &[0x3A, 0x50, 0x0F, 0x10],
+    );
+    assert_eq!(read_label_png(&p4).unwrap().labels, [3, 10, 5, 0, 15, 1]);
+    // 1-bit gray (PIL mode "1" masks).
+    let p1 = dir.path().join("mask.png");
+    write_png(
+        &p1,
+        (10, 1),
+        png::ColorType::Grayscale,
+        png::BitDepth::One,
+        None,
+        &[0b1010_0000, 0b0100_0000],
+    );
+    assert_eq!(
+        read_label_png(&p1).unwrap().labels,
+        [1, 0, 1, 0, 0, 0, 0, 0, 0, 1]
+    );
+}
+
+fn rgb_table() -> ClassTable {
+    let class = |id, name: &str, color| ClassInfo {
+        id,
+        name: name.into(),
+        color,
+    };
+    ClassTable {
+        classes: vec![
+            class(0, "road", [128, 64, 128]),
+            class(1, "car", [0, 0, 142]),
+            class(7, "building", [70, 70, 70]),
+        ],
+    }
+}
+
+#[test]
+fn colour_coded_maps_read_through_the_class_table() {
+    let dir = tempfile::tempdir().unwrap();
+    let table = rgb_table();
+    let p = dir.path().join("city.png");
+    #[rustfmt::skip]
+    let rgb = [128, 64, 128,  0, 0, 142,  70, 70, 70,  0, 0, 0];
+    write_png(
+        &p,
+        (2, 2),
+        png::ColorType::Rgb,
+        png::BitDepth::Eight,
+        None,
+        &rgb,
+    );
+    let format = LabelFormat::default();
+    let map = read_label_png_as(&p, &format, Some(&table)).unwrap();
+    // Black is no class's colour: unlabeled, as semsplat's own palette images write it.
+    assert_eq!(map.labels, [0, 1, 7, IGN]);
+
+    // A gray-only map whose grays are table colours but not table ids is colour-coded.
+    let gray = dir.path().join("gray_coded.png");
+    write_png(
+        &gray,
+        (2, 1),
+        png::ColorType::Rgb,
+        png::BitDepth::Eight,
+        None,
+        &[70, 70, 70, 70, 70, 70],
+    );
+    let map = read_label_png_as(&gray, &format, Some(&table)).unwrap();
+    assert_eq!(map.labels, [7, 7]);
+
+    // An unknown colour names itself, the pixel and the file.
+    let bad = dir.path().join("bad.png");
+    write_png(
+        &bad,
+        (2, 1),
+        png::ColorType::Rgba,
+        png::BitDepth::Eight,
+        None,
+        &[0, 0, 142, 255, 1, 2, 3, 255],
+    );
+    let e = err(read_label_png_as(&bad, &format, Some(&table)));
+    assert!(
+        e.contains("(1, 2, 3)") && e.contains("pixel (1, 0)") && e.contains("bad.png"),
+        "{e}"
+    );
+    // Without a table, the error says a class table is needed.
+    let e = err(read_label_png(&p));
+    assert!(e.contains("class table") && e.contains("city.png"), "{e}");
+}
+
+#[test]
+fn gray_rgb_and_gray_alpha_pngs_hold_ids() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("rgb_gray.png");
+    write_png(
+        &p,
+        (3, 1),
+        png::ColorType::Rgb,
+        png::BitDepth::Eight,
+        None,
+        &[0, 0, 0, 3, 3, 3, 255, 255, 255],
+    );
+    assert_eq!(read_label_png(&p).unwrap().labels, [0, 3, IGN]);
+    // With a table listing those ids, they stay ids (not colours).
+    let ids = ClassTable::from_ids([0, 3]);
+    let map = read_label_png_as(&p, &LabelFormat::default(), Some(&ids)).unwrap();
+    assert_eq!(map.labels, [0, 3, IGN]);
+
+    // Gray + alpha: transparent pixels are unlabeled.
+    let la = dir.path().join("la.png");
+    write_png(
+        &la,
+        (3, 1),
+        png::ColorType::GrayscaleAlpha,
+        png::BitDepth::Eight,
+        None,
+        &[2, 255, 5, 0, 255, 255],
+    );
+    assert_eq!(read_label_png(&la).unwrap().labels, [2, IGN, IGN]);
+    let la16 = dir.path().join("la16.png");
+    write_png(
+        &la16,
+        (2, 1),
+        png::ColorType::GrayscaleAlpha,
+        png::BitDepth::Sixteen,
+        None,
+        &[0x03, 0xE8, 0xFF, 0xFF, 0x00, 0x07, 0x00, 0x00],
+    );
+    assert_eq!(read_label_png(&la16).unwrap().labels, [1000, IGN]);
+}
+
+/// A label folder with a cameras.json beside it; returns (cameras.json, labels folder).
+fn dataset_dir(root: &Path, cams: &[Camera]) -> (PathBuf, PathBuf) {
+    let cameras = root.join("cameras.json");
+    write_semsplat_cameras(&cameras, cams).unwrap();
+    let labels = root.join("labels");
+    std::fs::create_dir_all(&labels).unwrap();
+    (cameras, labels)
+}
+
+fn open(cameras: &Path, labels: &Path, ignore_id: Option<u16>) -> anyhow::Result<Dataset> {
+    Dataset::open(&DatasetPaths {
+        cameras,
+        labels,
+        class_table: None,
+        train_only: false,
+        format: LabelFormat::with_ignore_id(ignore_id),
+    })
+}
+
+#[test]
+fn binary_masks_warn_and_ignore_id_keeps_the_object() {
+    let dir = tempfile::tempdir().unwrap();
+    let cams = [camera("a", (4, 3)), camera("b", (4, 3))];
+    let (cameras, labels) = dataset_dir(dir.path(), &cams);
+    // SAM-style masks: 0 background, 255 object.
+    for (name, object) in [("a", 1usize), ("b", 6)] {
+        let mut px = vec![0u8; 12];
+        px[object] = 255;
+        let p = labels.join(format!("{name}.png"));
+        write_png(
+            &p,
+            (4, 3),
+            png::ColorType::Grayscale,
+            png::BitDepth::Eight,
+            None,
+            &px,
+        );
+    }
+    let d = open(&cameras, &labels, None).unwrap();
+    assert_eq!(d.classes.user_ids(), [0]);
+    let warning = d.warnings.join("\n");
+    assert!(
+        warning.contains("only two values") && warning.contains("--ignore-id"),
+        "{warning}"
+    );
+    // An ignore id the masks do not use keeps both values as classes, silently.
+    let d = open(&cameras, &labels, Some(1000)).unwrap();
+    assert_eq!(d.classes.user_ids(), [0, 255]);
+    assert!(d.warnings.is_empty(), "{:?}", d.warnings);
+    // ADE20K/ScanNet style: 0 ignored, 255 is a class (and the folder is still flagged).
+    let d = open(&cameras, &labels, Some(0)).unwrap();
+    assert_eq!(d.classes.user_ids(), [255]);
+    assert_eq!(d.warnings.len(), 1);
+
+    // An ignore id that is a class of the table is refused.
+    write_class_table(
+        &labels.join("classes.json"),
+        &ClassTable::from_ids([0, 255]),
+    )
+    .unwrap();
+    let e = err(open(&cameras, &labels, Some(0)));
+    assert!(e.contains("--ignore-id 0") && e.contains("class_0"), "{e}");
+    std::fs::remove_file(labels.join("classes.json")).unwrap();
+
+    // inspect flags the folder as a problem (exit status 1), and --ignore-id validates.
+    let out = semsplat(&["inspect", labels.to_str().unwrap()]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        !out.status.success() && stdout.contains("only two values"),
+        "{stdout}"
+    );
+    let out = semsplat(&["inspect", labels.to_str().unwrap(), "--ignore-id", "1000"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    let out = semsplat(&["inspect", labels.to_str().unwrap(), "--ignore-id", "70000"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && stderr.contains("70000"),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn labels_at_another_resolution_scale_the_intrinsics_or_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    // 4946x3286 / 8 rounds to 618x411 (3DGS's images_8): within a pixel of the ratio.
+    let cams = [camera("a", (4946, 3286)), camera("b", (4946, 3286))];
+    let (cameras, labels) = dataset_dir(dir.path(), &cams);
+    for name in ["a", "b"] {
+        let map = LabelMap::filled(618, 411, 2);
+        semsplat::scene::labels::write_label_png(&labels.join(format!("{name}.png")), &map)
+            .unwrap();
+    }
+    let d = open(&cameras, &labels, None).unwrap();
+    let c = &d.cameras[0];
+    assert_eq!((c.width, c.height), (618, 411));
+    let (sx, sy) = (618.0 / 4946.0, 411.0 / 3286.0);
+    assert!((c.fx - 4946.0 * sx).abs() < 1e-9 && (c.cx - 2473.0 * sx).abs() < 1e-9);
+    assert!((c.fy - 4946.0 * sy).abs() < 1e-9 && (c.cy - 1643.0 * sy).abs() < 1e-9);
+    assert_eq!(d.warnings.len(), 1, "said once: {:?}", d.warnings);
+    assert!(d.warnings[0].contains("618x411") && d.warnings[0].contains("4946x3286"));
+
+    // Another aspect ratio: a clear error naming both sizes.
+    let map = LabelMap::filled(618, 300, 2);
+    semsplat::scene::labels::write_label_png(&labels.join("b.png"), &map).unwrap();
+    let e = err(open(&cameras, &labels, None));
+    assert!(
+        e.contains("618x300") && e.contains("4946x3286") && e.contains("b.png"),
+        "{e}"
+    );
+}
+
+#[test]
+fn rig_subfolders_match_by_relative_path_then_unique_stem() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    let gray = |p: &Path, v: u8| {
+        write_png(
+            p,
+            (4, 3),
+            png::ColorType::Grayscale,
+            png::BitDepth::Eight,
+            None,
+            &[v; 12],
+        )
+    };
+    gray(&root.join("cam0/00001.png"), 1);
+    gray(&root.join("cam1/00001.png"), 2);
+    gray(&root.join("cam0/00002.png"), 3);
+    let cams = [
+        camera("cam0/00001", (4, 3)),
+        camera("cam1/00001", (4, 3)),
+        camera("00002", (4, 3)),
+    ];
+    let dir_labels = LabelDir::open(root, &cams, None, MissingLabels::Error).unwrap();
+    let firsts: Vec<u16> = dir_labels.iter().map(|r| r.unwrap().1.labels[0]).collect();
+    assert_eq!(firsts, [1, 2, 3]);
+
+    // A bare stem matching two subfolders is ambiguous.
+    let e = err(LabelDir::open(
+        root,
+        &[camera("00001", (4, 3))],
+        None,
+        MissingLabels::Error,
+    ));
+    assert!(
+        e.contains("cam0/00001.png") && e.contains("cam1/00001.png") && e.contains("several"),
+        "{e}"
+    );
+    // Nothing matches: the error lists expected and found names.
+    let e = err(LabelDir::open(
+        root,
+        &[camera("frame_9", (4, 3))],
+        None,
+        MissingLabels::Skip,
+    ));
+    assert!(
+        e.contains("frame_9.png") && e.contains("cam0/00001.png"),
+        "{e}"
+    );
+}
+
+/// A PNG whose header claims `w` x `h` 8-bit gray, followed by a token IDAT: tiny on disk.
+fn huge_header_png(path: &Path, w: u32, h: u32) {
+    fn chunk(out: &mut Vec<u8>, kind: &[u8], data: &[u8]) {
+        out.extend((data.len() as u32).to_be_bytes());
+        let start = out.len();
+        out.extend(kind);
+        out.extend(data);
+        let crc = crc32(&out[start..]);
+        out.extend(crc.to_be_bytes());
+    }
+    let mut ihdr = Vec::new();
+    ihdr.extend(w.to_be_bytes());
+    ihdr.extend(h.to_be_bytes());
+    ihdr.extend([8, 0, 0, 0, 0]);
+    let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
+    chunk(&mut png, b"IHDR", &ihdr);
+    chunk(&mut png, b"IDAT", &[0x78, 0x9c, 0x03, 0x00]);
+    chunk(&mut png, b"IEND", &[]);
+    std::fs::write(path, png).unwrap();
+}
+
+fn crc32(bytes: &[u8]) -> u32 {
+    let mut crc = !0u32;
+    for &b in bytes {
+        crc ^= b as u32;
+        for _ in 0..8 {
+            crc = if crc & 1 != 0 {
+                (crc >> 1) ^ 0xEDB8_8320
+            } else {
+                crc >> 1
+            };
+        }
+    }
+    !crc
+}
+
+#[test]
+fn huge_label_headers_are_refused_before_decoding() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("v0.png");
+    huge_header_png(&p, 30000, 30000);
+    assert!(std::fs::metadata(&p).unwrap().len() < 100);
+    // Over the pixel limit: refused from the header alone (a decode would fail instead
+    // with "cannot decode", the IDAT being a token).
+    let e = err(read_label_png(&p));
+    assert!(
+        e.contains("30000x30000")
+            && e.contains("refused from its header")
+            && !e.contains("decode PNG"),
+        "{e}"
+    );
+    // Under the limit but not its camera's size: the size check comes before decoding.
+    huge_header_png(&p, 16000, 11000);
+    let labels = LabelDir::open(
+        dir.path(),
+        &[camera("v0", (4, 3))],
+        None,
+        MissingLabels::Error,
+    )
+    .unwrap();
+    let e = err(labels.load(0));
+    assert!(
+        e.contains("16000x11000") && e.contains("4x3") && !e.contains("decode PNG"),
+        "{e}"
+    );
+}
+
+#[test]
+fn jpeg_images_load() {
+    let dir = tempfile::tempdir().unwrap();
+    let (w, h) = (16u32, 8u32);
+    let img =
+        image::RgbImage::from_fn(w, h, |x, y| image::Rgb([(x * 4) as u8, (y * 8) as u8, 200]));
+    std::fs::create_dir_all(dir.path().join("cam0")).unwrap();
+    let path = dir.path().join("cam0/00001.jpg");
+    let mut file = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut file, 95)
+        .encode_image(&img)
+        .unwrap();
+    drop(file);
+    let rgb = load_view_image(dir.path(), &camera("cam0/00001", (w, h))).unwrap();
+    assert_eq!(rgb.len(), (w * h * 3) as usize);
+    // Lossy, but close: within 8/255 per channel at quality 95 on a smooth image.
+    for (got, want) in rgb.iter().zip(img.as_raw()) {
+        assert!(
+            (got - *want as f32 / 255.0).abs() < 8.0 / 255.0,
+            "{got} vs {want}"
+        );
+    }
+    let e = err(load_view_image(
+        dir.path(),
+        &camera("cam0/00001", (w, h + 1)),
+    ));
+    assert!(e.contains("16x8") && e.contains("16x9"), "{e}");
+}
+
+// ---------------------------------------------------------------------------------------
+// End to end through the CLI (lavapipe): palette labels, JPEG images, named eval classes,
+// class ids above 16 bits.
+
+fn semsplat(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_semsplat"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn ok(args: &[&str]) -> String {
+    let out = semsplat(args);
+    assert!(
+        out.status.success(),
+        "{args:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// The synth room's label maps re-saved as VOC-style palette PNGs and its images as JPEG.
+fn palette_labels_and_jpegs(d: &Path) {
+    let pal = d.join("labels_pal");
+    for entry in std::fs::read_dir(d.join("labels")).unwrap() {
+        let p = entry.unwrap().path();
+        let map = read_label_png(&p).unwrap();
+        let idx: Vec<u8> = map
+            .labels
+            .iter()
+            .map(|&l| if l == IGN { 255 } else { l as u8 })
+            .collect();
+        let out = pal.join(p.file_name().unwrap());
+        write_png(
+            &out,
+            (map.width, map.height),
+            png::ColorType::Indexed,
+            png::BitDepth::Eight,
+            Some(voc_palette()),
+            &idx,
+        );
+    }
+    let jpg = d.join("images_jpg");
+    std::fs::create_dir_all(&jpg).unwrap();
+    for entry in std::fs::read_dir(d.join("images")).unwrap() {
+        let p = entry.unwrap().path();
+        let img = image::open(&p).unwrap().to_rgb8();
+        img.save(jpg.join(p.with_extension("jpg").file_name().unwrap()))
+            .unwrap();
+    }
+}
+
+#[test]
+fn palette_labels_and_jpeg_images_through_fuse_train_and_eval() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let s = |p: &str| d.join(p).to_str().unwrap().to_owned();
+    ok(&[
+        "synth",
+        "--preset",
+        "tiny",
+        "--out",
+        &s(""),
+        "--views",
+        "4",
+        "--test-views",
+        "1",
+        "--width",
+        "48",
+        "--height",
+        "32",
+    ]);
+    palette_labels_and_jpegs(d);
+    ok(&[
+        "fuse",
+        "--scene",
+        &s("scene.ply"),
+        "--cameras",
+        &s("cameras.json"),
+        "--labels",
+        &s("labels_pal"),
+        "--classes",
+        &s("classes.json"),
+        "--out",
+        &s("fused.ply"),
+    ]);
+    ok(&[
+        "eval",
+        "--scene",
+        &s("fused.ply"),
+        "--cameras",
+        &s("cameras.json"),
+        "--labels",
+        &s("labels_pal"),
+        "--views",
+        "all",
+        "--images",
+        &s("images_jpg"),
+        "--json",
+        &s("eval.json"),
+    ]);
+    let eval: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("eval.json")).unwrap()).unwrap();
+    let miou = eval["miou"].as_f64().unwrap();
+    assert!(miou > 0.5, "{eval}");
+    assert!(
+        eval["image_quality"]["psnr"].as_f64().unwrap() > 10.0,
+        "{eval}"
+    );
+    let names: Vec<&str> = eval["per_class"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["name"].as_str().unwrap())
+        .collect();
+    assert!(
+        names.contains(&"floor") && names.contains(&"wall"),
+        "{names:?}"
+    );
+
+    // The same classes shifted by 2^16: cut to 16 bits they would score exactly as before.
+    let mut g = read_ply(&d.join("fused.ply")).unwrap();
+    for c in g.class_ids.as_mut().unwrap() {
+        if *c >= 0 {
+            *c += 65536;
+        }
+    }
+    write_ply(&d.join("shifted.ply"), &g).unwrap();
+    ok(&[
+        "eval",
+        "--scene",
+        &s("shifted.ply"),
+        "--cameras",
+        &s("cameras.json"),
+        "--labels",
+        &s("labels_pal"),
+        "--views",
+        "all",
+        "--json",
+        &s("shifted.json"),
+    ]);
+    let shifted: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("shifted.json")).unwrap()).unwrap();
+    assert_eq!(shifted["miou"].as_f64(), Some(0.0), "{shifted}");
+    assert_eq!(shifted["pixel_accuracy"].as_f64(), Some(0.0), "{shifted}");
+
+    // train reads the JPEG images (a couple of iterations: the format path, not quality).
+    ok(&[
+        "train",
+        "--images",
+        &s("images_jpg"),
+        "--labels",
+        &s("labels_pal"),
+        "--cameras",
+        &s("cameras.json"),
+        "--init",
+        &s("init.ply"),
+        "--out",
+        &s("trained.ply"),
+        "--train-only",
+        "--iters",
+        "2",
+        "--max-gaussians",
+        "4000",
+    ]);
+    assert!(read_ply(&d.join("trained.ply"))
+        .unwrap()
+        .class_ids
+        .is_some());
+}
