@@ -3,6 +3,7 @@
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
+use semsplat::util::interrupt;
 
 mod cli;
 
@@ -47,8 +48,27 @@ enum Command {
     Bench(cli::bench::BenchCommand),
 }
 
+impl Command {
+    /// Whether the command polls for Ctrl-C in its long loops (train per iteration, fuse,
+    /// render and eval per view, sweep per level) and so stops cleanly with an error; the
+    /// others exit at the first signal, after removing their temp files.
+    fn polls_for_interrupt(&self) -> bool {
+        matches!(
+            self,
+            Command::Train(_)
+                | Command::Fuse(_)
+                | Command::Render(_)
+                | Command::Eval(_)
+                | Command::Sweep(_)
+        )
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    if let Err(e) = interrupt::install_handler(cli.command.polls_for_interrupt()) {
+        eprintln!("warning: {e:#}; Ctrl-C may leave temp files behind");
+    }
     let result = match cli.command {
         Command::Demo(args) => cli::demo::run(args),
         Command::Eval(args) => cli::eval::run(args),
@@ -63,6 +83,10 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
+        Err(e) if interrupt::is_interruption(&e) => {
+            eprintln!("error: {}", interrupt::Interrupted);
+            ExitCode::from(interrupt::EXIT_CODE)
+        }
         Err(e) => {
             eprintln!("error: {e:#}");
             ExitCode::FAILURE

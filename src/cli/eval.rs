@@ -17,7 +17,9 @@ use semsplat::scene::images::load_view_image;
 use semsplat::scene::labels::{LabelDir, LabelMap};
 use semsplat::scene::ply::read_ply;
 use semsplat::scene::{Camera, Gaussians, Split};
-use semsplat::util::write_bytes_atomic;
+use semsplat::util::{interrupt, write_bytes_atomic};
+
+use super::check_outputs;
 
 #[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
 enum Views {
@@ -63,6 +65,7 @@ struct EvalReport {
 }
 
 pub fn run(args: EvalArgs) -> Result<()> {
+    check_outputs(&[("--json", args.json.as_deref())], &[])?;
     let g = read_ply(&args.scene)?;
     let Some(classes) = g.class_ids.clone() else {
         bail!(
@@ -80,6 +83,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
     let mut renderer = LabelRenderer::new(&gpu, &g, &classes)?;
     let mut confusion = Confusion::default();
     for &i in &chosen {
+        interrupt::check()?;
         let truth = dir.load(i)?;
         confusion.add(
             &truth.labels,
