@@ -27,6 +27,15 @@ pub fn human_bytes(bytes: &u64) -> String {
     }
 }
 
+/// The remedy after an allocation error, when it allocated something (not the allocator).
+fn too_large_hint(size: &u64) -> String {
+    if *size == 0 {
+        String::new()
+    } else {
+        format!("; {TOO_LARGE_HINT}")
+    }
+}
+
 #[derive(Debug, Error)]
 pub enum GpuError {
     #[error("cannot load the Vulkan loader (libvulkan.so.1): {0}; {SETUP_HINT}")]
@@ -51,7 +60,7 @@ pub enum GpuError {
         what: &'static str,
         result: vk::Result,
     },
-    #[error("GPU memory allocation of {size} bytes ({}) for '{name}' failed: {source}; {TOO_LARGE_HINT}", human_bytes(.size))]
+    #[error("GPU memory allocation of {size} bytes ({}) for '{name}' failed: {source}{}", human_bytes(.size), too_large_hint(.size))]
     Allocation {
         name: String,
         size: u64,
