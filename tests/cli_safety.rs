@@ -485,3 +485,69 @@ fn a_buffer_too_large_for_the_device_is_named_with_its_size_and_a_remedy() {
     }
     common::check_validation(gpu);
 }
+
+/// Every file name under `dir`, recursively.
+fn all_files(dir: &Path) -> Vec<String> {
+    let mut names = Vec::new();
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let entry = entry.unwrap();
+        if entry.file_type().unwrap().is_dir() {
+            names.extend(all_files(&entry.path()));
+        } else {
+            names.push(entry.file_name().to_string_lossy().into_owned());
+        }
+    }
+    names
+}
+
+/// A command that does not poll (synth) exits at the first Ctrl-C, mid-write, and still
+/// leaves no temp file: the handler removes the ones in flight.
+#[test]
+fn ctrl_c_during_synth_writing_exits_at_once_without_temp_files() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("room");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_semsplat"))
+        .args([
+            "synth",
+            "--preset",
+            "tiny",
+            "--views",
+            "400",
+            "--test-views",
+            "1",
+        ])
+        .args(["--width", "64", "--height", "48", "--no-previews", "--out"])
+        .arg(&out)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The view images are written last (400 views, about 3 s on 2 cores): wait for the
+    // first one's folder, polling.
+    let images = out.join("images");
+    for _ in 0..120_000 {
+        if images.exists() || child.try_wait().unwrap().is_some() {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    let sent = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    let run = child.wait_with_output().unwrap();
+    let err = stderr(&run);
+    assert_eq!(run.status.code(), Some(130), "{err}");
+    assert!(err.contains("interrupted"), "{err}");
+    let files = all_files(&out);
+    let temps: Vec<&String> = files
+        .iter()
+        .filter(|n| n.contains("semsplat-tmp"))
+        .collect();
+    assert!(temps.is_empty(), "temp files left: {temps:?}");
+    let written = all_files(&images).len();
+    assert!(
+        written < 401,
+        "synth finished before the signal ({written} images)"
+    );
+}
