@@ -77,3 +77,54 @@ impl LabelSource for Interruptible<'_> {
         self.0.labels(view, cam)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use semsplat::scene::classes::{read_class_table, ClassTable};
+    use semsplat::scene::ply::{classes_sidecar_path, read_ply};
+    use semsplat::scene::Gaussians;
+
+    use super::write_scene_with_table;
+
+    fn scene(n: usize, class: i32) -> Gaussians {
+        Gaussians {
+            means: vec![[0.0, 1.0, 2.0]; n],
+            log_scales: vec![[0.0; 3]; n],
+            quats: vec![[1.0, 0.0, 0.0, 0.0]; n],
+            opacity_logits: vec![0.5; n],
+            sh_degree: 0,
+            sh: vec![0.1; 3 * n],
+            class_ids: Some(vec![class; n]),
+            ..Default::default()
+        }
+    }
+
+    /// A failed write of either file leaves the old pair as it was, with no temp file.
+    #[test]
+    fn a_failed_write_keeps_the_old_scene_and_table_together() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("fused.ply");
+        write_scene_with_table(&out, &scene(2, 0), &ClassTable::from_ids([0])).unwrap();
+        let files = || std::fs::read_dir(dir.path()).unwrap().count();
+        assert_eq!(files(), 2);
+
+        // The PLY cannot be written (inconsistent layout): neither file changes.
+        let mut broken = scene(3, 1);
+        broken.sh.pop();
+        assert!(write_scene_with_table(&out, &broken, &ClassTable::from_ids([1])).is_err());
+        // The table cannot be written (invalid: a duplicate id): the PLY does not change.
+        let mut bad_table = ClassTable::from_ids([1]);
+        bad_table.classes.push(bad_table.classes[0].clone());
+        assert!(write_scene_with_table(&out, &scene(3, 1), &bad_table).is_err());
+
+        assert_eq!(read_ply(&out).unwrap().len(), 2);
+        let table = read_class_table(&classes_sidecar_path(&out)).unwrap();
+        assert_eq!(table.classes.iter().map(|c| c.id).collect::<Vec<_>>(), [0]);
+        assert_eq!(files(), 2, "a temp file was left");
+
+        // And a good write replaces both.
+        write_scene_with_table(&out, &scene(3, 1), &ClassTable::from_ids([1])).unwrap();
+        assert_eq!(read_ply(&out).unwrap().len(), 3);
+        assert_eq!(files(), 2);
+    }
+}
