@@ -551,3 +551,31 @@ fn ctrl_c_during_synth_writing_exits_at_once_without_temp_files() {
         "synth finished before the signal ({written} images)"
     );
 }
+
+/// A finite but absurd learning rate makes the logits overflow: training stops with the
+/// iteration, and writes nothing (it used to write a NaN model with exit 0).
+#[test]
+fn diverged_training_stops_with_a_clear_error_and_no_output() {
+    let tmp = tempfile::tempdir().unwrap();
+    let room = tmp.path().join("room");
+    synth(&room);
+    let out = tmp.path().join("diverged.ply");
+    let r = |f: &str| room.join(f);
+    let run = Command::new(env!("CARGO_BIN_EXE_semsplat"))
+        .arg("train")
+        .args(["--images".as_ref(), r("images").as_os_str()])
+        .args(["--labels".as_ref(), r("labels").as_os_str()])
+        .args(["--cameras".as_ref(), r("cameras.json").as_os_str()])
+        .args(["--init".as_ref(), r("init.ply").as_os_str()])
+        .args(["--semantics-only", "--iters", "20", "--lr-logits", "1e38"])
+        .args(["--out".as_ref(), out.as_os_str()])
+        .output()
+        .unwrap();
+    let err = stderr(&run);
+    assert!(!run.status.success(), "a diverged run succeeded: {err}");
+    assert!(
+        err.contains("diverged by iteration") && err.contains("NaN"),
+        "{err}"
+    );
+    assert!(!out.exists(), "a diverged model was written");
+}

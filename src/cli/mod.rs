@@ -16,7 +16,7 @@ pub mod train;
 
 use std::path::Path;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use semsplat::dataset::{Dataset, DatasetPaths};
 use semsplat::fuse::LabelSource;
 use semsplat::scene::classes::ClassTable;
@@ -62,7 +62,10 @@ pub fn check_outputs(
 /// mismatch: the PLY is written in full to a temp file first, then the table is renamed into
 /// place, then the PLY. A failure while writing changes neither; a kill can only pair the new
 /// table with the old PLY, never a new PLY with an old table.
+/// A scene with non-finite values (a diverged training run) is refused, not written.
 pub fn write_scene_with_table(out: &Path, g: &Gaussians, table: &ClassTable) -> Result<()> {
+    g.validate()
+        .with_context(|| format!("refusing to write {}", out.display()))?;
     let ply = stage_atomic(out, |w| write_ply_to(w, g))?;
     write_classes_sidecar(out, table)?;
     ply.commit()
