@@ -470,14 +470,19 @@ fn ctrl_c_and_sigterm_stop_training_with_no_output_and_no_temp_files() {
 #[test]
 fn a_buffer_too_large_for_the_device_is_named_with_its_size_and_a_remedy() {
     let gpu = common::gpu();
+    // Twice all the memory the device reports (its heaps), so it cannot fit anywhere; no
+    // fixed size, which might exceed a device's maxBufferSize and upset the validation layer.
+    let all_memory: u64 = gpu.caps().heaps.iter().map(|h| h.size_bytes).sum();
+    let size = 2 * all_memory.max(1 << 30);
     let err = gpu
-        .buffer("too-large-for-any-device", 1 << 40)
+        .buffer("too-large-for-any-device", size)
         .err()
-        .expect("a 1 TiB buffer was created");
+        .expect("a buffer of twice the device's memory was created");
     let msg = err.to_string();
+    let human = semsplat::gpu::error::human_bytes(&size);
     for needle in [
         "too-large-for-any-device",
-        "1.0 TiB",
+        &human,
         "smaller images",
         "--mem-budget",
     ] {

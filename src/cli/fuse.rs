@@ -64,7 +64,7 @@ pub struct FuseArgs {
     /// writes this normalized evidence.
     #[arg(long)]
     per_view: bool,
-    /// Relative depth tolerance of --occlusion.
+    /// Relative depth tolerance of --occlusion (> 0).
     #[arg(long, default_value_t = 0.05, value_parser = args::positive::<f32>)]
     depth_tol: f32,
     /// Background bias of the one-vs-rest assignment used by --extract/--remove, in [-1, 1]

@@ -56,7 +56,7 @@ pub struct TrainArgs {
     /// Blend softmax(logits) instead of the raw logits (Gaussian Semantics' ablation).
     #[arg(long)]
     softmax: bool,
-    /// Weight of the semantic cross-entropy (Gaussian Semantics: 1).
+    /// Weight of the semantic cross-entropy (Gaussian Semantics: 1; >= 0).
     #[arg(long, default_value_t = 1.0, value_parser = args::non_negative::<f32>)]
     lambda_sem: f32,
     /// Weight of the per-Gaussian entropy regularizer (Gaussian Semantics: 0.01; 0 turns it off).
@@ -66,7 +66,7 @@ pub struct TrainArgs {
     /// scaled to --iters).
     #[arg(long)]
     entropy_warmup: Option<u32>,
-    /// Learning rate of the semantic logits (Adam).
+    /// Learning rate of the semantic logits (Adam; > 0).
     #[arg(long, default_value_t = 0.05, value_parser = args::positive::<f64>)]
     lr_logits: f64,
     /// Never grow the model past this many Gaussians.

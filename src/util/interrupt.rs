@@ -54,11 +54,6 @@ pub fn check() -> Result<(), Interrupted> {
     }
 }
 
-/// Sets the flag as a signal would (for library users with their own signal handling).
-pub fn request_stop() {
-    INTERRUPTED.store(true, Ordering::SeqCst);
-}
-
 /// The registry of temp files in flight (poison-tolerant: a panicking writer must not stop
 /// the handler from cleaning up).
 pub(crate) fn temp_files() -> MutexGuard<'static, Vec<PathBuf>> {
