@@ -2,6 +2,8 @@
 //! outside the output folder, outputs are never special files and are checked writable
 //! before any work, Ctrl-C/SIGTERM leave no partial output or temp file, and a buffer the
 //! device cannot hold is named in the error.
+// Symbolic links, FIFOs and signals as Unix has them.
+#![cfg(unix)]
 
 mod common;
 
