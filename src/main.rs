@@ -3,6 +3,7 @@
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
+use semsplat::util::interrupt;
 
 mod cli;
 
@@ -13,7 +14,8 @@ mod cli;
     about = "Lift 2D semantic labels into 3D Gaussian Splatting scenes (Vulkan compute)",
     long_about = "Lift 2D semantic labels into 3D Gaussian Splatting scenes on a Vulkan compute \
                   backend. Runs on any Vulkan 1.3 device; without a GPU, install lavapipe with \
-                  tools/setup.sh. Select a device with SEMSPLAT_DEVICE=<index or name substring>."
+                  tools/setup.sh. Select a device with SEMSPLAT_DEVICE=<index or name substring>. \
+                  Ctrl-C stops a run cleanly: no partial output, exit status 130."
 )]
 struct Cli {
     #[command(subcommand)]
@@ -47,8 +49,27 @@ enum Command {
     Bench(cli::bench::BenchCommand),
 }
 
+impl Command {
+    /// Whether the command polls for Ctrl-C in its long loops (train per iteration, fuse,
+    /// render and eval per view, sweep per level) and so stops cleanly with an error; the
+    /// others exit at the first signal, after removing their temp files.
+    fn polls_for_interrupt(&self) -> bool {
+        matches!(
+            self,
+            Command::Train(_)
+                | Command::Fuse(_)
+                | Command::Render(_)
+                | Command::Eval(_)
+                | Command::Sweep(_)
+        )
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    if let Err(e) = interrupt::install_handler(cli.command.polls_for_interrupt()) {
+        eprintln!("warning: {e:#}; Ctrl-C may leave temp files behind");
+    }
     let result = match cli.command {
         Command::Demo(args) => cli::demo::run(args),
         Command::Eval(args) => cli::eval::run(args),
@@ -63,6 +84,10 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
+        Err(e) if interrupt::is_interruption(&e) => {
+            eprintln!("error: {}", interrupt::Interrupted);
+            ExitCode::from(interrupt::EXIT_CODE)
+        }
         Err(e) => {
             eprintln!("error: {e:#}");
             ExitCode::FAILURE

@@ -417,6 +417,52 @@ fn invalid_camera_jsons_are_errors() {
     );
 }
 
+/// Camera names become output and input file names, so every camera source refuses names
+/// that are paths: the semsplat and INRIA JSONs here, COLMAP through the same check.
+#[test]
+fn camera_names_that_are_paths_are_errors() {
+    let semsplat = |name: &str| {
+        format!(
+            r#"{{"format": "semsplat-cameras", "version": 1, "cameras": [{{"name": {name}, "width": 4, "height": 3,
+            "fx": 2, "fy": 2, "cx": 2, "cy": 1.5, "world_to_camera": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}}]}}"#
+        )
+    };
+    let inria = |name: &str| {
+        format!(
+            r#"[{{"img_name": {name}, "width": 4, "height": 3, "position": [0,0,0], "rotation": [[1,0,0],[0,1,0],[0,0,1]], "fx": 2, "fy": 2}}]"#
+        )
+    };
+    let cases = [
+        (r#""../../x""#, "path separator"),
+        (r#""/abs/x""#, "path separator"),
+        (r#""a\\b""#, "path separator"),
+        (r#"".""#, "names a folder"),
+        (r#""..""#, "names a folder"),
+        (r#""a\u0000b""#, "NUL"),
+        (r#""""#, "empty"),
+        (r#""C:x""#, "drive prefix"),
+    ];
+    for (name, needle) in cases {
+        let err = error_of(parse_cameras_json(semsplat(name).as_bytes()));
+        assert!(
+            err.contains("camera name") && err.contains(needle),
+            "{name}: {err}"
+        );
+    }
+    // INRIA strips folders from img_name (as COLMAP does), so only `.`/`..` stems remain.
+    for (name, needle) in [
+        (r#""..""#, "names a folder"),
+        (r#""a/..""#, "names a folder"),
+    ] {
+        let err = error_of(parse_cameras_json(inria(name).as_bytes()));
+        assert!(
+            err.contains("camera name") && err.contains(needle),
+            "{name}: {err}"
+        );
+    }
+    assert!(parse_cameras_json(semsplat(r#""frame..001""#).as_bytes()).is_ok());
+}
+
 // ---------------------------------------------------------------------------------------
 // Label maps and class tables
 

@@ -5,6 +5,7 @@ use anyhow::Result;
 use clap::{Args, Subcommand};
 use serde::Serialize;
 
+use super::args;
 use super::joint_args::parse_methods;
 use super::progress::{follow, views_bar};
 use semsplat::bench::fuse::{bench_fuse, FuseBench, FuseBenchSpec};
@@ -75,11 +76,11 @@ pub struct FuseArgs {
 #[derive(Args)]
 pub struct RenderArgs {
     /// Number of Gaussians.
-    #[arg(long, default_value_t = 100_000)]
+    #[arg(long, default_value_t = 100_000, value_parser = args::at_least_one::<usize>)]
     n: usize,
-    #[arg(long, default_value_t = 640)]
+    #[arg(long, default_value_t = 640, value_parser = args::at_least_one::<u32>)]
     width: u32,
-    #[arg(long, default_value_t = 480)]
+    #[arg(long, default_value_t = 480, value_parser = args::at_least_one::<u32>)]
     height: u32,
     /// Semantic channels blended with RGB (0: RGB only).
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u16).range(0..=256))]
@@ -91,7 +92,7 @@ pub struct RenderArgs {
 #[derive(Args)]
 pub struct CommonArgs {
     /// Timed repetitions (after one warm-up); the median is reported.
-    #[arg(long, default_value_t = 5)]
+    #[arg(long, default_value_t = 5, value_parser = args::at_least_one::<usize>)]
     iters: usize,
     /// Seed of the random input.
     #[arg(long, default_value_t = 1)]
@@ -104,7 +105,7 @@ pub struct CommonArgs {
 #[derive(Args)]
 pub struct SortArgs {
     /// Number of key/value pairs.
-    #[arg(long, default_value_t = 1 << 22)]
+    #[arg(long, default_value_t = 1 << 22, value_parser = args::at_least_one::<u64>)]
     n: u64,
     /// Sort by the low BITS bits of each key (1..=32).
     #[arg(long, default_value_t = 32, value_parser = clap::value_parser!(u32).range(1..=32))]
@@ -116,7 +117,7 @@ pub struct SortArgs {
 #[derive(Args)]
 pub struct ScanArgs {
     /// Number of u32 elements.
-    #[arg(long, default_value_t = 1 << 22)]
+    #[arg(long, default_value_t = 1 << 22, value_parser = args::at_least_one::<u64>)]
     n: u64,
     #[command(flatten)]
     common: CommonArgs,

@@ -8,6 +8,7 @@ use clap::Args;
 use serde::Serialize;
 
 use super::joint_args::{room_config, MethodArgs};
+use super::{args, check_outputs};
 use semsplat::eval::image_quality::ImageQuality;
 use semsplat::experiment::{held_out_quality, score_methods, MethodScore, TrainLabels};
 use semsplat::gpu::Gpu;
@@ -31,14 +32,14 @@ pub struct DemoArgs {
     /// Output folder: report.json, speed_vs_accuracy.png, strip.png.
     #[arg(long, default_value = "demo_out")]
     out: PathBuf,
-    #[arg(long, default_value_t = 20)]
+    #[arg(long, default_value_t = 20, value_parser = args::at_least_one::<usize>)]
     views: usize,
     /// Held-out views the 2D metrics are computed on.
-    #[arg(long, default_value_t = 6)]
+    #[arg(long, default_value_t = 6, value_parser = args::at_least_one::<usize>)]
     test_views: usize,
-    #[arg(long, default_value_t = 320)]
+    #[arg(long, default_value_t = 320, value_parser = args::at_least_one::<u32>)]
     width: u32,
-    #[arg(long, default_value_t = 240)]
+    #[arg(long, default_value_t = 240, value_parser = args::at_least_one::<u32>)]
     height: u32,
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -81,6 +82,7 @@ fn palette(labels: &[u16], table: &ClassTable) -> Vec<u8> {
 }
 
 pub fn run(args: DemoArgs) -> Result<()> {
+    check_outputs(&[], &[("--out", Some(&args.out))])?;
     let s = build_room(&args)?;
     let methods = args.methods.methods()?;
     let gpu = Gpu::new()?;

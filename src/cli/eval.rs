@@ -19,7 +19,9 @@ use semsplat::scene::labels::{binary_mask_warning, LabelDir, LabelMap};
 use semsplat::scene::ply::{read_classes_sidecar, read_ply};
 use semsplat::scene::scene_file::read_scene;
 use semsplat::scene::{Camera, Gaussians, Split};
-use semsplat::util::write_bytes_atomic;
+use semsplat::util::{interrupt, write_bytes_atomic};
+
+use super::check_outputs;
 
 #[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
 enum Views {
@@ -73,6 +75,7 @@ struct EvalReport {
 }
 
 pub fn run(args: EvalArgs) -> Result<()> {
+    check_outputs(&[("--json", args.json.as_deref())], &[])?;
     let g = read_scene(&args.scene)?;
     let Some(classes) = g.class_ids.clone() else {
         bail!(
@@ -96,6 +99,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
     let mut confusion = Confusion::default();
     let mut ignored = 0u64;
     for &i in &chosen {
+        interrupt::check()?;
         let truth = dir.load(i)?;
         ignored += truth
             .labels

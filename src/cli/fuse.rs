@@ -7,8 +7,9 @@ use anyhow::{anyhow, bail, Context, Result};
 use clap::{Args, ValueEnum};
 use serde::Serialize;
 
-use super::open_dataset;
+use super::args;
 use super::progress::{follow, views_bar};
+use super::{check_outputs, open_dataset, write_scene_with_table, Interruptible};
 use semsplat::dataset::{user_classes, DatasetPaths};
 use semsplat::eval::label_render::LabelRenderer;
 use semsplat::fuse::{
@@ -20,11 +21,11 @@ use semsplat::render::GpuScene;
 use semsplat::scene::cameras::load_cameras;
 use semsplat::scene::classes::{read_class_table, write_class_table, ClassTable};
 use semsplat::scene::labels::{write_label_png, write_palette_png, LabelMap};
-use semsplat::scene::ply::{read_classes_sidecar, write_classes_sidecar, write_ply};
+use semsplat::scene::ply::{classes_sidecar_path, read_classes_sidecar, write_ply};
 use semsplat::scene::scene_file::{read_scene, resolve_scene_path};
 use semsplat::scene::Gaussians;
 use semsplat::util::npy::write_npy_f32;
-use semsplat::util::write_bytes_atomic;
+use semsplat::util::{interrupt, write_bytes_atomic};
 
 /// The base methods of `--method`; their variant flags (`--occlusion`, `--weighted`,
 /// `--per-view`) pick the [`Method`] from `semsplat::fuse::SPELLINGS`.
@@ -70,12 +71,12 @@ pub struct FuseArgs {
     /// writes this normalized evidence.
     #[arg(long)]
     per_view: bool,
-    /// Relative depth tolerance of --occlusion.
-    #[arg(long, default_value_t = 0.05)]
+    /// Relative depth tolerance of --occlusion (> 0).
+    #[arg(long, default_value_t = 0.05, value_parser = args::positive::<f32>)]
     depth_tol: f32,
     /// Background bias of the one-vs-rest assignment used by --extract/--remove, in [-1, 1]
     /// (FlashSplat's Listing 1.1): larger keeps fewer Gaussians in the object.
-    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true, value_parser = args::signed_unit_interval)]
     gamma: f64,
     /// Class table (JSON: id, name, color). Default: classes.json beside or inside the label
     /// folder, else the ids found in the label maps.
@@ -130,25 +131,8 @@ pub struct FuseArgs {
     train_only: bool,
     /// Device memory for the evidence matrix, e.g. 512M or 2G; larger class counts are
     /// processed in batches (same result). Default: a quarter of device memory.
-    #[arg(long, value_parser = parse_bytes)]
+    #[arg(long, value_parser = args::bytes)]
     mem_budget: Option<u64>,
-}
-
-fn parse_bytes(s: &str) -> Result<u64, String> {
-    let s = s.trim();
-    let (num, mul) = match s.char_indices().last() {
-        Some((i, 'K' | 'k')) => (&s[..i], 1u64 << 10),
-        Some((i, 'M' | 'm')) => (&s[..i], 1 << 20),
-        Some((i, 'G' | 'g')) => (&s[..i], 1 << 30),
-        _ => (s, 1),
-    };
-    let v: f64 = num
-        .parse()
-        .map_err(|_| format!("'{s}' is not a size like 512M or 2G"))?;
-    if v.is_nan() || v <= 0.0 {
-        return Err(format!("'{s}' must be positive"));
-    }
-    Ok((v * mul as f64) as u64)
 }
 
 fn contrib_sidecar(path: &Path) -> PathBuf {
@@ -187,11 +171,9 @@ struct Evidence {
 
 pub fn run(args: FuseArgs) -> Result<()> {
     let start = Instant::now();
+    check_fuse_outputs(&args)?;
     let mut g = read_scene(&args.scene)?;
     let method = selected_method(&args)?;
-    if !(-1.0..=1.0).contains(&args.gamma) {
-        bail!("--gamma must lie in [-1, 1], got {}", args.gamma);
-    }
     let accumulation = if args.float_atomics {
         Accumulation::Float
     } else {
@@ -301,6 +283,26 @@ fn select_from_fused(
     write_report(args, &report)
 }
 
+/// Every file and folder the run will write can be written (checked before any work).
+fn check_fuse_outputs(args: &FuseArgs) -> Result<()> {
+    let contrib_table = args.save_contrib.as_deref().map(contrib_sidecar);
+    check_outputs(
+        &[
+            ("--out", Some(&args.out)),
+            (
+                "--out's class table",
+                Some(&classes_sidecar_path(&args.out)),
+            ),
+            ("--report", args.report.as_deref()),
+            ("--save-contrib", args.save_contrib.as_deref()),
+            ("--save-contrib's class table", contrib_table.as_deref()),
+            ("--save-membership", args.save_membership.as_deref()),
+            ("--palette-ply", args.palette_ply.as_deref()),
+        ],
+        &[("--render-views", args.render_views.as_deref())],
+    )
+}
+
 /// The method `--method` and its variant flags name.
 fn selected_method(args: &FuseArgs) -> Result<Method> {
     let base = args
@@ -377,7 +379,7 @@ fn fuse_views(
         &gpu,
         &scene,
         &data.cameras,
-        &data,
+        &Interruptible(&data),
         data.classes.len(),
         &cfg,
         follow(&bar),
@@ -424,6 +426,7 @@ fn render_label_views(
     let ids = g.class_ids.as_deref().expect("classes assigned");
     let mut renderer = LabelRenderer::new(&gpu, g, ids)?;
     for cam in &cams {
+        interrupt::check()?;
         let labels: Vec<u16> = renderer
             .render(cam)?
             .into_iter()
@@ -463,8 +466,7 @@ fn select_members(
 
 /// The output PLY with its class table, and the palette-colored copy if asked for.
 fn write_outputs(args: &FuseArgs, selected: &Gaussians, table: &ClassTable) -> Result<()> {
-    write_ply(&args.out, selected)?;
-    write_classes_sidecar(&args.out, table)?;
+    write_scene_with_table(&args.out, selected, table)?;
     if let Some(path) = &args.palette_ply {
         let colors: Vec<[f32; 3]> = selected
             .class_ids

@@ -4,6 +4,7 @@
 use anyhow::{anyhow, Result};
 use clap::Args;
 
+use super::args;
 use semsplat::experiment::{JointSchedule, Lifter, ALL_METHODS};
 use semsplat::synth::{RoomSource, SynthConfig};
 
@@ -15,10 +16,10 @@ pub struct MethodArgs {
     #[arg(long, value_delimiter = ',', num_args = 1..)]
     methods: Vec<String>,
     /// Iterations of joint-semantics (one view each).
-    #[arg(long, default_value_t = JointSchedule::default().semantics_only_iters)]
+    #[arg(long, default_value_t = JointSchedule::default().semantics_only_iters, value_parser = args::at_least_one::<u32>)]
     semantics_only_iters: u32,
     /// Iterations of full joint training (geometry, appearance and logits).
-    #[arg(long, default_value_t = JointSchedule::default().full_iters)]
+    #[arg(long, default_value_t = JointSchedule::default().full_iters, value_parser = args::at_least_one::<u32>)]
     joint_iters: u32,
 }
 

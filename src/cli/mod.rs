@@ -1,5 +1,6 @@
 //! One module per subcommand, and what several of them share.
 
+pub mod args;
 pub mod bench;
 pub mod demo;
 pub mod eval;
@@ -13,10 +14,18 @@ pub mod sweep;
 pub mod synth;
 pub mod train;
 
-use anyhow::Result;
+use std::path::Path;
+
+use anyhow::{Context, Result};
 use clap::Args;
 use semsplat::dataset::{Dataset, DatasetPaths};
+use semsplat::fuse::LabelSource;
+use semsplat::scene::classes::ClassTable;
 use semsplat::scene::labels::LabelFormat;
+use semsplat::scene::ply::{write_classes_sidecar, write_ply_to};
+use semsplat::scene::{Camera, Gaussians};
+use semsplat::util::interrupt;
+use semsplat::util::{check_output_file, check_output_folder, stage_atomic};
 
 /// How label maps are read, shared by every command that reads them.
 #[derive(Args, Clone, Copy, Debug, Default)]
@@ -50,4 +59,98 @@ pub fn open_dataset(paths: &DatasetPaths, skipped: &str) -> Result<Dataset> {
         );
     }
     Ok(data)
+}
+
+/// Checks, before any long work, that every output can be written (see
+/// [`check_output_file`]): `files` and `folders` pair each path with its option's name.
+/// Missing options are `None` and skipped.
+pub fn check_outputs(
+    files: &[(&str, Option<&Path>)],
+    folders: &[(&str, Option<&Path>)],
+) -> Result<()> {
+    for (option, path) in files {
+        if let Some(path) = path {
+            check_output_file(option, path)?;
+        }
+    }
+    for (option, path) in folders {
+        if let Some(path) = path {
+            check_output_folder(option, path)?;
+        }
+    }
+    Ok(())
+}
+
+/// Writes a classified scene and its class table (`<out>.classes.json`) so that they never
+/// mismatch: the PLY is written in full to a temp file first, then the table is renamed into
+/// place, then the PLY. A failure while writing changes neither; a kill can only pair the new
+/// table with the old PLY, never a new PLY with an old table.
+/// A scene with non-finite values (a diverged training run) is refused, not written.
+pub fn write_scene_with_table(out: &Path, g: &Gaussians, table: &ClassTable) -> Result<()> {
+    g.validate()
+        .with_context(|| format!("refusing to write {}", out.display()))?;
+    let ply = stage_atomic(out, |w| write_ply_to(w, g))?;
+    write_classes_sidecar(out, table)?;
+    ply.commit()
+}
+
+/// A label source that stops the run at the next view once Ctrl-C was pressed.
+pub struct Interruptible<'a>(pub &'a dyn LabelSource);
+
+impl LabelSource for Interruptible<'_> {
+    fn labels(&self, view: usize, cam: &Camera) -> Result<Option<Vec<u32>>> {
+        interrupt::check()?;
+        self.0.labels(view, cam)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use semsplat::scene::classes::{read_class_table, ClassTable};
+    use semsplat::scene::ply::{classes_sidecar_path, read_ply};
+    use semsplat::scene::Gaussians;
+
+    use super::write_scene_with_table;
+
+    fn scene(n: usize, class: i32) -> Gaussians {
+        Gaussians {
+            means: vec![[0.0, 1.0, 2.0]; n],
+            log_scales: vec![[0.0; 3]; n],
+            quats: vec![[1.0, 0.0, 0.0, 0.0]; n],
+            opacity_logits: vec![0.5; n],
+            sh_degree: 0,
+            sh: vec![0.1; 3 * n],
+            class_ids: Some(vec![class; n]),
+            ..Default::default()
+        }
+    }
+
+    /// A failed write of either file leaves the old pair as it was, with no temp file.
+    #[test]
+    fn a_failed_write_keeps_the_old_scene_and_table_together() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("fused.ply");
+        write_scene_with_table(&out, &scene(2, 0), &ClassTable::from_ids([0])).unwrap();
+        let files = || std::fs::read_dir(dir.path()).unwrap().count();
+        assert_eq!(files(), 2);
+
+        // The PLY cannot be written (inconsistent layout): neither file changes.
+        let mut broken = scene(3, 1);
+        broken.sh.pop();
+        assert!(write_scene_with_table(&out, &broken, &ClassTable::from_ids([1])).is_err());
+        // The table cannot be written (invalid: a duplicate id): the PLY does not change.
+        let mut bad_table = ClassTable::from_ids([1]);
+        bad_table.classes.push(bad_table.classes[0].clone());
+        assert!(write_scene_with_table(&out, &scene(3, 1), &bad_table).is_err());
+
+        assert_eq!(read_ply(&out).unwrap().len(), 2);
+        let table = read_class_table(&classes_sidecar_path(&out)).unwrap();
+        assert_eq!(table.classes.iter().map(|c| c.id).collect::<Vec<_>>(), [0]);
+        assert_eq!(files(), 2, "a temp file was left");
+
+        // And a good write replaces both.
+        write_scene_with_table(&out, &scene(3, 1), &ClassTable::from_ids([1])).unwrap();
+        assert_eq!(read_ply(&out).unwrap().len(), 3);
+        assert_eq!(files(), 2);
+    }
 }

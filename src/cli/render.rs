@@ -7,6 +7,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 
 use super::progress::render_bar;
+use super::{args, check_outputs};
 use semsplat::eval::label_render::LabelRenderer;
 use semsplat::gpu::Gpu;
 use semsplat::render::{GpuScene, Rasterizer, RenderOptions, RenderedFrame, SemanticMode};
@@ -17,7 +18,7 @@ use semsplat::scene::ply::read_classes_sidecar;
 use semsplat::scene::scene_file::{read_scene, resolve_scene_path};
 use semsplat::scene::{Camera, Gaussians};
 use semsplat::util::npy::write_npy_f32;
-use semsplat::util::write_bytes_atomic;
+use semsplat::util::{interrupt, write_bytes_atomic};
 
 #[derive(Args)]
 pub struct RenderArgs {
@@ -45,8 +46,9 @@ pub struct RenderArgs {
     /// Blend softmax(logits) per Gaussian instead of raw logits.
     #[arg(long, requires = "semantics")]
     softmax: bool,
-    /// Background color, three values in [0, 1].
-    #[arg(long, value_delimiter = ',', num_args = 3, default_values_t = [0.0f32, 0.0, 0.0])]
+    /// Background color, three values in [0, 1]: 0.2,0.5,1 or 0.2 0.5 1.
+    // num_args counts before the comma split, so 1..=3 takes both spellings; run checks 3.
+    #[arg(long, value_delimiter = ',', num_args = 1..=3, default_values_t = [0.0f32, 0.0, 0.0], value_parser = args::unit_interval::<f32>)]
     background: Vec<f32>,
     /// Also write float32 NumPy arrays per view: <view>.rgb.npy [H,W,3], .alpha.npy [H,W],
     /// .depth.npy [H,W], and with --semantics .sem.npy [H,W,C] (blended) and
@@ -134,12 +136,13 @@ fn label_source(args: &RenderArgs, g: &Gaussians, gpu: &Gpu) -> Result<LabelSour
 }
 
 pub fn run(args: RenderArgs) -> Result<()> {
-    if args.background.iter().any(|v| !(0.0..=1.0).contains(v)) {
+    if args.background.len() != 3 {
         bail!(
-            "--background values must lie in [0, 1], got {:?}",
+            "--background takes three values (red, green, blue in [0, 1]), got {:?}",
             args.background
         );
     }
+    check_outputs(&[], &[("--out", Some(&args.out))])?;
     let scene_file = resolve_scene_path(&args.scene)?;
     let g = read_scene(&scene_file)?;
     let table = read_classes_sidecar(&scene_file)?;
@@ -170,6 +173,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let mut raster = Rasterizer::new(&gpu);
     let bar = render_bar(cams.len());
     for cam in &cams {
+        interrupt::check()?;
         bar.set_message(cam.name.clone());
         let f = raster.render(&scene, cam, &opts)?;
         let out = |suffix: &str| args.out.join(format!("{}{suffix}", cam.name));

@@ -3,17 +3,18 @@
 
 use std::path::PathBuf;
 
-use anyhow::{bail, Result};
+use anyhow::Result;
 use clap::{Args, ValueEnum};
 use serde::Serialize;
 
 use super::joint_args::{room_config, MethodArgs};
+use super::{args, check_outputs};
 #[cfg(feature = "charts")]
 use semsplat::eval::chart::{lines, Line};
 use semsplat::experiment::{mislabel_follow, score_methods, Lifter, MislabelFollow, TrainLabels};
 use semsplat::gpu::Gpu;
 use semsplat::synth::{generate, NoiseSpec};
-use semsplat::util::write_bytes_atomic;
+use semsplat::util::{interrupt, write_bytes_atomic};
 
 #[derive(Clone, Copy, ValueEnum, PartialEq, Eq, Debug)]
 enum NoiseKind {
@@ -56,20 +57,20 @@ pub struct SweepArgs {
     #[arg(long, value_enum)]
     noise: NoiseKind,
     /// Noise levels (default per kind, starting at 0: the clean reference).
-    #[arg(long, value_delimiter = ',', num_args = 1..)]
+    #[arg(long, value_delimiter = ',', num_args = 1.., value_parser = args::non_negative::<f64>)]
     levels: Vec<f64>,
     #[arg(long, default_value = "office")]
     preset: String,
     /// Output folder: robustness_<noise>.png and robustness_<noise>.json.
     #[arg(long, default_value = "demo_out")]
     out: PathBuf,
-    #[arg(long, default_value_t = 12)]
+    #[arg(long, default_value_t = 12, value_parser = args::at_least_one::<usize>)]
     views: usize,
-    #[arg(long, default_value_t = 4)]
+    #[arg(long, default_value_t = 4, value_parser = args::at_least_one::<usize>)]
     test_views: usize,
-    #[arg(long, default_value_t = 320)]
+    #[arg(long, default_value_t = 320, value_parser = args::at_least_one::<u32>)]
     width: u32,
-    #[arg(long, default_value_t = 240)]
+    #[arg(long, default_value_t = 240, value_parser = args::at_least_one::<u32>)]
     height: u32,
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -102,14 +103,15 @@ pub fn run(args: SweepArgs) -> Result<()> {
     } else {
         args.levels.clone()
     };
-    if levels.iter().any(|l| !l.is_finite() || *l < 0.0) {
-        bail!("--levels must be finite and >= 0, got {levels:?}");
-    }
+    check_outputs(&[], &[("--out", Some(&args.out))])?;
     let methods = args.methods.methods()?;
     let gpu = Gpu::new()?;
     let results = levels
         .iter()
-        .map(|&level| run_level(&args, &gpu, &methods, level))
+        .map(|&level| {
+            interrupt::check()?;
+            run_level(&args, &gpu, &methods, level)
+        })
         .collect::<Result<Vec<_>>>()?;
     let key = args.noise.key();
     write_chart(&args, &results)?;

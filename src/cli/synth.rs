@@ -175,5 +175,5 @@ fn check_output_folder(out: &Path, force: bool) -> Result<()> {
             out.display()
         );
     }
-    Ok(())
+    semsplat::util::check_output_folder("--out", out)
 }

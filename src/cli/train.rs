@@ -8,13 +8,14 @@ use anyhow::{bail, Result};
 use clap::Args;
 use serde::Serialize;
 
-use super::open_dataset;
+use super::args;
 use super::progress::iterations_bar;
+use super::{check_outputs, open_dataset, write_scene_with_table};
 use semsplat::dataset::{user_classes, Dataset, DatasetPaths};
 use semsplat::gpu::Gpu;
 use semsplat::render::SemanticMode;
 use semsplat::scene::images::load_view_image;
-use semsplat::scene::ply::{write_classes_sidecar, write_ply};
+use semsplat::scene::ply::{classes_sidecar_path, write_ply};
 use semsplat::scene::scene_file::read_scene_or_point_cloud;
 use semsplat::scene::Gaussians;
 use semsplat::train::config::TrainConfig;
@@ -22,7 +23,7 @@ use semsplat::train::trainer::{
     classes_from_logits, with_initial_logits, DensifyEvent, StageTotals, Trainer,
 };
 use semsplat::train::views::TrainView;
-use semsplat::util::write_bytes_atomic;
+use semsplat::util::{interrupt, write_bytes_atomic};
 
 #[derive(Args)]
 pub struct TrainArgs {
@@ -45,7 +46,7 @@ pub struct TrainArgs {
     init: PathBuf,
     /// Iterations (one view each). The densification schedule and the entropy warm-up
     /// follow 3DGS's 30k schedule scaled to this.
-    #[arg(long, default_value_t = 30_000)]
+    #[arg(long, default_value_t = 30_000, value_parser = args::at_least_one::<u32>)]
     iters: u32,
     /// Output PLY: the trained Gaussians with their logits (sem_0..sem_{C-1}), `class` (label id,
     /// -1 for Gaussians no view sees) and `class_conf` (softmax probability of the class).
@@ -58,21 +59,21 @@ pub struct TrainArgs {
     /// Blend softmax(logits) instead of the raw logits (Gaussian Semantics' ablation).
     #[arg(long)]
     softmax: bool,
-    /// Weight of the semantic cross-entropy (Gaussian Semantics: 1).
-    #[arg(long, default_value_t = 1.0)]
+    /// Weight of the semantic cross-entropy (Gaussian Semantics: 1; >= 0).
+    #[arg(long, default_value_t = 1.0, value_parser = args::non_negative::<f32>)]
     lambda_sem: f32,
     /// Weight of the per-Gaussian entropy regularizer (Gaussian Semantics: 0.01; 0 turns it off).
-    #[arg(long, default_value_t = 0.01)]
+    #[arg(long, default_value_t = 0.01, value_parser = args::non_negative::<f32>)]
     lambda_entropy: f32,
     /// Iterations over which the entropy weight grows from 0 (default: 5000 of 30000,
     /// scaled to --iters).
     #[arg(long)]
     entropy_warmup: Option<u32>,
-    /// Learning rate of the semantic logits (Adam).
-    #[arg(long, default_value_t = 0.05)]
+    /// Learning rate of the semantic logits (Adam; > 0).
+    #[arg(long, default_value_t = 0.05, value_parser = args::positive::<f64>)]
     lr_logits: f64,
     /// Never grow the model past this many Gaussians.
-    #[arg(long, default_value_t = 3_000_000)]
+    #[arg(long, default_value_t = 3_000_000, value_parser = args::at_least_one::<u32>)]
     max_gaussians: u32,
     /// No densification or pruning.
     #[arg(long)]
@@ -87,7 +88,7 @@ pub struct TrainArgs {
     #[arg(long)]
     train_only: bool,
     /// Write the model every this many iterations to <out>.iter<N>.ply.
-    #[arg(long)]
+    #[arg(long, value_parser = args::at_least_one::<u32>)]
     checkpoint_every: Option<u32>,
     /// JSON report: configuration, losses over time, stage times, densification.
     #[arg(long)]
@@ -131,6 +132,17 @@ struct TrainReport<'a> {
 
 pub fn run(args: TrainArgs) -> Result<()> {
     let start = Instant::now();
+    check_outputs(
+        &[
+            ("--out", Some(&args.out)),
+            (
+                "--out's class table",
+                Some(&classes_sidecar_path(&args.out)),
+            ),
+            ("--report", args.report.as_deref()),
+        ],
+        &[],
+    )?;
     let data = load_dataset(&args)?;
     let views = train_views(&args, &data)?;
     let init = read_scene_or_point_cloud(&args.init)?;
@@ -139,6 +151,12 @@ pub fn run(args: TrainArgs) -> Result<()> {
 
     let gpu = Gpu::new()?;
     let mut trainer = Trainer::new(&gpu, &init, &views, cfg.clone(), &[])?;
+    eprintln!(
+        "training {} iterations on {} views from {} Gaussians (Ctrl-C stops without writing --out)",
+        args.iters,
+        views.len(),
+        init.len()
+    );
     let log = train_loop(&args, &mut trainer)?;
     let out = trainer.finish()?;
     let per_iter = per_iteration(&out.times);
@@ -149,8 +167,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         classes.iter().map(|c| c.map(|c| c as usize)),
     ));
     g.class_conf = Some(conf);
-    write_ply(&args.out, &g)?;
-    write_classes_sidecar(&args.out, &data.table)?;
+    write_scene_with_table(&args.out, &g, &data.table)?;
 
     let seconds = start.elapsed().as_secs_f64();
     eprintln!(
@@ -254,6 +271,7 @@ fn train_loop(args: &TrainArgs, trainer: &mut Trainer) -> Result<Vec<LogLine>> {
     let bar = iterations_bar(args.iters);
     let mut log = Vec::new();
     for _ in 0..args.iters {
+        interrupt::check()?;
         if let Some(l) = trainer.step()? {
             let line = LogLine {
                 iteration: trainer.iteration(),
@@ -264,6 +282,7 @@ fn train_loop(args: &TrainArgs, trainer: &mut Trainer) -> Result<Vec<LogLine>> {
                 ce: l.ce,
                 entropy: l.entropy,
             };
+            check_finite(&line)?;
             bar.set_message(format!(
                 "L1 {:.4} SSIM {:.3} CE {:.3} H {:.3} PSNR {:.2} dB, {} Gaussians",
                 line.l1, line.ssim, line.ce, line.entropy, line.psnr, line.gaussians
@@ -273,7 +292,7 @@ fn train_loop(args: &TrainArgs, trainer: &mut Trainer) -> Result<Vec<LogLine>> {
         bar.inc(1);
         if let Some(k) = args.checkpoint_every {
             let it = trainer.iteration();
-            if k > 0 && it % k == 0 && it < args.iters {
+            if it % k == 0 && it < args.iters {
                 let path = checkpoint_path(&args.out, it);
                 write_ply(&path, &trainer.gaussians()?)?;
             }
@@ -281,6 +300,24 @@ fn train_loop(args: &TrainArgs, trainer: &mut Trainer) -> Result<Vec<LogLine>> {
     }
     bar.finish();
     Ok(log)
+}
+
+/// Stops a diverged run at the first logged iteration whose losses are not finite, rather
+/// than training on and writing a NaN model.
+fn check_finite(line: &LogLine) -> Result<()> {
+    let losses = [line.l1, line.ssim, line.ce, line.entropy];
+    if losses.iter().all(|v| v.is_finite()) {
+        return Ok(());
+    }
+    bail!(
+        "training diverged by iteration {}: L1 {}, SSIM {}, CE {}, entropy {} (not all finite); \
+         lower --lr-logits or the loss weights (--lambda-sem, --lambda-entropy)",
+        line.iteration,
+        line.l1,
+        line.ssim,
+        line.ce,
+        line.entropy
+    )
 }
 
 /// GPU milliseconds per iteration, by stage.

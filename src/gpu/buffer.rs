@@ -7,7 +7,7 @@ use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
 use gpu_allocator::MemoryLocation;
 
 use super::context::Gpu;
-use super::error::{GpuError, GpuResult, VkContext};
+use super::error::{GpuError, GpuResult};
 use super::recorder::Recorder;
 
 /// A GPU buffer. Device-local buffers can be bound to kernels, used as indirect dispatch
@@ -72,7 +72,13 @@ impl Gpu {
             .sharing_mode(vk::SharingMode::EXCLUSIVE);
         let device = self.device();
         // SAFETY: valid create info; the buffer is destroyed on every error path below.
-        let raw = unsafe { device.create_buffer(&info, None) }.vk("vkCreateBuffer")?;
+        let raw =
+            unsafe { device.create_buffer(&info, None) }.map_err(|result| GpuError::Buffer {
+                name: name.to_string(),
+                size,
+                what: "vkCreateBuffer",
+                result,
+            })?;
         let requirements = unsafe { device.get_buffer_memory_requirements(raw) };
         let allocation = self
             .inner
@@ -106,7 +112,12 @@ impl Gpu {
             if let Some(alloc) = self.inner.allocator.lock().unwrap().as_mut() {
                 let _ = alloc.free(allocation);
             }
-            return Err(e).vk("vkBindBufferMemory");
+            return Err(GpuError::Buffer {
+                name: name.to_string(),
+                size,
+                what: "vkBindBufferMemory",
+                result: e,
+            });
         }
         self.name_object(raw, name);
         Ok(Buffer {

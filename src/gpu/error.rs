@@ -7,6 +7,35 @@ use thiserror::Error;
 pub const SETUP_HINT: &str =
     "install a Vulkan driver; on a machine without a GPU, `sudo bash tools/setup.sh` installs lavapipe (Mesa's CPU Vulkan driver)";
 
+/// What to change when a buffer does not fit: said by every allocation error.
+pub const TOO_LARGE_HINT: &str =
+    "the input is too large for this device: use smaller images, fewer Gaussians, or fewer classes per pass (fuse --mem-budget)";
+
+/// A byte count for people: 1536 -> "1.5 KiB".
+pub fn human_bytes(bytes: &u64) -> String {
+    let units = ["bytes", "KiB", "MiB", "GiB", "TiB"];
+    let mut value = *bytes as f64;
+    let mut unit = 0;
+    while value >= 1024.0 && unit + 1 < units.len() {
+        value /= 1024.0;
+        unit += 1;
+    }
+    if unit == 0 {
+        format!("{bytes} bytes")
+    } else {
+        format!("{value:.1} {}", units[unit])
+    }
+}
+
+/// The remedy after an allocation error, when it allocated something (not the allocator).
+fn too_large_hint(size: &u64) -> String {
+    if *size == 0 {
+        String::new()
+    } else {
+        format!("; {TOO_LARGE_HINT}")
+    }
+}
+
 #[derive(Debug, Error)]
 pub enum GpuError {
     #[error("cannot load the Vulkan loader (libvulkan.so.1): {0}; {SETUP_HINT}")]
@@ -24,7 +53,14 @@ pub enum GpuError {
         what: &'static str,
         result: vk::Result,
     },
-    #[error("GPU memory allocation of {size} bytes for {name} failed: {source}")]
+    #[error("GPU buffer '{name}' of {size} bytes ({}) could not be created ({what}: {result}); {TOO_LARGE_HINT}", human_bytes(.size))]
+    Buffer {
+        name: String,
+        size: u64,
+        what: &'static str,
+        result: vk::Result,
+    },
+    #[error("GPU memory allocation of {size} bytes ({}) for '{name}' failed: {source}{}", human_bytes(.size), too_large_hint(.size))]
     Allocation {
         name: String,
         size: u64,

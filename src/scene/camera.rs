@@ -55,14 +55,42 @@ impl Camera {
 /// transposed-by-mistake matrices.
 pub const ROTATION_TOLERANCE: f64 = 1e-3;
 
+/// Camera names become file names (`render` writes `<out>/<name>.png`, `train --images`
+/// reads `<images>/<name>.png`), so a name must be one plain file name: not empty, not `.` or
+/// `..`, no `/` or `\`, no NUL or other control character, no drive prefix (`C:`). Every
+/// camera source validates its cameras, so this one check covers them all.
+pub fn check_camera_name(name: &str) -> anyhow::Result<()> {
+    let problem = if name.is_empty() {
+        Some("it is empty")
+    } else if name == "." || name == ".." {
+        Some("it names a folder")
+    } else if name.contains(['/', '\\']) {
+        Some("it contains a path separator")
+    } else if name.chars().any(char::is_control) {
+        Some("it contains a NUL or control character")
+    } else if name.len() >= 2
+        && name.as_bytes()[1] == b':'
+        && name.as_bytes()[0].is_ascii_alphabetic()
+    {
+        Some("it starts with a drive prefix")
+    } else {
+        None
+    };
+    match problem {
+        Some(why) => anyhow::bail!(
+            "camera name {name:?} cannot be used as a file name ({why}): names must be plain \
+             file names because outputs are written to <out>/<name>.png"
+        ),
+        None => Ok(()),
+    }
+}
+
 impl Camera {
-    /// Checks positive sizes and focal lengths, finite values and a proper rotation
-    /// (orthonormal, determinant +1). The error names the camera.
+    /// Checks the name (see [`check_camera_name`]), positive sizes and focal lengths, finite
+    /// values and a proper rotation (orthonormal, determinant +1). The error names the camera.
     pub fn validate(&self) -> anyhow::Result<()> {
         let name = &self.name;
-        if name.is_empty() {
-            anyhow::bail!("a camera has an empty name");
-        }
+        check_camera_name(name)?;
         if self.width == 0 || self.height == 0 {
             anyhow::bail!(
                 "camera '{name}' has size {}x{}; both must be positive",

@@ -1,47 +1,287 @@
 //! Every output file is written atomically: to a temp file beside the target, then renamed,
-//! so a failure never leaves a half-written output.
+//! so a failure or Ctrl-C never leaves a half-written output.
+//!
+//! The target is resolved first: an existing symbolic link is written through (the temp file
+//! and the rename happen in its target's folder, so the link stays a link), and anything that
+//! is not a regular file (a folder, a device such as /dev/stdout, a FIFO, a socket) is
+//! refused rather than replaced. Temp files are named `.NAME.semsplat-tmpPID`; those left by
+//! a killed run (PID no longer alive) are removed at the next write into that folder.
 
+use std::collections::HashSet;
 use std::fs;
-use std::io::{BufWriter, Write};
+use std::io::{BufWriter, ErrorKind, Write};
 use std::path::{Path, PathBuf};
+use std::sync::Mutex;
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
+
+use super::interrupt;
+
+/// The temp-name marker between the target's name and the writer's PID.
+const TEMP_MARKER: &str = ".semsplat-tmp";
+/// Symbolic links followed before giving up (the kernel's own limit is 40).
+const MAX_LINKS: usize = 40;
 
 fn temp_path(target: &Path) -> PathBuf {
     let name = target
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    target.with_file_name(format!(".{name}.tmp{}", std::process::id()))
+    target.with_file_name(format!(".{name}{TEMP_MARKER}{}", std::process::id()))
 }
 
-/// Writes `target` through a buffered writer handed to `fill`; the file appears only if
-/// `fill` succeeds. Parent directories are created.
-pub fn write_atomic<F>(target: &Path, fill: F) -> Result<()>
+/// The file a write to `target` lands in: `target` itself, or the end of its chain of
+/// symbolic links (which may not exist yet). Errors when that is a folder or a special file.
+pub fn resolve_output_file(target: &Path) -> Result<PathBuf> {
+    // What the kernel sees through every link first: /dev/stdout leads through a magic link
+    // (/proc/self/fd/1 -> "pipe:[...]") that read_link cannot follow.
+    match fs::metadata(target) {
+        Ok(meta) if meta.is_dir() => {
+            bail!("{} is a folder; name a file to write", target.display())
+        }
+        Ok(meta) if !meta.is_file() => bail!(
+            "{} is not a regular file (a device, FIFO or socket); refusing to replace it: name \
+             a regular file",
+            target.display()
+        ),
+        _ => {}
+    }
+    let mut path = target.to_path_buf();
+    for _ in 0..MAX_LINKS {
+        let meta = match fs::symlink_metadata(&path) {
+            // Missing (a new file or a dangling link's target), or under a non-folder, which
+            // check_output_file reports by name.
+            Err(e) if matches!(e.kind(), ErrorKind::NotFound | ErrorKind::NotADirectory) => {
+                return Ok(path)
+            }
+            Err(e) => return Err(e).with_context(|| format!("checking {}", path.display())),
+            Ok(meta) => meta,
+        };
+        let kind = meta.file_type();
+        if kind.is_symlink() {
+            let link = fs::read_link(&path)
+                .with_context(|| format!("reading the link {}", path.display()))?;
+            // A relative link is relative to the folder holding it; join keeps absolute ones.
+            path = path.parent().map_or(link.clone(), |dir| dir.join(&link));
+        } else if kind.is_file() {
+            return Ok(path);
+        } else if kind.is_dir() {
+            bail!(
+                "{} is a folder; name a file to write",
+                describe(target, &path)
+            );
+        } else {
+            bail!(
+                "{} is not a regular file (a device, FIFO or socket); refusing to replace it: \
+                 name a regular file",
+                describe(target, &path)
+            );
+        }
+    }
+    bail!(
+        "{} is a chain of more than {MAX_LINKS} symbolic links",
+        target.display()
+    )
+}
+
+/// `target`, and where its links lead when that is another path.
+fn describe(target: &Path, resolved: &Path) -> String {
+    if target == resolved {
+        target.display().to_string()
+    } else {
+        format!("{} (a link to {})", target.display(), resolved.display())
+    }
+}
+
+/// A fully written temp file waiting to be renamed onto its target ([`StagedFile::commit`]);
+/// dropped uncommitted, it is removed. Staging several files and committing them in order
+/// keeps outputs that belong together (a PLY and its class table) from being half replaced
+/// when a write fails.
+#[must_use = "a staged file is removed unless committed"]
+pub struct StagedFile {
+    tmp: PathBuf,
+    target: PathBuf,
+    committed: bool,
+}
+
+impl StagedFile {
+    /// Renames the temp file onto the target, unless a signal arrived (then it is removed).
+    pub fn commit(mut self) -> Result<()> {
+        {
+            let mut temps = interrupt::temp_files();
+            if !interrupt::is_interrupted() {
+                fs::rename(&self.tmp, &self.target)
+                    .with_context(|| format!("renaming into {}", self.target.display()))?;
+                temps.retain(|t| t != &self.tmp);
+                self.committed = true;
+                return Ok(());
+            }
+        }
+        Err(interrupt::Interrupted).with_context(|| format!("writing {}", self.target.display()))
+    }
+}
+
+impl Drop for StagedFile {
+    fn drop(&mut self) {
+        if !self.committed {
+            let mut temps = interrupt::temp_files();
+            let _ = fs::remove_file(&self.tmp);
+            temps.retain(|t| t != &self.tmp);
+        }
+    }
+}
+
+/// Writes `target`'s content to a temp file beside it (parent folders are created) through a
+/// buffered writer handed to `fill`; the target is untouched until [`StagedFile::commit`].
+pub fn stage_atomic<F>(target: &Path, fill: F) -> Result<StagedFile>
 where
     F: FnOnce(&mut BufWriter<fs::File>) -> Result<()>,
 {
-    if let Some(parent) = target.parent().filter(|p| !p.as_os_str().is_empty()) {
-        fs::create_dir_all(parent)
-            .with_context(|| format!("creating directory {}", parent.display()))?;
-    }
-    let tmp = temp_path(target);
-    let result = (|| -> Result<()> {
-        let file = fs::File::create(&tmp).with_context(|| format!("creating {}", tmp.display()))?;
+    let staged = (|| -> Result<StagedFile> {
+        let target = resolve_output_file(target)?;
+        if let Some(parent) = target.parent().filter(|p| !p.as_os_str().is_empty()) {
+            fs::create_dir_all(parent)
+                .with_context(|| format!("creating directory {}", parent.display()))?;
+        }
+        remove_stale_temps(&target);
+        let (file, staged) = create_temp(target)?;
         let mut w = BufWriter::new(file);
         fill(&mut w)?;
         let file = w.into_inner().map_err(|e| e.into_error())?;
         file.sync_all().ok();
-        fs::rename(&tmp, target).with_context(|| format!("renaming into {}", target.display()))?;
-        Ok(())
+        Ok(staged)
     })();
-    if result.is_err() {
-        let _ = fs::remove_file(&tmp);
-    }
-    result.with_context(|| format!("writing {}", target.display()))
+    staged.with_context(|| format!("writing {}", target.display()))
+}
+
+/// Creates the temp file of `target`, registered so a signal handler can remove it.
+fn create_temp(target: PathBuf) -> Result<(fs::File, StagedFile)> {
+    let tmp = temp_path(&target);
+    let mut temps = interrupt::temp_files();
+    interrupt::check()?;
+    let file = fs::File::create(&tmp).with_context(|| format!("creating {}", tmp.display()))?;
+    temps.push(tmp.clone());
+    let staged = StagedFile {
+        tmp,
+        target,
+        committed: false,
+    };
+    Ok((file, staged))
+}
+
+/// Writes `target` through a buffered writer handed to `fill`; the file appears only if
+/// `fill` succeeds (and no signal arrived). Parent directories are created.
+pub fn write_atomic<F>(target: &Path, fill: F) -> Result<()>
+where
+    F: FnOnce(&mut BufWriter<fs::File>) -> Result<()>,
+{
+    stage_atomic(target, fill)?.commit()
 }
 
 /// Atomic write of a byte buffer.
 pub fn write_bytes_atomic(target: &Path, bytes: &[u8]) -> Result<()> {
     write_atomic(target, |w| Ok(w.write_all(bytes)?))
+}
+
+/// Removes, once per folder and process, the temp files that runs no longer alive left in
+/// `target`'s folder (killed with SIGKILL or by a power cut).
+fn remove_stale_temps(target: &Path) {
+    static CLEANED: Mutex<Option<HashSet<PathBuf>>> = Mutex::new(None);
+    let dir = match target.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let mut cleaned = CLEANED.lock().unwrap_or_else(|p| p.into_inner());
+    if !cleaned.get_or_insert_with(HashSet::new).insert(dir.clone()) {
+        return;
+    }
+    let Ok(entries) = fs::read_dir(&dir) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let Some(pid) = name.to_str().and_then(stale_temp_pid) else {
+            continue;
+        };
+        let is_file = entry.file_type().is_ok_and(|t| t.is_file());
+        if is_file && pid != std::process::id() && !process_alive(pid) {
+            let _ = fs::remove_file(entry.path());
+        }
+    }
+}
+
+/// The writer's PID if `name` is one of our temp names (`.NAME.semsplat-tmpPID`).
+fn stale_temp_pid(name: &str) -> Option<u32> {
+    let (head, pid) = name.rsplit_once(TEMP_MARKER)?;
+    if !head.starts_with('.') || head.len() < 2 || pid.is_empty() {
+        return None;
+    }
+    if !pid.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    pid.parse().ok()
+}
+
+/// Whether process `pid` runs. Without /proc we cannot tell, and keep the file.
+fn process_alive(pid: u32) -> bool {
+    let proc_root = Path::new("/proc");
+    !proc_root.join("self").exists() || proc_root.join(pid.to_string()).exists()
+}
+
+/// Checks, before any long work, that `target` can be written: not a folder or special file
+/// (after following links) and inside a folder that exists or can be created and accepts
+/// new files. `option` names the flag in the error.
+pub fn check_output_file(option: &str, target: &Path) -> Result<()> {
+    let resolved = resolve_output_file(target).with_context(|| option.to_string())?;
+    let parent = match resolved.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    check_writable_folder(parent).with_context(|| format!("{option} {}", target.display()))
+}
+
+/// Like [`check_output_file`] for an output folder (`render --out`, `--render-views`).
+pub fn check_output_folder(option: &str, dir: &Path) -> Result<()> {
+    check_writable_folder(dir).with_context(|| format!("{option} {}", dir.display()))
+}
+
+/// `dir` (or, where it does not exist yet, its nearest existing ancestor, since writers
+/// create folders) is a folder that accepts a new file: probed by creating and removing one.
+fn check_writable_folder(dir: &Path) -> Result<()> {
+    let mut existing = dir;
+    loop {
+        match fs::metadata(existing) {
+            Ok(meta) if meta.is_dir() => break,
+            Ok(_) => bail!("{} exists and is not a folder", existing.display()),
+            Err(e) if e.kind() == ErrorKind::NotFound => {}
+            Err(e) => return Err(e).with_context(|| format!("checking {}", existing.display())),
+        }
+        existing = match existing.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            _ if existing != Path::new(".") => Path::new("."),
+            _ => bail!("the current folder no longer exists"),
+        };
+    }
+    let probe = existing.join(format!(".semsplat-probe{}", std::process::id()));
+    fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&probe)
+        .with_context(|| format!("cannot create files in {}", existing.display()))?;
+    let _ = fs::remove_file(&probe);
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::stale_temp_pid;
+
+    #[test]
+    fn only_our_temp_names_are_stale_candidates() {
+        assert_eq!(stale_temp_pid(".out.ply.semsplat-tmp123"), Some(123));
+        assert_eq!(stale_temp_pid("out.ply.semsplat-tmp123"), None);
+        assert_eq!(stale_temp_pid(".out.ply.semsplat-tmp"), None);
+        assert_eq!(stale_temp_pid(".out.ply.semsplat-tmp12x"), None);
+        assert_eq!(stale_temp_pid(".out.ply.tmp123"), None);
+    }
 }

@@ -1,0 +1,588 @@
+//! The CLI's safety rails: numeric options are validated, camera names cannot steer files
+//! outside the output folder, outputs are never special files and are checked writable
+//! before any work, Ctrl-C/SIGTERM leave no partial output or temp file, and a buffer the
+//! device cannot hold is named in the error.
+// Symbolic links, FIFOs and signals as Unix has them.
+#![cfg(unix)]
+
+mod common;
+
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+use std::process::{Command, Output, Stdio};
+use std::sync::mpsc;
+use std::time::Duration;
+
+use semsplat::util::{write_atomic, write_bytes_atomic};
+
+fn semsplat<I, S>(args: I) -> Output
+where
+    I: IntoIterator<Item = S>,
+    S: AsRef<std::ffi::OsStr>,
+{
+    Command::new(env!("CARGO_BIN_EXE_semsplat"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// A tiny synth room (4 views of 32x24) in `dir`.
+fn synth(dir: &Path) {
+    let o = semsplat([
+        "synth",
+        "--preset",
+        "tiny",
+        "--views",
+        "3",
+        "--test-views",
+        "1",
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--no-previews",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
+/// Files in `dir` whose names say they are temp files of ours.
+fn temp_files(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.contains("semsplat-tmp") || n.contains(".tmp"))
+        .collect()
+}
+
+// ---------------------------------------------------------------------------------------
+// Numeric options
+
+#[test]
+fn bad_numeric_options_are_refused_naming_option_value_and_range() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out.ply");
+    let o = out.to_str().unwrap();
+    let train = [
+        "train",
+        "--images",
+        "i",
+        "--labels",
+        "l",
+        "--cameras",
+        "c.json",
+    ];
+    let train: Vec<&str> = train
+        .into_iter()
+        .chain(["--init", "x.ply", "--out", o])
+        .collect();
+    let fuse = [
+        "fuse",
+        "--scene",
+        "s.ply",
+        "--cameras",
+        "c.json",
+        "--labels",
+        "l",
+        "--out",
+        o,
+    ];
+    let render = [
+        "render",
+        "--scene",
+        "s.ply",
+        "--cameras",
+        "c.json",
+        "--out",
+        o,
+    ];
+    let sweep = ["sweep", "--noise", "salt", "--out", o];
+    let demo = ["demo", "--out", o];
+    // (command, option, bad value, words of the allowed range in the error)
+    let cases: &[(&[&str], &str, &str, &str)] = &[
+        (&train, "--lr-logits", "nan", "> 0"),
+        (&train, "--lr-logits", "inf", "> 0"),
+        (&train, "--lr-logits", "-0.1", "> 0"),
+        (&train, "--lr-logits", "0", "> 0"),
+        (&train, "--lambda-sem", "inf", ">= 0"),
+        (&train, "--lambda-sem", "-1", ">= 0"),
+        (&train, "--lambda-entropy", "NaN", ">= 0"),
+        (&train, "--iters", "0", ">= 1"),
+        (&train, "--max-gaussians", "0", ">= 1"),
+        (&train, "--checkpoint-every", "0", ">= 1"),
+        (&fuse, "--depth-tol", "nan", "> 0"),
+        (&fuse, "--depth-tol", "-0.05", "> 0"),
+        (&fuse, "--depth-tol", "0", "> 0"),
+        (&fuse, "--gamma", "nan", "[-1, 1]"),
+        (&fuse, "--gamma", "1.5", "[-1, 1]"),
+        (&fuse, "--mem-budget", "0", "1 byte"),
+        (&fuse, "--mem-budget", "inf", "1 byte"),
+        (&render, "--background", "0,nan,0", "[0, 1]"),
+        (&render, "--background", "0,2,0", "[0, 1]"),
+        (&sweep, "--levels", "0,nan", ">= 0"),
+        (&sweep, "--levels", "-1", ">= 0"),
+        (&sweep, "--views", "0", ">= 1"),
+        (&demo, "--test-views", "0", ">= 1"),
+        (&demo, "--width", "0", ">= 1"),
+        (&demo, "--joint-iters", "0", ">= 1"),
+        (&["bench", "render"], "--n", "0", ">= 1"),
+        (&["bench", "render"], "--iters", "0", ">= 1"),
+        (&["bench", "sort"], "--n", "0", ">= 1"),
+    ];
+    for (command, option, value, range) in cases {
+        let mut args: Vec<String> = command.iter().map(|s| s.to_string()).collect();
+        // `--opt=value` so that negative numbers reach the option's own parser.
+        args.push(format!("{option}={value}"));
+        let run = semsplat(&args);
+        let err = stderr(&run);
+        assert!(!run.status.success(), "{args:?} succeeded");
+        for needle in [*option, *range] {
+            assert!(
+                err.contains(needle),
+                "{args:?}: error lacks '{needle}': {err}"
+            );
+        }
+        // The bad value itself, quoted (of a list, the element that is bad).
+        let quoted = value.split(',').any(|v| err.contains(&format!("'{v}'")));
+        assert!(quoted, "{args:?}: error does not quote the value: {err}");
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+        assert!(!out.exists(), "{args:?} wrote {o}");
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Camera names
+
+#[test]
+fn camera_names_that_are_paths_are_refused_by_every_command() {
+    let tmp = tempfile::tempdir().unwrap();
+    let room = tmp.path().join("room");
+    synth(&room);
+    let cameras: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(room.join("cameras.json")).unwrap()).unwrap();
+    let escape = tmp.path().join("escaped");
+    let p = |f: &Path| f.to_str().unwrap().to_string();
+    let bad_names = [
+        "../../escaped".to_string(),
+        p(&escape),
+        "..".to_string(),
+        "a\0b".to_string(),
+        String::new(),
+    ];
+    let out = tmp.path().join("out");
+    for (i, name) in bad_names.iter().enumerate() {
+        let mut cams = cameras.clone();
+        cams["cameras"][0]["name"] = name.clone().into();
+        let file = tmp.path().join(format!("bad{i}.json"));
+        std::fs::write(&file, serde_json::to_vec(&cams).unwrap()).unwrap();
+        let r = |f: &str| p(&room.join(f));
+        let commands: Vec<Vec<String>> = vec![
+            vec![
+                "render".into(),
+                "--scene".into(),
+                r("scene.ply"),
+                "--cameras".into(),
+                p(&file),
+                "--out".into(),
+                p(&out),
+            ],
+            vec![
+                "render".into(),
+                "--raw".into(),
+                "--scene".into(),
+                r("scene.ply"),
+                "--cameras".into(),
+                p(&file),
+                "--out".into(),
+                p(&out),
+            ],
+            vec![
+                "fuse".into(),
+                "--scene".into(),
+                r("scene.ply"),
+                "--cameras".into(),
+                p(&file),
+                "--labels".into(),
+                r("labels"),
+                "--render-views".into(),
+                p(&out),
+                "--out".into(),
+                p(&out.join("f.ply")),
+            ],
+            vec![
+                "train".into(),
+                "--images".into(),
+                r("images"),
+                "--labels".into(),
+                r("labels"),
+                "--cameras".into(),
+                p(&file),
+                "--init".into(),
+                r("init.ply"),
+                "--iters".into(),
+                "2".into(),
+                "--out".into(),
+                p(&out.join("t.ply")),
+            ],
+        ];
+        for args in commands {
+            let run = semsplat(&args);
+            let err = stderr(&run);
+            assert!(!run.status.success(), "{name:?}: {args:?} succeeded");
+            assert!(
+                err.contains("camera name") && err.contains("file name"),
+                "{name:?}: {args:?}: {err}"
+            );
+        }
+    }
+    assert!(!out.exists(), "a refused run wrote into --out");
+    let leaked: Vec<_> = std::fs::read_dir(tmp.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with("escaped"))
+        .collect();
+    assert!(leaked.is_empty(), "wrote outside --out: {leaked:?}");
+}
+
+// ---------------------------------------------------------------------------------------
+// Output paths
+
+#[test]
+fn writes_go_through_symlinks_and_never_replace_special_files() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    // A link to an existing file, and a dangling one: both written through, links kept.
+    std::fs::create_dir(d.join("real")).unwrap();
+    std::fs::write(d.join("real/old.txt"), "old").unwrap();
+    std::os::unix::fs::symlink("real/old.txt", d.join("link.txt")).unwrap();
+    std::os::unix::fs::symlink("real/new.txt", d.join("dangling.txt")).unwrap();
+    for link in ["link.txt", "dangling.txt"] {
+        write_bytes_atomic(&d.join(link), b"new").unwrap();
+        assert!(
+            d.join(link).symlink_metadata().unwrap().is_symlink(),
+            "{link}"
+        );
+        assert_eq!(std::fs::read(d.join(link)).unwrap(), b"new", "{link}");
+    }
+    assert_eq!(std::fs::read(d.join("real/new.txt")).unwrap(), b"new");
+    assert!(temp_files(d).is_empty() && temp_files(&d.join("real")).is_empty());
+
+    // A FIFO, a device, a folder and a link to a folder are refused, and stay what they were.
+    let fifo = d.join("fifo");
+    assert!(Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap()
+        .success());
+    std::os::unix::fs::symlink("real", d.join("dirlink")).unwrap();
+    for (target, needle) in [
+        (fifo.clone(), "not a regular file"),
+        ("/dev/null".into(), "not a regular file"),
+        (d.join("real"), "is a folder"),
+        (d.join("dirlink"), "is a folder"),
+    ] {
+        let err = format!("{:#}", write_atomic(&target, |_| Ok(())).unwrap_err());
+        assert!(err.contains(needle), "{}: {err}", target.display());
+    }
+    use std::os::unix::fs::FileTypeExt;
+    assert!(fifo.symlink_metadata().unwrap().file_type().is_fifo());
+    assert!(Path::new("/dev/null")
+        .metadata()
+        .unwrap()
+        .file_type()
+        .is_char_device());
+}
+
+#[test]
+fn stale_temp_files_of_dead_runs_are_removed_and_live_ones_kept() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let mut child = Command::new("true").spawn().unwrap();
+    let dead = child.id();
+    child.wait().unwrap();
+    let stale = d.join(format!(".out.ply.semsplat-tmp{dead}"));
+    // PID 1 is always alive: its temp file may be in use.
+    let live = d.join(".other.ply.semsplat-tmp1");
+    let unrelated = d.join(".notes.tmp123");
+    for f in [&stale, &live, &unrelated] {
+        std::fs::write(f, "x").unwrap();
+    }
+    write_bytes_atomic(&d.join("out.ply"), b"new").unwrap();
+    assert!(!stale.exists(), "stale temp file left");
+    assert!(
+        live.exists() && unrelated.exists(),
+        "removed a file that is not stale"
+    );
+}
+
+#[test]
+fn outputs_are_checked_writable_before_any_work() {
+    let tmp = tempfile::tempdir().unwrap();
+    let room = tmp.path().join("room");
+    synth(&room);
+    let r = |f: &str| room.join(f).to_str().unwrap().to_string();
+    let blocker = tmp.path().join("a_file");
+    std::fs::write(&blocker, "x").unwrap();
+    let under_file = blocker.join("x.ply").to_str().unwrap().to_string();
+    let good = tmp.path().join("good.ply");
+    let good_s = good.to_str().unwrap().to_string();
+    let contrib = tmp.path().join("contrib.npy");
+    let contrib_s = contrib.to_str().unwrap().to_string();
+    let blocker_s = blocker.to_str().unwrap().to_string();
+    let fuse = |extra: &[&str]| -> Vec<String> {
+        let mut a: Vec<String> = [
+            "fuse",
+            "--scene",
+            &r("scene.ply"),
+            "--cameras",
+            &r("cameras.json"),
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+        a.extend(["--labels".into(), r("labels")]);
+        a.extend(extra.iter().map(|s| s.to_string()));
+        a
+    };
+    let train: Vec<String> = [
+        "train",
+        "--images",
+        &r("images"),
+        "--labels",
+        &r("labels"),
+        "--cameras",
+        &r("cameras.json"),
+        "--init",
+        &r("init.ply"),
+        "--iters",
+        "100000",
+        "--out",
+        &under_file,
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    let cases: Vec<(Vec<String>, &str)> = vec![
+        // Would train 100000 iterations and then fail on --out without the check.
+        (train, "--out"),
+        // Side outputs would be written before --out fails.
+        (
+            fuse(&["--save-contrib", &contrib_s, "--out", &under_file]),
+            "--out",
+        ),
+        (
+            fuse(&["--out", &good_s, "--report", &under_file]),
+            "--report",
+        ),
+        (
+            fuse(&["--out", &good_s, "--render-views", &blocker_s]),
+            "--render-views",
+        ),
+        (
+            fuse(&["--out", &good_s, "--palette-ply", &under_file]),
+            "--palette-ply",
+        ),
+    ];
+    for (args, option) in cases {
+        let run = semsplat(&args);
+        let err = stderr(&run);
+        assert!(!run.status.success(), "{args:?} succeeded");
+        assert!(
+            err.contains(option) && err.contains("a_file"),
+            "{args:?}: {err}"
+        );
+        assert!(!err.contains("training"), "{args:?} started work: {err}");
+        assert!(
+            !good.exists() && !contrib.exists(),
+            "{args:?} wrote an output"
+        );
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Interruption
+
+/// Starts `train` on `room` for very many iterations, waits until it reports that training
+/// started, sends `signal`, and returns its exit code and stderr.
+fn interrupt_training(room: &Path, out: &Path, signal: &str) -> (Option<i32>, String) {
+    let r = |f: &str| room.join(f);
+    let mut child = Command::new(env!("CARGO_BIN_EXE_semsplat"))
+        .arg("train")
+        .args(["--images".as_ref(), r("images").as_os_str()])
+        .args(["--labels".as_ref(), r("labels").as_os_str()])
+        .args(["--cameras".as_ref(), r("cameras.json").as_os_str()])
+        .args(["--init".as_ref(), r("init.ply").as_os_str()])
+        .args(["--iters", "10000000"])
+        .args(["--out".as_ref(), out.as_os_str()])
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let (tx, rx) = mpsc::channel();
+    let reader = BufReader::new(child.stderr.take().unwrap());
+    let lines = std::thread::spawn(move || {
+        let mut all = String::new();
+        for line in reader.lines().map_while(Result::ok) {
+            if line.starts_with("training ") {
+                let _ = tx.send(());
+            }
+            all.push_str(&line);
+            all.push('\n');
+        }
+        all
+    });
+    // Generous: the device and the scene upload come first (lavapipe, 2 busy cores).
+    let started = rx.recv_timeout(Duration::from_secs(300));
+    let sent = Command::new("kill")
+        .args([signal, &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    let status = child.wait().unwrap();
+    let err = lines.join().unwrap();
+    assert!(started.is_ok(), "training never started: {err}");
+    (status.code(), err)
+}
+
+#[test]
+fn ctrl_c_and_sigterm_stop_training_with_no_output_and_no_temp_files() {
+    let tmp = tempfile::tempdir().unwrap();
+    let room = tmp.path().join("room");
+    synth(&room);
+    let out_dir = tmp.path().join("out");
+    std::fs::create_dir(&out_dir).unwrap();
+    let out = out_dir.join("trained.ply");
+    for signal in ["-INT", "-TERM"] {
+        let (code, err) = interrupt_training(&room, &out, signal);
+        assert_eq!(code, Some(130), "{signal}: {err}");
+        assert!(err.contains("interrupted"), "{signal}: {err}");
+        assert!(!err.contains("panicked"), "{signal}: {err}");
+        let left: Vec<_> = std::fs::read_dir(&out_dir).unwrap().collect();
+        assert!(left.is_empty(), "{signal}: left {left:?}");
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Device memory
+
+#[test]
+fn a_buffer_too_large_for_the_device_is_named_with_its_size_and_a_remedy() {
+    let gpu = common::gpu();
+    // Twice all the memory the device reports (its heaps), so it cannot fit anywhere; no
+    // fixed size, which might exceed a device's maxBufferSize and upset the validation layer.
+    let all_memory: u64 = gpu.caps().heaps.iter().map(|h| h.size_bytes).sum();
+    let size = 2 * all_memory.max(1 << 30);
+    let err = gpu
+        .buffer("too-large-for-any-device", size)
+        .err()
+        .expect("a buffer of twice the device's memory was created");
+    let msg = err.to_string();
+    let human = semsplat::gpu::error::human_bytes(&size);
+    for needle in [
+        "too-large-for-any-device",
+        &human,
+        "smaller images",
+        "--mem-budget",
+    ] {
+        assert!(msg.contains(needle), "error lacks '{needle}': {msg}");
+    }
+    common::check_validation(gpu);
+}
+
+/// Every file name under `dir`, recursively.
+fn all_files(dir: &Path) -> Vec<String> {
+    let mut names = Vec::new();
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let entry = entry.unwrap();
+        if entry.file_type().unwrap().is_dir() {
+            names.extend(all_files(&entry.path()));
+        } else {
+            names.push(entry.file_name().to_string_lossy().into_owned());
+        }
+    }
+    names
+}
+
+/// A command that does not poll (synth) exits at the first Ctrl-C, mid-write, and still
+/// leaves no temp file: the handler removes the ones in flight.
+#[test]
+fn ctrl_c_during_synth_writing_exits_at_once_without_temp_files() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("room");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_semsplat"))
+        .args([
+            "synth",
+            "--preset",
+            "tiny",
+            "--views",
+            "400",
+            "--test-views",
+            "1",
+        ])
+        .args(["--width", "64", "--height", "48", "--no-previews", "--out"])
+        .arg(&out)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The view images are written last (400 views, about 3 s on 2 cores): wait for the
+    // first one's folder, polling.
+    let images = out.join("images");
+    for _ in 0..120_000 {
+        if images.exists() || child.try_wait().unwrap().is_some() {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    let sent = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    let run = child.wait_with_output().unwrap();
+    let err = stderr(&run);
+    assert_eq!(run.status.code(), Some(130), "{err}");
+    assert!(err.contains("interrupted"), "{err}");
+    let files = all_files(&out);
+    let temps: Vec<&String> = files
+        .iter()
+        .filter(|n| n.contains("semsplat-tmp"))
+        .collect();
+    assert!(temps.is_empty(), "temp files left: {temps:?}");
+    let written = all_files(&images).len();
+    assert!(
+        written < 401,
+        "synth finished before the signal ({written} images)"
+    );
+}
+
+/// A finite but absurd learning rate makes the logits overflow: training stops with the
+/// iteration, and writes nothing (it used to write a NaN model with exit 0).
+#[test]
+fn diverged_training_stops_with_a_clear_error_and_no_output() {
+    let tmp = tempfile::tempdir().unwrap();
+    let room = tmp.path().join("room");
+    synth(&room);
+    let out = tmp.path().join("diverged.ply");
+    let r = |f: &str| room.join(f);
+    let run = Command::new(env!("CARGO_BIN_EXE_semsplat"))
+        .arg("train")
+        .args(["--images".as_ref(), r("images").as_os_str()])
+        .args(["--labels".as_ref(), r("labels").as_os_str()])
+        .args(["--cameras".as_ref(), r("cameras.json").as_os_str()])
+        .args(["--init".as_ref(), r("init.ply").as_os_str()])
+        .args(["--semantics-only", "--iters", "20", "--lr-logits", "1e38"])
+        .args(["--out".as_ref(), out.as_os_str()])
+        .output()
+        .unwrap();
+    let err = stderr(&run);
+    assert!(!run.status.success(), "a diverged run succeeded: {err}");
+    assert!(
+        err.contains("diverged by iteration") && err.contains("NaN"),
+        "{err}"
+    );
+    assert!(!out.exists(), "a diverged model was written");
+}
