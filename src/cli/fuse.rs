@@ -7,13 +7,15 @@ use anyhow::{anyhow, bail, Context, Result};
 use clap::{Args, ValueEnum};
 use serde::Serialize;
 
+use super::merge::ShardJob;
 use super::open_dataset;
 use super::progress::{follow, views_bar};
+use semsplat::dataset::Dataset;
 use semsplat::dataset::{user_classes, DatasetPaths};
 use semsplat::eval::label_render::LabelRenderer;
 use semsplat::fuse::{
     accumulate, assign_one_vs_rest, assign_semantic, Accumulation, ClassScores, FuseConfig,
-    FuseStats, Method,
+    FuseStats, Method, Shard,
 };
 use semsplat::gpu::Gpu;
 use semsplat::render::GpuScene;
@@ -66,49 +68,14 @@ pub struct FuseArgs {
     /// Relative depth tolerance of --occlusion.
     #[arg(long, default_value_t = 0.05)]
     depth_tol: f32,
-    /// Background bias of the one-vs-rest assignment used by --extract/--remove, in [-1, 1]
-    /// (FlashSplat's Listing 1.1): larger keeps fewer Gaussians in the object.
-    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
-    gamma: f64,
     /// Class table (JSON: id, name, color). Default: classes.json beside or inside the label
     /// folder, else the ids found in the label maps.
     #[arg(long)]
     classes: Option<PathBuf>,
-    /// Output PLY: the input Gaussians with `class` (label id, -1 for Gaussians no view saw)
-    /// and `class_conf` (the winning class's share of the evidence). The class table goes to
-    /// <out>.classes.json.
-    #[arg(long)]
-    out: PathBuf,
-    /// Write a JSON report: timings, views/s, peak device memory, per-class counts.
-    #[arg(long)]
-    report: Option<PathBuf>,
-    /// Write the evidence matrix A as float64 NumPy [classes, Gaussians], rows in the order
-    /// of FILE.classes.json written beside it.
-    #[arg(long)]
-    save_contrib: Option<PathBuf>,
     /// Reassign from a saved evidence matrix instead of rendering (no GPU needed), e.g. to
     /// try another --gamma.
     #[arg(long, conflicts_with_all = ["labels", "save_contrib"])]
     contrib: Option<PathBuf>,
-    /// Keep only the Gaussians of this class (name or id) in --out, by one-vs-rest
-    /// assignment with --gamma.
-    #[arg(long, conflicts_with = "remove")]
-    extract: Option<String>,
-    /// Drop the Gaussians of this class (name or id) from --out.
-    #[arg(long)]
-    remove: Option<String>,
-    /// Render label and palette PNGs of every view from the fused scene into DIR
-    /// (<view>.labels.png with label ids, 255/65535 where nothing is drawn; <view>.palette.png).
-    #[arg(long, requires = "cameras")]
-    render_views: Option<PathBuf>,
-    /// Write the multi-instance membership S of FlashSplat's Listing 1.1 (with --gamma) as a
-    /// float32 NumPy array [classes, Gaussians] of 0/1: a Gaussian may belong to several
-    /// classes or none. Rows follow <out>.classes.json.
-    #[arg(long)]
-    save_membership: Option<PathBuf>,
-    /// Also write a copy colored by class palette, viewable in any 3DGS viewer.
-    #[arg(long)]
-    palette_ply: Option<PathBuf>,
     /// Accumulate with float32 atomics instead of 64-bit fixed point (fixed point gives the
     /// same A on every run).
     #[arg(long)]
@@ -121,6 +88,59 @@ pub struct FuseArgs {
     /// processed in batches (same result). Default: a quarter of device memory.
     #[arg(long, value_parser = parse_bytes)]
     mem_budget: Option<u64>,
+    /// Fuse only shard K of N of the labeled views (the views, in camera order, whose
+    /// position among those with a label map is K modulo N) and write its partial evidence
+    /// exactly (uint64 fixed point or uint32 vote counts, NumPy [classes, Gaussians]) to
+    /// --out, with <out>.manifest.json naming the inputs; `semsplat merge` sums the N parts
+    /// into what one fuse of every view gives, bit for bit (docs/sharded-fusion.md).
+    #[arg(long, value_parser = Shard::parse, conflicts_with_all = [
+        "contrib", "save_contrib", "float_atomics", "extract", "remove", "render_views",
+        "save_membership", "palette_ply", "report",
+    ])]
+    shard: Option<Shard>,
+    #[command(flatten)]
+    output: OutputArgs,
+}
+
+/// What `fuse` and `merge` write from the evidence matrix.
+#[derive(Args)]
+pub struct OutputArgs {
+    /// Background bias of the one-vs-rest assignment used by --extract/--remove, in [-1, 1]
+    /// (FlashSplat's Listing 1.1): larger keeps fewer Gaussians in the object.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pub gamma: f64,
+    /// Output PLY: the input Gaussians with `class` (label id, -1 for Gaussians no view saw)
+    /// and `class_conf` (the winning class's share of the evidence). The class table goes to
+    /// <out>.classes.json.
+    /// With fuse --shard: the partial evidence (.npy, see --shard) instead.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Write a JSON report: timings, views/s, peak device memory, per-class counts.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Write the evidence matrix A as float64 NumPy [classes, Gaussians], rows in the order
+    /// of FILE.classes.json written beside it.
+    #[arg(long)]
+    pub save_contrib: Option<PathBuf>,
+    /// Keep only the Gaussians of this class (name or id) in --out, by one-vs-rest
+    /// assignment with --gamma.
+    #[arg(long, conflicts_with = "remove")]
+    pub extract: Option<String>,
+    /// Drop the Gaussians of this class (name or id) from --out.
+    #[arg(long)]
+    pub remove: Option<String>,
+    /// Render label and palette PNGs of every view from the fused scene into DIR
+    /// (<view>.labels.png with label ids, 255/65535 where nothing is drawn; <view>.palette.png).
+    #[arg(long, requires = "cameras")]
+    pub render_views: Option<PathBuf>,
+    /// Write the multi-instance membership S of FlashSplat's Listing 1.1 (with --gamma) as a
+    /// float32 NumPy array [classes, Gaussians] of 0/1: a Gaussian may belong to several
+    /// classes or none. Rows follow <out>.classes.json.
+    #[arg(long)]
+    pub save_membership: Option<PathBuf>,
+    /// Also write a copy colored by class palette, viewable in any 3DGS viewer.
+    #[arg(long)]
+    pub palette_ply: Option<PathBuf>,
 }
 
 fn parse_bytes(s: &str) -> Result<u64, String> {
@@ -177,28 +197,68 @@ fn find_class(table: &ClassTable, key: &str) -> Result<u32> {
 }
 
 /// The evidence matrix and its row table, with the fusion statistics when it was rendered.
-struct Evidence {
-    scores: ClassScores,
-    table: ClassTable,
-    stats: Option<FuseStats>,
+pub(super) struct Evidence {
+    pub scores: ClassScores,
+    pub table: ClassTable,
+    pub stats: Option<FuseStats>,
+}
+
+/// How the evidence was gathered, for the report.
+pub(super) struct Provenance {
+    pub method: Method,
+    pub accumulation: Accumulation,
+    pub start: Instant,
 }
 
 pub fn run(args: FuseArgs) -> Result<()> {
     let start = Instant::now();
-    let mut g = read_ply(&args.scene)?;
+    let g = read_ply(&args.scene)?;
     let method = selected_method(&args)?;
-    if !(-1.0..=1.0).contains(&args.gamma) {
-        bail!("--gamma must lie in [-1, 1], got {}", args.gamma);
-    }
     let accumulation = if args.float_atomics {
         Accumulation::Float
     } else {
         Accumulation::FixedPoint
     };
+    if let Some(shard) = args.shard {
+        return fuse_shard(&args, &g, method, shard);
+    }
+    check_gamma(args.output.gamma)?;
     let evidence = match &args.contrib {
         Some(path) => load_evidence(path, g.len())?,
         None => fuse_views(&args, &g, method, accumulation)?,
     };
+    let provenance = Provenance {
+        method,
+        accumulation,
+        start,
+    };
+    write_fused(
+        &args.output,
+        args.cameras.as_deref(),
+        g,
+        evidence,
+        &provenance,
+    )
+}
+
+fn check_gamma(gamma: f64) -> Result<()> {
+    if !(-1.0..=1.0).contains(&gamma) {
+        bail!("--gamma must lie in [-1, 1], got {gamma}");
+    }
+    Ok(())
+}
+
+/// Assigns every Gaussian from the evidence and writes every output `args` asks for: the
+/// labelled PLY and its class table, the palette PLY, --extract/--remove, the evidence and
+/// membership matrices, label renders and the report. `fuse` and `merge` both end here.
+pub(super) fn write_fused(
+    args: &OutputArgs,
+    cameras: Option<&Path>,
+    mut g: Gaussians,
+    evidence: Evidence,
+    provenance: &Provenance,
+) -> Result<()> {
+    check_gamma(args.gamma)?;
     let Evidence {
         scores,
         table,
@@ -215,23 +275,24 @@ pub fn run(args: FuseArgs) -> Result<()> {
         save_membership(path, &scores, args.gamma)?;
     }
     if let Some(dir) = &args.render_views {
-        render_label_views(&args, dir, &g, &table)?;
+        let cameras = cameras.context("--render-views needs --cameras")?;
+        render_label_views(cameras, dir, &g, &table)?;
     }
-    let selected = select_members(&args, g, &scores, &table)?;
+    let selected = select_members(args, g, &scores, &table)?;
     let assign_s = assign_start.elapsed().as_secs_f64();
 
-    write_outputs(&args, &selected, &table)?;
+    write_outputs(args, &selected, &table)?;
     let report = Report {
-        method: method.name(),
-        accumulation,
+        method: provenance.method.name(),
+        accumulation: provenance.accumulation,
         gaussians: selected.len(),
         classes: table.len(),
         stats,
         assign_s,
-        total_s: start.elapsed().as_secs_f64(),
+        total_s: provenance.start.elapsed().as_secs_f64(),
         per_class: per_class_counts(&selected, &table),
     };
-    write_report(&args, &report)
+    write_report(args, &report)
 }
 
 /// The method `--method` and its variant flags name.
@@ -285,25 +346,10 @@ fn fuse_views(
     method: Method,
     accumulation: Accumulation,
 ) -> Result<Evidence> {
-    let (Some(cameras), Some(labels)) = (&args.cameras, &args.labels) else {
-        bail!("--cameras and --labels are needed (or --contrib to reassign from a saved matrix)");
-    };
-    let paths = DatasetPaths {
-        cameras,
-        labels,
-        class_table: args.classes.as_deref(),
-        train_only: args.train_only,
-    };
-    let data = open_dataset(&paths, "are skipped")?;
+    let data = open_labeled_views(args)?;
     let gpu = Gpu::new()?;
     let scene = GpuScene::upload_for(&gpu, g, method.scene_attributes())?;
-    let cfg = FuseConfig {
-        method,
-        accumulation,
-        mem_budget: args.mem_budget,
-        depth_tolerance: args.depth_tol,
-        ..Default::default()
-    };
+    let cfg = fuse_config(args, method, accumulation);
     let bar = views_bar(data.cameras.len());
     let (scores, stats) = accumulate(
         &gpu,
@@ -320,6 +366,45 @@ fn fuse_views(
         table: data.table,
         stats: Some(stats),
     })
+}
+
+/// The cameras, label maps and class table of --cameras, --labels and --classes.
+fn open_labeled_views(args: &FuseArgs) -> Result<Dataset> {
+    let (Some(cameras), Some(labels)) = (&args.cameras, &args.labels) else {
+        bail!("--cameras and --labels are needed (or --contrib to reassign from a saved matrix)");
+    };
+    let paths = DatasetPaths {
+        cameras,
+        labels,
+        class_table: args.classes.as_deref(),
+        train_only: args.train_only,
+    };
+    open_dataset(&paths, "are skipped")
+}
+
+fn fuse_config(args: &FuseArgs, method: Method, accumulation: Accumulation) -> FuseConfig {
+    FuseConfig {
+        method,
+        accumulation,
+        mem_budget: args.mem_budget,
+        depth_tolerance: args.depth_tol,
+        ..Default::default()
+    }
+}
+
+/// `--shard K/N`: the shard's partial evidence and its manifest (see `super::merge`).
+fn fuse_shard(args: &FuseArgs, g: &Gaussians, method: Method, shard: Shard) -> Result<()> {
+    let data = open_labeled_views(args)?;
+    let job = ShardJob {
+        scene_path: &args.scene,
+        gaussians: g,
+        data: &data,
+        cfg: fuse_config(args, method, Accumulation::FixedPoint),
+        train_only: args.train_only,
+        shard,
+        out: &args.output.out,
+    };
+    super::merge::fuse_shard(&job)
 }
 
 /// Gives every Gaussian its winning class (user id, -1 unseen) and that class's share.
@@ -343,12 +428,11 @@ fn save_membership(path: &Path, scores: &ClassScores, gamma: f64) -> Result<()> 
 
 /// Label and palette PNGs of every camera, rendered from the fused scene.
 fn render_label_views(
-    args: &FuseArgs,
+    cam_path: &Path,
     dir: &Path,
     g: &Gaussians,
     table: &ClassTable,
 ) -> Result<()> {
-    let cam_path = args.cameras.as_ref().expect("clap requires --cameras");
     let cams = load_cameras(cam_path)?;
     let gpu = Gpu::new()?;
     let ids = g.class_ids.as_deref().expect("classes assigned");
@@ -369,7 +453,7 @@ fn render_label_views(
 /// The Gaussians `--extract` keeps or `--remove` leaves (one-vs-rest with --gamma); all of
 /// them without either.
 fn select_members(
-    args: &FuseArgs,
+    args: &OutputArgs,
     g: Gaussians,
     scores: &ClassScores,
     table: &ClassTable,
@@ -392,7 +476,7 @@ fn select_members(
 }
 
 /// The output PLY with its class table, and the palette-colored copy if asked for.
-fn write_outputs(args: &FuseArgs, selected: &Gaussians, table: &ClassTable) -> Result<()> {
+fn write_outputs(args: &OutputArgs, selected: &Gaussians, table: &ClassTable) -> Result<()> {
     write_ply(&args.out, selected)?;
     write_classes_sidecar(&args.out, table)?;
     if let Some(path) = &args.palette_ply {
@@ -415,7 +499,7 @@ fn write_outputs(args: &FuseArgs, selected: &Gaussians, table: &ClassTable) -> R
 }
 
 /// The JSON report if asked for, and the summary line.
-fn write_report(args: &FuseArgs, report: &Report) -> Result<()> {
+fn write_report(args: &OutputArgs, report: &Report) -> Result<()> {
     if let Some(path) = &args.report {
         write_bytes_atomic(path, serde_json::to_string_pretty(report)?.as_bytes())?;
     }

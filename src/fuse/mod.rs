@@ -4,9 +4,13 @@
 pub mod accumulate;
 pub mod assign;
 pub mod method;
+pub mod partial;
 pub mod scores;
 
-pub use accumulate::{accumulate, Accumulation, FuseConfig, FuseStats, LabelSource, NO_LABEL};
+pub use accumulate::{
+    accumulate, accumulate_raw, Accumulation, FuseConfig, FuseStats, LabelSource, NO_LABEL,
+};
 pub use assign::{assign_one_vs_rest, assign_semantic, Assignment};
 pub use method::{Method, SPELLINGS};
+pub use partial::{EvidenceKind, PartManifest, RawEvidence, Shard};
 pub use scores::ClassScores;
