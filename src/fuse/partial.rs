@@ -435,17 +435,19 @@ impl PartManifest {
     }
 }
 
-/// The first field in which two fusion keys differ, with both values, or None.
-pub fn key_difference(a: &FusionKey, b: &FusionKey) -> Option<(String, String, String)> {
+/// Every field in which two fusion keys differ, as "field is A vs B" (empty if none).
+pub fn key_differences(a: &FusionKey, b: &FusionKey) -> Vec<String> {
     let (Ok(serde_json::Value::Object(a)), Ok(serde_json::Value::Object(b))) =
         (serde_json::to_value(a), serde_json::to_value(b))
     else {
-        return Some(("key".into(), String::new(), String::new()));
+        return vec!["the manifests could not be compared".into()];
     };
-    a.iter().find_map(|(field, va)| {
-        let vb = b.get(field).cloned().unwrap_or_default();
-        (*va != vb).then(|| (field.clone(), va.to_string(), vb.to_string()))
-    })
+    a.iter()
+        .filter_map(|(field, va)| {
+            let vb = b.get(field).cloned().unwrap_or_default();
+            (*va != vb).then(|| format!("{field} is {va} vs {vb}"))
+        })
+        .collect()
 }
 
 /// Checks that `parts` (path, manifest) agree on what they fused and cover shards
@@ -455,13 +457,14 @@ pub fn check_parts(parts: &[(PathBuf, PartManifest)]) -> Result<FusionKey> {
         bail!("no parts to merge");
     };
     for (path, m) in &parts[1..] {
-        if let Some((field, a, b)) = key_difference(&first.key, &m.key) {
-            bail!(
-                "{} and {} were fused from different inputs: {field} is {a} vs {b}",
-                first_path.display(),
-                path.display()
-            );
-        }
+        let differences = key_differences(&first.key, &m.key);
+        ensure!(
+            differences.is_empty(),
+            "{} and {} were fused from different inputs: {}",
+            first_path.display(),
+            path.display(),
+            differences.join("; ")
+        );
         ensure!(
             m.shard.count == first.shard.count,
             "{} is shard {} but {} is shard {}: parts of different splits",
