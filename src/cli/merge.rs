@@ -108,12 +108,14 @@ pub fn fuse_shard(job: &ShardJob) -> Result<()> {
     };
     manifest.write(job.out)?;
     eprintln!(
-        "shard {}: {} of {} labeled views in {:.2} s ({:.1} views/s) -> {} (+ {})",
+        "shard {}: {} of {} labeled views in {:.2} s ({:.1} views/s, peak device memory \
+         {:.1} MiB) -> {} (+ {})",
         job.shard,
         cams.len(),
         labeled.len(),
         stats.wall_s,
         stats.views_per_s,
+        stats.peak_device_bytes as f64 / (1u64 << 20) as f64,
         job.out.display(),
         manifest_path(job.out).display()
     );

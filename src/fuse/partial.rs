@@ -506,7 +506,7 @@ mod tests {
     #[test]
     fn shard_split_is_round_robin_and_covers_every_view_once() {
         let views: Vec<usize> = (0..10).collect();
-        let mut seen = vec![0; 10];
+        let mut seen = [0; 10];
         for k in 0..3 {
             let shard = Shard::parse(&format!("{k}/3")).unwrap();
             for v in shard.select(&views) {
