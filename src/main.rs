@@ -31,6 +31,9 @@ enum Command {
     Synth(cli::synth::SynthArgs),
     /// Lift per-view label maps onto the Gaussians (vote or FlashSplat; no training).
     Fuse(Box<cli::fuse::FuseArgs>),
+    /// Sum the partial evidence of `fuse --shard K/N` runs (every shard once) and write what
+    /// a single `fuse` of every view writes, bit for bit.
+    Merge(Box<cli::merge::MergeArgs>),
     /// Train semantic logits jointly with geometry and appearance (Gaussian Semantics), or the
     /// logits alone with --semantics-only.
     Train(Box<cli::train::TrainArgs>),
@@ -80,6 +83,7 @@ fn main() -> ExitCode {
         Command::Synth(args) => cli::synth::run(args),
         Command::Render(args) => cli::render::run(args),
         Command::Fuse(args) => cli::fuse::run(*args),
+        Command::Merge(args) => cli::merge::run(*args),
         Command::Train(args) => cli::train::run(*args),
     };
     match result {

@@ -62,5 +62,16 @@ if command -v vulkaninfo >/dev/null; then
   [ -n "${dev:-}" ] || die "the Vulkan loader finds no device (try VK_LOADER_DEBUG=error vulkaninfo)"
   say "Vulkan device: $dev"
 fi
+# Ray, for the sharded-fusion driver (tools/ray/fuse_sharded.py) and its test (tests/ray_shards.rs).
+if python3 -c 'import ray' 2>/dev/null; then
+  say "ray already installed: $(python3 -c 'import ray; print(ray.__version__)')"
+else
+  command -v python3 >/dev/null || die "python3 not found (needed for ray)"
+  say "installing ray (pip)"
+  # Debian's own python3 refuses system-wide pip installs (PEP 668) unless told otherwise.
+  python3 -m pip install -q 'ray>=2.58' \
+    || python3 -m pip install -q --break-system-packages 'ray>=2.58' \
+    || die "pip install ray failed (see tools/ray/README.md)"
+fi
 command -v cargo >/dev/null || die "cargo not found: install Rust (rustup) first"
 say "done"

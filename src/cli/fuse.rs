@@ -8,13 +8,15 @@ use clap::{Args, ValueEnum};
 use serde::Serialize;
 
 use super::args;
+use super::merge::ShardJob;
 use super::progress::{follow, views_bar};
 use super::{check_outputs, open_dataset, write_scene_with_table, Interruptible};
+use semsplat::dataset::Dataset;
 use semsplat::dataset::{user_classes, DatasetPaths};
 use semsplat::eval::label_render::LabelRenderer;
 use semsplat::fuse::{
     accumulate, assign_one_vs_rest, assign_semantic_near, nearest_neighbours, Accumulation,
-    ClassScores, FuseConfig, FuseStats, Method,
+    ClassScores, FuseConfig, FuseStats, Method, Shard,
 };
 use semsplat::gpu::Gpu;
 use semsplat::render::GpuScene;
@@ -74,53 +76,16 @@ pub struct FuseArgs {
     /// Relative depth tolerance of --occlusion (> 0).
     #[arg(long, default_value_t = 0.05, value_parser = args::positive::<f32>)]
     depth_tol: f32,
-    /// Background bias of the one-vs-rest assignment used by --extract/--remove, in [-1, 1]
-    /// (FlashSplat's Listing 1.1): larger keeps fewer Gaussians in the object.
-    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true, value_parser = args::signed_unit_interval)]
-    gamma: f64,
     /// Class table (JSON: id, name, color). Default: classes.json beside or inside the label
     /// folder, else the ids found in the label maps.
     #[arg(long)]
     classes: Option<PathBuf>,
     #[command(flatten)]
     label_format: super::LabelFormatArgs,
-    /// Output PLY: the input Gaussians with `class` (label id, -1 for Gaussians no view saw)
-    /// and `class_conf` (the winning class's share of the evidence). The class table goes to
-    /// <out>.classes.json.
-    #[arg(long)]
-    out: PathBuf,
-    /// Write a JSON report: timings, views/s, peak device memory, per-class counts.
-    #[arg(long)]
-    report: Option<PathBuf>,
-    /// Write the evidence matrix A as float64 NumPy [classes, Gaussians], rows in the order
-    /// of FILE.classes.json written beside it.
-    #[arg(long)]
-    save_contrib: Option<PathBuf>,
     /// Reassign from a saved evidence matrix instead of rendering (no GPU needed), e.g. to
     /// try another --gamma.
     #[arg(long, conflicts_with_all = ["labels", "save_contrib"])]
     contrib: Option<PathBuf>,
-    /// Keep only the Gaussians of this class (name, any case, or id) in --out, by one-vs-rest
-    /// assignment with --gamma. On an already fused scene (a `class` property) without
-    /// --labels or --contrib, selects by that class directly (no re-fusing).
-    #[arg(long, conflicts_with = "remove")]
-    extract: Option<String>,
-    /// Drop the Gaussians of this class (name, any case, or id) from --out; on a fused scene
-    /// without --labels or --contrib, by its `class` property.
-    #[arg(long)]
-    remove: Option<String>,
-    /// Render label and palette PNGs of every view from the fused scene into DIR
-    /// (<view>.labels.png with label ids, 255/65535 where nothing is drawn; <view>.palette.png).
-    #[arg(long, requires = "cameras")]
-    render_views: Option<PathBuf>,
-    /// Write the multi-instance membership S of FlashSplat's Listing 1.1 (with --gamma) as a
-    /// float32 NumPy array [classes, Gaussians] of 0/1: a Gaussian may belong to several
-    /// classes or none. Rows follow <out>.classes.json.
-    #[arg(long)]
-    save_membership: Option<PathBuf>,
-    /// Also write a copy colored by class palette, viewable in any 3DGS viewer.
-    #[arg(long)]
-    palette_ply: Option<PathBuf>,
     /// Accumulate with float32 atomics instead of 64-bit fixed point (fixed point gives the
     /// same A on every run).
     #[arg(long)]
@@ -133,6 +98,61 @@ pub struct FuseArgs {
     /// processed in batches (same result). Default: a quarter of device memory.
     #[arg(long, value_parser = args::bytes)]
     mem_budget: Option<u64>,
+    /// Fuse only shard K of N of the labeled views (the views, in camera order, whose
+    /// position among those with a label map is K modulo N) and write its partial evidence
+    /// exactly (uint64 fixed point or uint32 vote counts, NumPy [classes, Gaussians]) to
+    /// --out, with <out>.manifest.json naming the inputs; `semsplat merge` sums the N parts
+    /// into what one fuse of every view gives, bit for bit (docs/sharded-fusion.md).
+    #[arg(long, value_parser = Shard::parse, conflicts_with_all = [
+        "contrib", "save_contrib", "float_atomics", "extract", "remove", "render_views",
+        "save_membership", "palette_ply", "report",
+    ])]
+    shard: Option<Shard>,
+    #[command(flatten)]
+    output: OutputArgs,
+}
+
+/// What `fuse` and `merge` write from the evidence matrix.
+#[derive(Args)]
+pub struct OutputArgs {
+    /// Background bias of the one-vs-rest assignment used by --extract/--remove, in [-1, 1]
+    /// (FlashSplat's Listing 1.1): larger keeps fewer Gaussians in the object.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true, value_parser = args::signed_unit_interval)]
+    pub gamma: f64,
+    /// Output PLY: the input Gaussians with `class` (label id, -1 for Gaussians no view saw)
+    /// and `class_conf` (the winning class's share of the evidence). The class table goes to
+    /// <out>.classes.json.
+    /// With fuse --shard: the partial evidence (.npy, see --shard) instead.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Write a JSON report: timings, views/s, peak device memory, per-class counts.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Write the evidence matrix A as float64 NumPy [classes, Gaussians], rows in the order
+    /// of FILE.classes.json written beside it.
+    #[arg(long)]
+    pub save_contrib: Option<PathBuf>,
+    /// Keep only the Gaussians of this class (name, any case, or id) in --out, by one-vs-rest
+    /// assignment with --gamma. On an already fused scene (a `class` property) without
+    /// --labels or --contrib, selects by that class directly (no re-fusing).
+    #[arg(long, conflicts_with = "remove")]
+    pub extract: Option<String>,
+    /// Drop the Gaussians of this class (name, any case, or id) from --out; on a fused scene
+    /// without --labels or --contrib, by its `class` property.
+    #[arg(long)]
+    pub remove: Option<String>,
+    /// Render label and palette PNGs of every view from the fused scene into DIR
+    /// (<view>.labels.png with label ids, 255/65535 where nothing is drawn; <view>.palette.png).
+    #[arg(long, requires = "cameras")]
+    pub render_views: Option<PathBuf>,
+    /// Write the multi-instance membership S of FlashSplat's Listing 1.1 (with --gamma) as a
+    /// float32 NumPy array [classes, Gaussians] of 0/1: a Gaussian may belong to several
+    /// classes or none. Rows follow <out>.classes.json.
+    #[arg(long)]
+    pub save_membership: Option<PathBuf>,
+    /// Also write a copy colored by class palette, viewable in any 3DGS viewer.
+    #[arg(long)]
+    pub palette_ply: Option<PathBuf>,
 }
 
 fn contrib_sidecar(path: &Path) -> PathBuf {
@@ -163,22 +183,32 @@ fn find_class(table: &ClassTable, key: &str) -> Result<u32> {
 }
 
 /// The evidence matrix and its row table, with the fusion statistics when it was rendered.
-struct Evidence {
-    scores: ClassScores,
-    table: ClassTable,
-    stats: Option<FuseStats>,
+pub(super) struct Evidence {
+    pub scores: ClassScores,
+    pub table: ClassTable,
+    pub stats: Option<FuseStats>,
+}
+
+/// How the evidence was gathered, for the report.
+pub(super) struct Provenance {
+    pub method: Method,
+    pub accumulation: Accumulation,
+    pub start: Instant,
 }
 
 pub fn run(args: FuseArgs) -> Result<()> {
     let start = Instant::now();
-    check_fuse_outputs(&args)?;
-    let mut g = read_scene(&args.scene)?;
+    check_output_args(&args.output)?;
+    let g = read_scene(&args.scene)?;
     let method = selected_method(&args)?;
     let accumulation = if args.float_atomics {
         Accumulation::Float
     } else {
         Accumulation::FixedPoint
     };
+    if let Some(shard) = args.shard {
+        return fuse_shard(&args, &g, method, shard);
+    }
     if let Some(table) = fused_scene_table(&args, &g)? {
         return select_from_fused(&args, g, &table, start);
     }
@@ -186,6 +216,30 @@ pub fn run(args: FuseArgs) -> Result<()> {
         Some(path) => load_evidence(path, g.len())?,
         None => fuse_views(&args, &g, method, accumulation)?,
     };
+    let provenance = Provenance {
+        method,
+        accumulation,
+        start,
+    };
+    write_fused(
+        &args.output,
+        args.cameras.as_deref(),
+        g,
+        evidence,
+        &provenance,
+    )
+}
+
+/// Assigns every Gaussian from the evidence and writes every output `args` asks for: the
+/// labelled PLY and its class table, the palette PLY, --extract/--remove, the evidence and
+/// membership matrices, label renders and the report. `fuse` and `merge` both end here.
+pub(super) fn write_fused(
+    args: &OutputArgs,
+    cameras: Option<&Path>,
+    mut g: Gaussians,
+    evidence: Evidence,
+    provenance: &Provenance,
+) -> Result<()> {
     let Evidence {
         scores,
         table,
@@ -202,37 +256,40 @@ pub fn run(args: FuseArgs) -> Result<()> {
         save_membership(path, &scores, args.gamma)?;
     }
     if let Some(dir) = &args.render_views {
-        render_label_views(&args, dir, &g, &table)?;
+        let cameras = cameras.context("--render-views needs --cameras")?;
+        render_label_views(cameras, dir, &g, &table)?;
     }
-    let selected = select_members(&args, g, &scores, &table)?;
+    let selected = select_members(args, g, &scores, &table)?;
     let assign_s = assign_start.elapsed().as_secs_f64();
 
-    write_outputs(&args, &selected, &table)?;
+    write_outputs(args, &selected, &table)?;
     let report = Report {
-        method: method.name(),
-        accumulation,
+        method: provenance.method.name(),
+        accumulation: provenance.accumulation,
         gaussians: selected.len(),
         classes: table.len(),
         stats,
         assign_s,
-        total_s: start.elapsed().as_secs_f64(),
+        total_s: provenance.start.elapsed().as_secs_f64(),
         per_class: per_class_counts(&selected, &table),
     };
-    write_report(&args, &report)
+    write_report(args, &report)
 }
 
 /// With --extract/--remove on an already fused scene (a `class` property) and no evidence
 /// to fuse from (neither --labels nor --contrib), the class table to select with: the
 /// scene's `.classes.json` sidecar, else the ids present. `None` when fusing as usual.
 fn fused_scene_table(args: &FuseArgs, g: &Gaussians) -> Result<Option<ClassTable>> {
-    let selecting = args.extract.is_some() || args.remove.is_some();
+    let selecting = args.output.extract.is_some() || args.output.remove.is_some();
     if !selecting || args.labels.is_some() || args.contrib.is_some() {
         return Ok(None);
     }
     let Some(ids) = &g.class_ids else {
         return Ok(None);
     };
-    if args.save_contrib.is_some() || args.save_membership.is_some() || args.render_views.is_some()
+    if args.output.save_contrib.is_some()
+        || args.output.save_membership.is_some()
+        || args.output.render_views.is_some()
     {
         bail!(
             "selecting from a fused scene's class (no --labels or --contrib) has no evidence \
@@ -256,7 +313,7 @@ fn select_from_fused(
     table: &ClassTable,
     start: Instant,
 ) -> Result<()> {
-    let ((Some(name), _) | (_, Some(name))) = (&args.extract, &args.remove) else {
+    let ((Some(name), _) | (_, Some(name))) = (&args.output.extract, &args.output.remove) else {
         unreachable!("fused_scene_table checked --extract/--remove");
     };
     let id = find_class(table, name)? as i32;
@@ -266,10 +323,10 @@ fn select_from_fused(
         .expect("fused_scene_table checked class");
     let keep: Vec<bool> = ids
         .iter()
-        .map(|&c| (c == id) == args.extract.is_some())
+        .map(|&c| (c == id) == args.output.extract.is_some())
         .collect();
     let selected = g.select(&keep);
-    write_outputs(args, &selected, table)?;
+    write_outputs(&args.output, &selected, table)?;
     let report = Report {
         method: "class property of a fused scene",
         accumulation: Accumulation::FixedPoint,
@@ -280,11 +337,11 @@ fn select_from_fused(
         total_s: start.elapsed().as_secs_f64(),
         per_class: per_class_counts(&selected, table),
     };
-    write_report(args, &report)
+    write_report(&args.output, &report)
 }
 
 /// Every file and folder the run will write can be written (checked before any work).
-fn check_fuse_outputs(args: &FuseArgs) -> Result<()> {
+pub(super) fn check_output_args(args: &OutputArgs) -> Result<()> {
     let contrib_table = args.save_contrib.as_deref().map(contrib_sidecar);
     check_outputs(
         &[
@@ -354,26 +411,10 @@ fn fuse_views(
     method: Method,
     accumulation: Accumulation,
 ) -> Result<Evidence> {
-    let (Some(cameras), Some(labels)) = (&args.cameras, &args.labels) else {
-        bail!("--cameras and --labels are needed (or --contrib to reassign from a saved matrix)");
-    };
-    let paths = DatasetPaths {
-        cameras,
-        labels,
-        class_table: args.classes.as_deref(),
-        train_only: args.train_only,
-        format: args.label_format.format(),
-    };
-    let data = open_dataset(&paths, "are skipped")?;
+    let data = open_labeled_views(args)?;
     let gpu = Gpu::new()?;
     let scene = GpuScene::upload_for(&gpu, g, method.scene_attributes())?;
-    let cfg = FuseConfig {
-        method,
-        accumulation,
-        mem_budget: args.mem_budget,
-        depth_tolerance: args.depth_tol,
-        ..Default::default()
-    };
+    let cfg = fuse_config(args, method, accumulation);
     let bar = views_bar(data.cameras.len());
     let (scores, stats) = accumulate(
         &gpu,
@@ -390,6 +431,46 @@ fn fuse_views(
         table: data.table,
         stats: Some(stats),
     })
+}
+
+/// The cameras, label maps and class table of --cameras, --labels and --classes.
+fn open_labeled_views(args: &FuseArgs) -> Result<Dataset> {
+    let (Some(cameras), Some(labels)) = (&args.cameras, &args.labels) else {
+        bail!("--cameras and --labels are needed (or --contrib to reassign from a saved matrix)");
+    };
+    let paths = DatasetPaths {
+        cameras,
+        labels,
+        class_table: args.classes.as_deref(),
+        train_only: args.train_only,
+        format: args.label_format.format(),
+    };
+    open_dataset(&paths, "are skipped")
+}
+
+fn fuse_config(args: &FuseArgs, method: Method, accumulation: Accumulation) -> FuseConfig {
+    FuseConfig {
+        method,
+        accumulation,
+        mem_budget: args.mem_budget,
+        depth_tolerance: args.depth_tol,
+        ..Default::default()
+    }
+}
+
+/// `--shard K/N`: the shard's partial evidence and its manifest (see `super::merge`).
+fn fuse_shard(args: &FuseArgs, g: &Gaussians, method: Method, shard: Shard) -> Result<()> {
+    let data = open_labeled_views(args)?;
+    let job = ShardJob {
+        scene_path: &args.scene,
+        gaussians: g,
+        data: &data,
+        cfg: fuse_config(args, method, Accumulation::FixedPoint),
+        train_only: args.train_only,
+        shard,
+        out: &args.output.out,
+    };
+    super::merge::fuse_shard(&job)
 }
 
 /// Gives every Gaussian its winning class (user id, -1 unseen) and that class's share.
@@ -415,12 +496,11 @@ fn save_membership(path: &Path, scores: &ClassScores, gamma: f64) -> Result<()> 
 
 /// Label and palette PNGs of every camera, rendered from the fused scene.
 fn render_label_views(
-    args: &FuseArgs,
+    cam_path: &Path,
     dir: &Path,
     g: &Gaussians,
     table: &ClassTable,
 ) -> Result<()> {
-    let cam_path = args.cameras.as_ref().expect("clap requires --cameras");
     let cams = load_cameras(cam_path)?;
     let gpu = Gpu::new()?;
     let ids = g.class_ids.as_deref().expect("classes assigned");
@@ -442,7 +522,7 @@ fn render_label_views(
 /// The Gaussians `--extract` keeps or `--remove` leaves (one-vs-rest with --gamma); all of
 /// them without either.
 fn select_members(
-    args: &FuseArgs,
+    args: &OutputArgs,
     g: Gaussians,
     scores: &ClassScores,
     table: &ClassTable,
@@ -465,7 +545,7 @@ fn select_members(
 }
 
 /// The output PLY with its class table, and the palette-colored copy if asked for.
-fn write_outputs(args: &FuseArgs, selected: &Gaussians, table: &ClassTable) -> Result<()> {
+fn write_outputs(args: &OutputArgs, selected: &Gaussians, table: &ClassTable) -> Result<()> {
     write_scene_with_table(&args.out, selected, table)?;
     if let Some(path) = &args.palette_ply {
         let colors: Vec<[f32; 3]> = selected
@@ -487,7 +567,7 @@ fn write_outputs(args: &FuseArgs, selected: &Gaussians, table: &ClassTable) -> R
 }
 
 /// The JSON report if asked for, and the summary line.
-fn write_report(args: &FuseArgs, report: &Report) -> Result<()> {
+fn write_report(args: &OutputArgs, report: &Report) -> Result<()> {
     if let Some(path) = &args.report {
         write_bytes_atomic(path, serde_json::to_string_pretty(report)?.as_bytes())?;
     }

@@ -8,6 +8,7 @@ pub mod fuse;
 pub mod info;
 pub mod inspect;
 pub mod joint_args;
+pub mod merge;
 pub mod progress;
 pub mod render;
 pub mod sweep;

@@ -8,6 +8,7 @@ use anyhow::{bail, ensure, Result};
 use serde::Serialize;
 
 use super::method::Method;
+use super::partial::{fixed_to_f64, EvidenceKind, RawEvidence};
 use super::scores::ClassScores;
 use crate::contract::params::{ContribParams, VoteParams};
 use crate::gpu::kernel_table::ids;
@@ -205,18 +206,37 @@ pub fn accumulate(
     labels: &dyn LabelSource,
     classes: usize,
     cfg: &FuseConfig,
-    mut progress: impl FnMut(usize, usize),
+    progress: impl FnMut(usize, usize),
 ) -> Result<(ClassScores, FuseStats)> {
     if cfg.method == Method::SegmentConsensus {
         return super::consensus::consensus_evidence(gpu, scene, cams, labels, classes, cfg);
     }
+    let n = scene.n as usize;
+    let mut scores = ClassScores::zeros(classes, n);
+    let stats = accumulate_passes(gpu, scene, cams, labels, classes, cfg, progress, |pass| {
+        download_rows(gpu, pass, cfg, n, &mut scores)
+    })?;
+    Ok((scores, stats))
+}
+
+/// Runs every pass over the views; `on_pass` takes each pass's finished rows.
+#[allow(clippy::too_many_arguments)]
+fn accumulate_passes(
+    gpu: &Gpu,
+    scene: &GpuScene,
+    cams: &[Camera],
+    labels: &dyn LabelSource,
+    classes: usize,
+    cfg: &FuseConfig,
+    mut progress: impl FnMut(usize, usize),
+    mut on_pass: impl FnMut(&EvidencePass) -> Result<()>,
+) -> Result<FuseStats> {
     let start = std::time::Instant::now();
     let n = scene.n as usize;
     check_atomics(gpu, cfg.accumulation)?;
     let rows = rows_per_pass(gpu, cfg, classes, n)?;
     let passes = classes.div_ceil(rows).max(1);
     let entry = bytes_per_entry(cfg.method, cfg.accumulation);
-    let mut scores = ClassScores::zeros(classes, n);
     let mut stats = FuseStats {
         views: cams.len(),
         passes,
@@ -248,12 +268,49 @@ pub fn accumulate(
             stats.gpu_ms += accumulate_view(&mut raster, scene, cam, label_buf, carry, &pass, cfg)?;
             stats.peak_device_bytes = stats.peak_device_bytes.max(gpu.memory_reserved());
         }
-        download_rows(gpu, &pass, cfg, n, &mut scores)?;
+        on_pass(&pass)?;
     }
     progress(passes * cams.len(), passes * cams.len());
     stats.wall_s = start.elapsed().as_secs_f64();
     stats.views_per_s = (stats.views * passes) as f64 / stats.wall_s.max(1e-9);
-    Ok((scores, stats))
+    Ok(stats)
+}
+
+/// Like [`accumulate`], but returns the evidence [classes][n] as the integers the GPU summed
+/// (fixed-point u64 or vote counts u32), so partial sums over disjoint sets of views add up
+/// exactly to the sum over all of them (`semsplat merge`). Float accumulation has no exact
+/// partial sums and is refused.
+pub fn accumulate_raw(
+    gpu: &Gpu,
+    scene: &GpuScene,
+    cams: &[Camera],
+    labels: &dyn LabelSource,
+    classes: usize,
+    cfg: &FuseConfig,
+    progress: impl FnMut(usize, usize),
+) -> Result<(RawEvidence, FuseStats)> {
+    let n = scene.n as usize;
+    let Some(kind) = EvidenceKind::of(cfg.method, cfg.accumulation) else {
+        bail!("float accumulation has no exact integer evidence to save; use fixed point");
+    };
+    let mut raw = RawEvidence::zeros(kind, classes * n);
+    let stats = accumulate_passes(gpu, scene, cams, labels, classes, cfg, progress, |pass| {
+        let (begin, end) = (pass.row_begin * n, (pass.row_begin + pass.rows) * n);
+        match &mut raw {
+            RawEvidence::Fixed(out) => out[begin..end].copy_from_slice(&gpu.download::<u64>(
+                &pass.evidence,
+                0,
+                end - begin,
+            )?),
+            RawEvidence::Counts(out) => out[begin..end].copy_from_slice(&gpu.download::<u32>(
+                &pass.evidence,
+                0,
+                end - begin,
+            )?),
+        }
+        Ok(())
+    })?;
+    Ok((raw, stats))
 }
 
 /// Adds one view's evidence into `pass`; returns its GPU time in ms.
@@ -370,13 +427,11 @@ fn download_rows(
             .into_iter()
             .map(f64::from)
             .collect(),
-        (_, Accumulation::FixedPoint) => {
-            let scale = 1.0 / 4_294_967_296.0;
-            gpu.download::<u64>(evidence, 0, count)?
-                .into_iter()
-                .map(|v| v as f64 * scale)
-                .collect()
-        }
+        (_, Accumulation::FixedPoint) => gpu
+            .download::<u64>(evidence, 0, count)?
+            .into_iter()
+            .map(fixed_to_f64)
+            .collect(),
         (_, Accumulation::Float) => gpu
             .download::<f32>(evidence, 0, count)?
             .into_iter()

@@ -7,12 +7,16 @@ pub mod consensus;
 pub mod consensus_decide;
 pub mod consensus_segments;
 pub mod method;
+pub mod partial;
 pub mod scores;
 
-pub use accumulate::{accumulate, Accumulation, FuseConfig, FuseStats, LabelSource, NO_LABEL};
+pub use accumulate::{
+    accumulate, accumulate_raw, Accumulation, FuseConfig, FuseStats, LabelSource, NO_LABEL,
+};
 pub use assign::{assign_one_vs_rest, assign_semantic, assign_semantic_near, Assignment};
 pub use consensus::fuse_consensus;
 pub use consensus_decide::{Consensus, ConsensusParams, SegmentVotes};
 pub use consensus_segments::nearest_neighbours;
 pub use method::{Method, SPELLINGS};
+pub use partial::{EvidenceKind, PartManifest, RawEvidence, Shard};
 pub use scores::ClassScores;

@@ -1,0 +1,245 @@
+//! Sharded fusion: `fuse --shard K/N` writes one shard's exact partial evidence, and
+//! `semsplat merge` sums the parts of every shard, in chunks of Gaussians, into what a single
+//! `fuse` of every view gives, then assigns and writes exactly as `fuse` does
+//! (docs/sharded-fusion.md).
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{ensure, Context, Result};
+use clap::Args;
+
+use super::fuse::{write_fused, Evidence, OutputArgs, Provenance};
+use super::progress::{follow, views_bar};
+use semsplat::dataset::{load_split_cameras, Dataset};
+use semsplat::fuse::partial::{
+    cameras_digest, check_parts, manifest_path, FileDigest, Fnv64, FusionKey, PartReader,
+    MANIFEST_FORMAT, MANIFEST_VERSION,
+};
+use semsplat::fuse::{
+    accumulate_raw, Accumulation, ClassScores, EvidenceKind, FuseConfig, LabelSource, Method,
+    PartManifest, RawEvidence, Shard,
+};
+use semsplat::gpu::Gpu;
+use semsplat::render::GpuScene;
+use semsplat::scene::ply::read_ply;
+use semsplat::scene::{Camera, Gaussians};
+
+/// Gaussians summed at a time by default: 1M columns of every part (8 MB per class and part
+/// for fixed point).
+const CHUNK_GAUSSIANS: usize = 1 << 20;
+
+#[derive(Args)]
+pub struct MergeArgs {
+    /// Partial evidence of `fuse --shard K/N`, one per shard 0..N-1 in any order, each with
+    /// its <part>.manifest.json beside it.
+    #[arg(required = true)]
+    parts: Vec<PathBuf>,
+    /// The scene PLY the parts were fused from (checked against their manifests' digest).
+    #[arg(long)]
+    scene: PathBuf,
+    /// The cameras the parts were fused from: only needed by --render-views (checked
+    /// against the manifests).
+    #[arg(long)]
+    cameras: Option<PathBuf>,
+    /// Gaussians summed per chunk: memory is about parts x classes x this x 8 bytes.
+    #[arg(long, default_value_t = CHUNK_GAUSSIANS, hide = true)]
+    chunk_gaussians: usize,
+    #[command(flatten)]
+    output: OutputArgs,
+}
+
+/// One shard of `fuse`: what it fuses, and where the part goes.
+pub struct ShardJob<'a> {
+    pub scene_path: &'a Path,
+    pub gaussians: &'a Gaussians,
+    pub data: &'a Dataset,
+    pub cfg: FuseConfig,
+    pub train_only: bool,
+    pub shard: Shard,
+    pub out: &'a Path,
+}
+
+/// The labels of a shard's views, by their position in the shard's camera list.
+struct ShardLabels<'a> {
+    data: &'a Dataset,
+    views: &'a [usize],
+}
+
+impl LabelSource for ShardLabels<'_> {
+    fn labels(&self, view: usize, _cam: &Camera) -> Result<Option<Vec<u32>>> {
+        self.data.compact_labels(self.views[view])
+    }
+}
+
+/// Fuses the shard's views and writes the part and its manifest.
+pub fn fuse_shard(job: &ShardJob) -> Result<()> {
+    let data = job.data;
+    let labeled: Vec<usize> = (0..data.labels.len())
+        .filter_map(|i| data.labels.camera_index(i))
+        .collect();
+    let views = job.shard.select(&labeled);
+    let cams: Vec<Camera> = views.iter().map(|&v| data.cameras[v].clone()).collect();
+    let key = fusion_key(job)?;
+    let gpu = Gpu::new()?;
+    let scene = GpuScene::upload_for(&gpu, job.gaussians, job.cfg.method.scene_attributes())?;
+    let bar = views_bar(cams.len());
+    let labels = ShardLabels {
+        data,
+        views: &views,
+    };
+    let (raw, stats) = accumulate_raw(
+        &gpu,
+        &scene,
+        &cams,
+        &labels,
+        data.classes.len(),
+        &job.cfg,
+        follow(&bar),
+    )?;
+    bar.finish_and_clear();
+    raw.save_npy(job.out, data.classes.len())?;
+    let manifest = PartManifest {
+        format: MANIFEST_FORMAT.into(),
+        version: MANIFEST_VERSION,
+        key,
+        shard: job.shard,
+        views: cams.iter().map(|c| c.name.clone()).collect(),
+    };
+    manifest.write(job.out)?;
+    eprintln!(
+        "shard {}: {} of {} labeled views in {:.2} s ({:.1} views/s, peak device memory \
+         {:.1} MiB) -> {} (+ {})",
+        job.shard,
+        cams.len(),
+        labeled.len(),
+        stats.wall_s,
+        stats.views_per_s,
+        stats.peak_device_bytes as f64 / (1u64 << 20) as f64,
+        job.out.display(),
+        manifest_path(job.out).display()
+    );
+    Ok(())
+}
+
+/// What the shard was fused from, as its manifest names it.
+fn fusion_key(job: &ShardJob) -> Result<FusionKey> {
+    let data = job.data;
+    let evidence = EvidenceKind::of(job.cfg.method, job.cfg.accumulation)
+        .context("--shard needs exact (fixed-point) evidence; drop --float-atomics")?;
+    let mut labels = Fnv64::default();
+    for i in 0..data.labels.len() {
+        let path = data.labels.path(i).context("label entry without a path")?;
+        let bytes = std::fs::metadata(path)
+            .with_context(|| format!("reading {}", path.display()))?
+            .len();
+        let name = data
+            .labels
+            .camera_index(i)
+            .map_or("", |c| data.cameras[c].name.as_str());
+        labels.update(name.as_bytes());
+        labels.update(&[0]);
+        labels.update(&bytes.to_le_bytes());
+    }
+    Ok(FusionKey {
+        scene: FileDigest::of_file(job.scene_path)?,
+        gaussians: job.gaussians.len(),
+        cameras: cameras_digest(&data.cameras),
+        camera_count: data.cameras.len(),
+        labels: labels.hex(),
+        label_files: data.labels.len(),
+        classes: data.table.clone(),
+        method: job.cfg.method.key().into(),
+        depth_tolerance: job.cfg.depth_tolerance,
+        train_only: job.train_only,
+        evidence,
+    })
+}
+
+pub fn run(args: MergeArgs) -> Result<()> {
+    let start = Instant::now();
+    super::fuse::check_output_args(&args.output)?;
+    ensure!(
+        args.chunk_gaussians > 0,
+        "--chunk-gaussians must be positive"
+    );
+    let parts = args
+        .parts
+        .iter()
+        .map(|p| Ok((p.clone(), PartManifest::read(p)?)))
+        .collect::<Result<Vec<_>>>()?;
+    let key = check_parts(&parts)?;
+    let scene_digest = FileDigest::of_file(&args.scene)?;
+    ensure!(
+        scene_digest == key.scene,
+        "{} is not the scene the parts were fused from ({} bytes, FNV-1a {} vs {} bytes, {})",
+        args.scene.display(),
+        scene_digest.bytes,
+        scene_digest.fnv1a64,
+        key.scene.bytes,
+        key.scene.fnv1a64
+    );
+    if let Some(cameras) = &args.cameras {
+        let cams = load_split_cameras(cameras, key.train_only)?;
+        ensure!(
+            cameras_digest(&cams) == key.cameras,
+            "{} are not the cameras the parts were fused from",
+            cameras.display()
+        );
+    }
+    let g = read_ply(&args.scene)?;
+    let method = Method::from_key(&key.method)
+        .with_context(|| format!("the parts name an unknown method '{}'", key.method))?;
+    let scores = sum_parts(&args.parts, &key, args.chunk_gaussians)?;
+    let evidence = Evidence {
+        scores,
+        table: key.classes.clone(),
+        stats: None,
+    };
+    let provenance = Provenance {
+        method,
+        accumulation: Accumulation::FixedPoint,
+        start,
+    };
+    write_fused(
+        &args.output,
+        args.cameras.as_deref(),
+        g,
+        evidence,
+        &provenance,
+    )
+}
+
+/// Sums the parts' integers chunk of Gaussians by chunk and converts each sum as `fuse`
+/// converts its download: only one chunk of every part is in memory at a time.
+fn sum_parts(paths: &[PathBuf], key: &FusionKey, chunk: usize) -> Result<ClassScores> {
+    let (classes, n) = (key.classes.len(), key.gaussians);
+    let mut readers = paths
+        .iter()
+        .map(|p| PartReader::open(p))
+        .collect::<Result<Vec<_>>>()?;
+    for (r, path) in readers.iter().zip(paths) {
+        ensure!(
+            (r.classes, r.n, r.kind) == (classes, n, key.evidence),
+            "{} holds {:?} [{}, {}] but its manifest names {:?} [{classes}, {n}]",
+            path.display(),
+            r.kind,
+            r.classes,
+            r.n,
+            key.evidence
+        );
+    }
+    let mut scores = ClassScores::zeros(classes, n);
+    for begin in (0..n).step_by(chunk) {
+        let len = chunk.min(n - begin);
+        let mut sum = RawEvidence::zeros(key.evidence, classes * len);
+        for r in &mut readers {
+            sum.add(&r.read_columns(begin, len)?)?;
+        }
+        let values = sum.to_f64();
+        for (row, chunk_row) in values.chunks_exact(len).enumerate() {
+            scores.data[row * n + begin..row * n + begin + len].copy_from_slice(chunk_row);
+        }
+    }
+    Ok(scores)
+}
