@@ -1,24 +1,10 @@
 //! `semsplat synth | fuse | render` end to end on a tiny room, and their bad input.
 
+mod common;
+
+use common::cli::{ok, semsplat};
+
 use std::path::Path;
-use std::process::Command;
-
-fn semsplat(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_semsplat"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn ok(args: &[&str]) -> String {
-    let out = semsplat(args);
-    assert!(
-        out.status.success(),
-        "{args:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
 
 fn synth(dir: &Path) {
     ok(&[

@@ -188,7 +188,8 @@ fn bench_fuse_json_times_every_method_against_the_forward_render() {
             "vote-occlusion",
             "vote-weighted",
             "flashsplat",
-            "flashsplat-per-view"
+            "flashsplat-per-view",
+            "segment-consensus"
         ]
     );
     for m in methods {

@@ -1,32 +1,11 @@
 //! `fuse --shard K/N` + `semsplat merge` give what one `fuse` gives, byte for byte, and
 //! merge refuses parts that do not belong together.
 
+mod common;
+
+use common::cli::{fails, ok};
+
 use std::path::Path;
-use std::process::Command;
-
-fn semsplat(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_semsplat"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn ok(args: &[&str]) -> String {
-    let out = semsplat(args);
-    assert!(
-        out.status.success(),
-        "{args:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
-
-/// The command's error message; it must fail.
-fn refused(args: &[&str]) -> String {
-    let out = semsplat(args);
-    assert!(!out.status.success(), "{args:?} should have failed");
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
 
 /// A tiny room with 7 labeled views (6 train + 1 test), so 3 shards get 3, 2 and 2 views.
 fn synth(dir: &Path) {
@@ -187,7 +166,7 @@ fn merge_refuses_parts_that_do_not_belong_together() {
         let mut args = vec!["merge"];
         args.extend_from_slice(parts);
         args.extend_from_slice(&["--scene", &scene, "--out", &out]);
-        refused(&args)
+        fails(&args)
     };
 
     let err = merge(&[&a0, &v1]);
@@ -201,7 +180,7 @@ fn merge_refuses_parts_that_do_not_belong_together() {
     assert!(err.contains("shard 1/2 is given twice"), "{err}");
 
     // Another scene (here: another file) is refused by its digest.
-    let err = refused(&["merge", &a0, &a1, "--scene", &cameras, "--out", &out]);
+    let err = fails(&["merge", &a0, &a1, "--scene", &cameras, "--out", &out]);
     assert!(
         err.contains("not the scene the parts were fused from"),
         "{err}"
@@ -220,7 +199,7 @@ fn merge_refuses_parts_that_do_not_belong_together() {
     assert!(!Path::new(&out).exists(), "no output on refusal");
 
     // Float atomics have no exact parts.
-    let err = refused(&[
+    let err = fails(&[
         "fuse",
         "--scene",
         &scene,

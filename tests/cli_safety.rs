@@ -581,7 +581,7 @@ fn diverged_training_stops_with_a_clear_error_and_no_output() {
     let err = stderr(&run);
     assert!(!run.status.success(), "a diverged run succeeded: {err}");
     assert!(
-        err.contains("diverged by iteration") && err.contains("NaN"),
+        err.contains("training diverged") && err.contains("not finite at iteration"),
         "{err}"
     );
     assert!(!out.exists(), "a diverged model was written");

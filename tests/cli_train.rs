@@ -1,16 +1,13 @@
 //! `semsplat train` end to end on a tiny synth room, and its bad input.
 
+mod common;
+
+use common::cli::semsplat;
+
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
 use semsplat::scene::ply::read_ply;
-
-fn semsplat(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_semsplat"))
-        .args(args)
-        .output()
-        .unwrap()
-}
 
 fn synth(dir: &Path) {
     let out = semsplat(&[

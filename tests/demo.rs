@@ -49,6 +49,7 @@ fn demo_reports_every_method_with_finite_numbers_and_valid_charts() {
             "vote --weighted",
             "flashsplat",
             "flashsplat --per-view",
+            "segment-consensus",
             "joint --semantics-only",
             "joint"
         ]

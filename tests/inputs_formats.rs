@@ -3,9 +3,12 @@
 //! SuperSplat compressed PLY, class ids written unsigned. Every file here is built byte by
 //! byte (or by a small generator following the other tool's writer), no network.
 
+mod common;
+
+use common::cli::{fails, ok};
+
 use std::io::{Read, Write};
 use std::path::Path;
-use std::process::Command;
 
 use glam::{DMat3, DVec3};
 use semsplat::fuse::ClassScores;
@@ -19,29 +22,6 @@ use semsplat::scene::scene_file::{read_scene, read_scene_or_point_cloud, resolve
 use semsplat::scene::{Camera, Gaussians, SemanticLogits, Split};
 use semsplat::util::npy::parse_npy_f64;
 use semsplat::util::Rng;
-
-fn semsplat(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_semsplat"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn ok(args: &[&str]) -> String {
-    let out = semsplat(args);
-    assert!(
-        out.status.success(),
-        "{args:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
-
-fn fails(args: &[&str]) -> String {
-    let out = semsplat(args);
-    assert!(!out.status.success(), "{args:?} should fail");
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
 
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()

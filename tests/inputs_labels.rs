@@ -4,8 +4,11 @@
 //! another resolution than the cameras; rig subfolders; huge headers refused before
 //! decoding; JPEG images; eval with ids above 16 bits and named classes.
 
+mod common;
+
+use common::cli::{ok, semsplat};
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 use glam::{DMat3, DVec3};
 use semsplat::dataset::{Dataset, DatasetPaths};
@@ -498,23 +501,6 @@ fn jpeg_images_load() {
 // ---------------------------------------------------------------------------------------
 // End to end through the CLI (lavapipe): palette labels, JPEG images, named eval classes,
 // class ids above 16 bits.
-
-fn semsplat(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_semsplat"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn ok(args: &[&str]) -> String {
-    let out = semsplat(args);
-    assert!(
-        out.status.success(),
-        "{args:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
 
 /// The synth room's label maps re-saved as VOC-style palette PNGs and its images as JPEG.
 fn palette_labels_and_jpegs(d: &Path) {

@@ -5,20 +5,14 @@
 
 mod common;
 
+use common::cli::semsplat;
+
 use std::path::Path;
-use std::process::{Command, Output};
 
 use semsplat::render::backward::{BackwardVariant, HostPixelGrads};
 use semsplat::render::{GpuScene, Rasterizer, RenderOptions, SemanticMode};
 use semsplat::scene::random_scene::{random_scene, RandomSceneSpec};
 use semsplat::scene::Camera;
-
-fn semsplat(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_semsplat"))
-        .args(args)
-        .output()
-        .unwrap()
-}
 
 fn synth(dir: &Path) {
     let d = dir.to_str().unwrap();

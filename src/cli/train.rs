@@ -282,7 +282,6 @@ fn train_loop(args: &TrainArgs, trainer: &mut Trainer) -> Result<Vec<LogLine>> {
                 ce: l.ce,
                 entropy: l.entropy,
             };
-            check_finite(&line)?;
             bar.set_message(format!(
                 "L1 {:.4} SSIM {:.3} CE {:.3} H {:.3} PSNR {:.2} dB, {} Gaussians",
                 line.l1, line.ssim, line.ce, line.entropy, line.psnr, line.gaussians
@@ -300,24 +299,6 @@ fn train_loop(args: &TrainArgs, trainer: &mut Trainer) -> Result<Vec<LogLine>> {
     }
     bar.finish();
     Ok(log)
-}
-
-/// Stops a diverged run at the first logged iteration whose losses are not finite, rather
-/// than training on and writing a NaN model.
-fn check_finite(line: &LogLine) -> Result<()> {
-    let losses = [line.l1, line.ssim, line.ce, line.entropy];
-    if losses.iter().all(|v| v.is_finite()) {
-        return Ok(());
-    }
-    bail!(
-        "training diverged by iteration {}: L1 {}, SSIM {}, CE {}, entropy {} (not all finite); \
-         lower --lr-logits or the loss weights (--lambda-sem, --lambda-entropy)",
-        line.iteration,
-        line.l1,
-        line.ssim,
-        line.ce,
-        line.entropy
-    )
 }
 
 /// GPU milliseconds per iteration, by stage.

@@ -273,9 +273,15 @@ impl Rasterizer {
 
     /// Applies every size `split` overrides.
     pub fn set_split_sizes(&mut self, split: SplitSizes) {
-        split.window_len.map(|v| self.set_window_len(v));
-        split.band_rows.map(|v| self.set_band_rows(v));
-        split.list_capacity.map(|v| self.set_list_capacity(v));
+        if let Some(len) = split.window_len {
+            self.set_window_len(len);
+        }
+        if let Some(rows) = split.band_rows {
+            self.set_band_rows(rows);
+        }
+        if let Some(entries) = split.list_capacity {
+            self.set_list_capacity(entries);
+        }
     }
 
     /// Entries one intersection list may hold: one binding's worth (or a test's override).
@@ -347,7 +353,7 @@ impl Rasterizer {
     /// Downloads the images of the frame `run` just rendered.
     pub(crate) fn download_frame(&self, cam: &Camera, frame: &TiledRun) -> Result<RenderedFrame> {
         let b = self.bufs.as_ref().expect("ran");
-        let stages = frame.stages.clone();
+        let stages = frame.stages;
         RenderedFrame::download(
             &self.gpu,
             cam,

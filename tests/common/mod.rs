@@ -3,6 +3,7 @@
 //! its end: any warning, error or synchronization hazard from the layer fails it.
 #![allow(dead_code)]
 
+pub mod cli;
 pub mod spec_scene;
 
 use std::sync::OnceLock;

@@ -1,0 +1,29 @@
+//! Running the `semsplat` binary from the integration tests.
+
+use std::process::{Command, Output};
+
+/// Runs `semsplat args...` and returns what it did.
+pub fn semsplat(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_semsplat"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+/// Runs a command that must succeed; returns its stderr (progress and summary lines).
+pub fn ok(args: &[&str]) -> String {
+    let out = semsplat(args);
+    assert!(
+        out.status.success(),
+        "{args:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// Runs a command that must fail; returns its error message.
+pub fn fails(args: &[&str]) -> String {
+    let out = semsplat(args);
+    assert!(!out.status.success(), "{args:?} should fail");
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
