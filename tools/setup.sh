@@ -67,6 +67,10 @@ if python3 -c 'import ray' 2>/dev/null; then
   say "ray already installed: $(python3 -c 'import ray; print(ray.__version__)')"
 else
   command -v python3 >/dev/null || die "python3 not found (needed for ray)"
+  if ! python3 -m pip --version >/dev/null 2>&1; then
+    say "installing pip (python3-pip)"
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -q python3-pip
+  fi
   say "installing ray (pip)"
   # Debian's own python3 refuses system-wide pip installs (PEP 668) unless told otherwise.
   python3 -m pip install -q 'ray>=2.58' \
