@@ -35,7 +35,14 @@ layout(set = 0, binding = 9) writeonly buffer FinalTBuf { float data[]; } out_fi
 layout(set = 0, binding = 10) writeonly buffer LastBuf { uint data[]; } out_last;
 layout(set = 0, binding = 11) writeonly buffer CountBuf { uint data[]; } out_n_contrib;
 layout(set = 0, binding = 15) readonly buffer FracBuf { vec2 data[]; } xy_frac;
-#if CHUNK_CHANNELS > 0
+#if defined(LABEL_ARGMAX)
+// Label rendering: each Gaussian blends the one-hot vector of its class (NO_LABEL: zeros),
+// and each pixel keeps only the running argmax over the chunks of classes, so C classes
+// cost C / CHUNK_CHANNELS passes but no per-pixel C-vector.
+layout(set = 0, binding = 12) readonly buffer ClassBuf { uint data[]; } classes;
+layout(set = 0, binding = 13) buffer BestBuf { uvec2 data[]; } label_best; // (value bits, class)
+shared float s_sem[BATCH * CHUNK_CHANNELS];
+#elif CHUNK_CHANNELS > 0
 layout(set = 0, binding = 12) readonly buffer SemBuf { float data[]; } sem_in;
 layout(set = 0, binding = 13) writeonly buffer SemOutBuf { float data[]; } out_sem;
 layout(set = 0, binding = 14) writeonly buffer SemNormBuf { float data[]; } out_sem_norm;
@@ -97,7 +104,12 @@ void main() {
             s_frac[t] = xy_frac.data[g];
             s_conic[t] = conics.data[g];
             s_color[t] = colors.data[g];
-#if CHUNK_CHANNELS > 0
+#if defined(LABEL_ARGMAX)
+            uint cls = classes.data[g];
+            [[unroll]] for (uint k = 0; k < CHUNK_CHANNELS; k++) {
+                s_sem[t * CHUNK_CHANNELS + k] = cls == chunk_base + k ? 1.0 : 0.0;
+            }
+#elif CHUNK_CHANNELS > 0
             [[unroll]] for (uint k = 0; k < CHUNK_CHANNELS; k++) {
                 uint c = chunk_base + k;
                 s_sem[t * CHUNK_CHANNELS + k] = c < channels ? sem_in.data[g * channels + c] : 0.0;
@@ -170,7 +182,19 @@ void main() {
         out_last.data[pix] = last;
         out_n_contrib.data[pix] = n_contrib;
     }
-#if CHUNK_CHANNELS > 0
+#if defined(LABEL_ARGMAX)
+    // The largest normalized value so far, later classes winning ties (as a host argmax
+    // over the whole vector taking the last maximum would).
+    uvec2 best = chunk_base == 0 ? uvec2(floatBitsToUint(0.0), NO_LABEL) : label_best.data[pix];
+    [[unroll]] for (uint k = 0; k < CHUNK_CHANNELS; k++) {
+        uint c = chunk_base + k;
+        float v = acc_alpha > 0.0 ? sem[k] / acc_alpha : 0.0;
+        if (c < channels && (best.y == NO_LABEL || v >= uintBitsToFloat(best.x))) {
+            best = uvec2(floatBitsToUint(v), c);
+        }
+    }
+    label_best.data[pix] = best;
+#elif CHUNK_CHANNELS > 0
     [[unroll]] for (uint k = 0; k < CHUNK_CHANNELS; k++) {
         uint c = chunk_base + k;
         if (c < channels) {

@@ -1,18 +1,22 @@
 //! Label maps rendered from a scene whose Gaussians carry classes: each Gaussian blends a
 //! one-hot vector of its class (unseen Gaussians blend zeros but still occlude), and the
-//! pixel takes the argmax of the normalized semantics (Gaussian Semantics Eq. 2).
+//! pixel takes the argmax of the normalized semantics (Gaussian Semantics Eq. 2). The GPU
+//! keeps only the running argmax per pixel and one class index per Gaussian, so memory does
+//! not grow with the number of classes (1M Gaussians x 300 classes is 4 MB of indices, not
+//! 1.2 GB of one-hot vectors).
 
 use anyhow::{bail, Result};
 
+use crate::dataset::NO_LABEL;
 use crate::gpu::Gpu;
 use crate::render::{GpuScene, Rasterizer, RenderOptions, SemanticMode};
 use crate::scene::classes::IGNORE_U16;
-use crate::scene::{Camera, Gaussians, SemanticLogits};
+use crate::scene::{Camera, Gaussians};
 
 /// Renders the class of every pixel of `cams` (None where no classified Gaussian shows).
 pub struct LabelRenderer {
     scene: GpuScene,
-    /// User class id of each one-hot channel.
+    /// User class id of each class index, ascending.
     channel_ids: Vec<u32>,
     raster: Rasterizer,
 }
@@ -27,23 +31,16 @@ impl LabelRenderer {
             .collect();
         channel_ids.sort_unstable();
         channel_ids.dedup();
-        let c = channel_ids.len().max(1);
-        let mut logits = vec![0.0f32; g.len() * c];
-        for (i, &id) in class_ids.iter().enumerate() {
-            if id >= 0 {
-                let k = channel_ids
-                    .binary_search(&(id as u32))
-                    .expect("collected above");
-                logits[i * c + k] = 1.0;
-            }
-        }
-        let mut scene = g.clone();
-        scene.semantics = Some(SemanticLogits {
-            channels: c,
-            logits,
-        });
+        let index: Vec<u32> = class_ids
+            .iter()
+            .map(|&id| match channel_ids.binary_search(&(id as u32)) {
+                Ok(k) if id >= 0 => k as u32,
+                _ => NO_LABEL,
+            })
+            .collect();
+        let classes = channel_ids.len().max(1) as u32;
         Ok(LabelRenderer {
-            scene: GpuScene::upload(gpu, &scene)?,
+            scene: GpuScene::upload_with_classes(gpu, g, &index, classes)?,
             channel_ids,
             raster: Rasterizer::new(gpu),
         })
@@ -55,16 +52,16 @@ impl LabelRenderer {
             semantics: Some(SemanticMode::RawLogits),
             ..Default::default()
         };
-        let f = self.raster.render(&self.scene, cam, &opts)?;
-        let c = f.channels as usize;
-        Ok((0..f.alpha.len())
-            .map(|p| {
-                let s = &f.sem_norm[p * c..(p + 1) * c];
-                let (k, &v) = s.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1))?;
-                (v > 0.0)
-                    .then(|| self.channel_ids.get(k).copied())
-                    .flatten()
-            })
+        let pixels = cam.width as usize * cam.height as usize;
+        self.raster
+            .run_tiled_in_bands(&self.scene, cam, &opts, |rec, tiles| {
+                tiles.record_blend(rec)
+            })?;
+        Ok(self
+            .raster
+            .last_labels(pixels)?
+            .into_iter()
+            .map(|k| k.and_then(|k| self.channel_ids.get(k as usize).copied()))
             .collect())
     }
 

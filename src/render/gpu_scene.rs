@@ -237,6 +237,11 @@ pub struct GpuScene {
     /// Semantic channels C (0 without semantics).
     pub channels: u32,
     pub attributes: SceneAttributes,
+    /// Per Gaussian, a class index below `channels` (or NO_LABEL) whose one-hot vector
+    /// stands in for semantic logits: such a scene renders label maps (the argmax per
+    /// pixel, [`crate::render::Rasterizer::last_labels`]) without a C-vector per Gaussian or
+    /// per pixel. None for scenes with logits or none.
+    pub(crate) class_index: Option<Buffer>,
     pub(crate) params: GaussianParams<Buffer>,
     /// [n * C]
     pub(crate) logits: Option<Buffer>,
@@ -270,6 +275,7 @@ impl GpuScene {
             sh_coeffs: if colour { g.sh_coeffs() as u32 } else { 0 },
             channels,
             attributes,
+            class_index: None,
             params: GaussianParams::try_from_fn(|p| {
                 if attributes.holds(p) {
                     gpu.buffer_from(p.name(), host[p])
@@ -280,6 +286,23 @@ impl GpuScene {
             logits,
             probs: std::sync::OnceLock::new(),
         })
+    }
+
+    /// Uploads `g` (without its logits) with one class per Gaussian for label rendering:
+    /// `class_index[i]` below `classes`, or NO_LABEL for a Gaussian that blends zeros (it
+    /// still occludes).
+    pub fn upload_with_classes(
+        gpu: &Gpu,
+        g: &Gaussians,
+        class_index: &[u32],
+        classes: u32,
+    ) -> GpuResult<GpuScene> {
+        assert_eq!(class_index.len(), g.len(), "one class index per Gaussian");
+        let mut scene = GpuScene::upload_for(gpu, g, SceneAttributes::Full)?;
+        scene.logits = None;
+        scene.channels = classes;
+        scene.class_index = Some(gpu.buffer_from("class_index", class_index)?);
+        Ok(scene)
     }
 
     /// Bytes this scene holds on the device (parameters and semantic logits).

@@ -34,6 +34,7 @@ struct Buffers {
     n_cap: u32,
     pixel_cap: u64,
     sem_cap: u64,
+    best_cap: u64,
     carry_cap: u64,
     tiles_cap: u32,
     isect_cap: u32,
@@ -61,6 +62,8 @@ struct Buffers {
     n_contrib: Buffer,
     sem: Buffer,
     sem_norm: Buffer,
+    /// Per pixel (value bits, class) of the label argmax.
+    label_best: Buffer,
     /// Frame status words (ST_*), one region of `status_stride` words per band of tile rows
     /// a view is binned in; the frame-wide words are copied from band 0's into the others.
     status: Buffer,
@@ -134,6 +137,8 @@ struct Need {
     pixels: u64,
     tiles: u32,
     sem: u64,
+    /// Pixels of the label argmax (0 unless rendering labels).
+    best: u64,
     carry: u64,
     isect: u32,
 }
@@ -161,6 +166,7 @@ impl Buffers {
             n_cap: n as u32,
             pixel_cap: p,
             sem_cap: need.sem,
+            best_cap: need.best,
             carry_cap: need.carry,
             tiles_cap: need.tiles,
             isect_cap: isect as u32,
@@ -188,6 +194,7 @@ impl Buffers {
             n_contrib: b("n_contrib", p * 4)?,
             sem: b("sem", need.sem * 4)?,
             sem_norm: b("sem_norm", need.sem * 4)?,
+            label_best: b("label_best", need.best.max(1) * 8)?,
             status: b("status", MAX_LIST_BANDS as u64 * status_stride as u64 * 4)?,
             status_stride,
             scan_n: PrefixScan::new(gpu, n + 1)?,
@@ -201,6 +208,7 @@ impl Buffers {
         need.n <= self.n_cap
             && need.pixels <= self.pixel_cap
             && need.sem <= self.sem_cap
+            && need.best <= self.best_cap
             && need.carry <= self.carry_cap
             && need.tiles <= self.tiles_cap
             && need.isect <= self.isect_cap
@@ -324,6 +332,7 @@ impl Rasterizer {
                     pixels: grow(b.pixel_cap, need.pixels),
                     tiles: grow(b.tiles_cap as u64, need.tiles as u64) as u32,
                     sem: grow(b.sem_cap, need.sem),
+                    best: grow(b.best_cap, need.best),
                     carry: grow(b.carry_cap, need.carry),
                     // Growth past a need never exceeds what one list may hold.
                     isect: grow(b.isect_cap as u64, need.isect as u64)
@@ -512,7 +521,11 @@ impl Rasterizer {
             visible: statuses[0][ST_VISIBLE as usize],
             intersections: statuses.iter().map(|s| s[ST_ISECT as usize]).sum(),
             list_bands: rows.len() as u32,
-            channels: frame.channels,
+            channels: if frame.labels.is_some() {
+                0
+            } else {
+                frame.channels
+            },
         };
         Ok((run, statuses))
     }
@@ -576,6 +589,7 @@ impl Rasterizer {
         cam: &'a Camera,
         opts: &RenderOptions,
     ) -> Result<FrameSpec<'a>> {
+        let labels = opts.semantics.and(scene.class_index.as_ref());
         let semantics = match opts.semantics {
             Some(mode) => scene.semantics(&self.gpu, mode)?.map(|buf| (mode, buf)),
             None => None,
@@ -586,12 +600,13 @@ impl Rasterizer {
             tiles_y: cam.height.div_ceil(TILE_SIZE),
             window_len: self.window_len,
             windows: self.windows_for(scene.n),
-            channels: if semantics.is_some() {
+            channels: if semantics.is_some() || labels.is_some() {
                 scene.channels
             } else {
                 0
             },
             semantics,
+            labels,
             background: opts.background,
             band_limits: BandLimits {
                 max_binding: self.gpu.caps().max_storage_buffer_range,
@@ -610,7 +625,12 @@ impl Rasterizer {
             n: scene.n,
             pixels,
             tiles: frame.tiles_x * frame.tiles_y,
-            sem: pixels * frame.channels as u64,
+            sem: if frame.labels.is_some() {
+                0
+            } else {
+                pixels * frame.channels as u64
+            },
+            best: if frame.labels.is_some() { pixels } else { 0 },
             carry: (pixels * frame.blend_carry_floats()).max(1),
             isect: self
                 .bufs
@@ -645,6 +665,18 @@ impl Rasterizer {
         let keys: Vec<u32> = self.gpu.download(&b.isect_keys, 0, count)?;
         let ids: Vec<u32> = self.gpu.download(&b.isect_ids, 0, count)?;
         Ok(keys.into_iter().zip(ids).collect())
+    }
+
+    /// Per pixel of the last frame rendered from a scene uploaded with classes
+    /// ([`GpuScene::upload_with_classes`]): the class index whose one-hot vectors blend to
+    /// the largest share (later classes winning ties), None where no class shows.
+    pub fn last_labels(&self, pixels: usize) -> Result<Vec<Option<u32>>> {
+        let b = self.bufs.as_ref().expect("a frame was rendered");
+        let best: Vec<[u32; 2]> = self.gpu.download(&b.label_best, 0, pixels)?;
+        Ok(best
+            .into_iter()
+            .map(|[value, class]| (f32::from_bits(value) > 0.0).then_some(class))
+            .collect())
     }
 
     /// The expected depth per pixel of the last rendered frame.
@@ -899,6 +931,9 @@ pub struct FrameSpec<'a> {
     pub channels: u32,
     /// What the semantic channels blend, and the per-Gaussian vectors (None: RGB only).
     pub semantics: Option<(SemanticMode, &'a Buffer)>,
+    /// Per Gaussian class indices whose one-hot vectors blend into a per-pixel argmax
+    /// instead of semantic channels (a scene uploaded with classes; `channels` classes).
+    pub labels: Option<&'a Buffer>,
     pub background: [f32; 3],
     /// What sizes the bands of tile rows per-tile passes split the image into.
     pub band_limits: BandLimits,
@@ -1070,7 +1105,11 @@ impl TileLists<'_> {
     pub fn record_blend(&self, rec: &mut Recorder) -> Result<()> {
         let (b, f) = (self.bufs, &self.frame);
         let carry_bytes = f.blend_carry_floats() * 4;
-        let sem_bytes = f.channels as u64 * 4;
+        let sem_bytes = if f.labels.is_some() {
+            8
+        } else {
+            f.channels as u64 * 4
+        };
         let widest = [RGB_BYTES, sem_bytes, carry_bytes]
             .into_iter()
             .max()
@@ -1097,8 +1136,15 @@ impl TileLists<'_> {
                         ("out_last", px(&b.last, 4)),
                         ("out_n_contrib", px(&b.n_contrib, 4)),
                     ];
-                    let kernel = match f.semantics {
-                        Some((_, sem)) => {
+                    let kernel = match (f.labels, f.semantics) {
+                        (Some(classes), _) => {
+                            bindings.extend([
+                                ("classes", BufferRange::whole(classes)),
+                                ("label_best", px(&b.label_best, 8)),
+                            ]);
+                            ids::RASTER_BLEND_LABEL
+                        }
+                        (None, Some((_, sem))) => {
                             bindings.extend([
                                 ("sem_in", BufferRange::whole(sem)),
                                 ("out_sem", px(&b.sem, sem_bytes)),
@@ -1106,7 +1152,7 @@ impl TileLists<'_> {
                             ]);
                             ids::RASTER_BLEND_SEM
                         }
-                        None => ids::RASTER_BLEND_RGB,
+                        (None, None) => ids::RASTER_BLEND_RGB,
                     };
                     rec.dispatch_ranges(kernel, &bindings, &params, band.groups(f.tiles_x))?;
                 }

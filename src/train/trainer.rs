@@ -439,6 +439,7 @@ impl Trainer {
             sh_coeffs: old.sh_coeffs,
             channels: old.channels,
             attributes: old.attributes,
+            class_index: None,
             params,
             logits,
             probs: OnceLock::new(),
