@@ -416,6 +416,7 @@ fn fuse_views(
     let scene = GpuScene::upload_for(&gpu, g, method.scene_attributes())?;
     let cfg = fuse_config(args, method, accumulation);
     let bar = views_bar(data.cameras.len());
+    let track = follow(&bar);
     let (scores, stats) = accumulate(
         &gpu,
         &scene,
@@ -423,7 +424,10 @@ fn fuse_views(
         &Interruptible(&data),
         data.classes.len(),
         &cfg,
-        follow(&bar),
+        |done, total| {
+            track(done, total);
+            bar.set_message(memory_line(scene.n, &gpu));
+        },
     )?;
     bar.finish_and_clear();
     Ok(Evidence {
@@ -431,6 +435,17 @@ fn fuse_views(
         table: data.table,
         stats: Some(stats),
     })
+}
+
+/// The progress line's tail: the scene's size and the memory in use.
+fn memory_line(gaussians: u32, gpu: &Gpu) -> String {
+    let mib = |b: u64| b >> 20;
+    let host = semsplat::util::memory::peak_host_bytes().unwrap_or(0);
+    format!(
+        "{gaussians} Gaussians, device {} MiB, host peak {} MiB",
+        mib(gpu.memory_reserved()),
+        mib(host)
+    )
 }
 
 /// The cameras, label maps and class table of --cameras, --labels and --classes.

@@ -99,6 +99,10 @@ pub struct FuseStats {
     pub wall_s: f64,
     pub views_per_s: f64,
     pub peak_device_bytes: u64,
+    /// Device memory of the scene as this method uploaded it (only what it reads).
+    pub scene_device_bytes: u64,
+    /// Peak resident memory of the process so far (Linux; 0 where unknown).
+    pub peak_host_bytes: u64,
 }
 
 fn bytes_per_entry(method: Method, acc: Accumulation) -> u64 {
@@ -273,6 +277,8 @@ fn accumulate_passes(
     progress(passes * cams.len(), passes * cams.len());
     stats.wall_s = start.elapsed().as_secs_f64();
     stats.views_per_s = (stats.views * passes) as f64 / stats.wall_s.max(1e-9);
+    stats.scene_device_bytes = scene.device_bytes();
+    stats.peak_host_bytes = crate::util::memory::peak_host_bytes().unwrap_or(0);
     Ok(stats)
 }
 
