@@ -433,9 +433,10 @@ fn camera_names_that_are_paths_are_errors() {
         )
     };
     let cases = [
-        (r#""../../x""#, "path separator"),
-        (r#""/abs/x""#, "path separator"),
-        (r#""a\\b""#, "path separator"),
+        (r#""../../x""#, "'..'"),
+        (r#""cam0/../../x""#, "'..'"),
+        (r#""/abs/x""#, "absolute path"),
+        (r#""a\\b""#, "backslash"),
         (r#"".""#, "names a folder"),
         (r#""..""#, "names a folder"),
         (r#""a\u0000b""#, "NUL"),
