@@ -188,6 +188,34 @@ fn colmap_rig_fuses_with_mirrored_label_subfolders() {
         assert_eq!(a.labels, b.labels, "{rig_view}");
     }
 
+    // eval reads labels and images by relative path (images/cam0/00001.png).
+    for (i, rig_view) in ["cam0/00001", "cam1/00001"].iter().enumerate() {
+        let image = d.join(format!("room/images/{}.png", cams[i].name));
+        copy(&image, &d.join(format!("images_rig/{rig_view}.png")));
+    }
+    ok(&[
+        "eval",
+        "--scene",
+        &s("rig.ply"),
+        "--cameras",
+        &s("rig"),
+        "--labels",
+        &s("labels_rig"),
+        "--views",
+        "all",
+        "--images",
+        &s("images_rig"),
+        "--json",
+        &s("eval.json"),
+    ]);
+    let eval: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("eval.json")).unwrap()).unwrap();
+    assert!(eval["miou"].as_f64().unwrap() > 0.5, "{eval}");
+    assert!(
+        eval["image_quality"]["psnr"].as_f64().unwrap() > 10.0,
+        "{eval}"
+    );
+
     // render (with --semantics, and --raw) of one rig view by its name lands inside --out.
     let render = |scene: &str, extra: &str| {
         ok(&[
