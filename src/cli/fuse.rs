@@ -142,7 +142,8 @@ pub struct OutputArgs {
     #[arg(long)]
     pub remove: Option<String>,
     /// Render label and palette PNGs of every view from the fused scene into DIR
-    /// (<view>.labels.png with label ids, 255/65535 where nothing is drawn; <view>.palette.png).
+    /// (<view>.labels.png with label ids, 255/65535 where nothing is drawn; <view>.palette.png;
+    /// rig views named by a relative path go into subfolders: DIR/cam0/00001.labels.png).
     #[arg(long, requires = "cameras")]
     pub render_views: Option<PathBuf>,
     /// Write the multi-instance membership S of FlashSplat's Listing 1.1 (with --gamma) as a

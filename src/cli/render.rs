@@ -32,11 +32,13 @@ pub struct RenderArgs {
     /// sparse/0), an INRIA cameras.json, or a semsplat cameras.json.
     #[arg(long)]
     cameras: PathBuf,
-    /// Render only these views (image names without extension); default: all.
+    /// Render only these views (image names without extension, e.g. 00001, or cam0/00001
+    /// for rig cameras whose stems repeat); default: all.
     #[arg(long, num_args = 1.., value_delimiter = ',')]
     views: Vec<String>,
     /// Output folder: <view>.png (RGB) and, with --semantics, <view>.labels.png (class ids,
-    /// 255/65535 where nothing was drawn) and <view>.palette.png (class colors).
+    /// 255/65535 where nothing was drawn) and <view>.palette.png (class colors). Rig views
+    /// named by a relative path write into subfolders: <out>/cam0/00001.png.
     #[arg(long)]
     out: PathBuf,
     /// Also render the semantic channels (the argmax class per pixel), or for a fused PLY
@@ -176,6 +178,8 @@ pub fn run(args: RenderArgs) -> Result<()> {
         interrupt::check()?;
         bar.set_message(cam.name.clone());
         let f = raster.render(&scene, cam, &opts)?;
+        // Rig names (`cam0/00001`) write into subfolders of --out; check_camera_name keeps
+        // every component a plain name, so nothing lands outside it.
         let out = |suffix: &str| args.out.join(format!("{}{suffix}", cam.name));
         write_rgb_png(&out(".png"), &f)?;
         let labels = match &mut labels_from {

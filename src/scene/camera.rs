@@ -15,7 +15,9 @@ pub enum Split {
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct Camera {
-    /// Image name without extension; label maps and images are matched by this stem.
+    /// Image name without extension (the stem), or for images whose stems repeat (multi-camera
+    /// rigs) the relative image path without extension (`cam0/00001`); label maps and images
+    /// are matched by it. See [`check_camera_name`].
     pub name: String,
     pub width: u32,
     pub height: u32,
@@ -56,32 +58,47 @@ impl Camera {
 pub const ROTATION_TOLERANCE: f64 = 1e-3;
 
 /// Camera names become file names (`render` writes `<out>/<name>.png`, `train --images`
-/// reads `<images>/<name>.png`), so a name must be one plain file name: not empty, not `.` or
-/// `..`, no `/` or `\`, no NUL or other control character, no drive prefix (`C:`). Every
-/// camera source validates its cameras, so this one check covers them all.
+/// reads `<images>/<name>.png`), so a name must be a plain file name, or, for multi-camera
+/// rigs, a relative path of plain names joined by `/` (`cam0/00001`, written as
+/// `<out>/cam0/00001.png`). Every component must be a plain name: not empty (so no leading
+/// `/` and no `//`), not `.` or `..`, no `\`, no NUL or other control character, no drive
+/// prefix (`C:`). So a name can never lead outside the folder it is joined to. Every camera
+/// source validates its cameras, so this one check covers them all.
 pub fn check_camera_name(name: &str) -> anyhow::Result<()> {
     let problem = if name.is_empty() {
         Some("it is empty")
-    } else if name == "." || name == ".." {
-        Some("it names a folder")
-    } else if name.contains(['/', '\\']) {
-        Some("it contains a path separator")
-    } else if name.chars().any(char::is_control) {
-        Some("it contains a NUL or control character")
-    } else if name.len() >= 2
-        && name.as_bytes()[1] == b':'
-        && name.as_bytes()[0].is_ascii_alphabetic()
-    {
-        Some("it starts with a drive prefix")
+    } else if name.starts_with('/') {
+        Some("it is an absolute path")
     } else {
-        None
+        name.split('/').find_map(name_component_problem)
     };
     match problem {
         Some(why) => anyhow::bail!(
             "camera name {name:?} cannot be used as a file name ({why}): names must be plain \
-             file names because outputs are written to <out>/<name>.png"
+             file names, or relative paths of plain names joined by '/' (cam0/00001), because \
+             outputs are written to <out>/<name>.png"
         ),
         None => Ok(()),
+    }
+}
+
+/// Why one `/`-separated component of a camera name is unsafe as a path component.
+fn name_component_problem(part: &str) -> Option<&'static str> {
+    if part.is_empty() {
+        Some("it has an empty path component")
+    } else if part == "." || part == ".." {
+        Some("it names a folder ('.' or '..')")
+    } else if part.contains('\\') {
+        Some("it contains a backslash")
+    } else if part.chars().any(char::is_control) {
+        Some("it contains a NUL or control character")
+    } else if part.len() >= 2
+        && part.as_bytes()[1] == b':'
+        && part.as_bytes()[0].is_ascii_alphabetic()
+    {
+        Some("it starts with a drive prefix")
+    } else {
+        None
     }
 }
 

@@ -29,6 +29,76 @@ pub fn image_name_stem(name: &str) -> String {
     }
 }
 
+/// The file name of an image path without a known image extension (as in
+/// [`image_name_stem`], for the last component only).
+fn strip_image_extension(base: &str) -> &str {
+    match base.rsplit_once('.') {
+        Some((stem, ext))
+            if !stem.is_empty() && IMAGE_EXTENSIONS.iter().any(|e| e.eq_ignore_ascii_case(ext)) =>
+        {
+            stem
+        }
+        _ => base,
+    }
+}
+
+/// Camera names for images named by relative paths (`cam0/00001.jpg`), in the same order: the
+/// stem (`00001`) where no other image has it, so ordinary datasets keep their plain names;
+/// otherwise (a multi-camera rig) the relative path without extension, `/`-separated
+/// (`cam0/00001`), without `.` components and without the leading folders every image shares
+/// (nerfstudio's `images/`), i.e. relative to the image root that label folders mirror.
+/// The names are not checked here: [`validate_cameras`] refuses `..`, absolute paths and
+/// other unsafe components, and names that still collide.
+pub fn image_names(paths: &[&str]) -> Vec<String> {
+    let split: Vec<Vec<&str>> = paths
+        .iter()
+        .map(|p| p.split(['/', '\\']).filter(|c| *c != ".").collect())
+        .collect();
+    let common = common_folder_count(&split);
+    let stems: Vec<String> = paths.iter().map(|p| image_name_stem(p)).collect();
+    let mut stem_count: HashMap<&str, usize> = HashMap::new();
+    for s in &stems {
+        *stem_count.entry(s.as_str()).or_default() += 1;
+    }
+    split
+        .iter()
+        .zip(&stems)
+        .map(|(parts, stem)| {
+            if stem_count[stem.as_str()] == 1 {
+                return stem.clone();
+            }
+            let mut rel: Vec<&str> = parts[common..].to_vec();
+            if let Some(last) = rel.last_mut() {
+                *last = strip_image_extension(last);
+            }
+            rel.join("/")
+        })
+        .collect()
+}
+
+/// How many leading folders (not the file name) all paths share.
+fn common_folder_count(split: &[Vec<&str>]) -> usize {
+    let Some(first) = split.first() else {
+        return 0;
+    };
+    let mut n = first.len().saturating_sub(1);
+    for parts in &split[1..] {
+        n = n.min(parts.len().saturating_sub(1));
+        n = (0..n).take_while(|&i| parts[i] == first[i]).count();
+    }
+    n
+}
+
+/// Renames cameras whose `name` holds their image path (as the file lists it) to
+/// [`image_names`].
+pub fn name_by_image_paths(cameras: &mut [Camera]) {
+    let paths: Vec<&str> = cameras.iter().map(|c| c.name.as_str()).collect();
+    let names = image_names(&paths);
+    for (cam, name) in cameras.iter_mut().zip(names) {
+        cam.name = name;
+    }
+}
+
 /// Checks every camera (see [`Camera::validate`]) and that names are unique (label maps
 /// are matched by name).
 pub fn validate_cameras(cameras: &[Camera]) -> Result<()> {
@@ -37,8 +107,8 @@ pub fn validate_cameras(cameras: &[Camera]) -> Result<()> {
         cam.validate().with_context(|| format!("camera {i}"))?;
         if let Some(first) = seen.insert(cam.name.as_str(), i) {
             bail!(
-                "cameras {first} and {i} share the name '{}': names (image stems) must be unique \
-                 because label maps are matched by name",
+                "cameras {first} and {i} share the name '{}': names (image stems, or relative image \
+                 paths where stems repeat) must be unique because label maps are matched by name",
                 cam.name
             );
         }

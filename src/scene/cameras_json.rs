@@ -16,7 +16,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 use super::camera::{Camera, Split};
-use super::cameras::{image_name_stem, validate_cameras};
+use super::cameras::{name_by_image_paths, validate_cameras};
 use crate::util::write_atomic;
 
 /// The `format` value of semsplat camera files.
@@ -89,7 +89,7 @@ pub fn read_cameras_json_kind(path: &Path) -> Result<(CameraJsonKind, Vec<Camera
 /// Parses camera JSON from memory (the entry point the fuzzer uses).
 pub fn parse_cameras_json(bytes: &[u8]) -> Result<(CameraJsonKind, Vec<Camera>)> {
     let value: Value = serde_json::from_slice(bytes).map_err(|e| anyhow!("invalid JSON: {e}"))?;
-    let (kind, cameras) = match &value {
+    let (kind, mut cameras) = match &value {
         Value::Array(entries) => (CameraJsonKind::Inria, parse_inria(entries)?),
         Value::Object(obj) => match obj.get("format").and_then(Value::as_str) {
             Some(SEMSPLAT_CAMERAS_FORMAT) => (CameraJsonKind::Semsplat, parse_semsplat(&value)?),
@@ -110,6 +110,10 @@ pub fn parse_cameras_json(bytes: &[u8]) -> Result<(CameraJsonKind, Vec<Camera>)>
     };
     if cameras.is_empty() {
         bail!("the file lists no cameras");
+    }
+    // INRIA and nerfstudio list image paths; semsplat's own names are kept as written.
+    if kind != CameraJsonKind::Semsplat {
+        name_by_image_paths(&mut cameras);
     }
     validate_cameras(&cameras)?;
     Ok((kind, cameras))
@@ -134,7 +138,7 @@ fn parse_inria(entries: &[Value]) -> Result<Vec<Camera>> {
             let rotation = DMat3::from_cols_array_2d(&c.rotation);
             let translation = -(rotation * DVec3::from_array(c.position));
             Ok(Camera {
-                name: image_name_stem(&c.img_name),
+                name: c.img_name, // the image path until name_by_image_paths
                 width: c.width,
                 height: c.height,
                 fx: c.fx,

@@ -15,7 +15,7 @@ use anyhow::{anyhow, bail, Context, Result};
 use glam::{DMat3, DQuat, DVec3};
 
 use super::camera::{Camera, Split};
-use super::cameras::{image_name_stem, validate_cameras};
+use super::cameras::{name_by_image_paths, validate_cameras};
 use crate::util::{write_atomic, write_bytes_atomic};
 
 /// Longest image name we accept in a binary file (a missing NUL must not read the rest of the
@@ -196,8 +196,9 @@ pub fn qvec_from_rotation(r: DMat3) -> [f64; 4] {
     [q.w, q.x, q.y, q.z]
 }
 
-/// Joins images with their cameras: one [`Camera`] per image, named by the image stem,
-/// sorted by name, validated.
+/// Joins images with their cameras: one [`Camera`] per image, named by the image stem (by
+/// the relative image path where stems repeat, as in a multi-camera rig: see
+/// [`super::cameras::image_names`]), sorted by name, validated.
 pub fn colmap_to_cameras(cams: &[ColmapCamera], images: &[ColmapImage]) -> Result<Vec<Camera>> {
     let mut intrinsics: HashMap<u32, (&ColmapCamera, [f64; 4])> = HashMap::new();
     for cam in cams {
@@ -228,7 +229,7 @@ pub fn colmap_to_cameras(cams: &[ColmapCamera], images: &[ColmapImage]) -> Resul
         let rotation = rotation_from_qvec(img.qvec)
             .with_context(|| format!("image {} ('{}')", img.id, img.name))?;
         out.push(Camera {
-            name: image_name_stem(&img.name),
+            name: img.name.clone(), // the image path until name_by_image_paths
             width,
             height,
             fx,
@@ -243,6 +244,7 @@ pub fn colmap_to_cameras(cams: &[ColmapCamera], images: &[ColmapImage]) -> Resul
     if out.is_empty() {
         bail!("the model has no images");
     }
+    name_by_image_paths(&mut out);
     out.sort_by(|a, b| a.name.cmp(&b.name));
     validate_cameras(&out)?;
     Ok(out)

@@ -18,7 +18,6 @@ use glam::{DMat3, DVec3};
 use serde_json::{Map, Value};
 
 use super::camera::{Camera, Split};
-use super::cameras::image_name_stem;
 
 const DISTORTION_KEYS: [&str; 6] = ["k1", "k2", "k3", "k4", "p1", "p2"];
 
@@ -108,7 +107,7 @@ fn parse_frame(i: usize, v: &Value, top: &Map<String, Value>) -> Result<Camera> 
         Ok(v as u32)
     };
     Ok(Camera {
-        name: image_name_stem(file_path),
+        name: file_path.to_owned(), // named by cameras::name_by_image_paths
         width: size("w")?,
         height: size("h")?,
         fx: num("fl_x")?,
