@@ -1,5 +1,6 @@
 //! `semsplat sweep` end to end on the tiny room (consistent mislabeling; several seeds), and
 //! the instance-oracle bound against a direct computation.
+#![allow(clippy::needless_range_loop)] // index loops mirror the plain transcription
 
 use std::collections::BTreeMap;
 use std::process::Command;
