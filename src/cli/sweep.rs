@@ -1,5 +1,6 @@
 //! `semsplat sweep`: how each method holds up as one kind of label noise grows, and where
-//! it breaks (mIoU below half of its clean value).
+//! it breaks (mIoU below half of its clean value), over several rooms and seeds, read against
+//! the instance-oracle bound (the per-object majority of the same noisy labels).
 
 use std::path::PathBuf;
 
@@ -10,8 +11,12 @@ use serde::Serialize;
 use super::joint_args::{room_config, MethodArgs};
 use super::{args, check_outputs};
 #[cfg(feature = "charts")]
-use semsplat::eval::chart::{lines, Line};
-use semsplat::experiment::{mislabel_follow, score_methods, Lifter, MislabelFollow, TrainLabels};
+use semsplat::eval::chart::{lines, Line, Reference};
+use semsplat::eval::metrics::ClassIou;
+use semsplat::experiment::{
+    mislabel_follow, score_instance_oracle, score_methods, Lifter, MislabelFollow, TrainLabels,
+    ORACLE_NAME,
+};
 use semsplat::gpu::Gpu;
 use semsplat::synth::{generate, NoiseSpec};
 use semsplat::util::{interrupt, write_bytes_atomic};
@@ -59,8 +64,13 @@ pub struct SweepArgs {
     /// Noise levels (default per kind, starting at 0: the clean reference).
     #[arg(long, value_delimiter = ',', num_args = 1.., value_parser = args::non_negative::<f64>)]
     levels: Vec<f64>,
-    #[arg(long, default_value = "office")]
+    /// The room (one of `--presets`' names, or a room spec file).
+    #[arg(long, default_value = "office", conflicts_with = "presets")]
     preset: String,
+    /// Several rooms, e.g. office,living: every (room, seed) is one run; the JSON and chart
+    /// give mean, min and max over the runs.
+    #[arg(long, value_delimiter = ',', num_args = 1..)]
+    presets: Vec<String>,
     /// Output folder: robustness_<noise>.png and robustness_<noise>.json.
     #[arg(long, default_value = "demo_out")]
     out: PathBuf,
@@ -72,29 +82,98 @@ pub struct SweepArgs {
     width: u32,
     #[arg(long, default_value_t = 240, value_parser = args::at_least_one::<u32>)]
     height: u32,
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, conflicts_with = "seeds")]
     seed: u64,
+    /// Several seeds, e.g. 1,2,3 (cameras, Gaussians and noise all follow the seed).
+    #[arg(long, value_delimiter = ',', num_args = 1..)]
+    seeds: Vec<u64>,
     #[command(flatten)]
     methods: MethodArgs,
+}
+
+/// One method's (or the oracle's) figures at one level of one run.
+#[derive(Serialize)]
+struct MethodLevel {
+    method: String,
+    /// Held-out views.
+    miou: f64,
+    gaussian_accuracy: f64,
+    /// Held-out IoU per class present there, with the room's class names.
+    per_class: Vec<ClassIou>,
 }
 
 #[derive(Serialize)]
 struct LevelResult {
     level: f64,
-    /// method -> mIoU on held-out views
-    miou: Vec<(String, f64)>,
-    gaussian_accuracy: Vec<(String, f64)>,
+    methods: Vec<MethodLevel>,
+    /// The instance-oracle bound on the same labels.
+    oracle: MethodLevel,
     /// Consistent noise only: per mislabeled object and method.
     mislabeled: Vec<(String, Vec<MislabelFollow>)>,
+}
+
+/// One room and seed: every level.
+#[derive(Serialize)]
+struct RunResult {
+    preset: String,
+    seed: u64,
+    levels: Vec<LevelResult>,
+}
+
+/// Mean, min and max of one figure over the runs.
+#[derive(Clone, Copy, Serialize)]
+struct Spread {
+    mean: f64,
+    min: f64,
+    max: f64,
+}
+
+impl Spread {
+    fn of(values: impl Iterator<Item = f64> + Clone) -> Spread {
+        let n = values.clone().count().max(1) as f64;
+        Spread {
+            mean: values.clone().sum::<f64>() / n,
+            min: values.clone().fold(f64::INFINITY, f64::min),
+            max: values.fold(f64::NEG_INFINITY, f64::max),
+        }
+    }
+}
+
+/// One method's spread over the runs at one level.
+#[derive(Serialize)]
+struct MethodSpread {
+    method: String,
+    miou: Spread,
+    gaussian_accuracy: Spread,
+}
+
+#[derive(Serialize)]
+struct LevelSummary {
+    level: f64,
+    /// Methods, then the oracle last.
+    methods: Vec<MethodSpread>,
+}
+
+/// The clean-label reference line: the method with the best mean mIoU at level 0.
+#[derive(Serialize)]
+struct CleanReference {
+    method: String,
+    miou: f64,
 }
 
 #[derive(Serialize)]
 struct SweepReport {
     noise: &'static str,
-    preset: String,
-    levels: Vec<LevelResult>,
-    /// method -> first level where mIoU fell below half of its value at the first level.
+    presets: Vec<String>,
+    seeds: Vec<u64>,
+    /// Mean, min and max over the runs (every preset and seed).
+    levels: Vec<LevelSummary>,
+    /// None when the levels do not include 0.
+    clean_reference: Option<CleanReference>,
+    /// method -> first level where its mean mIoU fell below half of its mean at the first
+    /// level.
     breaks_at: Vec<(String, Option<f64>)>,
+    runs: Vec<RunResult>,
 }
 
 pub fn run(args: SweepArgs) -> Result<()> {
@@ -103,30 +182,57 @@ pub fn run(args: SweepArgs) -> Result<()> {
     } else {
         args.levels.clone()
     };
+    let presets = if args.presets.is_empty() {
+        vec![args.preset.clone()]
+    } else {
+        args.presets.clone()
+    };
+    let seeds = if args.seeds.is_empty() {
+        vec![args.seed]
+    } else {
+        args.seeds.clone()
+    };
     check_outputs(&[], &[("--out", Some(&args.out))])?;
     let methods = args.methods.methods()?;
     let gpu = Gpu::new()?;
-    let results = levels
-        .iter()
-        .map(|&level| {
-            interrupt::check()?;
-            run_level(&args, &gpu, &methods, level)
-        })
-        .collect::<Result<Vec<_>>>()?;
-    let key = args.noise.key();
-    write_chart(&args, &results)?;
-    let report = SweepReport {
-        noise: key,
-        preset: args.preset.clone(),
-        breaks_at: breaks_at(&results),
-        levels: results,
-    };
-    for (m, b) in &report.breaks_at {
-        match b {
-            Some(l) => println!("{m}: below half of its clean mIoU at {key}={l}"),
-            None => println!("{m}: never below half of its clean mIoU in this range"),
+    let mut runs = Vec::new();
+    for preset in &presets {
+        for &seed in &seeds {
+            eprintln!("{preset}, seed {seed}");
+            let levels = levels
+                .iter()
+                .map(|&level| {
+                    interrupt::check()?;
+                    run_level(&args, &gpu, &methods, (preset, seed), level)
+                })
+                .collect::<Result<Vec<_>>>()?;
+            runs.push(RunResult {
+                preset: preset.clone(),
+                seed,
+                levels,
+            });
         }
     }
+    let summary = summarize(&runs);
+    let clean_reference = clean_reference(&summary);
+    let key = args.noise.key();
+    write_chart(
+        &args,
+        &presets,
+        &summary,
+        clean_reference.as_ref(),
+        runs.len(),
+    )?;
+    let report = SweepReport {
+        noise: key,
+        presets,
+        seeds,
+        breaks_at: breaks_at(&summary),
+        levels: summary,
+        clean_reference,
+        runs,
+    };
+    print_summary(&report);
     write_bytes_atomic(
         &args.out.join(format!("robustness_{key}.json")),
         serde_json::to_string_pretty(&report)?.as_bytes(),
@@ -134,14 +240,42 @@ pub fn run(args: SweepArgs) -> Result<()> {
     Ok(())
 }
 
-/// Generates the room with `level` of the noise and scores every method on it.
-fn run_level(args: &SweepArgs, gpu: &Gpu, methods: &[Lifter], level: f64) -> Result<LevelResult> {
+fn print_summary(report: &SweepReport) {
+    let key = report.noise;
+    if report.runs.len() > 1 {
+        println!("mean (min-max) over {} runs:", report.runs.len());
+        for l in &report.levels {
+            for m in &l.methods {
+                let (a, g) = (m.miou, m.gaussian_accuracy);
+                println!(
+                    "{key}={:<6} {:<28} mIoU {:.4} ({:.4}-{:.4})  3D acc {:.4} ({:.4}-{:.4})",
+                    l.level, m.method, a.mean, a.min, a.max, g.mean, g.min, g.max
+                );
+            }
+        }
+    }
+    for (m, b) in &report.breaks_at {
+        match b {
+            Some(l) => println!("{m}: below half of its clean mIoU at {key}={l}"),
+            None => println!("{m}: never below half of its clean mIoU in this range"),
+        }
+    }
+}
+
+/// Generates the room with `level` of the noise and scores every method and the oracle on it.
+fn run_level(
+    args: &SweepArgs,
+    gpu: &Gpu,
+    methods: &[Lifter],
+    (preset, seed): (&str, u64),
+    level: f64,
+) -> Result<LevelResult> {
     let mut cfg = room_config(
-        &args.preset,
+        preset,
         args.views,
         args.test_views,
         (args.width, args.height),
-        args.seed,
+        seed,
     )?;
     let spec = if args.noise == NoiseKind::Boundary {
         format!("boundary={}", level.round() as u32)
@@ -159,22 +293,23 @@ fn run_level(args: &SweepArgs, gpu: &Gpu, methods: &[Lifter], level: f64) -> Res
         &args.methods.schedule(),
         |m| eprintln!("  {m}"),
     )?;
-    for r in &scores {
+    let oracle = score_instance_oracle(gpu, &s)?;
+    for r in scores.iter().chain([&oracle]) {
         println!(
-            "{spec:<16} {:<18} mIoU {:.4}  3D acc {:.4}",
+            "{preset:<8} seed {seed:<4} {spec:<16} {:<28} mIoU {:.4}  3D acc {:.4}",
             r.method, r.miou, r.gaussian_accuracy
         );
     }
+    let figures = |r: &semsplat::experiment::MethodScore| MethodLevel {
+        method: r.method.to_string(),
+        miou: r.miou,
+        gaussian_accuracy: r.gaussian_accuracy,
+        per_class: r.per_class.clone(),
+    };
     Ok(LevelResult {
         level,
-        miou: scores
-            .iter()
-            .map(|r| (r.method.to_string(), r.miou))
-            .collect(),
-        gaussian_accuracy: scores
-            .iter()
-            .map(|r| (r.method.to_string(), r.gaussian_accuracy))
-            .collect(),
+        methods: scores.iter().map(figures).collect(),
+        oracle: figures(&oracle),
         mislabeled: scores
             .iter()
             .map(|r| (r.method.to_string(), mislabel_follow(&s, r)))
@@ -182,53 +317,136 @@ fn run_level(args: &SweepArgs, gpu: &Gpu, methods: &[Lifter], level: f64) -> Res
     })
 }
 
-/// The methods, in the order of every level's results.
-fn method_names(results: &[LevelResult]) -> Vec<String> {
-    results[0].miou.iter().map(|(m, _)| m.clone()).collect()
+/// Per level, every method's (then the oracle's) mean, min and max over the runs. Every run
+/// has the same levels and methods in the same order.
+fn summarize(runs: &[RunResult]) -> Vec<LevelSummary> {
+    let first = &runs[0].levels;
+    (0..first.len())
+        .map(|l| {
+            let at = |k: usize| {
+                runs.iter().map(move |r| {
+                    let level = &r.levels[l];
+                    level.methods.get(k).unwrap_or(&level.oracle)
+                })
+            };
+            let methods = (0..=first[l].methods.len())
+                .map(|k| MethodSpread {
+                    method: at(k).next().map(|m| m.method.clone()).unwrap_or_default(),
+                    miou: Spread::of(at(k).map(|m| m.miou)),
+                    gaussian_accuracy: Spread::of(at(k).map(|m| m.gaussian_accuracy)),
+                })
+                .collect();
+            LevelSummary {
+                level: first[l].level,
+                methods,
+            }
+        })
+        .collect()
 }
 
-/// Per method: the first level where mIoU fell below half of its value at the first level.
-fn breaks_at(results: &[LevelResult]) -> Vec<(String, Option<f64>)> {
-    method_names(results)
-        .into_iter()
-        .enumerate()
-        .map(|(k, m)| {
-            let clean = results[0].miou[k].1;
+/// The best mean mIoU at level 0 among the methods (not the oracle); None without level 0.
+fn clean_reference(summary: &[LevelSummary]) -> Option<CleanReference> {
+    let clean = summary.iter().find(|l| l.level == 0.0)?;
+    clean
+        .methods
+        .iter()
+        .filter(|m| m.method != ORACLE_NAME)
+        .max_by(|a, b| a.miou.mean.total_cmp(&b.miou.mean))
+        .map(|m| CleanReference {
+            method: m.method.clone(),
+            miou: m.miou.mean,
+        })
+}
+
+/// Per method (and the oracle): the first level where its mean mIoU fell below half of its
+/// mean at the first level.
+fn breaks_at(summary: &[LevelSummary]) -> Vec<(String, Option<f64>)> {
+    (0..summary[0].methods.len())
+        .map(|k| {
+            let clean = summary[0].methods[k].miou.mean;
             (
-                m,
-                results
+                summary[0].methods[k].method.clone(),
+                summary
                     .iter()
-                    .find(|r| r.miou[k].1 < 0.5 * clean)
-                    .map(|r| r.level),
+                    .find(|l| l.methods[k].miou.mean < 0.5 * clean)
+                    .map(|l| l.level),
             )
         })
         .collect()
 }
 
-/// robustness_<noise>.png: every method's mIoU against the noise level.
+/// robustness_<noise>.png: every method's mean mIoU against the noise level, with its
+/// min-max band over the runs, the oracle bound and the clean-label reference dashed.
 #[cfg(feature = "charts")]
-fn write_chart(args: &SweepArgs, results: &[LevelResult]) -> Result<()> {
-    let methods = method_names(results);
-    let series: Vec<Line> = methods
+fn write_chart(
+    args: &SweepArgs,
+    presets: &[String],
+    summary: &[LevelSummary],
+    clean: Option<&CleanReference>,
+    runs: usize,
+) -> Result<()> {
+    let oracle = summary[0].methods.len() - 1;
+    let curve = |k: usize| -> Vec<(f64, f64)> {
+        summary
+            .iter()
+            .map(|l| (l.level, l.methods[k].miou.mean))
+            .collect()
+    };
+    let series: Vec<Line> = summary[0].methods[..oracle]
         .iter()
         .enumerate()
         .map(|(k, m)| Line {
-            label: m,
-            points: results.iter().map(|r| (r.level, r.miou[k].1)).collect(),
+            label: &m.method,
+            points: curve(k),
+            band: if runs > 1 {
+                summary
+                    .iter()
+                    .map(|l| (l.methods[k].miou.min, l.methods[k].miou.max))
+                    .collect()
+            } else {
+                Vec::new()
+            },
         })
         .collect();
+    let clean_label = clean.map(|c| format!("clean labels: {} at level 0", c.method));
+    let mut references = vec![Reference {
+        label: "oracle bound (instance majority of the noisy labels)",
+        points: curve(oracle),
+    }];
+    if let (Some(c), Some(label)) = (clean, &clean_label) {
+        let xs = summary.iter().map(|l| l.level);
+        references.push(Reference {
+            label,
+            points: vec![
+                (xs.clone().fold(f64::INFINITY, f64::min), c.miou),
+                (xs.fold(f64::NEG_INFINITY, f64::max), c.miou),
+            ],
+        });
+    }
     let key = args.noise.key();
+    let spread = if runs > 1 {
+        format!(", mean and min-max of {runs} runs")
+    } else {
+        String::new()
+    };
     lines(
         &args.out.join(format!("robustness_{key}.png")),
-        &format!("{}: mIoU as {key} noise grows", args.preset),
+        &format!("{}: mIoU as {key} noise grows{spread}", presets.join("+")),
         &format!("{key} level"),
         "mIoU on held-out views",
         &series,
+        &references,
     )
 }
 
 #[cfg(not(feature = "charts"))]
-fn write_chart(_: &SweepArgs, _: &[LevelResult]) -> Result<()> {
+fn write_chart(
+    _: &SweepArgs,
+    _: &[String],
+    _: &[LevelSummary],
+    _: Option<&CleanReference>,
+    _: usize,
+) -> Result<()> {
     eprintln!("built without the charts feature: no robustness chart");
     Ok(())
 }

@@ -176,21 +176,50 @@ pub struct Line<'a> {
     pub label: &'a str,
     /// (level, value) pairs in level order.
     pub points: Vec<(f64, f64)>,
+    /// (min, max) per point: the spread over several runs, drawn as a shaded band around the
+    /// line; empty: no band.
+    pub band: Vec<(f64, f64)>,
 }
 
-/// Lines of `y_label` (0..1) against `x_label`, one per method.
+/// A dashed reference line (a bound or a baseline the methods are read against).
+pub struct Reference<'a> {
+    pub label: &'a str,
+    pub points: Vec<(f64, f64)>,
+}
+
+/// Lines of `y_label` (0..1) against `x_label`, one per method, each with its min-max band
+/// where it has one, and dashed reference lines drawn over them.
 pub fn lines(
     path: &Path,
     title: &str,
     x_label: &str,
     y_label: &str,
     series: &[Line],
+    references: &[Reference],
 ) -> Result<()> {
-    let all = || series.iter().flat_map(|s| s.points.iter());
-    ensure!(all().count() > 0, "no points to chart");
+    let all = || {
+        series
+            .iter()
+            .flat_map(|s| s.points.iter())
+            .chain(references.iter().flat_map(|r| r.points.iter()))
+    };
     ensure!(
-        all().all(|(x, y)| x.is_finite() && y.is_finite()),
+        series.iter().any(|s| !s.points.is_empty()),
+        "no points to chart"
+    );
+    ensure!(
+        all().all(|(x, y)| x.is_finite() && y.is_finite())
+            && series
+                .iter()
+                .flat_map(|s| s.band.iter())
+                .all(|(lo, hi)| lo.is_finite() && hi.is_finite()),
         "non-finite chart data"
+    );
+    ensure!(
+        series
+            .iter()
+            .all(|s| s.band.is_empty() || s.band.len() == s.points.len()),
+        "a band needs one (min, max) per point"
     );
     draw_png(path, |root| {
         let xmin = all().map(|p| p.0).fold(f64::INFINITY, f64::min);
@@ -211,6 +240,10 @@ pub fn lines(
             .label_style(("sans-serif", 16))
             .draw()
             .map_err(plot_err)?;
+        // Bands first, so that no band hides a line.
+        for (i, s) in series.iter().enumerate() {
+            draw_band(&mut chart, s, Palette99::pick(i).to_rgba())?;
+        }
         for (i, s) in series.iter().enumerate() {
             let color = Palette99::pick(i).to_rgba();
             chart
@@ -227,6 +260,44 @@ pub fn lines(
                 .draw_series(s.points.iter().map(|&p| Circle::new(p, 5, color.filled())))
                 .map_err(plot_err)?;
         }
+        for (i, r) in references.iter().enumerate() {
+            // Dark, distinct from the method palette: black, then greys.
+            let grey = (i * 90).min(160) as u8;
+            let color = RGBColor(grey, grey, grey).to_rgba();
+            chart
+                .draw_series(DashedLineSeries::new(
+                    r.points.iter().copied(),
+                    12,
+                    8,
+                    color.stroke_width(2),
+                ))
+                .map_err(plot_err)?
+                .label(r.label)
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+                });
+        }
         draw_legend(&mut chart, SeriesLabelPosition::LowerLeft)
     })
+}
+
+/// The shaded min-max band of one line (nothing when it has none).
+fn draw_band<DB: DrawingBackend>(
+    chart: &mut ChartContext<DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    line: &Line,
+    color: RGBAColor,
+) -> Result<()> {
+    if line.band.is_empty() {
+        return Ok(());
+    }
+    let upper = line.points.iter().zip(&line.band).map(|(p, b)| (p.0, b.1));
+    let lower = line.points.iter().zip(&line.band).map(|(p, b)| (p.0, b.0));
+    let outline: Vec<(f64, f64)> = upper.chain(lower.rev()).collect();
+    chart
+        .draw_series(std::iter::once(Polygon::new(
+            outline,
+            color.mix(0.18).filled(),
+        )))
+        .map_err(plot_err)?;
+    Ok(())
 }

@@ -12,7 +12,7 @@ use super::lifter::{JointSchedule, Lifter};
 use crate::dataset::{user_classes, CompactClasses};
 use crate::eval::image_quality::{image_quality, ImageQuality};
 use crate::eval::label_render::LabelRenderer;
-use crate::eval::metrics::{gaussian_accuracy, ClassIou, Confusion};
+use crate::eval::metrics::{gaussian_accuracy, ClassIou, Confusion, SegmentationScores};
 use crate::fuse::{
     accumulate, assign_semantic_near, fuse_consensus, nearest_neighbours, ConsensusParams,
     FuseConfig, Method, SegmentVotes,
@@ -141,14 +141,8 @@ pub fn score_methods(
     let truth0 = s.gaussians.class_ids.clone().unwrap_or_default();
     let compact = CompactClasses::from_table(&s.room.classes)?;
     let labels = train_labels(s, which, &compact)?;
-    let test: Vec<(usize, &Camera)> = s
-        .cameras
-        .iter()
-        .enumerate()
-        .filter(|(_, c)| c.split == Split::Test)
-        .collect();
     ensure!(
-        !test.is_empty(),
+        s.cameras.iter().any(|c| c.split == Split::Test),
         "the scene has no held-out test views to evaluate on"
     );
     let mut out = Vec::new();
@@ -172,16 +166,7 @@ pub fn score_methods(
         let scene = lifted.as_ref().map_or(&s.gaussians, |l| &l.gaussians);
         let truth = lifted.as_ref().map_or(&truth0, |l| &l.truth);
 
-        let mut confusion = Confusion::default();
-        let mut renderer = LabelRenderer::new(gpu, scene, &classes)?;
-        for &(i, cam) in &test {
-            confusion.add(
-                &s.views[i].labels,
-                &renderer.render_ids(cam)?,
-                LabelMap::IGNORE,
-            );
-        }
-        let seg = confusion.scores();
+        let seg = held_out_segmentation(gpu, s, scene, &classes)?;
         let image_quality = match &lifted {
             Some(l) => Some(held_out_quality(gpu, s, &l.gaussians)?),
             None => None,
@@ -202,6 +187,26 @@ pub fn score_methods(
         });
     }
     Ok(out)
+}
+
+/// Segmentation scores of `classes` (user ids per Gaussian of `scene`, -1: none) rendered
+/// from the held-out views against their true label maps, classes named from the room.
+pub fn held_out_segmentation(
+    gpu: &Gpu,
+    s: &SynthScene,
+    scene: &Gaussians,
+    classes: &[i32],
+) -> Result<SegmentationScores> {
+    let mut confusion = Confusion::default();
+    let mut renderer = LabelRenderer::new(gpu, scene, classes)?;
+    for (cam, view) in s.cameras.iter().zip(&s.views) {
+        if cam.split == Split::Test {
+            confusion.add(&view.labels, &renderer.render_ids(cam)?, LabelMap::IGNORE);
+        }
+    }
+    let mut seg = confusion.scores();
+    seg.name_classes(&s.room.classes);
+    Ok(seg)
 }
 
 /// PSNR and SSIM of `g` rendered from the scene's held-out views against their images.
