@@ -197,30 +197,13 @@ pub fn lines(
     series: &[Line],
     references: &[Reference],
 ) -> Result<()> {
+    check_line_data(series, references)?;
     let all = || {
         series
             .iter()
             .flat_map(|s| s.points.iter())
             .chain(references.iter().flat_map(|r| r.points.iter()))
     };
-    ensure!(
-        series.iter().any(|s| !s.points.is_empty()),
-        "no points to chart"
-    );
-    ensure!(
-        all().all(|(x, y)| x.is_finite() && y.is_finite())
-            && series
-                .iter()
-                .flat_map(|s| s.band.iter())
-                .all(|(lo, hi)| lo.is_finite() && hi.is_finite()),
-        "non-finite chart data"
-    );
-    ensure!(
-        series
-            .iter()
-            .all(|s| s.band.is_empty() || s.band.len() == s.points.len()),
-        "a band needs one (min, max) per point"
-    );
     draw_png(path, |root| {
         let xmin = all().map(|p| p.0).fold(f64::INFINITY, f64::min);
         let xmax = all().map(|p| p.0).fold(f64::NEG_INFINITY, f64::max);
@@ -279,6 +262,34 @@ pub fn lines(
         }
         draw_legend(&mut chart, SeriesLabelPosition::LowerLeft)
     })
+}
+
+/// Refuses chart data that would draw nothing or garbage: no points, non-finite values, or
+/// a band without one (min, max) per point.
+fn check_line_data(series: &[Line], references: &[Reference]) -> Result<()> {
+    ensure!(
+        series.iter().any(|s| !s.points.is_empty()),
+        "no points to chart"
+    );
+    let points = series
+        .iter()
+        .flat_map(|s| s.points.iter())
+        .chain(references.iter().flat_map(|r| r.points.iter()));
+    let bands = series.iter().flat_map(|s| s.band.iter());
+    ensure!(
+        points.clone().all(|(x, y)| x.is_finite() && y.is_finite())
+            && bands
+                .clone()
+                .all(|(lo, hi)| lo.is_finite() && hi.is_finite()),
+        "non-finite chart data"
+    );
+    ensure!(
+        series
+            .iter()
+            .all(|s| s.band.is_empty() || s.band.len() == s.points.len()),
+        "a band needs one (min, max) per point"
+    );
+    Ok(())
 }
 
 /// The shaded min-max band of one line (nothing when it has none).
