@@ -2,33 +2,13 @@
 
 mod common;
 
-use common::cli::{ok, semsplat};
-
-use std::path::Path;
-
-fn synth(dir: &Path) {
-    ok(&[
-        "synth",
-        "--preset",
-        "tiny",
-        "--out",
-        dir.to_str().unwrap(),
-        "--views",
-        "4",
-        "--test-views",
-        "1",
-        "--width",
-        "64",
-        "--height",
-        "48",
-    ]);
-}
+use common::cli::{ok, semsplat, synth_tiny};
 
 #[test]
 fn fuse_writes_classes_reassigns_from_saved_evidence_and_extracts() {
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();
-    synth(d);
+    synth_tiny(d, 4, (64, 48));
     let p = |f: &str| d.join(f).to_str().unwrap().to_string();
     // `fuse` on the synth folder's scene, cameras and labels, plus `extra`.
     let (scene, cameras, labels) = (p("scene.ply"), p("cameras.json"), p("labels"));
@@ -217,7 +197,7 @@ fn fuse_writes_classes_reassigns_from_saved_evidence_and_extracts() {
 fn render_writes_images_labels_and_raw_arrays() {
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();
-    synth(d);
+    synth_tiny(d, 4, (64, 48));
     let p = |f: &str| d.join(f).to_str().unwrap().to_string();
     // A scene with semantic logits: one-hot from the true classes.
     let mut g = semsplat::scene::ply::read_ply(&d.join("scene.ply")).unwrap();
@@ -289,7 +269,7 @@ fn render_writes_images_labels_and_raw_arrays() {
 fn bad_input_is_one_clear_error_and_writes_nothing() {
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();
-    synth(d);
+    synth_tiny(d, 4, (64, 48));
     let p = |f: &str| d.join(f).to_str().unwrap().to_string();
     // A complete `fuse` command writing x.ply, with `extra` options.
     let fuse_with = |extra: &[&str]| -> Vec<String> {

@@ -3,28 +3,9 @@
 
 mod common;
 
-use common::cli::{fails, ok};
+use common::cli::{fails, ok, synth_tiny};
 
 use std::path::Path;
-
-/// A tiny room with 7 labeled views (6 train + 1 test), so 3 shards get 3, 2 and 2 views.
-fn synth(dir: &Path) {
-    ok(&[
-        "synth",
-        "--preset",
-        "tiny",
-        "--out",
-        dir.to_str().unwrap(),
-        "--views",
-        "6",
-        "--test-views",
-        "1",
-        "--width",
-        "48",
-        "--height",
-        "32",
-    ]);
-}
 
 fn bytes(path: &Path) -> Vec<u8> {
     std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
@@ -39,7 +20,7 @@ fn json(path: &Path) -> serde_json::Value {
 fn shards_merge_to_the_single_run(method: &[&str]) {
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();
-    synth(d);
+    synth_tiny(d, 6, (48, 32));
     let p = |f: &str| d.join(f).to_str().unwrap().to_string();
     let (scene, cameras, labels) = (p("scene.ply"), p("cameras.json"), p("labels"));
     let inputs = [
@@ -137,7 +118,7 @@ fn vote_shards_merge_to_the_single_run_byte_for_byte() {
 fn merge_refuses_parts_that_do_not_belong_together() {
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();
-    synth(d);
+    synth_tiny(d, 6, (48, 32));
     let p = |f: &str| d.join(f).to_str().unwrap().to_string();
     let (scene, cameras, labels) = (p("scene.ply"), p("cameras.json"), p("labels"));
     let shard = |k: &str, method: &str, out: &str| {

@@ -2,36 +2,12 @@
 
 mod common;
 
-use common::cli::semsplat;
+use common::cli::{semsplat, synth_tiny};
 
 use std::path::Path;
 use std::process::Output;
 
 use semsplat::scene::ply::read_ply;
-
-fn synth(dir: &Path) {
-    let out = semsplat(&[
-        "synth",
-        "--preset",
-        "tiny",
-        "--views",
-        "4",
-        "--test-views",
-        "1",
-        "--width",
-        "48",
-        "--height",
-        "36",
-        "--no-previews",
-        "--out",
-        dir.to_str().unwrap(),
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
 
 fn train_args<'a>(d: &'a str, out: &'a str) -> Vec<String> {
     [
@@ -62,7 +38,7 @@ fn run(args: &[String]) -> Output {
 fn train_writes_classes_logits_checkpoints_and_a_report() {
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path().join("room");
-    synth(&d);
+    synth_tiny(&d, 4, (48, 36));
     let d = d.to_str().unwrap();
     let out = tmp.path().join("trained.ply");
     let report = tmp.path().join("train.json");
@@ -146,7 +122,7 @@ fn train_writes_classes_logits_checkpoints_and_a_report() {
 fn semantics_only_keeps_the_geometry() {
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path().join("room");
-    synth(&d);
+    synth_tiny(&d, 4, (48, 36));
     let d = d.to_str().unwrap();
     let out = tmp.path().join("sem.ply");
     let mut args = train_args(d, out.to_str().unwrap());
@@ -166,7 +142,7 @@ fn semantics_only_keeps_the_geometry() {
 fn bad_input_gives_a_clear_error_and_no_output() {
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path().join("room");
-    synth(&d);
+    synth_tiny(&d, 4, (48, 36));
     let ds = d.to_str().unwrap();
     let out = tmp.path().join("never.ply");
     let outs = out.to_str().unwrap();

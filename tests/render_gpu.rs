@@ -55,6 +55,31 @@ fn max_diff(gpu: &[f32], cpu: impl Iterator<Item = f64>) -> (f64, usize) {
     worst
 }
 
+/// `g` rendered by `raster` and by the f64 reference with the same background and
+/// semantics, and the reference's settings.
+fn render_both(
+    raster: &mut Rasterizer,
+    g: &Gaussians,
+    cam: &Camera,
+    mode: Option<SemanticMode>,
+) -> (RenderedFrame, reference::ReferenceImage, RenderSettings) {
+    let scene = GpuScene::upload(gpu(), g).unwrap();
+    let opts = RenderOptions {
+        background: [0.2, 0.4, 0.6],
+        semantics: mode,
+        ..Default::default()
+    };
+    let frame = raster.render(&scene, cam, &opts).unwrap();
+    let settings = RenderSettings {
+        background: [0.2, 0.4, 0.6],
+        semantics: mode.is_some(),
+        semantic_mode: ref_mode(mode.unwrap_or_default()),
+        ..Default::default()
+    };
+    let r = reference::render(g, cam, &settings);
+    (frame, r, settings)
+}
+
 /// Renders on both sides and checks every output and the intersection list.
 fn compare(
     raster: &mut Rasterizer,
@@ -75,22 +100,8 @@ fn compare_within(
     tol: f64,
     exact_lists: bool,
 ) -> RenderedFrame {
-    let gpu = gpu();
     let g = &separate_depth_ties(g, cam);
-    let scene = GpuScene::upload(gpu, g).unwrap();
-    let opts = RenderOptions {
-        background: [0.2, 0.4, 0.6],
-        semantics: mode,
-        ..Default::default()
-    };
-    let frame = raster.render(&scene, cam, &opts).unwrap();
-    let settings = RenderSettings {
-        background: [0.2, 0.4, 0.6],
-        semantics: mode.is_some(),
-        semantic_mode: ref_mode(mode.unwrap_or_default()),
-        ..Default::default()
-    };
-    let r = reference::render(g, cam, &settings);
+    let (frame, r, settings) = render_both(raster, g, cam, mode);
     assert_eq!(frame.channels as usize, r.channels, "{what}: channels");
     let checks: [(&str, &[f32], Vec<f64>); 5] = [
         ("rgb", &frame.rgb, r.rgb.iter().flatten().copied().collect()),
@@ -638,22 +649,8 @@ fn a_scene_whose_sh_passes_one_binding_renders() {
 /// times a colour difference. Millions of pixels make a few such pixels likely; a wrong
 /// band would change whole rows of tiles.
 fn compare_allowing_threshold_pixels(g: &Gaussians, cam: &Camera, mode: Option<SemanticMode>) {
-    let gpu = gpu();
     let g = &separate_depth_ties(g, cam);
-    let scene = GpuScene::upload(gpu, g).unwrap();
-    let opts = RenderOptions {
-        background: [0.2, 0.4, 0.6],
-        semantics: mode,
-        ..Default::default()
-    };
-    let frame = Rasterizer::new(gpu).render(&scene, cam, &opts).unwrap();
-    let settings = RenderSettings {
-        background: [0.2, 0.4, 0.6],
-        semantics: mode.is_some(),
-        semantic_mode: ref_mode(mode.unwrap_or_default()),
-        ..Default::default()
-    };
-    let r = reference::render(g, cam, &settings);
+    let (frame, r, _) = render_both(&mut Rasterizer::new(gpu()), g, cam, mode);
     let pixels = (cam.width * cam.height) as usize;
     let checks: [(&str, &[f32], Vec<f64>); 3] = [
         ("rgb", &frame.rgb, r.rgb.iter().flatten().copied().collect()),

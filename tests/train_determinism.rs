@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::cli::semsplat;
+use common::cli::{semsplat, synth_tiny};
 
 use std::path::Path;
 
@@ -13,31 +13,6 @@ use semsplat::render::backward::{BackwardVariant, HostPixelGrads};
 use semsplat::render::{GpuScene, Rasterizer, RenderOptions, SemanticMode};
 use semsplat::scene::random_scene::{random_scene, RandomSceneSpec};
 use semsplat::scene::Camera;
-
-fn synth(dir: &Path) {
-    let d = dir.to_str().unwrap();
-    let out = semsplat(&[
-        "synth",
-        "--preset",
-        "tiny",
-        "--views",
-        "4",
-        "--test-views",
-        "1",
-        "--width",
-        "48",
-        "--height",
-        "36",
-        "--no-previews",
-        "--out",
-        d,
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
 
 /// Trains the room in `d` into `out` with `extra` options; returns the PLY's bytes.
 fn train(d: &str, out: &Path, extra: &[&str]) -> Vec<u8> {
@@ -80,7 +55,7 @@ fn vertex_count(ply: &[u8]) -> usize {
 fn train_twice_with_the_same_seed_writes_the_same_bytes() {
     let tmp = tempfile::tempdir().unwrap();
     let room = tmp.path().join("room");
-    synth(&room);
+    synth_tiny(&room, 4, (48, 36));
     let d = room.to_str().unwrap();
     let init = std::fs::read(room.join("init.ply")).unwrap();
     // 30 iterations: the scaled 3DGS schedule densifies at iteration 10.

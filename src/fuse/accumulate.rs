@@ -10,7 +10,7 @@ use serde::Serialize;
 use super::method::Method;
 use super::partial::{fixed_to_f64, EvidenceKind, RawEvidence};
 use super::scores::ClassScores;
-use crate::contract::params::{ContribParams, VoteParams};
+use crate::contract::params::{CenterParams, ContribParams};
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, BufferRange, Gpu, Recorder};
 use crate::render::rasterizer::{SplitSizes, TileLists};
@@ -465,6 +465,34 @@ fn record_vote(
     Ok(t.between(m0, m1).unwrap_or(0.0) * 1e-6)
 }
 
+/// Push constants of the kernels that look up each Gaussian's center pixel (the vote and
+/// the consensus's observations): the camera, clip range and occlusion test of `cfg`, and
+/// the class rows `(row_begin, rows)` a vote pass holds.
+pub(crate) fn center_params(
+    cam: &Camera,
+    n: u32,
+    cfg: &FuseConfig,
+    occlusion: bool,
+    (row_begin, rows): (u32, u32),
+) -> CenterParams {
+    CenterParams {
+        world_to_camera: camera_rows_f32(cam),
+        fx: cam.fx as f32,
+        fy: cam.fy as f32,
+        cx: cam.cx as f32,
+        cy: cam.cy as f32,
+        near: cfg.near,
+        far: cfg.far,
+        depth_tolerance: cfg.depth_tolerance,
+        occlusion: u32::from(occlusion),
+        width: cam.width,
+        height: cam.height,
+        n,
+        row_begin,
+        rows,
+    }
+}
+
 /// Records the vote of every projected center into the pass's rows; with `depth`, only
 /// centers within the tolerance of the rendered depth vote.
 fn dispatch_vote(
@@ -476,22 +504,8 @@ fn dispatch_vote(
     pass: &EvidencePass,
     cfg: &FuseConfig,
 ) -> Result<()> {
-    let params = VoteParams {
-        world_to_camera: camera_rows_f32(cam),
-        fx: cam.fx as f32,
-        fy: cam.fy as f32,
-        cx: cam.cx as f32,
-        cy: cam.cy as f32,
-        near: cfg.near,
-        far: cfg.far,
-        depth_tolerance: cfg.depth_tolerance,
-        occlusion: u32::from(depth.is_some()),
-        width: cam.width,
-        height: cam.height,
-        n: scene.n,
-        row_begin: pass.row_begin as u32,
-        rows: pass.rows as u32,
-    };
+    let rows = (pass.row_begin as u32, pass.rows as u32);
+    let params = center_params(cam, scene.n, cfg, depth.is_some(), rows);
     rec.dispatch(
         ids::FUSE_VOTE,
         &[

@@ -7,14 +7,13 @@
 
 use anyhow::{ensure, Result};
 
-use super::accumulate::{FuseConfig, FuseStats, LabelSource, NO_LABEL};
+use super::accumulate::{center_params, FuseConfig, FuseStats, LabelSource, NO_LABEL};
 use super::consensus_decide::{build_segments, decide, merge_segments, Consensus, ConsensusParams};
 use super::consensus_segments::{label_regions, nearest_neighbours, Observations};
 use super::scores::ClassScores;
-use crate::contract::params::CenterPixelParams;
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, Gpu, Recorder};
-use crate::render::{camera_rows_f32, GpuScene, Rasterizer};
+use crate::render::{GpuScene, Rasterizer};
 use crate::scene::Camera;
 
 /// Lifts the labels of `cams` by segment consensus. `means` are the scene's centers (the
@@ -167,20 +166,8 @@ fn dispatch_center_pixels(
     out: &Buffer,
     cfg: &FuseConfig,
 ) -> Result<()> {
-    let params = CenterPixelParams {
-        world_to_camera: camera_rows_f32(cam),
-        fx: cam.fx as f32,
-        fy: cam.fy as f32,
-        cx: cam.cx as f32,
-        cy: cam.cy as f32,
-        near: cfg.near,
-        far: cfg.far,
-        depth_tolerance: cfg.depth_tolerance,
-        occlusion: u32::from(depth.is_some()),
-        width: cam.width,
-        height: cam.height,
-        n: scene.n,
-    };
+    // No class rows: the observations take every label.
+    let params = center_params(cam, scene.n, cfg, depth.is_some(), (0, 0));
     rec.dispatch(
         ids::FUSE_CENTER_PIXEL,
         &[

@@ -1,5 +1,6 @@
 //! Running the `semsplat` binary from the integration tests.
 
+use std::path::Path;
 use std::process::{Command, Output};
 
 /// Runs `semsplat args...` and returns what it did.
@@ -26,4 +27,26 @@ pub fn fails(args: &[&str]) -> String {
     let out = semsplat(args);
     assert!(!out.status.success(), "{args:?} should fail");
     String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// Writes the tiny synthetic room into `dir`: `views` train views and one held-out view at
+/// `width` x `height`, without preview images.
+pub fn synth_tiny(dir: &Path, views: u32, (width, height): (u32, u32)) {
+    let (views, width, height) = (views.to_string(), width.to_string(), height.to_string());
+    ok(&[
+        "synth",
+        "--preset",
+        "tiny",
+        "--views",
+        &views,
+        "--test-views",
+        "1",
+        "--width",
+        &width,
+        "--height",
+        &height,
+        "--no-previews",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
 }

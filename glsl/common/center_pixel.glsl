@@ -1,0 +1,50 @@
+// Push constants and the pixel under a Gaussian's projected center, shared by the vote
+// (fuse/vote.comp) and the segment consensus's observations (fuse/center_pixel.comp). The
+// includer declares `means` and `depth` (float buffers) first.
+#ifndef CENTER_PIXEL_GLSL
+#define CENTER_PIXEL_GLSL
+
+#include "shared_constants.glsl" // NO_LABEL
+
+layout(push_constant) uniform CenterParams {
+    vec4 world_to_camera[3]; // rows (R00 R01 R02 t0), ...
+    float fx;
+    float fy;
+    float cx;
+    float cy;
+    float near;
+    float far;
+    float depth_tolerance; // relative, of the occlusion test
+    uint occlusion;        // 1: only where the center is within tolerance of the depth
+    uint width;
+    uint height;
+    uint n;
+    uint row_begin;        // vote: first class row of the votes this pass holds
+    uint rows;             // vote: class rows this pass holds
+} pc;
+
+// The pixel under Gaussian i's center, or NO_LABEL where the center is outside the clip
+// range or the image, or (with occlusion) not within the tolerance of the rendered depth.
+uint center_pixel(uint i) {
+    vec3 mean = vec3(means.data[3 * i], means.data[3 * i + 1], means.data[3 * i + 2]);
+    vec3 p = vec3(dot(pc.world_to_camera[0].xyz, mean) + pc.world_to_camera[0].w,
+                  dot(pc.world_to_camera[1].xyz, mean) + pc.world_to_camera[1].w,
+                  dot(pc.world_to_camera[2].xyz, mean) + pc.world_to_camera[2].w);
+    if (!(p.z > pc.near && p.z < pc.far)) {
+        return NO_LABEL;
+    }
+    vec2 uv = vec2(pc.fx * p.x / p.z + pc.cx, pc.fy * p.y / p.z + pc.cy);
+    if (!(uv.x >= 0.0 && uv.y >= 0.0 && uv.x < float(pc.width) && uv.y < float(pc.height))) {
+        return NO_LABEL;
+    }
+    uint pix = uint(uv.y) * pc.width + uint(uv.x);
+    if (pc.occlusion != 0) {
+        float d = depth.data[pix];
+        if (!(d > 0.0 && abs(p.z - d) <= pc.depth_tolerance * d)) {
+            return NO_LABEL;
+        }
+    }
+    return pix;
+}
+
+#endif
