@@ -1,12 +1,14 @@
 //! Fusion speed (issue #5): every fusion method over many views of a random scene, against
 //! a plain forward render (RGB only, the same render options) of the same views.
 
+use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{ensure, Result};
 use glam::DVec3;
 use serde::Serialize;
 
+use super::export::{export_inputs, ExportLabels};
 use super::median;
 use crate::fuse::{accumulate, FuseConfig, LabelSource, Method, NO_LABEL};
 use crate::gpu::Gpu;
@@ -36,6 +38,9 @@ pub struct FuseBenchSpec {
     /// Timed runs of every method and of the forward render; medians are reported.
     pub iters: usize,
     pub seed: u64,
+    /// Write the scene, cameras and label maps here first (see [`super::export`]).
+    #[serde(skip)]
+    pub export: Option<PathBuf>,
 }
 
 /// The forward render of every view.
@@ -95,9 +100,18 @@ pub struct FuseBench {
 /// each (a few unlabeled), so neighbouring pixels share labels, as the subgroup combining of
 /// contributions expects of real maps. Blocks are not tile-aligned (random offset, size not
 /// a multiple of 16). Fresh per view and the same in every run: drawn from (seed, view).
-struct BlockLabels {
+pub(super) struct BlockLabels {
     classes: u64,
     rng: Rng,
+}
+
+impl BlockLabels {
+    pub(super) fn new(classes: usize, seed: u64) -> BlockLabels {
+        BlockLabels {
+            classes: classes as u64,
+            rng: Rng::new(seed).fork(0x1abe1),
+        }
+    }
 }
 
 impl LabelSource for BlockLabels {
@@ -195,6 +209,20 @@ pub fn bench_fuse(
     });
     // Each method reads only its attributes (no SH colour, or only the centers), as `fuse`
     // uploads them; the forward render reads all.
+    let cams = ring_cameras(spec.views, spec.width, spec.height);
+    let labels = BlockLabels::new(spec.classes, spec.seed);
+    let opts = FuseConfig::default().render_options();
+    if let Some(dir) = &spec.export {
+        let source = &labels as &dyn LabelSource;
+        let classes = spec.classes;
+        export_inputs(
+            dir,
+            &g,
+            &cams,
+            &opts,
+            Some(ExportLabels { source, classes }),
+        )?;
+    }
     let scene = GpuScene::upload(gpu, &g)?;
     let method_scenes = methods
         .iter()
@@ -205,13 +233,10 @@ pub fn bench_fuse(
         gpu,
         scene: &scene,
         method_scenes: &method_scenes,
-        cams: ring_cameras(spec.views, spec.width, spec.height),
-        labels: BlockLabels {
-            classes: spec.classes as u64,
-            rng: Rng::new(spec.seed).fork(0x1abe1),
-        },
+        cams,
+        labels,
         classes: spec.classes,
-        opts: FuseConfig::default().render_options(),
+        opts,
         cfgs: methods
             .iter()
             .map(|&method| FuseConfig {

@@ -2,10 +2,12 @@
 //! baseline on the same data in the same run, with the GPU result checked against it (or,
 //! for fusion, against a forward render of the same views).
 
+pub mod export;
 pub mod fuse;
 pub mod render;
 pub mod scan;
 pub mod sort;
+pub mod train;
 
 use std::time::Instant;
 

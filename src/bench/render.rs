@@ -1,21 +1,107 @@
-//! Forward rendering throughput on a random scene: frames/s and the per-stage split.
+//! Forward rendering throughput: frames/s and the per-stage split, on a random scene or on
+//! a scene folder (`scene.ply` + `cameras.json`, e.g. a `synth` room).
 
-use anyhow::Result;
+use std::path::PathBuf;
+
+use anyhow::{ensure, Context, Result};
 use glam::DVec3;
 use serde::Serialize;
 
+use super::export::export_inputs;
 use super::median;
 use crate::gpu::Gpu;
 use crate::render::{GpuScene, Rasterizer, RenderOptions, SemanticMode, StageTimes};
+use crate::scene::cameras_json::read_cameras_json;
+use crate::scene::ply::read_ply;
 use crate::scene::random_scene::{random_scene, RandomSceneSpec};
-use crate::scene::Camera;
+use crate::scene::{Camera, Gaussians, SemanticLogits};
+use crate::util::Rng;
+
+/// The scene and view a render or training benchmark works on.
+#[derive(Clone, Debug, Serialize)]
+pub struct BenchInput {
+    /// Gaussians of the random scene (SH degree 3); ignored with `scene`.
+    pub n: usize,
+    /// Image size of the random scene's camera; ignored with `scene`.
+    pub width: u32,
+    pub height: u32,
+    /// Semantic channels blended with RGB (0: RGB only); random logits.
+    pub channels: usize,
+    pub seed: u64,
+    /// A folder with `scene.ply` and `cameras.json` (its first camera is used) instead of
+    /// the random scene.
+    pub scene: Option<PathBuf>,
+    /// Write the scene and camera here first (see [`super::export`]).
+    #[serde(skip)]
+    pub export: Option<PathBuf>,
+}
+
+impl BenchInput {
+    /// Loads or generates the scene (with `channels` random logits) and its camera, and
+    /// exports them when asked.
+    pub fn load(&self) -> Result<(Gaussians, Camera)> {
+        let (g, cam) = match &self.scene {
+            Some(dir) => self.load_folder(dir)?,
+            None => self.random(),
+        };
+        if let Some(dir) = &self.export {
+            let opts = RenderOptions::default();
+            export_inputs(dir, &g, std::slice::from_ref(&cam), &opts, None)?;
+        }
+        Ok((g, cam))
+    }
+
+    /// The random scene, which fills the view cone of a camera at the origin looking down
+    /// +z; its logits are drawn after the geometry, so every channel count sees the same
+    /// Gaussians.
+    fn random(&self) -> (Gaussians, Camera) {
+        let g = random_scene(&RandomSceneSpec {
+            n: self.n,
+            channels: self.channels,
+            sh_degree: 3,
+            seed: self.seed,
+            ..Default::default()
+        });
+        let (w, h) = (self.width, self.height);
+        let cam = Camera::look_at("bench", DVec3::ZERO, DVec3::Z, -DVec3::Y, w, h, 70.0);
+        (g, cam)
+    }
+
+    /// This input with the image size of the camera actually used (a folder's).
+    pub fn with_size_of(&self, cam: &Camera) -> BenchInput {
+        BenchInput {
+            width: cam.width,
+            height: cam.height,
+            ..self.clone()
+        }
+    }
+
+    fn load_folder(&self, dir: &std::path::Path) -> Result<(Gaussians, Camera)> {
+        let mut g = read_ply(&dir.join("scene.ply"))?;
+        let cam = read_cameras_json(&dir.join("cameras.json"))?
+            .into_iter()
+            .next()
+            .with_context(|| format!("{} has no camera", dir.join("cameras.json").display()))?;
+        ensure!(!g.is_empty(), "{} has no Gaussians", dir.display());
+        g.semantics = (self.channels > 0).then(|| {
+            let mut rng = Rng::new(self.seed);
+            SemanticLogits {
+                channels: self.channels,
+                logits: (0..g.len() * self.channels)
+                    .map(|_| (rng.normal() * 2.0) as f32)
+                    .collect(),
+            }
+        });
+        Ok((g, cam))
+    }
+}
 
 #[derive(Debug, Serialize)]
 pub struct RenderBench {
-    pub n: usize,
-    pub width: u32,
-    pub height: u32,
-    pub channels: usize,
+    #[serde(flatten)]
+    pub input: BenchInput,
+    /// Gaussians rendered (the random scene's `n` or the folder's).
+    pub gaussians: usize,
     pub iters: usize,
     pub device: String,
     /// Median GPU time of a frame (all stages), from timestamps.
@@ -27,34 +113,11 @@ pub struct RenderBench {
     pub intersections: u32,
 }
 
-pub fn bench_render(
-    gpu: &Gpu,
-    n: usize,
-    width: u32,
-    height: u32,
-    channels: usize,
-    iters: usize,
-    seed: u64,
-) -> Result<RenderBench> {
-    let g = random_scene(&RandomSceneSpec {
-        n,
-        channels,
-        sh_degree: 3,
-        seed,
-        ..Default::default()
-    });
+pub fn bench_render(gpu: &Gpu, input: &BenchInput, iters: usize) -> Result<RenderBench> {
+    let (g, cam) = input.load()?;
     let scene = GpuScene::upload(gpu, &g)?;
-    let cam = Camera::look_at(
-        "bench",
-        DVec3::ZERO,
-        DVec3::Z,
-        -DVec3::Y,
-        width,
-        height,
-        70.0,
-    );
     let opts = RenderOptions {
-        semantics: (channels > 0).then_some(SemanticMode::RawLogits),
+        semantics: (input.channels > 0).then_some(SemanticMode::RawLogits),
         ..Default::default()
     };
     let mut raster = Rasterizer::new(gpu);
@@ -72,10 +135,8 @@ pub fn bench_render(
     };
     let frame_ms = med(StageTimes::total_ms);
     Ok(RenderBench {
-        n,
-        width,
-        height,
-        channels,
+        input: input.with_size_of(&cam),
+        gaussians: g.len(),
         iters,
         device: gpu.caps().name.clone(),
         frame_ms,

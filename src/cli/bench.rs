@@ -1,6 +1,8 @@
 //! `semsplat bench`: GPU kernel throughput from timestamps, against a CPU baseline measured
 //! in the same run on the same data; fusion against a forward render of the same views.
 
+use std::path::PathBuf;
+
 use anyhow::Result;
 use clap::{Args, Subcommand};
 use serde::Serialize;
@@ -9,7 +11,9 @@ use super::args;
 use super::joint_args::parse_methods;
 use super::progress::{follow, views_bar};
 use semsplat::bench::fuse::{bench_fuse, FuseBench, FuseBenchSpec};
-use semsplat::bench::{render::bench_render, scan::bench_scan, sort::bench_sort};
+use semsplat::bench::render::{bench_render, BenchInput};
+use semsplat::bench::train::{bench_train, TrainBench};
+use semsplat::bench::{scan::bench_scan, sort::bench_sort};
 use semsplat::experiment::{Lifter, ALL_METHODS};
 use semsplat::gpu::timings::KernelTotal;
 use semsplat::gpu::Gpu;
@@ -25,6 +29,10 @@ pub enum BenchCommand {
     /// Every fusion method over many views of a random scene, against a plain forward render
     /// (RGB only) of the same views: seconds, GPU time, views/s and the ratio to the render.
     Fuse(FuseArgs),
+    /// Training iterations (forward, losses, backward, Adam) on one view of a random scene:
+    /// wall time per iteration and GPU time per stage; the backward stage is the backward
+    /// pass's benchmark.
+    Train(TrainArgs),
 }
 
 /// Scene sizes of trained 3DGS scenes at full HD, for `bench fuse --preset`.
@@ -68,6 +76,11 @@ pub struct FuseArgs {
     /// Seed of the scene and the label maps.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Also write the scene (PLY), the cameras (JSON), every view's label map (one uint16
+    /// `labels.npy`, 65535 where unlabeled) and a `bench.json` into DIR, so other tools can
+    /// be timed on the same bytes.
+    #[arg(long, value_name = "DIR")]
+    export: Option<PathBuf>,
     /// Print one JSON object instead of a table.
     #[arg(long)]
     json: bool,
@@ -75,23 +88,64 @@ pub struct FuseArgs {
 
 #[derive(Args)]
 pub struct RenderArgs {
-    /// Number of Gaussians.
+    #[command(flatten)]
+    input: InputArgs,
+    #[command(flatten)]
+    common: CommonArgs,
+}
+
+#[derive(Args)]
+pub struct TrainArgs {
+    #[command(flatten)]
+    input: InputArgs,
+    /// Train only the semantic logits (geometry and colours fixed), as `train
+    /// --semantics-only`.
+    #[arg(long)]
+    semantics_only: bool,
+    #[command(flatten)]
+    common: CommonArgs,
+}
+
+/// The scene and view of `bench render` and `bench train`.
+#[derive(Args)]
+pub struct InputArgs {
+    /// Number of Gaussians of the random scene (SH degree 3).
     #[arg(long, default_value_t = 100_000, value_parser = args::at_least_one::<usize>)]
     n: usize,
     #[arg(long, default_value_t = 640, value_parser = args::at_least_one::<u32>)]
     width: u32,
     #[arg(long, default_value_t = 480, value_parser = args::at_least_one::<u32>)]
     height: u32,
-    /// Semantic channels blended with RGB (0: RGB only).
+    /// Semantic channels blended with RGB (0: RGB only), with random logits.
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u16).range(0..=256))]
     channels: u16,
-    #[command(flatten)]
-    common: CommonArgs,
+    /// A folder with `scene.ply` and `cameras.json` (e.g. a `synth` output) to use instead
+    /// of the random scene; its first camera is the view (--n, --width, --height ignored).
+    #[arg(long, value_name = "DIR")]
+    scene: Option<PathBuf>,
+    /// Also write the scene (PLY, with the semantic channels), the camera (JSON) and a
+    /// `bench.json` into DIR, so other renderers can be timed on the same bytes.
+    #[arg(long, value_name = "DIR")]
+    export: Option<PathBuf>,
+}
+
+impl InputArgs {
+    fn input(&self, seed: u64) -> BenchInput {
+        BenchInput {
+            n: self.n,
+            width: self.width,
+            height: self.height,
+            channels: self.channels as usize,
+            seed,
+            scene: self.scene.clone(),
+            export: self.export.clone(),
+        }
+    }
 }
 
 #[derive(Args)]
 pub struct CommonArgs {
-    /// Timed repetitions (after one warm-up); the median is reported.
+    /// Timed repetitions (after a warm-up); the median is reported.
     #[arg(long, default_value_t = 5, value_parser = args::at_least_one::<usize>)]
     iters: usize,
     /// Seed of the random input.
@@ -220,6 +274,7 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
         BenchCommand::Scan(a) => run_scan(&gpu, a),
         BenchCommand::Render(a) => run_render(&gpu, a),
         BenchCommand::Fuse(a) => run_fuse(&gpu, a),
+        BenchCommand::Train(a) => run_train(&gpu, a),
     }
 }
 
@@ -274,19 +329,12 @@ fn run_scan(gpu: &Gpu, a: ScanArgs) -> Result<()> {
 }
 
 fn run_render(gpu: &Gpu, a: RenderArgs) -> Result<()> {
-    let r = bench_render(
-        gpu,
-        a.n,
-        a.width,
-        a.height,
-        a.channels as usize,
-        a.common.iters,
-        a.common.seed,
-    )?;
+    let r = bench_render(gpu, &a.input.input(a.common.seed), a.common.iters)?;
     emit(a.common.json, &r, || {
+        let i = &r.input;
         println!(
             "render: {} Gaussians, {}x{}, C = {} on {} (median of {})",
-            r.n, r.width, r.height, r.channels, r.device, r.iters
+            r.gaussians, i.width, i.height, i.channels, r.device, r.iters
         );
         println!(
             "  frame      {:>10.3} ms  {:>8.1} frames/s",
@@ -329,6 +377,7 @@ fn run_fuse(gpu: &Gpu, a: FuseArgs) -> Result<()> {
         classes: a.classes,
         iters: a.iters,
         seed: a.seed,
+        export: a.export,
     };
     let bar = views_bar(0);
     let r = bench_fuse(gpu, &spec, &methods, |phase, done, total| {
@@ -339,4 +388,29 @@ fn run_fuse(gpu: &Gpu, a: FuseArgs) -> Result<()> {
     })?;
     bar.finish_and_clear();
     emit(a.json, &r, || print_fuse(&r))
+}
+
+fn run_train(gpu: &Gpu, a: TrainArgs) -> Result<()> {
+    let input = a.input.input(a.common.seed);
+    let iters = u32::try_from(a.common.iters).unwrap_or(u32::MAX);
+    let r = bench_train(gpu, &input, iters, a.semantics_only)?;
+    emit(a.common.json, &r, || print_train(&r))
+}
+
+fn print_train(r: &TrainBench) {
+    let i = &r.input;
+    let what = if r.semantics_only {
+        "semantics only"
+    } else {
+        "full"
+    };
+    println!(
+        "train ({what}): {} Gaussians, {}x{}, C = {} on {} (median of {} iterations)",
+        r.gaussians, i.width, i.height, i.channels, r.device, r.iters
+    );
+    println!("  iteration  {:>10.3} ms (wall)", r.iter_ms);
+    println!("  forward    {:>10.3} ms (GPU)", r.forward_ms);
+    println!("  losses     {:>10.3} ms", r.loss_ms);
+    println!("  backward   {:>10.3} ms", r.backward_ms);
+    println!("  optimizer  {:>10.3} ms", r.optimizer_ms);
 }

@@ -1,0 +1,164 @@
+#!/usr/bin/env bash
+# Runs on a GPU machine lent through the `device` tool, in the repository root, with the
+# folder .gpu/ made by tools/gpu/pack.sh carried along. Writes its results under $OUT
+# (at most 8 files come back): summary.txt, tests.log, bench.log, ours.jsonl, peers.jsonl,
+# info.txt, and the built peers (peers_built.tar.xz) for a later call.
+#
+# usage: bash tools/gpu/device_run.sh [STAGE...]   (default: all)
+#   tests   every test binary, validation layer and synchronization validation on
+#   ours    semsplat's benchmarks: sort 2^25, forward and training at C = 0/16/32/64 on a
+#           1M random scene and an office room at ~1.1M Gaussians (spacing 0.0053), fusion of 1M x 200 views
+#   peers   gsplat 1.5.3 and FlashSplat's rasterizer on the scenes `ours` exported
+# env: BUDGET_S (default 540): benchmarks starting after this many seconds are skipped;
+#      N, W, H, VIEWS, SPACING: scene size (1000000, 1920x1080, 200 fusion views, room
+#      spacing 0.0053), smaller for a dry run on lavapipe; TESTS: a grep -E filter on the
+#      test binaries' names.
+set -uo pipefail
+START=$(date +%s)
+BUDGET_S=${BUDGET_S:-540}
+OUT=${OUT:-/tmp/out}
+repo=$(pwd)
+gpu=$repo/.gpu
+bin=/opt/semsplat
+site=/tmp/peer_site
+mkdir -p "$OUT"
+summary=$OUT/summary.txt
+say() { printf '[%4ds] %s\n' $(($(date +%s) - START)) "$*" | tee -a "$summary"; }
+left() { echo $((BUDGET_S - ($(date +%s) - START))); }
+stages=${*:-tests ours peers}
+
+setup() {
+  [ -f "$gpu/bins.tar.xz" ] || { say "no .gpu/bins.tar.xz: run tools/gpu/pack.sh and carry .gpu"; exit 2; }
+  mkdir -p "$bin" && tar -C "$bin" -xJf "$gpu/bins.tar.xz"
+  if ! ldconfig -p | grep -q 'libvulkan.so.1 '; then
+    dpkg -x "$gpu"/debs/libvulkan1_*.deb / && ldconfig
+  fi
+  dpkg -x "$gpu"/debs/vulkan-validationlayers_*.deb /opt/vvl
+  export VK_LAYER_PATH=/opt/vvl/usr/share/vulkan/explicit_layer.d
+  export LD_LIBRARY_PATH=/opt/vvl/usr/lib/x86_64-linux-gnu${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
+  local icd=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
+  [ -f "$icd" ] && export VK_DRIVER_FILES=$icd VK_ICD_FILENAMES=$icd
+  # Test binaries run the CLI and read fixtures at the paths they were built at.
+  built=$(cat "$gpu/built_at")
+  mkdir -p target/release && ln -sf "$bin/semsplat" target/release/semsplat
+  if [ "$built" != "$repo" ] && [ ! -e "$built" ]; then
+    mkdir -p "$(dirname "$built")" && ln -sfn "$repo" "$built"
+  fi
+  export PATH=$bin:$PATH
+  { nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv; semsplat info; } \
+    >"$OUT/info.txt" 2>&1
+  say "device: $(grep -m1 -i 'device\|name' "$OUT/info.txt" | head -c 200)"
+}
+
+# gsplat JIT-compiles its CUDA extension (minutes): started first, in the background.
+build_peers() {
+  mkdir -p "$site"
+  python3 -m pip install -q --no-deps --no-index --target "$site" "$gpu"/whl/gsplat-*.whl \
+    >/tmp/peers_build.log 2>&1
+  export TORCH_CUDA_ARCH_LIST=9.0 MAX_JOBS=16 PYTHONPATH=$site:$repo/tools/gpu/peers
+  (
+    timeout 400 python3 -c 'from gsplat.cuda._backend import _C; assert _C is not None' \
+      >>/tmp/peers_build.log 2>&1 && echo ok >/tmp/gsplat_built
+  ) &
+  gsplat_pid=$!
+  (
+    tar -C /tmp -xzf "$gpu/src/flashsplat-rasterization.tar.gz" &&
+      bash tools/gpu/peers/patch_flashsplat.sh /tmp/flashsplat-rasterization /tmp/fs_src &&
+      python3 -m pip install -q --no-build-isolation --no-deps --target "$site" /tmp/fs_src &&
+      echo ok >/tmp/flashsplat_built
+  ) >>/tmp/peers_build.log 2>&1 &
+  flashsplat_pid=$!
+}
+
+run_tests() {
+  local logs=/tmp/test_logs
+  mkdir -p "$logs"
+  ls "$bin/tests" | grep -E "${TESTS:-.}" | xargs -P 4 -I{} sh -c \
+    "cd '$built' && timeout 240 '$bin/tests/{}' >'$logs/{}.log' 2>&1; echo \"{} \$?\" >>'$logs/rc'"
+  local failed=0
+  while read -r name rc; do
+    if [ "$rc" = 0 ]; then
+      grep -h '^test result' "$logs/$name.log" | sed "s/^/$name: /" >>"$OUT/tests.log"
+    else
+      failed=$((failed + 1))
+      { echo "=== $name: exit $rc"; tail -c 20000 "$logs/$name.log"; } >>"$OUT/tests.log"
+    fi
+  done < <(sort "$logs/rc")
+  say "tests: $(wc -l <"$logs/rc") binaries, $failed failed"
+}
+
+# One semsplat benchmark: its JSON (with "case") appended to ours.jsonl.
+b() {
+  local case=$1; shift
+  [ "$(left)" -gt 20 ] || { say "skipped $case (budget)"; return; }
+  echo "=== $case: semsplat $*" >>"$OUT/bench.log"
+  if timeout "$(left)" semsplat "$@" --json >/tmp/b.json 2>>"$OUT/bench.log"; then
+    python3 -c 'import json,sys; d=json.load(open("/tmp/b.json")); d["case"]=sys.argv[1]; print(json.dumps(d))' \
+      "$case" >>"$OUT/ours.jsonl"
+  else
+    say "FAILED $case (see bench.log)"
+  fi
+}
+
+run_ours() {
+  local big=(--n "${N:-1000000}" --width "${W:-1920}" --height "${H:-1080}")
+  b sort bench sort --n 33554432 --iters 10
+  for c in 0 16 32 64; do
+    local ex=(); [ $c = 0 ] && ex=(--export /tmp/exp_random)
+    b "render random C=$c" bench render "${big[@]}" --channels $c --iters 10 "${ex[@]}"
+  done
+  timeout 120 semsplat synth --preset office --spacing "${SPACING:-0.0053}" --views 1 \
+    --test-views 0 --width "${W:-1920}" --height "${H:-1080}" --out /tmp/room >>"$OUT/bench.log" 2>&1 || say "synth room failed"
+  for c in 0 16 32 64; do
+    local ex=(); [ $c = 0 ] && ex=(--export /tmp/exp_room)
+    b "render room C=$c" bench render --scene /tmp/room --channels $c --iters 10 "${ex[@]}"
+  done
+  for c in 0 16 32 64; do
+    b "train random C=$c" bench train "${big[@]}" --channels $c --iters 5
+    [ $c = 0 ] || b "train random C=$c semantics-only" bench train "${big[@]}" --channels $c \
+      --iters 5 --semantics-only
+  done
+  b "fuse ${N:-1000000} x ${VIEWS:-200}" bench fuse "${big[@]}" --views "${VIEWS:-200}" --classes 16 \
+    --methods flashsplat,vote,vote-weighted --export /tmp/exp_fuse
+  say "ours: $(wc -l <"$OUT/ours.jsonl" 2>/dev/null || echo 0) results"
+}
+
+run_peers() {
+  local t0; t0=$(date +%s)
+  wait "$gsplat_pid" "$flashsplat_pid"
+  say "peer builds done (waited $(($(date +%s) - t0)) s): gsplat $(cat /tmp/gsplat_built 2>/dev/null || echo FAILED), flashsplat $(cat /tmp/flashsplat_built 2>/dev/null || echo FAILED)"
+  tail -c 6000 /tmp/peers_build.log >>"$OUT/bench.log"
+  local peers=tools/gpu/peers
+  if [ -f /tmp/gsplat_built ]; then
+    for s in random room; do
+      [ -d /tmp/exp_$s ] && [ "$(left)" -gt 30 ] &&
+        timeout "$(left)" python3 $peers/gsplat_bench.py --scene /tmp/exp_$s --channels 0,16,32,64 \
+          --iters 10 --warmup 3 --label $s --out /tmp/gsplat_$s.json >>"$OUT/bench.log" 2>&1
+    done
+  fi
+  if [ -f /tmp/flashsplat_built ] && [ -d /tmp/exp_fuse ] && [ "$(left)" -gt 30 ]; then
+    timeout "$(left)" python3 $peers/flashsplat_bench.py --scene /tmp/exp_fuse --label random \
+      --commit "$(cat "$gpu/src/flashsplat-rasterization.commit")" --out /tmp/flashsplat.json \
+      >>"$OUT/bench.log" 2>&1
+  fi
+  python3 -c 'import json,sys
+runs = []
+for p in sys.argv[1:]:
+    try: d = json.load(open(p))
+    except (OSError, ValueError): continue
+    runs += d if isinstance(d, list) else [d]
+json.dump(runs, open("'"$OUT"'/peers.json", "w"), indent=1)' \
+    /tmp/gsplat_random.json /tmp/gsplat_room.json /tmp/flashsplat.json
+  # The built extensions, so a later call can skip the compile.
+  local built_ext; built_ext=$(find ~/.cache/torch_extensions -name 'gsplat_cuda*.so' 2>/dev/null | head -1)
+  tar -cJf "$OUT/peers_built.tar.xz" -C / ${built_ext:+"${built_ext#/}"} "${site#/}/flashsplat_rasterization" \
+    2>/dev/null
+  say "peers done"
+}
+
+setup
+case " $stages " in *" peers "*) build_peers ;; esac
+case " $stages " in *" tests "*) run_tests ;; esac
+case " $stages " in *" ours "*) run_ours ;; esac
+case " $stages " in *" peers "*) run_peers ;; esac
+say "finished"
