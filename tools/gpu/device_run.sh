@@ -30,9 +30,11 @@ stages=${*:-tests ours peers}
 setup() {
   [ -f "$gpu/bins.tar.xz" ] || { say "no .gpu/bins.tar.xz: run tools/gpu/pack.sh and carry .gpu"; exit 2; }
   mkdir -p "$bin" && tar -C "$bin" -xJf "$gpu/bins.tar.xz"
-  if ! ldconfig -p | grep -q 'libvulkan.so.1 '; then
-    dpkg -x "$gpu"/debs/libvulkan1_*.deb / && ldconfig
-  fi
+  # The Vulkan loader and glvnd (the NVIDIA driver's libGLX_nvidia needs libGLdispatch).
+  for f in "$gpu"/debs/*.deb; do
+    case $f in *vulkan-validationlayers*) ;; *) dpkg -x "$f" / ;; esac
+  done
+  ldconfig
   dpkg -x "$gpu"/debs/vulkan-validationlayers_*.deb /opt/vvl
   export VK_LAYER_PATH=/opt/vvl/usr/share/vulkan/explicit_layer.d
   export LD_LIBRARY_PATH=/opt/vvl/usr/lib/x86_64-linux-gnu${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
@@ -46,8 +48,13 @@ setup() {
   fi
   export PATH=$bin:$PATH
   { nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv; semsplat info; } \
-    >"$OUT/info.txt" 2>&1
-  say "device: $(grep -m1 -i 'device\|name' "$OUT/info.txt" | head -c 200)"
+    >"$OUT/info.txt" 2>&1 || {
+    # No device: what the loader saw, for the next try.
+    { ls -l "$icd"; cat "$icd"; ldconfig -p | grep -i 'vulkan\|GLX\|GLdispatch';
+      VK_LOADER_DEBUG=error,warn,info semsplat info; } >>"$OUT/info.txt" 2>&1
+  }
+  say "device: $(grep -m1 'selected' "$OUT/info.txt" || echo 'NONE (see info.txt)')"
+  grep -q selected "$OUT/info.txt" || exit 3
 }
 
 # gsplat JIT-compiles its CUDA extension (minutes): started first, in the background.

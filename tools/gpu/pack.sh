@@ -45,8 +45,10 @@ say "compressing $(du -sh "$out/stage" | cut -f1) of binaries"
 tar -C "$out/stage" -cf - . | xz -9e -T0 >"$out/bins.tar.xz"
 rm -rf "$out/stage" "$out/artifacts.json"
 
-say "downloading the Vulkan loader and validation layer (.deb)"
-(cd "$out/debs" && apt-get download libvulkan1 vulkan-validationlayers >/dev/null 2>&1) \
+# The NVIDIA Vulkan driver (libGLX_nvidia) needs glvnd's dispatch libraries beside the loader.
+say "downloading the Vulkan loader, glvnd and the validation layer (.deb)"
+(cd "$out/debs" && apt-get download libvulkan1 libglvnd0 libglx0 libgl1 libegl1 libopengl0 \
+  libgles2 vulkan-validationlayers >/dev/null 2>&1) \
   || die "apt-get download failed (run tools/setup.sh first; needs the Debian archive)"
 
 say "downloading gsplat ${GSPLAT_VERSION:=1.5.3} (pure-Python wheel; its CUDA code is compiled on the GPU machine)"
