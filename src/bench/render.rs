@@ -9,6 +9,7 @@ use serde::Serialize;
 
 use super::export::export_inputs;
 use super::median;
+use crate::gpu::timings::KernelTotal;
 use crate::gpu::Gpu;
 use crate::render::{GpuScene, Rasterizer, RenderOptions, SemanticMode, StageTimes};
 use crate::scene::cameras_json::read_cameras_json;
@@ -111,6 +112,8 @@ pub struct RenderBench {
     pub stages: StageTimes,
     pub visible: u32,
     pub intersections: u32,
+    /// GPU time per kernel of the last frame.
+    pub kernels: Vec<KernelTotal>,
 }
 
 pub fn bench_render(gpu: &Gpu, input: &BenchInput, iters: usize) -> Result<RenderBench> {
@@ -121,10 +124,15 @@ pub fn bench_render(gpu: &Gpu, input: &BenchInput, iters: usize) -> Result<Rende
         ..Default::default()
     };
     let mut raster = Rasterizer::new(gpu);
-    let warm = raster.render(&scene, &cam, &opts)?;
+    // The frame stays on the device (downloading it is no part of rendering).
+    let mut frame = || raster.run_tiled_in_bands(&scene, &cam, &opts, |r, t| t.record_blend(r));
+    let warm = frame()?;
     let mut frames = Vec::new();
+    let mut kernels = Vec::new();
     for _ in 0..iters.max(1) {
-        frames.push(raster.render(&scene, &cam, &opts)?.stages);
+        let run = frame()?;
+        frames.push(run.stages);
+        kernels = run.timings.by_kernel();
     }
     let med = |f: fn(&StageTimes) -> f64| median(&mut frames.iter().map(f).collect::<Vec<_>>());
     let stages = StageTimes {
@@ -144,5 +152,6 @@ pub fn bench_render(gpu: &Gpu, input: &BenchInput, iters: usize) -> Result<Rende
         stages,
         visible: warm.visible,
         intersections: warm.intersections,
+        kernels,
     })
 }

@@ -349,6 +349,7 @@ fn run_render(gpu: &Gpu, a: RenderArgs) -> Result<()> {
             "  visible {} Gaussians, {} tile intersections",
             r.visible, r.intersections
         );
+        print_kernels(&r.kernels);
     })
 }
 

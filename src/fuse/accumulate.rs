@@ -13,6 +13,7 @@ use super::scores::ClassScores;
 use crate::contract::params::{CenterParams, ContribParams};
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, BufferRange, Gpu, Recorder};
+use crate::util::prefetch_ordered;
 use crate::render::rasterizer::{SplitSizes, TileLists};
 use crate::render::{camera_rows_f32, GpuScene, Rasterizer, RenderOptions};
 use crate::scene::Camera;
@@ -75,8 +76,9 @@ impl FuseConfig {
 }
 
 /// Gives the label map of a view as compact class indices per pixel ([`NO_LABEL`] where
-/// unlabeled), or None when the view has no labels. Called once per view and pass.
-pub trait LabelSource {
+/// unlabeled), or None when the view has no labels. Called once per view and pass, from
+/// worker threads a few views ahead of the GPU (hence `Sync`).
+pub trait LabelSource: Sync {
     fn labels(&self, view: usize, cam: &Camera) -> Result<Option<Vec<u32>>>;
 }
 
@@ -199,6 +201,11 @@ impl ViewInputs {
     }
 }
 
+/// Worker threads reading label maps ahead of the GPU, and how many views they may run
+/// ahead (each a label map in memory).
+const LABEL_THREADS: usize = 4;
+const LABELS_AHEAD: usize = 8;
+
 /// Bytes per pixel of the weighted methods' carried state between windows: (T, done).
 const CONTRIB_CARRY_BYTES: u64 = 8;
 
@@ -253,11 +260,15 @@ fn accumulate_passes(
     for pass_index in 0..passes {
         let row_begin = pass_index * rows;
         let pass = EvidencePass::new(gpu, row_begin, rows.min(classes - row_begin), n, entry)?;
-        for (view, cam) in cams.iter().enumerate() {
+        // Label maps are read (decoded, converted) on worker threads a few views ahead
+        // while the GPU works on the current one.
+        let produce = |view: usize| labels.labels(view, &cams[view]);
+        prefetch_ordered(cams.len(), LABEL_THREADS, LABELS_AHEAD, produce, |view, map| {
             progress(pass_index * cams.len() + view, passes * cams.len());
-            let Some(map) = labels.labels(view, cam)? else {
-                continue;
+            let Some(map) = map else {
+                return Ok(());
             };
+            let cam = &cams[view];
             let pixels = cam.width as usize * cam.height as usize;
             ensure!(
                 map.len() == pixels,
@@ -271,7 +282,8 @@ fn accumulate_passes(
             let (label_buf, carry) = inputs.upload(gpu, &map)?;
             stats.gpu_ms += accumulate_view(&mut raster, scene, cam, label_buf, carry, &pass, cfg)?;
             stats.peak_device_bytes = stats.peak_device_bytes.max(gpu.memory_reserved());
-        }
+            Ok(())
+        })?;
         on_pass(&pass)?;
     }
     progress(passes * cams.len(), passes * cams.len());

@@ -11,5 +11,5 @@ pub use atomic_write::{
     check_output_file, check_output_folder, stage_atomic, write_atomic, write_bytes_atomic,
     StagedFile,
 };
-pub use parallel::parallel_map;
+pub use parallel::{parallel_map, prefetch_ordered};
 pub use rng::Rng;

@@ -31,3 +31,72 @@ pub fn parallel_map<T: Send>(count: usize, f: impl Fn(usize) -> T + Sync) -> Vec
         .map(|v| v.expect("every index was computed"))
         .collect()
 }
+
+/// Runs `produce(0), ..., produce(count - 1)` on up to `threads` worker threads, at most
+/// `ahead` items ahead of the consumer, and hands the results to `consume` on the calling
+/// thread in index order. The consumer's work (e.g. GPU submissions) overlaps the
+/// production of the next items (e.g. decoding label maps). The first error, from either
+/// side, stops both and is returned.
+pub fn prefetch_ordered<T: Send>(
+    count: usize,
+    threads: usize,
+    ahead: usize,
+    produce: impl Fn(usize) -> anyhow::Result<T> + Sync,
+    mut consume: impl FnMut(usize, T) -> anyhow::Result<()>,
+) -> anyhow::Result<()> {
+    use std::collections::BTreeMap;
+    use std::sync::Condvar;
+    struct State<T> {
+        ready: BTreeMap<usize, anyhow::Result<T>>,
+        consumed: usize,
+        stop: bool,
+    }
+    let ahead = ahead.max(1);
+    let state = Mutex::new(State {
+        ready: BTreeMap::new(),
+        consumed: 0,
+        stop: false,
+    });
+    let changed = Condvar::new();
+    let next = AtomicUsize::new(0);
+    let lock = || state.lock().unwrap_or_else(|e| e.into_inner());
+    let wait = |g| changed.wait(g).unwrap_or_else(|e| e.into_inner());
+    std::thread::scope(|scope| {
+        for _ in 0..threads.clamp(1, count.max(1)) {
+            scope.spawn(|| loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                if i >= count {
+                    return;
+                }
+                let mut g = lock();
+                // Wait for room: at most `ahead` items past the consumer.
+                while !g.stop && i >= g.consumed + ahead {
+                    g = wait(g);
+                }
+                if g.stop {
+                    return;
+                }
+                drop(g);
+                let item = produce(i);
+                lock().ready.insert(i, item);
+                changed.notify_all();
+            });
+        }
+        let result = (0..count).try_for_each(|i| {
+            let mut g = lock();
+            let item = loop {
+                if let Some(item) = g.ready.remove(&i) {
+                    break item;
+                }
+                g = wait(g);
+            };
+            g.consumed = i + 1;
+            drop(g);
+            changed.notify_all();
+            consume(i, item?)
+        });
+        lock().stop = true;
+        changed.notify_all();
+        result
+    })
+}

@@ -12,7 +12,8 @@
 # env: BUDGET_S (default 540): benchmarks starting after this many seconds are skipped;
 #      N, W, H, VIEWS, SPACING: scene size (1000000, 1920x1080, 200 fusion views, room
 #      spacing 0.0053), smaller for a dry run on lavapipe; TESTS: a grep -E filter on the
-#      test binaries' names.
+#      test binaries' names; CASES: a regular expression on the benchmark case names
+#      ("render random C=16", "train random C=32 semantics-only", "fuse ...").
 set -uo pipefail
 START=$(date +%s)
 BUDGET_S=${BUDGET_S:-540}
@@ -79,7 +80,7 @@ build_peers() {
 
 run_tests() {
   local logs=/tmp/test_logs
-  mkdir -p "$logs"
+  rm -rf "$logs" && mkdir -p "$logs"
   ls "$bin/tests" | grep -E "${TESTS:-.}" | xargs -P 4 -I{} sh -c \
     "cd '$built' && timeout 240 '$bin/tests/{}' >'$logs/{}.log' 2>&1; echo \"{} \$?\" >>'$logs/rc'"
   local failed=0
@@ -97,6 +98,7 @@ run_tests() {
 # One semsplat benchmark: its JSON (with "case") appended to ours.jsonl.
 b() {
   local case=$1; shift
+  [[ $case =~ ${CASES:-.} ]] || return 0
   [ "$(left)" -gt 20 ] || { say "skipped $case (budget)"; return; }
   echo "=== $case: semsplat $*" >>"$OUT/bench.log"
   if timeout "$(left)" semsplat "$@" --json >/tmp/b.json 2>>"$OUT/bench.log"; then
@@ -114,8 +116,13 @@ run_ours() {
     local ex=(); [ $c = 0 ] && ex=(--export /tmp/exp_random)
     b "render random C=$c" bench render "${big[@]}" --channels $c --iters 10 "${ex[@]}"
   done
-  timeout 120 semsplat synth --preset office --spacing "${SPACING:-0.0053}" --views 1 \
-    --test-views 0 --width "${W:-1920}" --height "${H:-1080}" --out /tmp/room >>"$OUT/bench.log" 2>&1 || say "synth room failed"
+  # The first case again: a drift of the GPU's clocks over the run would show here.
+  b "render random C=0 (repeat)" bench render "${big[@]}" --channels 0 --iters 10
+  if [[ -z ${CASES:-} || $CASES == *room* ]]; then
+    timeout 120 semsplat synth --preset office --spacing "${SPACING:-0.0053}" --views 1 \
+      --test-views 0 --width "${W:-1920}" --height "${H:-1080}" --out /tmp/room \
+      >>"$OUT/bench.log" 2>&1 || say "synth room failed"
+  fi
   for c in 0 16 32 64; do
     local ex=(); [ $c = 0 ] && ex=(--export /tmp/exp_room)
     b "render room C=$c" bench render --scene /tmp/room --channels $c --iters 10 "${ex[@]}"
@@ -127,6 +134,8 @@ run_ours() {
   done
   b "fuse ${N:-1000000} x ${VIEWS:-200}" bench fuse "${big[@]}" --views "${VIEWS:-200}" --classes 16 \
     --methods flashsplat,vote,vote-weighted --export /tmp/exp_fuse
+  nvidia-smi --query-gpu=clocks.sm,clocks.max.sm,clocks.mem,temperature.gpu,power.draw \
+    --format=csv >>"$OUT/info.txt" 2>&1
   say "ours: $(wc -l <"$OUT/ours.jsonl" 2>/dev/null || echo 0) results"
 }
 
