@@ -4,7 +4,9 @@
 // of SORT_WG_SIZE elements in lane order; each element's rank among equal digits of its
 // subgroup comes from ballots (multi-split: one ballot per digit bit, so any subgroup size
 // up to 128 works), and (subtile, subgroup) pairs are ordered by a per-digit scan of their
-// counts. No workgroup waits on another.
+// counts. The round is sorted by digit in shared memory first and then written out in
+// order, so neighbouring lanes write neighbouring addresses (a digit's run) instead of up
+// to RADIX runs per store. No workgroup waits on another.
 #extension GL_EXT_control_flow_attributes : require
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_ballot : require
@@ -34,6 +36,9 @@ layout(set = 0, binding = 5) readonly buffer OffsetsBuf { uint data[]; } offsets
 shared uint digit_base[RADIX];                         // next output slot of each digit
 shared uint round_total[RADIX];                        // elements of each digit this round
 shared uint sg_hist[SUBTILES * MAX_SUBGROUPS * RADIX]; // counts per (subtile, subgroup, digit), then prefixes
+shared uint digit_local[RADIX];                        // first slot of each digit in the round
+shared uint s_keys[ROUND];                             // the round, sorted by digit
+shared uint s_values[ROUND];
 
 void main() {
     uint blocks = state.data[0];
@@ -90,12 +95,29 @@ void main() {
             round_total[t] = acc;
         }
         barrier();
+        if (t < RADIX) {
+            uint before = 0;
+            for (uint d = 0; d < t; d++) {
+                before += round_total[d];
+            }
+            digit_local[t] = before;
+        }
+        barrier();
         [[unroll]] for (uint k = 0; k < SUBTILES; k++) {
             if (valid[k]) {
-                uint dst = digit_base[digits[k]] + sg_hist[k * sg_slots + gl_SubgroupID * RADIX + digits[k]] + ranks[k];
-                keys_out.data[dst] = keys[k];
-                values_out.data[dst] = values[k];
+                uint local = digit_local[digits[k]] + sg_hist[k * sg_slots + gl_SubgroupID * RADIX + digits[k]] + ranks[k];
+                s_keys[local] = keys[k];
+                s_values[local] = values[k];
             }
+        }
+        barrier();
+        uint round_len = min(ROUND, n - round_start);
+        for (uint i = t; i < round_len; i += SORT_WG_SIZE) {
+            uint key = s_keys[i];
+            uint digit = bitfieldExtract(key, int(pc.shift), int(pc.bits));
+            uint dst = digit_base[digit] + (i - digit_local[digit]);
+            keys_out.data[dst] = key;
+            values_out.data[dst] = s_values[i];
         }
         barrier();
         if (t < RADIX) {

@@ -191,7 +191,7 @@ fn forward_run(
 }
 
 /// Times the forward render and each of `methods` over `spec.views` views of a random
-/// scene, taking turns on rounds of views. `progress(phase, done, total)` counts views over
+/// scene, taking turns on each timed run. `progress(phase, done, total)` counts views over
 /// all phases ("forward render" or the method's name).
 pub fn bench_fuse(
     gpu: &Gpu,
@@ -326,54 +326,43 @@ impl Setup<'_> {
         Ok(())
     }
 
-    /// `iters` timed runs of the forward render and of every method. They take turns on
-    /// each round of views, so a slow spell of a shared machine slows them alike and the
-    /// ratios stay meaningful.
+    /// `iters` timed runs of the forward render and of every method, each over all views
+    /// at once as `fuse` does it (one rasterizer, one evidence matrix). They take turns on
+    /// each iteration, so a slow spell of a shared machine slows them alike.
     fn timed_runs(
         &self,
         iters: usize,
         mut progress: impl FnMut(&str, usize, usize),
     ) -> Result<(Vec<RunTotal>, Vec<Vec<RunTotal>>)> {
         let methods = self.cfgs.len();
-        let total = iters * self.cams.len() * (1 + methods);
+        let views = self.cams.len();
+        let total = iters * views * (1 + methods);
         let mut done = 0;
         let mut forward_runs = Vec::with_capacity(iters);
         let mut method_runs: Vec<Vec<RunTotal>> = vec![Vec::with_capacity(iters); methods];
         for _ in 0..iters {
-            let mut forward = RunTotal::default();
-            let mut per_method = vec![RunTotal::default(); methods];
-            for (r, round) in self.cams.chunks(ROUND_VIEWS).enumerate() {
-                let f = forward_run(self.gpu, self.scene, round, &self.opts, |d| {
-                    progress("forward render", done + d, total)
-                })?;
-                done += round.len();
-                forward.add(f.gpu_ms, f.wall_s, f.peak_device_bytes);
-                forward.visible += f.visible;
-                forward.intersections += f.intersections;
-                let shifted = Shifted {
-                    labels: &self.labels,
-                    first: r * ROUND_VIEWS,
-                };
-                let runs = self.cfgs.iter().zip(self.method_scenes);
-                for ((cfg, scene), sum) in runs.zip(&mut per_method) {
-                    let (_, stats) = accumulate(
-                        self.gpu,
-                        scene,
-                        round,
-                        &shifted,
-                        self.classes,
-                        cfg,
-                        |d, _| progress(cfg.method.name(), done + d, total),
-                    )?;
-                    done += round.len();
-                    sum.add(stats.gpu_ms, stats.wall_s, stats.peak_device_bytes);
-                    sum.passes = stats.passes;
-                    sum.rows_per_pass = stats.rows_per_pass;
-                }
-            }
+            let forward = forward_run(self.gpu, self.scene, &self.cams, &self.opts, |d| {
+                progress("forward render", done + d, total)
+            })?;
+            done += views;
             forward_runs.push(forward);
-            for (runs, sum) in method_runs.iter_mut().zip(per_method) {
-                runs.push(sum);
+            let runs = self.cfgs.iter().zip(self.method_scenes);
+            for ((cfg, scene), method) in runs.zip(&mut method_runs) {
+                let (_, stats) = accumulate(
+                    self.gpu,
+                    scene,
+                    &self.cams,
+                    &self.labels,
+                    self.classes,
+                    cfg,
+                    |d, _| progress(cfg.method.name(), done + d, total),
+                )?;
+                done += views;
+                let mut sum = RunTotal::default();
+                sum.add(stats.gpu_ms, stats.wall_s, stats.peak_device_bytes);
+                sum.passes = stats.passes;
+                sum.rows_per_pass = stats.rows_per_pass;
+                method.push(sum);
             }
         }
         Ok((forward_runs, method_runs))
@@ -419,11 +408,8 @@ fn method_bench(
     }
 }
 
-/// Views per round: see `bench_fuse`.
-const ROUND_VIEWS: usize = 10;
-
-/// Time and memory of one run over all views (or one round of them), summed over its
-/// rounds; for the forward render also the visible Gaussians and tile intersections.
+/// Time and memory of one run over all views; for the forward render also the visible
+/// Gaussians and tile intersections.
 #[derive(Clone, Debug, Default)]
 struct RunTotal {
     gpu_ms: f64,
@@ -450,17 +436,5 @@ impl RunTotal {
             peak_device_bytes: runs.iter().map(|r| r.peak_device_bytes).max().unwrap_or(0),
             ..runs.last().cloned().unwrap_or_default()
         }
-    }
-}
-
-/// The label maps of a round of views, numbered as in the whole run.
-struct Shifted<'a> {
-    labels: &'a BlockLabels,
-    first: usize,
-}
-
-impl LabelSource for Shifted<'_> {
-    fn labels(&self, view: usize, cam: &Camera) -> Result<Option<Vec<u32>>> {
-        self.labels.labels(self.first + view, cam)
     }
 }

@@ -8,7 +8,7 @@ use glam::DVec3;
 use serde::Serialize;
 
 use super::export::export_inputs;
-use super::median;
+use super::{median, warm_up};
 use crate::gpu::timings::KernelTotal;
 use crate::gpu::Gpu;
 use crate::render::{GpuScene, Rasterizer, RenderOptions, SemanticMode, StageTimes};
@@ -127,6 +127,7 @@ pub fn bench_render(gpu: &Gpu, input: &BenchInput, iters: usize) -> Result<Rende
     // The frame stays on the device (downloading it is no part of rendering).
     let mut frame = || raster.run_tiled_in_bands(&scene, &cam, &opts, |r, t| t.record_blend(r));
     let warm = frame()?;
+    warm_up(|| frame().map(drop))?;
     let mut frames = Vec::new();
     let mut kernels = Vec::new();
     for _ in 0..iters.max(1) {

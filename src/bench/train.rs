@@ -8,8 +8,8 @@ use anyhow::{ensure, Result};
 use serde::Serialize;
 
 use super::fuse::BlockLabels;
-use super::median;
 use super::render::BenchInput;
+use super::{median, warm_up};
 use crate::fuse::LabelSource;
 use crate::gpu::Gpu;
 use crate::train::config::TrainConfig;
@@ -17,8 +17,9 @@ use crate::train::trainer::{StageTotals, Trainer};
 use crate::train::views::TrainView;
 use crate::util::Rng;
 
-/// Untimed iterations first (pipeline creation, first touches of the buffers).
-const WARMUP_ITERS: u32 = 2;
+/// Iterations the trainer is configured for beyond the timed ones: the warm-up's (see
+/// [`warm_up`]); a long warm-up may use them all, and then stops there.
+const WARMUP_ITERS: u32 = 1000;
 
 #[derive(Debug, Serialize)]
 pub struct TrainBench {
@@ -55,9 +56,14 @@ pub fn bench_train(
     cfg.densify = None;
     cfg.log_every = u32::MAX; // no loss read-back inside the timed iterations
     let mut trainer = Trainer::new(gpu, &g, std::slice::from_ref(&view), cfg, &[])?;
-    for _ in 0..WARMUP_ITERS {
-        trainer.step()?;
-    }
+    let mut warm_iters = 0;
+    warm_up(|| {
+        if warm_iters < WARMUP_ITERS {
+            warm_iters += 1;
+            trainer.step()?;
+        }
+        Ok(())
+    })?;
     let before = trainer.times();
     let mut walls = Vec::with_capacity(iters as usize);
     for _ in 0..iters {

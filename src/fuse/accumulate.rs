@@ -13,10 +13,10 @@ use super::scores::ClassScores;
 use crate::contract::params::{CenterParams, ContribParams};
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, BufferRange, Gpu, Recorder};
-use crate::util::prefetch_ordered;
 use crate::render::rasterizer::{SplitSizes, TileLists};
 use crate::render::{camera_rows_f32, GpuScene, Rasterizer, RenderOptions};
 use crate::scene::Camera;
+use crate::util::prefetch_ordered;
 
 /// Marks a pixel without a label (or with a class outside the table).
 pub use crate::dataset::NO_LABEL;
@@ -263,27 +263,34 @@ fn accumulate_passes(
         // Label maps are read (decoded, converted) on worker threads a few views ahead
         // while the GPU works on the current one.
         let produce = |view: usize| labels.labels(view, &cams[view]);
-        prefetch_ordered(cams.len(), LABEL_THREADS, LABELS_AHEAD, produce, |view, map| {
-            progress(pass_index * cams.len() + view, passes * cams.len());
-            let Some(map) = map else {
-                return Ok(());
-            };
-            let cam = &cams[view];
-            let pixels = cam.width as usize * cam.height as usize;
-            ensure!(
-                map.len() == pixels,
-                "labels of view {} have {} pixels, the camera {pixels}",
-                cam.name,
-                map.len()
-            );
-            if pass_index == 0 {
-                stats.views_with_labels += 1;
-            }
-            let (label_buf, carry) = inputs.upload(gpu, &map)?;
-            stats.gpu_ms += accumulate_view(&mut raster, scene, cam, label_buf, carry, &pass, cfg)?;
-            stats.peak_device_bytes = stats.peak_device_bytes.max(gpu.memory_reserved());
-            Ok(())
-        })?;
+        prefetch_ordered(
+            cams.len(),
+            LABEL_THREADS,
+            LABELS_AHEAD,
+            produce,
+            |view, map| {
+                progress(pass_index * cams.len() + view, passes * cams.len());
+                let Some(map) = map else {
+                    return Ok(());
+                };
+                let cam = &cams[view];
+                let pixels = cam.width as usize * cam.height as usize;
+                ensure!(
+                    map.len() == pixels,
+                    "labels of view {} have {} pixels, the camera {pixels}",
+                    cam.name,
+                    map.len()
+                );
+                if pass_index == 0 {
+                    stats.views_with_labels += 1;
+                }
+                let (label_buf, carry) = inputs.upload(gpu, &map)?;
+                stats.gpu_ms +=
+                    accumulate_view(&mut raster, scene, cam, label_buf, carry, &pass, cfg)?;
+                stats.peak_device_bytes = stats.peak_device_bytes.max(gpu.memory_reserved());
+                Ok(())
+            },
+        )?;
         on_pass(&pass)?;
     }
     progress(passes * cams.len(), passes * cams.len());

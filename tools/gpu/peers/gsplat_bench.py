@@ -50,9 +50,14 @@ def time_events(fn, iters, warmup, marks=1):
     record at its inner points (e.g. after the forward). Returns lists of per-iteration
     milliseconds: segments[k] = from mark k to k+1 (mark 0 = start, last = end), plus
     'total' and 'wall'."""
-    for _ in range(warmup):
+    # At least `warmup` runs and WARMUP_S seconds (as semsplat's benchmarks): an idle GPU
+    # takes a while to reach its working clocks.
+    t_warm = time.perf_counter()
+    done = 0
+    while done < warmup or time.perf_counter() - t_warm < WARMUP_S:
         fn([torch.cuda.Event(enable_timing=True) for _ in range(marks - 1)])
-    torch.cuda.synchronize()
+        torch.cuda.synchronize()
+        done += 1
     seg = [[] for _ in range(marks)]
     total, wall = [], []
     for _ in range(iters):
@@ -70,6 +75,9 @@ def time_events(fn, iters, warmup, marks=1):
             seg[k].append(evs[k].elapsed_time(evs[k + 1]))
         total.append(start.elapsed_time(end))
     return {"segments": seg, "total": total, "wall": wall}
+
+
+WARMUP_S = 0.5
 
 
 def med(xs):
