@@ -11,6 +11,7 @@ use super::fuse::BlockLabels;
 use super::render::BenchInput;
 use super::{median, warm_up};
 use crate::fuse::LabelSource;
+use crate::gpu::timings::KernelTotal;
 use crate::gpu::Gpu;
 use crate::train::config::TrainConfig;
 use crate::train::trainer::{StageTotals, Trainer};
@@ -39,6 +40,8 @@ pub struct TrainBench {
     pub backward_ms: f64,
     /// Entropy regularizer and Adam.
     pub optimizer_ms: f64,
+    /// GPU time per kernel of the last iteration.
+    pub kernels: Vec<KernelTotal>,
 }
 
 /// Runs `iters` timed iterations (after a short warm-up) without densification.
@@ -83,6 +86,7 @@ pub fn bench_train(
         loss_ms: per_iter(|t| t.loss_ms),
         backward_ms: per_iter(|t| t.backward_ms),
         optimizer_ms: per_iter(|t| t.optimizer_ms),
+        kernels: trainer.last_kernels().to_vec(),
     })
 }
 

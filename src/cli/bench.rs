@@ -180,7 +180,7 @@ pub struct ScanArgs {
 fn print_kernels(kernels: &[KernelTotal]) {
     for k in kernels {
         println!(
-            "  {:<16} {:>4} dispatches {:>10.3} ms",
+            "  {:<26} {:>4} dispatches {:>10.3} ms",
             k.kernel,
             k.dispatches,
             k.ns * 1e-6
@@ -414,4 +414,5 @@ fn print_train(r: &TrainBench) {
     println!("  losses     {:>10.3} ms", r.loss_ms);
     println!("  backward   {:>10.3} ms", r.backward_ms);
     println!("  optimizer  {:>10.3} ms", r.optimizer_ms);
+    print_kernels(&r.kernels);
 }

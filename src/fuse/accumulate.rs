@@ -4,6 +4,8 @@
 //! the evidence matrix stays dense while it fits the memory budget, else the classes are
 //! processed in batches of rows (each batch walks every view again; results are the same).
 
+use std::time::Instant;
+
 use anyhow::{bail, ensure, Result};
 use serde::Serialize;
 
@@ -99,6 +101,12 @@ pub struct FuseStats {
     /// GPU time (timestamps): binning + per-tile stages, and the vote kernels.
     pub gpu_ms: f64,
     pub wall_s: f64,
+    /// Where the wall time went on the host: waiting for label maps (read on worker
+    /// threads), uploading them, and running each view (recording, submitting and waiting
+    /// for its GPU work).
+    pub label_wait_s: f64,
+    pub upload_s: f64,
+    pub view_s: f64,
     pub views_per_s: f64,
     pub peak_device_bytes: u64,
     /// Device memory of the scene as this method uploaded it (only what it reads).
@@ -242,7 +250,7 @@ fn accumulate_passes(
     mut progress: impl FnMut(usize, usize),
     mut on_pass: impl FnMut(&EvidencePass) -> Result<()>,
 ) -> Result<FuseStats> {
-    let start = std::time::Instant::now();
+    let start = Instant::now();
     let n = scene.n as usize;
     check_atomics(gpu, cfg.accumulation)?;
     let rows = rows_per_pass(gpu, cfg, classes, n)?;
@@ -263,31 +271,31 @@ fn accumulate_passes(
         // Label maps are read (decoded, converted) on worker threads a few views ahead
         // while the GPU works on the current one.
         let produce = |view: usize| labels.labels(view, &cams[view]);
+        let mut waited_since = Instant::now();
         prefetch_ordered(
             cams.len(),
             LABEL_THREADS,
             LABELS_AHEAD,
             produce,
             |view, map| {
+                stats.label_wait_s += waited_since.elapsed().as_secs_f64();
                 progress(pass_index * cams.len() + view, passes * cams.len());
-                let Some(map) = map else {
-                    return Ok(());
-                };
-                let cam = &cams[view];
-                let pixels = cam.width as usize * cam.height as usize;
-                ensure!(
-                    map.len() == pixels,
-                    "labels of view {} have {} pixels, the camera {pixels}",
-                    cam.name,
-                    map.len()
-                );
-                if pass_index == 0 {
-                    stats.views_with_labels += 1;
+                if let Some(map) = map {
+                    let cam = &cams[view];
+                    check_map_size(cam, &map)?;
+                    if pass_index == 0 {
+                        stats.views_with_labels += 1;
+                    }
+                    let upload_start = Instant::now();
+                    let (label_buf, carry) = inputs.upload(gpu, &map)?;
+                    let view_start = Instant::now();
+                    stats.gpu_ms +=
+                        accumulate_view(&mut raster, scene, cam, label_buf, carry, &pass, cfg)?;
+                    stats.upload_s += (view_start - upload_start).as_secs_f64();
+                    stats.view_s += view_start.elapsed().as_secs_f64();
+                    stats.peak_device_bytes = stats.peak_device_bytes.max(gpu.memory_reserved());
                 }
-                let (label_buf, carry) = inputs.upload(gpu, &map)?;
-                stats.gpu_ms +=
-                    accumulate_view(&mut raster, scene, cam, label_buf, carry, &pass, cfg)?;
-                stats.peak_device_bytes = stats.peak_device_bytes.max(gpu.memory_reserved());
+                waited_since = Instant::now();
                 Ok(())
             },
         )?;
@@ -336,6 +344,18 @@ pub fn accumulate_raw(
         Ok(())
     })?;
     Ok((raw, stats))
+}
+
+/// Refuses a label map whose size is not the camera's.
+fn check_map_size(cam: &Camera, map: &[u32]) -> Result<()> {
+    let pixels = cam.width as usize * cam.height as usize;
+    ensure!(
+        map.len() == pixels,
+        "labels of view {} have {} pixels, the camera {pixels}",
+        cam.name,
+        map.len()
+    );
+    Ok(())
 }
 
 /// Adds one view's evidence into `pass`; returns its GPU time in ms.

@@ -12,6 +12,7 @@ use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 use super::caps::{probe_device, DeviceCaps};
 use super::error::{GpuError, GpuResult, VkContext};
 use super::kernel::Pipeline;
+use super::recorder::RecorderParts;
 use super::validation::{debug_callback, ValidationLog};
 
 const VALIDATION_LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
@@ -41,6 +42,8 @@ pub(crate) struct Inner {
     pub(crate) push_descriptor: ash::khr::push_descriptor::Device,
     pub(crate) caps: DeviceCaps,
     pub(crate) kernels: Mutex<HashMap<usize, Arc<Pipeline>>>,
+    /// Finished recorders' pools, reused by the next ones (see `recorder::RecorderParts`).
+    pub(crate) recycled_recorders: Mutex<Vec<RecorderParts>>,
 }
 
 /// A shared handle to the Vulkan device. Cheap to clone; buffers keep it alive.
@@ -278,6 +281,7 @@ impl Gpu {
                 push_descriptor,
                 caps,
                 kernels: Mutex::new(HashMap::new()),
+                recycled_recorders: Mutex::new(Vec::new()),
             }),
         })
     }
@@ -455,6 +459,9 @@ impl Drop for Inner {
             let _ = self.device.device_wait_idle();
             for (_, k) in self.kernels.lock().unwrap().drain() {
                 k.destroy(&self.device);
+            }
+            for parts in self.recycled_recorders.lock().unwrap().drain(..) {
+                parts.destroy(&self.device);
             }
             drop(self.allocator.lock().unwrap().take());
             self.device.destroy_device(None);

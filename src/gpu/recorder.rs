@@ -22,13 +22,28 @@ pub struct Recorder {
     queries: Option<vk::QueryPool>,
     /// Label of each timestamp after the first (kernel name or None for marks).
     stamps: Vec<Option<&'static str>>,
+    /// No submission of its command buffer can be pending (never submitted, or waited
+    /// for): its pools may be reused by the next recorder instead of destroyed.
+    idle: bool,
 }
 
-impl Recorder {
-    /// Starts recording; timestamps are on when the device supports them.
-    pub fn new(gpu: &Gpu) -> GpuResult<Recorder> {
+/// A recorder's Vulkan objects. Creating a command pool and a 4096-entry query pool for
+/// every submission cost host time on every view; a few finished ones are kept on the
+/// device for the next recorders (see [`MAX_RECYCLED`]).
+pub(crate) struct RecorderParts {
+    pool: vk::CommandPool,
+    cmd: vk::CommandBuffer,
+    queries: Option<vk::QueryPool>,
+}
+
+/// Finished recorders' parts kept for reuse (more than one recorder may be open at once).
+const MAX_RECYCLED: usize = 8;
+
+impl RecorderParts {
+    fn create(gpu: &Gpu) -> GpuResult<RecorderParts> {
         let device = gpu.device();
-        // SAFETY: objects are created from a valid device and destroyed in Drop.
+        // SAFETY: objects are created from a valid device; they are destroyed by
+        // `destroy`, by the recorder's Drop or the device's.
         unsafe {
             let pool = device
                 .create_command_pool(
@@ -38,21 +53,76 @@ impl Recorder {
                     None,
                 )
                 .vk("vkCreateCommandPool")?;
-            let mut rec = Recorder {
-                gpu: gpu.clone(),
+            let mut parts = RecorderParts {
                 pool,
                 cmd: vk::CommandBuffer::null(),
                 queries: None,
-                stamps: vec![],
             };
-            rec.cmd = device
-                .allocate_command_buffers(
-                    &vk::CommandBufferAllocateInfo::default()
-                        .command_pool(pool)
-                        .level(vk::CommandBufferLevel::PRIMARY)
-                        .command_buffer_count(1),
-                )
-                .vk("vkAllocateCommandBuffers")?[0];
+            let allocated = device.allocate_command_buffers(
+                &vk::CommandBufferAllocateInfo::default()
+                    .command_pool(pool)
+                    .level(vk::CommandBufferLevel::PRIMARY)
+                    .command_buffer_count(1),
+            );
+            match allocated {
+                Ok(cmds) => parts.cmd = cmds[0],
+                Err(e) => {
+                    parts.destroy(device);
+                    return Err(e).vk("vkAllocateCommandBuffers");
+                }
+            }
+            if gpu.caps().timestamps {
+                let qp = device.create_query_pool(
+                    &vk::QueryPoolCreateInfo::default()
+                        .query_type(vk::QueryType::TIMESTAMP)
+                        .query_count(MAX_QUERIES),
+                    None,
+                );
+                match qp {
+                    Ok(qp) => parts.queries = Some(qp),
+                    Err(e) => {
+                        parts.destroy(device);
+                        return Err(e).vk("vkCreateQueryPool");
+                    }
+                }
+            }
+            Ok(parts)
+        }
+    }
+
+    /// # Safety
+    /// Nothing recorded into the pool's buffer may be pending.
+    pub(crate) unsafe fn destroy(&self, device: &ash::Device) {
+        if let Some(qp) = self.queries {
+            device.destroy_query_pool(qp, None);
+        }
+        device.destroy_command_pool(self.pool, None);
+    }
+}
+
+impl Recorder {
+    /// Starts recording; timestamps are on when the device supports them.
+    pub fn new(gpu: &Gpu) -> GpuResult<Recorder> {
+        let device = gpu.device();
+        let recycled = gpu.inner.recycled_recorders.lock().unwrap().pop();
+        let parts = match recycled {
+            Some(parts) => parts,
+            None => RecorderParts::create(gpu)?,
+        };
+        let mut rec = Recorder {
+            gpu: gpu.clone(),
+            pool: parts.pool,
+            cmd: parts.cmd,
+            queries: parts.queries,
+            stamps: vec![],
+            idle: false,
+        };
+        // SAFETY: the pool's buffer is not pending (a recycled one was waited for); recording
+        // into our own command buffer.
+        unsafe {
+            device
+                .reset_command_pool(rec.pool, vk::CommandPoolResetFlags::empty())
+                .vk("vkResetCommandPool")?;
             device
                 .begin_command_buffer(
                     rec.cmd,
@@ -60,21 +130,13 @@ impl Recorder {
                         .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
                 )
                 .vk("vkBeginCommandBuffer")?;
-            if gpu.caps().timestamps {
-                let qp = device
-                    .create_query_pool(
-                        &vk::QueryPoolCreateInfo::default()
-                            .query_type(vk::QueryType::TIMESTAMP)
-                            .query_count(MAX_QUERIES),
-                        None,
-                    )
-                    .vk("vkCreateQueryPool")?;
-                rec.queries = Some(qp);
+            if let Some(qp) = rec.queries {
                 device.cmd_reset_query_pool(rec.cmd, qp, 0, MAX_QUERIES);
                 device.cmd_write_timestamp(rec.cmd, vk::PipelineStageFlags::TOP_OF_PIPE, qp, 0);
             }
-            Ok(rec)
         }
+        rec.idle = true; // recorded, never submitted: nothing of it can be pending
+        Ok(rec)
     }
 
     pub fn gpu(&self) -> &Gpu {
@@ -362,7 +424,8 @@ impl Recorder {
     }
 
     /// Submits, waits for completion, and returns the per-kernel timings.
-    pub fn submit_and_wait(self) -> GpuResult<Timings> {
+    pub fn submit_and_wait(mut self) -> GpuResult<Timings> {
+        self.idle = false;
         let device = self.gpu.device();
         // SAFETY: the command buffer is fully recorded; we wait on the fence before reading
         // queries or letting Drop free anything.
@@ -382,6 +445,7 @@ impl Recorder {
             let waited = submitted.and_then(|_| device.wait_for_fences(&[fence], true, u64::MAX));
             device.destroy_fence(fence, None);
             waited.vk("vkQueueSubmit/vkWaitForFences")?;
+            self.idle = true;
 
             let mut raw = vec![0u64; self.stamps.len() + 1];
             if let Some(qp) = self.queries {
@@ -409,13 +473,21 @@ impl Recorder {
 
 impl Drop for Recorder {
     fn drop(&mut self) {
-        // SAFETY: submit_and_wait waited for the fence; an unsubmitted buffer is never pending.
-        unsafe {
-            if let Some(qp) = self.queries {
-                self.gpu.device().destroy_query_pool(qp, None);
+        let parts = RecorderParts {
+            pool: self.pool,
+            cmd: self.cmd,
+            queries: self.queries,
+        };
+        if self.idle {
+            let mut recycled = self.gpu.inner.recycled_recorders.lock().unwrap();
+            if recycled.len() < MAX_RECYCLED {
+                recycled.push(parts);
+                return;
             }
-            self.gpu.device().destroy_command_pool(self.pool, None);
         }
+        // SAFETY: an idle buffer is not pending; one that is not idle failed to submit or
+        // to be waited for, a device error after which nothing of it runs.
+        unsafe { parts.destroy(self.gpu.device()) }
     }
 }
 

@@ -23,6 +23,7 @@ use super::loss_entropy::entropy_weight;
 use super::loss_values::LossValues;
 use super::tensors::{new_moments, tensors, PerTensor, TensorRef};
 use super::views::{DeviceView, TrainView};
+use crate::gpu::timings::KernelTotal;
 use crate::gpu::{Buffer, Gpu, Mark, Recorder};
 use crate::render::backward::{Accumulation, FixedCheck, PixelGrads, SceneGrads, FIXED_MAX_REDOS};
 use crate::render::{GpuScene, Rasterizer, RenderOptions, SemanticMode};
@@ -96,6 +97,8 @@ pub struct Trainer {
     times: StageTotals,
     events: Vec<DensifyEvent>,
     last_loss: Option<(u32, u32)>,
+    /// GPU time per kernel of the last iteration (both submissions), for benchmarks.
+    last_kernels: Vec<KernelTotal>,
 }
 
 /// 3DGS's scene extent: 1.1 times the largest distance of a camera center from their mean.
@@ -175,6 +178,7 @@ impl Trainer {
             times: StageTotals::default(),
             events: Vec::new(),
             last_loss: None,
+            last_kernels: Vec::new(),
             cfg,
         })
     }
@@ -194,6 +198,12 @@ impl Trainer {
 
     pub fn times(&self) -> StageTotals {
         self.times
+    }
+
+    /// GPU time per kernel of the last iteration's two submissions (a kernel in both
+    /// appears twice).
+    pub fn last_kernels(&self) -> &[KernelTotal] {
+        &self.last_kernels
     }
 
     pub fn extent(&self) -> f64 {
@@ -322,6 +332,7 @@ impl Trainer {
         self.times.forward_ms += ms(run.marks[0], marks[0]);
         self.times.loss_ms += ms(marks[0], marks[1]);
         self.times.backward_ms += ms(marks[1], marks[2]);
+        self.last_kernels = run.timings.by_kernel();
         Ok(key)
     }
 
@@ -366,6 +377,7 @@ impl Trainer {
         let timings = rec.submit_and_wait()?;
         self.times.backward_ms += timings.between(m0, m1).unwrap_or(0.0) * 1e-6;
         self.times.optimizer_ms += timings.between(m1, m2).unwrap_or(0.0) * 1e-6;
+        self.last_kernels.extend(timings.by_kernel());
         Ok(())
     }
 
