@@ -70,10 +70,9 @@ pub struct MethodBench {
     pub gpu_ms: f64,
     /// Views (times passes) per wall second.
     pub views_per_s: f64,
-    /// Host time of the accumulation: waiting for label maps, uploading them, running
-    /// the views (see `FuseStats`); the rest of `wall_s` is setup and the evidence download.
+    /// Host time of the accumulation: waiting for label maps and running the views (see
+    /// `FuseStats`); the rest of `wall_s` is setup and the evidence download.
     pub label_wait_s: f64,
-    pub upload_s: f64,
     pub view_s: f64,
     /// Passes over the views (the evidence matrix split into class-row batches).
     pub passes: usize,
@@ -367,7 +366,7 @@ impl Setup<'_> {
                 sum.add(stats.gpu_ms, stats.wall_s, stats.peak_device_bytes);
                 sum.passes = stats.passes;
                 sum.rows_per_pass = stats.rows_per_pass;
-                sum.host = [stats.label_wait_s, stats.upload_s, stats.view_s];
+                sum.host = [stats.label_wait_s, stats.view_s];
                 method.push(sum);
             }
         }
@@ -405,8 +404,7 @@ fn method_bench(
         wall_s: m.wall_s,
         gpu_ms: m.gpu_ms,
         label_wait_s: m.host[0],
-        upload_s: m.host[1],
-        view_s: m.host[2],
+        view_s: m.host[1],
         views_per_s: (views * m.passes) as f64 / m.wall_s,
         passes: m.passes,
         rows_per_pass: m.rows_per_pass,
@@ -423,8 +421,8 @@ fn method_bench(
 struct RunTotal {
     gpu_ms: f64,
     wall_s: f64,
-    /// Label wait, upload and view seconds (methods only; the last run's).
-    host: [f64; 3],
+    /// Label wait and view seconds (methods only; the last run's).
+    host: [f64; 2],
     peak_device_bytes: u64,
     passes: usize,
     rows_per_pass: usize,

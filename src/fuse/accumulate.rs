@@ -4,6 +4,7 @@
 //! the evidence matrix stays dense while it fits the memory budget, else the classes are
 //! processed in batches of rows (each batch walks every view again; results are the same).
 
+use std::sync::Mutex;
 use std::time::Instant;
 
 use anyhow::{bail, ensure, Result};
@@ -101,11 +102,10 @@ pub struct FuseStats {
     /// GPU time (timestamps): binning + per-tile stages, and the vote kernels.
     pub gpu_ms: f64,
     pub wall_s: f64,
-    /// Where the wall time went on the host: waiting for label maps (read on worker
-    /// threads), uploading them, and running each view (recording, submitting and waiting
-    /// for its GPU work).
+    /// Where the wall time went on the host: waiting for label maps (read and staged on
+    /// worker threads), and running each view (uploading its labels, recording,
+    /// submitting and waiting for its GPU work).
     pub label_wait_s: f64,
-    pub upload_s: f64,
     pub view_s: f64,
     pub views_per_s: f64,
     pub peak_device_bytes: u64,
@@ -180,32 +180,72 @@ impl EvidencePass {
     }
 }
 
-/// The per-view device inputs, grown to the largest view: the label map (uploaded through
-/// one reused staging buffer) and the per-pixel state the tiled methods carry between
-/// windows.
+/// The per-view device inputs, grown to the largest view: the label map and the per-pixel
+/// state the tiled methods carry between windows.
 #[derive(Default)]
 struct ViewInputs {
     labels: Option<Buffer>,
-    staging: Option<Buffer>,
     carry: Option<Buffer>,
 }
 
 impl ViewInputs {
-    /// Uploads `map` (one compact class per pixel) and returns (labels, carry).
-    fn upload(&mut self, gpu: &Gpu, map: &[u32]) -> Result<(&Buffer, &Buffer)> {
-        let pixels = map.len() as u64;
+    /// (labels, carry) for a view of `pixels` pixels.
+    fn for_pixels(&mut self, gpu: &Gpu, pixels: u64) -> Result<(&Buffer, &Buffer)> {
         if self.labels.as_ref().is_none_or(|b| b.size() < pixels * 4) {
             self.labels = Some(gpu.buffer("labels", pixels * 4)?);
-            self.staging = Some(gpu.staging_buffer(pixels * 4)?);
             self.carry = Some(gpu.buffer("contrib-carry", pixels * CONTRIB_CARRY_BYTES)?);
         }
-        let (Some(labels), Some(staging), Some(carry)) =
-            (&self.labels, &mut self.staging, &self.carry)
-        else {
+        let (Some(labels), Some(carry)) = (&self.labels, &self.carry) else {
             unreachable!("allocated together above");
         };
-        gpu.upload_with(staging, labels, 0, map)?;
         Ok((labels, carry))
+    }
+}
+
+/// Host buffers the label maps are staged in by the worker threads that read them: one
+/// slot per view in flight (view `v` uses slot `v % slots`). A slot is written again only
+/// once the GPU has run its view: workers run at most [`LABELS_AHEAD`] views ahead of the
+/// view being run, and there are more slots than that.
+struct LabelStaging {
+    slots: Vec<Mutex<Option<Buffer>>>,
+}
+
+impl LabelStaging {
+    fn new() -> LabelStaging {
+        LabelStaging {
+            slots: (0..LABELS_AHEAD + 1).map(|_| Mutex::new(None)).collect(),
+        }
+    }
+
+    fn slot(&self, view: usize) -> std::sync::MutexGuard<'_, Option<Buffer>> {
+        let slot = &self.slots[view % self.slots.len()];
+        slot.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Copies `map` into view `view`'s slot (grown as needed).
+    fn stage(&self, gpu: &Gpu, view: usize, map: &[u32]) -> Result<()> {
+        let bytes = std::mem::size_of_val(map) as u64;
+        let mut slot = self.slot(view);
+        if slot.as_ref().is_none_or(|b| b.size() < bytes) {
+            *slot = Some(gpu.staging_buffer(bytes)?);
+        }
+        slot.as_mut().expect("allocated above").write_mapped(map);
+        Ok(())
+    }
+}
+
+/// A view's label map: staged on the host, copied to `device` at the start of the view's
+/// GPU work (in the same submission).
+struct ViewLabels<'a> {
+    staged: &'a Buffer,
+    device: &'a Buffer,
+    bytes: u64,
+}
+
+impl ViewLabels<'_> {
+    fn record_upload(&self, rec: &mut Recorder) {
+        rec.copy(self.staged, 0, self.device, 0, self.bytes);
+        rec.barrier();
     }
 }
 
@@ -265,33 +305,44 @@ fn accumulate_passes(
     let mut raster = Rasterizer::new(gpu);
     raster.set_split_sizes(cfg.split);
     let mut inputs = ViewInputs::default();
+    let staging = LabelStaging::new();
     for pass_index in 0..passes {
         let row_begin = pass_index * rows;
         let pass = EvidencePass::new(gpu, row_begin, rows.min(classes - row_begin), n, entry)?;
-        // Label maps are read (decoded, converted) on worker threads a few views ahead
-        // while the GPU works on the current one.
-        let produce = |view: usize| labels.labels(view, &cams[view]);
+        // Label maps are read (decoded, converted) and staged on worker threads a few views
+        // ahead while the GPU works on the current one.
+        let produce = |view: usize| -> Result<Option<u64>> {
+            let Some(map) = labels.labels(view, &cams[view])? else {
+                return Ok(None);
+            };
+            check_map_size(&cams[view], &map)?;
+            staging.stage(gpu, view, &map)?;
+            Ok(Some(map.len() as u64))
+        };
         let mut waited_since = Instant::now();
         prefetch_ordered(
             cams.len(),
             LABEL_THREADS,
             LABELS_AHEAD,
             produce,
-            |view, map| {
+            |view, staged| {
                 stats.label_wait_s += waited_since.elapsed().as_secs_f64();
                 progress(pass_index * cams.len() + view, passes * cams.len());
-                if let Some(map) = map {
-                    let cam = &cams[view];
-                    check_map_size(cam, &map)?;
-                    if pass_index == 0 {
-                        stats.views_with_labels += 1;
-                    }
-                    let upload_start = Instant::now();
-                    let (label_buf, carry) = inputs.upload(gpu, &map)?;
+                if let Some(pixels) = staged {
+                    stats.views_with_labels += usize::from(pass_index == 0);
                     let view_start = Instant::now();
+                    let slot = staging.slot(view);
+                    let (device, carry) = inputs.for_pixels(gpu, pixels)?;
+                    let staged = slot.as_ref().expect("staged by the producer");
+                    let bytes = pixels * 4;
+                    let labels = ViewLabels {
+                        staged,
+                        device,
+                        bytes,
+                    };
+                    let cam = &cams[view];
                     stats.gpu_ms +=
-                        accumulate_view(&mut raster, scene, cam, label_buf, carry, &pass, cfg)?;
-                    stats.upload_s += (view_start - upload_start).as_secs_f64();
+                        accumulate_view(&mut raster, scene, cam, &labels, carry, &pass, cfg)?;
                     stats.view_s += view_start.elapsed().as_secs_f64();
                     stats.peak_device_bytes = stats.peak_device_bytes.max(gpu.memory_reserved());
                 }
@@ -363,7 +414,7 @@ fn accumulate_view(
     raster: &mut Rasterizer,
     scene: &GpuScene,
     cam: &Camera,
-    labels: &Buffer,
+    labels: &ViewLabels,
     carry: &Buffer,
     pass: &EvidencePass,
     cfg: &FuseConfig,
@@ -378,12 +429,13 @@ fn accumulate_view(
             let run = raster
                 .run_tiled_in_bands(scene, cam, &opts, |rec, tiles| tiles.record_blend(rec))?;
             let mut rec = Recorder::new(raster.gpu())?;
+            labels.record_upload(&mut rec);
             let m0 = rec.mark();
             dispatch_vote(
                 &mut rec,
                 scene,
                 cam,
-                labels,
+                labels.device,
                 Some(raster.depth()),
                 pass,
                 cfg,
@@ -394,7 +446,10 @@ fn accumulate_view(
         }
         Method::VoteWeighted | Method::FlashSplat | Method::FlashSplatPerView => raster
             .run_tiled_in_bands(scene, cam, &opts, |rec, tiles| {
-                record_contrib(rec, tiles, scene.n, labels, carry, pass, cfg)
+                if tiles.band() == 0 {
+                    labels.record_upload(rec); // every band reads the whole map
+                }
+                record_contrib(rec, tiles, scene.n, labels.device, carry, pass, cfg)
             })?,
     };
     Ok(run.timings.total_ns() * 1e-6)
@@ -492,13 +547,14 @@ fn record_vote(
     gpu: &Gpu,
     scene: &GpuScene,
     cam: &Camera,
-    labels: &Buffer,
+    labels: &ViewLabels,
     pass: &EvidencePass,
     cfg: &FuseConfig,
 ) -> Result<f64> {
     let mut rec = Recorder::new(gpu)?;
+    labels.record_upload(&mut rec);
     let m0 = rec.mark();
-    dispatch_vote(&mut rec, scene, cam, labels, None, pass, cfg)?;
+    dispatch_vote(&mut rec, scene, cam, labels.device, None, pass, cfg)?;
     let m1 = rec.mark();
     let t = rec.submit_and_wait()?;
     Ok(t.between(m0, m1).unwrap_or(0.0) * 1e-6)

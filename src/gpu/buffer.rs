@@ -30,6 +30,17 @@ impl Buffer {
         &self.name
     }
 
+    /// Writes `data` at the start of this host-mapped (staging) buffer.
+    pub fn write_mapped<T: Pod>(&mut self, data: &[T]) {
+        let bytes: &[u8] = bytemuck::cast_slice(data);
+        assert!(
+            bytes.len() as u64 <= self.size,
+            "staging buffer {} is too small",
+            self.name
+        );
+        self.mapped()[..bytes.len()].copy_from_slice(bytes);
+    }
+
     fn mapped(&mut self) -> &mut [u8] {
         let size = self.size as usize;
         self.allocation
@@ -195,12 +206,7 @@ impl Gpu {
             "upload past the end of {}",
             dst.name
         );
-        assert!(
-            bytes.len() as u64 <= staging.size,
-            "staging buffer {} is too small",
-            staging.name
-        );
-        staging.mapped()[..bytes.len()].copy_from_slice(bytes);
+        staging.write_mapped(bytes);
         let mut rec = Recorder::new(self)?;
         rec.copy(staging, 0, dst, offset, bytes.len() as u64);
         rec.submit_and_wait()?;

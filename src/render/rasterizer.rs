@@ -1021,6 +1021,12 @@ pub struct TiledRun {
 }
 
 impl TileLists<'_> {
+    /// Which band of tile rows of the view these lists hold (0 when binned whole, and for
+    /// the first band).
+    pub fn band(&self) -> u32 {
+        self.band
+    }
+
     /// The status words (ST_*) of these lists' binning. Its intersection lists overflowed
     /// where `ST_OVERFLOW` is set: the view is recorded again with larger lists (or in
     /// more bands), so a pass that accumulates across views must add nothing then.
