@@ -398,7 +398,7 @@ pub fn accumulate_raw(
 }
 
 /// Refuses a label map whose size is not the camera's.
-fn check_map_size(cam: &Camera, map: &[u32]) -> Result<()> {
+pub(crate) fn check_map_size(cam: &Camera, map: &[u32]) -> Result<()> {
     let pixels = cam.width as usize * cam.height as usize;
     ensure!(
         map.len() == pixels,

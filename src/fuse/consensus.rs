@@ -7,7 +7,9 @@
 
 use anyhow::{ensure, Result};
 
-use super::accumulate::{center_params, FuseConfig, FuseStats, LabelSource, NO_LABEL};
+use super::accumulate::{
+    center_params, check_map_size, FuseConfig, FuseStats, LabelSource, NO_LABEL,
+};
 use super::consensus_decide::{build_segments, decide, merge_segments, Consensus, ConsensusParams};
 use super::consensus_segments::{label_regions, nearest_neighbours, Observations};
 use super::scores::ClassScores;
@@ -99,13 +101,7 @@ pub fn observe(
             per_view.push(Vec::new());
             continue;
         };
-        let pixels = cam.width as usize * cam.height as usize;
-        ensure!(
-            map.len() == pixels,
-            "labels of view {} have {} pixels, the camera {pixels}",
-            cam.name,
-            map.len()
-        );
+        check_map_size(cam, &map)?;
         ensure!(
             map.iter().all(|&l| l == NO_LABEL || (l as usize) < classes),
             "labels of view {} hold a class outside the {classes} classes",
