@@ -10,8 +10,8 @@
 // gradients are dL/d(rgb), dL/d(accumulated alpha) and dL/d(normalized semantics); the
 // Gaussian Semantics Eq. 2 normalization (sem / (1 - T_final)) is undone per pixel first, which turns it into
 // a gradient on the raw blend plus one on T_final. Each Gaussian's gradient is summed
-// across the subgroup before the atomics, and steps where no lane of a subgroup
-// contributes are skipped with a vote.
+// across the subgroup before the atomics (its channels by one reduce-scatter), and steps
+// where no lane of a subgroup contributes are skipped with a vote.
 //
 // Windows: like the forward, one dispatch walks at most window_len entries of a tile's
 // list; windows run from the last to the first, carrying T and the sums of what lies
@@ -23,6 +23,10 @@
 #extension GL_KHR_shader_subgroup_vote : require
 #extension GL_KHR_shader_subgroup_arithmetic : require
 #include "raster_common.glsl"
+#include "subgroup_reduce_scatter.glsl"
+#if SEM_CHUNK != 16
+#error "a chunk's channels are summed by reduce_scatter16"
+#endif
 
 #define BATCH TILE_PIXELS
 // Screen-space gradient per Gaussian (grad2d, GRAD2D_STRIDE floats, shared_constants.txt):
@@ -219,26 +223,43 @@ void main() {
 #endif
                 T = t_i;
             }
-            // Sum over the subgroup; lane l then does the atomics of values l, l + size, ...
             uint gid = s_id[j];
             uint lane = gl_SubgroupInvocationID;
-            [[unroll]] for (uint k = 0; k < STEP_VALUES; k++) {
-                // Uniform bound: only the values this dispatch has (no color past chunk 0,
-                // no channels past C).
-#ifdef SEM_ONLY
-                bool wanted = k >= GRAD2D_STRIDE && chunk_base + k - GRAD2D_STRIDE < channels;
-#else
-                bool wanted = k < GRAD2D_STRIDE ? (with_rgb || k < 6) : (chunk_base + k - GRAD2D_STRIDE < channels);
-#endif
-                if (!wanted) {
-                    continue;
+#ifndef SEM_ONLY
+            // Screen-space values (padded to 16): one reduce-scatter leaves each sum in one
+            // lane, which does its atomic.
+            float geo_sums[16];
+            [[unroll]] for (uint k = 0; k < 16; k++) {
+                geo_sums[k] = k < GRAD2D_STRIDE ? vals[k] : 0.0;
+            }
+            reduce_scatter16(geo_sums);
+            if (reduce_scatter_owner(lane)) {
+                uint first = reduce_scatter_base(lane);
+                uint count = reduce_scatter_count();
+                [[unroll]] for (uint i = 0; i < 4; i++) { // at most 16 / 4 sums a lane
+                    uint k = first + i;
+                    if (i < count && k < GRAD2D_STRIDE && geo_sums[i] != 0.0) {
+                        grad_add(gid * GRAD2D_STRIDE + k, geo_sums[i]);
+                    }
                 }
-                float sum = subgroupAdd(vals[k]);
-                if (k % gl_SubgroupSize == lane && sum != 0.0) {
-                    if (k < GRAD2D_STRIDE) {
-                        grad_add(gid * GRAD2D_STRIDE + k, sum);
-                    } else {
-                        sem_grad_add(gid * channels + chunk_base + k - GRAD2D_STRIDE, sum);
+            }
+#endif
+            // The chunk's channels: one reduce-scatter leaves each channel's sum in one
+            // lane, which does its atomic (16 shuffles at 32 lanes instead of 16 sums of 5).
+            if (chunk_base < channels) { // uniform: RGB-only frames have no channels
+                float sem_sums[SEM_CHUNK];
+                [[unroll]] for (uint k = 0; k < SEM_CHUNK; k++) {
+                    sem_sums[k] = vals[GRAD2D_STRIDE + k];
+                }
+                reduce_scatter16(sem_sums);
+                if (reduce_scatter_owner(lane)) {
+                    uint first = chunk_base + reduce_scatter_base(lane);
+                    uint count = reduce_scatter_count();
+                    [[unroll]] for (uint i = 0; i < 4; i++) { // at most 16 / 4 sums a lane
+                        uint c = first + i;
+                        if (i < count && c < channels && sem_sums[i] != 0.0) {
+                            sem_grad_add(gid * channels + c, sem_sums[i]);
+                        }
                     }
                 }
             }

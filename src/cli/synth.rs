@@ -67,7 +67,8 @@ pub struct SynthArgs {
     /// Horizontal field of view in degrees (20..=120).
     #[arg(long, default_value_t = DEFAULT_HFOV_DEG)]
     fov: f64,
-    /// Gaussian spacing on surfaces in meters (density ~ 1/spacing^2; office ~160k at 0.03).
+    /// Gaussian spacing on surfaces in meters (density ~ 1/spacing^2: office 41k at 0.03,
+    /// ~1M at 0.0053).
     #[arg(long, default_value_t = DEFAULT_SPACING)]
     spacing: f64,
     /// Point spacing of init.ply in meters.

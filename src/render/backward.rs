@@ -438,7 +438,7 @@ impl TileLists<'_> {
         for chunk in 0..f.sem_chunks() {
             for start in f.window_starts().rev() {
                 let params = f.blend_params(start, chunk, false);
-                let bindings: [(&str, &Buffer); 12] = [
+                let bindings: [(&str, &Buffer); 11] = [
                     ("tile_ranges", self.ranges()),
                     ("isect_ids", self.isect_ids()),
                     ("xy_depth_opacity", self.xy_depth_opacity()),
@@ -449,11 +449,12 @@ impl TileLists<'_> {
                     ("n_contrib", self.n_contrib()),
                     ("v_sem_norm", upstream.sem_norm),
                     ("carry", &grads.carry),
-                    ("grad2d", screen_target),
                     ("grad_sem", sem_target),
                 ];
-                // What the alpha and color gradients read (not the semantic-only variant).
-                let optional: [(&str, &Buffer); 7] = [
+                // What the alpha, color and screen-space gradients read and write (not the
+                // semantic-only variant).
+                let optional: [(&str, &Buffer); 8] = [
+                    ("grad2d", screen_target),
                     ("colors", self.colors()),
                     ("sem_in", sem_in),
                     ("sem_norm", sem_norm),
