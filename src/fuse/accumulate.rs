@@ -519,27 +519,46 @@ fn download_rows(
     n: usize,
     out: &mut ClassScores,
 ) -> Result<()> {
-    let (evidence, row_begin, rows) = (&pass.evidence, pass.row_begin, pass.rows);
-    let count = rows * n;
-    let values: Vec<f64> = match (cfg.method, cfg.accumulation) {
-        (Method::Vote | Method::VoteOcclusion, _) => gpu
-            .download::<u32>(evidence, 0, count)?
-            .into_iter()
-            .map(f64::from)
-            .collect(),
-        (_, Accumulation::FixedPoint) => gpu
-            .download::<u64>(evidence, 0, count)?
-            .into_iter()
-            .map(fixed_to_f64)
-            .collect(),
-        (_, Accumulation::Float) => gpu
-            .download::<f32>(evidence, 0, count)?
-            .into_iter()
-            .map(f64::from)
-            .collect(),
+    let (row_begin, rows) = (pass.row_begin, pass.rows);
+    let dst = &mut out.data[row_begin * n..(row_begin + rows) * n];
+    let entry = bytes_per_entry(cfg.method, cfg.accumulation);
+    let widen: fn(&[u8]) -> f64 = match (cfg.method, cfg.accumulation) {
+        (Method::Vote | Method::VoteOcclusion, _) => |b| f64::from(u32::from_le_bytes(le(b))),
+        (_, Accumulation::FixedPoint) => |b| fixed_to_f64(u64::from_le_bytes(le(b))),
+        (_, Accumulation::Float) => |b| f64::from(f32::from_le_bytes(le(b))),
     };
-    out.data[row_begin * n..(row_begin + rows) * n].copy_from_slice(&values);
+    let len = dst.len() as u64 * entry;
+    gpu.download_with(&pass.evidence, 0, len, |bytes| {
+        widen_in_parallel(bytes, entry as usize, dst, widen)
+    })?;
     Ok(())
+}
+
+/// The first N bytes of `b` as an array (`b` is one evidence entry).
+fn le<const N: usize>(b: &[u8]) -> [u8; N] {
+    b[..N].try_into().expect("one entry")
+}
+
+/// `dst[i] = widen(entry i of bytes)` on every core: the evidence of millions of
+/// Gaussians times the classes is hundreds of MB (6M x 16 fixed-point entries: 768 MB).
+fn widen_in_parallel(bytes: &[u8], entry: usize, dst: &mut [f64], widen: fn(&[u8]) -> f64) {
+    const CHUNK: usize = 1 << 20;
+    std::thread::scope(|scope| {
+        let parts = dst.chunks_mut(CHUNK).zip(bytes.chunks(CHUNK * entry));
+        let threads = std::thread::available_parallelism().map_or(1, |t| t.get());
+        let mut parts: Vec<_> = parts.collect();
+        let per_thread = parts.len().div_ceil(threads).max(1);
+        while !parts.is_empty() {
+            let take: Vec<_> = parts.drain(..per_thread.min(parts.len())).collect();
+            scope.spawn(move || {
+                for (out, raw) in take {
+                    for (o, b) in out.iter_mut().zip(raw.chunks_exact(entry)) {
+                        *o = widen(b);
+                    }
+                }
+            });
+        }
+    });
 }
 
 /// Plain vote of one view in a submission of its own; returns its GPU time in ms.

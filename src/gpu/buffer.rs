@@ -232,8 +232,39 @@ impl Gpu {
         if total == 0 {
             return Ok(ranges.iter().map(|_| Vec::new()).collect());
         }
-        let mut staging =
-            self.create_buffer("staging-download", total, MemoryLocation::GpuToCpu)?;
+        let mut staging = self.stage_download(ranges, total)?;
+        let bytes = staging.mapped();
+        let mut at = 0;
+        Ok(ranges
+            .iter()
+            .map(|r| {
+                let v = bytes[at as usize..(at + r.2) as usize].to_vec();
+                at += r.2;
+                v
+            })
+            .collect())
+    }
+
+    /// Reads `len` bytes of `src` from byte `offset` and hands them to `read` straight from
+    /// the staging buffer (a large matrix is converted once, not copied first), and waits.
+    pub fn download_with<R>(
+        &self,
+        src: &Buffer,
+        offset: u64,
+        len: u64,
+        read: impl FnOnce(&[u8]) -> R,
+    ) -> GpuResult<R> {
+        if len == 0 {
+            return Ok(read(&[]));
+        }
+        let mut staging = self.stage_download(&[(src, offset, len)], len)?;
+        Ok(read(&staging.mapped()[..len as usize]))
+    }
+
+    /// A host staging buffer holding `ranges` back to back (`total` bytes), copied in one
+    /// submission.
+    fn stage_download(&self, ranges: &[(&Buffer, u64, u64)], total: u64) -> GpuResult<Buffer> {
+        let staging = self.create_buffer("staging-download", total, MemoryLocation::GpuToCpu)?;
         let mut rec = Recorder::new(self)?;
         let mut at = 0;
         for &(src, offset, len) in ranges {
@@ -247,16 +278,7 @@ impl Gpu {
         }
         rec.host_barrier();
         rec.submit_and_wait()?;
-        let bytes = staging.mapped();
-        let mut at = 0;
-        Ok(ranges
-            .iter()
-            .map(|r| {
-                let v = bytes[at as usize..(at + r.2) as usize].to_vec();
-                at += r.2;
-                v
-            })
-            .collect())
+        Ok(staging)
     }
 
     /// Reads the whole buffer as elements of type T.
