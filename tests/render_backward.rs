@@ -457,3 +457,50 @@ fn gpu_backward_matches_finite_differences() {
     );
     common::check_validation(gpu);
 }
+
+#[test]
+fn a_view_whose_lists_grow_counts_its_densification_statistics_once() {
+    // Large Gaussians: far more (tile, Gaussian) pairs than the first guess at the lists (4
+    // per Gaussian, at least 65,536), so the first attempt overflows and the view is
+    // recorded again with larger lists. The overflowed attempt's backward must add nothing
+    // to the densification statistics, which are not cleared between attempts (nor between
+    // iterations): each visible Gaussian counts this view once.
+    let gpu = common::gpu();
+    let n = 2_000;
+    let g = random_scene(&RandomSceneSpec {
+        scale: (0.5, 1.0),
+        ..spec(n, 1, 0, 61)
+    });
+    let cam = camera(512, 384);
+    let pixels = (cam.width * cam.height) as usize;
+    let (rgb, alpha, sem, _) = upstream(pixels, 0, 62);
+    let scene = GpuScene::upload(gpu, &g).unwrap();
+    let opts = RenderOptions {
+        semantics: None,
+        ..Default::default()
+    };
+    let upstream = HostPixelGrads {
+        rgb: &rgb,
+        alpha: &alpha,
+        sem_norm: &sem,
+    };
+    let variant = BackwardVariant {
+        deterministic: false,
+        float_atomics: true,
+        semantics_only: false,
+    };
+    let (frame, grads) = Rasterizer::new(gpu)
+        .render_backward(&scene, &cam, &opts, &upstream, variant)
+        .unwrap();
+    let first_guess = (4 * n).max(1 << 16);
+    assert!(
+        frame.intersections as usize > first_guess,
+        "{} intersections: the lists would not have grown",
+        frame.intersections
+    );
+    let most = grads.densify_count.iter().fold(0.0f32, |a, &c| a.max(c));
+    assert_eq!(most, 1.0, "a Gaussian's view count");
+    let counted = grads.densify_count.iter().filter(|&&c| c == 1.0).count();
+    assert_eq!(counted, frame.visible as usize);
+    common::check_validation(gpu);
+}

@@ -33,6 +33,9 @@ layout(set = 0, binding = 13) buffer DensifyCountBuf { float data[]; } densify_c
 // float atomics): after an overflow the view is redone, so it must add nothing here (the
 // densification statistics are not cleared between iterations).
 layout(set = 0, binding = 14) readonly buffer FixedStatusBuf { uint data[]; } fixed_status;
+// Status words of this view's binning (ST_*): lists that overflowed are grown and the view
+// recorded again, so this attempt must add nothing either.
+layout(set = 0, binding = 15) readonly buffer RasterStatusBuf { uint data[]; } raster_status;
 
 #define SH_COEFF(k) vec3(sh.data[base + 3 * (k)], sh.data[base + 3 * (k) + 1], sh.data[base + 3 * (k) + 2])
 
@@ -75,7 +78,9 @@ vec3 sh_basis_grad(uint degree, vec3 dir, float g[16]) {
 void main() {
     uint i = gl_GlobalInvocationID.x;
     uint n = pc.n;
-    if (i >= n || visible.data[i] == 0 || fixed_status.data[FS_OVERFLOW] != 0) {
+    bool redone = fixed_status.data[FS_OVERFLOW] != 0 || raster_status.data[ST_OVERFLOW] != 0
+        || raster_status.data[ST_ISECT_WRAPPED] != 0;
+    if (i >= n || visible.data[i] == 0 || redone) {
         return;
     }
     uint g0 = i * GRAD2D_STRIDE;

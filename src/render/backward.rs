@@ -20,7 +20,7 @@ use crate::contract::{
     FS_WORDS, SEM_CHUNK, TILE_SIZE,
 };
 use crate::gpu::kernel_table::ids;
-use crate::gpu::{Buffer, Gpu, Recorder};
+use crate::gpu::{Buffer, BufferRange, Gpu, Recorder};
 use crate::scene::Camera;
 
 pub use crate::contract::GRAD2D_STRIDE;
@@ -519,24 +519,26 @@ impl TileLists<'_> {
     ) -> Result<()> {
         // The backward culls nothing itself: it reads the forward's visibility flags.
         let params = project_params(cam, scene, 0.0, f32::INFINITY);
-        rec.dispatch(
+        let whole = BufferRange::whole;
+        rec.dispatch_ranges(
             ids::RASTER_PROJECT_BACKWARD,
             &[
-                ("means", &scene.params.means),
-                ("log_scales", &scene.params.log_scales),
-                ("quats", &scene.params.quats),
-                ("opacity_logits", &scene.params.opacity_logits),
-                ("sh", &scene.params.sh),
-                ("visible", self.visible_flags()),
-                ("grad2d", &grads.screen),
-                ("grad_means", &grads.params.means),
-                ("grad_log_scales", &grads.params.log_scales),
-                ("grad_quats", &grads.params.quats),
-                ("grad_opacity_logits", &grads.params.opacity_logits),
-                ("grad_sh", &grads.params.sh),
-                ("densify_grad", &grads.densify_grad),
-                ("densify_count", &grads.densify_count),
-                ("fixed_status", &grads.fixed.status),
+                ("means", whole(&scene.params.means)),
+                ("log_scales", whole(&scene.params.log_scales)),
+                ("quats", whole(&scene.params.quats)),
+                ("opacity_logits", whole(&scene.params.opacity_logits)),
+                ("sh", whole(&scene.params.sh)),
+                ("visible", whole(self.visible_flags())),
+                ("grad2d", whole(&grads.screen)),
+                ("grad_means", whole(&grads.params.means)),
+                ("grad_log_scales", whole(&grads.params.log_scales)),
+                ("grad_quats", whole(&grads.params.quats)),
+                ("grad_opacity_logits", whole(&grads.params.opacity_logits)),
+                ("grad_sh", whole(&grads.params.sh)),
+                ("densify_grad", whole(&grads.densify_grad)),
+                ("densify_count", whole(&grads.densify_count)),
+                ("fixed_status", whole(&grads.fixed.status)),
+                ("raster_status", self.status()),
             ],
             &params,
             ids::RASTER_PROJECT_BACKWARD.groups_for(scene.n),
@@ -623,7 +625,8 @@ impl Rasterizer {
             let run = self.run_tiled(scene, cam, opts, |rec, tiles| {
                 tiles.record_blend(rec)?;
                 grads.record_zero(rec);
-                grads.record_zero_densify(rec);
+                // The densification statistics are not cleared per attempt (as in training,
+                // where they sum over iterations): an overflowed attempt adds nothing to them.
                 tiles.record_backward(rec, scene, &pixel_grads, &grads)
             })?;
             match grads.fixed.check(&gpu)? {
