@@ -179,3 +179,72 @@ fn bad_input_gives_a_clear_error_and_no_output() {
 
     assert!(!out.exists(), "a failed run left {}", out.display());
 }
+
+#[test]
+fn training_starts_from_a_fusion_of_its_scene() {
+    // Fuse the room's scene, then train its logits from the fused classes: after one
+    // semantics-only step with a tiny learning rate the classes are still the fused ones
+    // (where the fusion gave one), so the logits started there and not from random values.
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path().join("room");
+    synth_tiny(&d, 4, (48, 36));
+    let d = d.to_str().unwrap();
+    let fused = tmp.path().join("fused.ply");
+    let fused = fused.to_str().unwrap();
+    let labels = format!("{d}/labels");
+    let cameras = format!("{d}/cameras.json");
+    let scene = format!("{d}/scene.ply");
+    common::cli::ok(&[
+        "fuse",
+        "--scene",
+        &scene,
+        "--cameras",
+        &cameras,
+        "--labels",
+        &labels,
+        "--out",
+        fused,
+    ]);
+    let out = tmp.path().join("trained.ply");
+    let mut args = train_args(d, out.to_str().unwrap());
+    let at = args.iter().position(|a| a == "--init").unwrap();
+    args[at + 1] = scene.clone();
+    let extra = [
+        "--init-semantics-from",
+        fused,
+        "--semantics-only",
+        "--iters",
+        "1",
+        "--lr-logits",
+        "0.0001",
+        "--no-densify",
+    ];
+    args.extend(extra.map(String::from));
+    let r = run(&args);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let want = read_ply(Path::new(fused)).unwrap().class_ids.unwrap();
+    let got = read_ply(&out).unwrap().class_ids.unwrap();
+    let classed: Vec<usize> = (0..want.len()).filter(|&i| want[i] >= 0).collect();
+    assert!(
+        classed.len() > want.len() / 2,
+        "{} of {} fused",
+        classed.len(),
+        want.len()
+    );
+    let same = classed.iter().filter(|&&i| got[i] == want[i]).count();
+    assert_eq!(
+        same,
+        classed.len(),
+        "trained classes that left the fused ones"
+    );
+
+    // A PLY of other Gaussians is refused before any work, naming the option.
+    let mut args = train_args(d, tmp.path().join("bad.ply").to_str().unwrap());
+    let init_cloud = format!("{d}/init.ply");
+    args.extend(["--init-semantics-from", &init_cloud, "--iters", "1"].map(String::from));
+    let r = run(&args);
+    assert!(!r.status.success());
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(err.contains("--init-semantics-from"), "{err}");
+    assert!(!tmp.path().join("bad.ply").exists());
+}

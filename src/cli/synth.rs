@@ -67,8 +67,9 @@ pub struct SynthArgs {
     /// Horizontal field of view in degrees (20..=120).
     #[arg(long, default_value_t = DEFAULT_HFOV_DEG)]
     fov: f64,
-    /// Gaussian spacing on surfaces in meters (density ~ 1/spacing^2: office 41k at 0.03,
-    /// ~1M at 0.0053).
+    /// Gaussian spacing on surfaces in meters (density ~ 1/spacing^2; only surfaces some
+    /// view sees get Gaussians: office ~150k at 0.03 with the default views, 41k at 0.03 and
+    /// ~1M at 0.0053 with one view).
     #[arg(long, default_value_t = DEFAULT_SPACING)]
     spacing: f64,
     /// Point spacing of init.ply in meters.

@@ -4,23 +4,24 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{bail, Result};
+use anyhow::{bail, ensure, Result};
 use clap::Args;
 use serde::Serialize;
 
 use super::args;
 use super::progress::iterations_bar;
 use super::{check_outputs, open_dataset, write_scene_with_table};
-use semsplat::dataset::{user_classes, Dataset, DatasetPaths};
+use semsplat::dataset::{user_classes, CompactClasses, Dataset, DatasetPaths};
 use semsplat::gpu::Gpu;
 use semsplat::render::SemanticMode;
 use semsplat::scene::images::load_view_image;
-use semsplat::scene::ply::{classes_sidecar_path, write_ply};
+use semsplat::scene::ply::{classes_sidecar_path, read_ply, write_ply};
 use semsplat::scene::scene_file::read_scene_or_point_cloud;
 use semsplat::scene::Gaussians;
 use semsplat::train::config::TrainConfig;
 use semsplat::train::trainer::{
-    classes_from_logits, with_initial_logits, DensifyEvent, StageTotals, Trainer,
+    classes_from_logits, with_initial_logits, with_logits_from_classes, DensifyEvent, StageTotals,
+    Trainer,
 };
 use semsplat::train::views::TrainView;
 use semsplat::util::{interrupt, write_bytes_atomic};
@@ -78,6 +79,12 @@ pub struct TrainArgs {
     /// No densification or pruning.
     #[arg(long)]
     no_densify: bool,
+    /// Start the semantic logits where a fusion of --init ended: a PLY that `semsplat fuse`
+    /// wrote for the same scene (its `class` and `class_conf` per Gaussian; any method).
+    /// Each Gaussian's logits then give its fused class its fused confidence; unseen ones
+    /// start uniform. With --semantics-only, training refines the fused labels.
+    #[arg(long, value_name = "PLY")]
+    init_semantics_from: Option<PathBuf>,
     /// Class table (JSON: id, name, color). Default: classes.json beside or inside the
     /// label folder.
     #[arg(long)]
@@ -146,7 +153,10 @@ pub fn run(args: TrainArgs) -> Result<()> {
     let data = load_dataset(&args)?;
     let views = train_views(&args, &data)?;
     let init = read_scene_or_point_cloud(&args.init)?;
-    let init = with_initial_logits(&init, data.classes.len(), args.seed);
+    let init = match &args.init_semantics_from {
+        Some(fused) => logits_from_fusion(&init, fused, &data.classes)?,
+        None => with_initial_logits(&init, data.classes.len(), args.seed),
+    };
     let cfg = train_config(&args, init.len())?;
 
     let gpu = Gpu::new()?;
@@ -197,6 +207,47 @@ pub fn run(args: TrainArgs) -> Result<()> {
         write_bytes_atomic(path, serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
     Ok(())
+}
+
+/// `init` with logits from the fused classes of `fused` (see --init-semantics-from), which
+/// must hold the same Gaussians.
+fn logits_from_fusion(
+    init: &Gaussians,
+    fused: &Path,
+    classes: &CompactClasses,
+) -> Result<Gaussians> {
+    let f = read_ply(fused)?;
+    let same = f.len() == init.len() && f.means == init.means;
+    ensure!(
+        same,
+        "--init-semantics-from {}: its {} Gaussians are not --init's {} (fuse the scene you \
+         train from, and train from that scene)",
+        fused.display(),
+        f.len(),
+        init.len()
+    );
+    let Some(ids) = &f.class_ids else {
+        bail!(
+            "--init-semantics-from {} has no `class` property (write it with `semsplat fuse`)",
+            fused.display()
+        );
+    };
+    let compact: Vec<Option<u32>> = ids
+        .iter()
+        .map(|&id| {
+            u32::try_from(id)
+                .ok()
+                .and_then(|id| classes.compact_of(id))
+                .map(u32::from)
+        })
+        .collect();
+    let conf = f.class_conf.as_deref();
+    Ok(with_logits_from_classes(
+        init,
+        &compact,
+        conf,
+        classes.len(),
+    ))
 }
 
 /// The cameras, their label maps and the classes present (at least one).

@@ -550,6 +550,41 @@ pub fn with_initial_logits(g: &Gaussians, channels: usize, seed: u64) -> Gaussia
     out
 }
 
+/// Confidence given a fused class that comes without one (`class_conf` missing or not in
+/// (0, 1)).
+pub const FUSED_DEFAULT_CONF: f32 = 0.9;
+
+/// `g` with semantic logits over `channels` classes that start where a fusion ended: a
+/// Gaussian of compact class `c` with confidence `p` gets logit `ln(p (C - 1) / (1 - p))`
+/// for `c` and 0 for the others, so the softmax of its logits gives `c` probability `p`
+/// (capped at 0.999); a Gaussian without a class (unseen, or a class the labels lack) gets
+/// zeros, the uniform distribution.
+pub fn with_logits_from_classes(
+    g: &Gaussians,
+    classes: &[Option<u32>],
+    conf: Option<&[f32]>,
+    channels: usize,
+) -> Gaussians {
+    let mut logits = vec![0.0f32; g.len() * channels];
+    for (i, class) in classes.iter().enumerate() {
+        let Some(c) = class.filter(|&c| (c as usize) < channels) else {
+            continue;
+        };
+        let p = conf
+            .map(|v| v[i])
+            .filter(|p| *p > 0.0 && *p < 1.0)
+            .unwrap_or(FUSED_DEFAULT_CONF)
+            .clamp(1.0 / channels as f32, 0.999) as f64;
+        let others = (channels - 1).max(1) as f64;
+        logits[i * channels + c as usize] = (p * others / (1.0 - p)).ln().max(0.0) as f32;
+    }
+    let mut out = g.clone();
+    out.semantics = Some(SemanticLogits { channels, logits });
+    out.class_ids = None;
+    out.class_conf = None;
+    out
+}
+
 /// Class (compact index, None where unseen) and confidence (softmax probability of the
 /// winner) per Gaussian from its logits.
 pub fn classes_from_logits(g: &Gaussians, seen: &[bool]) -> (Vec<Option<u32>>, Vec<f32>) {
@@ -574,4 +609,38 @@ pub fn classes_from_logits(g: &Gaussians, seen: &[bool]) -> (Vec<Option<u32>>, V
             }
         })
         .unzip()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::random_scene::{random_scene, RandomSceneSpec};
+
+    fn softmax(l: &[f32]) -> Vec<f64> {
+        let e: Vec<f64> = l.iter().map(|&x| (x as f64).exp()).collect();
+        let sum: f64 = e.iter().sum();
+        e.iter().map(|x| x / sum).collect()
+    }
+
+    #[test]
+    fn logits_from_fused_classes_give_back_class_and_confidence() {
+        let g = random_scene(&RandomSceneSpec {
+            n: 5,
+            ..Default::default()
+        });
+        let classes = [Some(2), None, Some(0), Some(7), Some(1)];
+        let conf = [0.8, 0.5, 0.0, 0.9, 1.0];
+        let out = with_logits_from_classes(&g, &classes, Some(&conf), 4);
+        let s = out.semantics.expect("logits");
+        let probs = |i: usize| softmax(&s.logits[i * 4..(i + 1) * 4]);
+        assert!((probs(0)[2] - 0.8).abs() < 1e-5, "{:?}", probs(0));
+        // No class, or one past the channels: uniform.
+        for i in [1, 3] {
+            assert!(probs(i).iter().all(|p| (p - 0.25).abs() < 1e-6));
+        }
+        // A confidence outside (0, 1) falls back to the default; 1.0 is no certainty.
+        assert!((probs(2)[0] - FUSED_DEFAULT_CONF as f64).abs() < 1e-5);
+        assert!((probs(4)[1] - FUSED_DEFAULT_CONF as f64).abs() < 1e-5);
+        assert!(out.class_ids.is_none());
+    }
 }

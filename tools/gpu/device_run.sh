@@ -7,7 +7,7 @@
 # usage: bash tools/gpu/device_run.sh [STAGE...]   (default: all)
 #   tests   every test binary, validation layer and synchronization validation on
 #   ours    semsplat's benchmarks: sort 2^25, forward and training at C = 0/16/32/64 on a
-#           1M random scene and an office room at ~1.1M Gaussians (spacing 0.0053), fusion of 1M x 200 views
+#           1M random scene and an office room at ~1M Gaussians (spacing 0.0053, one view), fusion of 1M x 200 views
 #   peers   gsplat 1.5.3 and FlashSplat's rasterizer on the scenes `ours` exported
 # env: BUDGET_S (default 540): benchmarks starting after this many seconds are skipped;
 #      N, W, H, VIEWS, SPACING: scene size (1000000, 1920x1080, 200 fusion views, room
