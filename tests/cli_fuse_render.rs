@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::cli::{ok, semsplat, synth_tiny};
+use common::cli::{fuse_synth, ok, semsplat, synth_tiny};
 
 #[test]
 fn fuse_writes_classes_reassigns_from_saved_evidence_and_extracts() {
@@ -10,21 +10,7 @@ fn fuse_writes_classes_reassigns_from_saved_evidence_and_extracts() {
     let d = tmp.path();
     synth_tiny(d, 4, (64, 48));
     let p = |f: &str| d.join(f).to_str().unwrap().to_string();
-    // `fuse` on the synth folder's scene, cameras and labels, plus `extra`.
-    let (scene, cameras, labels) = (p("scene.ply"), p("cameras.json"), p("labels"));
-    let fuse = |extra: &[&str]| {
-        let mut args = vec![
-            "fuse",
-            "--scene",
-            &scene,
-            "--cameras",
-            &cameras,
-            "--labels",
-            &labels,
-        ];
-        args.extend_from_slice(extra);
-        ok(&args)
-    };
+    let fuse = |extra: &[&str]| fuse_synth(d, extra);
     fuse(&[
         "--out",
         &p("fused.ply"),

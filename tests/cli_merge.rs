@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::cli::{fails, ok, synth_tiny};
+use common::cli::{fails, fuse_synth, ok, synth_tiny};
 
 use std::path::Path;
 
@@ -122,21 +122,7 @@ fn merge_refuses_parts_that_do_not_belong_together() {
     let p = |f: &str| d.join(f).to_str().unwrap().to_string();
     let (scene, cameras, labels) = (p("scene.ply"), p("cameras.json"), p("labels"));
     let shard = |k: &str, method: &str, out: &str| {
-        ok(&[
-            "fuse",
-            "--scene",
-            &scene,
-            "--cameras",
-            &cameras,
-            "--labels",
-            &labels,
-            "--method",
-            method,
-            "--shard",
-            k,
-            "--out",
-            out,
-        ])
+        fuse_synth(d, &["--method", method, "--shard", k, "--out", out])
     };
     let (a0, a1, v1) = (p("a0.npy"), p("a1.npy"), p("v1.npy"));
     shard("0/2", "flashsplat", &a0);

@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::cli::{semsplat, synth_tiny};
+use common::cli::{fuse_synth, semsplat, synth_tiny};
 
 use std::path::Path;
 use std::process::Output;
@@ -191,20 +191,8 @@ fn training_starts_from_a_fusion_of_its_scene() {
     let d = d.to_str().unwrap();
     let fused = tmp.path().join("fused.ply");
     let fused = fused.to_str().unwrap();
-    let labels = format!("{d}/labels");
-    let cameras = format!("{d}/cameras.json");
+    fuse_synth(Path::new(d), &["--out", fused]);
     let scene = format!("{d}/scene.ply");
-    common::cli::ok(&[
-        "fuse",
-        "--scene",
-        &scene,
-        "--cameras",
-        &cameras,
-        "--labels",
-        &labels,
-        "--out",
-        fused,
-    ]);
     let out = tmp.path().join("trained.ply");
     let mut args = train_args(d, out.to_str().unwrap());
     let at = args.iter().position(|a| a == "--init").unwrap();

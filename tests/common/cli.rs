@@ -50,3 +50,21 @@ pub fn synth_tiny(dir: &Path, views: u32, (width, height): (u32, u32)) {
         dir.to_str().unwrap(),
     ]);
 }
+
+/// Runs `fuse` on a `synth` folder's scene, cameras and labels, plus `extra` (at least
+/// `--out`), and returns its stderr.
+pub fn fuse_synth(dir: &Path, extra: &[&str]) -> String {
+    let p = |f: &str| dir.join(f).to_str().unwrap().to_string();
+    let (scene, cameras, labels) = (p("scene.ply"), p("cameras.json"), p("labels"));
+    let mut args = vec![
+        "fuse",
+        "--scene",
+        &scene,
+        "--cameras",
+        &cameras,
+        "--labels",
+        &labels,
+    ];
+    args.extend_from_slice(extra);
+    ok(&args)
+}
