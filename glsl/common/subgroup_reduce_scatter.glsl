@@ -5,9 +5,8 @@
 // 16 full reductions of log2(size) shuffles each. Works for any subgroup size from 4: with
 // fewer than 16 lanes a lane ends with 16 / size sums.
 //
-// After reduce_scatter16(v): lane l holds in v[0 .. reduce_scatter_count()) the totals of
-// values reduce_scatter_base(l) + i; lanes past the 16th hold copies (reduce_scatter_owner
-// is false there). All lanes of the subgroup must call it (uniform control flow). The
+// After reduce_scatter16(v): v[i] of lane l totals value reduce_scatter_index(l, i) for
+// i < 4 (REDUCE_SCATTER_NONE where that lane holds no such sum of its own). All lanes of the subgroup must call it (uniform control flow). The
 // blend backward uses it for a step's screen-space values and for its chunk of channels.
 #ifndef SUBGROUP_REDUCE_SCATTER_GLSL
 #define SUBGROUP_REDUCE_SCATTER_GLSL
@@ -42,27 +41,24 @@ void reduce_scatter16(inout float v[16]) {
     }
 }
 
-// Sums each lane holds afterwards: 16 / min(size, 16).
-uint reduce_scatter_count() {
-    return 16u / min(gl_SubgroupSize, 16u);
-}
-
-// The first value of lane `lane`'s sums: the halves its bits of 1, 2, 4, 8 kept.
-uint reduce_scatter_base(uint lane) {
-    uint base = 0u;
+// Which of the 16 values lane `lane`'s sum v[i] (i < 4) totals, or REDUCE_SCATTER_NONE
+// where the lane holds fewer sums or only a copy (lanes past the 16th). A lane keeps
+// 16 / min(size, 16) sums, from the value its bits of 1, 2, 4, 8 picked the halves of.
+#define REDUCE_SCATTER_NONE 0xFFFFFFFFu
+uint reduce_scatter_index(uint lane, uint i) {
+    uint held = 16u / min(gl_SubgroupSize, 16u);
+    if (lane >= 16u || i >= held) {
+        return REDUCE_SCATTER_NONE;
+    }
+    uint first = 0u;
     uint half_len = 8u;
     for (uint o = 1u; o < min(gl_SubgroupSize, 16u); o *= 2u) {
         if ((lane & o) != 0u) {
-            base += half_len;
+            first += half_len;
         }
         half_len /= 2u;
     }
-    return base;
-}
-
-// Whether lane `lane` is the one that owns its sums (lanes past 16 hold copies).
-bool reduce_scatter_owner(uint lane) {
-    return lane < 16u;
+    return first + i;
 }
 
 #endif

@@ -233,14 +233,10 @@ void main() {
                 geo_sums[k] = k < GRAD2D_STRIDE ? vals[k] : 0.0;
             }
             reduce_scatter16(geo_sums);
-            if (reduce_scatter_owner(lane)) {
-                uint first = reduce_scatter_base(lane);
-                uint count = reduce_scatter_count();
-                [[unroll]] for (uint i = 0; i < 4; i++) { // at most 16 / 4 sums a lane
-                    uint k = first + i;
-                    if (i < count && k < GRAD2D_STRIDE && geo_sums[i] != 0.0) {
-                        grad_add(gid * GRAD2D_STRIDE + k, geo_sums[i]);
-                    }
+            [[unroll]] for (uint i = 0; i < 4; i++) {
+                uint k = reduce_scatter_index(lane, i);
+                if (k < GRAD2D_STRIDE && geo_sums[i] != 0.0) {
+                    grad_add(gid * GRAD2D_STRIDE + k, geo_sums[i]);
                 }
             }
 #endif
@@ -252,14 +248,11 @@ void main() {
                     sem_sums[k] = vals[GRAD2D_STRIDE + k];
                 }
                 reduce_scatter16(sem_sums);
-                if (reduce_scatter_owner(lane)) {
-                    uint first = chunk_base + reduce_scatter_base(lane);
-                    uint count = reduce_scatter_count();
-                    [[unroll]] for (uint i = 0; i < 4; i++) { // at most 16 / 4 sums a lane
-                        uint c = first + i;
-                        if (i < count && c < channels && sem_sums[i] != 0.0) {
-                            sem_grad_add(gid * channels + c, sem_sums[i]);
-                        }
+                [[unroll]] for (uint i = 0; i < 4; i++) {
+                    uint k = reduce_scatter_index(lane, i);
+                    uint c = chunk_base + k;
+                    if (k < SEM_CHUNK && c < channels && sem_sums[i] != 0.0) {
+                        sem_grad_add(gid * channels + c, sem_sums[i]);
                     }
                 }
             }

@@ -362,12 +362,16 @@ impl Setup<'_> {
                     |d, _| progress(cfg.method.name(), done + d, total),
                 )?;
                 done += views;
-                let mut sum = RunTotal::default();
-                sum.add(stats.gpu_ms, stats.wall_s, stats.peak_device_bytes);
-                sum.passes = stats.passes;
-                sum.rows_per_pass = stats.rows_per_pass;
-                sum.host = [stats.label_wait_s, stats.view_s];
-                method.push(sum);
+                method.push(RunTotal {
+                    gpu_ms: stats.gpu_ms,
+                    wall_s: stats.wall_s,
+                    label_wait_s: stats.label_wait_s,
+                    view_s: stats.view_s,
+                    peak_device_bytes: stats.peak_device_bytes,
+                    passes: stats.passes,
+                    rows_per_pass: stats.rows_per_pass,
+                    ..Default::default()
+                });
             }
         }
         Ok((forward_runs, method_runs))
@@ -403,8 +407,8 @@ fn method_bench(
         key: method.key(),
         wall_s: m.wall_s,
         gpu_ms: m.gpu_ms,
-        label_wait_s: m.host[0],
-        view_s: m.host[1],
+        label_wait_s: m.label_wait_s,
+        view_s: m.view_s,
         views_per_s: (views * m.passes) as f64 / m.wall_s,
         passes: m.passes,
         rows_per_pass: m.rows_per_pass,
@@ -421,8 +425,10 @@ fn method_bench(
 struct RunTotal {
     gpu_ms: f64,
     wall_s: f64,
-    /// Label wait and view seconds (methods only; the last run's).
-    host: [f64; 2],
+    /// Host seconds waiting for label maps and running the views (methods only; the last
+    /// run's).
+    label_wait_s: f64,
+    view_s: f64,
     peak_device_bytes: u64,
     passes: usize,
     rows_per_pass: usize,

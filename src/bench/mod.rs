@@ -52,8 +52,8 @@ pub fn median_gpu_time(
 }
 
 /// How long untimed work runs before a timed GPU benchmark: an idle GPU takes a while to
-/// reach its working clocks (on an H100 the same 1080p frame measured 20 ms in the first
-/// tenth of a second and 9 ms warmed up).
+/// reach its working clocks (on an H100 the median of a 1080p frame's first ten runs after
+/// start measured 20 ms, warmed up 9 ms).
 pub const WARMUP: std::time::Duration = std::time::Duration::from_millis(500);
 
 /// Runs `step` (untimed) at least three times and until [`WARMUP`] has passed.

@@ -542,19 +542,16 @@ fn le<const N: usize>(b: &[u8]) -> [u8; N] {
 /// `dst[i] = widen(entry i of bytes)` on every core: the evidence of millions of
 /// Gaussians times the classes is hundreds of MB (6M x 16 fixed-point entries: 768 MB).
 fn widen_in_parallel(bytes: &[u8], entry: usize, dst: &mut [f64], widen: fn(&[u8]) -> f64) {
-    const CHUNK: usize = 1 << 20;
+    let threads = std::thread::available_parallelism().map_or(1, |t| t.get());
+    let per_thread = dst.len().div_ceil(threads).max(1);
     std::thread::scope(|scope| {
-        let parts = dst.chunks_mut(CHUNK).zip(bytes.chunks(CHUNK * entry));
-        let threads = std::thread::available_parallelism().map_or(1, |t| t.get());
-        let mut parts: Vec<_> = parts.collect();
-        let per_thread = parts.len().div_ceil(threads).max(1);
-        while !parts.is_empty() {
-            let take: Vec<_> = parts.drain(..per_thread.min(parts.len())).collect();
+        for (out, raw) in dst
+            .chunks_mut(per_thread)
+            .zip(bytes.chunks(per_thread * entry))
+        {
             scope.spawn(move || {
-                for (out, raw) in take {
-                    for (o, b) in out.iter_mut().zip(raw.chunks_exact(entry)) {
-                        *o = widen(b);
-                    }
+                for (o, b) in out.iter_mut().zip(raw.chunks_exact(entry)) {
+                    *o = widen(b);
                 }
             });
         }
