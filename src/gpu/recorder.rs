@@ -17,9 +17,7 @@ const MAX_QUERIES: u32 = 4096;
 /// Records one command buffer; `submit_and_wait` runs it and returns the timings.
 pub struct Recorder {
     gpu: Gpu,
-    pool: vk::CommandPool,
-    cmd: vk::CommandBuffer,
-    queries: Option<vk::QueryPool>,
+    parts: RecorderParts,
     /// Label of each timestamp after the first (kernel name or None for marks).
     stamps: Vec<Option<&'static str>>,
     /// No submission of its command buffer can be pending (never submitted, or waited
@@ -30,6 +28,7 @@ pub struct Recorder {
 /// A recorder's Vulkan objects. Creating a command pool and a 4096-entry query pool for
 /// every submission cost host time on every view; a few finished ones are kept on the
 /// device for the next recorders (see [`MAX_RECYCLED`]).
+#[derive(Clone, Copy)] // Vulkan handles; the recorder or the recycle list owns them
 pub(crate) struct RecorderParts {
     pool: vk::CommandPool,
     cmd: vk::CommandBuffer,
@@ -111,9 +110,7 @@ impl Recorder {
         };
         let mut rec = Recorder {
             gpu: gpu.clone(),
-            pool: parts.pool,
-            cmd: parts.cmd,
-            queries: parts.queries,
+            parts,
             stamps: vec![],
             idle: false,
         };
@@ -121,18 +118,23 @@ impl Recorder {
         // into our own command buffer.
         unsafe {
             device
-                .reset_command_pool(rec.pool, vk::CommandPoolResetFlags::empty())
+                .reset_command_pool(rec.parts.pool, vk::CommandPoolResetFlags::empty())
                 .vk("vkResetCommandPool")?;
             device
                 .begin_command_buffer(
-                    rec.cmd,
+                    rec.parts.cmd,
                     &vk::CommandBufferBeginInfo::default()
                         .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
                 )
                 .vk("vkBeginCommandBuffer")?;
-            if let Some(qp) = rec.queries {
-                device.cmd_reset_query_pool(rec.cmd, qp, 0, MAX_QUERIES);
-                device.cmd_write_timestamp(rec.cmd, vk::PipelineStageFlags::TOP_OF_PIPE, qp, 0);
+            if let Some(qp) = rec.parts.queries {
+                device.cmd_reset_query_pool(rec.parts.cmd, qp, 0, MAX_QUERIES);
+                device.cmd_write_timestamp(
+                    rec.parts.cmd,
+                    vk::PipelineStageFlags::TOP_OF_PIPE,
+                    qp,
+                    0,
+                );
             }
         }
         rec.idle = true; // recorded, never submitted: nothing of it can be pending
@@ -144,7 +146,7 @@ impl Recorder {
     }
 
     fn stamp(&mut self, label: Option<&'static str>) -> Option<Mark> {
-        let qp = self.queries?;
+        let qp = self.parts.queries?;
         let index = self.stamps.len() as u32 + 1;
         if index >= MAX_QUERIES {
             return None;
@@ -152,7 +154,7 @@ impl Recorder {
         // SAFETY: recording into our command buffer; the query index is in range.
         unsafe {
             self.gpu.device().cmd_write_timestamp(
-                self.cmd,
+                self.parts.cmd,
                 vk::PipelineStageFlags::BOTTOM_OF_PIPE,
                 qp,
                 index,
@@ -206,9 +208,9 @@ impl Recorder {
         let device = self.gpu.device();
         // SAFETY: recording into our command buffer with a pipeline that lives in the cache.
         unsafe {
-            device.cmd_bind_pipeline(self.cmd, vk::PipelineBindPoint::COMPUTE, k.pipeline);
+            device.cmd_bind_pipeline(self.parts.cmd, vk::PipelineBindPoint::COMPUTE, k.pipeline);
             self.gpu.inner.push_descriptor.cmd_push_descriptor_set(
-                self.cmd,
+                self.parts.cmd,
                 vk::PipelineBindPoint::COMPUTE,
                 k.layout,
                 0,
@@ -216,7 +218,7 @@ impl Recorder {
             );
             if !push.is_empty() {
                 device.cmd_push_constants(
-                    self.cmd,
+                    self.parts.cmd,
                     k.layout,
                     vk::ShaderStageFlags::COMPUTE,
                     0,
@@ -261,7 +263,7 @@ impl Recorder {
         unsafe {
             self.gpu
                 .device()
-                .cmd_dispatch(self.cmd, groups[0], groups[1], groups[2])
+                .cmd_dispatch(self.parts.cmd, groups[0], groups[1], groups[2])
         };
         self.stamp(Some(kernel.info().name));
         Ok(())
@@ -314,7 +316,7 @@ impl Recorder {
         unsafe {
             self.gpu
                 .device()
-                .cmd_dispatch_indirect(self.cmd, args.raw, offset)
+                .cmd_dispatch_indirect(self.parts.cmd, args.raw, offset)
         };
         self.stamp(Some(kernel.info().name));
         Ok(())
@@ -335,7 +337,7 @@ impl Recorder {
         // SAFETY: recording into our command buffer.
         unsafe {
             self.gpu.device().cmd_pipeline_barrier(
-                self.cmd,
+                self.parts.cmd,
                 vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER,
                 vk::PipelineStageFlags::COMPUTE_SHADER
                     | vk::PipelineStageFlags::DRAW_INDIRECT
@@ -356,7 +358,7 @@ impl Recorder {
         // SAFETY: recording into our command buffer.
         unsafe {
             self.gpu.device().cmd_pipeline_barrier(
-                self.cmd,
+                self.parts.cmd,
                 vk::PipelineStageFlags::TRANSFER,
                 vk::PipelineStageFlags::HOST,
                 vk::DependencyFlags::empty(),
@@ -388,7 +390,7 @@ impl Recorder {
         unsafe {
             self.gpu
                 .device()
-                .cmd_copy_buffer(self.cmd, src.raw, dst.raw, &[region])
+                .cmd_copy_buffer(self.parts.cmd, src.raw, dst.raw, &[region])
         };
     }
 
@@ -406,7 +408,7 @@ impl Recorder {
         unsafe {
             self.gpu
                 .device()
-                .cmd_update_buffer(self.cmd, dst.raw, offset, data)
+                .cmd_update_buffer(self.parts.cmd, dst.raw, offset, data)
         };
     }
 
@@ -419,7 +421,7 @@ impl Recorder {
         unsafe {
             self.gpu
                 .device()
-                .cmd_fill_buffer(self.cmd, dst.raw, offset, size, value)
+                .cmd_fill_buffer(self.parts.cmd, dst.raw, offset, size, value)
         };
     }
 
@@ -431,12 +433,12 @@ impl Recorder {
         // queries or letting Drop free anything.
         unsafe {
             device
-                .end_command_buffer(self.cmd)
+                .end_command_buffer(self.parts.cmd)
                 .vk("vkEndCommandBuffer")?;
             let fence = device
                 .create_fence(&vk::FenceCreateInfo::default(), None)
                 .vk("vkCreateFence")?;
-            let cmds = [self.cmd];
+            let cmds = [self.parts.cmd];
             let submit = vk::SubmitInfo::default().command_buffers(&cmds);
             let submitted = {
                 let queue = self.gpu.inner.queue.lock().unwrap();
@@ -448,7 +450,7 @@ impl Recorder {
             self.idle = true;
 
             let mut raw = vec![0u64; self.stamps.len() + 1];
-            if let Some(qp) = self.queries {
+            if let Some(qp) = self.parts.queries {
                 device
                     .get_query_pool_results(
                         qp,
@@ -466,18 +468,18 @@ impl Recorder {
             };
             let period = self.gpu.caps().timestamp_period_ns;
             let ns: Vec<f64> = raw.iter().map(|t| (t & mask) as f64 * period).collect();
-            Ok(Timings::new(&ns, &self.stamps, self.queries.is_some()))
+            Ok(Timings::new(
+                &ns,
+                &self.stamps,
+                self.parts.queries.is_some(),
+            ))
         }
     }
 }
 
 impl Drop for Recorder {
     fn drop(&mut self) {
-        let parts = RecorderParts {
-            pool: self.pool,
-            cmd: self.cmd,
-            queries: self.queries,
-        };
+        let parts = self.parts;
         if self.idle {
             let mut recycled = self.gpu.inner.recycled_recorders.lock().unwrap();
             if recycled.len() < MAX_RECYCLED {
