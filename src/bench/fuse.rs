@@ -11,10 +11,13 @@ use serde::Serialize;
 use super::export::{export_inputs, ExportLabels};
 use super::median;
 use crate::fuse::{accumulate, FuseConfig, LabelSource, Method, NO_LABEL};
+use crate::gpu::timings::KernelTotal;
 use crate::gpu::Gpu;
 use crate::render::{GpuScene, Rasterizer, RenderOptions};
+use crate::scene::cameras_json::read_cameras_json;
+use crate::scene::ply::read_ply;
 use crate::scene::random_scene::{random_scene, RandomSceneSpec};
-use crate::scene::Camera;
+use crate::scene::{Camera, Gaussians};
 use crate::util::Rng;
 
 /// Issue #5's goal: accumulation takes at most this multiple of the forward render's time.
@@ -38,6 +41,9 @@ pub struct FuseBenchSpec {
     /// Timed runs of every method and of the forward render; medians are reported.
     pub iters: usize,
     pub seed: u64,
+    /// A folder with `scene.ply` and `cameras.json` to fuse instead of the random scene
+    /// (its first `views` cameras, scaled to `width` x `height`); `n` becomes its size.
+    pub scene: Option<PathBuf>,
     /// Write the scene, cameras and label maps here first (see [`super::export`]).
     #[serde(skip)]
     pub export: Option<PathBuf>,
@@ -54,6 +60,8 @@ pub struct ForwardBench {
     pub visible_per_view: f64,
     pub intersections_per_view: f64,
     pub peak_device_bytes: u64,
+    /// GPU time per kernel over all views (the last run's).
+    pub kernels: Vec<KernelTotal>,
 }
 
 /// One fusion method over every view.
@@ -70,10 +78,12 @@ pub struct MethodBench {
     pub gpu_ms: f64,
     /// Views (times passes) per wall second.
     pub views_per_s: f64,
-    /// Host time of the accumulation: waiting for label maps and running the views (see
-    /// `FuseStats`); the rest of `wall_s` is setup and the evidence download.
+    /// Host time of the accumulation: waiting for label maps, running the views, and
+    /// setting up, downloading and widening the evidence matrix (see `FuseStats`); the rest
+    /// of `wall_s` is setup.
     pub label_wait_s: f64,
     pub view_s: f64,
+    pub evidence_s: f64,
     /// Passes over the views (the evidence matrix split into class-row batches).
     pub passes: usize,
     pub rows_per_pass: usize,
@@ -83,6 +93,8 @@ pub struct MethodBench {
     pub scene_device_bytes: u64,
     /// gpu_ms / forward gpu_ms.
     pub gpu_ratio: f64,
+    /// GPU time per kernel over all views (the last run's).
+    pub kernels: Vec<KernelTotal>,
     /// wall_s / forward wall_s.
     pub wall_ratio: f64,
 }
@@ -186,6 +198,7 @@ fn forward_run(
         let run =
             raster.run_tiled_in_bands(scene, cam, opts, |rec, tiles| tiles.record_blend(rec))?;
         total.add(run.timings.total_ns() * 1e-6, 0.0, gpu.memory_reserved());
+        run.timings.add_to(&mut total.kernels);
         total.visible += f64::from(run.visible);
         total.intersections += f64::from(run.intersections);
     }
@@ -204,16 +217,12 @@ pub fn bench_fuse(
     progress: impl FnMut(&str, usize, usize),
 ) -> Result<FuseBench> {
     check_spec(gpu, spec, methods)?;
-    // SH degree 3 as a trained 3DGS scene (and `bench render`): projection evaluates it.
-    let g = random_scene(&RandomSceneSpec {
-        n: spec.n,
-        sh_degree: 3,
-        seed: spec.seed,
-        ..Default::default()
-    });
-    // Each method reads only its attributes (no SH colour, or only the centers), as `fuse`
-    // uploads them; the forward render reads all.
-    let cams = ring_cameras(spec.views, spec.width, spec.height);
+    let (g, cams) = scene_and_cameras(spec)?;
+    let spec = &FuseBenchSpec {
+        n: g.len(),
+        views: cams.len(),
+        ..spec.clone()
+    };
     let labels = BlockLabels::new(spec.classes, spec.seed);
     let opts = FuseConfig::default().render_options();
     if let Some(dir) = &spec.export {
@@ -227,6 +236,8 @@ pub fn bench_fuse(
             Some(ExportLabels { source, classes }),
         )?;
     }
+    // Each method reads only its attributes (no SH colour, or only the centers), as `fuse`
+    // uploads them; the forward render reads all.
     let scene = GpuScene::upload(gpu, &g)?;
     let method_scenes = methods
         .iter()
@@ -268,6 +279,38 @@ pub fn bench_fuse(
         methods: results,
         peak_host_bytes: crate::util::memory::peak_host_bytes(),
     })
+}
+
+/// The random scene (SH degree 3 as a trained 3DGS scene, and `bench render`: projection
+/// evaluates it) on its ring of cameras, or the folder's scene and first cameras.
+fn scene_and_cameras(spec: &FuseBenchSpec) -> Result<(Gaussians, Vec<Camera>)> {
+    let Some(dir) = &spec.scene else {
+        let g = random_scene(&RandomSceneSpec {
+            n: spec.n,
+            sh_degree: 3,
+            seed: spec.seed,
+            ..Default::default()
+        });
+        return Ok((g, ring_cameras(spec.views, spec.width, spec.height)));
+    };
+    let g = read_ply(&dir.join("scene.ply"))?;
+    ensure!(!g.is_empty(), "{} has no Gaussians", dir.display());
+    ensure!(
+        g.len() <= u32::MAX as usize,
+        "{} has 2^32 Gaussians or more",
+        dir.display()
+    );
+    let cams: Vec<Camera> = read_cameras_json(&dir.join("cameras.json"))?
+        .iter()
+        .take(spec.views)
+        .map(|c| c.scaled_to(spec.width, spec.height))
+        .collect();
+    ensure!(
+        !cams.is_empty(),
+        "{} has no camera",
+        dir.join("cameras.json").display()
+    );
+    Ok((g, cams))
 }
 
 /// Refuses specs the benchmark cannot run or measure.
@@ -367,6 +410,8 @@ impl Setup<'_> {
                     wall_s: stats.wall_s,
                     label_wait_s: stats.label_wait_s,
                     view_s: stats.view_s,
+                    evidence_s: stats.evidence_s,
+                    kernels: stats.kernels,
                     peak_device_bytes: stats.peak_device_bytes,
                     passes: stats.passes,
                     rows_per_pass: stats.rows_per_pass,
@@ -390,6 +435,7 @@ fn forward_bench(runs: &[RunTotal], views: usize) -> ForwardBench {
         visible_per_view: last.visible / n_views,
         intersections_per_view: last.intersections / n_views,
         peak_device_bytes: forward.peak_device_bytes,
+        kernels: forward.kernels,
     }
 }
 
@@ -409,12 +455,14 @@ fn method_bench(
         gpu_ms: m.gpu_ms,
         label_wait_s: m.label_wait_s,
         view_s: m.view_s,
+        evidence_s: m.evidence_s,
         views_per_s: (views * m.passes) as f64 / m.wall_s,
         passes: m.passes,
         rows_per_pass: m.rows_per_pass,
         peak_device_bytes: m.peak_device_bytes,
         scene_device_bytes,
         gpu_ratio: m.gpu_ms / forward.gpu_ms,
+        kernels: m.kernels,
         wall_ratio: m.wall_s / forward.wall_s,
     }
 }
@@ -429,6 +477,8 @@ struct RunTotal {
     /// run's).
     label_wait_s: f64,
     view_s: f64,
+    evidence_s: f64,
+    kernels: Vec<KernelTotal>,
     peak_device_bytes: u64,
     passes: usize,
     rows_per_pass: usize,

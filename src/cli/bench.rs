@@ -54,10 +54,16 @@ pub struct FuseArgs {
     /// Number of Gaussians (a random scene, SH degree 3).
     #[arg(long, default_value_t = 200_000)]
     n: usize,
-    /// Views: cameras on a ring in front of the scene, each seeing most of it, with a
-    /// label map of blocks of random classes each (seeded, streamed view by view).
+    /// A folder with `scene.ply` and `cameras.json` (a `synth` room, a trained scene) instead
+    /// of the random scene: its first --views cameras, scaled to --width x --height.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["preset", "n"])]
+    scene: Option<PathBuf>,
+    /// Views: cameras on a ring in front of the scene, each seeing most of it (or the
+    /// --scene folder's first ones), with a label map of blocks of random classes each
+    /// (seeded, streamed view by view).
     #[arg(long, default_value_t = 100)]
     views: usize,
+    /// Image size of every view.
     #[arg(long, default_value_t = 640)]
     width: u32,
     #[arg(long, default_value_t = 480)]
@@ -378,6 +384,7 @@ fn run_fuse(gpu: &Gpu, a: FuseArgs) -> Result<()> {
         classes: a.classes,
         iters: a.iters,
         seed: a.seed,
+        scene: a.scene,
         export: a.export,
     };
     let bar = views_bar(0);

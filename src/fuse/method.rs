@@ -40,6 +40,15 @@ impl Method {
             _ => SceneAttributes::Geometry,
         }
     }
+
+    /// Whether the method accumulates over each view's tile lists (alpha * T per pixel and
+    /// Gaussian), as the weighted vote and FlashSplat do.
+    pub fn is_tiled(self) -> bool {
+        matches!(
+            self,
+            Method::VoteWeighted | Method::FlashSplat | Method::FlashSplatPerView
+        )
+    }
 }
 
 /// How one method is spelled everywhere.

@@ -41,6 +41,13 @@ impl Buffer {
         self.mapped()[..bytes.len()].copy_from_slice(bytes);
     }
 
+    /// The first `count` elements of this host-mapped (readback) buffer; the GPU writes must
+    /// be finished and made visible to the host ([`Recorder::host_barrier`] before the wait).
+    pub fn read_mapped<T: Pod>(&mut self, count: usize) -> Vec<T> {
+        let bytes = count * std::mem::size_of::<T>();
+        bytemuck::pod_collect_to_vec(&self.mapped()[..bytes])
+    }
+
     fn mapped(&mut self) -> &mut [u8] {
         let size = self.size as usize;
         self.allocation
@@ -178,6 +185,11 @@ impl Gpu {
     /// change to one run over all views; the two were not measured apart.
     pub fn staging_buffer(&self, size: u64) -> GpuResult<Buffer> {
         self.create_buffer("staging-upload", size, MemoryLocation::GpuToCpu)
+    }
+
+    /// A host-readable buffer that GPU copies write into ([`Buffer::read_mapped`]).
+    pub fn readback_buffer(&self, size: u64) -> GpuResult<Buffer> {
+        self.create_buffer("readback", size, MemoryLocation::GpuToCpu)
     }
 
     /// Copies `data` into `dst` at byte `offset` through a fresh staging buffer, and waits.

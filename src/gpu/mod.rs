@@ -20,7 +20,7 @@ pub use context::{list_devices, Gpu, GpuOptions};
 pub use count::GpuCount;
 pub use error::{GpuError, GpuResult};
 pub use kernel_table::{ids, KernelId, KERNELS};
-pub use recorder::{BufferRange, Recorder};
+pub use recorder::{BufferRange, Recorder, Submission};
 pub use scan::PrefixScan;
 pub use sort::RadixSort;
 pub use timings::{Mark, Timings};

@@ -426,11 +426,16 @@ impl Recorder {
     }
 
     /// Submits, waits for completion, and returns the per-kernel timings.
-    pub fn submit_and_wait(mut self) -> GpuResult<Timings> {
-        self.idle = false;
+    pub fn submit_and_wait(self) -> GpuResult<Timings> {
+        self.submit()?.wait()
+    }
+
+    /// Submits without waiting: the host may record the next work while this runs. Every
+    /// buffer the commands use must outlive the returned [`Submission`] (dropping it waits).
+    pub fn submit(mut self) -> GpuResult<Submission> {
         let device = self.gpu.device();
-        // SAFETY: the command buffer is fully recorded; we wait on the fence before reading
-        // queries or letting Drop free anything.
+        // SAFETY: the command buffer is fully recorded; the submission waits on the fence
+        // before reading queries or letting the recorder's Drop free or recycle anything.
         unsafe {
             device
                 .end_command_buffer(self.parts.cmd)
@@ -438,20 +443,32 @@ impl Recorder {
             let fence = device
                 .create_fence(&vk::FenceCreateInfo::default(), None)
                 .vk("vkCreateFence")?;
+            self.idle = false;
             let cmds = [self.parts.cmd];
             let submit = vk::SubmitInfo::default().command_buffers(&cmds);
             let submitted = {
                 let queue = self.gpu.inner.queue.lock().unwrap();
                 device.queue_submit(*queue, &[submit], fence)
             };
-            let waited = submitted.and_then(|_| device.wait_for_fences(&[fence], true, u64::MAX));
-            device.destroy_fence(fence, None);
-            waited.vk("vkQueueSubmit/vkWaitForFences")?;
-            self.idle = true;
+            if let Err(e) = submitted {
+                device.destroy_fence(fence, None);
+                return Err(e).vk("vkQueueSubmit");
+            }
+            Ok(Submission {
+                rec: Some(self),
+                fence,
+            })
+        }
+    }
 
-            let mut raw = vec![0u64; self.stamps.len() + 1];
-            if let Some(qp) = self.parts.queries {
-                device
+    /// The timings of a finished submission.
+    fn read_timings(&self) -> GpuResult<Timings> {
+        let mut raw = vec![0u64; self.stamps.len() + 1];
+        if let Some(qp) = self.parts.queries {
+            // SAFETY: the submission that wrote the queries has finished.
+            unsafe {
+                self.gpu
+                    .device()
                     .get_query_pool_results(
                         qp,
                         0,
@@ -460,19 +477,60 @@ impl Recorder {
                     )
                     .vk("vkGetQueryPoolResults")?;
             }
-            let bits = self.gpu.caps().timestamp_valid_bits;
-            let mask = if bits >= 64 {
-                u64::MAX
-            } else {
-                (1u64 << bits) - 1
-            };
-            let period = self.gpu.caps().timestamp_period_ns;
-            let ns: Vec<f64> = raw.iter().map(|t| (t & mask) as f64 * period).collect();
-            Ok(Timings::new(
-                &ns,
-                &self.stamps,
-                self.parts.queries.is_some(),
-            ))
+        }
+        let bits = self.gpu.caps().timestamp_valid_bits;
+        let mask = if bits >= 64 {
+            u64::MAX
+        } else {
+            (1u64 << bits) - 1
+        };
+        let period = self.gpu.caps().timestamp_period_ns;
+        let ns: Vec<f64> = raw.iter().map(|t| (t & mask) as f64 * period).collect();
+        Ok(Timings::new(
+            &ns,
+            &self.stamps,
+            self.parts.queries.is_some(),
+        ))
+    }
+}
+
+/// Recorded work running on the GPU ([`Recorder::submit`]). Dropping it waits for the work
+/// to finish, so the buffers it uses are not freed under it.
+pub struct Submission {
+    rec: Option<Recorder>,
+    fence: vk::Fence,
+}
+
+impl Submission {
+    /// Waits for the work and returns its per-kernel timings.
+    pub fn wait(mut self) -> GpuResult<Timings> {
+        let mut rec = self.rec.take().expect("waited once");
+        rec.wait_for(self.fence)?;
+        rec.read_timings()
+    }
+}
+
+impl Recorder {
+    /// Waits for `fence` (this recorder's submission) and destroys it. The recorder is idle
+    /// afterwards unless the wait failed (a device error: its pools are then destroyed, not
+    /// reused).
+    fn wait_for(&mut self, fence: vk::Fence) -> GpuResult<()> {
+        let device = self.gpu.device();
+        // SAFETY: the fence belongs to this recorder's submission and is destroyed once.
+        let waited = unsafe {
+            let waited = device.wait_for_fences(&[fence], true, u64::MAX);
+            device.destroy_fence(fence, None);
+            waited
+        };
+        self.idle = waited.is_ok();
+        waited.vk("vkWaitForFences")
+    }
+}
+
+impl Drop for Submission {
+    fn drop(&mut self) {
+        if let Some(mut rec) = self.rec.take() {
+            let _ = rec.wait_for(self.fence);
         }
     }
 }

@@ -21,6 +21,19 @@ pub struct KernelTotal {
     pub ns: f64,
 }
 
+impl KernelTotal {
+    /// Adds this total to `totals`' entry for its kernel (a new entry at the end if none).
+    pub fn add_to(self, totals: &mut Vec<KernelTotal>) {
+        match totals.iter_mut().find(|t| t.kernel == self.kernel) {
+            Some(t) => {
+                t.dispatches += self.dispatches;
+                t.ns += self.ns;
+            }
+            None => totals.push(self),
+        }
+    }
+}
+
 /// GPU timings of one submission. Empty (all zero) when the device has no timestamps.
 #[derive(Clone, Debug, Default)]
 pub struct Timings {
@@ -73,20 +86,20 @@ impl Timings {
 
     /// Per-kernel totals, in order of first dispatch.
     pub fn by_kernel(&self) -> Vec<KernelTotal> {
-        let mut out: Vec<KernelTotal> = Vec::new();
-        for d in &self.dispatches {
-            match out.iter_mut().find(|t| t.kernel == d.kernel) {
-                Some(t) => {
-                    t.dispatches += 1;
-                    t.ns += d.ns;
-                }
-                None => out.push(KernelTotal {
-                    kernel: d.kernel,
-                    dispatches: 1,
-                    ns: d.ns,
-                }),
-            }
-        }
+        let mut out = Vec::new();
+        self.add_to(&mut out);
         out
+    }
+
+    /// Adds this submission's dispatches to per-kernel totals (of many submissions).
+    pub fn add_to(&self, totals: &mut Vec<KernelTotal>) {
+        for d in &self.dispatches {
+            KernelTotal {
+                kernel: d.kernel,
+                dispatches: 1,
+                ns: d.ns,
+            }
+            .add_to(totals);
+        }
     }
 }

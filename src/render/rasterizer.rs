@@ -18,7 +18,7 @@ use crate::contract::{
 };
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{
-    Buffer, BufferRange, Gpu, GpuCount, Mark, PrefixScan, RadixSort, Recorder, Timings,
+    Buffer, BufferRange, Gpu, GpuCount, Mark, PrefixScan, RadixSort, Recorder, Submission, Timings,
 };
 use crate::scene::Camera;
 
@@ -67,6 +67,8 @@ struct Buffers {
     /// Frame status words (ST_*), one region of `status_stride` words per band of tile rows
     /// a view is binned in; the frame-wide words are copied from band 0's into the others.
     status: Buffer,
+    /// Host-readable copy of `status`, written at the end of each view's submission.
+    status_host: Buffer,
     status_stride: u32,
     scan_n: PrefixScan,
     scan_v: PrefixScan,
@@ -76,6 +78,9 @@ struct Buffers {
 
 /// Renders scenes on the GPU; reuses its buffers across frames and grows them on demand.
 pub struct Rasterizer {
+    /// The attempt at a view submitted and not yet waited for. The first field, so a
+    /// dropped rasterizer waits for it before its buffers are freed.
+    pending: Option<PendingRun>,
     gpu: Gpu,
     bufs: Option<Buffers>,
     /// Entries of a tile's list one per-tile dispatch walks (see [`FrameSpec::window_len`]).
@@ -103,6 +108,46 @@ pub struct SplitSizes {
     /// Entries one band's intersection lists may hold before the view is binned in
     /// (more) bands of tile rows.
     pub list_capacity: Option<u32>,
+}
+
+/// One attempt at a view, submitted ([`Rasterizer::submit_tiled_in_bands`]).
+struct PendingRun {
+    submission: Submission,
+    recorded: RecordedRun,
+    cam: Camera,
+    banded: bool,
+    /// The sizes the attempt ran with (grown from on an overflow).
+    need: Need,
+}
+
+/// Where an attempt's timestamps are: around projection, depth sort and binning, the
+/// frame's marks, and (start, lists built, per-tile done) for each band.
+struct RecordedRun {
+    stage_marks: [Option<Mark>; 3],
+    marks: [Option<Mark>; 5],
+    spans: Vec<(Option<Mark>, Option<Mark>, Option<Mark>)>,
+    channels: u32,
+}
+
+impl RecordedRun {
+    /// The run, from the attempt's timings and each band's status words.
+    fn run(&self, timings: Timings, statuses: &[Vec<u32>]) -> TiledRun {
+        let [m0, m1, m2] = self.stage_marks;
+        let mut stages = StageTimes::from_marks(&timings, &[m0, m1, m2, m2, m2]);
+        for &(start, lists, end) in &self.spans {
+            stages.bin_ms += timings.between(start, lists).unwrap_or(0.0) * 1e-6;
+            stages.blend_ms += timings.between(lists, end).unwrap_or(0.0) * 1e-6;
+        }
+        TiledRun {
+            timings,
+            marks: self.marks,
+            stages,
+            visible: statuses[0][ST_VISIBLE as usize],
+            intersections: statuses.iter().map(|s| s[ST_ISECT as usize]).sum(),
+            list_bands: statuses.len() as u32,
+            channels: self.channels,
+        }
+    }
 }
 
 /// Most bands of tile rows one view's lists are split into (a status region each).
@@ -196,6 +241,7 @@ impl Buffers {
             sem_norm: b("sem_norm", need.sem * 4)?,
             label_best: b("label_best", need.best.max(1) * 8)?,
             status: b("status", MAX_LIST_BANDS as u64 * status_stride as u64 * 4)?,
+            status_host: gpu.readback_buffer(MAX_LIST_BANDS as u64 * status_stride as u64 * 4)?,
             status_stride,
             scan_n: PrefixScan::new(gpu, n + 1)?,
             scan_v: PrefixScan::new(gpu, n + 1)?,
@@ -237,6 +283,7 @@ impl Rasterizer {
             band_rows: None,
             list_bands: 1,
             list_capacity: None,
+            pending: None,
         }
     }
 
@@ -430,45 +477,127 @@ impl Rasterizer {
     where
         F: FnMut(&mut Recorder, &TileLists) -> Result<()>,
     {
+        loop {
+            self.submit_binned(scene, cam, opts, banded, &mut per_tile)?;
+            if let Some(run) = self.wait_binned()? {
+                return Ok(run);
+            }
+        }
+    }
+
+    /// [`Rasterizer::run_tiled_in_bands`] without waiting: records one attempt at the view
+    /// and submits it; the host may prepare other work (another rasterizer's view) while it
+    /// runs. [`Rasterizer::wait_tiled`] finishes it. The buffers `per_tile` binds must
+    /// outlive the wait (dropping the rasterizer waits too).
+    pub fn submit_tiled_in_bands<F>(
+        &mut self,
+        scene: &GpuScene,
+        cam: &Camera,
+        opts: &RenderOptions,
+        mut per_tile: F,
+    ) -> Result<()>
+    where
+        F: FnMut(&mut Recorder, &TileLists) -> Result<()>,
+    {
+        self.submit_binned(scene, cam, opts, true, &mut per_tile)
+    }
+
+    /// Waits for the view [`Rasterizer::submit_tiled_in_bands`] submitted. None when its
+    /// lists overflowed: the rasterizer has grown them (or chosen more bands), and the view
+    /// must run again ([`Rasterizer::run_tiled_in_bands`]); its `per_tile` work saw the
+    /// overflow flag and must have added nothing.
+    pub fn wait_tiled(&mut self) -> Result<Option<TiledRun>> {
+        self.wait_binned()
+    }
+
+    /// Whether a submitted view has not been waited for.
+    pub fn is_busy(&self) -> bool {
+        self.pending.is_some()
+    }
+
+    /// Records one attempt at the view (binning and `per_tile`, band by band, then a copy
+    /// of the status words the host reads) and submits it.
+    fn submit_binned<F>(
+        &mut self,
+        scene: &GpuScene,
+        cam: &Camera,
+        opts: &RenderOptions,
+        banded: bool,
+        per_tile: &mut F,
+    ) -> Result<()>
+    where
+        F: FnMut(&mut Recorder, &TileLists) -> Result<()>,
+    {
         ensure!(
             cam.width > 0 && cam.height > 0,
             "camera {} has an empty image",
             cam.name
         );
+        self.wait_binned()?; // one view in flight per rasterizer: its buffers are shared
         let frame = self.frame_spec(scene, cam, opts)?;
-        let mut need = self.need(scene, &frame);
+        let need = self.need(scene, &frame);
+        self.ensure(need)?;
         // Start from the last view's band count: neighbouring views need about the same.
-        let mut bands = if banded {
+        let bands = if banded {
             self.list_bands.min(frame.tiles_y)
         } else {
             1
         };
-        loop {
-            self.ensure(need)?;
-            let step = row_step(cam.width, frame.band_limits.offset_alignment);
-            let rows = split_rows(frame.tiles_y, bands, step);
-            let (run, statuses) = self.record_and_run(scene, opts, &frame, &rows, &mut per_tile)?;
-            match self.next_attempt(cam, &statuses, bands, banded)? {
-                Attempt::Done => {
-                    self.list_bands = bands;
-                    return Ok(run);
-                }
-                Attempt::Grow(isect) => need.isect = isect,
-                Attempt::Split(more) => bands = more,
+        let step = row_step(cam.width, frame.band_limits.offset_alignment);
+        let rows = split_rows(frame.tiles_y, bands, step);
+        let (recorded, rec) = self.record_bands(scene, opts, &frame, &rows, per_tile)?;
+        self.pending = Some(PendingRun {
+            submission: rec.submit()?,
+            recorded,
+            cam: cam.clone(),
+            banded,
+            need,
+        });
+        Ok(())
+    }
+
+    /// Waits for the submitted attempt, if any: its run when the view is done, None when
+    /// it must run again (the buffers grown or the bands split for it).
+    fn wait_binned(&mut self) -> Result<Option<TiledRun>> {
+        let Some(pending) = self.pending.take() else {
+            return Ok(None);
+        };
+        let timings = pending.submission.wait()?;
+        let b = self.bufs.as_mut().expect("ensured");
+        let stride = b.status_stride as usize;
+        let bands = pending.recorded.spans.len();
+        let words: Vec<u32> = b.status_host.read_mapped(bands * stride);
+        let statuses: Vec<Vec<u32>> = words.chunks(stride).map(|w| w.to_vec()).collect();
+        let run = pending.recorded.run(timings, &statuses);
+        match self.next_attempt(&pending.cam, &statuses, bands as u32, pending.banded)? {
+            Attempt::Done => {
+                self.list_bands = bands as u32;
+                Ok(Some(run))
+            }
+            Attempt::Grow(isect) => {
+                self.ensure(Need {
+                    isect,
+                    ..pending.need
+                })?;
+                Ok(None)
+            }
+            Attempt::Split(more) => {
+                self.list_bands = more;
+                Ok(None)
             }
         }
     }
 
-    /// Records the view's binning and `per_tile` band by band in one submission, runs it,
-    /// and returns the run with each band's status words.
-    fn record_and_run<F>(
+    /// Records the view's binning and `per_tile` band by band, and the copy of each band's
+    /// status words for the host.
+    fn record_bands<F>(
         &self,
         scene: &GpuScene,
         opts: &RenderOptions,
         frame: &FrameSpec,
         rows: &[Range<u32>],
         per_tile: &mut F,
-    ) -> Result<(TiledRun, Vec<Vec<u32>>)>
+    ) -> Result<(RecordedRun, Recorder)>
     where
         F: FnMut(&mut Recorder, &TileLists) -> Result<()>,
     {
@@ -503,31 +632,20 @@ impl Rasterizer {
             spans.push((start, lists, rec.mark()));
         }
         marks[4] = spans.last().and_then(|s| s.2);
-        let timings = rec.submit_and_wait()?;
-        let stride = b.status_stride as usize;
-        let words = self
-            .gpu
-            .download::<u32>(&b.status, 0, rows.len() * stride)?;
-        let statuses: Vec<Vec<u32>> = words.chunks(stride).map(|w| w.to_vec()).collect();
-        let mut stages = StageTimes::from_marks(&timings, &[m0, m1, m2, m2, m2]);
-        for (start, lists, end) in spans {
-            stages.bin_ms += timings.between(start, lists).unwrap_or(0.0) * 1e-6;
-            stages.blend_ms += timings.between(lists, end).unwrap_or(0.0) * 1e-6;
-        }
-        let run = TiledRun {
-            timings,
+        let status_bytes = rows.len() as u64 * b.status_stride as u64 * 4;
+        rec.copy(&b.status, 0, &b.status_host, 0, status_bytes);
+        rec.host_barrier();
+        let recorded = RecordedRun {
+            stage_marks: [m0, m1, m2],
             marks,
-            stages,
-            visible: statuses[0][ST_VISIBLE as usize],
-            intersections: statuses.iter().map(|s| s[ST_ISECT as usize]).sum(),
-            list_bands: rows.len() as u32,
+            spans,
             channels: if frame.labels.is_some() {
                 0
             } else {
                 frame.channels
             },
         };
-        Ok((run, statuses))
+        Ok((recorded, rec))
     }
 
     /// What to do after a run whose bands reported `statuses`: done, grow the lists, or

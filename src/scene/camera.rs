@@ -50,6 +50,22 @@ impl Camera {
             self.fy * pc.y / pc.z + self.cy,
         )
     }
+
+    /// The same view at `width` x `height` pixels: the intrinsics scaled per axis (pixel
+    /// centers stay at +0.5 of the new grid's pixels).
+    pub fn scaled_to(&self, width: u32, height: u32) -> Camera {
+        let sx = width as f64 / self.width as f64;
+        let sy = height as f64 / self.height as f64;
+        Camera {
+            fx: self.fx * sx,
+            cx: self.cx * sx,
+            fy: self.fy * sy,
+            cy: self.cy * sy,
+            width,
+            height,
+            ..self.clone()
+        }
+    }
 }
 
 /// How far `R^T R` may stray from the identity (per element) before a rotation is refused:

@@ -8,8 +8,10 @@
 #   tests   every test binary, validation layer and synchronization validation on
 #   ours    semsplat's benchmarks: sort 2^25, forward and training at C = 0/16/32/64 on a
 #           1M random scene and an office room at ~1M Gaussians (spacing 0.0053, one view), fusion of 1M x 200 views
+#           of the random scene and of the room (~1M Gaussians seen from 200 views)
 #   peers   gsplat 1.5.3 and FlashSplat's rasterizer on the scenes `ours` exported
-# env: BUDGET_S (default 540): benchmarks starting after this many seconds are skipped;
+# env: PEERS: the peers to build and run (default "gsplat flashsplat");
+#      BUDGET_S (default 540): benchmarks starting after this many seconds are skipped;
 #      N, W, H, VIEWS, SPACING: scene size (1000000, 1920x1080, 200 fusion views, room
 #      spacing 0.0053), smaller for a dry run on lavapipe; TESTS: a grep -E filter on the
 #      test binaries' names; CASES: a regular expression on the benchmark case names
@@ -59,16 +61,20 @@ setup() {
 }
 
 # gsplat JIT-compiles its CUDA extension (minutes): started first, in the background.
+# PEERS (default "gsplat flashsplat") picks which are built and run.
 build_peers() {
   mkdir -p "$site"
   python3 -m pip install -q --no-deps --no-index --target "$site" "$gpu"/whl/gsplat-*.whl \
     >/tmp/peers_build.log 2>&1
   export TORCH_CUDA_ARCH_LIST=9.0 MAX_JOBS=16 PYTHONPATH=$site:$repo/tools/gpu/peers
-  (
-    timeout 400 python3 -c 'from gsplat.cuda._backend import _C; assert _C is not None' \
-      >>/tmp/peers_build.log 2>&1 && echo ok >/tmp/gsplat_built
-  ) &
-  gsplat_pid=$!
+  if [[ ${PEERS:-gsplat} == *gsplat* ]]; then
+    (
+      timeout 400 python3 -c 'from gsplat.cuda._backend import _C; assert _C is not None' \
+        >>/tmp/peers_build.log 2>&1 && echo ok >/tmp/gsplat_built
+    ) &
+    gsplat_pid=$!
+  fi
+  [[ ${PEERS:-flashsplat} == *flashsplat* ]] || return 0
   (
     tar -C /tmp -xzf "$gpu/src/flashsplat-rasterization.tar.gz" &&
       bash tools/gpu/peers/patch_flashsplat.sh /tmp/flashsplat-rasterization /tmp/fs_src &&
@@ -134,6 +140,20 @@ run_ours() {
   done
   b "fuse ${N:-1000000} x ${VIEWS:-200}" bench fuse "${big[@]}" --views "${VIEWS:-200}" --classes 16 \
     --methods flashsplat,vote,vote-weighted --export /tmp/exp_fuse
+  # The room seen from 200 views (spacing 0.0115: ~980k Gaussians on the surfaces they see);
+  # synthesized small, its cameras scaled to W x H by bench fuse.
+  if [[ "fuse room x ${VIEWS:-200}" =~ ${CASES:-.} ]]; then
+    timeout 120 semsplat synth --preset office --spacing "${ROOM_FUSE_SPACING:-0.0115}" \
+      --views "${VIEWS:-200}" --test-views 0 --width 96 --height 54 --no-previews \
+      --out /tmp/room_fuse >>"$OUT/bench.log" 2>&1 || say "synth room_fuse failed"
+  fi
+  b "fuse room x ${VIEWS:-200}" bench fuse --scene /tmp/room_fuse --views "${VIEWS:-200}" \
+    --width "${W:-1920}" --height "${H:-1080}" --classes 16 \
+    --methods flashsplat,vote,vote-weighted --export /tmp/exp_fuse_room
+  # Real size (#14): 6M Gaussians, as Mip-NeRF 360's garden.
+  b "render random 6M C=16" bench render --n 6000000 --width "${W:-1920}" --height "${H:-1080}" \
+    --channels 16 --iters 5
+  b "fuse 6M x 20" bench fuse --preset 6m --views 20 --classes 16 --methods flashsplat,vote
   nvidia-smi --query-gpu=clocks.sm,clocks.max.sm,clocks.mem,temperature.gpu,power.draw \
     --format=csv >>"$OUT/info.txt" 2>&1
   say "ours: $(wc -l <"$OUT/ours.jsonl" 2>/dev/null || echo 0) results"
@@ -141,7 +161,7 @@ run_ours() {
 
 run_peers() {
   local t0; t0=$(date +%s)
-  wait "$gsplat_pid" "$flashsplat_pid"
+  wait ${gsplat_pid:-} ${flashsplat_pid:-}
   say "peer builds done (waited $(($(date +%s) - t0)) s): gsplat $(cat /tmp/gsplat_built 2>/dev/null || echo FAILED), flashsplat $(cat /tmp/flashsplat_built 2>/dev/null || echo FAILED)"
   tail -c 6000 /tmp/peers_build.log >>"$OUT/bench.log"
   local peers=tools/gpu/peers
@@ -152,11 +172,14 @@ run_peers() {
           --iters 10 --warmup 3 --label $s --out /tmp/gsplat_$s.json >>"$OUT/bench.log" 2>&1
     done
   fi
-  if [ -f /tmp/flashsplat_built ] && [ -d /tmp/exp_fuse ] && [ "$(left)" -gt 30 ]; then
-    timeout "$(left)" python3 $peers/flashsplat_bench.py --scene /tmp/exp_fuse --label random \
-      --commit "$(cat "$gpu/src/flashsplat-rasterization.commit")" --out /tmp/flashsplat.json \
-      >>"$OUT/bench.log" 2>&1
-  fi
+  for s in random room; do
+    local exp=/tmp/exp_fuse; [ $s = room ] && exp=/tmp/exp_fuse_room
+    if [ -f /tmp/flashsplat_built ] && [ -d $exp ] && [ "$(left)" -gt 30 ]; then
+      timeout "$(left)" python3 $peers/flashsplat_bench.py --scene $exp --label $s \
+        --commit "$(cat "$gpu/src/flashsplat-rasterization.commit")" --out /tmp/flashsplat_$s.json \
+        >>"$OUT/bench.log" 2>&1
+    fi
+  done
   python3 -c 'import json,sys
 runs = []
 for p in sys.argv[1:]:
@@ -164,7 +187,8 @@ for p in sys.argv[1:]:
     except (OSError, ValueError): continue
     runs += d if isinstance(d, list) else [d]
 json.dump(runs, open("'"$OUT"'/peers.json", "w"), indent=1)' \
-    /tmp/gsplat_random.json /tmp/gsplat_room.json /tmp/flashsplat.json
+    /tmp/gsplat_random.json /tmp/gsplat_room.json /tmp/flashsplat_random.json \
+    /tmp/flashsplat_room.json
   # The built extensions, so a later call can skip the compile.
   local built_ext; built_ext=$(find ~/.cache/torch_extensions -name 'gsplat_cuda*.so' 2>/dev/null | head -1)
   tar -cJf "$OUT/peers_built.tar.xz" -C / ${built_ext:+"${built_ext#/}"} "${site#/}/flashsplat_rasterization" \

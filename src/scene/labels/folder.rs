@@ -283,7 +283,7 @@ impl LabelDir {
         for e in &self.entries {
             if e.size != e.camera_size {
                 if let Some(cam) = cameras.get_mut(e.camera) {
-                    scale_camera(cam, e.size);
+                    *cam = cam.scaled_to(e.size.0, e.size.1);
                 }
             }
         }
@@ -353,17 +353,6 @@ fn entry_for(camera: usize, cam: &Camera, path: &Path) -> LabelEntry {
         camera_size,
         size,
     }
-}
-
-fn scale_camera(cam: &mut Camera, (width, height): (u32, u32)) {
-    let sx = width as f64 / cam.width as f64;
-    let sy = height as f64 / cam.height as f64;
-    cam.fx *= sx;
-    cam.cx *= sx;
-    cam.fy *= sy;
-    cam.cy *= sy;
-    cam.width = width;
-    cam.height = height;
 }
 
 /// One line saying how many cameras were scaled to their label size, with an example.
