@@ -369,3 +369,74 @@ fn bad_input_is_one_clear_error_and_writes_nothing() {
         "a failed run left output behind"
     );
 }
+
+/// `bench fuse --scene` times a folder's scene on its first `--views` cameras, scaled to the
+/// asked size, and reports where the GPU time went per kernel.
+#[test]
+fn bench_fuse_times_a_scene_folder_on_its_cameras() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    synth_tiny(d, 3, (40, 30));
+    let scene = d.join("scene.ply");
+    let gaussians = semsplat::scene::ply::read_ply(&scene).unwrap().len();
+    let bench = |extra: &[&str]| {
+        let mut args = vec![
+            "bench",
+            "fuse",
+            "--scene",
+            d.to_str().unwrap(),
+            "--methods",
+            "vote,flashsplat",
+        ];
+        args.extend_from_slice(extra);
+        std::process::Command::new(env!("CARGO_BIN_EXE_semsplat"))
+            .args(&args)
+            .env("SEMSPLAT_VALIDATION", "1")
+            .output()
+            .unwrap()
+    };
+    // Asked for more views than the folder has cameras (3 train + 1 test): all four.
+    let out = bench(&["--views", "9", "--width", "80", "--height", "60", "--json"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(!stderr.contains("[vulkan"), "validation layer: {stderr}");
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["n"], gaussians as u64);
+    assert_eq!(v["views"], 4);
+    assert_eq!(
+        (v["width"].clone(), v["height"].clone()),
+        (80.into(), 60.into())
+    );
+    for m in v["methods"].as_array().unwrap() {
+        let kernels = m["kernels"].as_array().unwrap();
+        let names: Vec<&str> = kernels
+            .iter()
+            .map(|k| k["kernel"].as_str().unwrap())
+            .collect();
+        let want = if m["key"] == "vote" {
+            "fuse/vote"
+        } else {
+            "fuse/contrib_fixed"
+        };
+        assert!(names.contains(&want), "{names:?}");
+        // Each kernel's time ends at its own timestamp: together at most the views' time.
+        let sum: f64 = kernels.iter().map(|k| k["ns"].as_f64().unwrap()).sum();
+        let gpu_ms = m["gpu_ms"].as_f64().unwrap();
+        assert!(
+            sum > 0.0 && sum * 1e-6 <= gpu_ms * (1.0 + 1e-9),
+            "{sum} ns of {gpu_ms} ms"
+        );
+    }
+    // A folder without cameras.json, and --scene with a random-scene option, are refused.
+    std::fs::remove_file(d.join("cameras.json")).unwrap();
+    let out = bench(&["--views", "2"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && stderr.contains("cameras.json"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    let out = bench(&["--n", "10"]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--n"));
+}

@@ -7,8 +7,8 @@ mod common;
 use common::{check_validation, gpu, separate_depth_ties};
 use glam::DVec3;
 use semsplat::fuse::{
-    accumulate, assign_one_vs_rest, assign_semantic, Accumulation, ClassScores, FuseConfig, Method,
-    NO_LABEL,
+    accumulate, assign_one_vs_rest, assign_semantic, Accumulation, ClassScores, FuseConfig,
+    LabelSource, Method, NO_LABEL,
 };
 use semsplat::render::rasterizer::SplitSizes;
 use semsplat::render::reference::{self, RenderSettings};
@@ -559,5 +559,55 @@ fn each_method_uploads_only_what_it_reads_and_gets_the_same_evidence() {
         assert!(want.data.iter().sum::<f64>() > 10.0, "{}", spelling.name);
         assert_eq!(evidence(&partial).data, want.data, "{}", spelling.name);
     }
+    check_validation(gpu);
+}
+
+/// Label maps that fail to load at one view, as a corrupt file would.
+struct FailingAt(usize, Vec<Option<Vec<u32>>>);
+
+impl LabelSource for FailingAt {
+    fn labels(&self, view: usize, cam: &Camera) -> anyhow::Result<Option<Vec<u32>>> {
+        anyhow::ensure!(view != self.0, "label map of view {} is corrupt", cam.name);
+        self.1.labels(view, cam)
+    }
+}
+
+/// Views run two at a time: an error while earlier views are still on the GPU (their lists
+/// overflowing, so they would run again) is returned as it is, after they finish, and leaves
+/// nothing behind that changes the next run.
+#[test]
+fn an_error_with_views_in_flight_is_returned_and_changes_nothing_after() {
+    let gpu = gpu();
+    let g = scene(600, 11);
+    let cams: Vec<Camera> = cameras().into_iter().cycle().take(6).collect();
+    let labels = label_maps(&cams, 12);
+    let cfg = FuseConfig {
+        method: Method::FlashSplat,
+        split: SplitSizes {
+            list_capacity: Some(400),
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let scene = GpuScene::upload(gpu, &g).unwrap();
+    let failing = FailingAt(4, labels.clone());
+    let err = accumulate(gpu, &scene, &cams, &failing, CLASSES, &cfg, |_, _| {})
+        .map(|_| ())
+        .unwrap_err();
+    assert!(
+        format!("{err:#}").contains("label map of view b is corrupt"),
+        "{err:#}"
+    );
+    let after = run(&g, &cams, &labels, &cfg);
+    let fresh = run(
+        &g,
+        &cams,
+        &labels,
+        &FuseConfig {
+            split: SplitSizes::default(),
+            ..cfg
+        },
+    );
+    assert_eq!(after.data, fresh.data);
     check_validation(gpu);
 }

@@ -163,3 +163,33 @@ impl Camera {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod scaled_tests {
+    use super::*;
+
+    /// A point seen at (u, v) in the original image is seen at (u sx, v sy) in the scaled one:
+    /// the image's edges (0 and width) stay the image's edges.
+    #[test]
+    fn a_scaled_camera_sees_every_point_at_the_scaled_position() {
+        let cam = Camera {
+            name: "c".into(),
+            width: 96,
+            height: 54,
+            fx: 80.0,
+            fy: 81.0,
+            cx: 47.0,
+            cy: 28.5,
+            rotation: DMat3::from_rotation_y(0.3),
+            translation: DVec3::new(0.1, -0.2, 0.5),
+            split: Split::Train,
+        };
+        let big = cam.scaled_to(1920, 1080);
+        assert_eq!((big.width, big.height), (1920, 1080));
+        for p in [DVec3::new(0.3, 0.2, 3.0), DVec3::new(-1.0, 0.5, 5.0)] {
+            let (u, v) = cam.project_camera_point(cam.world_to_camera(p));
+            let (bu, bv) = big.project_camera_point(big.world_to_camera(p));
+            assert!((bu - u * 20.0).abs() < 1e-9 && (bv - v * 20.0).abs() < 1e-9);
+        }
+    }
+}
