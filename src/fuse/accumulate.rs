@@ -203,6 +203,23 @@ impl ViewInputs {
         Ok(self.current())
     }
 
+    /// A view of `pixels` pixels whose labels are staged in `staged`: its label upload, and
+    /// the carry.
+    fn for_view<'a>(
+        &'a mut self,
+        gpu: &Gpu,
+        staged: &'a Buffer,
+        pixels: u64,
+    ) -> Result<(ViewLabels<'a>, &'a Buffer)> {
+        let (device, carry) = self.for_pixels(gpu, pixels)?;
+        let labels = ViewLabels {
+            staged,
+            device,
+            bytes: pixels * 4,
+        };
+        Ok((labels, carry))
+    }
+
     /// (labels, carry) as last allocated.
     fn current(&self) -> (&Buffer, &Buffer) {
         let (Some(labels), Some(carry)) = (&self.labels, &self.carry) else {
@@ -258,12 +275,7 @@ impl Lane {
     ) -> Result<ViewGpu> {
         let finished = self.finish(ctx)?;
         let gpu = self.raster.gpu().clone();
-        let (device, carry) = self.inputs.for_pixels(&gpu, pixels)?;
-        let labels = ViewLabels {
-            staged,
-            device,
-            bytes: pixels * 4,
-        };
+        let (labels, carry) = self.inputs.for_view(&gpu, staged, pixels)?;
         let n = ctx.scene.n;
         self.raster.submit_tiled_in_bands(
             ctx.scene,
@@ -565,12 +577,7 @@ fn run_view(
     // The votes run each view whole, on the first lane.
     let lane = &mut lanes[0];
     let gpu = lane.raster.gpu().clone();
-    let (device, _) = lane.inputs.for_pixels(&gpu, pixels)?;
-    let labels = ViewLabels {
-        staged,
-        device,
-        bytes: pixels * 4,
-    };
+    let (labels, _) = lane.inputs.for_view(&gpu, staged, pixels)?;
     let cam = &ctx.cams[view];
     match cfg.method {
         Method::Vote => record_vote(&gpu, ctx.scene, cam, &labels, ctx.pass, cfg),
