@@ -246,6 +246,7 @@ const LANES: usize = 2;
 
 /// What every view of one pass shares.
 struct PassContext<'a> {
+    gpu: &'a Gpu,
     scene: &'a GpuScene,
     cams: &'a [Camera],
     pass: &'a EvidencePass,
@@ -451,54 +452,23 @@ fn accumulate_passes(
         let row_begin = pass_index * rows;
         let pass = EvidencePass::new(gpu, row_begin, rows.min(classes - row_begin), n, entry)?;
         let ctx = PassContext {
+            gpu,
             scene,
             cams,
             pass: &pass,
             cfg,
             opts: cfg.render_options(),
         };
-        // Label maps are read (decoded, converted) and staged on worker threads a few views
-        // ahead while the GPU works on the current ones.
-        let produce = |view: usize| -> Result<Option<u64>> {
-            let Some(map) = labels.labels(view, &cams[view])? else {
-                return Ok(None);
-            };
-            check_map_size(&cams[view], &map)?;
-            staging.stage(gpu, view, &map)?;
-            Ok(Some(map.len() as u64))
-        };
-        let mut waited_since = Instant::now();
-        let produced = prefetch_ordered(
-            cams.len(),
-            LABEL_THREADS,
-            LABELS_AHEAD,
-            produce,
-            |view, staged| {
-                stats.label_wait_s += waited_since.elapsed().as_secs_f64();
-                progress(pass_index * cams.len() + view, passes * cams.len());
-                if let Some(pixels) = staged {
-                    stats.views_with_labels += usize::from(pass_index == 0);
-                    let view_start = Instant::now();
-                    let slot = staging.slot(view);
-                    let staged = slot.as_ref().expect("staged by the producer");
-                    let finished = run_view(&mut lanes, &ctx, view, staged, pixels)?;
-                    stats.add_gpu(finished);
-                    stats.view_s += view_start.elapsed().as_secs_f64();
-                    stats.peak_device_bytes = stats.peak_device_bytes.max(gpu.memory_reserved());
-                }
-                waited_since = Instant::now();
-                Ok(())
-            },
-        );
-        // Every view in flight finishes before the pass's evidence is read (or freed).
-        let finish_start = Instant::now();
-        // Every lane is waited for, even after an error: the evidence is freed next.
-        let finished: Vec<Result<ViewGpu>> = lanes.iter_mut().map(|l| l.finish(&ctx)).collect();
-        produced?;
-        for work in finished {
-            stats.add_gpu(work?);
-        }
-        stats.view_s += finish_start.elapsed().as_secs_f64();
+        let views = cams.len();
+        let pass_progress = |view: usize| progress(pass_index * views + view, passes * views);
+        run_pass(
+            &ctx,
+            &mut lanes,
+            labels,
+            &staging,
+            &mut stats,
+            pass_progress,
+        )?;
         let evidence_start = Instant::now();
         on_pass(&pass)?;
         stats.evidence_s += evidence_start.elapsed().as_secs_f64();
@@ -509,6 +479,62 @@ fn accumulate_passes(
     stats.scene_device_bytes = scene.device_bytes();
     stats.peak_host_bytes = crate::util::memory::peak_host_bytes().unwrap_or(0);
     Ok(stats)
+}
+
+/// Runs every view of one pass, `progress(view)` before each: label maps are read
+/// (decoded, converted) and staged on worker threads a few views ahead while the GPU works on
+/// the current ones. Every view has finished on the GPU when it returns, error or not.
+fn run_pass(
+    ctx: &PassContext,
+    lanes: &mut [Lane],
+    labels: &dyn LabelSource,
+    staging: &LabelStaging,
+    stats: &mut FuseStats,
+    mut progress: impl FnMut(usize),
+) -> Result<()> {
+    let (cams, gpu) = (ctx.cams, ctx.gpu);
+    let first_pass = ctx.pass.row_begin == 0;
+    let produce = |view: usize| -> Result<Option<u64>> {
+        let Some(map) = labels.labels(view, &cams[view])? else {
+            return Ok(None);
+        };
+        check_map_size(&cams[view], &map)?;
+        staging.stage(gpu, view, &map)?;
+        Ok(Some(map.len() as u64))
+    };
+    let mut waited_since = Instant::now();
+    let produced = prefetch_ordered(
+        cams.len(),
+        LABEL_THREADS,
+        LABELS_AHEAD,
+        produce,
+        |view, staged| {
+            stats.label_wait_s += waited_since.elapsed().as_secs_f64();
+            progress(view);
+            if let Some(pixels) = staged {
+                stats.views_with_labels += usize::from(first_pass);
+                let view_start = Instant::now();
+                let slot = staging.slot(view);
+                let staged = slot.as_ref().expect("staged by the producer");
+                let finished = run_view(lanes, ctx, view, staged, pixels)?;
+                stats.add_gpu(finished);
+                stats.view_s += view_start.elapsed().as_secs_f64();
+                stats.peak_device_bytes = stats.peak_device_bytes.max(gpu.memory_reserved());
+            }
+            waited_since = Instant::now();
+            Ok(())
+        },
+    );
+    // Every lane is waited for, even after an error: the pass's evidence is read (or freed)
+    // next.
+    let finish_start = Instant::now();
+    let finished: Vec<Result<ViewGpu>> = lanes.iter_mut().map(|l| l.finish(ctx)).collect();
+    produced?;
+    for work in finished {
+        stats.add_gpu(work?);
+    }
+    stats.view_s += finish_start.elapsed().as_secs_f64();
+    Ok(())
 }
 
 /// Like [`accumulate`], but returns the evidence [classes][n] as the integers the GPU summed

@@ -73,6 +73,14 @@ impl PrefixScan {
         output: &Buffer,
         count: GpuCount,
     ) -> GpuResult<()> {
+        self.record_setup(rec, count)?;
+        self.record_scan(rec, input, output)
+    }
+
+    /// Records the setup of scans of `count` elements alone: the element count and
+    /// dispatch size of each level. Scans of the same count (a radix sort's passes) share
+    /// one setup: a dispatch and a barrier each saved ([`PrefixScan::record_scan`]).
+    pub fn record_setup(&self, rec: &mut Recorder, count: GpuCount) -> GpuResult<()> {
         let levels = self.partials.len() + 1;
         let setup = ScanSetupParams {
             count_index: count.index,
@@ -88,6 +96,18 @@ impl PrefixScan {
             [1, 1, 1],
         )?;
         rec.barrier();
+        Ok(())
+    }
+
+    /// Records the scan of `input` into `output` for the count of the last
+    /// [`PrefixScan::record_setup`] recorded before it (in this or an earlier submission).
+    pub fn record_scan(
+        &self,
+        rec: &mut Recorder,
+        input: &Buffer,
+        output: &Buffer,
+    ) -> GpuResult<()> {
+        let levels = self.partials.len() + 1;
         let args_offset = |level: usize| (ARGS_OFFSET + 3 * level as u64) * 4;
         for level in 0..levels - 1 {
             let params = ScanReduceParams {

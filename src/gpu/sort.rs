@@ -109,6 +109,15 @@ impl RadixSort {
             [1, 1, 1],
         )?;
         rec.barrier();
+        // RADIX counters per block; state[0] holds the block count. Every pass scans a
+        // histogram of that size, so one scan setup serves them all.
+        let histogram_len = GpuCount {
+            buffer: &self.state,
+            index: 0,
+            div: 1,
+            mul: RADIX as u32,
+        };
+        self.scan.record_setup(rec, histogram_len)?;
         for (p, &(shift, width)) in passes.iter().enumerate() {
             let (src_k, src_v, dst_k, dst_v) = if p % 2 == 0 {
                 (keys, values, &self.tmp_keys, &self.tmp_values)
@@ -128,15 +137,7 @@ impl RadixSort {
                 0,
             )?;
             rec.barrier();
-            // RADIX counters per block; state[0] holds the block count.
-            let histogram_len = GpuCount {
-                buffer: &self.state,
-                index: 0,
-                div: 1,
-                mul: RADIX as u32,
-            };
-            self.scan
-                .record(rec, &self.counts, &self.counts, histogram_len)?;
+            self.scan.record_scan(rec, &self.counts, &self.counts)?;
             rec.dispatch_indirect(
                 ids::SORT_SCATTER,
                 &[
