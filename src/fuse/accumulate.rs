@@ -275,8 +275,7 @@ impl Lane {
         pixels: u64,
     ) -> Result<ViewGpu> {
         let finished = self.finish(ctx)?;
-        let gpu = self.raster.gpu().clone();
-        let (labels, carry) = self.inputs.for_view(&gpu, staged, pixels)?;
+        let (labels, carry) = self.inputs.for_view(ctx.gpu, staged, pixels)?;
         let n = ctx.scene.n;
         self.raster.submit_tiled_in_bands(
             ctx.scene,
@@ -602,11 +601,10 @@ fn run_view(
     }
     // The votes run each view whole, on the first lane.
     let lane = &mut lanes[0];
-    let gpu = lane.raster.gpu().clone();
-    let (labels, _) = lane.inputs.for_view(&gpu, staged, pixels)?;
+    let (labels, _) = lane.inputs.for_view(ctx.gpu, staged, pixels)?;
     let cam = &ctx.cams[view];
     match cfg.method {
-        Method::Vote => record_vote(&gpu, ctx.scene, cam, &labels, ctx.pass, cfg),
+        Method::Vote => record_vote(ctx.gpu, ctx.scene, cam, &labels, ctx.pass, cfg),
         Method::VoteOcclusion => vote_occluded(&mut lane.raster, ctx, cam, &labels),
         _ => bail!("{} has no per-view evidence pass", cfg.method.name()),
     }
