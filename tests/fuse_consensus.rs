@@ -127,11 +127,11 @@ fn observations_match_a_cpu_transcription() {
             let expect = expect
                 .map(|(u, w)| w as usize * cam.width as usize + u as usize)
                 .filter(|&pix| map[pix] != NO_LABEL)
-                .map(|pix| (map[pix], regions[pix]));
+                .map(|pix| (map[pix], regions[pix], on_edge(&regions, cam, pix)));
             let got = obs
                 .row(g)
                 .find(|&i| obs.view[i] == v as u32)
-                .map(|i| (obs.label[i], obs.region[i]));
+                .map(|i| (obs.label[i], obs.region[i], obs.edge[i]));
             assert_eq!(got, expect, "view {v}, Gaussian {g}");
             checked += 1;
         }
@@ -141,6 +141,18 @@ fn observations_match_a_cpu_transcription() {
         "checked {checked}, skipped {skipped}"
     );
     check_validation(gpu);
+}
+
+/// Whether pixel `pix` has a 4-neighbour (inside the image) in another region.
+fn on_edge(regions: &[u32], cam: &semsplat::scene::Camera, pix: usize) -> bool {
+    let (w, h) = (cam.width as i64, cam.height as i64);
+    let (x, y) = (pix as i64 % w, pix as i64 / w);
+    [(-1, 0), (1, 0), (0, -1), (0, 1)].iter().any(|&(dx, dy)| {
+        let (nx, ny) = (x + dx, y + dy);
+        (0..w).contains(&nx)
+            && (0..h).contains(&ny)
+            && regions[(ny * w + nx) as usize] != regions[pix]
+    })
 }
 
 /// A tiny deterministic generator for the CPU-only tests.
@@ -171,15 +183,18 @@ fn two_objects(views: u32, seed: u64) -> (Vec<[f32; 3]>, Observations, Vec<u32>)
             object.push(o);
         }
     }
-    let per_view: Vec<Vec<(u32, u32, u32)>> = (0..views)
+    let per_view: Vec<Vec<(u32, u32, u32, bool)>> = (0..views)
         .map(|_| {
             let class = [0u32, 1].map(|o| if rng.next() % 10 < 3 { 1 - o } else { o });
             (0..means.len() as u32)
-                .filter(|_| rng.next() % 3 != 0)
-                .map(|g| {
+                .filter_map(|g| {
+                    if rng.next() % 3 == 0 {
+                        return None; // not seen by this view
+                    }
                     let o = object[g as usize] as usize;
                     let region = if class[0] == class[1] { 0 } else { o as u32 };
-                    (g, class[o], region)
+                    // Every tenth observation lies on a region edge.
+                    Some((g, class[o], region, rng.next() % 10 == 0))
                 })
                 .collect()
         })
@@ -215,14 +230,22 @@ fn decisions_match_a_plain_transcription() {
         assert_eq!(&knn[g * k..(g + 1) * k], &want[..], "neighbours of {g}");
     }
     // Segments: minimum Gaussian index reachable over joining edges.
-    let views_of = |g: usize| -> std::collections::BTreeMap<u32, u32> {
-        obs.row(g).map(|i| (obs.view[i], obs.region[i])).collect()
+    // Per view: (region, on its edge). One region on its edge is no evidence either way;
+    // different regions always separate.
+    let views_of = |g: usize| -> std::collections::BTreeMap<u32, (u32, bool)> {
+        obs.row(g)
+            .map(|i| (obs.view[i], (obs.region[i], obs.edge[i])))
+            .collect()
     };
     let joins = |a: usize, b: usize| {
         let (va, vb) = (views_of(a), views_of(b));
         let shared: Vec<u32> = va.keys().filter(|v| vb.contains_key(v)).copied().collect();
-        let together = shared.iter().filter(|v| va[v] == vb[v]).count();
-        together as u32 >= p.min_together && together == shared.len()
+        let apart = shared.iter().filter(|v| va[v].0 != vb[v].0).count();
+        let together = shared
+            .iter()
+            .filter(|v| va[v].0 == vb[v].0 && !va[v].1 && !vb[v].1)
+            .count();
+        together as u32 >= p.min_together && apart == 0
     };
     let mut label: Vec<usize> = (0..means.len()).collect();
     loop {

@@ -11,7 +11,7 @@ use super::accumulate::{
     center_params, check_map_size, FuseConfig, FuseStats, LabelSource, NO_LABEL,
 };
 use super::consensus_decide::{build_segments, decide, merge_segments, Consensus, ConsensusParams};
-use super::consensus_segments::{label_regions, nearest_neighbours, Observations};
+use super::consensus_segments::{label_regions, nearest_neighbours, region_edges, Observations};
 use super::scores::ClassScores;
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, Gpu, Recorder};
@@ -112,12 +112,16 @@ pub fn observe(
         stats.peak_device_bytes = stats.peak_device_bytes.max(gpu.memory_reserved());
         let centers: Vec<u32> = gpu.download(&pixels_buf, 0, n)?;
         let regions = label_regions(&map, cam.width as usize);
+        let edges = region_edges(&regions, cam.width as usize);
         per_view.push(
             centers
                 .iter()
                 .enumerate()
                 .filter(|&(_, &p)| p != NO_LABEL && map[p as usize] != NO_LABEL)
-                .map(|(g, &p)| (g as u32, map[p as usize], regions[p as usize]))
+                .map(|(g, &p)| {
+                    let p = p as usize;
+                    (g as u32, map[p], regions[p], edges[p])
+                })
                 .collect(),
         );
     }

@@ -22,14 +22,21 @@ pub struct Observations {
     pub label: Vec<u32>,
     /// Connected label region of that pixel, unique within the view.
     pub region: Vec<u32>,
+    /// Whether that pixel lies on its region's edge (a 4-neighbour in another region or
+    /// unlabeled). Whether a Gaussian near an object's edge lands on this side of the label
+    /// edge or the other is decided by a pixel's width, so two Gaussians in one region there
+    /// are no evidence that they belong together (a floor Gaussian at the wall's foot would
+    /// join the wall, and through it the floor would join the wall). Two in different
+    /// regions still count as apart: the veto that keeps objects apart under flicker.
+    pub edge: Vec<bool>,
 }
 
 impl Observations {
-    /// From per-view lists of (Gaussian, label, region), views in order.
-    pub fn from_views(n: usize, per_view: &[Vec<(u32, u32, u32)>]) -> Observations {
+    /// From per-view lists of (Gaussian, label, region, edge), views in order.
+    pub fn from_views(n: usize, per_view: &[Vec<(u32, u32, u32, bool)>]) -> Observations {
         let mut counts = vec![0u32; n + 1];
         for list in per_view {
-            for &(g, _, _) in list {
+            for &(g, ..) in list {
                 counts[g as usize + 1] += 1;
             }
         }
@@ -39,12 +46,13 @@ impl Observations {
         let total = counts[n] as usize;
         let mut next = counts.clone();
         let (mut view, mut label, mut region) = (vec![0; total], vec![0; total], vec![0; total]);
+        let mut edge = vec![false; total];
         // Views in order, so every row ends up sorted by view.
         for (v, list) in per_view.iter().enumerate() {
-            for &(g, l, r) in list {
+            for &(g, l, r, e) in list {
                 let at = next[g as usize] as usize;
                 next[g as usize] += 1;
-                (view[at], label[at], region[at]) = (v as u32, l, r);
+                (view[at], label[at], region[at], edge[at]) = (v as u32, l, r, e);
             }
         }
         Observations {
@@ -53,6 +61,7 @@ impl Observations {
             view,
             label,
             region,
+            edge,
         }
     }
 
@@ -90,6 +99,22 @@ pub fn label_regions(labels: &[u32], width: usize) -> Vec<u32> {
         id[p] = id[root];
     }
     id
+}
+
+/// Per pixel of `regions` (a view's [`label_regions`]): whether a 4-neighbour inside the image
+/// lies in another region (or is unlabeled). The image border is not an edge.
+pub fn region_edges(regions: &[u32], width: usize) -> Vec<bool> {
+    let height = regions.len() / width.max(1);
+    (0..regions.len())
+        .map(|p| {
+            let (x, y) = (p % width, p / width);
+            let differs = |q: usize| regions[q] != regions[p];
+            (x > 0 && differs(p - 1))
+                || (x + 1 < width && differs(p + 1))
+                || (y > 0 && differs(p - width))
+                || (y + 1 < height && differs(p + width))
+        })
+        .collect()
 }
 
 pub(crate) fn find(parent: &mut [u32], mut x: u32) -> u32 {
@@ -236,8 +261,8 @@ impl Grid {
     }
 }
 
-/// Of the views that observed both rows: how many put them in the same region, and how many
-/// in different ones. Rows are sorted by view.
+/// Of the views that observed both rows: how many put them in the same region (both away
+/// from its edge), and how many in different ones. Rows are sorted by view.
 pub fn co_occurrence(obs: &Observations, a: usize, b: usize) -> (u32, u32) {
     let (ra, rb) = (obs.row(a), obs.row(b));
     let (mut i, mut j) = (ra.start, rb.start);
@@ -247,11 +272,11 @@ pub fn co_occurrence(obs: &Observations, a: usize, b: usize) -> (u32, u32) {
             std::cmp::Ordering::Less => i += 1,
             std::cmp::Ordering::Greater => j += 1,
             std::cmp::Ordering::Equal => {
-                if obs.region[i] == obs.region[j] {
-                    together += 1;
-                } else {
+                if obs.region[i] != obs.region[j] {
                     apart += 1;
-                }
+                } else if !(obs.edge[i] || obs.edge[j]) {
+                    together += 1;
+                } // one region, on its edge: no evidence (see `Observations::edge`)
                 i += 1;
                 j += 1;
             }
