@@ -380,6 +380,20 @@ fn planted_object_is_flagged() {
         "planted {} not flagged",
         planted[0].instance_name
     );
+    // Only segments large and seen enough for their split to mean something are flagged
+    // (not the singletons of Gaussians no view saw, which have no class either).
+    let p = ConsensusParams::default();
+    let unseen = c.segments.iter().filter(|s| s.views == 0).count();
+    assert!(unseen > 0, "the scene should have unseen Gaussians");
+    for &k in &flagged {
+        let seg = &c.segments[k];
+        assert!(
+            seg.gaussians >= p.flag_min_gaussians && seg.views >= p.flag_min_views,
+            "segment {k}: {} Gaussians, {} views",
+            seg.gaussians,
+            seg.views
+        );
+    }
     check_validation(gpu);
 }
 

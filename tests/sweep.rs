@@ -74,6 +74,11 @@ fn sweep_charts_every_method_and_reports_how_mislabels_are_followed() {
         let f = &follows.as_array().unwrap()[0];
         assert_eq!(f["wrong_view_rate"].as_f64().unwrap(), 1.0, "{method}");
         assert!(f["assigned_wrong"].as_f64().unwrap() > 0.5, "{method}: {f}");
+        // Only segment consensus flags segments: whether it flagged the object, and how many
+        // other segments it flagged.
+        let has_flags = method.as_str() == Some("segment-consensus");
+        let flags = (f["flagged"].is_boolean(), f["false_flags"].is_u64());
+        assert_eq!(flags, (has_flags, has_flags), "{method}: {f}");
     }
 }
 

@@ -3,7 +3,10 @@
 
 use serde::Serialize;
 
+use std::collections::HashMap;
+
 use super::MethodScore;
+use crate::fuse::consensus_decide::SegmentVotes;
 use crate::synth::SynthScene;
 
 /// How a method treated one consistently mislabeled object (Gaussian Semantics' limitation: a
@@ -20,6 +23,11 @@ pub struct MislabelFollow {
     /// Mean confidence on the object's Gaussians, and on every other seen Gaussian.
     pub confidence_on_object: f64,
     pub confidence_elsewhere: f64,
+    /// Methods that flag segments (segment consensus): whether a flagged segment (close or
+    /// bimodal vote split) lies mostly on the object, and how many flagged segments lie
+    /// mostly on no mislabeled object (false flags, scene-wide). None for the others.
+    pub flagged: Option<bool>,
+    pub false_flags: Option<usize>,
 }
 
 /// For every consistently mislabeled object of the scene's noise: what `score` assigned.
@@ -31,6 +39,21 @@ pub fn mislabel_follow(s: &SynthScene, score: &MethodScore) -> Vec<MislabelFollo
         .lifted
         .as_ref()
         .map_or(input_instances, |l| &l.instances);
+    let planted: Vec<i32> = noisy
+        .report
+        .consistent
+        .iter()
+        .map(|m| m.instance as i32)
+        .collect();
+    let flags = score
+        .segments
+        .as_ref()
+        .map(|(segments, of)| flagged_instances(segments, of, instances));
+    let false_flags = flags.as_ref().map(|f| {
+        f.iter()
+            .filter(|i| !i.is_some_and(|i| planted.contains(&i)))
+            .count()
+    });
     noisy
         .report
         .consistent
@@ -57,7 +80,41 @@ pub fn mislabel_follow(s: &SynthScene, score: &MethodScore) -> Vec<MislabelFollo
                 assigned_wrong: wrong as f64 / members.len().max(1) as f64,
                 confidence_on_object: mean(&on_object),
                 confidence_elsewhere: mean(&|i| !on_object(i)),
+                flagged: flags.as_ref().map(|f| f.contains(&Some(m.instance as i32))),
+                false_flags,
             }
         })
         .collect()
+}
+
+/// Per flagged segment, the instance more than half of its Gaussians belong to (None: no
+/// such instance). `segment_of` gives each Gaussian's segment.
+fn flagged_instances(
+    segments: &[SegmentVotes],
+    segment_of: &[u32],
+    instances: &[i32],
+) -> Vec<Option<i32>> {
+    let mut members: HashMap<u32, HashMap<i32, usize>> = HashMap::new();
+    for (g, &seg) in segment_of.iter().enumerate() {
+        if segments[seg as usize].flagged {
+            *members
+                .entry(seg)
+                .or_default()
+                .entry(instances[g])
+                .or_default() += 1;
+        }
+    }
+    let mut flagged: Vec<(u32, Option<i32>)> = members
+        .into_iter()
+        .map(|(seg, counts)| {
+            let total: usize = counts.values().sum();
+            let majority = counts
+                .into_iter()
+                .find(|&(i, c)| i >= 0 && 2 * c > total)
+                .map(|(i, _)| i);
+            (seg, majority)
+        })
+        .collect();
+    flagged.sort_unstable();
+    flagged.into_iter().map(|(_, i)| i).collect()
 }

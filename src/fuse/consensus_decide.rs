@@ -36,7 +36,7 @@ pub struct ConsensusParams {
     pub prior: f64,
     /// A segment is flagged when its runner-up class holds at least this share of its views...
     pub flag_share: f64,
-    /// ...it has at least this many Gaussians and views.
+    /// ...(or it has no decisive class), and it has at least this many Gaussians and views.
     pub flag_min_gaussians: usize,
     pub flag_min_views: usize,
 }
@@ -345,10 +345,11 @@ fn segment_summary(
         views,
         split: split.to_vec(),
         class,
-        flagged: class.is_none()
-            || runner_up >= p.flag_share
-                && gaussians >= p.flag_min_gaussians
-                && views >= p.flag_min_views,
+        // Only a segment large and well enough seen for its split to mean something: a
+        // singleton no view saw has no class either, and is not a finding.
+        flagged: gaussians >= p.flag_min_gaussians
+            && views >= p.flag_min_views
+            && (class.is_none() || runner_up >= p.flag_share),
     }
 }
 
