@@ -611,3 +611,33 @@ fn an_error_with_views_in_flight_is_returned_and_changes_nothing_after() {
     assert_eq!(after.data, fresh.data);
     check_validation(gpu);
 }
+
+/// One view in flight or two (the default, where the device has room): the same evidence,
+/// and the run says how many it kept.
+#[test]
+fn views_in_flight_change_nothing_but_the_overlap() {
+    let gpu = gpu();
+    let g = scene(600, 13);
+    let cams: Vec<Camera> = cameras().into_iter().cycle().take(5).collect();
+    let labels = label_maps(&cams, 14);
+    let scene = GpuScene::upload(gpu, &g).unwrap();
+    let run = |views_in_flight: usize| {
+        let cfg = FuseConfig {
+            method: Method::FlashSplat,
+            split: SplitSizes {
+                list_capacity: Some(400),
+                ..Default::default()
+            },
+            views_in_flight,
+            ..Default::default()
+        };
+        accumulate(gpu, &scene, &cams, &labels, CLASSES, &cfg, |_, _| {}).unwrap()
+    };
+    let (one, one_stats) = run(1);
+    let (two, two_stats) = run(semsplat::fuse::LANES);
+    assert_eq!(one_stats.views_in_flight, 1);
+    assert_eq!(two_stats.views_in_flight, 2, "lavapipe has room for two");
+    assert!(one.data.iter().any(|&v| v > 0.0));
+    assert_eq!(one.data, two.data);
+    check_validation(gpu);
+}

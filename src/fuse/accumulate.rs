@@ -50,6 +50,9 @@ pub struct FuseConfig {
     /// How finely views are split (windows of the tile lists, bands of tile rows); the
     /// device's sizes by default, small ones in tests so small scenes walk the split paths.
     pub split: SplitSizes,
+    /// Views the tiled methods keep in flight at most (1..=[`LANES`]); fewer where the
+    /// device has no room for another view's buffers (see [`Lanes`]).
+    pub views_in_flight: usize,
 }
 
 impl Default for FuseConfig {
@@ -62,6 +65,7 @@ impl Default for FuseConfig {
             near: 0.01,
             far: 1e10,
             split: SplitSizes::default(),
+            views_in_flight: LANES,
         }
     }
 }
@@ -99,6 +103,8 @@ pub struct FuseStats {
     pub views_with_labels: usize,
     /// Passes over the views (1 when the evidence matrix fits the budget).
     pub passes: usize,
+    /// Views the tiled methods had in flight at once (1 for the votes).
+    pub views_in_flight: usize,
     pub rows_per_pass: usize,
     /// GPU time (timestamps): binning + per-tile stages, and the vote kernels.
     pub gpu_ms: f64,
@@ -229,8 +235,8 @@ impl ViewInputs {
     }
 }
 
-/// A rasterizer and the device inputs of the views it runs. The tiled methods keep
-/// [`LANES`] of them and give view `v` to lane `v % LANES`: the host records and submits a
+/// A rasterizer and the device inputs of the views it runs. The tiled methods keep up to
+/// [`LANES`] of them and give view `v` to lane `v % lanes`: the host records and submits a
 /// view while the GPU still runs the previous ones, instead of leaving the GPU idle while it
 /// records (about 3 ms a view at 1080p).
 struct Lane {
@@ -241,8 +247,57 @@ struct Lane {
     view: Option<usize>,
 }
 
-/// Views in flight at once (each with its own rasterizer buffers).
-const LANES: usize = 2;
+/// Views in flight at once at most (each with its own rasterizer buffers).
+pub const LANES: usize = 2;
+
+/// Share of the device-local memory the lanes may fill before no further lane is added.
+const LANE_MEMORY_SHARE: f64 = 0.8;
+
+/// The lanes of one fusion run. It starts with one; the first tiled view runs alone, which
+/// shows what a lane's buffers take for these views, and further lanes (up to
+/// `views_in_flight`) are added only while the device has room for them, so keeping views
+/// in flight never makes a run fail that fits one view at a time.
+struct Lanes {
+    lanes: Vec<Lane>,
+    /// Whether the first tiled view has run (and the lane count is settled).
+    settled: bool,
+}
+
+impl Lanes {
+    fn new(gpu: &Gpu, cfg: &FuseConfig) -> Lanes {
+        Lanes {
+            lanes: vec![Lane::new(gpu, cfg.split)],
+            settled: false,
+        }
+    }
+
+    /// Submits a tiled method's view on its lane; returns the GPU work of the views that
+    /// finished meanwhile.
+    fn submit(
+        &mut self,
+        ctx: &PassContext,
+        view: usize,
+        staged: &Buffer,
+        pixels: u64,
+    ) -> Result<ViewGpu> {
+        if self.settled {
+            let count = self.lanes.len();
+            return self.lanes[view % count].submit(ctx, view, staged, pixels);
+        }
+        let before = ctx.gpu.memory_reserved();
+        let mut work = self.lanes[0].submit(ctx, view, staged, pixels)?;
+        work.add(self.lanes[0].finish(ctx)?);
+        let lane_bytes = ctx.gpu.memory_reserved().saturating_sub(before);
+        let budget = ctx.gpu.caps().device_local_bytes() as f64 * LANE_MEMORY_SHARE;
+        while self.lanes.len() < ctx.cfg.views_in_flight.clamp(1, LANES)
+            && (ctx.gpu.memory_reserved() + lane_bytes) as f64 <= budget
+        {
+            self.lanes.push(Lane::new(ctx.gpu, ctx.cfg.split));
+        }
+        self.settled = true;
+        Ok(work)
+    }
+}
 
 /// What every view of one pass shares.
 struct PassContext<'a> {
@@ -324,6 +379,14 @@ struct ViewGpu {
 }
 
 impl ViewGpu {
+    /// Adds `other`'s work to this one.
+    fn add(&mut self, other: ViewGpu) {
+        self.ms += other.ms;
+        for k in other.kernels {
+            k.add_to(&mut self.kernels);
+        }
+    }
+
     /// A whole submission's work.
     fn of(timings: &Timings) -> ViewGpu {
         ViewGpu {
@@ -445,7 +508,7 @@ fn accumulate_passes(
         rows_per_pass: rows,
         ..Default::default()
     };
-    let mut lanes: Vec<Lane> = (0..LANES).map(|_| Lane::new(gpu, cfg.split)).collect();
+    let mut lanes = Lanes::new(gpu, cfg);
     let staging = LabelStaging::new();
     for pass_index in 0..passes {
         let row_begin = pass_index * rows;
@@ -475,6 +538,7 @@ fn accumulate_passes(
     progress(passes * cams.len(), passes * cams.len());
     stats.wall_s = start.elapsed().as_secs_f64();
     stats.views_per_s = (stats.views * passes) as f64 / stats.wall_s.max(1e-9);
+    stats.views_in_flight = lanes.lanes.len();
     stats.scene_device_bytes = scene.device_bytes();
     stats.peak_host_bytes = crate::util::memory::peak_host_bytes().unwrap_or(0);
     Ok(stats)
@@ -485,7 +549,7 @@ fn accumulate_passes(
 /// the current ones. Every view has finished on the GPU when it returns, error or not.
 fn run_pass(
     ctx: &PassContext,
-    lanes: &mut [Lane],
+    lanes: &mut Lanes,
     labels: &dyn LabelSource,
     staging: &LabelStaging,
     stats: &mut FuseStats,
@@ -527,7 +591,7 @@ fn run_pass(
     // Every lane is waited for, even after an error: the pass's evidence is read (or freed)
     // next.
     let finish_start = Instant::now();
-    let finished: Vec<Result<ViewGpu>> = lanes.iter_mut().map(|l| l.finish(ctx)).collect();
+    let finished: Vec<Result<ViewGpu>> = lanes.lanes.iter_mut().map(|l| l.finish(ctx)).collect();
     produced?;
     for work in finished {
         stats.add_gpu(work?);
@@ -589,7 +653,7 @@ pub(crate) fn check_map_size(cam: &Camera, map: &[u32]) -> Result<()> {
 /// finish the lane's previous view), the votes run it whole. Returns the GPU work of the
 /// views finished.
 fn run_view(
-    lanes: &mut [Lane],
+    lanes: &mut Lanes,
     ctx: &PassContext,
     view: usize,
     staged: &Buffer,
@@ -597,10 +661,10 @@ fn run_view(
 ) -> Result<ViewGpu> {
     let cfg = ctx.cfg;
     if cfg.method.is_tiled() {
-        return lanes[view % lanes.len()].submit(ctx, view, staged, pixels);
+        return lanes.submit(ctx, view, staged, pixels);
     }
     // The votes run each view whole, on the first lane.
-    let lane = &mut lanes[0];
+    let lane = &mut lanes.lanes[0];
     let (labels, _) = lane.inputs.for_view(ctx.gpu, staged, pixels)?;
     let cam = &ctx.cams[view];
     match cfg.method {

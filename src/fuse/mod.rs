@@ -11,7 +11,7 @@ pub mod partial;
 pub mod scores;
 
 pub use accumulate::{
-    accumulate, accumulate_raw, Accumulation, FuseConfig, FuseStats, LabelSource, NO_LABEL,
+    accumulate, accumulate_raw, Accumulation, FuseConfig, FuseStats, LabelSource, LANES, NO_LABEL,
 };
 pub use assign::{assign_one_vs_rest, assign_semantic, assign_semantic_near, Assignment};
 pub use consensus::fuse_consensus;
