@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::cli::{fuse_synth, ok, semsplat, synth_tiny};
+use common::cli::{fuse_synth, fuse_synth_args, ok, semsplat, synth_tiny};
 
 #[test]
 fn fuse_writes_classes_reassigns_from_saved_evidence_and_extracts() {
@@ -259,12 +259,7 @@ fn bad_input_is_one_clear_error_and_writes_nothing() {
     let p = |f: &str| d.join(f).to_str().unwrap().to_string();
     // A complete `fuse` command writing x.ply, with `extra` options.
     let fuse_with = |extra: &[&str]| -> Vec<String> {
-        let mut args: Vec<String> = ["fuse", "--scene", &p("scene.ply"), "--cameras"]
-            .iter()
-            .map(|s| s.to_string())
-            .collect();
-        args.extend([p("cameras.json"), "--labels".into(), p("labels")]);
-        args.extend(extra.iter().map(|s| s.to_string()));
+        let mut args = fuse_synth_args(d, extra);
         args.extend(["--out".into(), p("x.ply")]);
         args
     };

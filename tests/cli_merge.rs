@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::cli::{fails, fuse_synth, ok, synth_tiny};
+use common::cli::{fails, fuse_synth, fuse_synth_fails, ok, synth_tiny};
 
 use std::path::Path;
 
@@ -120,7 +120,7 @@ fn merge_refuses_parts_that_do_not_belong_together() {
     let d = tmp.path();
     synth_tiny(d, 6, (48, 32));
     let p = |f: &str| d.join(f).to_str().unwrap().to_string();
-    let (scene, cameras, labels) = (p("scene.ply"), p("cameras.json"), p("labels"));
+    let (scene, cameras) = (p("scene.ply"), p("cameras.json"));
     let shard = |k: &str, method: &str, out: &str| {
         fuse_synth(d, &["--method", method, "--shard", k, "--out", out])
     };
@@ -166,19 +166,6 @@ fn merge_refuses_parts_that_do_not_belong_together() {
     assert!(!Path::new(&out).exists(), "no output on refusal");
 
     // Float atomics have no exact parts.
-    let err = fails(&[
-        "fuse",
-        "--scene",
-        &scene,
-        "--cameras",
-        &cameras,
-        "--labels",
-        &labels,
-        "--shard",
-        "0/2",
-        "--float-atomics",
-        "--out",
-        &a0,
-    ]);
+    let err = fuse_synth_fails(d, &["--shard", "0/2", "--float-atomics", "--out", &a0]);
     assert!(err.contains("--float-atomics"), "{err}");
 }

@@ -562,6 +562,20 @@ fn each_method_uploads_only_what_it_reads_and_gets_the_same_evidence() {
     check_validation(gpu);
 }
 
+/// FlashSplat with lists of at most 400 pairs, so the first view of every lane overflows
+/// and runs again, and `views_in_flight` views at most in flight.
+fn flashsplat_overflowing(views_in_flight: usize) -> FuseConfig {
+    FuseConfig {
+        method: Method::FlashSplat,
+        split: SplitSizes {
+            list_capacity: Some(400),
+            ..Default::default()
+        },
+        views_in_flight,
+        ..Default::default()
+    }
+}
+
 /// Label maps that fail to load at one view, as a corrupt file would.
 struct FailingAt(usize, Vec<Option<Vec<u32>>>);
 
@@ -581,14 +595,7 @@ fn an_error_with_views_in_flight_is_returned_and_changes_nothing_after() {
     let g = scene(600, 11);
     let cams: Vec<Camera> = cameras().into_iter().cycle().take(6).collect();
     let labels = label_maps(&cams, 12);
-    let cfg = FuseConfig {
-        method: Method::FlashSplat,
-        split: SplitSizes {
-            list_capacity: Some(400),
-            ..Default::default()
-        },
-        ..Default::default()
-    };
+    let cfg = flashsplat_overflowing(semsplat::fuse::LANES);
     let scene = GpuScene::upload(gpu, &g).unwrap();
     let failing = FailingAt(4, labels.clone());
     let err = accumulate(gpu, &scene, &cams, &failing, CLASSES, &cfg, |_, _| {})
@@ -622,15 +629,7 @@ fn views_in_flight_change_nothing_but_the_overlap() {
     let labels = label_maps(&cams, 14);
     let scene = GpuScene::upload(gpu, &g).unwrap();
     let run = |views_in_flight: usize| {
-        let cfg = FuseConfig {
-            method: Method::FlashSplat,
-            split: SplitSizes {
-                list_capacity: Some(400),
-                ..Default::default()
-            },
-            views_in_flight,
-            ..Default::default()
-        };
+        let cfg = flashsplat_overflowing(views_in_flight);
         accumulate(gpu, &scene, &cams, &labels, CLASSES, &cfg, |_, _| {}).unwrap()
     };
     let (one, one_stats) = run(1);

@@ -14,8 +14,6 @@ use crate::fuse::{accumulate, FuseConfig, LabelSource, Method, NO_LABEL};
 use crate::gpu::timings::KernelTotal;
 use crate::gpu::Gpu;
 use crate::render::{GpuScene, Rasterizer, RenderOptions};
-use crate::scene::cameras_json::read_cameras_json;
-use crate::scene::ply::read_ply;
 use crate::scene::random_scene::{random_scene, RandomSceneSpec};
 use crate::scene::{Camera, Gaussians};
 use crate::util::Rng;
@@ -293,23 +291,12 @@ fn scene_and_cameras(spec: &FuseBenchSpec) -> Result<(Gaussians, Vec<Camera>)> {
         });
         return Ok((g, ring_cameras(spec.views, spec.width, spec.height)));
     };
-    let g = read_ply(&dir.join("scene.ply"))?;
-    ensure!(!g.is_empty(), "{} has no Gaussians", dir.display());
-    ensure!(
-        g.len() <= u32::MAX as usize,
-        "{} has 2^32 Gaussians or more",
-        dir.display()
-    );
-    let cams: Vec<Camera> = read_cameras_json(&dir.join("cameras.json"))?
+    let (g, cams) = super::read_scene_folder(dir)?;
+    let cams = cams
         .iter()
         .take(spec.views)
         .map(|c| c.scaled_to(spec.width, spec.height))
         .collect();
-    ensure!(
-        !cams.is_empty(),
-        "{} has no camera",
-        dir.join("cameras.json").display()
-    );
     Ok((g, cams))
 }
 

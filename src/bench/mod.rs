@@ -98,3 +98,22 @@ pub fn time_cpu<T, R>(
     }
     (median(&mut samples), last.expect("at least one run"))
 }
+
+/// A benchmark's scene folder: its `scene.ply` (at least one Gaussian, fewer than 2^32) and
+/// the cameras of its `cameras.json` (at least one).
+pub fn read_scene_folder(
+    dir: &std::path::Path,
+) -> anyhow::Result<(crate::scene::Gaussians, Vec<crate::scene::Camera>)> {
+    use anyhow::ensure;
+    let g = crate::scene::ply::read_ply(&dir.join("scene.ply"))?;
+    ensure!(!g.is_empty(), "{} has no Gaussians", dir.display());
+    ensure!(
+        g.len() <= u32::MAX as usize,
+        "{} has 2^32 Gaussians or more",
+        dir.display()
+    );
+    let json = dir.join("cameras.json");
+    let cams = crate::scene::cameras_json::read_cameras_json(&json)?;
+    ensure!(!cams.is_empty(), "{} has no camera", json.display());
+    Ok((g, cams))
+}

@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{ensure, Context, Result};
+use anyhow::Result;
 use glam::DVec3;
 use serde::Serialize;
 
@@ -12,8 +12,6 @@ use super::{median, warm_up};
 use crate::gpu::timings::KernelTotal;
 use crate::gpu::Gpu;
 use crate::render::{GpuScene, Rasterizer, RenderOptions, SemanticMode, StageTimes};
-use crate::scene::cameras_json::read_cameras_json;
-use crate::scene::ply::read_ply;
 use crate::scene::random_scene::{random_scene, RandomSceneSpec};
 use crate::scene::{Camera, Gaussians, SemanticLogits};
 use crate::util::Rng;
@@ -78,12 +76,11 @@ impl BenchInput {
     }
 
     fn load_folder(&self, dir: &std::path::Path) -> Result<(Gaussians, Camera)> {
-        let mut g = read_ply(&dir.join("scene.ply"))?;
-        let cam = read_cameras_json(&dir.join("cameras.json"))?
+        let (mut g, cams) = super::read_scene_folder(dir)?;
+        let cam = cams
             .into_iter()
             .next()
-            .with_context(|| format!("{} has no camera", dir.join("cameras.json").display()))?;
-        ensure!(!g.is_empty(), "{} has no Gaussians", dir.display());
+            .expect("read_scene_folder checks for one");
         g.semantics = (self.channels > 0).then(|| {
             let mut rng = Rng::new(self.seed);
             SemanticLogits {

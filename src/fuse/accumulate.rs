@@ -382,9 +382,7 @@ impl ViewGpu {
     /// Adds `other`'s work to this one.
     fn add(&mut self, other: ViewGpu) {
         self.ms += other.ms;
-        for k in other.kernels {
-            k.add_to(&mut self.kernels);
-        }
+        KernelTotal::add_all(&mut self.kernels, other.kernels);
     }
 
     /// A whole submission's work.
@@ -399,9 +397,7 @@ impl ViewGpu {
 impl FuseStats {
     fn add_gpu(&mut self, work: ViewGpu) {
         self.gpu_ms += work.ms;
-        for k in work.kernels {
-            k.add_to(&mut self.kernels);
-        }
+        KernelTotal::add_all(&mut self.kernels, work.kernels);
     }
 }
 

@@ -461,6 +461,21 @@ impl Recorder {
         }
     }
 
+    /// Waits for `fence` (this recorder's submission) and destroys it. The recorder is idle
+    /// afterwards unless the wait failed (a device error: its pools are then destroyed, not
+    /// reused).
+    fn wait_for(&mut self, fence: vk::Fence) -> GpuResult<()> {
+        let device = self.gpu.device();
+        // SAFETY: the fence belongs to this recorder's submission and is destroyed once.
+        let waited = unsafe {
+            let waited = device.wait_for_fences(&[fence], true, u64::MAX);
+            device.destroy_fence(fence, None);
+            waited
+        };
+        self.idle = waited.is_ok();
+        waited.vk("vkWaitForFences")
+    }
+
     /// The timings of a finished submission.
     fn read_timings(&self) -> GpuResult<Timings> {
         let mut raw = vec![0u64; self.stamps.len() + 1];
@@ -507,23 +522,6 @@ impl Submission {
         let mut rec = self.rec.take().expect("waited once");
         rec.wait_for(self.fence)?;
         rec.read_timings()
-    }
-}
-
-impl Recorder {
-    /// Waits for `fence` (this recorder's submission) and destroys it. The recorder is idle
-    /// afterwards unless the wait failed (a device error: its pools are then destroyed, not
-    /// reused).
-    fn wait_for(&mut self, fence: vk::Fence) -> GpuResult<()> {
-        let device = self.gpu.device();
-        // SAFETY: the fence belongs to this recorder's submission and is destroyed once.
-        let waited = unsafe {
-            let waited = device.wait_for_fences(&[fence], true, u64::MAX);
-            device.destroy_fence(fence, None);
-            waited
-        };
-        self.idle = waited.is_ok();
-        waited.vk("vkWaitForFences")
     }
 }
 

@@ -22,14 +22,16 @@ pub struct KernelTotal {
 }
 
 impl KernelTotal {
-    /// Adds this total to `totals`' entry for its kernel (a new entry at the end if none).
-    pub fn add_to(self, totals: &mut Vec<KernelTotal>) {
-        match totals.iter_mut().find(|t| t.kernel == self.kernel) {
-            Some(t) => {
-                t.dispatches += self.dispatches;
-                t.ns += self.ns;
+    /// Adds each of `more` to `totals`' entry for its kernel (a new entry at the end if none).
+    pub fn add_all(totals: &mut Vec<KernelTotal>, more: impl IntoIterator<Item = KernelTotal>) {
+        for k in more {
+            match totals.iter_mut().find(|t| t.kernel == k.kernel) {
+                Some(t) => {
+                    t.dispatches += k.dispatches;
+                    t.ns += k.ns;
+                }
+                None => totals.push(k),
             }
-            None => totals.push(self),
         }
     }
 }
@@ -93,13 +95,11 @@ impl Timings {
 
     /// Adds this submission's dispatches to per-kernel totals (of many submissions).
     pub fn add_to(&self, totals: &mut Vec<KernelTotal>) {
-        for d in &self.dispatches {
-            KernelTotal {
-                kernel: d.kernel,
-                dispatches: 1,
-                ns: d.ns,
-            }
-            .add_to(totals);
-        }
+        let each = self.dispatches.iter().map(|d| KernelTotal {
+            kernel: d.kernel,
+            dispatches: 1,
+            ns: d.ns,
+        });
+        KernelTotal::add_all(totals, each);
     }
 }

@@ -120,10 +120,9 @@ struct PendingRun {
     need: Need,
 }
 
-/// Where an attempt's timestamps are: around projection, depth sort and binning, the
-/// frame's marks, and (start, lists built, per-tile done) for each band.
+/// Where an attempt's timestamps are: the frame's marks (before projection, depth sort and
+/// binning, ...) and (start, lists built, per-tile done) for each band.
 struct RecordedRun {
-    stage_marks: [Option<Mark>; 3],
     marks: [Option<Mark>; 5],
     spans: Vec<(Option<Mark>, Option<Mark>, Option<Mark>)>,
     channels: u32,
@@ -132,7 +131,7 @@ struct RecordedRun {
 impl RecordedRun {
     /// The run, from the attempt's timings and each band's status words.
     fn run(&self, timings: Timings, statuses: &[Vec<u32>]) -> TiledRun {
-        let [m0, m1, m2] = self.stage_marks;
+        let [m0, m1, m2, ..] = self.marks;
         let mut stages = StageTimes::from_marks(&timings, &[m0, m1, m2, m2, m2]);
         for &(start, lists, end) in &self.spans {
             stages.bin_ms += timings.between(start, lists).unwrap_or(0.0) * 1e-6;
@@ -479,7 +478,7 @@ impl Rasterizer {
     {
         loop {
             self.submit_binned(scene, cam, opts, banded, &mut per_tile)?;
-            if let Some(run) = self.wait_binned()? {
+            if let Some(run) = self.wait_tiled()? {
                 return Ok(run);
             }
         }
@@ -502,19 +501,6 @@ impl Rasterizer {
         self.submit_binned(scene, cam, opts, true, &mut per_tile)
     }
 
-    /// Waits for the view [`Rasterizer::submit_tiled_in_bands`] submitted. None when its
-    /// lists overflowed: the rasterizer has grown them (or chosen more bands), and the view
-    /// must run again ([`Rasterizer::run_tiled_in_bands`]); its `per_tile` work saw the
-    /// overflow flag and must have added nothing.
-    pub fn wait_tiled(&mut self) -> Result<Option<TiledRun>> {
-        self.wait_binned()
-    }
-
-    /// Whether a submitted view has not been waited for.
-    pub fn is_busy(&self) -> bool {
-        self.pending.is_some()
-    }
-
     /// Records one attempt at the view (binning and `per_tile`, band by band, then a copy
     /// of the status words the host reads) and submits it.
     fn submit_binned<F>(
@@ -533,7 +519,12 @@ impl Rasterizer {
             "camera {} has an empty image",
             cam.name
         );
-        self.wait_binned()?; // one view in flight per rasterizer: its buffers are shared
+        // One view in flight per rasterizer (its buffers are shared), and an attempt that
+        // overflowed must be run again by whoever submitted it, not dropped here.
+        ensure!(
+            self.pending.is_none(),
+            "internal error: a view is still in flight on this rasterizer; wait for it first"
+        );
         let frame = self.frame_spec(scene, cam, opts)?;
         let need = self.need(scene, &frame);
         self.ensure(need)?;
@@ -556,9 +547,12 @@ impl Rasterizer {
         Ok(())
     }
 
-    /// Waits for the submitted attempt, if any: its run when the view is done, None when
-    /// it must run again (the buffers grown or the bands split for it).
-    fn wait_binned(&mut self) -> Result<Option<TiledRun>> {
+    /// Waits for the view [`Rasterizer::submit_tiled_in_bands`] submitted, if any: its run
+    /// when the view is done. None when its lists overflowed: the rasterizer has grown them
+    /// (or chosen more bands), and the view must run again
+    /// ([`Rasterizer::run_tiled_in_bands`]); its `per_tile` work saw the overflow flag and
+    /// must have added nothing.
+    pub fn wait_tiled(&mut self) -> Result<Option<TiledRun>> {
         let Some(pending) = self.pending.take() else {
             return Ok(None);
         };
@@ -636,7 +630,6 @@ impl Rasterizer {
         rec.copy(&b.status, 0, &b.status_host, 0, status_bytes);
         rec.host_barrier();
         let recorded = RecordedRun {
-            stage_marks: [m0, m1, m2],
             marks,
             spans,
             channels: if frame.labels.is_some() {

@@ -51,20 +51,29 @@ pub fn synth_tiny(dir: &Path, views: u32, (width, height): (u32, u32)) {
     ]);
 }
 
+/// `fuse` on a `synth` folder's scene, cameras and labels, plus `extra`.
+pub fn fuse_synth_args(dir: &Path, extra: &[&str]) -> Vec<String> {
+    let p = |f: &str| dir.join(f).to_str().unwrap().to_string();
+    let mut args: Vec<String> = vec!["fuse".into(), "--scene".into(), p("scene.ply")];
+    args.extend([
+        "--cameras".into(),
+        p("cameras.json"),
+        "--labels".into(),
+        p("labels"),
+    ]);
+    args.extend(extra.iter().map(|s| s.to_string()));
+    args
+}
+
 /// Runs `fuse` on a `synth` folder's scene, cameras and labels, plus `extra` (at least
 /// `--out`), and returns its stderr.
 pub fn fuse_synth(dir: &Path, extra: &[&str]) -> String {
-    let p = |f: &str| dir.join(f).to_str().unwrap().to_string();
-    let (scene, cameras, labels) = (p("scene.ply"), p("cameras.json"), p("labels"));
-    let mut args = vec![
-        "fuse",
-        "--scene",
-        &scene,
-        "--cameras",
-        &cameras,
-        "--labels",
-        &labels,
-    ];
-    args.extend_from_slice(extra);
-    ok(&args)
+    let args = fuse_synth_args(dir, extra);
+    ok(&args.iter().map(String::as_str).collect::<Vec<_>>())
+}
+
+/// Like [`fuse_synth`] for a command that must fail; returns its error message.
+pub fn fuse_synth_fails(dir: &Path, extra: &[&str]) -> String {
+    let args = fuse_synth_args(dir, extra);
+    fails(&args.iter().map(String::as_str).collect::<Vec<_>>())
 }
