@@ -41,6 +41,8 @@ fn shards_merge_to_the_single_run(method: &[&str]) {
             p(&format!("{tag}.json")),
             "--save-contrib".into(),
             p(&format!("{tag}.contrib.npy")),
+            "--save-membership".into(),
+            p(&format!("{tag}.membership.npy")),
         ]
     };
     let mut single = vec!["fuse"];
@@ -88,9 +90,18 @@ fn shards_merge_to_the_single_run(method: &[&str]) {
         ("single.palette.ply", "merged.palette.ply"),
         ("single.classes.json", "merged.classes.json"),
         ("single.contrib.npy", "merged.contrib.npy"),
+        ("single.membership.npy", "merged.membership.npy"),
     ] {
         assert!(bytes(&d.join(a)) == bytes(&d.join(b)), "{a} != {b}");
     }
+    // `fuse` assigned on the GPU and spilled its evidence rows to a scratch file for the
+    // matrix outputs; `merge` held them in memory. Nothing of the scratch file is left.
+    let hidden: Vec<String> = std::fs::read_dir(d)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|name| name.starts_with('.'))
+        .collect();
+    assert!(hidden.is_empty(), "left behind: {hidden:?}");
     let (single_report, merged_report) =
         (json(&d.join("single.json")), json(&d.join("merged.json")));
     assert_eq!(single_report["per_class"], merged_report["per_class"]);

@@ -14,7 +14,7 @@ use crate::scene::cameras_json::write_semsplat_cameras;
 use crate::scene::ply::write_ply;
 use crate::scene::{Camera, Gaussians};
 use crate::util::atomic_write::write_bytes_atomic;
-use crate::util::npy::write_npy_u16_rows;
+use crate::util::npy::write_npy_rows;
 
 /// `labels.npy`'s value for an unlabeled pixel (a `u16` class id otherwise).
 pub const EXPORT_NO_LABEL: u16 = u16::MAX;
@@ -89,7 +89,7 @@ fn export_labels(path: &Path, cams: &[Camera], labels: &ExportLabels) -> Result<
         labels.classes
     );
     let (w, h) = (cams[0].width as u64, cams[0].height as u64);
-    write_npy_u16_rows(path, &[cams.len() as u64, h, w], |view| {
+    write_npy_rows::<u16, Vec<u16>>(path, &[cams.len() as u64, h, w], |view| {
         let map = labels
             .source
             .labels(view, &cams[view])?

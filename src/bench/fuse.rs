@@ -10,7 +10,10 @@ use serde::Serialize;
 
 use super::export::{export_inputs, ExportLabels};
 use super::median;
-use crate::fuse::{accumulate, FuseConfig, LabelSource, Method, NO_LABEL};
+use crate::fuse::{
+    accumulate_assigned, nearest_neighbours, AssignOnGpu, FuseConfig, LabelSource, Method,
+    NO_LABEL, TIE_NEIGHBOURS,
+};
 use crate::gpu::timings::KernelTotal;
 use crate::gpu::Gpu;
 use crate::render::{GpuScene, Rasterizer, RenderOptions};
@@ -69,16 +72,18 @@ pub struct MethodBench {
     pub method: &'static str,
     /// As `--methods` takes it ("vote-occlusion").
     pub key: &'static str,
-    /// Accumulation over all views (label upload, GPU work, evidence download), from
-    /// `fuse::accumulate`; the assignment afterwards is not included.
+    /// Accumulation over all views and the assignment, as `fuse` runs them
+    /// (`fuse::accumulate_assigned`): label upload, GPU work, and the assignment on the GPU
+    /// (or the evidence download and host assignment where the method needs it). The
+    /// neighbour search for its tie-breaks, once per scene, is `neighbours_s`.
     pub wall_s: f64,
     /// GPU time of all views (binning + accumulation), from timestamps.
     pub gpu_ms: f64,
     /// Views (times passes) per wall second.
     pub views_per_s: f64,
     /// Host time of the accumulation: waiting for label maps, running the views, and
-    /// setting up, downloading and widening the evidence matrix (see `FuseStats`); the rest
-    /// of `wall_s` is setup.
+    /// setting up and assigning the evidence matrix (see `FuseStats`); the rest of `wall_s`
+    /// is setup.
     pub label_wait_s: f64,
     pub view_s: f64,
     pub evidence_s: f64,
@@ -108,6 +113,9 @@ pub struct FuseBench {
     pub methods: Vec<MethodBench>,
     /// Peak resident memory of the whole benchmark process (scene generation included).
     pub peak_host_bytes: Option<u64>,
+    /// The host's search for every Gaussian's nearest neighbours (the assignment's
+    /// tie-break), once per scene.
+    pub neighbours_s: f64,
 }
 
 /// Label maps like a segmenter's: square blocks of about a twelfth of the image, one class
@@ -223,6 +231,9 @@ pub fn bench_fuse(
     };
     let labels = BlockLabels::new(spec.classes, spec.seed);
     let opts = FuseConfig::default().render_options();
+    let neighbours_start = Instant::now();
+    let knn = nearest_neighbours(&g.means, TIE_NEIGHBOURS);
+    let neighbours_s = neighbours_start.elapsed().as_secs_f64();
     if let Some(dir) = &spec.export {
         let source = &labels as &dyn LabelSource;
         let classes = spec.classes;
@@ -249,6 +260,7 @@ pub fn bench_fuse(
         cams,
         labels,
         classes: spec.classes,
+        knn,
         opts,
         cfgs: methods
             .iter()
@@ -276,6 +288,7 @@ pub fn bench_fuse(
         forward,
         methods: results,
         peak_host_bytes: crate::util::memory::peak_host_bytes(),
+        neighbours_s,
     })
 }
 
@@ -336,6 +349,8 @@ struct Setup<'a> {
     cams: Vec<Camera>,
     labels: BlockLabels,
     classes: usize,
+    /// [n][TIE_NEIGHBOURS] nearest neighbours, for the assignment's tie-breaks.
+    knn: Vec<u32>,
     opts: RenderOptions,
     /// One per method.
     cfgs: Vec<FuseConfig>,
@@ -347,17 +362,34 @@ impl Setup<'_> {
     fn warm_up(&self) -> Result<()> {
         forward_run(self.gpu, self.scene, &self.cams[..1], &self.opts, |_| {})?;
         for (cfg, scene) in self.cfgs.iter().zip(self.method_scenes) {
-            accumulate(
-                self.gpu,
-                scene,
-                &self.cams[..1],
-                &self.labels,
-                self.classes,
-                cfg,
-                |_, _| {},
-            )?;
+            self.fuse(cfg, scene, &self.cams[..1], |_| {})?;
         }
         Ok(())
+    }
+
+    /// One method over `cams`, accumulated and assigned as `fuse` does it.
+    fn fuse(
+        &self,
+        cfg: &FuseConfig,
+        scene: &GpuScene,
+        cams: &[Camera],
+        mut progress: impl FnMut(usize),
+    ) -> Result<crate::fuse::FuseStats> {
+        let with = AssignOnGpu {
+            knn: Some((&self.knn, TIE_NEIGHBOURS)),
+            rows: None,
+        };
+        let (_, stats) = accumulate_assigned(
+            self.gpu,
+            scene,
+            cams,
+            &self.labels,
+            self.classes,
+            cfg,
+            with,
+            |d, _| progress(d),
+        )?;
+        Ok(stats)
     }
 
     /// `iters` timed runs of the forward render and of every method, each over all views
@@ -382,15 +414,9 @@ impl Setup<'_> {
             forward_runs.push(forward);
             let runs = self.cfgs.iter().zip(self.method_scenes);
             for ((cfg, scene), method) in runs.zip(&mut method_runs) {
-                let (_, stats) = accumulate(
-                    self.gpu,
-                    scene,
-                    &self.cams,
-                    &self.labels,
-                    self.classes,
-                    cfg,
-                    |d, _| progress(cfg.method.name(), done + d, total),
-                )?;
+                let stats = self.fuse(cfg, scene, &self.cams, |d| {
+                    progress(cfg.method.name(), done + d, total)
+                })?;
                 done += views;
                 method.push(RunTotal {
                     gpu_ms: stats.gpu_ms,

@@ -15,8 +15,9 @@ use semsplat::dataset::Dataset;
 use semsplat::dataset::{user_classes, DatasetPaths};
 use semsplat::eval::label_render::LabelRenderer;
 use semsplat::fuse::{
-    accumulate, assign_one_vs_rest, assign_semantic_near, nearest_neighbours, Accumulation,
-    ClassScores, FuseConfig, FuseStats, Method, Shard,
+    accumulate_assigned, assign_semantic_near, class_totals, nearest_neighbours, one_vs_rest_row,
+    Accumulation, AssignOnGpu, Assignment, ClassScores, EvidenceRows, FuseConfig, FuseStats,
+    Method, Shard, SpilledRows, TIE_NEIGHBOURS,
 };
 use semsplat::gpu::Gpu;
 use semsplat::render::GpuScene;
@@ -26,7 +27,7 @@ use semsplat::scene::labels::{write_label_png, write_palette_png, LabelMap};
 use semsplat::scene::ply::{classes_sidecar_path, read_classes_sidecar, write_ply};
 use semsplat::scene::scene_file::{read_scene, resolve_scene_path};
 use semsplat::scene::Gaussians;
-use semsplat::util::npy::write_npy_f32;
+use semsplat::util::npy::write_npy_rows;
 use semsplat::util::{interrupt, write_bytes_atomic};
 
 /// The base methods of `--method`; their variant flags (`--occlusion`, `--weighted`,
@@ -183,11 +184,46 @@ fn find_class(table: &ClassTable, key: &str) -> Result<u32> {
     table.find(key).map(|c| c.id)
 }
 
-/// The evidence matrix and its row table, with the fusion statistics when it was rendered.
+/// Every Gaussian's class, the evidence rows where an output reads them, and the rows'
+/// class table, with the fusion statistics when it was rendered.
 pub(super) struct Evidence {
-    pub scores: ClassScores,
+    pub assignment: Assignment,
+    /// Kept only where an output needs them ([`needs_rows`]) or they are in memory anyway.
+    pub rows: Option<Box<dyn EvidenceRows>>,
     pub table: ClassTable,
     pub stats: Option<FuseStats>,
+}
+
+impl Evidence {
+    /// Evidence held whole in memory (--contrib, merge), assigned on the host: ties go to
+    /// the class the Gaussian's nearest neighbours hold most evidence for.
+    pub fn from_matrix(scores: ClassScores, g: &Gaussians, table: ClassTable) -> Evidence {
+        let knn = nearest_neighbours(&g.means, TIE_NEIGHBOURS);
+        Evidence {
+            assignment: assign_semantic_near(&scores, Some((&knn, TIE_NEIGHBOURS))),
+            rows: Some(Box::new(scores)),
+            table,
+            stats: None,
+        }
+    }
+}
+
+/// The evidence rows, which [`needs_rows`] made sure were kept for the outputs that read
+/// them.
+fn kept(rows: &mut Option<Box<dyn EvidenceRows>>) -> Result<&mut dyn EvidenceRows> {
+    match rows.as_deref_mut() {
+        Some(rows) => Ok(rows),
+        None => bail!("internal: the evidence rows were not kept for this output"),
+    }
+}
+
+/// Whether an output reads the evidence itself (not only the assignment): then fusion
+/// spills its rows to disk as they stream from the GPU.
+fn needs_rows(args: &OutputArgs) -> bool {
+    args.save_contrib.is_some()
+        || args.save_membership.is_some()
+        || args.extract.is_some()
+        || args.remove.is_some()
 }
 
 /// How the evidence was gathered, for the report.
@@ -214,7 +250,7 @@ pub fn run(args: FuseArgs) -> Result<()> {
         return select_from_fused(&args, g, &table, start);
     }
     let evidence = match &args.contrib {
-        Some(path) => load_evidence(path, g.len())?,
+        Some(path) => load_evidence(path, &g)?,
         None => fuse_views(&args, &g, method, accumulation)?,
     };
     let provenance = Provenance {
@@ -242,25 +278,26 @@ pub(super) fn write_fused(
     provenance: &Provenance,
 ) -> Result<()> {
     let Evidence {
-        scores,
+        assignment,
+        mut rows,
         table,
         stats,
     } = evidence;
     if let Some(path) = &args.save_contrib {
-        scores.save_npy(path)?;
+        kept(&mut rows)?.save_npy(path)?;
         write_class_table(&contrib_sidecar(path), &table)?;
     }
 
     let assign_start = Instant::now();
-    assign_classes(&mut g, &scores, &table);
+    assign_classes(&mut g, &assignment, &table);
     if let Some(path) = &args.save_membership {
-        save_membership(path, &scores, args.gamma)?;
+        save_membership(path, kept(&mut rows)?, args.gamma)?;
     }
     if let Some(dir) = &args.render_views {
         let cameras = cameras.context("--render-views needs --cameras")?;
         render_label_views(cameras, dir, &g, &table)?;
     }
-    let selected = select_members(args, g, &scores, &table)?;
+    let selected = select_members(args, g, &mut rows, &table)?;
     let assign_s = assign_start.elapsed().as_secs_f64();
 
     write_outputs(args, &selected, &table)?;
@@ -379,7 +416,7 @@ fn selected_method(args: &FuseArgs) -> Result<Method> {
 }
 
 /// A saved evidence matrix (`--contrib`) and its row table, checked against the scene.
-fn load_evidence(path: &Path, gaussians: usize) -> Result<Evidence> {
+fn load_evidence(path: &Path, g: &Gaussians) -> Result<Evidence> {
     let scores = ClassScores::load_npy(path)?;
     let table = read_class_table(&contrib_sidecar(path)).with_context(|| {
         format!(
@@ -388,24 +425,22 @@ fn load_evidence(path: &Path, gaussians: usize) -> Result<Evidence> {
             contrib_sidecar(path).display()
         )
     })?;
-    if scores.n != gaussians || scores.classes != table.len() {
+    if scores.n != g.len() || scores.classes != table.len() {
         bail!(
             "{} holds [{}, {}] but the scene has {} Gaussians and the row table {} classes",
             path.display(),
             scores.classes,
             scores.n,
-            gaussians,
+            g.len(),
             table.len()
         );
     }
-    Ok(Evidence {
-        scores,
-        table,
-        stats: None,
-    })
+    Ok(Evidence::from_matrix(scores, g, table))
 }
 
-/// Accumulates the evidence of every labeled view on the GPU.
+/// Accumulates the evidence of every labeled view on the GPU and assigns every Gaussian
+/// (on the GPU where the method's evidence allows: `accumulate_assigned`). The evidence
+/// rows are spilled beside --out only when an output reads them.
 fn fuse_views(
     args: &FuseArgs,
     g: &Gaussians,
@@ -416,15 +451,34 @@ fn fuse_views(
     let gpu = Gpu::new()?;
     let scene = GpuScene::upload_for(&gpu, g, method.scene_attributes())?;
     let cfg = fuse_config(args, method, accumulation);
+    let knn = nearest_neighbours(&g.means, TIE_NEIGHBOURS);
+    let mut spill = match needs_rows(&args.output) {
+        true => Some(SpilledRows::beside(
+            &args.output.out,
+            data.classes.len(),
+            g.len(),
+        )?),
+        false => None,
+    };
+    let keep_rows = spill.is_some();
+    let mut append = |e: usize, row: &[f64]| match spill.as_mut() {
+        Some(spill) => spill.append(e, row),
+        None => Ok(()),
+    };
+    let with = AssignOnGpu {
+        knn: Some((&knn, TIE_NEIGHBOURS)),
+        rows: keep_rows.then_some(&mut append as &mut dyn FnMut(usize, &[f64]) -> Result<()>),
+    };
     let bar = views_bar(data.cameras.len());
     let track = follow(&bar);
-    let (scores, stats) = accumulate(
+    let (assignment, stats) = accumulate_assigned(
         &gpu,
         &scene,
         &data.cameras,
         &Interruptible(&data),
         data.classes.len(),
         &cfg,
+        with,
         |done, total| {
             track(done, total);
             bar.set_message(memory_line(scene.n, &gpu));
@@ -432,7 +486,8 @@ fn fuse_views(
     )?;
     bar.finish_and_clear();
     Ok(Evidence {
-        scores,
+        assignment,
+        rows: spill.map(|s| Box::new(s) as Box<dyn EvidenceRows>),
         table: data.table,
         stats: Some(stats),
     })
@@ -490,24 +545,24 @@ fn fuse_shard(args: &FuseArgs, g: &Gaussians, method: Method, shard: Shard) -> R
 }
 
 /// Gives every Gaussian its winning class (user id, -1 unseen) and that class's share.
-fn assign_classes(g: &mut Gaussians, scores: &ClassScores, table: &ClassTable) {
-    // Ties go to the class the Gaussian's 8 nearest neighbours hold most evidence for.
-    let knn = nearest_neighbours(&g.means, 8);
-    let assignment = assign_semantic_near(scores, Some((&knn, 8)));
+fn assign_classes(g: &mut Gaussians, assignment: &Assignment, table: &ClassTable) {
     let rows: Vec<u32> = table.classes.iter().map(|c| c.id).collect();
     g.class_ids = Some(user_classes(&rows, assignment.class.iter().copied()));
-    g.class_conf = Some(assignment.confidence);
+    g.class_conf = Some(assignment.confidence.clone());
 }
 
-/// Writes the one-vs-rest membership matrix S as float32 0/1 [classes, Gaussians].
-fn save_membership(path: &Path, scores: &ClassScores, gamma: f64) -> Result<()> {
-    let s_matrix = assign_one_vs_rest(scores, gamma);
-    let flat: Vec<f32> = s_matrix
-        .iter()
-        .flatten()
-        .map(|&m| f32::from(u8::from(m)))
-        .collect();
-    write_npy_f32(path, &[scores.classes as u64, scores.n as u64], &flat)
+/// Writes the one-vs-rest membership matrix S as float32 0/1 [classes, Gaussians], a row
+/// at a time.
+fn save_membership(path: &Path, rows: &mut dyn EvidenceRows, gamma: f64) -> Result<()> {
+    let totals = class_totals(rows)?;
+    let shape = [rows.classes() as u64, rows.n() as u64];
+    write_npy_rows::<f32, Vec<f32>>(path, &shape, |e| {
+        let members = one_vs_rest_row(&rows.row(e)?, &totals, gamma);
+        Ok(members
+            .into_iter()
+            .map(|m| f32::from(u8::from(m)))
+            .collect())
+    })
 }
 
 /// Label and palette PNGs of every camera, rendered from the fused scene.
@@ -540,7 +595,7 @@ fn render_label_views(
 fn select_members(
     args: &OutputArgs,
     g: Gaussians,
-    scores: &ClassScores,
+    rows: &mut Option<Box<dyn EvidenceRows>>,
     table: &ClassTable,
 ) -> Result<Gaussians> {
     let ((Some(name), _) | (_, Some(name))) = (&args.extract, &args.remove) else {
@@ -552,7 +607,9 @@ fn select_members(
         .iter()
         .position(|c| c.id == id)
         .expect("class in table");
-    let members = assign_one_vs_rest(scores, args.gamma).swap_remove(row);
+    let rows = kept(rows)?;
+    let totals = class_totals(rows)?;
+    let members = one_vs_rest_row(&rows.row(row)?, &totals, args.gamma);
     let keep: Vec<bool> = members
         .iter()
         .map(|&m| m == args.extract.is_some())

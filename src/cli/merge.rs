@@ -191,11 +191,7 @@ pub fn run(args: MergeArgs) -> Result<()> {
     let method = Method::from_key(&key.method)
         .with_context(|| format!("the parts name an unknown method '{}'", key.method))?;
     let scores = sum_parts(&args.parts, &key, args.chunk_gaussians)?;
-    let evidence = Evidence {
-        scores,
-        table: key.classes.clone(),
-        stats: None,
-    };
+    let evidence = Evidence::from_matrix(scores, &g, key.classes.clone());
     let provenance = Provenance {
         method,
         accumulation: Accumulation::FixedPoint,

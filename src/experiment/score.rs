@@ -14,8 +14,8 @@ use crate::eval::image_quality::{image_quality, ImageQuality};
 use crate::eval::label_render::LabelRenderer;
 use crate::eval::metrics::{gaussian_accuracy, ClassIou, Confusion, SegmentationScores};
 use crate::fuse::{
-    accumulate, assign_semantic_near, fuse_consensus, nearest_neighbours, ConsensusParams,
-    FuseConfig, Method, SegmentVotes,
+    accumulate_assigned, fuse_consensus, nearest_neighbours, AssignOnGpu, ConsensusParams,
+    FuseConfig, Method, SegmentVotes, TIE_NEIGHBOURS,
 };
 use crate::gpu::Gpu;
 use crate::render::GpuScene;
@@ -266,18 +266,22 @@ fn fuse_lifted(
             segments: Some((c.segments, c.segment)),
         });
     }
-    let (evidence, stats) = accumulate(
+    // Ties go to the class the Gaussian's nearest neighbours hold most evidence for.
+    let knn = nearest_neighbours(&s.gaussians.means, TIE_NEIGHBOURS);
+    let with = AssignOnGpu {
+        knn: Some((&knn, TIE_NEIGHBOURS)),
+        rows: None,
+    };
+    let (assignment, stats) = accumulate_assigned(
         gpu,
         &scene,
         &s.cameras,
         labels,
         compact.len(),
         &cfg,
+        with,
         |_, _| {},
     )?;
-    // Ties go to the class the Gaussian's 8 nearest neighbours hold most evidence for.
-    let knn = nearest_neighbours(&s.gaussians.means, 8);
-    let assignment = assign_semantic_near(&evidence, Some((&knn, 8)));
     let classes = user_classes(compact.user_ids(), assignment.class.iter().copied());
     Ok(Lifted {
         classes,

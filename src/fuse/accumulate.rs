@@ -10,6 +10,8 @@ use std::time::Instant;
 use anyhow::{bail, ensure, Result};
 use serde::Serialize;
 
+use super::assign::{assign_semantic_near, Assignment};
+use super::assign_gpu::GpuAssigner;
 use super::method::Method;
 use super::partial::{fixed_to_f64, EvidenceKind, RawEvidence};
 use super::scores::ClassScores;
@@ -116,7 +118,8 @@ pub struct FuseStats {
     /// submitting and waiting for its GPU work).
     pub label_wait_s: f64,
     pub view_s: f64,
-    /// Setting up, downloading and widening the evidence matrix (all passes).
+    /// Setting up the evidence and, after each pass, assigning it on the GPU (or
+    /// downloading and widening it for the host), streaming rows where asked.
     pub evidence_s: f64,
     pub views_per_s: f64,
     pub peak_device_bytes: u64,
@@ -475,9 +478,73 @@ pub fn accumulate(
     let n = scene.n as usize;
     let mut scores = ClassScores::zeros(classes, n);
     let stats = accumulate_passes(gpu, scene, cams, labels, classes, cfg, progress, |pass| {
-        download_rows(gpu, pass, cfg, n, &mut scores)
+        let dst = &mut scores.data[pass.row_begin * n..(pass.row_begin + pass.rows) * n];
+        download_rows(gpu, pass, cfg, 0..pass.rows, dst)
     })?;
     Ok((scores, stats))
+}
+
+/// Receives the evidence rows of [`accumulate_assigned`] one at a time, in class order:
+/// (compact class, its row over every Gaussian).
+pub type RowSink<'s> = &'s mut dyn FnMut(usize, &[f64]) -> Result<()>;
+
+/// What [`accumulate_assigned`] assigns with, and where the evidence rows go.
+#[derive(Default)]
+pub struct AssignOnGpu<'s> {
+    /// [n][k] nearest neighbours: ties go to the class the neighbours hold most evidence for.
+    pub knn: Option<(&'s [u32], usize)>,
+    /// Where every row goes, for outputs that need the evidence itself (none by default:
+    /// then the rows never leave the device).
+    pub rows: Option<RowSink<'s>>,
+}
+
+/// [`accumulate`] followed by [`super::assign_semantic_near`]. Where [`gpu_assignable`]
+/// (evidence in exact integers: votes and fixed point, on a device with shaderInt64), the
+/// assignment is folded on the GPU after each pass ([`GpuAssigner`]) and the host holds a
+/// few words per Gaussian instead of the evidence matrix; else (float atomics, the segment
+/// consensus) the matrix is downloaded and assigned on the host. The result is the same.
+#[allow(clippy::too_many_arguments)]
+pub fn accumulate_assigned(
+    gpu: &Gpu,
+    scene: &GpuScene,
+    cams: &[Camera],
+    labels: &dyn LabelSource,
+    classes: usize,
+    cfg: &FuseConfig,
+    mut with: AssignOnGpu,
+    progress: impl FnMut(usize, usize),
+) -> Result<(Assignment, FuseStats)> {
+    let Some(kind) = gpu_assignable(gpu, cfg) else {
+        let (scores, stats) = accumulate(gpu, scene, cams, labels, classes, cfg, progress)?;
+        if let Some(sink) = with.rows.as_mut() {
+            for e in 0..classes {
+                sink(e, scores.row(e))?;
+            }
+        }
+        return Ok((assign_semantic_near(&scores, with.knn), stats));
+    };
+    let n = scene.n as usize;
+    let mut assigner = GpuAssigner::new(gpu, n, classes, kind, with.knn)?;
+    let stats = accumulate_passes(gpu, scene, cams, labels, classes, cfg, progress, |pass| {
+        assigner.fold(&pass.evidence, pass.row_begin, pass.rows)?;
+        let Some(sink) = with.rows.as_mut() else {
+            return Ok(());
+        };
+        let mut row = vec![0.0; n];
+        for r in 0..pass.rows {
+            download_rows(gpu, pass, cfg, r..r + 1, &mut row)?;
+            sink(pass.row_begin + r, &row)?;
+        }
+        Ok(())
+    })?;
+    Ok((assigner.finish()?, stats))
+}
+
+/// The integer kind of `cfg`'s evidence when [`accumulate_assigned`] can assign it on
+/// `gpu`; None where the host must ([`accumulate`]).
+pub fn gpu_assignable(gpu: &Gpu, cfg: &FuseConfig) -> Option<EvidenceKind> {
+    let kind = EvidenceKind::of(cfg.method, cfg.accumulation)?;
+    (cfg.method != Method::SegmentConsensus && gpu.caps().int64).then_some(kind)
 }
 
 /// Runs every pass over the views; `on_pass` takes each pass's finished rows.
@@ -759,23 +826,23 @@ fn record_contrib(
     Ok(())
 }
 
+/// Rows `rows` of the pass (relative to its first), widened to f64 into `dst`.
 fn download_rows(
     gpu: &Gpu,
     pass: &EvidencePass,
     cfg: &FuseConfig,
-    n: usize,
-    out: &mut ClassScores,
+    rows: std::ops::Range<usize>,
+    dst: &mut [f64],
 ) -> Result<()> {
-    let (row_begin, rows) = (pass.row_begin, pass.rows);
-    let dst = &mut out.data[row_begin * n..(row_begin + rows) * n];
     let entry = bytes_per_entry(cfg.method, cfg.accumulation);
     let widen: fn(&[u8]) -> f64 = match (cfg.method, cfg.accumulation) {
         (Method::Vote | Method::VoteOcclusion, _) => |b| f64::from(u32::from_le_bytes(le(b))),
         (_, Accumulation::FixedPoint) => |b| fixed_to_f64(u64::from_le_bytes(le(b))),
         (_, Accumulation::Float) => |b| f64::from(f32::from_le_bytes(le(b))),
     };
-    let len = dst.len() as u64 * entry;
-    gpu.download_with(&pass.evidence, 0, len, |bytes| {
+    let row_bytes = entry * (dst.len() / rows.len().max(1)) as u64;
+    let (offset, len) = (rows.start as u64 * row_bytes, rows.len() as u64 * row_bytes);
+    gpu.download_with(&pass.evidence, offset, len, |bytes| {
         widen_in_parallel(bytes, entry as usize, dst, widen)
     })?;
     Ok(())

@@ -7,6 +7,7 @@ use serde::Serialize;
 
 use super::assign::Assignment;
 use super::consensus_segments::{co_occurrence, find, union, Observations};
+use crate::contract::NO_NEIGHBOUR;
 
 /// The knobs of segment consensus (defaults: docs/robustness.md).
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -98,7 +99,7 @@ pub fn build_segments(obs: &Observations, knn: &[u32], p: &ConsensusParams) -> V
     let mut parent: Vec<u32> = (0..n as u32).collect();
     for g in 0..n {
         for &h in &knn[g * k..(g + 1) * k] {
-            if h == u32::MAX || (h as usize) < g && knn_has(knn, k, h as usize, g) {
+            if h == NO_NEIGHBOUR || (h as usize) < g && knn_has(knn, k, h as usize, g) {
                 continue; // absent, or the pair is tested from h's row
             }
             let (together, apart) = co_occurrence(obs, g, h as usize);
@@ -128,7 +129,7 @@ pub fn merge_segments(
         let mut pairs: Vec<(u32, u32)> = Vec::new();
         for g in 0..obs.n {
             for &h in &knn[g * k..(g + 1) * k] {
-                if h != u32::MAX && segment[g] != segment[h as usize] {
+                if h != NO_NEIGHBOUR && segment[g] != segment[h as usize] {
                     let (a, b) = (segment[g], segment[h as usize]);
                     pairs.push((a.min(b), a.max(b)));
                 }
@@ -357,7 +358,7 @@ fn segment_summary(
 fn neighbour_votes(own: &[Vec<f64>], knn: &[u32], k: usize, g: usize) -> Vec<f64> {
     let mut sum = vec![0.0; own[g].len()];
     for &h in &knn[g * k..(g + 1) * k] {
-        if h != u32::MAX {
+        if h != NO_NEIGHBOUR {
             for (s, v) in sum.iter_mut().zip(&own[h as usize]) {
                 *s += v;
             }

@@ -9,6 +9,7 @@
 //! find region boundaries here; they vote once per view, per segment.
 
 use super::accumulate::NO_LABEL;
+use crate::contract::NO_NEIGHBOUR;
 
 /// Per Gaussian, the views that observed it (center visible on a labeled pixel), in
 /// compressed rows sorted by view: what a view says about a Gaussian.
@@ -136,10 +137,10 @@ pub(crate) fn union(parent: &mut [u32], a: u32, b: u32) {
 }
 
 /// The `k` nearest other Gaussians of each (by center distance, ties by index), [n][k]
-/// row-major, `u32::MAX` where fewer exist. Uniform grid, searched in growing shells.
+/// row-major, `NO_NEIGHBOUR` where fewer exist. Uniform grid, searched in growing shells.
 pub fn nearest_neighbours(means: &[[f32; 3]], k: usize) -> Vec<u32> {
     let n = means.len();
-    let mut out = vec![u32::MAX; n * k];
+    let mut out = vec![NO_NEIGHBOUR; n * k];
     if n < 2 || k == 0 {
         return out;
     }

@@ -3,6 +3,7 @@
 
 pub mod accumulate;
 pub mod assign;
+pub mod assign_gpu;
 pub mod consensus;
 pub mod consensus_decide;
 pub mod consensus_segments;
@@ -11,12 +12,16 @@ pub mod partial;
 pub mod scores;
 
 pub use accumulate::{
-    accumulate, accumulate_raw, Accumulation, FuseConfig, FuseStats, LabelSource, LANES, NO_LABEL,
+    accumulate, accumulate_assigned, accumulate_raw, gpu_assignable, Accumulation, AssignOnGpu,
+    FuseConfig, FuseStats, LabelSource, RowSink, LANES, NO_LABEL,
 };
-pub use assign::{assign_one_vs_rest, assign_semantic, assign_semantic_near, Assignment};
+pub use assign::{
+    assign_one_vs_rest, assign_semantic, assign_semantic_near, class_totals, one_vs_rest_row,
+    Assignment, TIE_NEIGHBOURS,
+};
 pub use consensus::fuse_consensus;
 pub use consensus_decide::{Consensus, ConsensusParams, SegmentVotes};
 pub use consensus_segments::nearest_neighbours;
 pub use method::{Method, SPELLINGS};
 pub use partial::{EvidenceKind, PartManifest, RawEvidence, Shard};
-pub use scores::ClassScores;
+pub use scores::{ClassScores, EvidenceRows, SpilledRows};

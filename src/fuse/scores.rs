@@ -1,11 +1,15 @@
 //! Per-class, per-Gaussian evidence gathered over all views: vote counts, weighted votes,
 //! or FlashSplat's contribution matrix A. Rows are compact classes, columns Gaussians.
 
+use std::borrow::Cow;
+use std::fs::File;
+use std::io::{Read, Seek, SeekFrom, Write};
 use std::path::Path;
 
-use anyhow::{ensure, Result};
+use anyhow::{ensure, Context, Result};
 
-use crate::util::npy::{read_npy_f64, write_npy_f64, NpyArray};
+use crate::util::atomic_write::{stage_scratch, StagedFile};
+use crate::util::npy::{read_npy_f64, write_npy_rows, NpyArray};
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct ClassScores {
@@ -34,11 +38,6 @@ impl ClassScores {
         &self.data[class * self.n..(class + 1) * self.n]
     }
 
-    /// Writes A as a float64 NumPy array [E, N].
-    pub fn save_npy(&self, path: &Path) -> Result<()> {
-        write_npy_f64(path, &[self.classes as u64, self.n as u64], &self.data)
-    }
-
     /// Reads an [E, N] float64 (or float32) NumPy array, C or Fortran order
     /// ([`read_npy_f64`]).
     pub fn load_npy(path: &Path) -> Result<ClassScores> {
@@ -58,5 +57,109 @@ impl ClassScores {
             n: shape[1] as usize,
             data,
         })
+    }
+}
+
+/// The evidence matrix read one class row at a time, wherever it is: in memory
+/// ([`ClassScores`]) or spilled to disk as it streamed from the GPU ([`SpilledRows`]).
+pub trait EvidenceRows {
+    /// Rows E (compact classes).
+    fn classes(&self) -> usize;
+    /// Columns N (Gaussians).
+    fn n(&self) -> usize;
+    /// Row `class`, N long.
+    fn row(&mut self, class: usize) -> Result<Cow<'_, [f64]>>;
+
+    /// Writes the rows as a float64 NumPy array [E, N], one row in memory at a time.
+    fn save_npy(&mut self, path: &Path) -> Result<()> {
+        let shape = [self.classes() as u64, self.n() as u64];
+        write_npy_rows(path, &shape, |e| Ok(self.row(e)?.into_owned()))
+    }
+}
+
+impl EvidenceRows for ClassScores {
+    fn classes(&self) -> usize {
+        self.classes
+    }
+
+    fn n(&self) -> usize {
+        self.n
+    }
+
+    fn row(&mut self, class: usize) -> Result<Cow<'_, [f64]>> {
+        Ok(Cow::Borrowed(ClassScores::row(self, class)))
+    }
+}
+
+/// Evidence rows written to a scratch file beside an output as they stream from the GPU,
+/// so the outputs that need the evidence itself (the saved matrix, the membership,
+/// --extract) read it a row at a time and the host never holds all of it. The file is
+/// removed when this drops, and by the interrupt handler.
+pub struct SpilledRows {
+    file: File,
+    _scratch: StagedFile,
+    classes: usize,
+    n: usize,
+    /// Rows appended so far (they arrive in class order).
+    written: usize,
+}
+
+impl SpilledRows {
+    /// An empty spill for [classes][n] beside `output` (in its folder).
+    pub fn beside(output: &Path, classes: usize, n: usize) -> Result<SpilledRows> {
+        let (file, scratch) = stage_scratch(&output.with_extension("evidence"))?;
+        Ok(SpilledRows {
+            file,
+            _scratch: scratch,
+            classes,
+            n,
+            written: 0,
+        })
+    }
+
+    /// Appends row `class`, which must be the next one.
+    pub fn append(&mut self, class: usize, row: &[f64]) -> Result<()> {
+        ensure!(
+            class == self.written && row.len() == self.n,
+            "evidence row {class} ({} values) out of order: expected row {} of {} values",
+            row.len(),
+            self.written,
+            self.n
+        );
+        let bytes: Vec<u8> = row.iter().flat_map(|v| v.to_le_bytes()).collect();
+        self.file
+            .write_all(&bytes)
+            .context("spilling evidence rows")?;
+        self.written += 1;
+        Ok(())
+    }
+}
+
+impl EvidenceRows for SpilledRows {
+    fn classes(&self) -> usize {
+        self.classes
+    }
+
+    fn n(&self) -> usize {
+        self.n
+    }
+
+    fn row(&mut self, class: usize) -> Result<Cow<'_, [f64]>> {
+        ensure!(
+            self.written == self.classes && class < self.classes,
+            "evidence row {class} read before all {} rows were spilled",
+            self.classes
+        );
+        let row_bytes = self.n as u64 * 8;
+        let mut bytes = vec![0u8; row_bytes as usize];
+        self.file.seek(SeekFrom::Start(class as u64 * row_bytes))?;
+        self.file
+            .read_exact(&mut bytes)
+            .context("reading spilled evidence rows")?;
+        let row = bytes
+            .chunks_exact(8)
+            .map(|b| f64::from_le_bytes(b.try_into().expect("8 bytes")))
+            .collect();
+        Ok(Cow::Owned(row))
     }
 }

@@ -159,7 +159,14 @@ fn create_temp(target: PathBuf) -> Result<(fs::File, StagedFile)> {
     let tmp = temp_path(&target);
     let mut temps = interrupt::temp_files();
     interrupt::check()?;
-    let file = fs::File::create(&tmp).with_context(|| format!("creating {}", tmp.display()))?;
+    // Readable too: a scratch file (`stage_scratch`) is read back by its writer.
+    let file = fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(true)
+        .open(&tmp)
+        .with_context(|| format!("creating {}", tmp.display()))?;
     temps.push(tmp.clone());
     let staged = StagedFile {
         tmp,
@@ -167,6 +174,19 @@ fn create_temp(target: PathBuf) -> Result<(fs::File, StagedFile)> {
         committed: false,
     };
     Ok((file, staged))
+}
+
+/// A scratch file beside `target`, named and registered like a temp file (so a signal or a
+/// later run removes it), open for reading and writing. It is removed when the returned
+/// [`StagedFile`] drops; nothing is ever renamed onto `target`.
+pub fn stage_scratch(target: &Path) -> Result<(fs::File, StagedFile)> {
+    let target = resolve_output_file(target)?;
+    if let Some(parent) = target.parent().filter(|p| !p.as_os_str().is_empty()) {
+        fs::create_dir_all(parent)
+            .with_context(|| format!("creating directory {}", parent.display()))?;
+    }
+    remove_stale_temps(&target);
+    create_temp(target)
 }
 
 /// Writes `target` through a buffered writer handed to `fill`; the file appears only if

@@ -37,30 +37,31 @@ fn write_npy<T: npyz::AutoSerialize + Copy>(path: &Path, shape: &[u64], data: &[
     })
 }
 
-/// Writes a `uint16` .npy file of `shape` whose first axis is filled one slice at a time
-/// by `slice(i)` (each the product of the other axes long), so a large array never sits
-/// in memory whole.
-pub fn write_npy_u16_rows(
+/// Writes a .npy file of `shape` whose first axis is filled one slice at a time by
+/// `slice(i)` (each the product of the other axes long), so a large array never sits in
+/// memory whole.
+pub fn write_npy_rows<T: npyz::AutoSerialize + Copy, S: AsRef<[T]>>(
     path: &Path,
     shape: &[u64],
-    mut slice: impl FnMut(usize) -> Result<Vec<u16>>,
+    mut slice: impl FnMut(usize) -> Result<S>,
 ) -> Result<()> {
     let (&rows, rest) = shape.split_first().context("npy shape has no axis")?;
     let slice_len: u64 = rest.iter().product();
     write_atomic(path, |w| {
-        let mut writer = npyz::WriteOptions::<u16>::new()
+        let mut writer = npyz::WriteOptions::<T>::new()
             .default_dtype()
             .shape(shape)
             .writer(w)
             .begin_nd()?;
         for i in 0..rows as usize {
             let values = slice(i)?;
+            let values = values.as_ref();
             ensure!(
                 values.len() as u64 == slice_len,
                 "npy slice {i} has {} values, not {slice_len}",
                 values.len()
             );
-            writer.extend(values)?;
+            writer.extend(values.iter().copied())?;
         }
         writer.finish()?;
         Ok(())
