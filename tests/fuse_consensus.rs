@@ -14,6 +14,7 @@ use semsplat::fuse::{
 };
 use semsplat::render::GpuScene;
 use semsplat::synth::{generate, RoomSource, SynthConfig, SynthScene};
+use semsplat::util::Rng;
 
 fn room(preset: &str, views: usize, size: (u32, u32), seed: u64, noise: &str) -> SynthScene {
     let mut cfg = SynthConfig::new(RoomSource::from_arg(preset).unwrap());
@@ -202,17 +203,9 @@ fn two_objects(views: u32, seed: u64) -> (Vec<[f32; 3]>, Observations, Vec<u32>)
     (means, Observations::from_views(120, &per_view), object)
 }
 
-/// `nearest_neighbours` against brute force, and the segments and classes against a plain
-/// transcription: pairwise co-occurrence, segments by label propagation, views counted once.
-#[test]
-fn decisions_match_a_plain_transcription() {
-    let (means, obs, object) = two_objects(12, 7);
-    let p = ConsensusParams {
-        merge_rounds: 0,
-        ..Default::default()
-    };
-    let k = p.neighbours;
-    let knn = nearest_neighbours(&means, k);
+/// `nearest_neighbours(means, k)` equals a brute-force search (ties by index).
+fn assert_neighbours_are_the_nearest(means: &[[f32; 3]], k: usize) {
+    let knn = nearest_neighbours(means, k);
     for g in 0..means.len() {
         let mut d: Vec<(f64, u32)> = (0..means.len())
             .filter(|&h| h != g)
@@ -229,6 +222,31 @@ fn decisions_match_a_plain_transcription() {
         let want: Vec<u32> = d[..k].iter().map(|e| e.1).collect();
         assert_eq!(&knn[g * k..(g + 1) * k], &want[..], "neighbours of {g}");
     }
+}
+
+/// Gaussians filling a volume (as a random scene does), not lying on surfaces: the grid
+/// sizes its cells by the volume there, and the neighbours are still the nearest.
+#[test]
+fn nearest_neighbours_in_a_volume_are_the_nearest() {
+    let mut rng = Rng::new(9);
+    let means: Vec<[f32; 3]> = (0..3_000)
+        .map(|_| [0, 1, 2].map(|_| rng.range_f64(-5.0, 5.0) as f32))
+        .collect();
+    assert_neighbours_are_the_nearest(&means, 8);
+}
+
+/// `nearest_neighbours` against brute force, and the segments and classes against a plain
+/// transcription: pairwise co-occurrence, segments by label propagation, views counted once.
+#[test]
+fn decisions_match_a_plain_transcription() {
+    let (means, obs, object) = two_objects(12, 7);
+    let p = ConsensusParams {
+        merge_rounds: 0,
+        ..Default::default()
+    };
+    let k = p.neighbours;
+    assert_neighbours_are_the_nearest(&means, k);
+    let knn = nearest_neighbours(&means, k);
     // Segments: minimum Gaussian index reachable over joining edges.
     // Per view: (region, on its edge). One region on its edge is no evidence either way;
     // different regions always separate.

@@ -74,9 +74,12 @@ pub struct SweepArgs {
     /// Output folder: robustness_<noise>.png and robustness_<noise>.json.
     #[arg(long, default_value = "demo_out")]
     out: PathBuf,
-    #[arg(long, default_value_t = 12, value_parser = args::at_least_one::<usize>)]
+    /// Train views of each room: as many as a real capture has (each Gaussian is seen in
+    /// only some of them, which is where label noise bites).
+    #[arg(long, default_value_t = 60, value_parser = args::at_least_one::<usize>)]
     views: usize,
-    #[arg(long, default_value_t = 4, value_parser = args::at_least_one::<usize>)]
+    /// Held-out views the mIoU is measured on.
+    #[arg(long, default_value_t = 8, value_parser = args::at_least_one::<usize>)]
     test_views: usize,
     #[arg(long, default_value_t = 320, value_parser = args::at_least_one::<u32>)]
     width: u32,

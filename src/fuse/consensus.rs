@@ -48,8 +48,8 @@ pub fn fuse_consensus(
     Ok((consensus, stats))
 }
 
-/// Segment consensus as an evidence matrix, for the callers of [`super::accumulate`] (`fuse`,
-/// `bench fuse`): each Gaussian's column holds the counts its class was decided from (its
+/// Segment consensus as an evidence matrix, for the callers of [`super::accumulate`] (`fuse`
+/// and `bench fuse`, through `accumulate_assigned`, which assigns it on the host): each Gaussian's column holds the counts its class was decided from (its
 /// segment's vote split, or its own views), so the argmax is that class except in exact ties.
 pub fn consensus_evidence(
     gpu: &Gpu,

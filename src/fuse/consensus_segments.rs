@@ -10,6 +10,7 @@
 
 use super::accumulate::NO_LABEL;
 use crate::contract::NO_NEIGHBOUR;
+use crate::util::parallel_map;
 
 /// Per Gaussian, the views that observed it (center visible on a labeled pixel), in
 /// compressed rows sorted by view: what a view says about a Gaussian.
@@ -140,35 +141,28 @@ pub(crate) fn union(parent: &mut [u32], a: u32, b: u32) {
 /// row-major, `NO_NEIGHBOUR` where fewer exist. Uniform grid, searched in growing shells.
 pub fn nearest_neighbours(means: &[[f32; 3]], k: usize) -> Vec<u32> {
     let n = means.len();
-    let mut out = vec![NO_NEIGHBOUR; n * k];
     if n < 2 || k == 0 {
-        return out;
+        return vec![NO_NEIGHBOUR; n * k];
     }
     let grid = Grid::new(means);
-    let mut best: Vec<(f64, u32)> = Vec::with_capacity(4 * k);
-    for g in 0..n {
-        best.clear();
-        let home = grid.cell_of(means[g]);
-        for ring in 0..=Grid::MAX_RING {
-            grid.for_shell(home, ring, |h| {
-                if h as usize != g {
-                    best.push((dist2(means[g], means[h as usize]), h));
-                }
-            });
-            best.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-            best.truncate(k);
-            // Every Gaussian outside the searched cube is farther than ring * cell.
-            let reach = ring as f64 * grid.cell;
-            if best.len() == k && best[k - 1].0 <= reach * reach {
-                break;
+    // Blocks of Gaussians on every core (millions of Gaussians take tens of seconds on one).
+    let blocks = parallel_map(n.div_ceil(KNN_BLOCK), |b| {
+        let range = b * KNN_BLOCK..n.min((b + 1) * KNN_BLOCK);
+        let mut out = vec![NO_NEIGHBOUR; range.len() * k];
+        let mut best: Vec<(f64, u32)> = Vec::with_capacity(4 * k);
+        for (g, slots) in range.zip(out.chunks_mut(k)) {
+            grid.nearest(means, g, k, &mut best);
+            for (slot, &(_, h)) in slots.iter_mut().zip(&best) {
+                *slot = h;
             }
         }
-        for (slot, &(_, h)) in out[g * k..].iter_mut().zip(&best) {
-            *slot = h;
-        }
-    }
-    out
+        out
+    });
+    blocks.concat()
 }
+
+/// Gaussians per work item of [`nearest_neighbours`].
+const KNN_BLOCK: usize = 4096;
 
 fn dist2(a: [f32; 3], b: [f32; 3]) -> f64 {
     (0..3).map(|i| (a[i] as f64 - b[i] as f64).powi(2)).sum()
@@ -187,6 +181,8 @@ struct Grid {
 impl Grid {
     /// Shells searched at most: past it a Gaussian keeps the neighbours found.
     const MAX_RING: i64 = 6;
+    /// Cells per Gaussian at most (each costs a 4-byte start).
+    const MAX_CELLS_PER_GAUSSIAN: f64 = 4.0;
 
     fn new(means: &[[f32; 3]]) -> Grid {
         let mut lo = [f64::MAX; 3];
@@ -198,11 +194,17 @@ impl Grid {
             }
         }
         // Surfaces dominate: about 4 Gaussians per occupied cell when spread over the
-        // bounding box's largest face.
+        // bounding box's largest face. But at most `MAX_CELLS_PER_GAUSSIAN` cells per
+        // Gaussian: Gaussians filling a volume (a random scene) would otherwise make
+        // hundreds of mostly empty cells each (3M of them: 2.6 GB of cell starts, and rings
+        // of empty cells searched for every neighbour; 124 s).
         let ext: Vec<f64> = (0..3).map(|i| (hi[i] - lo[i]).max(1e-6)).collect();
         let mut faces = [ext[0] * ext[1], ext[1] * ext[2], ext[0] * ext[2]];
         faces.sort_by(f64::total_cmp);
-        let cell = (faces[2] * 4.0 / means.len() as f64).sqrt().max(1e-6);
+        let n = means.len() as f64;
+        let surface_cell = (faces[2] * 4.0 / n).sqrt();
+        let volume_cell = (ext[0] * ext[1] * ext[2] / (n * Self::MAX_CELLS_PER_GAUSSIAN)).cbrt();
+        let cell = surface_cell.max(volume_cell).max(1e-6);
         let dims = [0, 1, 2].map(|i| ((ext[i] / cell).floor() as i64 + 1).min(1 << 20));
         let mut grid = Grid {
             origin: lo,
@@ -228,6 +230,28 @@ impl Grid {
         }
         (grid.starts, grid.members) = (starts, members);
         grid
+    }
+
+    /// The `k` nearest other Gaussians of `g` into `best` (distance, index), nearest
+    /// first, ties by index: shells of cells outward until no Gaussian outside the searched
+    /// cube can be nearer than the k-th found (or [`Grid::MAX_RING`]).
+    fn nearest(&self, means: &[[f32; 3]], g: usize, k: usize, best: &mut Vec<(f64, u32)>) {
+        best.clear();
+        let home = self.cell_of(means[g]);
+        for ring in 0..=Grid::MAX_RING {
+            self.for_shell(home, ring, |h| {
+                if h as usize != g {
+                    best.push((dist2(means[g], means[h as usize]), h));
+                }
+            });
+            best.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            best.truncate(k);
+            // Every Gaussian outside the searched cube is farther than ring * cell.
+            let reach = ring as f64 * self.cell;
+            if best.len() == k && best[k - 1].0 <= reach * reach {
+                break;
+            }
+        }
     }
 
     fn cell_of(&self, m: [f32; 3]) -> [i64; 3] {
