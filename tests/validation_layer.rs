@@ -8,6 +8,7 @@ fn validated_gpu() -> Gpu {
     let gpu = Gpu::with_options(GpuOptions {
         validation: true,
         device: None,
+        ..Default::default()
     })
     .expect("Vulkan device");
     assert!(gpu.validation_enabled());

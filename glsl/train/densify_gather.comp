@@ -3,7 +3,9 @@
 // the slot's source Gaussian, changed by the tensor's role: split children move their mean
 // and shrink their scale; Adam moments of every new Gaussian (clone copy, split children)
 // start at zero. One invocation per element, over a 2D grid of workgroups (the element
-// count can pass 65,535 workgroups in one dimension).
+// count can pass 65,535 workgroups in one dimension). A tensor past one binding is gathered
+// in parts: `dst` is bound from slot `first_slot`, `src` from Gaussian `src_first`, and a
+// slot whose source lies in another part of `src` is left to that part's dispatch.
 #include "densify_common.glsl"
 
 // ROLE_* (what a gathered tensor is) come from shared_constants.glsl.
@@ -11,10 +13,13 @@
 layout(local_size_x = DENSIFY_WG_SIZE) in;
 
 layout(push_constant) uniform GatherParams {
-    uint elements; // new_n * width
+    uint elements; // slots of this part * width
     uint width;
     uint role;
     float ln_split_shrink; // ln(1.6)
+    uint first_slot;       // the part's first slot (dst is bound from it)
+    uint src_first;        // the first source Gaussian src is bound from
+    uint src_count;        // source Gaussians bound
 } pc;
 
 layout(set = 0, binding = 0) readonly buffer SourceBuf { uint data[]; } slot_source;
@@ -29,10 +34,15 @@ void main() {
     if (e >= pc.elements) {
         return;
     }
-    uint j = e / pc.width;
-    uint c = e - j * pc.width;
+    uint local_slot = e / pc.width;
+    uint c = e - local_slot * pc.width;
+    uint j = pc.first_slot + local_slot;
+    uint source = slot_source.data[j] - pc.src_first; // wraps below src_first: skipped too
+    if (source >= pc.src_count) {
+        return;
+    }
     uint kind = slot_kind.data[j];
-    float v = src.data[slot_source.data[j] * pc.width + c];
+    float v = src.data[source * pc.width + c];
     bool child = kind >= SLOT_SPLIT0;
     if (pc.role == ROLE_MOMENT && kind != SLOT_KEEP) {
         v = 0.0;

@@ -163,6 +163,18 @@ pub fn probe_device(instance: &ash::Instance, pd: vk::PhysicalDevice) -> (Device
     (caps, missing)
 }
 
+/// The device's `maxStorageBufferRange` (`device`), or less where `asked` (else
+/// `SEMSPLAT_MAX_BINDING`, bytes) asks for less, rounded down to 256 bytes: see
+/// `GpuOptions::max_binding`. It can only lower the limit.
+pub(crate) fn binding_limit(device: u64, asked: Option<u64>) -> u64 {
+    let asked = asked.or_else(|| {
+        std::env::var("SEMSPLAT_MAX_BINDING")
+            .ok()
+            .and_then(|v| v.parse::<u64>().ok())
+    });
+    asked.map_or(device, |a| (a / 256 * 256).clamp(256, device))
+}
+
 /// The properties of the `vkGetPhysicalDeviceProperties2` chain we read (`size_control`
 /// only on Vulkan 1.3; default otherwise).
 struct ChainedProperties {

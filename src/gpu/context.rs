@@ -9,7 +9,7 @@ use std::sync::{Arc, Mutex};
 use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 
-use super::caps::{probe_device, DeviceCaps};
+use super::caps::{binding_limit, probe_device, DeviceCaps};
 use super::error::{GpuError, GpuResult, VkContext};
 use super::kernel::Pipeline;
 use super::recorder::RecorderParts;
@@ -25,6 +25,10 @@ pub struct GpuOptions {
     pub validation: bool,
     /// Device index or name substring; defaults to `SEMSPLAT_DEVICE`.
     pub device: Option<String>,
+    /// Bytes one storage binding may hold, below the device's `maxStorageBufferRange`
+    /// (defaults to `SEMSPLAT_MAX_BINDING`): tests set it so small scenes take the paths
+    /// that split work across bindings, as scenes past the real limit do.
+    pub max_binding: Option<u64>,
 }
 
 pub(crate) struct Inner {
@@ -251,7 +255,9 @@ impl Gpu {
             None
         };
 
-        let (physical, caps) = pick_physical(&instance, wanted.as_deref())?;
+        let (physical, mut caps) = pick_physical(&instance, wanted.as_deref())?;
+        caps.max_storage_buffer_range =
+            binding_limit(caps.max_storage_buffer_range, opts.max_binding);
         let queue_family = caps
             .compute_queue_family
             .expect("usable device has a compute queue");

@@ -10,8 +10,9 @@
 
 use anyhow::{bail, ensure, Result};
 
+use super::chunks::chunks;
 use super::frame::RenderedFrame;
-use super::gpu_scene::{GaussianParams, GpuScene, HostParams};
+use super::gpu_scene::{GaussianParams, GpuScene, HostParams, ParamTensor};
 use super::rasterizer::{Rasterizer, TileLists};
 use super::{project_params, RenderOptions, SemanticMode};
 use crate::contract::params::{FixedResolveParams, SoftmaxParams};
@@ -510,6 +511,8 @@ impl TileLists<'_> {
         Ok(())
     }
 
+    /// The projection's backward, in chunks of Gaussians whose per-Gaussian ranges each fit
+    /// one binding (as the forward projection's).
     fn record_project_backward(
         &self,
         rec: &mut Recorder,
@@ -518,31 +521,43 @@ impl TileLists<'_> {
         grads: &SceneGrads,
     ) -> Result<()> {
         // The backward culls nothing itself: it reads the forward's visibility flags.
-        let params = project_params(cam, scene, 0.0, f32::INFINITY);
-        let whole = BufferRange::whole;
-        rec.dispatch_ranges(
-            ids::RASTER_PROJECT_BACKWARD,
-            &[
-                ("means", whole(&scene.params.means)),
-                ("log_scales", whole(&scene.params.log_scales)),
-                ("quats", whole(&scene.params.quats)),
-                ("opacity_logits", whole(&scene.params.opacity_logits)),
-                ("sh", whole(&scene.params.sh)),
-                ("visible", whole(self.visible_flags())),
-                ("grad2d", whole(&grads.screen)),
-                ("grad_means", whole(&grads.params.means)),
-                ("grad_log_scales", whole(&grads.params.log_scales)),
-                ("grad_quats", whole(&grads.params.quats)),
-                ("grad_opacity_logits", whole(&grads.params.opacity_logits)),
-                ("grad_sh", whole(&grads.params.sh)),
-                ("densify_grad", whole(&grads.densify_grad)),
-                ("densify_count", whole(&grads.densify_count)),
-                ("fixed_status", whole(&grads.fixed.status)),
-                ("raster_status", self.status()),
-            ],
-            &params,
-            ids::RASTER_PROJECT_BACKWARD.groups_for(scene.n),
-        )?;
+        let mut params = project_params(cam, scene, 0.0, f32::INFINITY);
+        for range in chunks(scene.n, self.frame.gaussian_chunk) {
+            params.n = range.len() as u32;
+            let per_gaussian = |buf, bytes: u64| {
+                BufferRange::new(buf, range.start as u64 * bytes, range.len() as u64 * bytes)
+            };
+            let grad = |p: ParamTensor| {
+                per_gaussian(&grads.params[p], p.floats(scene.sh_coeffs) as u64 * 4)
+            };
+            let param = |p: ParamTensor| scene.param_range(p, &range);
+            rec.dispatch_ranges(
+                ids::RASTER_PROJECT_BACKWARD,
+                &[
+                    ("means", param(ParamTensor::Means)),
+                    ("log_scales", param(ParamTensor::LogScales)),
+                    ("quats", param(ParamTensor::Quats)),
+                    ("opacity_logits", param(ParamTensor::OpacityLogits)),
+                    ("sh", param(ParamTensor::Sh)),
+                    ("visible", per_gaussian(self.visible_flags(), 4)),
+                    (
+                        "grad2d",
+                        per_gaussian(&grads.screen, GRAD2D_STRIDE as u64 * 4),
+                    ),
+                    ("grad_means", grad(ParamTensor::Means)),
+                    ("grad_log_scales", grad(ParamTensor::LogScales)),
+                    ("grad_quats", grad(ParamTensor::Quats)),
+                    ("grad_opacity_logits", grad(ParamTensor::OpacityLogits)),
+                    ("grad_sh", grad(ParamTensor::Sh)),
+                    ("densify_grad", per_gaussian(&grads.densify_grad, 4)),
+                    ("densify_count", per_gaussian(&grads.densify_count, 4)),
+                    ("fixed_status", BufferRange::whole(&grads.fixed.status)),
+                    ("raster_status", self.status()),
+                ],
+                &params,
+                ids::RASTER_PROJECT_BACKWARD.groups_for(params.n),
+            )?;
+        }
         rec.barrier();
         Ok(())
     }

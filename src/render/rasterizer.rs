@@ -13,8 +13,8 @@ use super::gpu_scene::{GpuScene, ParamTensor, SceneAttributes};
 use super::{project_params, RenderOptions, SemanticMode, StageTimes};
 use crate::contract::params::{BlendParams, CompactParams, EmitParams, GatherTouchedParams};
 use crate::contract::{
-    BLEND_CARRY_BASE, ST_ARGS_ISECT, ST_ARGS_VISIBLE, ST_ISECT, ST_ISECT_NEEDED, ST_ISECT_WRAPPED,
-    ST_N_PLUS1, ST_OVERFLOW, ST_VISIBLE, ST_VISIBLE_PLUS1, ST_WORDS,
+    BLEND_CARRY_BASE, GRAD2D_STRIDE, ST_ARGS_ISECT, ST_ARGS_VISIBLE, ST_ISECT, ST_ISECT_NEEDED,
+    ST_ISECT_WRAPPED, ST_N_PLUS1, ST_OVERFLOW, ST_VISIBLE, ST_VISIBLE_PLUS1, ST_WORDS,
 };
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{
@@ -347,8 +347,9 @@ impl Rasterizer {
             .min(u32::MAX as u64) as u32
     }
 
-    /// Gaussians one projection dispatch covers: as many as the widest per-Gaussian range
-    /// (SH coefficients, or the 16-byte projected attributes) fits in one binding.
+    /// Gaussians one projection dispatch (or its backward) covers: as many as the widest
+    /// per-Gaussian range (SH coefficients, the 16-byte projected attributes, or the
+    /// backward's screen-space gradient) fits in one binding.
     fn projection_chunk_len(&self, scene: &GpuScene) -> Result<u32> {
         if let Some(len) = self.projection_chunk {
             return Ok(len);
@@ -359,7 +360,7 @@ impl Rasterizer {
             .map(|p| p.floats(scene.sh_coeffs) as u64 * 4)
             .max()
             .unwrap_or(0)
-            .max(16);
+            .max(GRAD2D_STRIDE as u64 * 4);
         let max_range = self.gpu.caps().max_storage_buffer_range;
         chunk_len(widest, 4, max_range).ok_or_else(|| {
             anyhow::anyhow!(
@@ -725,6 +726,7 @@ impl Rasterizer {
                 tile_rows: self.band_rows,
             },
             rows: 0..cam.height.div_ceil(TILE_SIZE),
+            gaussian_chunk: self.projection_chunk_len(scene)?,
         })
     }
 
@@ -828,8 +830,7 @@ impl Rasterizer {
         rec.fill(&b.ranges, 0, (frame.tiles_x * frame.tiles_y) as u64 * 8, 0);
         rec.barrier();
         let m0 = rec.mark();
-        let chunk_len = self.projection_chunk_len(scene)?;
-        b.record_project(rec, scene, frame.cam, opts, (self.float64, chunk_len))?;
+        b.record_project(rec, scene, frame, opts, self.float64)?;
         for band in 1..bands as u64 {
             rec.copy(&b.status, 0, &b.status, band * stride, ST_WORDS as u64 * 4);
         }
@@ -855,11 +856,11 @@ impl Buffers {
         &self,
         rec: &mut Recorder,
         scene: &GpuScene,
-        cam: &Camera,
+        frame: &FrameSpec,
         opts: &RenderOptions,
-        (float64, chunk_len): (bool, u32),
+        float64: bool,
     ) -> Result<()> {
-        let (b, n) = (self, scene.n);
+        let (b, n, cam) = (self, scene.n, frame.cam);
         ensure!(
             scene.attributes >= SceneAttributes::Geometry,
             "rendering needs the scene's shapes and opacities; it was uploaded with {:?}",
@@ -882,7 +883,7 @@ impl Buffers {
         } else {
             ids::RASTER_PROJECT
         };
-        for (k, range) in chunks(n, chunk_len).enumerate() {
+        for (k, range) in chunks(n, frame.gaussian_chunk).enumerate() {
             if k > 0 {
                 rec.barrier(); // this chunk's first flag overwrites the last one's tail zero
             }
@@ -1051,6 +1052,9 @@ pub struct FrameSpec<'a> {
     /// The tile rows these lists hold: all of them, or one band of a view binned in bands
     /// ([`Rasterizer::run_tiled_in_bands`]); per-tile passes cover only these.
     pub rows: Range<u32>,
+    /// Gaussians one per-Gaussian dispatch (the projection, its backward) covers, so each
+    /// per-Gaussian range it binds fits one binding.
+    pub gaussian_chunk: u32,
 }
 
 impl FrameSpec<'_> {

@@ -5,7 +5,8 @@ use anyhow::{ensure, Result};
 
 use crate::contract::params::AdamParams;
 use crate::gpu::kernel_table::ids;
-use crate::gpu::{Buffer, Gpu, Recorder};
+use crate::gpu::{Buffer, BufferRange, Gpu, Recorder};
+use crate::render::chunks::chunks;
 
 /// Most workgroups of one Adam dispatch; invocations stride over larger tensors.
 const MAX_GROUPS: u32 = 65_535;
@@ -108,17 +109,33 @@ pub fn record_adam(rec: &mut Recorder, t: &AdamTensor<'_>, s: AdamStep) -> Resul
         sqrt_bc2: bc2.sqrt() as f32,
     };
     rec.barrier();
-    rec.dispatch(
-        ids::TRAIN_ADAM,
-        &[
-            ("param", t.param),
-            ("grad", t.grad),
-            ("exp_avg", t.exp_avg),
-            ("exp_avg_sq", t.exp_avg_sq),
-        ],
-        &params,
-        [ids::TRAIN_ADAM.groups_for(t.count)[0].min(MAX_GROUPS), 1, 1],
-    )?;
+    // Element-wise: a tensor past one binding (the SH coefficients of a million Gaussians)
+    // is updated in parts that each fit one.
+    let caps = rec.gpu().caps();
+    let granule = (caps.min_storage_offset_alignment / 4).max(1);
+    let part_len = (caps.max_storage_buffer_range / 4 / granule * granule).min(u32::MAX as u64);
+    for part in chunks(t.count, part_len as u32) {
+        let range = |buf| BufferRange::new(buf, part.start as u64 * 4, part.len() as u64 * 4);
+        let params = AdamParams {
+            count: part.len() as u32,
+            ..params
+        };
+        rec.dispatch_ranges(
+            ids::TRAIN_ADAM,
+            &[
+                ("param", range(t.param)),
+                ("grad", range(t.grad)),
+                ("exp_avg", range(t.exp_avg)),
+                ("exp_avg_sq", range(t.exp_avg_sq)),
+            ],
+            &params,
+            [
+                ids::TRAIN_ADAM.groups_for(params.count)[0].min(MAX_GROUPS),
+                1,
+                1,
+            ],
+        )?;
+    }
     rec.barrier();
     Ok(())
 }

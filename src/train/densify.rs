@@ -36,14 +36,15 @@
 //! `z = (r0 cos a0, r0 sin a0, r1 cos a1)`. The quaternion is normalized before use
 //! (glsl/train/densify_common.glsl: `split_normal`).
 
-use anyhow::{ensure, Result};
+use anyhow::{ensure, Context, Result};
 
 use crate::contract::params::{
     DensifyClassifyParams, DensifyCompactParams, DensifyLayoutParams, GatherParams,
     ResetOpacityParams,
 };
 use crate::gpu::kernel_table::ids;
-use crate::gpu::{Buffer, Gpu, GpuCount, PrefixScan, RadixSort, Recorder};
+use crate::gpu::{Buffer, BufferRange, Gpu, GpuCount, PrefixScan, RadixSort, Recorder};
+use crate::render::chunks::{chunk_len, chunks};
 use crate::render::gpu_scene::ParamTensor;
 
 use crate::contract::{
@@ -552,12 +553,15 @@ impl Densifier {
             return Ok(out);
         }
         let params = GatherParams {
-            elements: elements as u32,
+            elements: 0, // per part
             width,
             role,
             ln_split_shrink: 1.6f64.ln() as f32,
+            first_slot: 0,
+            src_first: 0,
+            src_count: plan.n,
         };
-        self.record_gather(rec, tensor, &out, &params)?;
+        self.record_gather(rec, tensor, &out, &params, plan)?;
         Ok(out)
     }
 
@@ -594,43 +598,62 @@ impl Densifier {
             tensor.size(),
             plan.n
         );
-        let elements = plan.new_n as u64 * width as u64;
-        ensure!(
-            elements * 4 <= self.gpu.caps().max_storage_buffer_range,
-            "densify: {} after the step ({elements} f32) exceeds the device's binding limit",
-            tensor.name()
-        );
-        Ok(elements)
+        // Gathered in parts that fit one binding each (`record_gather`).
+        Ok(plan.new_n as u64 * width as u64)
     }
 
-    /// Records the gather of `tensor` into `out` by the plan's slots.
+    /// Records the gather of `tensor` into `out` by the plan's slots: in parts of slots
+    /// and of source Gaussians whose ranges of the two tensors each fit one binding.
     fn record_gather(
         &self,
         rec: &mut Recorder,
         tensor: &Buffer,
         out: &Buffer,
-        params: &GatherParams,
+        whole: &GatherParams,
+        plan: &DensifyPlan,
     ) -> Result<()> {
         let b = self
             .bufs
             .as_ref()
             .expect("a plan with Gaussians has buffers");
-        // A 2D grid: one element per invocation can pass 65,535 workgroups.
-        let total = (params.elements as u64).div_ceil(WG_SIZE as u64);
-        let gx = total.min(self.gpu.caps().max_workgroup_count[0] as u64);
-        let gy = total.div_ceil(gx);
-        rec.dispatch(
-            ids::TRAIN_DENSIFY_GATHER,
-            &[
-                ("slot_source", &b.slot_source),
-                ("slot_kind", &b.slot_kind),
-                ("slot_mean_delta", &b.slot_mean_delta),
-                ("src", tensor),
-                ("dst", out),
-            ],
-            params,
-            [gx as u32, gy as u32, 1],
-        )?;
+        let row_bytes = whole.width as u64 * 4;
+        let caps = self.gpu.caps();
+        let part = chunk_len(row_bytes, 0, caps.max_storage_buffer_range)
+            .context("densify: one Gaussian's row is wider than one binding")?;
+        let rows = |buf, range: &std::ops::Range<u32>| {
+            BufferRange::new(
+                buf,
+                range.start as u64 * row_bytes,
+                range.len() as u64 * row_bytes,
+            )
+        };
+        for slots in chunks(plan.new_n, part) {
+            for sources in chunks(plan.n, part) {
+                let params = GatherParams {
+                    elements: slots.len() as u32 * whole.width,
+                    first_slot: slots.start,
+                    src_first: sources.start,
+                    src_count: sources.len() as u32,
+                    ..*whole
+                };
+                // A 2D grid: one element per invocation can pass 65,535 workgroups.
+                let total = (params.elements as u64).div_ceil(WG_SIZE as u64);
+                let gx = total.min(caps.max_workgroup_count[0] as u64);
+                let gy = total.div_ceil(gx);
+                rec.dispatch_ranges(
+                    ids::TRAIN_DENSIFY_GATHER,
+                    &[
+                        ("slot_source", BufferRange::whole(&b.slot_source)),
+                        ("slot_kind", BufferRange::whole(&b.slot_kind)),
+                        ("slot_mean_delta", BufferRange::whole(&b.slot_mean_delta)),
+                        ("src", rows(tensor, &sources)),
+                        ("dst", rows(out, &slots)),
+                    ],
+                    &params,
+                    [gx as u32, gy as u32, 1],
+                )?;
+            }
+        }
         rec.barrier();
         Ok(())
     }

@@ -5,8 +5,14 @@ use std::process::{Command, Output};
 
 /// Runs `semsplat args...` and returns what it did.
 pub fn semsplat(args: &[&str]) -> Output {
+    semsplat_with_env(args, &[])
+}
+
+/// [`semsplat`] with environment variables set (e.g. `SEMSPLAT_MAX_BINDING`).
+pub fn semsplat_with_env(args: &[&str], env: &[(&str, String)]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_semsplat"))
         .args(args)
+        .envs(env.iter().map(|(k, v)| (k, v)))
         .output()
         .unwrap()
 }

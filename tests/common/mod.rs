@@ -18,6 +18,7 @@ pub fn gpu() -> &'static Gpu {
         Gpu::with_options(GpuOptions {
             validation: true,
             device: None,
+            ..Default::default()
         })
         .unwrap_or_else(|e| panic!("tests need a Vulkan device with validation layers: {e}"))
     })
