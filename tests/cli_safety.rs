@@ -586,3 +586,53 @@ fn diverged_training_stops_with_a_clear_error_and_no_output() {
     );
     assert!(!out.exists(), "a diverged model was written");
 }
+
+/// Ctrl-C while `fuse` streams its evidence rows to the scratch file beside --out (as
+/// --save-contrib asks): exit 130, and neither an output nor the scratch file is left.
+#[test]
+fn ctrl_c_during_fuse_leaves_neither_output_nor_scratch_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let room = tmp.path().join("room");
+    common::cli::synth_tiny(&room, 200, (96, 72));
+    let out_dir = tmp.path().join("out");
+    std::fs::create_dir(&out_dir).unwrap();
+    let r = |f: &str| room.join(f);
+    let mut child = Command::new(env!("CARGO_BIN_EXE_semsplat"))
+        .arg("fuse")
+        .arg("--scene")
+        .arg(r("scene.ply"))
+        .arg("--cameras")
+        .arg(r("cameras.json"))
+        .arg("--labels")
+        .arg(r("labels"))
+        .arg("--out")
+        .arg(out_dir.join("fused.ply"))
+        .arg("--save-contrib")
+        .arg(out_dir.join("contrib.npy"))
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The scratch file appears before the first view is fused: signal once it is there.
+    let mut scratch_seen = false;
+    for _ in 0..120_000 {
+        scratch_seen = all_files(&out_dir)
+            .iter()
+            .any(|n| n.contains("semsplat-tmp"));
+        if scratch_seen || child.try_wait().unwrap().is_some() {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    assert!(scratch_seen, "fuse ended before its scratch file was seen");
+    let sent = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    let run = child.wait_with_output().unwrap();
+    let err = stderr(&run);
+    assert_eq!(run.status.code(), Some(130), "{err}");
+    assert!(err.contains("interrupted"), "{err}");
+    let left = all_files(&out_dir);
+    assert!(left.is_empty(), "left behind: {left:?}");
+}
