@@ -9,7 +9,7 @@ mod common;
 
 use std::io::{BufRead, BufReader};
 use std::path::Path;
-use std::process::{Command, Output, Stdio};
+use std::process::{Child, Command, Output, Stdio};
 use std::sync::mpsc;
 use std::time::Duration;
 
@@ -507,6 +507,19 @@ fn all_files(dir: &Path) -> Vec<String> {
     names
 }
 
+/// Sends Ctrl-C (SIGINT) to `child` and checks that it stopped as interrupted (exit 130).
+fn interrupt(child: Child) {
+    let sent = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    let run = child.wait_with_output().unwrap();
+    let err = stderr(&run);
+    assert_eq!(run.status.code(), Some(130), "{err}");
+    assert!(err.contains("interrupted"), "{err}");
+}
+
 /// A command that does not poll (synth) exits at the first Ctrl-C, mid-write, and still
 /// leaves no temp file: the handler removes the ones in flight.
 #[test]
@@ -537,15 +550,7 @@ fn ctrl_c_during_synth_writing_exits_at_once_without_temp_files() {
         }
         std::thread::sleep(Duration::from_millis(1));
     }
-    let sent = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(sent.success());
-    let run = child.wait_with_output().unwrap();
-    let err = stderr(&run);
-    assert_eq!(run.status.code(), Some(130), "{err}");
-    assert!(err.contains("interrupted"), "{err}");
+    interrupt(child);
     let files = all_files(&out);
     let temps: Vec<&String> = files
         .iter()
@@ -624,15 +629,7 @@ fn ctrl_c_during_fuse_leaves_neither_output_nor_scratch_file() {
         std::thread::sleep(Duration::from_millis(1));
     }
     assert!(scratch_seen, "fuse ended before its scratch file was seen");
-    let sent = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(sent.success());
-    let run = child.wait_with_output().unwrap();
-    let err = stderr(&run);
-    assert_eq!(run.status.code(), Some(130), "{err}");
-    assert!(err.contains("interrupted"), "{err}");
+    interrupt(child);
     let left = all_files(&out_dir);
     assert!(left.is_empty(), "left behind: {left:?}");
 }

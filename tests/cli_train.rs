@@ -9,24 +9,9 @@ use std::process::Output;
 
 use semsplat::scene::ply::read_ply;
 
-fn train_args<'a>(d: &'a str, out: &'a str) -> Vec<String> {
-    [
-        "train",
-        "--images",
-        &format!("{d}/images"),
-        "--labels",
-        &format!("{d}/labels"),
-        "--cameras",
-        &format!("{d}/cameras.json"),
-        "--init",
-        &format!("{d}/init.ply"),
-        "--out",
-        out,
-        "--train-only",
-    ]
-    .iter()
-    .map(|s| s.to_string())
-    .collect()
+/// `train` on the room `d`, from its init, into `out`.
+fn train_args(d: &str, out: &str) -> Vec<String> {
+    common::cli::train_args(d, &format!("{d}/init.ply"), out)
 }
 
 fn run(args: &[String]) -> Output {

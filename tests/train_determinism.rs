@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::cli::{semsplat_with_env, synth_tiny};
+use common::cli::{semsplat_with_env, synth_tiny, train_args};
 
 use std::path::Path;
 
@@ -28,27 +28,10 @@ fn train_from(
     extra: &[&str],
     max_binding: Option<u64>,
 ) -> Vec<u8> {
-    let (images, labels) = (format!("{d}/images"), format!("{d}/labels"));
-    let cameras = format!("{d}/cameras.json");
-    let mut args = vec![
-        "train",
-        "--images",
-        &images,
-        "--labels",
-        &labels,
-        "--cameras",
-        &cameras,
-        "--init",
-        init,
-        "--train-only",
-        "--seed",
-        "7",
-        "--deterministic",
-        "--out",
-    ];
-    let out_s = out.to_str().unwrap();
-    args.push(out_s);
-    args.extend_from_slice(extra);
+    let mut args = train_args(d, init, out.to_str().unwrap());
+    args.extend(["--seed", "7", "--deterministic"].map(String::from));
+    args.extend(extra.iter().map(|s| s.to_string()));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
     let env: Vec<(&str, String)> = max_binding
         .map(|bytes| ("SEMSPLAT_MAX_BINDING", bytes.to_string()))
         .into_iter()

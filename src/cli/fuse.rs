@@ -220,10 +220,12 @@ fn kept(rows: &mut Option<Box<dyn EvidenceRows>>) -> Result<&mut dyn EvidenceRow
 /// Whether an output reads the evidence itself (not only the assignment): then fusion
 /// spills its rows to disk as they stream from the GPU.
 fn needs_rows(args: &OutputArgs) -> bool {
-    args.save_contrib.is_some()
-        || args.save_membership.is_some()
-        || args.extract.is_some()
-        || args.remove.is_some()
+    args.save_contrib.is_some() || args.save_membership.is_some() || selecting(args)
+}
+
+/// Whether --extract or --remove selects Gaussians by class.
+fn selecting(args: &OutputArgs) -> bool {
+    args.extract.is_some() || args.remove.is_some()
 }
 
 /// How the evidence was gathered, for the report.
@@ -289,15 +291,22 @@ pub(super) fn write_fused(
     }
 
     let assign_start = Instant::now();
-    assign_classes(&mut g, &assignment, &table);
+    assign_classes(&mut g, assignment, &table);
+    // One-vs-rest (--save-membership, --extract, --remove) divides by each Gaussian's
+    // evidence over every class: one more read of the rows, once.
+    let one_vs_rest = args.save_membership.is_some() || selecting(args);
+    let totals = match one_vs_rest {
+        true => class_totals(kept(&mut rows)?)?,
+        false => Vec::new(),
+    };
     if let Some(path) = &args.save_membership {
-        save_membership(path, kept(&mut rows)?, args.gamma)?;
+        save_membership(path, kept(&mut rows)?, &totals, args.gamma)?;
     }
     if let Some(dir) = &args.render_views {
         let cameras = cameras.context("--render-views needs --cameras")?;
         render_label_views(cameras, dir, &g, &table)?;
     }
-    let selected = select_members(args, g, &mut rows, &table)?;
+    let selected = select_members(args, g, &mut rows, &totals, &table)?;
     let assign_s = assign_start.elapsed().as_secs_f64();
 
     write_outputs(args, &selected, &table)?;
@@ -318,8 +327,7 @@ pub(super) fn write_fused(
 /// to fuse from (neither --labels nor --contrib), the class table to select with: the
 /// scene's `.classes.json` sidecar, else the ids present. `None` when fusing as usual.
 fn fused_scene_table(args: &FuseArgs, g: &Gaussians) -> Result<Option<ClassTable>> {
-    let selecting = args.output.extract.is_some() || args.output.remove.is_some();
-    if !selecting || args.labels.is_some() || args.contrib.is_some() {
+    if !selecting(&args.output) || args.labels.is_some() || args.contrib.is_some() {
         return Ok(None);
     }
     let Some(ids) = &g.class_ids else {
@@ -545,19 +553,23 @@ fn fuse_shard(args: &FuseArgs, g: &Gaussians, method: Method, shard: Shard) -> R
 }
 
 /// Gives every Gaussian its winning class (user id, -1 unseen) and that class's share.
-fn assign_classes(g: &mut Gaussians, assignment: &Assignment, table: &ClassTable) {
+fn assign_classes(g: &mut Gaussians, assignment: Assignment, table: &ClassTable) {
     let rows: Vec<u32> = table.classes.iter().map(|c| c.id).collect();
     g.class_ids = Some(user_classes(&rows, assignment.class.iter().copied()));
-    g.class_conf = Some(assignment.confidence.clone());
+    g.class_conf = Some(assignment.confidence);
 }
 
 /// Writes the one-vs-rest membership matrix S as float32 0/1 [classes, Gaussians], a row
-/// at a time.
-fn save_membership(path: &Path, rows: &mut dyn EvidenceRows, gamma: f64) -> Result<()> {
-    let totals = class_totals(rows)?;
+/// at a time (`totals`: [`class_totals`] of the rows).
+fn save_membership(
+    path: &Path,
+    rows: &mut dyn EvidenceRows,
+    totals: &[f64],
+    gamma: f64,
+) -> Result<()> {
     let shape = [rows.classes() as u64, rows.n() as u64];
     write_npy_rows::<f32, Vec<f32>>(path, &shape, |e| {
-        let members = one_vs_rest_row(&rows.row(e)?, &totals, gamma);
+        let members = one_vs_rest_row(&rows.row(e)?, totals, gamma);
         Ok(members
             .into_iter()
             .map(|m| f32::from(u8::from(m)))
@@ -590,12 +602,13 @@ fn render_label_views(
     Ok(())
 }
 
-/// The Gaussians `--extract` keeps or `--remove` leaves (one-vs-rest with --gamma); all of
-/// them without either.
+/// The Gaussians `--extract` keeps or `--remove` leaves (one-vs-rest with --gamma, `totals`:
+/// [`class_totals`] of the rows); all of them without either.
 fn select_members(
     args: &OutputArgs,
     g: Gaussians,
     rows: &mut Option<Box<dyn EvidenceRows>>,
+    totals: &[f64],
     table: &ClassTable,
 ) -> Result<Gaussians> {
     let ((Some(name), _) | (_, Some(name))) = (&args.extract, &args.remove) else {
@@ -607,9 +620,7 @@ fn select_members(
         .iter()
         .position(|c| c.id == id)
         .expect("class in table");
-    let rows = kept(rows)?;
-    let totals = class_totals(rows)?;
-    let members = one_vs_rest_row(&rows.row(row)?, &totals, args.gamma);
+    let members = one_vs_rest_row(&kept(rows)?.row(row)?, totals, args.gamma);
     let keep: Vec<bool> = members
         .iter()
         .map(|&m| m == args.extract.is_some())

@@ -731,7 +731,7 @@ fn run_view(
     let (labels, _) = lane.inputs.for_view(ctx.gpu, staged, pixels)?;
     let cam = &ctx.cams[view];
     match cfg.method {
-        Method::Vote => record_vote(ctx.gpu, ctx.scene, cam, &labels, ctx.pass, cfg),
+        Method::Vote => run_vote(ctx, cam, &labels, None),
         Method::VoteOcclusion => vote_occluded(&mut lane.raster, ctx, cam, &labels),
         _ => bail!("{} has no per-view evidence pass", cfg.method.name()),
     }
@@ -749,23 +749,8 @@ fn vote_occluded(
     let run = raster.run_tiled_in_bands(ctx.scene, cam, &ctx.opts, |rec, tiles| {
         tiles.record_blend(rec)
     })?;
-    let mut rec = Recorder::new(raster.gpu())?;
-    labels.record_upload(&mut rec);
-    let m0 = rec.mark();
-    dispatch_vote(
-        &mut rec,
-        ctx.scene,
-        cam,
-        labels.device,
-        Some(raster.depth()),
-        ctx.pass,
-        ctx.cfg,
-    )?;
-    let m1 = rec.mark();
-    let vote = rec.submit_and_wait()?;
     let mut work = ViewGpu::of(&run.timings);
-    work.ms += vote.between(m0, m1).unwrap_or(0.0) * 1e-6;
-    vote.add_to(&mut work.kernels);
+    work.add(run_vote(ctx, cam, labels, Some(raster.depth()))?);
     Ok(work)
 }
 
@@ -872,20 +857,26 @@ fn widen_in_parallel(bytes: &[u8], entry: usize, dst: &mut [f64], widen: fn(&[u8
     });
 }
 
-/// Plain vote of one view in a submission of its own; returns its GPU work (the label
-/// upload not counted in its time).
-fn record_vote(
-    gpu: &Gpu,
-    scene: &GpuScene,
+/// The vote of one view (only where `depth` shows the center, when given) in a submission
+/// of its own; returns its GPU work (the label upload not counted in its time).
+fn run_vote(
+    ctx: &PassContext,
     cam: &Camera,
     labels: &ViewLabels,
-    pass: &EvidencePass,
-    cfg: &FuseConfig,
+    depth: Option<&Buffer>,
 ) -> Result<ViewGpu> {
-    let mut rec = Recorder::new(gpu)?;
+    let mut rec = Recorder::new(ctx.gpu)?;
     labels.record_upload(&mut rec);
     let m0 = rec.mark();
-    dispatch_vote(&mut rec, scene, cam, labels.device, None, pass, cfg)?;
+    dispatch_vote(
+        &mut rec,
+        ctx.scene,
+        cam,
+        labels.device,
+        depth,
+        ctx.pass,
+        ctx.cfg,
+    )?;
     let m1 = rec.mark();
     let t = rec.submit_and_wait()?;
     Ok(ViewGpu {

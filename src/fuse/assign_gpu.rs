@@ -12,11 +12,11 @@ use anyhow::{ensure, Result};
 use bytemuck::{Pod, Zeroable};
 
 use super::assign::Assignment;
-use super::partial::{fixed_to_f64, EvidenceKind};
+use super::partial::EvidenceKind;
 use crate::contract::params::{FoldParams, MassParams};
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, BufferRange, Gpu, Recorder};
-use crate::render::chunks::{chunk_len, chunks};
+use crate::render::chunks::{chunk_len, chunks, part_of};
 
 /// One Gaussian's running assignment; mirrors `FoldState` in glsl/fuse/assign_fold.comp
 /// (std430: three uint64, two uint, 32 bytes).
@@ -134,7 +134,7 @@ impl<'a> GpuAssigner<'a> {
             };
             let knn = match self.k {
                 0 => BufferRange::whole(&self.knn),
-                k => gaussian_range(&self.knn, &range, 4 * k as u64),
+                k => part_of(&self.knn, &range, 4 * k as u64),
             };
             rec.dispatch_ranges(
                 ids::FUSE_ASSIGN_FOLD,
@@ -142,7 +142,7 @@ impl<'a> GpuAssigner<'a> {
                     ("evidence", BufferRange::whole(evidence)),
                     ("knn", knn),
                     ("scene_rank", BufferRange::whole(&self.ranks)),
-                    ("state", gaussian_range(&self.state, &range, STATE_BYTES)),
+                    ("state", part_of(&self.state, &range, STATE_BYTES)),
                 ],
                 &params,
                 ids::FUSE_ASSIGN_FOLD.groups_for(params.count),
@@ -198,10 +198,7 @@ impl<'a> GpuAssigner<'a> {
     /// and its share of the Gaussian's evidence.
     pub fn finish(self) -> Result<Assignment> {
         let states: Vec<FoldState> = self.gpu.download(&self.state, 0, self.n as usize)?;
-        let widen = |v: u64| match self.kind {
-            EvidenceKind::CountU32 => v as f64,
-            EvidenceKind::FixedU64 => fixed_to_f64(v),
-        };
+        let widen = |v: u64| self.kind.widen(v);
         let decided = |s: &FoldState| s.value > 0 && s.tied == 0;
         Ok(Assignment {
             class: states
@@ -217,19 +214,6 @@ impl<'a> GpuAssigner<'a> {
                 .collect(),
         })
     }
-}
-
-/// The bytes of a per-Gaussian buffer of `bytes_per_gaussian` that Gaussians `range` own.
-fn gaussian_range<'b>(
-    buf: &'b Buffer,
-    range: &std::ops::Range<u32>,
-    bytes_per_gaussian: u64,
-) -> BufferRange<'b> {
-    BufferRange::new(
-        buf,
-        range.start as u64 * bytes_per_gaussian,
-        range.len() as u64 * bytes_per_gaussian,
-    )
 }
 
 /// A workgroup's 96-bit sum: 64 bits (`lo`, `hi`) and the carries out of them.

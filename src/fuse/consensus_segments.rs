@@ -195,9 +195,9 @@ impl Grid {
         }
         // Surfaces dominate: about 4 Gaussians per occupied cell when spread over the
         // bounding box's largest face. But at most `MAX_CELLS_PER_GAUSSIAN` cells per
-        // Gaussian: Gaussians filling a volume (a random scene) would otherwise make
-        // hundreds of mostly empty cells each (3M of them: 2.6 GB of cell starts, and rings
-        // of empty cells searched for every neighbour; 124 s).
+        // Gaussian: Gaussians filling a volume (a random scene) would otherwise get far
+        // more cells than Gaussians, mostly empty, each a 4-byte start and searched ring by
+        // ring for every neighbour (3M random Gaussians took 124 s without the cap).
         let ext: Vec<f64> = (0..3).map(|i| (hi[i] - lo[i]).max(1e-6)).collect();
         let mut faces = [ext[0] * ext[1], ext[1] * ext[2], ext[0] * ext[2]];
         faces.sort_by(f64::total_cmp);

@@ -56,6 +56,15 @@ impl EvidenceKind {
             EvidenceKind::CountU32 => 4,
         }
     }
+
+    /// The f64 value of one entry summed in this kind (a count, or fixed point as
+    /// [`fixed_to_f64`] converts it).
+    pub fn widen(self, v: u64) -> f64 {
+        match self {
+            EvidenceKind::FixedU64 => fixed_to_f64(v),
+            EvidenceKind::CountU32 => v as f64,
+        }
+    }
 }
 
 /// Evidence [classes][n] (or a chunk of it) as the GPU's integers.
@@ -111,9 +120,10 @@ impl RawEvidence {
 
     /// The f64 evidence, converted as `fuse` converts what it downloads.
     pub fn to_f64(&self) -> Vec<f64> {
+        let kind = self.kind();
         match self {
-            RawEvidence::Fixed(v) => v.iter().copied().map(fixed_to_f64).collect(),
-            RawEvidence::Counts(v) => v.iter().copied().map(f64::from).collect(),
+            RawEvidence::Fixed(v) => v.iter().map(|&x| kind.widen(x)).collect(),
+            RawEvidence::Counts(v) => v.iter().map(|&x| kind.widen(x.into())).collect(),
         }
     }
 

@@ -10,7 +10,7 @@
 
 use anyhow::{bail, ensure, Result};
 
-use super::chunks::chunks;
+use super::chunks::{chunks, part_of};
 use super::frame::RenderedFrame;
 use super::gpu_scene::{GaussianParams, GpuScene, HostParams, ParamTensor};
 use super::rasterizer::{Rasterizer, TileLists};
@@ -524,9 +524,7 @@ impl TileLists<'_> {
         let mut params = project_params(cam, scene, 0.0, f32::INFINITY);
         for range in chunks(scene.n, self.frame.gaussian_chunk) {
             params.n = range.len() as u32;
-            let per_gaussian = |buf, bytes: u64| {
-                BufferRange::new(buf, range.start as u64 * bytes, range.len() as u64 * bytes)
-            };
+            let per_gaussian = |buf, bytes: u64| part_of(buf, &range, bytes);
             let grad = |p: ParamTensor| {
                 per_gaussian(&grads.params[p], p.floats(scene.sh_coeffs) as u64 * 4)
             };

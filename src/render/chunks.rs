@@ -36,6 +36,16 @@ pub fn chunk_len(max_bytes_per_gaussian: u64, tail_bytes: u64, max_range: u64) -
     (granules > 0).then(|| (granules * CHUNK_GRANULE as u64).min(u32::MAX as u64) as u32)
 }
 
+/// The part of a buffer of `bytes_per_item` per item (Gaussian, slot, element) that items
+/// `range` own: what one chunk of a split pass binds.
+pub fn part_of<'a>(buf: &'a Buffer, range: &Range<u32>, bytes_per_item: u64) -> BufferRange<'a> {
+    BufferRange::new(
+        buf,
+        range.start as u64 * bytes_per_item,
+        range.len() as u64 * bytes_per_item,
+    )
+}
+
 /// A band of whole tile rows that one per-tile dispatch covers; its per-pixel buffers are
 /// bound from the band's first pixel row.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -8,6 +8,7 @@ use crate::gpu::{Buffer, BufferRange, Gpu, GpuResult, Recorder};
 use crate::scene::gaussians::SemanticLogits;
 use crate::scene::Gaussians;
 
+use super::chunks::part_of;
 use super::SemanticMode;
 use crate::contract::params::SoftmaxParams;
 
@@ -318,12 +319,7 @@ impl GpuScene {
         if !self.attributes.holds(p) {
             return BufferRange::whole(buf);
         }
-        let stride = p.floats(self.sh_coeffs) as u64 * 4;
-        BufferRange::new(
-            buf,
-            range.start as u64 * stride,
-            range.len() as u64 * stride,
-        )
+        part_of(buf, range, p.floats(self.sh_coeffs) as u64 * 4)
     }
 
     /// The per-Gaussian semantic vectors blended in `mode` (None without semantics).

@@ -7,7 +7,7 @@ use std::ops::Range;
 
 use anyhow::{ensure, Result};
 
-use super::chunks::{bands, chunk_len, chunks, row_step, Band, BandLimits, CHUNK_GRANULE};
+use super::chunks::{bands, chunk_len, chunks, part_of, row_step, Band, BandLimits, CHUNK_GRANULE};
 use super::frame::RenderedFrame;
 use super::gpu_scene::{GpuScene, ParamTensor, SceneAttributes};
 use super::{project_params, RenderOptions, SemanticMode, StageTimes};
@@ -926,10 +926,8 @@ impl Buffers {
         scene: &'a GpuScene,
         range: &Range<u32>,
     ) -> Vec<(&'static str, BufferRange<'a>)> {
-        let (first, count) = (range.start as u64, range.len() as u64);
-        let part = |buf, stride: u64, extra: u64| {
-            BufferRange::new(buf, first * stride, (count + extra) * stride)
-        };
+        let part =
+            |buf, stride: u64, extra: u32| part_of(buf, &(range.start..range.end + extra), stride);
         let mut bindings: Vec<(&str, BufferRange)> = ParamTensor::ALL
             .iter()
             .map(|&p| (p.name(), scene.param_range(p, range)))

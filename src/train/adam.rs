@@ -5,8 +5,8 @@ use anyhow::{ensure, Result};
 
 use crate::contract::params::AdamParams;
 use crate::gpu::kernel_table::ids;
-use crate::gpu::{Buffer, BufferRange, Gpu, Recorder};
-use crate::render::chunks::chunks;
+use crate::gpu::{Buffer, Gpu, Recorder};
+use crate::render::chunks::{chunks, part_of};
 
 /// Most workgroups of one Adam dispatch; invocations stride over larger tensors.
 const MAX_GROUPS: u32 = 65_535;
@@ -115,7 +115,7 @@ pub fn record_adam(rec: &mut Recorder, t: &AdamTensor<'_>, s: AdamStep) -> Resul
     let granule = (caps.min_storage_offset_alignment / 4).max(1);
     let part_len = (caps.max_storage_buffer_range / 4 / granule * granule).min(u32::MAX as u64);
     for part in chunks(t.count, part_len as u32) {
-        let range = |buf| BufferRange::new(buf, part.start as u64 * 4, part.len() as u64 * 4);
+        let range = |buf| part_of(buf, &part, 4);
         let params = AdamParams {
             count: part.len() as u32,
             ..params

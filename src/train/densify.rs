@@ -44,7 +44,7 @@ use crate::contract::params::{
 };
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, BufferRange, Gpu, GpuCount, PrefixScan, RadixSort, Recorder};
-use crate::render::chunks::{chunk_len, chunks};
+use crate::render::chunks::{chunk_len, chunks, part_of};
 use crate::render::gpu_scene::ParamTensor;
 
 use crate::contract::{
@@ -620,13 +620,6 @@ impl Densifier {
         let caps = self.gpu.caps();
         let part = chunk_len(row_bytes, 0, caps.max_storage_buffer_range)
             .context("densify: one Gaussian's row is wider than one binding")?;
-        let rows = |buf, range: &std::ops::Range<u32>| {
-            BufferRange::new(
-                buf,
-                range.start as u64 * row_bytes,
-                range.len() as u64 * row_bytes,
-            )
-        };
         for slots in chunks(plan.new_n, part) {
             for sources in chunks(plan.n, part) {
                 let params = GatherParams {
@@ -646,8 +639,8 @@ impl Densifier {
                         ("slot_source", BufferRange::whole(&b.slot_source)),
                         ("slot_kind", BufferRange::whole(&b.slot_kind)),
                         ("slot_mean_delta", BufferRange::whole(&b.slot_mean_delta)),
-                        ("src", rows(tensor, &sources)),
-                        ("dst", rows(out, &slots)),
+                        ("src", part_of(tensor, &sources, row_bytes)),
+                        ("dst", part_of(out, &slots, row_bytes)),
                     ],
                     &params,
                     [gx as u32, gy as u32, 1],

@@ -57,6 +57,28 @@ pub fn synth_tiny(dir: &Path, views: u32, (width, height): (u32, u32)) {
     ]);
 }
 
+/// `train` on a `synth` folder `d`'s train views, from the scene `init`, into `out` (the
+/// images path is element 2, for tests that replace it).
+pub fn train_args(d: &str, init: &str, out: &str) -> Vec<String> {
+    [
+        "train",
+        "--images",
+        &format!("{d}/images"),
+        "--labels",
+        &format!("{d}/labels"),
+        "--cameras",
+        &format!("{d}/cameras.json"),
+        "--init",
+        init,
+        "--out",
+        out,
+        "--train-only",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect()
+}
+
 /// `fuse` on a `synth` folder's scene, cameras and labels, plus `extra`.
 pub fn fuse_synth_args(dir: &Path, extra: &[&str]) -> Vec<String> {
     let p = |f: &str| dir.join(f).to_str().unwrap().to_string();
