@@ -13,7 +13,7 @@ use semsplat::render::backward::{BackwardVariant, HostPixelGrads};
 use semsplat::render::{GpuScene, Rasterizer, RenderOptions, SemanticMode};
 use semsplat::scene::ply::{read_ply, write_ply};
 use semsplat::scene::random_scene::{random_scene, RandomSceneSpec};
-use semsplat::scene::Camera;
+use semsplat::scene::{Camera, Gaussians};
 
 /// Trains the room in `d` into `out` with `extra` options; returns the PLY's bytes.
 fn train(d: &str, out: &Path, extra: &[&str]) -> Vec<u8> {
@@ -81,18 +81,21 @@ fn train_twice_with_the_same_seed_writes_the_same_bytes() {
     }
 }
 
-/// A scene whose SH coefficients pass one binding trains as one that fits: the projection
-/// backward, Adam and the densification's gather split the work into parts (here forced by
-/// a lower binding limit, as a 1M-Gaussian SH-3 scene passes lavapipe's 128 MiB), and the
-/// trained PLY is byte for byte the one trained without splitting.
+/// A scene whose per-Gaussian buffers pass one binding trains as one that fits, here forced
+/// by a lower binding limit (as a 1M-Gaussian SH-3 scene passes lavapipe's 128 MiB): the
+/// projection, its backward, Adam and the densification's gather split the work into
+/// parts of Gaussians, the kernels that index Gaussians at random (blending, its backward,
+/// binning) reach them by address, and the trained PLY is byte for byte the one trained
+/// without a limit. Only 4-byte-per-Gaussian arrays (sort keys, scans) must fit.
 #[test]
 fn training_past_one_binding_writes_the_same_bytes() {
     let tmp = tempfile::tempdir().unwrap();
     let room = tmp.path().join("room");
     synth_tiny(&room, 4, (48, 36));
     let d = room.to_str().unwrap();
-    // The room's init with SH degree 3 (zero higher coefficients): 192 bytes per Gaussian.
-    let mut g = read_ply(&room.join("init.ply")).unwrap();
+    // The room's init four times over (each copy shifted by a millimetre), with SH degree
+    // 3 (zero higher coefficients): 192 bytes per Gaussian.
+    let mut g = replicated(&read_ply(&room.join("init.ply")).unwrap(), 4);
     let dc = g.sh.clone();
     g.sh_degree = 3;
     g.sh = dc
@@ -102,12 +105,13 @@ fn training_past_one_binding_writes_the_same_bytes() {
     let init = room.join("init_sh3.ply");
     write_ply(&init, &g).unwrap();
     let init = init.to_str().unwrap();
-    // Below the SH buffer, above the widest buffer that is not split (the fixed-point
-    // screen-space gradient, 80 bytes per Gaussian, after densification).
-    let limit = 512 * 1024;
+    // Below every per-Gaussian buffer but the 4-byte ones (16 bytes per Gaussian of the
+    // projected attributes, 48 of the room's 12 logits, 80 of the fixed-point screen-space
+    // gradient), above the loss's per-pixel scratch and partial sums.
+    let limit = 128 * 1024;
     assert!(
-        g.len() as u64 * 192 > limit,
-        "the SH buffer must pass the limit"
+        g.len() as u64 * 16 > limit,
+        "the projected attributes must pass the limit"
     );
     let extra = ["--iters", "30"];
     let whole = train_from(d, init, &tmp.path().join("a.ply"), &extra, None);
@@ -115,13 +119,32 @@ fn training_past_one_binding_writes_the_same_bytes() {
     let trained = vertex_count(&split);
     assert_ne!(trained, g.len(), "densification did not run");
     assert!(
-        trained as u64 * 80 <= limit,
-        "the limit must fit the unsplit buffers"
+        trained as u64 * 4 <= limit,
+        "the limit must fit the 4-byte arrays"
     );
     assert!(
         whole == split,
         "splitting across bindings changed the result"
     );
+}
+
+/// `g` repeated `copies` times, copy k shifted by k millimetres along x.
+fn replicated(g: &Gaussians, copies: usize) -> Gaussians {
+    let repeat = |v: &[f32]| v.repeat(copies);
+    Gaussians {
+        means: (0..copies)
+            .flat_map(|k| {
+                g.means
+                    .iter()
+                    .map(move |m| [m[0] + 1e-3 * k as f32, m[1], m[2]])
+            })
+            .collect(),
+        log_scales: g.log_scales.repeat(copies),
+        quats: g.quats.repeat(copies),
+        opacity_logits: repeat(&g.opacity_logits),
+        sh: repeat(&g.sh),
+        ..g.clone()
+    }
 }
 
 /// The same backward twice: every gradient bit-identical (the float-atomic path

@@ -1,6 +1,6 @@
 // Push constants and the pixel under a Gaussian's projected center, shared by the vote
 // (fuse/vote.comp) and the segment consensus's observations (fuse/center_pixel.comp). The
-// includer declares `means` and `depth` (float buffers) first.
+// includer declares `depth` (a float buffer) first; the means are reached by address.
 #ifndef CENTER_PIXEL_GLSL
 #define CENTER_PIXEL_GLSL
 
@@ -8,6 +8,7 @@
 
 layout(push_constant) uniform CenterParams {
     vec4 world_to_camera[3]; // rows (R00 R01 R02 t0), ...
+    uvec2 means_addr;        // the scene's means [n][3] (gaussian_arrays.glsl)
     float fx;
     float fy;
     float cx;
@@ -22,6 +23,9 @@ layout(push_constant) uniform CenterParams {
     uint row_begin;        // vote: first class row of the votes this pass holds
     uint rows;             // vote: class rows this pass holds
 } pc;
+
+#include "gaussian_arrays.glsl"
+#define means FloatArray(pc.means_addr)
 
 // The pixel under Gaussian i's center, or NO_LABEL where the center is outside the clip
 // range or the image, or (with occlusion) not within the tolerance of the rendered depth.

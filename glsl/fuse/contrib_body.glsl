@@ -26,6 +26,10 @@
 layout(local_size_x = TILE_PIXELS) in;
 
 layout(push_constant) uniform ContribParams {
+    // Addresses of the per-Gaussian arrays (gaussian_arrays.glsl).
+    uvec2 xy_depth_opacity_addr;
+    uvec2 xy_frac_addr;
+    uvec2 conics_addr;
     uint width;
     uint height;
     uint tiles_x;
@@ -39,14 +43,16 @@ layout(push_constant) uniform ContribParams {
     uint tile_row_base; // first tile row of this dispatch's band
 } pc;
 
+#include "gaussian_arrays.glsl"
+#define xy_depth_opacity Vec4Array(pc.xy_depth_opacity_addr)
+#define xy_frac Vec2Array(pc.xy_frac_addr)
+#define conics Vec4Array(pc.conics_addr)
+
 layout(set = 0, binding = 0) readonly buffer RangesBuf { uvec2 data[]; } tile_ranges;
 #include "tile_window.glsl"
 layout(set = 0, binding = 1) readonly buffer IdsBuf { uint data[]; } isect_ids;
-layout(set = 0, binding = 2) readonly buffer XyBuf { vec4 data[]; } xy_depth_opacity;
-layout(set = 0, binding = 3) readonly buffer ConicBuf { vec4 data[]; } conics;
 layout(set = 0, binding = 4) readonly buffer LabelsBuf { uint data[]; } labels; // compact class per pixel
 layout(set = 0, binding = 5) buffer CarryBuf { vec2 data[]; } carry;           // (T, done) between windows
-layout(set = 0, binding = 7) readonly buffer FracBuf { vec2 data[]; } xy_frac;
 // The binning's status words: a binning whose lists overflowed (or wrapped) is recorded
 // again with larger lists, so its accumulation must add nothing (A is a running sum).
 layout(set = 0, binding = 8) readonly buffer StatusBuf { uint data[]; } status;

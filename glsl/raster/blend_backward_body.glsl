@@ -43,11 +43,6 @@ layout(local_size_x = TILE_PIXELS) in;
 layout(set = 0, binding = 0) readonly buffer RangesBuf { uvec2 data[]; } tile_ranges;
 #include "tile_window.glsl"
 layout(set = 0, binding = 1) readonly buffer IdsBuf { uint data[]; } isect_ids;
-layout(set = 0, binding = 2) readonly buffer XyBuf { vec4 data[]; } xy_depth_opacity;
-layout(set = 0, binding = 3) readonly buffer FracBuf { vec2 data[]; } xy_frac;
-layout(set = 0, binding = 4) readonly buffer ConicBuf { vec4 data[]; } conics;
-layout(set = 0, binding = 5) readonly buffer ColorBuf { vec4 data[]; } colors;
-layout(set = 0, binding = 6) readonly buffer SemBuf { float data[]; } sem_in;
 layout(set = 0, binding = 7) readonly buffer FinalTBuf { float data[]; } final_t;
 layout(set = 0, binding = 8) readonly buffer LastBuf { uint data[]; } last_entry;
 layout(set = 0, binding = 9) readonly buffer CountBuf { uint data[]; } n_contrib;
@@ -56,7 +51,6 @@ layout(set = 0, binding = 11) readonly buffer VRgbBuf { float data[]; } v_rgb;
 layout(set = 0, binding = 12) readonly buffer VAlphaBuf { float data[]; } v_alpha;
 layout(set = 0, binding = 13) readonly buffer VSemNormBuf { float data[]; } v_sem_norm;
 layout(set = 0, binding = 14) buffer CarryBuf { float data[]; } carry;
-// bindings 15, 16: the includer's gradient buffers (grad2d, grad_sem)
 
 shared vec4 s_xy_depth_opacity[BATCH];
 shared vec2 s_frac[BATCH];

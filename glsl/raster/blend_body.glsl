@@ -24,9 +24,6 @@ layout(local_size_x = TILE_PIXELS) in;
 layout(set = 0, binding = 0) readonly buffer RangesBuf { uvec2 data[]; } tile_ranges;
 #include "tile_window.glsl"
 layout(set = 0, binding = 1) readonly buffer IdsBuf { uint data[]; } isect_ids;
-layout(set = 0, binding = 2) readonly buffer XyBuf { vec4 data[]; } xy_depth_opacity;
-layout(set = 0, binding = 3) readonly buffer ConicBuf { vec4 data[]; } conics;
-layout(set = 0, binding = 4) readonly buffer ColorBuf { vec4 data[]; } colors;
 layout(set = 0, binding = 5) buffer CarryBuf { float data[]; } carry;
 layout(set = 0, binding = 6) writeonly buffer RgbBuf { float data[]; } out_rgb;
 layout(set = 0, binding = 7) writeonly buffer AlphaBuf { float data[]; } out_alpha;
@@ -34,16 +31,14 @@ layout(set = 0, binding = 8) writeonly buffer DepthBuf { float data[]; } out_dep
 layout(set = 0, binding = 9) writeonly buffer FinalTBuf { float data[]; } out_final_t;
 layout(set = 0, binding = 10) writeonly buffer LastBuf { uint data[]; } out_last;
 layout(set = 0, binding = 11) writeonly buffer CountBuf { uint data[]; } out_n_contrib;
-layout(set = 0, binding = 15) readonly buffer FracBuf { vec2 data[]; } xy_frac;
 #if defined(LABEL_ARGMAX)
 // Label rendering: each Gaussian blends the one-hot vector of its class (NO_LABEL: zeros),
 // and each pixel keeps only the running argmax over the chunks of classes, so C classes
 // cost C / CHUNK_CHANNELS passes but no per-pixel C-vector.
-layout(set = 0, binding = 12) readonly buffer ClassBuf { uint data[]; } classes;
+#define classes UintArray(pc.sem_in_addr)
 layout(set = 0, binding = 13) buffer BestBuf { uvec2 data[]; } label_best; // (value bits, class)
 shared float s_sem[BATCH * CHUNK_CHANNELS];
 #elif CHUNK_CHANNELS > 0
-layout(set = 0, binding = 12) readonly buffer SemBuf { float data[]; } sem_in;
 layout(set = 0, binding = 13) writeonly buffer SemOutBuf { float data[]; } out_sem;
 layout(set = 0, binding = 14) writeonly buffer SemNormBuf { float data[]; } out_sem_norm;
 shared float s_sem[BATCH * CHUNK_CHANNELS];

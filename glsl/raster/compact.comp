@@ -6,11 +6,16 @@
 
 layout(local_size_x = 256) in;
 
-layout(push_constant) uniform CompactParams { uint n; } pc;
+layout(push_constant) uniform CompactParams {
+    uvec2 xy_depth_opacity_addr; // per Gaussian (gaussian_arrays.glsl)
+    uint n;
+} pc;
+
+#include "gaussian_arrays.glsl"
+#define xy_depth_opacity Vec4Array(pc.xy_depth_opacity_addr)
 
 layout(set = 0, binding = 0) readonly buffer FlagsBuf { uint data[]; } visible;
 layout(set = 0, binding = 1) readonly buffer OffsetsBuf { uint data[]; } visible_offsets; // n + 1
-layout(set = 0, binding = 2) readonly buffer XyBuf { vec4 data[]; } xy_depth_opacity;
 layout(set = 0, binding = 3) writeonly buffer KeysBuf { uint data[]; } depth_keys;
 layout(set = 0, binding = 4) writeonly buffer IdsBuf { uint data[]; } depth_ids;
 layout(set = 0, binding = 5) writeonly buffer StatusBuf { uint data[]; } status;

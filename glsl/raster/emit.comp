@@ -19,16 +19,19 @@
 layout(local_size_x = EMIT_GROUP) in;
 
 layout(push_constant) uniform EmitParams {
+    uvec2 tile_rects_addr; // per Gaussian (gaussian_arrays.glsl)
     uint tiles_x;
     uint capacity;
     uint row_begin; // first tile row binned (see gather_touched.comp)
     uint row_end;   // one past the last
 } pc;
 
+#include "gaussian_arrays.glsl"
+#define tile_rects UVec4Array(pc.tile_rects_addr)
+
 layout(set = 0, binding = 0) buffer StatusBuf { uint data[]; } status;
 layout(set = 0, binding = 1) readonly buffer IdsBuf { uint data[]; } depth_ids;
 layout(set = 0, binding = 2) readonly buffer OffsetsBuf { uint data[]; } isect_offsets; // V + 1
-layout(set = 0, binding = 3) readonly buffer RectBuf { uvec4 data[]; } tile_rects;
 layout(set = 0, binding = 4) writeonly buffer KeysBuf { uint data[]; } isect_keys;
 layout(set = 0, binding = 5) writeonly buffer ValsBuf { uint data[]; } isect_ids;
 

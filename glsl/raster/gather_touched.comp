@@ -8,13 +8,16 @@
 layout(local_size_x = 256) in;
 
 layout(push_constant) uniform GatherTouchedParams {
+    uvec2 tile_rects_addr; // per Gaussian (gaussian_arrays.glsl)
     uint row_begin; // first tile row binned
     uint row_end;   // one past the last
 } pc;
 
+#include "gaussian_arrays.glsl"
+#define tile_rects UVec4Array(pc.tile_rects_addr)
+
 layout(set = 0, binding = 0) readonly buffer StatusBuf { uint data[]; } status;
 layout(set = 0, binding = 1) readonly buffer IdsBuf { uint data[]; } depth_ids;
-layout(set = 0, binding = 2) readonly buffer RectBuf { uvec4 data[]; } tile_rects;
 layout(set = 0, binding = 3) writeonly buffer SortedTouchedBuf { uint data[]; } sorted_touched;
 
 void main() {

@@ -1,8 +1,9 @@
 // Gradient accumulation of blend_backward_body.glsl for devices without float atomics:
 // compare-and-swap on the float bits.
 
-layout(set = 0, binding = 15) buffer Grad2dBuf { uint data[]; } grad2d;
-layout(set = 0, binding = 16) buffer GradSemBuf { uint data[]; } grad_sem;
+#include "blend_params.glsl" // the gradient arrays' addresses
+#define grad2d UintArrayRW(pc.grad2d_addr)
+#define grad_sem UintArrayRW(pc.grad_sem_addr)
 
 #define CAS_ADD(buf, i, v)                                                                     \
     {                                                                                          \

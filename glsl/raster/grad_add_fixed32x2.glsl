@@ -3,8 +3,9 @@
 // word. The final (lo, hi) is the exact 64-bit sum whatever the order (see
 // grad_fixed_common.glsl); only the sums read after the dispatch are meaningful.
 
-layout(set = 0, binding = 15) buffer Grad2dBuf { uint data[]; } grad2d;
-layout(set = 0, binding = 16) buffer GradSemBuf { uint data[]; } grad_sem;
+#include "blend_params.glsl" // the gradient arrays' addresses
+#define grad2d UintArrayRW(pc.grad2d_addr)
+#define grad_sem UintArrayRW(pc.grad_sem_addr)
 
 #include "grad_fixed_common.glsl"
 

@@ -3,8 +3,10 @@
 #extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
 #extension GL_EXT_shader_atomic_int64 : require
 
-layout(set = 0, binding = 15) buffer Grad2dBuf { uint64_t data[]; } grad2d;
-layout(set = 0, binding = 16) buffer GradSemBuf { uint64_t data[]; } grad_sem;
+#include "blend_params.glsl" // the gradient arrays' addresses
+layout(buffer_reference, std430, buffer_reference_align = 8) buffer U64Sums { uint64_t data[]; };
+#define grad2d U64Sums(pc.grad2d_addr)
+#define grad_sem U64Sums(pc.grad_sem_addr)
 
 #include "grad_fixed_common.glsl"
 

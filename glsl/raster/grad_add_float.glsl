@@ -2,8 +2,9 @@
 // (VK_EXT_shader_atomic_float).
 #extension GL_EXT_shader_atomic_float : require
 
-layout(set = 0, binding = 15) buffer Grad2dBuf { float data[]; } grad2d;
-layout(set = 0, binding = 16) buffer GradSemBuf { float data[]; } grad_sem;
+#include "blend_params.glsl" // the gradient arrays' addresses
+#define grad2d FloatArrayRW(pc.grad2d_addr)
+#define grad_sem FloatArrayRW(pc.grad_sem_addr)
 
 void grad_add(uint i, float v) {
     atomicAdd(grad2d.data[i], v);

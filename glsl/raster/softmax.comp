@@ -7,10 +7,14 @@ layout(local_size_x = 256) in;
 layout(push_constant) uniform SoftmaxParams {
     uint n;
     uint channels;
+    // [n][channels] each, by address (gaussian_arrays.glsl)
+    uvec2 logits_addr;
+    uvec2 probs_addr;
 } pc;
 
-layout(set = 0, binding = 0) readonly buffer LogitsBuf { float data[]; } logits;
-layout(set = 0, binding = 1) writeonly buffer ProbsBuf { float data[]; } probs;
+#include "gaussian_arrays.glsl"
+#define logits FloatArray(pc.logits_addr)
+#define probs FloatArrayRW(pc.probs_addr)
 
 void main() {
     uint i = gl_GlobalInvocationID.x;

@@ -4,14 +4,19 @@
 
 layout(local_size_x = 256) in;
 
-layout(push_constant) uniform SoftmaxParams {
+layout(push_constant) uniform SoftmaxBackwardParams {
     uint n;
     uint channels;
+    // [n][channels] each, by address (gaussian_arrays.glsl)
+    uvec2 probs_addr;
+    uvec2 grad_probs_addr;
+    uvec2 grad_logits_addr;
 } pc;
 
-layout(set = 0, binding = 0) readonly buffer ProbsBuf { float data[]; } probs;
-layout(set = 0, binding = 1) readonly buffer GradProbsBuf { float data[]; } grad_probs;
-layout(set = 0, binding = 2) buffer GradLogitsBuf { float data[]; } grad_logits;
+#include "gaussian_arrays.glsl"
+#define probs FloatArray(pc.probs_addr)
+#define grad_probs FloatArray(pc.grad_probs_addr)
+#define grad_logits FloatArrayRW(pc.grad_logits_addr)
 
 void main() {
     uint i = gl_GlobalInvocationID.x;

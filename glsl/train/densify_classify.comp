@@ -11,6 +11,7 @@
 layout(local_size_x = DENSIFY_WG_SIZE) in;
 
 layout(push_constant) uniform DensifyClassifyParams {
+    uvec2 log_scales_addr; // [n][3], by address (gaussian_arrays.glsl)
     uint n;
     float grad_threshold;
     // Thresholds on the largest log-scale (ln of the host's scale thresholds, so the test
@@ -19,7 +20,8 @@ layout(push_constant) uniform DensifyClassifyParams {
     float ln_prune_scale; // +inf when large Gaussians are not pruned
 } pc;
 
-layout(set = 0, binding = 0) readonly buffer LogScalesBuf { float data[]; } log_scales;
+#include "gaussian_arrays.glsl"
+#define log_scales FloatArray(pc.log_scales_addr)
 layout(set = 0, binding = 1) readonly buffer OpacityBuf { float data[]; } opacity_logits;
 layout(set = 0, binding = 2) readonly buffer AccumBuf { float data[]; } grad_accum;
 layout(set = 0, binding = 3) readonly buffer CountBuf { float data[]; } grad_count;

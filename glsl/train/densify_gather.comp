@@ -13,6 +13,7 @@
 layout(local_size_x = DENSIFY_WG_SIZE) in;
 
 layout(push_constant) uniform GatherParams {
+    uvec2 slot_mean_delta_addr; // [slots][3], by address (gaussian_arrays.glsl)
     uint elements; // slots of this part * width
     uint width;
     uint role;
@@ -22,9 +23,11 @@ layout(push_constant) uniform GatherParams {
     uint src_count;        // source Gaussians bound
 } pc;
 
+#include "gaussian_arrays.glsl"
+#define slot_mean_delta FloatArray(pc.slot_mean_delta_addr)
+
 layout(set = 0, binding = 0) readonly buffer SourceBuf { uint data[]; } slot_source;
 layout(set = 0, binding = 1) readonly buffer KindBuf { uint data[]; } slot_kind;
-layout(set = 0, binding = 2) readonly buffer DeltaBuf { float data[]; } slot_mean_delta;
 layout(set = 0, binding = 3) readonly buffer SrcBuf { float data[]; } src;
 layout(set = 0, binding = 4) writeonly buffer DstBuf { float data[]; } dst;
 

@@ -15,14 +15,19 @@ layout(push_constant) uniform DensifyLayoutParams {
     uint n;
     float ln_split_scale; // densified Gaussians with a larger max log-scale split
     uvec2 seed;
+    // By address (gaussian_arrays.glsl): [n][3], [n], and [slots][3] written.
+    uvec2 log_scales_addr;
+    uvec2 quats_addr;
+    uvec2 slot_mean_delta_addr;
 } pc;
 
-layout(set = 0, binding = 0) readonly buffer LogScalesBuf { float data[]; } log_scales;
-layout(set = 0, binding = 1) readonly buffer QuatsBuf { vec4 data[]; } quats;
+#include "gaussian_arrays.glsl"
+#define log_scales FloatArray(pc.log_scales_addr)
+#define quats Vec4Array(pc.quats_addr)
+#define slot_mean_delta FloatArrayRW(pc.slot_mean_delta_addr)
 layout(set = 0, binding = 2) readonly buffer OutOffsetsBuf { uint data[]; } out_offsets; // n + 1
 layout(set = 0, binding = 3) writeonly buffer SourceBuf { uint data[]; } slot_source;
 layout(set = 0, binding = 4) writeonly buffer KindBuf { uint data[]; } slot_kind;
-layout(set = 0, binding = 5) writeonly buffer DeltaBuf { float data[]; } slot_mean_delta;
 layout(set = 0, binding = 6) buffer StatusBuf { uint data[]; } status;
 
 void write_slot(uint j, uint source, uint kind, vec3 delta) {

@@ -9,6 +9,9 @@
 layout(local_size_x = LOSS_WG) in;
 
 layout(push_constant) uniform EntropyParams {
+    // [N][C] each, by address (gaussian_arrays.glsl)
+    uvec2 logits_addr;
+    uvec2 grad_logits_addr;
     uint n;
     uint channels;
     uint stride;
@@ -16,8 +19,9 @@ layout(push_constant) uniform EntropyParams {
     float inv_n;      // 1 / N
 } pc;
 
-layout(set = 0, binding = 0) readonly buffer LogitsBuf { float data[]; } logits; // [N][C]
-layout(set = 0, binding = 1) buffer GradLogitsBuf { float data[]; } grad_logits; // [N][C]
+#include "gaussian_arrays.glsl"
+#define logits FloatArray(pc.logits_addr)
+#define grad_logits FloatArrayRW(pc.grad_logits_addr)
 layout(set = 0, binding = 2) writeonly buffer PartialsBuf { float data[]; } partials;
 
 void main() {

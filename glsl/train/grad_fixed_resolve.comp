@@ -17,10 +17,14 @@ layout(push_constant) uniform FixedResolveParams {
     uint stride;     // values per row
     uint semantic;   // 1: every value is in FIXED_GROUP_SEM; 0: screen-space layout
     uint accumulate; // 1: add into out; 0: overwrite
+    // [rows][stride] each, by address (gaussian_arrays.glsl)
+    uvec2 fixed_sums_addr;
+    uvec2 out_grad_addr;
 } pc;
 
-layout(set = 0, binding = 0) readonly buffer FixedBuf { uvec2 data[]; } fixed_sums;
-layout(set = 0, binding = 1) buffer OutBuf { float data[]; } out_grad;
+#include "gaussian_arrays.glsl"
+#define fixed_sums UVec2Array(pc.fixed_sums_addr)
+#define out_grad FloatArrayRW(pc.out_grad_addr)
 layout(set = 0, binding = 2) readonly buffer FixedParamsBuf { float data[]; } fixed_params;
 layout(set = 0, binding = 3) buffer FixedStatusBuf { uint data[]; } fixed_status;
 

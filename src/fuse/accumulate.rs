@@ -771,9 +771,13 @@ fn record_contrib(
     };
     let f = &tiles.frame;
     let bands = f.bands(CONTRIB_CARRY_BYTES)?;
+    let projected = tiles.projected_addrs()?;
     for start in f.window_starts() {
         for band in &bands {
             let params = ContribParams {
+                xy_depth_opacity_addr: projected.xy_depth_opacity,
+                xy_frac_addr: projected.xy_frac,
+                conics_addr: projected.conics,
                 width: f.cam.width,
                 height: f.cam.height,
                 tiles_x: f.tiles_x,
@@ -791,12 +795,6 @@ fn record_contrib(
                 &[
                     ("tile_ranges", BufferRange::whole(tiles.ranges())),
                     ("isect_ids", BufferRange::whole(tiles.isect_ids())),
-                    (
-                        "xy_depth_opacity",
-                        BufferRange::whole(tiles.xy_depth_opacity()),
-                    ),
-                    ("conics", BufferRange::whole(tiles.conics())),
-                    ("xy_frac", BufferRange::whole(tiles.xy_frac())),
                     ("labels", band.range(labels, 4)),
                     ("carry", band.range(carry, CONTRIB_CARRY_BYTES)),
                     ("contrib", BufferRange::whole(&pass.evidence)),
@@ -887,16 +885,18 @@ fn run_vote(
 
 /// Push constants of the kernels that look up each Gaussian's center pixel (the vote and
 /// the consensus's observations): the camera, clip range and occlusion test of `cfg`, and
-/// the class rows `(row_begin, rows)` a vote pass holds.
+/// the class rows `(row_begin, rows)` a vote pass holds, and the address of the scene's
+/// means.
 pub(crate) fn center_params(
     cam: &Camera,
-    n: u32,
+    scene: &GpuScene,
     cfg: &FuseConfig,
     occlusion: bool,
     (row_begin, rows): (u32, u32),
-) -> CenterParams {
-    CenterParams {
+) -> Result<CenterParams> {
+    Ok(CenterParams {
         world_to_camera: camera_rows_f32(cam),
+        means_addr: scene.params.means.address_words(12)?,
         fx: cam.fx as f32,
         fy: cam.fy as f32,
         cx: cam.cx as f32,
@@ -907,10 +907,10 @@ pub(crate) fn center_params(
         occlusion: u32::from(occlusion),
         width: cam.width,
         height: cam.height,
-        n,
+        n: scene.n,
         row_begin,
         rows,
-    }
+    })
 }
 
 /// Records the vote of every projected center into the pass's rows; with `depth`, only
@@ -925,11 +925,10 @@ fn dispatch_vote(
     cfg: &FuseConfig,
 ) -> Result<()> {
     let rows = (pass.row_begin as u32, pass.rows as u32);
-    let params = center_params(cam, scene.n, cfg, depth.is_some(), rows);
+    let params = center_params(cam, scene, cfg, depth.is_some(), rows)?;
     rec.dispatch(
         ids::FUSE_VOTE,
         &[
-            ("means", &scene.params.means),
             ("labels", labels),
             ("depth", depth.unwrap_or(labels)),
             ("votes", &pass.evidence),

@@ -167,11 +167,10 @@ fn dispatch_center_pixels(
     cfg: &FuseConfig,
 ) -> Result<()> {
     // No class rows: the observations take every label.
-    let params = center_params(cam, scene.n, cfg, depth.is_some(), (0, 0));
+    let params = center_params(cam, scene, cfg, depth.is_some(), (0, 0))?;
     rec.dispatch(
         ids::FUSE_CENTER_PIXEL,
         &[
-            ("means", &scene.params.means),
             // Never read without occlusion: any readable buffer fills the binding.
             ("depth", depth.unwrap_or(&scene.params.means)),
             ("pixels", out),

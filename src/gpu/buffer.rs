@@ -18,6 +18,8 @@ pub struct Buffer {
     allocation: Option<Allocation>,
     size: u64,
     name: String,
+    /// The buffer's device address (device-local buffers; 0 for staging buffers).
+    address: u64,
 }
 
 impl Buffer {
@@ -28,6 +30,27 @@ impl Buffer {
 
     pub fn name(&self) -> &str {
         &self.name
+    }
+
+    /// The address kernels reach this buffer at (`GL_EXT_buffer_reference`), as the two
+    /// 32-bit words of a `uvec2` push constant, for an array of `elem_bytes`-byte elements.
+    ///
+    /// Kernels that index per-Gaussian arrays at arbitrary Gaussians (through the tile
+    /// lists) reach them by address, not by a binding: a binding is capped at
+    /// maxStorageBufferRange (128 MiB on lavapipe, 8.4M Gaussians of 16 bytes), an address
+    /// only by the buffer's own size. A shader's index is a signed 32-bit value, so the
+    /// array may hold at most `i32::MAX` elements.
+    pub fn address_words(&self, elem_bytes: u64) -> GpuResult<[u32; 2]> {
+        assert!(self.address != 0, "{} has no device address", self.name);
+        let elements = self.size / elem_bytes.max(1);
+        if elements > i32::MAX as u64 {
+            return Err(GpuError::Limit(format!(
+                "buffer '{}' holds {elements} elements of {elem_bytes} bytes; a kernel indexes                  at most {} (use fewer Gaussians or fewer classes per pass)",
+                self.name,
+                i32::MAX
+            )));
+        }
+        Ok([self.address as u32, (self.address >> 32) as u32])
     }
 
     /// Writes `data` at the start of this host-mapped (staging) buffer.
@@ -81,6 +104,7 @@ impl Gpu {
                     | vk::BufferUsageFlags::TRANSFER_SRC
                     | vk::BufferUsageFlags::TRANSFER_DST
                     | vk::BufferUsageFlags::INDIRECT_BUFFER
+                    | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS
             }
             _ => vk::BufferUsageFlags::TRANSFER_SRC | vk::BufferUsageFlags::TRANSFER_DST,
         };
@@ -138,12 +162,21 @@ impl Gpu {
             });
         }
         self.name_object(raw, name);
+        let address = if usage.contains(vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS) {
+            let info = vk::BufferDeviceAddressInfo::default().buffer(raw);
+            // SAFETY: a live buffer with memory bound, made with SHADER_DEVICE_ADDRESS on a
+            // device with bufferDeviceAddress enabled (core in Vulkan 1.3, which we require).
+            unsafe { device.get_buffer_device_address(&info) }
+        } else {
+            0
+        };
         Ok(Buffer {
             gpu: self.clone(),
             raw,
             allocation: Some(allocation),
             size,
             name: name.to_string(),
+            address,
         })
     }
 

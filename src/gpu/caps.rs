@@ -324,6 +324,10 @@ fn missing_features(
             subgroup.subgroup_size
         ));
     }
+    // Kernels reach large per-Gaussian arrays by address (mandatory in Vulkan 1.3).
+    if features.v12.buffer_device_address == 0 {
+        missing.push("bufferDeviceAddress".into());
+    }
     let v13 = &features.v13;
     if has_13 && (v13.subgroup_size_control == 0 || v13.compute_full_subgroups == 0) {
         missing.push("subgroupSizeControl with computeFullSubgroups".into());

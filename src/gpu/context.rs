@@ -378,7 +378,7 @@ fn create_allocator(
         device: device.clone(),
         physical_device: physical,
         debug_settings: Default::default(),
-        buffer_device_address: false,
+        buffer_device_address: true,
         allocation_sizes: Default::default(),
     })
     .map_err(|source| GpuError::Allocation {
@@ -407,6 +407,7 @@ fn create_device(
         .shader_buffer_float32_atomic_add(caps.float_atomic_add);
     let mut v12 = vk::PhysicalDeviceVulkan12Features::default()
         .shader_buffer_int64_atomics(caps.int64_atomics)
+        .buffer_device_address(true)
         .storage_buffer8_bit_access(caps.storage_8bit)
         .shader_int8(caps.storage_8bit);
     let mut v13 = vk::PhysicalDeviceVulkan13Features::default()

@@ -209,13 +209,16 @@ impl Recorder {
         // SAFETY: recording into our command buffer with a pipeline that lives in the cache.
         unsafe {
             device.cmd_bind_pipeline(self.parts.cmd, vk::PipelineBindPoint::COMPUTE, k.pipeline);
-            self.gpu.inner.push_descriptor.cmd_push_descriptor_set(
-                self.parts.cmd,
-                vk::PipelineBindPoint::COMPUTE,
-                k.layout,
-                0,
-                &writes,
-            );
+            // A kernel that reaches all its buffers by address binds none.
+            if !writes.is_empty() {
+                self.gpu.inner.push_descriptor.cmd_push_descriptor_set(
+                    self.parts.cmd,
+                    vk::PipelineBindPoint::COMPUTE,
+                    k.layout,
+                    0,
+                    &writes,
+                );
+            }
             if !push.is_empty() {
                 device.cmd_push_constants(
                     self.parts.cmd,

@@ -15,7 +15,7 @@ use super::frame::RenderedFrame;
 use super::gpu_scene::{GaussianParams, GpuScene, HostParams, ParamTensor};
 use super::rasterizer::{Rasterizer, TileLists};
 use super::{project_params, RenderOptions, SemanticMode};
-use crate::contract::params::{FixedResolveParams, SoftmaxParams};
+use crate::contract::params::{BlendParams, FixedResolveParams, SoftmaxBackwardParams};
 use crate::contract::{
     FIXED_GROUPS, FIXED_PARAM_WORDS, FS_NONFINITE, FS_OVERFLOW, FS_STEP_MAX, FS_TOTAL_MAX,
     FS_WORDS, SEM_CHUNK, TILE_SIZE,
@@ -318,14 +318,13 @@ impl SceneGrads {
         };
         rec.dispatch(
             ids::RASTER_SOFTMAX_BACKWARD,
-            &[
-                ("probs", probs),
-                ("grad_probs", &self.probs),
-                ("grad_logits", &self.logits),
-            ],
-            &SoftmaxParams {
+            &[],
+            &SoftmaxBackwardParams {
                 n: self.n,
                 channels: self.channels,
+                probs_addr: probs.address_words(4)?,
+                grad_probs_addr: self.probs.address_words(4)?,
+                grad_logits_addr: self.logits.address_words(4)?,
             },
             ids::RASTER_SOFTMAX_BACKWARD.groups_for(self.n),
         )?;
@@ -406,10 +405,10 @@ impl TileLists<'_> {
         grads: &SceneGrads,
     ) -> Result<()> {
         let f = &self.frame;
-        let (sem_in, sem_target) = match f.semantics {
-            Some((SemanticMode::RawLogits, buf)) => (buf, &grads.logits),
-            Some((SemanticMode::Softmax, buf)) => (buf, &grads.probs),
-            None => (&grads.placeholder, &grads.placeholder),
+        let sem_target = match f.semantics {
+            Some((SemanticMode::RawLogits, _)) => &grads.logits,
+            Some((SemanticMode::Softmax, _)) => &grads.probs,
+            None => &grads.placeholder,
         };
         let sem_norm = if f.channels > 0 {
             self.sem_norm()
@@ -436,28 +435,28 @@ impl TileLists<'_> {
             Accumulation::FixedPoint => (&grads.screen_fixed, &grads.sem_fixed),
             _ => (&grads.screen, sem_target),
         };
+        // Element sizes for the index bound only: the kernels index 32-bit words.
+        let grad2d_addr = screen_target.address_words(4)?;
+        let grad_sem_addr = sem_target.address_words(4)?;
         for chunk in 0..f.sem_chunks() {
             for start in f.window_starts().rev() {
-                let params = f.blend_params(start, chunk, false);
-                let bindings: [(&str, &Buffer); 11] = [
+                let params = BlendParams {
+                    grad2d_addr,
+                    grad_sem_addr,
+                    ..self.blend_params(start, chunk, false)?
+                };
+                let bindings: [(&str, &Buffer); 7] = [
                     ("tile_ranges", self.ranges()),
                     ("isect_ids", self.isect_ids()),
-                    ("xy_depth_opacity", self.xy_depth_opacity()),
-                    ("xy_frac", self.xy_frac()),
-                    ("conics", self.conics()),
                     ("final_t", self.final_t()),
                     ("last_entry", self.last_entry()),
                     ("n_contrib", self.n_contrib()),
                     ("v_sem_norm", upstream.sem_norm),
                     ("carry", &grads.carry),
-                    ("grad_sem", sem_target),
                 ];
                 // What the alpha, color and screen-space gradients read and write (not the
                 // semantic-only variant).
-                let optional: [(&str, &Buffer); 8] = [
-                    ("grad2d", screen_target),
-                    ("colors", self.colors()),
-                    ("sem_in", sem_in),
+                let optional: [(&str, &Buffer); 5] = [
                     ("sem_norm", sem_norm),
                     ("v_rgb", upstream.rgb),
                     ("v_alpha", upstream.alpha),
@@ -494,12 +493,12 @@ impl TileLists<'_> {
                 },
                 semantic: semantic_rows as u32,
                 accumulate: semantic_rows as u32,
+                fixed_sums_addr: fixed.address_words(8)?,
+                out_grad_addr: target.address_words(4)?,
             };
             rec.dispatch(
                 ids::TRAIN_GRAD_FIXED_RESOLVE,
                 &[
-                    ("fixed_sums", fixed),
-                    ("out_grad", target),
                     ("fixed_params", &grads.fixed.params),
                     ("fixed_status", &grads.fixed.status),
                 ],

@@ -353,10 +353,12 @@ impl GpuScene {
         let probs = self.probs.get().expect("set above");
         rec.dispatch(
             ids::RASTER_SOFTMAX,
-            &[("logits", logits), ("probs", probs)],
+            &[],
             &SoftmaxParams {
                 n: self.n,
                 channels: self.channels,
+                logits_addr: logits.address_words(4)?,
+                probs_addr: probs.address_words(4)?,
             },
             ids::RASTER_SOFTMAX.groups_for(self.n),
         )?;

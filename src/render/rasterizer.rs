@@ -907,12 +907,14 @@ impl Buffers {
             &[
                 ("visible", &b.flags),
                 ("visible_offsets", &b.visible_offsets),
-                ("xy_depth_opacity", &b.xy),
                 ("depth_keys", &b.depth_keys),
                 ("depth_ids", &b.depth_ids),
                 ("status", &b.status),
             ],
-            &CompactParams { n },
+            &CompactParams {
+                xy_depth_opacity_addr: b.xy.address_words(16)?,
+                n,
+            },
             ids::RASTER_COMPACT.groups_for(n + 1),
         )?;
         rec.barrier();
@@ -964,10 +966,10 @@ impl Buffers {
             &[
                 ("status", status),
                 ("depth_ids", whole(&b.depth_ids)),
-                ("tile_rects", whole(&b.rect)),
                 ("sorted_touched", whole(&b.sorted_touched)),
             ],
             &GatherTouchedParams {
+                tile_rects_addr: b.rect.address_words(16)?,
                 row_begin: rows_params.0,
                 row_end: rows_params.1,
             },
@@ -987,11 +989,11 @@ impl Buffers {
                 ("status", status),
                 ("depth_ids", whole(&b.depth_ids)),
                 ("isect_offsets", whole(&b.isect_offsets)),
-                ("tile_rects", whole(&b.rect)),
                 ("isect_keys", whole(&b.isect_keys)),
                 ("isect_ids", whole(&b.isect_ids)),
             ],
             &EmitParams {
+                tile_rects_addr: b.rect.address_words(16)?,
                 tiles_x,
                 capacity: b.isect_cap,
                 row_begin: rows_params.0,
@@ -1065,23 +1067,6 @@ impl FrameSpec<'_> {
     /// Dispatches that cover the semantic channels, SEM_CHUNK at a time (1 for RGB only).
     pub fn sem_chunks(&self) -> u32 {
         self.channels.div_ceil(SEM_CHUNK).max(1)
-    }
-
-    /// Push constants of a blend or blend-backward dispatch over the window at `start`
-    /// and semantic chunk `chunk`; `write_rgb` marks the forward chunk that writes RGB.
-    pub fn blend_params(&self, start: u32, chunk: u32, write_rgb: bool) -> BlendParams {
-        BlendParams {
-            width: self.cam.width,
-            height: self.cam.height,
-            tiles_x: self.tiles_x,
-            channels: self.channels,
-            window_start: start,
-            window_len: self.window_len,
-            chunk_base: chunk * SEM_CHUNK,
-            write_rgb: u32::from(write_rgb),
-            background: self.background,
-            tile_row_base: 0,
-        }
     }
 
     /// Floats of state blending carries per pixel between windows (0 with one window).
@@ -1219,6 +1204,53 @@ impl TileLists<'_> {
         &self.bufs.sem_norm
     }
 
+    /// Addresses of the projected per-Gaussian arrays, for the kernels that read them at
+    /// the Gaussians of the tile lists (gaussian_arrays.glsl).
+    pub fn projected_addrs(&self) -> Result<ProjectedAddrs> {
+        let b = self.bufs;
+        Ok(ProjectedAddrs {
+            xy_depth_opacity: b.xy.address_words(16)?,
+            xy_frac: b.xy_frac.address_words(8)?,
+            conics: b.conic.address_words(16)?,
+            colors: b.color.address_words(16)?,
+        })
+    }
+
+    /// Push constants of a blend or blend-backward dispatch over the window at `start`
+    /// and semantic chunk `chunk` (`write_rgb`: the forward chunk that writes RGB), with
+    /// the addresses of the per-Gaussian arrays it reads: the projected attributes and the
+    /// frame's semantic vectors (or its classes when rendering labels). The backward adds
+    /// its gradient sums' addresses.
+    pub fn blend_params(&self, start: u32, chunk: u32, write_rgb: bool) -> Result<BlendParams> {
+        let f = &self.frame;
+        let projected = self.projected_addrs()?;
+        let sem_in = match (f.labels, f.semantics) {
+            (Some(classes), _) => classes.address_words(4)?,
+            (None, Some((_, sem))) => sem.address_words(4)?,
+            // Never read: the kernel blends no channels.
+            (None, None) => [0; 2],
+        };
+        Ok(BlendParams {
+            width: f.cam.width,
+            height: f.cam.height,
+            tiles_x: f.tiles_x,
+            channels: f.channels,
+            window_start: start,
+            window_len: f.window_len,
+            chunk_base: chunk * SEM_CHUNK,
+            write_rgb: u32::from(write_rgb),
+            background: f.background,
+            tile_row_base: 0,
+            xy_depth_opacity_addr: projected.xy_depth_opacity,
+            xy_frac_addr: projected.xy_frac,
+            conics_addr: projected.conics,
+            colors_addr: projected.colors,
+            sem_in_addr: sem_in,
+            grad2d_addr: [0; 2],
+            grad_sem_addr: [0; 2],
+        })
+    }
+
     /// Records forward blending of the frame into the rasterizer's output images, band by
     /// band where the image's per-pixel buffers pass one binding.
     pub fn record_blend(&self, rec: &mut Recorder) -> Result<()> {
@@ -1237,16 +1269,12 @@ impl TileLists<'_> {
         for chunk in 0..f.sem_chunks() {
             for start in f.window_starts() {
                 for band in &bands {
-                    let mut params = f.blend_params(start, chunk, chunk == 0);
+                    let mut params = self.blend_params(start, chunk, chunk == 0)?;
                     params.tile_row_base = band.first_tile_row;
                     let px = |buf, bytes| band.range(buf, bytes);
                     let mut bindings: Vec<(&str, BufferRange)> = vec![
                         ("tile_ranges", BufferRange::whole(&b.ranges)),
                         ("isect_ids", BufferRange::whole(&b.isect_ids)),
-                        ("xy_depth_opacity", BufferRange::whole(&b.xy)),
-                        ("conics", BufferRange::whole(&b.conic)),
-                        ("colors", BufferRange::whole(&b.color)),
-                        ("xy_frac", BufferRange::whole(&b.xy_frac)),
                         ("carry", carry_range(&b.carry, band, carry_bytes)),
                         ("out_rgb", px(&b.rgb, RGB_BYTES)),
                         ("out_alpha", px(&b.alpha, 4)),
@@ -1256,16 +1284,12 @@ impl TileLists<'_> {
                         ("out_n_contrib", px(&b.n_contrib, 4)),
                     ];
                     let kernel = match (f.labels, f.semantics) {
-                        (Some(classes), _) => {
-                            bindings.extend([
-                                ("classes", BufferRange::whole(classes)),
-                                ("label_best", px(&b.label_best, 8)),
-                            ]);
+                        (Some(_), _) => {
+                            bindings.push(("label_best", px(&b.label_best, 8)));
                             ids::RASTER_BLEND_LABEL
                         }
-                        (None, Some((_, sem))) => {
+                        (None, Some(_)) => {
                             bindings.extend([
-                                ("sem_in", BufferRange::whole(sem)),
                                 ("out_sem", px(&b.sem, sem_bytes)),
                                 ("out_sem_norm", px(&b.sem_norm, sem_bytes)),
                             ]);
@@ -1280,6 +1304,14 @@ impl TileLists<'_> {
         }
         Ok(())
     }
+}
+
+/// Device addresses of the projected per-Gaussian arrays ([`TileLists::projected_addrs`]).
+pub struct ProjectedAddrs {
+    pub xy_depth_opacity: [u32; 2],
+    pub xy_frac: [u32; 2],
+    pub conics: [u32; 2],
+    pub colors: [u32; 2],
 }
 
 /// Bytes of a pixel's RGB.

@@ -285,6 +285,7 @@ impl PlanBuffers {
         // thresholds move to log space.
         let logit = |p: f64| (p / (1.0 - p)).ln();
         let classify = DensifyClassifyParams {
+            log_scales_addr: inputs.log_scales.address_words(4)?,
             n,
             grad_threshold: config.grad_threshold,
             opacity_logit_min: logit(config.min_opacity as f64) as f32,
@@ -303,7 +304,6 @@ impl PlanBuffers {
         rec.dispatch(
             ids::TRAIN_DENSIFY_CLASSIFY,
             &[
-                ("log_scales", inputs.log_scales),
                 ("opacity_logits", inputs.opacity_logits),
                 ("grad_accum", inputs.grad_accum),
                 ("grad_count", inputs.grad_count),
@@ -395,16 +395,16 @@ impl PlanBuffers {
             n: inputs.n,
             ln_split_scale: config.ln_extent(config.percent_dense as f64),
             seed: [config.seed as u32, (config.seed >> 32) as u32],
+            log_scales_addr: inputs.log_scales.address_words(4)?,
+            quats_addr: inputs.quats.address_words(16)?,
+            slot_mean_delta_addr: self.slot_mean_delta.address_words(4)?,
         };
         rec.dispatch(
             ids::TRAIN_DENSIFY_LAYOUT,
             &[
-                ("log_scales", inputs.log_scales),
-                ("quats", inputs.quats),
                 ("out_offsets", &self.out_offsets),
                 ("slot_source", &self.slot_source),
                 ("slot_kind", &self.slot_kind),
-                ("slot_mean_delta", &self.slot_mean_delta),
                 ("status", &self.status),
             ],
             &layout,
@@ -468,7 +468,9 @@ impl Densifier {
 
     fn ensure(&mut self, n: u64, slots: u64) -> Result<()> {
         let n_limit = self.max_n();
-        let slot_limit = self.gpu.caps().max_storage_buffer_range / 12;
+        // The slots' 4-byte arrays each fit one binding (their mean deltas are reached by
+        // address).
+        let slot_limit = self.gpu.caps().max_storage_buffer_range / 4;
         ensure!(
             n <= n_limit && slots <= slot_limit,
             "densify: {n} Gaussians ({slots} after the step) exceed this device's limits \
@@ -560,6 +562,7 @@ impl Densifier {
             first_slot: 0,
             src_first: 0,
             src_count: plan.n,
+            slot_mean_delta_addr: [0; 2], // set by record_gather
         };
         self.record_gather(rec, tensor, &out, &params, plan)?;
         Ok(out)
@@ -627,6 +630,7 @@ impl Densifier {
                     first_slot: slots.start,
                     src_first: sources.start,
                     src_count: sources.len() as u32,
+                    slot_mean_delta_addr: b.slot_mean_delta.address_words(4)?,
                     ..*whole
                 };
                 // A 2D grid: one element per invocation can pass 65,535 workgroups.
@@ -638,7 +642,6 @@ impl Densifier {
                     &[
                         ("slot_source", BufferRange::whole(&b.slot_source)),
                         ("slot_kind", BufferRange::whole(&b.slot_kind)),
-                        ("slot_mean_delta", BufferRange::whole(&b.slot_mean_delta)),
                         ("src", part_of(tensor, &sources, row_bytes)),
                         ("dst", part_of(out, &slots, row_bytes)),
                     ],

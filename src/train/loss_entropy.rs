@@ -63,12 +63,10 @@ impl ImageLoss {
         rec.barrier();
         rec.dispatch(
             ids::TRAIN_ENTROPY,
-            &[
-                ("logits", logits),
-                ("grad_logits", grad_logits),
-                ("partials", &self.partials),
-            ],
+            &[("partials", &self.partials)],
             &EntropyParams {
+                logits_addr: logits.address_words(4)?,
+                grad_logits_addr: grad_logits.address_words(4)?,
                 n,
                 channels,
                 stride: self.stride,

@@ -1,0 +1,24 @@
+// Per-Gaussian arrays that a kernel indexes at arbitrary Gaussians (the ids in tile lists,
+// or every Gaussian of a scene in one dispatch) are reached by buffer device address, not
+// through a binding: one binding is capped at maxStorageBufferRange (128 MiB on lavapipe,
+// 8.4M Gaussians of 16 bytes, 3.3M of the 40-byte screen-space gradient), an address only
+// by the buffer's size. The host passes each array's address in the kernel's push
+// constants as a uvec2 (`Buffer::address_words`), and the includer names the array with a
+// macro, e.g. `#define conics Vec4Array(pc.conics_addr)`, so the kernel body indexes it
+// like a bound buffer (`conics.data[g]`).
+#ifndef GAUSSIAN_ARRAYS_GLSL
+#define GAUSSIAN_ARRAYS_GLSL
+#extension GL_EXT_buffer_reference : require
+#extension GL_EXT_buffer_reference_uvec2 : require
+
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer Vec4Array { vec4 data[]; };
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer UVec4Array { uvec4 data[]; };
+layout(buffer_reference, std430, buffer_reference_align = 8) readonly buffer Vec2Array { vec2 data[]; };
+layout(buffer_reference, std430, buffer_reference_align = 8) readonly buffer UVec2Array { uvec2 data[]; };
+layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer FloatArray { float data[]; };
+layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer UintArray { uint data[]; };
+// Arrays kernels write (gradient sums, often atomically).
+layout(buffer_reference, std430, buffer_reference_align = 4) buffer FloatArrayRW { float data[]; };
+layout(buffer_reference, std430, buffer_reference_align = 4) buffer UintArrayRW { uint data[]; };
+
+#endif
