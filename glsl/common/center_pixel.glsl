@@ -9,6 +9,8 @@
 layout(push_constant) uniform CenterParams {
     vec4 world_to_camera[3]; // rows (R00 R01 R02 t0), ...
     uvec2 means_addr;        // the scene's means [n][3] (gaussian_arrays.glsl)
+    uvec2 out_addr;          // vote: the pass's vote rows [rows][n]; observations: each
+                             // Gaussian's center pixel [n]
     float fx;
     float fy;
     float cx;

@@ -21,12 +21,12 @@ struct FoldState {
     uint tied;      // 1 when another class equals the winner on all three
 };
 
-layout(set = 0, binding = 0) readonly buffer EvidenceBuf { uint data[]; } evidence; // [rows][n] entries
 layout(set = 0, binding = 1) readonly buffer KnnBuf { uint data[]; } knn;           // [count][k], from `first`
 layout(set = 0, binding = 2) readonly buffer RankBuf { uint data[]; } scene_rank;   // [classes]
 layout(set = 0, binding = 3) buffer StateBuf { FoldState data[]; } state;           // [count], from `first`
 
 layout(push_constant) uniform FoldParams {
+    uvec2 evidence_addr; // [rows][n] entries (evidence_entry.glsl)
     uint n;
     uint words;     // words per evidence entry: 1 (vote counts) or 2 (64-bit fixed point)
     uint first;     // the chunk's first Gaussian

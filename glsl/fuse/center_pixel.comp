@@ -8,9 +8,9 @@
 layout(local_size_x = 256) in;
 
 layout(set = 0, binding = 1) readonly buffer DepthBuf { float data[]; } depth;
-layout(set = 0, binding = 2) writeonly buffer PixelsBuf { uint data[]; } pixels; // [n]
 
 #include "center_pixel.glsl"
+#define pixels UintArrayRW(pc.out_addr) // [n]
 
 void main() {
     uint i = gl_GlobalInvocationID.x;

@@ -8,7 +8,6 @@
 
 layout(local_size_x = 256) in;
 
-layout(set = 0, binding = 0) readonly buffer EvidenceBuf { uint data[]; } evidence; // [rows][n] entries
 layout(set = 0, binding = 1) writeonly buffer PartialsBuf { uvec4 data[]; } partials; // [rows][spans]: sum lo, hi, carries, 0
 
 layout(push_constant) uniform MassParams {
@@ -16,6 +15,7 @@ layout(push_constant) uniform MassParams {
     uint words; // words per evidence entry: 1 (vote counts) or 2 (64-bit fixed point)
     uint span;  // Gaussians per workgroup, a multiple of 256
     uint spans; // workgroups per row
+    uvec2 evidence_addr; // [rows][n] entries (evidence_entry.glsl)
 } pc;
 
 #include "evidence_entry.glsl"

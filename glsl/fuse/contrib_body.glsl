@@ -30,6 +30,7 @@ layout(push_constant) uniform ContribParams {
     uvec2 xy_depth_opacity_addr;
     uvec2 xy_frac_addr;
     uvec2 conics_addr;
+    uvec2 contrib_addr; // the pass's evidence rows, [rows][n] (the includer's entry type)
     uint width;
     uint height;
     uint tiles_x;

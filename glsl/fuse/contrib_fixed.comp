@@ -5,7 +5,8 @@
 #extension GL_EXT_shader_atomic_int64 : require
 #include "contrib_body.glsl"
 
-layout(set = 0, binding = 6) buffer ContribBuf { uint64_t data[]; } contrib; // [rows][n]
+layout(buffer_reference, std430, buffer_reference_align = 8) buffer U64ArrayRW { uint64_t data[]; };
+#define contrib U64ArrayRW(pc.contrib_addr) // [rows][n]
 
 void accumulate(uint row, uint gaussian, float w) {
     // w < 1, so its fixed-point value fits 32 bits; summing 16-bit halves keeps the

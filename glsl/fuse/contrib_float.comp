@@ -3,7 +3,7 @@
 #extension GL_EXT_shader_atomic_float : require
 #include "contrib_body.glsl"
 
-layout(set = 0, binding = 6) buffer ContribBuf { float data[]; } contrib; // [rows][n]
+#define contrib FloatArrayRW(pc.contrib_addr) // [rows][n]
 
 void accumulate(uint row, uint gaussian, float w) {
     if (subgroupAllEqual(row)) {

@@ -9,9 +9,9 @@ layout(local_size_x = 256) in;
 
 layout(set = 0, binding = 1) readonly buffer LabelsBuf { uint data[]; } labels;
 layout(set = 0, binding = 2) readonly buffer DepthBuf { float data[]; } depth;
-layout(set = 0, binding = 3) buffer VotesBuf { uint data[]; } votes; // [rows][n]
 
 #include "center_pixel.glsl"
+#define votes UintArrayRW(pc.out_addr) // [rows][n]
 
 void main() {
     uint i = gl_GlobalInvocationID.x;

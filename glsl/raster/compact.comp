@@ -7,17 +7,23 @@
 layout(local_size_x = 256) in;
 
 layout(push_constant) uniform CompactParams {
-    uvec2 xy_depth_opacity_addr; // per Gaussian (gaussian_arrays.glsl)
+    // Per Gaussian, by address (gaussian_arrays.glsl): the flags and their scan (n + 1
+    // each), the projected attributes, and the depth keys and ids written.
+    uvec2 visible_addr;
+    uvec2 visible_offsets_addr;
+    uvec2 xy_depth_opacity_addr;
+    uvec2 depth_keys_addr;
+    uvec2 depth_ids_addr;
     uint n;
 } pc;
 
 #include "gaussian_arrays.glsl"
+#define visible UintArray(pc.visible_addr)
+#define visible_offsets UintArray(pc.visible_offsets_addr)
 #define xy_depth_opacity Vec4Array(pc.xy_depth_opacity_addr)
+#define depth_keys UintArrayRW(pc.depth_keys_addr)
+#define depth_ids UintArrayRW(pc.depth_ids_addr)
 
-layout(set = 0, binding = 0) readonly buffer FlagsBuf { uint data[]; } visible;
-layout(set = 0, binding = 1) readonly buffer OffsetsBuf { uint data[]; } visible_offsets; // n + 1
-layout(set = 0, binding = 3) writeonly buffer KeysBuf { uint data[]; } depth_keys;
-layout(set = 0, binding = 4) writeonly buffer IdsBuf { uint data[]; } depth_ids;
 layout(set = 0, binding = 5) writeonly buffer StatusBuf { uint data[]; } status;
 
 void main() {

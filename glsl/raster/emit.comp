@@ -19,7 +19,11 @@
 layout(local_size_x = EMIT_GROUP) in;
 
 layout(push_constant) uniform EmitParams {
-    uvec2 tile_rects_addr; // per Gaussian (gaussian_arrays.glsl)
+    // By address (gaussian_arrays.glsl): per Gaussian its tile rectangle, per visible
+    // Gaussian in depth order its id and first slot (V + 1).
+    uvec2 tile_rects_addr;
+    uvec2 depth_ids_addr;
+    uvec2 isect_offsets_addr;
     uint tiles_x;
     uint capacity;
     uint row_begin; // first tile row binned (see gather_touched.comp)
@@ -28,10 +32,10 @@ layout(push_constant) uniform EmitParams {
 
 #include "gaussian_arrays.glsl"
 #define tile_rects UVec4Array(pc.tile_rects_addr)
+#define depth_ids UintArray(pc.depth_ids_addr)
+#define isect_offsets UintArray(pc.isect_offsets_addr)
 
 layout(set = 0, binding = 0) buffer StatusBuf { uint data[]; } status;
-layout(set = 0, binding = 1) readonly buffer IdsBuf { uint data[]; } depth_ids;
-layout(set = 0, binding = 2) readonly buffer OffsetsBuf { uint data[]; } isect_offsets; // V + 1
 layout(set = 0, binding = 4) writeonly buffer KeysBuf { uint data[]; } isect_keys;
 layout(set = 0, binding = 5) writeonly buffer ValsBuf { uint data[]; } isect_ids;
 

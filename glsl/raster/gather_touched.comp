@@ -8,17 +8,21 @@
 layout(local_size_x = 256) in;
 
 layout(push_constant) uniform GatherTouchedParams {
-    uvec2 tile_rects_addr; // per Gaussian (gaussian_arrays.glsl)
+    // By address (gaussian_arrays.glsl): per Gaussian its tile rectangle, per visible
+    // Gaussian in depth order its id and (written) its tile count.
+    uvec2 tile_rects_addr;
+    uvec2 depth_ids_addr;
+    uvec2 sorted_touched_addr;
     uint row_begin; // first tile row binned
     uint row_end;   // one past the last
 } pc;
 
 #include "gaussian_arrays.glsl"
 #define tile_rects UVec4Array(pc.tile_rects_addr)
+#define depth_ids UintArray(pc.depth_ids_addr)
+#define sorted_touched UintArrayRW(pc.sorted_touched_addr)
 
 layout(set = 0, binding = 0) readonly buffer StatusBuf { uint data[]; } status;
-layout(set = 0, binding = 1) readonly buffer IdsBuf { uint data[]; } depth_ids;
-layout(set = 0, binding = 3) writeonly buffer SortedTouchedBuf { uint data[]; } sorted_touched;
 
 void main() {
     uint j = gl_GlobalInvocationID.x;

@@ -4,9 +4,9 @@
 #extension GL_EXT_shader_atomic_int64 : require
 
 #include "blend_params.glsl" // the gradient arrays' addresses
-layout(buffer_reference, std430, buffer_reference_align = 8) buffer U64Sums { uint64_t data[]; };
-#define grad2d U64Sums(pc.grad2d_addr)
-#define grad_sem U64Sums(pc.grad_sem_addr)
+layout(buffer_reference, std430, buffer_reference_align = 8) buffer U64ArrayRW { uint64_t data[]; };
+#define grad2d U64ArrayRW(pc.grad2d_addr)
+#define grad_sem U64ArrayRW(pc.grad_sem_addr)
 
 #include "grad_fixed_common.glsl"
 

@@ -10,14 +10,20 @@
 layout(local_size_x = SCAN_WG_SIZE) in;
 
 layout(push_constant) uniform ScanDownsweepParams {
+    // This level's elements, their scan, and the next level's scanned sums, by address
+    // (gaussian_arrays.glsl; src and dst may be the same array).
+    uvec2 src_addr;
+    uvec2 dst_addr;
+    uvec2 offsets_addr;
     uint level;
     uint has_offsets; // 0 at the top level: its single block starts at 0
 } pc;
 
 layout(set = 0, binding = 0) readonly buffer StateBuf { uint data[]; } state;
-layout(set = 0, binding = 1) readonly buffer SrcBuf { uint data[]; } src;
-layout(set = 0, binding = 2) writeonly buffer DstBuf { uint data[]; } dst;
-layout(set = 0, binding = 3) readonly buffer OffsetsBuf { uint data[]; } offsets;
+#include "gaussian_arrays.glsl"
+#define src UintArray(pc.src_addr)
+#define dst UintArrayRW(pc.dst_addr)
+#define offsets UintArray(pc.offsets_addr)
 
 shared uint tile[SCAN_BLOCK];
 

@@ -8,11 +8,18 @@
 
 layout(local_size_x = SCAN_WG_SIZE) in;
 
-layout(push_constant) uniform ScanReduceParams { uint level; } pc;
+layout(push_constant) uniform ScanReduceParams {
+    // This level's elements and the next level's, by address (gaussian_arrays.glsl).
+    uvec2 src_addr;
+    uvec2 sums_addr;
+    uint level;
+} pc;
+
+#include "gaussian_arrays.glsl"
+#define src UintArray(pc.src_addr)
+#define sums UintArrayRW(pc.sums_addr)
 
 layout(set = 0, binding = 0) readonly buffer StateBuf { uint data[]; } state;
-layout(set = 0, binding = 1) readonly buffer SrcBuf { uint data[]; } src;
-layout(set = 0, binding = 2) writeonly buffer SumsBuf { uint data[]; } sums;
 
 void main() {
     uint n = state.data[pc.level];

@@ -7,13 +7,9 @@
 
 layout(local_size_x = SORT_WG_SIZE) in;
 
-layout(push_constant) uniform SortPassParams {
-    uint shift;
-    uint bits; // digit width of this pass, 0..=RADIX_BITS
-} pc;
+#include "pass_params.glsl"
 
 layout(set = 0, binding = 0) readonly buffer StateBuf { uint data[]; } state;
-layout(set = 0, binding = 1) readonly buffer KeysBuf { uint data[]; } keys;
 layout(set = 0, binding = 2) writeonly buffer CountsBuf { uint data[]; } counts;
 
 shared uint hist[RADIX];
@@ -30,7 +26,7 @@ void main() {
     [[unroll]] for (uint i = 0; i < SORT_ITEMS; i++) {
         uint g = base + i * SORT_WG_SIZE + t;
         if (g < n) {
-            atomicAdd(hist[bitfieldExtract(keys.data[g], int(pc.shift), int(pc.bits))], 1);
+            atomicAdd(hist[bitfieldExtract(keys_in.data[g], int(pc.shift), int(pc.bits))], 1);
         }
     }
     barrier();

@@ -14,16 +14,9 @@
 
 layout(local_size_x = SORT_WG_SIZE) in;
 
-layout(push_constant) uniform SortPassParams {
-    uint shift;
-    uint bits;
-} pc;
+#include "pass_params.glsl"
 
 layout(set = 0, binding = 0) readonly buffer StateBuf { uint data[]; } state;
-layout(set = 0, binding = 1) readonly buffer KeysInBuf { uint data[]; } keys_in;
-layout(set = 0, binding = 2) readonly buffer ValuesInBuf { uint data[]; } values_in;
-layout(set = 0, binding = 3) writeonly buffer KeysOutBuf { uint data[]; } keys_out;
-layout(set = 0, binding = 4) writeonly buffer ValuesOutBuf { uint data[]; } values_out;
 layout(set = 0, binding = 5) readonly buffer OffsetsBuf { uint data[]; } offsets; // scanned counts
 
 // Subgroups of at least 4 lanes.

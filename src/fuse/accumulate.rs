@@ -141,16 +141,18 @@ fn bytes_per_entry(method: Method, acc: Accumulation) -> u64 {
 pub fn rows_per_pass(gpu: &Gpu, cfg: &FuseConfig, classes: usize, n: usize) -> Result<usize> {
     let per_row = bytes_per_entry(cfg.method, cfg.accumulation) * n.max(1) as u64;
     let caps = gpu.caps();
+    // The kernels reach the rows by address, so a pass is one allocation of at most
+    // 2^31 words (a kernel's index is a signed 32-bit value), not one binding.
+    let one_buffer = caps.max_allocation.min(i32::MAX as u64 * 4);
     let budget = cfg
         .mem_budget
         .unwrap_or(caps.device_local_bytes() / 4)
-        .min(caps.max_storage_buffer_range);
+        .min(one_buffer);
     let rows = (budget / per_row) as usize;
     if rows == 0 {
         bail!(
             "one class row of the evidence matrix takes {per_row} bytes for {n} Gaussians, over the memory budget \
-             of {budget} bytes (raise --mem-budget; one buffer binding holds at most {} bytes on this device)",
-            caps.max_storage_buffer_range
+             of {budget} bytes (raise --mem-budget; one buffer holds at most {one_buffer} bytes on this device)"
         );
     }
     Ok(rows.min(classes.max(1)))
@@ -772,12 +774,14 @@ fn record_contrib(
     let f = &tiles.frame;
     let bands = f.bands(CONTRIB_CARRY_BYTES)?;
     let projected = tiles.projected_addrs()?;
+    let contrib_addr = pass.evidence.address_words(4)?;
     for start in f.window_starts() {
         for band in &bands {
             let params = ContribParams {
                 xy_depth_opacity_addr: projected.xy_depth_opacity,
                 xy_frac_addr: projected.xy_frac,
                 conics_addr: projected.conics,
+                contrib_addr,
                 width: f.cam.width,
                 height: f.cam.height,
                 tiles_x: f.tiles_x,
@@ -797,7 +801,6 @@ fn record_contrib(
                     ("isect_ids", BufferRange::whole(tiles.isect_ids())),
                     ("labels", band.range(labels, 4)),
                     ("carry", band.range(carry, CONTRIB_CARRY_BYTES)),
-                    ("contrib", BufferRange::whole(&pass.evidence)),
                     ("status", tiles.status()),
                 ],
                 &params,
@@ -885,18 +888,20 @@ fn run_vote(
 
 /// Push constants of the kernels that look up each Gaussian's center pixel (the vote and
 /// the consensus's observations): the camera, clip range and occlusion test of `cfg`, and
-/// the class rows `(row_begin, rows)` a vote pass holds, and the address of the scene's
-/// means.
+/// the class rows `(row_begin, rows)` a vote pass holds, and the addresses of the scene's
+/// means and of the output (a vote pass's rows, or the observations' center pixels).
 pub(crate) fn center_params(
     cam: &Camera,
     scene: &GpuScene,
     cfg: &FuseConfig,
     occlusion: bool,
     (row_begin, rows): (u32, u32),
+    out_addr: [u32; 2],
 ) -> Result<CenterParams> {
     Ok(CenterParams {
         world_to_camera: camera_rows_f32(cam),
         means_addr: scene.params.means.address_words(12)?,
+        out_addr,
         fx: cam.fx as f32,
         fy: cam.fy as f32,
         cx: cam.cx as f32,
@@ -925,14 +930,11 @@ fn dispatch_vote(
     cfg: &FuseConfig,
 ) -> Result<()> {
     let rows = (pass.row_begin as u32, pass.rows as u32);
-    let params = center_params(cam, scene, cfg, depth.is_some(), rows)?;
+    let votes = pass.evidence.address_words(4)?;
+    let params = center_params(cam, scene, cfg, depth.is_some(), rows, votes)?;
     rec.dispatch(
         ids::FUSE_VOTE,
-        &[
-            ("labels", labels),
-            ("depth", depth.unwrap_or(labels)),
-            ("votes", &pass.evidence),
-        ],
+        &[("labels", labels), ("depth", depth.unwrap_or(labels))],
         &params,
         ids::FUSE_VOTE.groups_for(scene.n),
     )?;

@@ -8,7 +8,7 @@
 //! Kernels: `fuse/class_mass` sums each row exactly (the scene mass), `fuse/assign_fold`
 //! folds a pass's rows into the per-Gaussian state.
 
-use anyhow::{ensure, Result};
+use anyhow::{ensure, Context, Result};
 use bytemuck::{Pod, Zeroable};
 
 use super::assign::Assignment;
@@ -84,8 +84,11 @@ impl<'a> GpuAssigner<'a> {
         );
         let per_gaussian = STATE_BYTES.max(4 * k as u64);
         let group = ids::FUSE_ASSIGN_FOLD.info().workgroup_size[0];
-        let chunk = chunk_len(per_gaussian, 0, gpu.caps().max_storage_buffer_range)
-            .expect("a granule of Gaussians fits any binding")
+        let max_range = gpu.caps().max_storage_buffer_range;
+        let chunk = chunk_len(per_gaussian, 0, max_range)
+            .with_context(|| {
+                format!("one granule of Gaussians' fold state passes the {max_range}-byte binding limit")
+            })?
             .min(gpu.caps().max_workgroup_count[0].saturating_mul(group));
         let state = gpu.buffer("assign-state", (n as u64 * STATE_BYTES).max(STATE_BYTES))?;
         let mut rec = Recorder::new(gpu)?;
@@ -121,9 +124,11 @@ impl<'a> GpuAssigner<'a> {
             self.masses[row_begin + r] = Some(mass);
         }
         self.gpu.upload(&self.ranks, 0, &mass_ranks(&self.masses))?;
+        let evidence_addr = evidence.address_words(4)?;
         let mut rec = Recorder::new(self.gpu)?;
         for range in chunks(self.n, self.chunk) {
             let params = FoldParams {
+                evidence_addr,
                 n: self.n,
                 words: self.words(),
                 first: range.start,
@@ -139,7 +144,6 @@ impl<'a> GpuAssigner<'a> {
             rec.dispatch_ranges(
                 ids::FUSE_ASSIGN_FOLD,
                 &[
-                    ("evidence", BufferRange::whole(evidence)),
                     ("knn", knn),
                     ("scene_rank", BufferRange::whole(&self.ranks)),
                     ("state", part_of(&self.state, &range, STATE_BYTES)),
@@ -168,11 +172,12 @@ impl<'a> GpuAssigner<'a> {
             words: self.words(),
             span,
             spans,
+            evidence_addr: evidence.address_words(4)?,
         };
         let mut rec = Recorder::new(self.gpu)?;
         rec.dispatch(
             ids::FUSE_CLASS_MASS,
-            &[("evidence", evidence), ("partials", &partials)],
+            &[("partials", &partials)],
             &params,
             [spans, rows as u32, 1],
         )?;

@@ -167,13 +167,19 @@ fn dispatch_center_pixels(
     cfg: &FuseConfig,
 ) -> Result<()> {
     // No class rows: the observations take every label.
-    let params = center_params(cam, scene, cfg, depth.is_some(), (0, 0))?;
+    let params = center_params(
+        cam,
+        scene,
+        cfg,
+        depth.is_some(),
+        (0, 0),
+        out.address_words(4)?,
+    )?;
     rec.dispatch(
         ids::FUSE_CENTER_PIXEL,
         &[
             // Never read without occlusion: any readable buffer fills the binding.
             ("depth", depth.unwrap_or(&scene.params.means)),
-            ("pixels", out),
         ],
         &params,
         ids::FUSE_CENTER_PIXEL.groups_for(scene.n),

@@ -42,6 +42,9 @@ pub struct DeviceCaps {
     #[serde(skip)]
     pub timestamp_valid_bits: u32,
     pub max_storage_buffer_range: u64,
+    /// The largest single allocation (maxMemoryAllocationSize, 2 GiB on lavapipe): what
+    /// one buffer reached by address may hold.
+    pub max_allocation: u64,
     /// Byte alignment of a storage buffer range's offset (minStorageBufferOffsetAlignment):
     /// work split into chunks binds each chunk's range at a multiple of it.
     pub min_storage_offset_alignment: u64,
@@ -154,6 +157,7 @@ pub fn probe_device(instance: &ash::Instance, pd: vk::PhysicalDevice) -> (Device
         timestamp_period_ns: base.limits.timestamp_period as f64,
         timestamp_valid_bits,
         max_storage_buffer_range: base.limits.max_storage_buffer_range as u64,
+        max_allocation: props.maintenance3.max_memory_allocation_size,
         min_storage_offset_alignment: base.limits.min_storage_buffer_offset_alignment,
         max_workgroup_count: base.limits.max_compute_work_group_count,
         max_shared_memory: base.limits.max_compute_shared_memory_size,
@@ -181,6 +185,7 @@ struct ChainedProperties {
     subgroup: vk::PhysicalDeviceSubgroupProperties<'static>,
     driver: vk::PhysicalDeviceDriverProperties<'static>,
     size_control: vk::PhysicalDeviceSubgroupSizeControlProperties<'static>,
+    maintenance3: vk::PhysicalDeviceMaintenance3Properties<'static>,
 }
 
 fn query_properties(
@@ -191,10 +196,12 @@ fn query_properties(
     let mut subgroup = vk::PhysicalDeviceSubgroupProperties::default();
     let mut driver = vk::PhysicalDeviceDriverProperties::default();
     let mut size_control = vk::PhysicalDeviceSubgroupSizeControlProperties::default();
+    let mut maintenance3 = vk::PhysicalDeviceMaintenance3Properties::default();
     {
         let mut props = vk::PhysicalDeviceProperties2::default()
             .push_next(&mut subgroup)
-            .push_next(&mut driver);
+            .push_next(&mut driver)
+            .push_next(&mut maintenance3);
         if has_13 {
             props = props.push_next(&mut size_control);
         }
@@ -205,10 +212,12 @@ fn query_properties(
     subgroup.p_next = std::ptr::null_mut();
     driver.p_next = std::ptr::null_mut();
     size_control.p_next = std::ptr::null_mut();
+    maintenance3.p_next = std::ptr::null_mut();
     ChainedProperties {
         subgroup,
         driver,
         size_control,
+        maintenance3,
     }
 }
 

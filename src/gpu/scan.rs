@@ -29,9 +29,9 @@ impl PrefixScan {
     pub fn new(gpu: &Gpu, capacity: u64) -> GpuResult<PrefixScan> {
         let caps = gpu.caps();
         let max_groups = caps.max_workgroup_count[0] as u64;
-        let max_elems = (caps.max_storage_buffer_range / 4)
-            .min(max_groups * SCAN_BLOCK)
-            .min(u32::MAX as u64);
+        // Kernels reach the levels by address: one dispatch's workgroups (and a kernel's
+        // signed 32-bit index) bound a scan, not one binding.
+        let max_elems = (max_groups * SCAN_BLOCK).min(i32::MAX as u64);
         if capacity > max_elems {
             return Err(GpuError::Limit(format!(
                 "prefix scan of {capacity} elements exceeds this device's limit of {max_elems}"
@@ -111,15 +111,13 @@ impl PrefixScan {
         let args_offset = |level: usize| (ARGS_OFFSET + 3 * level as u64) * 4;
         for level in 0..levels - 1 {
             let params = ScanReduceParams {
+                src_addr: self.level_buffer(input, level).address_words(4)?,
+                sums_addr: self.partials[level].address_words(4)?,
                 level: level as u32,
             };
             rec.dispatch_indirect(
                 ids::SCAN_REDUCE,
-                &[
-                    ("state", &self.state),
-                    ("src", self.level_buffer(input, level)),
-                    ("sums", &self.partials[level]),
-                ],
+                &[("state", &self.state)],
                 &params,
                 &self.state,
                 args_offset(level),
@@ -133,24 +131,22 @@ impl PrefixScan {
             } else {
                 &self.partials[level - 1]
             };
-            // The top level has no offsets; bind the state buffer as a stand-in.
-            let offsets = if top {
-                &self.state
+            // The top level has no offsets (never read there).
+            let offsets_addr = if top {
+                [0; 2]
             } else {
-                &self.partials[level]
+                self.partials[level].address_words(4)?
             };
             let params = ScanDownsweepParams {
+                src_addr: self.level_buffer(input, level).address_words(4)?,
+                dst_addr: dst.address_words(4)?,
+                offsets_addr,
                 level: level as u32,
                 has_offsets: u32::from(!top),
             };
             rec.dispatch_indirect(
                 ids::SCAN_DOWNSWEEP,
-                &[
-                    ("state", &self.state),
-                    ("src", self.level_buffer(input, level)),
-                    ("dst", dst),
-                    ("offsets", offsets),
-                ],
+                &[("state", &self.state)],
                 &params,
                 &self.state,
                 args_offset(level),

@@ -61,12 +61,13 @@ impl RadixSort {
     pub fn new(gpu: &Gpu, capacity: u64) -> GpuResult<RadixSort> {
         let caps = gpu.caps();
         let max_groups = caps.max_workgroup_count[0] as u64;
-        let max_elems = (caps.max_storage_buffer_range / 4).min(max_groups * SORT_BLOCK);
+        // The passes reach keys and values by address: what bounds a sort is one
+        // dispatch's workgroups (and a kernel's signed 32-bit index), not one binding.
+        let max_elems = (max_groups * SORT_BLOCK).min(i32::MAX as u64);
         if capacity > max_elems {
             return Err(GpuError::Limit(format!(
                 "radix sort of {capacity} pairs exceeds this device's limit of {max_elems} \
-                 (one storage binding holds {} bytes)",
-                caps.max_storage_buffer_range
+                 ({max_groups} workgroups of {SORT_BLOCK})"
             )));
         }
         let blocks = capacity.div_ceil(SORT_BLOCK).max(1);
@@ -124,14 +125,17 @@ impl RadixSort {
             } else {
                 (&self.tmp_keys, &self.tmp_values, keys, values)
             };
-            let params = SortPassParams { shift, bits: width };
+            let params = SortPassParams {
+                keys_in_addr: src_k.address_words(4)?,
+                values_in_addr: src_v.address_words(4)?,
+                keys_out_addr: dst_k.address_words(4)?,
+                values_out_addr: dst_v.address_words(4)?,
+                shift,
+                bits: width,
+            };
             rec.dispatch_indirect(
                 ids::SORT_COUNT,
-                &[
-                    ("state", &self.state),
-                    ("keys", src_k),
-                    ("counts", &self.counts),
-                ],
+                &[("state", &self.state), ("counts", &self.counts)],
                 &params,
                 &self.state,
                 0,
@@ -140,14 +144,7 @@ impl RadixSort {
             self.scan.record_scan(rec, &self.counts, &self.counts)?;
             rec.dispatch_indirect(
                 ids::SORT_SCATTER,
-                &[
-                    ("state", &self.state),
-                    ("keys_in", src_k),
-                    ("values_in", src_v),
-                    ("keys_out", dst_k),
-                    ("values_out", dst_v),
-                    ("offsets", &self.counts),
-                ],
+                &[("state", &self.state), ("offsets", &self.counts)],
                 &params,
                 &self.state,
                 0,

@@ -904,15 +904,13 @@ impl Buffers {
         )?;
         rec.dispatch(
             ids::RASTER_COMPACT,
-            &[
-                ("visible", &b.flags),
-                ("visible_offsets", &b.visible_offsets),
-                ("depth_keys", &b.depth_keys),
-                ("depth_ids", &b.depth_ids),
-                ("status", &b.status),
-            ],
+            &[("status", &b.status)],
             &CompactParams {
+                visible_addr: b.flags.address_words(4)?,
+                visible_offsets_addr: b.visible_offsets.address_words(4)?,
                 xy_depth_opacity_addr: b.xy.address_words(16)?,
+                depth_keys_addr: b.depth_keys.address_words(4)?,
+                depth_ids_addr: b.depth_ids.address_words(4)?,
                 n,
             },
             ids::RASTER_COMPACT.groups_for(n + 1),
@@ -963,13 +961,11 @@ impl Buffers {
         let rows_params = (rows.start, rows.end);
         rec.dispatch_indirect_ranges(
             ids::RASTER_GATHER_TOUCHED,
-            &[
-                ("status", status),
-                ("depth_ids", whole(&b.depth_ids)),
-                ("sorted_touched", whole(&b.sorted_touched)),
-            ],
+            &[("status", status)],
             &GatherTouchedParams {
                 tile_rects_addr: b.rect.address_words(16)?,
+                depth_ids_addr: b.depth_ids.address_words(4)?,
+                sorted_touched_addr: b.sorted_touched.address_words(4)?,
                 row_begin: rows_params.0,
                 row_end: rows_params.1,
             },
@@ -987,13 +983,13 @@ impl Buffers {
             ids::RASTER_EMIT,
             &[
                 ("status", status),
-                ("depth_ids", whole(&b.depth_ids)),
-                ("isect_offsets", whole(&b.isect_offsets)),
                 ("isect_keys", whole(&b.isect_keys)),
                 ("isect_ids", whole(&b.isect_ids)),
             ],
             &EmitParams {
                 tile_rects_addr: b.rect.address_words(16)?,
+                depth_ids_addr: b.depth_ids.address_words(4)?,
+                isect_offsets_addr: b.isect_offsets.address_words(4)?,
                 tiles_x,
                 capacity: b.isect_cap,
                 row_begin: rows_params.0,
