@@ -13,7 +13,7 @@ layout(push_constant) uniform BlendParams {
     uint chunk_base;   // first semantic channel of this dispatch
     uint write_rgb;    // forward only: 1 in the chunk that writes RGB, alpha, depth and T
     vec3 background;
-    uint tile_row_base; // forward only: first tile row of this dispatch's band
+    uint tile_row_base; // first tile row of this dispatch's band
     // Addresses of the per-Gaussian arrays (gaussian_arrays.glsl).
     uvec2 xy_depth_opacity_addr;
     uvec2 xy_frac_addr;

@@ -68,7 +68,8 @@ void main() {
 #else
     bool with_rgb = chunk_base == 0;
 #endif
-    TileWindow tw = tile_window(width, height, pc.tiles_x, window_start, window_len);
+    TileWindow tw = tile_window_in_band(width, height, pc.tiles_x, window_start, window_len,
+                                        pc.tile_row_base);
     if (window_start > 0 && window_start >= tw.len) {
         return; // this tile's list ends before the window
     }

@@ -11,7 +11,15 @@
 layout(local_size_x = DENSIFY_WG_SIZE) in;
 
 layout(push_constant) uniform DensifyClassifyParams {
-    uvec2 log_scales_addr; // [n][3], by address (gaussian_arrays.glsl)
+    // Per Gaussian, by address (gaussian_arrays.glsl): log-scales [n][3], opacity logits,
+    // the accumulated screen-space gradient and its count, and the flags and output
+    // counts written ([n + 1] each).
+    uvec2 log_scales_addr;
+    uvec2 opacity_logits_addr;
+    uvec2 grad_accum_addr;
+    uvec2 grad_count_addr;
+    uvec2 candidate_flags_addr;
+    uvec2 out_count_addr;
     uint n;
     float grad_threshold;
     // Thresholds on the largest log-scale (ln of the host's scale thresholds, so the test
@@ -22,11 +30,11 @@ layout(push_constant) uniform DensifyClassifyParams {
 
 #include "gaussian_arrays.glsl"
 #define log_scales FloatArray(pc.log_scales_addr)
-layout(set = 0, binding = 1) readonly buffer OpacityBuf { float data[]; } opacity_logits;
-layout(set = 0, binding = 2) readonly buffer AccumBuf { float data[]; } grad_accum;
-layout(set = 0, binding = 3) readonly buffer CountBuf { float data[]; } grad_count;
-layout(set = 0, binding = 4) writeonly buffer CandBuf { uint data[]; } candidate_flags; // n + 1
-layout(set = 0, binding = 5) writeonly buffer OutCountBuf { uint data[]; } out_count;   // n + 1
+#define opacity_logits FloatArray(pc.opacity_logits_addr)
+#define grad_accum FloatArray(pc.grad_accum_addr)
+#define grad_count FloatArray(pc.grad_count_addr)
+#define candidate_flags UintArrayRW(pc.candidate_flags_addr)
+#define out_count UintArrayRW(pc.out_count_addr)
 layout(set = 0, binding = 6) buffer StatusBuf { uint data[]; } status;
 
 void main() {

@@ -7,16 +7,26 @@
 layout(local_size_x = DENSIFY_WG_SIZE) in;
 
 layout(push_constant) uniform DensifyCompactParams {
+    // Per Gaussian, by address (gaussian_arrays.glsl): the accumulated gradient and its
+    // count, the candidate flags and their scan ([n + 1]), and the candidates' sort keys
+    // and ids written.
+    uvec2 grad_accum_addr;
+    uvec2 grad_count_addr;
+    uvec2 candidate_flags_addr;
+    uvec2 candidate_offsets_addr;
+    uvec2 candidate_keys_addr;
+    uvec2 candidate_ids_addr;
     uint n;
     uint max_gaussians;
 } pc;
 
-layout(set = 0, binding = 0) readonly buffer AccumBuf { float data[]; } grad_accum;
-layout(set = 0, binding = 1) readonly buffer CountBuf { float data[]; } grad_count;
-layout(set = 0, binding = 2) readonly buffer CandBuf { uint data[]; } candidate_flags;
-layout(set = 0, binding = 3) readonly buffer CandOffsetsBuf { uint data[]; } candidate_offsets; // n + 1
-layout(set = 0, binding = 4) writeonly buffer KeysBuf { uint data[]; } candidate_keys;
-layout(set = 0, binding = 5) writeonly buffer IdsBuf { uint data[]; } candidate_ids;
+#include "gaussian_arrays.glsl"
+#define grad_accum FloatArray(pc.grad_accum_addr)
+#define grad_count FloatArray(pc.grad_count_addr)
+#define candidate_flags UintArray(pc.candidate_flags_addr)
+#define candidate_offsets UintArray(pc.candidate_offsets_addr)
+#define candidate_keys UintArrayRW(pc.candidate_keys_addr)
+#define candidate_ids UintArrayRW(pc.candidate_ids_addr)
 layout(set = 0, binding = 6) buffer StatusBuf { uint data[]; } status;
 
 void main() {

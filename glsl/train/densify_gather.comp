@@ -13,7 +13,10 @@
 layout(local_size_x = DENSIFY_WG_SIZE) in;
 
 layout(push_constant) uniform GatherParams {
-    uvec2 slot_mean_delta_addr; // [slots][3], by address (gaussian_arrays.glsl)
+    // Per slot, by address (gaussian_arrays.glsl): its source, kind and mean offset.
+    uvec2 slot_source_addr;
+    uvec2 slot_kind_addr;
+    uvec2 slot_mean_delta_addr; // [slots][3]
     uint elements; // slots of this part * width
     uint width;
     uint role;
@@ -24,10 +27,10 @@ layout(push_constant) uniform GatherParams {
 } pc;
 
 #include "gaussian_arrays.glsl"
+#define slot_source UintArray(pc.slot_source_addr)
+#define slot_kind UintArray(pc.slot_kind_addr)
 #define slot_mean_delta FloatArray(pc.slot_mean_delta_addr)
 
-layout(set = 0, binding = 0) readonly buffer SourceBuf { uint data[]; } slot_source;
-layout(set = 0, binding = 1) readonly buffer KindBuf { uint data[]; } slot_kind;
 layout(set = 0, binding = 3) readonly buffer SrcBuf { float data[]; } src;
 layout(set = 0, binding = 4) writeonly buffer DstBuf { float data[]; } dst;
 

@@ -15,9 +15,13 @@ layout(push_constant) uniform DensifyLayoutParams {
     uint n;
     float ln_split_scale; // densified Gaussians with a larger max log-scale split
     uvec2 seed;
-    // By address (gaussian_arrays.glsl): [n][3], [n], and [slots][3] written.
+    // By address (gaussian_arrays.glsl): log-scales [n][3], quaternions [n], output
+    // offsets [n + 1], and per slot its source, kind and mean offset [slots][3] written.
     uvec2 log_scales_addr;
     uvec2 quats_addr;
+    uvec2 out_offsets_addr;
+    uvec2 slot_source_addr;
+    uvec2 slot_kind_addr;
     uvec2 slot_mean_delta_addr;
 } pc;
 
@@ -25,9 +29,9 @@ layout(push_constant) uniform DensifyLayoutParams {
 #define log_scales FloatArray(pc.log_scales_addr)
 #define quats Vec4Array(pc.quats_addr)
 #define slot_mean_delta FloatArrayRW(pc.slot_mean_delta_addr)
-layout(set = 0, binding = 2) readonly buffer OutOffsetsBuf { uint data[]; } out_offsets; // n + 1
-layout(set = 0, binding = 3) writeonly buffer SourceBuf { uint data[]; } slot_source;
-layout(set = 0, binding = 4) writeonly buffer KindBuf { uint data[]; } slot_kind;
+#define out_offsets UintArray(pc.out_offsets_addr)
+#define slot_source UintArrayRW(pc.slot_source_addr)
+#define slot_kind UintArrayRW(pc.slot_kind_addr)
 layout(set = 0, binding = 6) buffer StatusBuf { uint data[]; } status;
 
 void write_slot(uint j, uint source, uint kind, vec3 delta) {

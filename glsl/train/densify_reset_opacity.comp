@@ -6,11 +6,13 @@
 layout(local_size_x = DENSIFY_WG_SIZE) in;
 
 layout(push_constant) uniform ResetOpacityParams {
+    uvec2 opacity_logits_addr; // [n], by address (gaussian_arrays.glsl)
     uint n;
     float max_logit;
 } pc;
 
-layout(set = 0, binding = 0) buffer OpacityBuf { float data[]; } opacity_logits;
+#include "gaussian_arrays.glsl"
+#define opacity_logits FloatArrayRW(pc.opacity_logits_addr)
 
 void main() {
     uint i = gl_GlobalInvocationID.x;

@@ -5,9 +5,18 @@
 
 layout(local_size_x = DENSIFY_WG_SIZE) in;
 
+layout(push_constant) uniform DensifySelectParams {
+    // By address (gaussian_arrays.glsl): the sorted candidates' ids, and the output count
+    // of every Gaussian ([n + 1]).
+    uvec2 candidate_ids_addr;
+    uvec2 out_count_addr;
+} pc;
+
+#include "gaussian_arrays.glsl"
+#define candidate_ids UintArray(pc.candidate_ids_addr)
+#define out_count UintArrayRW(pc.out_count_addr)
+
 layout(set = 0, binding = 0) readonly buffer StatusBuf { uint data[]; } status;
-layout(set = 0, binding = 1) readonly buffer IdsBuf { uint data[]; } candidate_ids;
-layout(set = 0, binding = 2) writeonly buffer OutCountBuf { uint data[]; } out_count;
 
 void main() {
     uint p = gl_GlobalInvocationID.x;

@@ -272,13 +272,13 @@ impl Recorder {
         Ok(())
     }
 
-    /// [`Recorder::dispatch`] where the buffers in `optional` are bound only if the kernel
-    /// uses them (the optimizer drops bindings a variant never reads).
+    /// [`Recorder::dispatch_ranges`] where the ranges in `optional` are bound only if the
+    /// kernel uses them (the optimizer drops bindings a variant never reads).
     pub fn dispatch_with_optional<P: bytemuck::Pod>(
         &mut self,
         kernel: Kernel<P>,
-        bindings: &[(&str, &Buffer)],
-        optional: &[(&str, &Buffer)],
+        bindings: &[(&str, BufferRange)],
+        optional: &[(&str, BufferRange)],
         params: &P,
         groups: [u32; 3],
     ) -> GpuResult<()> {
@@ -289,7 +289,7 @@ impl Recorder {
                 .iter()
                 .filter(|(name, _)| used.iter().any(|b| b.name == *name)),
         );
-        self.dispatch(kernel, &all, params, groups)
+        self.dispatch_ranges(kernel, &all, params, groups)
     }
 
     /// Dispatches with the workgroup count read from `args` at byte `offset`

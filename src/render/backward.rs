@@ -13,7 +13,7 @@ use anyhow::{bail, ensure, Result};
 use super::chunks::{chunks, part_of};
 use super::frame::RenderedFrame;
 use super::gpu_scene::{GaussianParams, GpuScene, HostParams, ParamTensor};
-use super::rasterizer::{Rasterizer, TileLists};
+use super::rasterizer::{FrameSpec, Rasterizer, TileLists, RGB_BYTES};
 use super::{project_params, RenderOptions, SemanticMode};
 use crate::contract::params::{BlendParams, FixedResolveParams, SoftmaxBackwardParams};
 use crate::contract::{
@@ -285,6 +285,16 @@ impl SceneGrads {
         Ok(())
     }
 
+    /// Bytes per pixel of the state the backward carries between windows of `frame` (0
+    /// with one window: the carry buffer is then a placeholder).
+    fn carry_bytes_per_pixel(&self, frame: &FrameSpec) -> u64 {
+        if frame.windows > 1 {
+            CARRY_STRIDE * 4
+        } else {
+            0
+        }
+    }
+
     /// Records zeroing of the parameter gradients and the fixed-point status (start of an
     /// iteration).
     pub fn record_zero(&self, rec: &mut Recorder) {
@@ -438,6 +448,10 @@ impl TileLists<'_> {
         // Element sizes for the index bound only: the kernels index 32-bit words.
         let grad2d_addr = screen_target.address_words(4)?;
         let grad_sem_addr = sem_target.address_words(4)?;
+        // Bands of tile rows whose per-pixel buffers each fit one binding (the widest:
+        // the carried state, the semantic channels or RGB).
+        let sem_bytes = f.channels as u64 * 4;
+        let bands = f.bands(RGB_BYTES.max(sem_bytes).max(grads.carry_bytes_per_pixel(f)))?;
         for chunk in 0..f.sem_chunks() {
             for start in f.window_starts().rev() {
                 let params = BlendParams {
@@ -445,25 +459,36 @@ impl TileLists<'_> {
                     grad_sem_addr,
                     ..self.blend_params(start, chunk, false)?
                 };
-                let bindings: [(&str, &Buffer); 7] = [
-                    ("tile_ranges", self.ranges()),
-                    ("isect_ids", self.isect_ids()),
-                    ("final_t", self.final_t()),
-                    ("last_entry", self.last_entry()),
-                    ("n_contrib", self.n_contrib()),
-                    ("v_sem_norm", upstream.sem_norm),
-                    ("carry", &grads.carry),
-                ];
-                // What the alpha, color and screen-space gradients read and write (not the
-                // semantic-only variant).
-                let optional: [(&str, &Buffer); 5] = [
-                    ("sem_norm", sem_norm),
-                    ("v_rgb", upstream.rgb),
-                    ("v_alpha", upstream.alpha),
-                    ("fixed_params", &grads.fixed.params),
-                    ("fixed_status", &grads.fixed.status),
-                ];
-                rec.dispatch_with_optional(kernel, &bindings, &optional, &params, f.tile_groups())?;
+                for band in &bands {
+                    let params = BlendParams {
+                        tile_row_base: band.first_tile_row,
+                        ..params
+                    };
+                    let px = |buf, bytes_per_pixel: u64| match bytes_per_pixel {
+                        0 => BufferRange::whole(buf), // a placeholder, never read
+                        bytes => band.range(buf, bytes),
+                    };
+                    let bindings = [
+                        ("tile_ranges", BufferRange::whole(self.ranges())),
+                        ("isect_ids", BufferRange::whole(self.isect_ids())),
+                        ("final_t", px(self.final_t(), 4)),
+                        ("last_entry", px(self.last_entry(), 4)),
+                        ("n_contrib", px(self.n_contrib(), 4)),
+                        ("v_sem_norm", px(upstream.sem_norm, sem_bytes)),
+                        ("carry", px(&grads.carry, grads.carry_bytes_per_pixel(f))),
+                    ];
+                    // What the alpha, color and screen-space gradients read and write (not
+                    // the semantic-only variant).
+                    let optional = [
+                        ("sem_norm", px(sem_norm, sem_bytes)),
+                        ("v_rgb", px(upstream.rgb, RGB_BYTES)),
+                        ("v_alpha", px(upstream.alpha, 4)),
+                        ("fixed_params", BufferRange::whole(&grads.fixed.params)),
+                        ("fixed_status", BufferRange::whole(&grads.fixed.status)),
+                    ];
+                    let groups = band.groups(f.tiles_x);
+                    rec.dispatch_with_optional(kernel, &bindings, &optional, &params, groups)?;
+                }
                 rec.barrier();
             }
         }

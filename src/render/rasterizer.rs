@@ -1311,7 +1311,7 @@ pub struct ProjectedAddrs {
 }
 
 /// Bytes of a pixel's RGB.
-const RGB_BYTES: u64 = 12;
+pub(crate) const RGB_BYTES: u64 = 12;
 
 /// A band's part of a carry buffer of `bytes_per_pixel` (the whole placeholder when a
 /// frame needs no carried state: one window).

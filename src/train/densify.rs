@@ -39,11 +39,11 @@
 use anyhow::{ensure, Context, Result};
 
 use crate::contract::params::{
-    DensifyClassifyParams, DensifyCompactParams, DensifyLayoutParams, GatherParams,
-    ResetOpacityParams,
+    DensifyClassifyParams, DensifyCompactParams, DensifyLayoutParams, DensifySelectParams,
+    GatherParams, ResetOpacityParams,
 };
 use crate::gpu::kernel_table::ids;
-use crate::gpu::{Buffer, BufferRange, Gpu, GpuCount, PrefixScan, RadixSort, Recorder};
+use crate::gpu::{Buffer, Gpu, GpuCount, PrefixScan, RadixSort, Recorder};
 use crate::render::chunks::{chunk_len, chunks, part_of};
 use crate::render::gpu_scene::ParamTensor;
 
@@ -286,6 +286,11 @@ impl PlanBuffers {
         let logit = |p: f64| (p / (1.0 - p)).ln();
         let classify = DensifyClassifyParams {
             log_scales_addr: inputs.log_scales.address_words(4)?,
+            opacity_logits_addr: inputs.opacity_logits.address_words(4)?,
+            grad_accum_addr: inputs.grad_accum.address_words(4)?,
+            grad_count_addr: inputs.grad_count.address_words(4)?,
+            candidate_flags_addr: self.candidate_flags.address_words(4)?,
+            out_count_addr: self.out_count.address_words(4)?,
             n,
             grad_threshold: config.grad_threshold,
             opacity_logit_min: logit(config.min_opacity as f64) as f32,
@@ -303,14 +308,7 @@ impl PlanBuffers {
         rec.barrier();
         rec.dispatch(
             ids::TRAIN_DENSIFY_CLASSIFY,
-            &[
-                ("opacity_logits", inputs.opacity_logits),
-                ("grad_accum", inputs.grad_accum),
-                ("grad_count", inputs.grad_count),
-                ("candidate_flags", &self.candidate_flags),
-                ("out_count", &self.out_count),
-                ("status", &self.status),
-            ],
+            &[("status", &self.status)],
             &classify,
             ids::TRAIN_DENSIFY_CLASSIFY.groups_for(n + 1),
         )?;
@@ -324,12 +322,11 @@ impl PlanBuffers {
         self.record_compact(rec, inputs, config)?;
         rec.dispatch(
             ids::TRAIN_DENSIFY_SELECT,
-            &[
-                ("status", &self.status),
-                ("candidate_ids", &self.candidate_ids),
-                ("out_count", &self.out_count),
-            ],
-            &(),
+            &[("status", &self.status)],
+            &DensifySelectParams {
+                candidate_ids_addr: self.candidate_ids.address_words(4)?,
+                out_count_addr: self.out_count.address_words(4)?,
+            },
             ids::TRAIN_DENSIFY_SELECT.groups_for(n),
         )?;
         rec.barrier();
@@ -347,16 +344,14 @@ impl PlanBuffers {
         let n64 = inputs.n as u64;
         rec.dispatch(
             ids::TRAIN_DENSIFY_COMPACT,
-            &[
-                ("grad_accum", inputs.grad_accum),
-                ("grad_count", inputs.grad_count),
-                ("candidate_flags", &self.candidate_flags),
-                ("candidate_offsets", &self.candidate_offsets),
-                ("candidate_keys", &self.candidate_keys),
-                ("candidate_ids", &self.candidate_ids),
-                ("status", &self.status),
-            ],
+            &[("status", &self.status)],
             &DensifyCompactParams {
+                grad_accum_addr: inputs.grad_accum.address_words(4)?,
+                grad_count_addr: inputs.grad_count.address_words(4)?,
+                candidate_flags_addr: self.candidate_flags.address_words(4)?,
+                candidate_offsets_addr: self.candidate_offsets.address_words(4)?,
+                candidate_keys_addr: self.candidate_keys.address_words(4)?,
+                candidate_ids_addr: self.candidate_ids.address_words(4)?,
                 n: inputs.n,
                 max_gaussians: config.max_gaussians,
             },
@@ -397,16 +392,14 @@ impl PlanBuffers {
             seed: [config.seed as u32, (config.seed >> 32) as u32],
             log_scales_addr: inputs.log_scales.address_words(4)?,
             quats_addr: inputs.quats.address_words(16)?,
+            out_offsets_addr: self.out_offsets.address_words(4)?,
+            slot_source_addr: self.slot_source.address_words(4)?,
+            slot_kind_addr: self.slot_kind.address_words(4)?,
             slot_mean_delta_addr: self.slot_mean_delta.address_words(4)?,
         };
         rec.dispatch(
             ids::TRAIN_DENSIFY_LAYOUT,
-            &[
-                ("out_offsets", &self.out_offsets),
-                ("slot_source", &self.slot_source),
-                ("slot_kind", &self.slot_kind),
-                ("status", &self.status),
-            ],
+            &[("status", &self.status)],
             &layout,
             ids::TRAIN_DENSIFY_LAYOUT.groups_for(inputs.n + 1),
         )?;
@@ -458,19 +451,17 @@ impl Densifier {
         }
     }
 
-    /// The most Gaussians one plan can take in (every `[n + 1]` u32 array in one binding,
-    /// one invocation per Gaussian in one dispatch dimension).
+    /// The most Gaussians one plan can take in: one invocation per Gaussian in one dispatch
+    /// dimension, and every `[n + 1]` array indexable (the kernels reach them by address).
     fn max_n(&self) -> u64 {
         let caps = self.gpu.caps();
-        (caps.max_storage_buffer_range / 4 - 1)
-            .min(caps.max_workgroup_count[0] as u64 * WG_SIZE as u64 - 1)
+        (i32::MAX as u64 - 1).min(caps.max_workgroup_count[0] as u64 * WG_SIZE as u64 - 1)
     }
 
     fn ensure(&mut self, n: u64, slots: u64) -> Result<()> {
         let n_limit = self.max_n();
-        // The slots' 4-byte arrays each fit one binding (their mean deltas are reached by
-        // address).
-        let slot_limit = self.gpu.caps().max_storage_buffer_range / 4;
+        // Every slot's mean offset (3 floats) indexable by the kernels' signed 32-bit index.
+        let slot_limit = i32::MAX as u64 / 3;
         ensure!(
             n <= n_limit && slots <= slot_limit,
             "densify: {n} Gaussians ({slots} after the step) exceed this device's limits \
@@ -562,7 +553,10 @@ impl Densifier {
             first_slot: 0,
             src_first: 0,
             src_count: plan.n,
-            slot_mean_delta_addr: [0; 2], // set by record_gather
+            // Set by record_gather.
+            slot_source_addr: [0; 2],
+            slot_kind_addr: [0; 2],
+            slot_mean_delta_addr: [0; 2],
         };
         self.record_gather(rec, tensor, &out, &params, plan)?;
         Ok(out)
@@ -630,6 +624,8 @@ impl Densifier {
                     first_slot: slots.start,
                     src_first: sources.start,
                     src_count: sources.len() as u32,
+                    slot_source_addr: b.slot_source.address_words(4)?,
+                    slot_kind_addr: b.slot_kind.address_words(4)?,
                     slot_mean_delta_addr: b.slot_mean_delta.address_words(4)?,
                     ..*whole
                 };
@@ -640,8 +636,6 @@ impl Densifier {
                 rec.dispatch_ranges(
                     ids::TRAIN_DENSIFY_GATHER,
                     &[
-                        ("slot_source", BufferRange::whole(&b.slot_source)),
-                        ("slot_kind", BufferRange::whole(&b.slot_kind)),
                         ("src", part_of(tensor, &sources, row_bytes)),
                         ("dst", part_of(out, &slots, row_bytes)),
                     ],
@@ -681,12 +675,13 @@ pub fn reset_opacity(
     }
     let p = max_opacity as f64;
     let params = ResetOpacityParams {
+        opacity_logits_addr: opacity_logits.address_words(4)?,
         n,
         max_logit: (p / (1.0 - p)).ln() as f32,
     };
     rec.dispatch(
         ids::TRAIN_DENSIFY_RESET_OPACITY,
-        &[("opacity_logits", opacity_logits)],
+        &[],
         &params,
         ids::TRAIN_DENSIFY_RESET_OPACITY.groups_for(n),
     )?;
