@@ -107,7 +107,7 @@ fn training_past_one_binding_writes_the_same_bytes() {
     let init = init.to_str().unwrap();
     // Below every per-Gaussian buffer (4 bytes per Gaussian of flags, sort keys and scans,
     // 16 of the projected attributes, 48 of the room's 12 logits, 80 of the fixed-point
-    // screen-space gradient), above the loss's per-pixel scratch and partial sums.
+    // screen-space gradient), above the loss partial sums (64 KiB).
     let limit = 128 * 1024;
     assert!(
         g.len() as u64 * 4 > limit,

@@ -14,7 +14,7 @@ layout(push_constant) uniform BlendParams {
     uint write_rgb;    // forward only: 1 in the chunk that writes RGB, alpha, depth and T
     vec3 background;
     uint tile_row_base; // first tile row of this dispatch's band
-    // Addresses of the per-Gaussian arrays (gaussian_arrays.glsl).
+    // Addresses of the per-Gaussian arrays (addressed_arrays.glsl).
     uvec2 xy_depth_opacity_addr;
     uvec2 xy_frac_addr;
     uvec2 conics_addr;
@@ -24,7 +24,7 @@ layout(push_constant) uniform BlendParams {
     uvec2 grad_sem_addr; // backward only: semantic gradient sums
 } pc;
 
-#include "gaussian_arrays.glsl"
+#include "addressed_arrays.glsl"
 #define xy_depth_opacity Vec4Array(pc.xy_depth_opacity_addr)
 #define xy_frac Vec2Array(pc.xy_frac_addr)
 #define conics Vec4Array(pc.conics_addr)

@@ -8,7 +8,7 @@
 
 layout(push_constant) uniform CenterParams {
     vec4 world_to_camera[3]; // rows (R00 R01 R02 t0), ...
-    uvec2 means_addr;        // the scene's means [n][3] (gaussian_arrays.glsl)
+    uvec2 means_addr;        // the scene's means [n][3] (addressed_arrays.glsl)
     uvec2 out_addr;          // vote: the pass's vote rows [rows][n]; observations: each
                              // Gaussian's center pixel [n]
     float fx;
@@ -26,7 +26,7 @@ layout(push_constant) uniform CenterParams {
     uint rows;             // vote: class rows this pass holds
 } pc;
 
-#include "gaussian_arrays.glsl"
+#include "addressed_arrays.glsl"
 #define means FloatArray(pc.means_addr)
 
 // The pixel under Gaussian i's center, or NO_LABEL where the center is outside the clip

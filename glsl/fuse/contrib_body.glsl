@@ -26,7 +26,7 @@
 layout(local_size_x = TILE_PIXELS) in;
 
 layout(push_constant) uniform ContribParams {
-    // Addresses of the per-Gaussian arrays (gaussian_arrays.glsl).
+    // Addresses of the per-Gaussian arrays (addressed_arrays.glsl).
     uvec2 xy_depth_opacity_addr;
     uvec2 xy_frac_addr;
     uvec2 conics_addr;
@@ -44,7 +44,7 @@ layout(push_constant) uniform ContribParams {
     uint tile_row_base; // first tile row of this dispatch's band
 } pc;
 
-#include "gaussian_arrays.glsl"
+#include "addressed_arrays.glsl"
 #define xy_depth_opacity Vec4Array(pc.xy_depth_opacity_addr)
 #define xy_frac Vec2Array(pc.xy_frac_addr)
 #define conics Vec4Array(pc.conics_addr)

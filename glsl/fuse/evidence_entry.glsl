@@ -2,12 +2,12 @@
 // per entry, fixed-point contributions two (little-endian halves of a uint64). Shared by the
 // assignment kernels (class_mass.comp, assign_fold.comp); the includer declares push
 // constants `pc` with `n`, `words` and the address of the rows, `evidence_addr` (uint
-// words, [rows][n] entries: a pass may pass one binding, gaussian_arrays.glsl).
+// words, [rows][n] entries: a pass may pass one binding, addressed_arrays.glsl).
 #ifndef EVIDENCE_ENTRY_GLSL
 #define EVIDENCE_ENTRY_GLSL
 
 #extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
-#include "gaussian_arrays.glsl"
+#include "addressed_arrays.glsl"
 #define evidence UintArray(pc.evidence_addr)
 
 uint64_t evidence_entry(uint row, uint gaussian) {

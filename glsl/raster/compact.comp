@@ -7,7 +7,7 @@
 layout(local_size_x = 256) in;
 
 layout(push_constant) uniform CompactParams {
-    // Per Gaussian, by address (gaussian_arrays.glsl): the flags and their scan (n + 1
+    // Per Gaussian, by address (addressed_arrays.glsl): the flags and their scan (n + 1
     // each), the projected attributes, and the depth keys and ids written.
     uvec2 visible_addr;
     uvec2 visible_offsets_addr;
@@ -17,7 +17,7 @@ layout(push_constant) uniform CompactParams {
     uint n;
 } pc;
 
-#include "gaussian_arrays.glsl"
+#include "addressed_arrays.glsl"
 #define visible UintArray(pc.visible_addr)
 #define visible_offsets UintArray(pc.visible_offsets_addr)
 #define xy_depth_opacity Vec4Array(pc.xy_depth_opacity_addr)

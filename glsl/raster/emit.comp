@@ -19,7 +19,7 @@
 layout(local_size_x = EMIT_GROUP) in;
 
 layout(push_constant) uniform EmitParams {
-    // By address (gaussian_arrays.glsl): per Gaussian its tile rectangle, per visible
+    // By address (addressed_arrays.glsl): per Gaussian its tile rectangle, per visible
     // Gaussian in depth order its id and first slot (V + 1).
     uvec2 tile_rects_addr;
     uvec2 depth_ids_addr;
@@ -30,7 +30,7 @@ layout(push_constant) uniform EmitParams {
     uint row_end;   // one past the last
 } pc;
 
-#include "gaussian_arrays.glsl"
+#include "addressed_arrays.glsl"
 #define tile_rects UVec4Array(pc.tile_rects_addr)
 #define depth_ids UintArray(pc.depth_ids_addr)
 #define isect_offsets UintArray(pc.isect_offsets_addr)

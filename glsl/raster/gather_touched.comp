@@ -8,7 +8,7 @@
 layout(local_size_x = 256) in;
 
 layout(push_constant) uniform GatherTouchedParams {
-    // By address (gaussian_arrays.glsl): per Gaussian its tile rectangle, per visible
+    // By address (addressed_arrays.glsl): per Gaussian its tile rectangle, per visible
     // Gaussian in depth order its id and (written) its tile count.
     uvec2 tile_rects_addr;
     uvec2 depth_ids_addr;
@@ -17,7 +17,7 @@ layout(push_constant) uniform GatherTouchedParams {
     uint row_end;   // one past the last
 } pc;
 
-#include "gaussian_arrays.glsl"
+#include "addressed_arrays.glsl"
 #define tile_rects UVec4Array(pc.tile_rects_addr)
 #define depth_ids UintArray(pc.depth_ids_addr)
 #define sorted_touched UintArrayRW(pc.sorted_touched_addr)

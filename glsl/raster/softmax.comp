@@ -7,12 +7,12 @@ layout(local_size_x = 256) in;
 layout(push_constant) uniform SoftmaxParams {
     uint n;
     uint channels;
-    // [n][channels] each, by address (gaussian_arrays.glsl)
+    // [n][channels] each, by address (addressed_arrays.glsl)
     uvec2 logits_addr;
     uvec2 probs_addr;
 } pc;
 
-#include "gaussian_arrays.glsl"
+#include "addressed_arrays.glsl"
 #define logits FloatArray(pc.logits_addr)
 #define probs FloatArrayRW(pc.probs_addr)
 

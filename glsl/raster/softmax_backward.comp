@@ -7,13 +7,13 @@ layout(local_size_x = 256) in;
 layout(push_constant) uniform SoftmaxBackwardParams {
     uint n;
     uint channels;
-    // [n][channels] each, by address (gaussian_arrays.glsl)
+    // [n][channels] each, by address (addressed_arrays.glsl)
     uvec2 probs_addr;
     uvec2 grad_probs_addr;
     uvec2 grad_logits_addr;
 } pc;
 
-#include "gaussian_arrays.glsl"
+#include "addressed_arrays.glsl"
 #define probs FloatArray(pc.probs_addr)
 #define grad_probs FloatArray(pc.grad_probs_addr)
 #define grad_logits FloatArrayRW(pc.grad_logits_addr)

@@ -11,7 +11,7 @@ layout(local_size_x = SCAN_WG_SIZE) in;
 
 layout(push_constant) uniform ScanDownsweepParams {
     // This level's elements, their scan, and the next level's scanned sums, by address
-    // (gaussian_arrays.glsl; src and dst may be the same array).
+    // (addressed_arrays.glsl; src and dst may be the same array).
     uvec2 src_addr;
     uvec2 dst_addr;
     uvec2 offsets_addr;
@@ -20,7 +20,7 @@ layout(push_constant) uniform ScanDownsweepParams {
 } pc;
 
 layout(set = 0, binding = 0) readonly buffer StateBuf { uint data[]; } state;
-#include "gaussian_arrays.glsl"
+#include "addressed_arrays.glsl"
 #define src UintArray(pc.src_addr)
 #define dst UintArrayRW(pc.dst_addr)
 #define offsets UintArray(pc.offsets_addr)

@@ -9,13 +9,13 @@
 layout(local_size_x = SCAN_WG_SIZE) in;
 
 layout(push_constant) uniform ScanReduceParams {
-    // This level's elements and the next level's, by address (gaussian_arrays.glsl).
+    // This level's elements and the next level's, by address (addressed_arrays.glsl).
     uvec2 src_addr;
     uvec2 sums_addr;
     uint level;
 } pc;
 
-#include "gaussian_arrays.glsl"
+#include "addressed_arrays.glsl"
 #define src UintArray(pc.src_addr)
 #define sums UintArrayRW(pc.sums_addr)
 

@@ -1,5 +1,5 @@
 // Push constants of one radix pass (count.comp, scatter.comp): the digit, and the pass's
-// input and output arrays by address (gaussian_arrays.glsl), so sorting a scene's visible
+// input and output arrays by address (addressed_arrays.glsl), so sorting a scene's visible
 // Gaussians is bounded by memory, not one binding (33.5M 4-byte keys on lavapipe).
 #ifndef SORT_PASS_PARAMS_GLSL
 #define SORT_PASS_PARAMS_GLSL
@@ -13,7 +13,7 @@ layout(push_constant) uniform SortPassParams {
     uint bits; // digit width of this pass, 0..=RADIX_BITS
 } pc;
 
-#include "gaussian_arrays.glsl"
+#include "addressed_arrays.glsl"
 #define keys_in UintArray(pc.keys_in_addr)
 #define values_in UintArray(pc.values_in_addr)
 #define keys_out UintArrayRW(pc.keys_out_addr)

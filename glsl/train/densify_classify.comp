@@ -11,7 +11,7 @@
 layout(local_size_x = DENSIFY_WG_SIZE) in;
 
 layout(push_constant) uniform DensifyClassifyParams {
-    // Per Gaussian, by address (gaussian_arrays.glsl): log-scales [n][3], opacity logits,
+    // Per Gaussian, by address (addressed_arrays.glsl): log-scales [n][3], opacity logits,
     // the accumulated screen-space gradient and its count, and the flags and output
     // counts written ([n + 1] each).
     uvec2 log_scales_addr;
@@ -28,7 +28,7 @@ layout(push_constant) uniform DensifyClassifyParams {
     float ln_prune_scale; // +inf when large Gaussians are not pruned
 } pc;
 
-#include "gaussian_arrays.glsl"
+#include "addressed_arrays.glsl"
 #define log_scales FloatArray(pc.log_scales_addr)
 #define opacity_logits FloatArray(pc.opacity_logits_addr)
 #define grad_accum FloatArray(pc.grad_accum_addr)

@@ -7,7 +7,7 @@
 layout(local_size_x = DENSIFY_WG_SIZE) in;
 
 layout(push_constant) uniform DensifyCompactParams {
-    // Per Gaussian, by address (gaussian_arrays.glsl): the accumulated gradient and its
+    // Per Gaussian, by address (addressed_arrays.glsl): the accumulated gradient and its
     // count, the candidate flags and their scan ([n + 1]), and the candidates' sort keys
     // and ids written.
     uvec2 grad_accum_addr;
@@ -20,7 +20,7 @@ layout(push_constant) uniform DensifyCompactParams {
     uint max_gaussians;
 } pc;
 
-#include "gaussian_arrays.glsl"
+#include "addressed_arrays.glsl"
 #define grad_accum FloatArray(pc.grad_accum_addr)
 #define grad_count FloatArray(pc.grad_count_addr)
 #define candidate_flags UintArray(pc.candidate_flags_addr)

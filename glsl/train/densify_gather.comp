@@ -13,7 +13,7 @@
 layout(local_size_x = DENSIFY_WG_SIZE) in;
 
 layout(push_constant) uniform GatherParams {
-    // Per slot, by address (gaussian_arrays.glsl): its source, kind and mean offset.
+    // Per slot, by address (addressed_arrays.glsl): its source, kind and mean offset.
     uvec2 slot_source_addr;
     uvec2 slot_kind_addr;
     uvec2 slot_mean_delta_addr; // [slots][3]
@@ -26,7 +26,7 @@ layout(push_constant) uniform GatherParams {
     uint src_count;        // source Gaussians bound
 } pc;
 
-#include "gaussian_arrays.glsl"
+#include "addressed_arrays.glsl"
 #define slot_source UintArray(pc.slot_source_addr)
 #define slot_kind UintArray(pc.slot_kind_addr)
 #define slot_mean_delta FloatArray(pc.slot_mean_delta_addr)

@@ -15,7 +15,7 @@ layout(push_constant) uniform DensifyLayoutParams {
     uint n;
     float ln_split_scale; // densified Gaussians with a larger max log-scale split
     uvec2 seed;
-    // By address (gaussian_arrays.glsl): log-scales [n][3], quaternions [n], output
+    // By address (addressed_arrays.glsl): log-scales [n][3], quaternions [n], output
     // offsets [n + 1], and per slot its source, kind and mean offset [slots][3] written.
     uvec2 log_scales_addr;
     uvec2 quats_addr;
@@ -25,7 +25,7 @@ layout(push_constant) uniform DensifyLayoutParams {
     uvec2 slot_mean_delta_addr;
 } pc;
 
-#include "gaussian_arrays.glsl"
+#include "addressed_arrays.glsl"
 #define log_scales FloatArray(pc.log_scales_addr)
 #define quats Vec4Array(pc.quats_addr)
 #define slot_mean_delta FloatArrayRW(pc.slot_mean_delta_addr)

@@ -6,12 +6,12 @@
 layout(local_size_x = DENSIFY_WG_SIZE) in;
 
 layout(push_constant) uniform ResetOpacityParams {
-    uvec2 opacity_logits_addr; // [n], by address (gaussian_arrays.glsl)
+    uvec2 opacity_logits_addr; // [n], by address (addressed_arrays.glsl)
     uint n;
     float max_logit;
 } pc;
 
-#include "gaussian_arrays.glsl"
+#include "addressed_arrays.glsl"
 #define opacity_logits FloatArrayRW(pc.opacity_logits_addr)
 
 void main() {

@@ -6,13 +6,13 @@
 layout(local_size_x = DENSIFY_WG_SIZE) in;
 
 layout(push_constant) uniform DensifySelectParams {
-    // By address (gaussian_arrays.glsl): the sorted candidates' ids, and the output count
+    // By address (addressed_arrays.glsl): the sorted candidates' ids, and the output count
     // of every Gaussian ([n + 1]).
     uvec2 candidate_ids_addr;
     uvec2 out_count_addr;
 } pc;
 
-#include "gaussian_arrays.glsl"
+#include "addressed_arrays.glsl"
 #define candidate_ids UintArray(pc.candidate_ids_addr)
 #define out_count UintArrayRW(pc.out_count_addr)
 

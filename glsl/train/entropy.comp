@@ -9,7 +9,7 @@
 layout(local_size_x = LOSS_WG) in;
 
 layout(push_constant) uniform EntropyParams {
-    // [N][C] each, by address (gaussian_arrays.glsl)
+    // [N][C] each, by address (addressed_arrays.glsl)
     uvec2 logits_addr;
     uvec2 grad_logits_addr;
     uint n;
@@ -19,7 +19,7 @@ layout(push_constant) uniform EntropyParams {
     float inv_n;      // 1 / N
 } pc;
 
-#include "gaussian_arrays.glsl"
+#include "addressed_arrays.glsl"
 #define logits FloatArray(pc.logits_addr)
 #define grad_logits FloatArrayRW(pc.grad_logits_addr)
 layout(set = 0, binding = 2) writeonly buffer PartialsBuf { float data[]; } partials;

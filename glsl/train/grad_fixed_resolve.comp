@@ -17,12 +17,12 @@ layout(push_constant) uniform FixedResolveParams {
     uint stride;     // values per row
     uint semantic;   // 1: every value is in FIXED_GROUP_SEM; 0: screen-space layout
     uint accumulate; // 1: add into out; 0: overwrite
-    // [rows][stride] each, by address (gaussian_arrays.glsl)
+    // [rows][stride] each, by address (addressed_arrays.glsl)
     uvec2 fixed_sums_addr;
     uvec2 out_grad_addr;
 } pc;
 
-#include "gaussian_arrays.glsl"
+#include "addressed_arrays.glsl"
 #define fixed_sums UVec2Array(pc.fixed_sums_addr)
 #define out_grad FloatArrayRW(pc.out_grad_addr)
 layout(set = 0, binding = 2) readonly buffer FixedParamsBuf { float data[]; } fixed_params;

@@ -7,12 +7,14 @@
 layout(local_size_x = LOSS_WG) in;
 
 layout(push_constant) uniform CountLabelsParams {
+    uvec2 labels_addr; // [P], by address (addressed_arrays.glsl)
     uint pixels;
     uint channels;
     uint stride;
 } pc;
 
-layout(set = 0, binding = 0) readonly buffer LabelsBuf { uint data[]; } labels; // [P]
+#include "addressed_arrays.glsl"
+#define labels UintArray(pc.labels_addr)
 layout(set = 0, binding = 1) writeonly buffer PartialsBuf { float data[]; } partials;
 
 void main() {

@@ -11,6 +11,11 @@
 layout(local_size_x = LOSS_WG) in;
 
 layout(push_constant) uniform CrossEntropyParams {
+    // Per pixel, by address (addressed_arrays.glsl): the normalized semantic channels, the
+    // labels, and the channels' gradient written.
+    uvec2 sem_norm_addr;
+    uvec2 labels_addr;
+    uvec2 v_sem_norm_addr;
     uint pixels;
     uint channels;
     uint stride;
@@ -20,10 +25,11 @@ layout(push_constant) uniform CrossEntropyParams {
 
 const float PROB_FLOOR = 1e-6;
 
-layout(set = 0, binding = 0) readonly buffer SemNormBuf { float data[]; } sem_norm; // [P][C]
-layout(set = 0, binding = 1) readonly buffer LabelsBuf { uint data[]; } labels;     // [P]
+#include "addressed_arrays.glsl"
+#define sem_norm FloatArray(pc.sem_norm_addr) // [P][C]
+#define labels UintArray(pc.labels_addr)       // [P]
 layout(set = 0, binding = 2) readonly buffer ValuesBuf { float data[]; } values;
-layout(set = 0, binding = 3) writeonly buffer VSemNormBuf { float data[]; } v_sem_norm;
+#define v_sem_norm FloatArrayRW(pc.v_sem_norm_addr)
 layout(set = 0, binding = 4) writeonly buffer PartialsBuf { float data[]; } partials;
 
 void main() {

@@ -9,15 +9,22 @@
 layout(local_size_x = SSIM_TILE, local_size_y = SSIM_TILE) in;
 
 layout(push_constant) uniform SsimBackwardParams {
+    // Per pixel, by address (addressed_arrays.glsl): the rendered and target RGB, the
+    // blurred moment gradients, and dL/d rgb written.
+    uvec2 rgb_addr;
+    uvec2 target_addr;
+    uvec2 blurred_addr;
+    uvec2 v_rgb_addr;
     uint width;
     uint height;
     float l1_weight; // 0.8 / (3 * pixels)
 } pc;
 
-layout(set = 0, binding = 0) readonly buffer RgbBuf { float data[]; } rgb;
-layout(set = 0, binding = 1) readonly buffer TargetBuf { float data[]; } target;
-layout(set = 0, binding = 2) readonly buffer BlurredBuf { float data[]; } blurred; // [3][P][3]
-layout(set = 0, binding = 3) writeonly buffer VRgbBuf { float data[]; } v_rgb;     // [P][3]
+#include "addressed_arrays.glsl"
+#define rgb FloatArray(pc.rgb_addr)
+#define target FloatArray(pc.target_addr)
+#define blurred FloatArray(pc.blurred_addr) // [3][P][3]
+#define v_rgb FloatArrayRW(pc.v_rgb_addr)   // [P][3]
 
 void main() {
     uint px = gl_GlobalInvocationID.x;

@@ -6,13 +6,17 @@
 
 layout(local_size_x = SSIM_TILE, local_size_y = SSIM_TILE) in;
 
-layout(push_constant) uniform ImageSizeParams {
+layout(push_constant) uniform BlurGradsParams {
+    // Per pixel, by address (addressed_arrays.glsl): the moment gradients and their blur.
+    uvec2 moment_grads_addr;
+    uvec2 blurred_addr;
     uint width;
     uint height;
 } pc;
 
-layout(set = 0, binding = 0) readonly buffer MomentGradsBuf { float data[]; } moment_grads; // [3][P][3]
-layout(set = 0, binding = 1) writeonly buffer BlurredBuf { float data[]; } blurred;         // [3][P][3]
+#include "addressed_arrays.glsl"
+#define moment_grads FloatArray(pc.moment_grads_addr) // [3][P][3]
+#define blurred FloatArrayRW(pc.blurred_addr)         // [3][P][3]
 
 void main() {
     uint px = gl_GlobalInvocationID.x;

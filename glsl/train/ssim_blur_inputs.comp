@@ -6,15 +6,22 @@
 
 layout(local_size_x = SSIM_TILE, local_size_y = SSIM_TILE) in;
 
-layout(push_constant) uniform ImageSizeParams {
+layout(push_constant) uniform BlurInputsParams {
+    // Per pixel, by address (addressed_arrays.glsl: a training image's moments pass one
+    // binding at 2.2 MP on lavapipe): the rendered and target RGB, and the moments written.
+    uvec2 rgb_addr;
+    uvec2 target_addr;
+    uvec2 moments_addr;
     uint width;
     uint height;
 } pc;
 
-layout(set = 0, binding = 0) readonly buffer RgbBuf { float data[]; } rgb;       // [P][3]
-layout(set = 0, binding = 1) readonly buffer TargetBuf { float data[]; } target; // [P][3]
+#include "addressed_arrays.glsl"
+#define rgb FloatArray(pc.rgb_addr)       // [P][3]
+#define target FloatArray(pc.target_addr) // [P][3]
+#define moments FloatArrayRW(pc.moments_addr)
+
 // [5][P][3]: blurred x, y, x^2, y^2, xy.
-layout(set = 0, binding = 2) writeonly buffer MomentsBuf { float data[]; } moments;
 
 void main() {
     uint px = gl_GlobalInvocationID.x;

@@ -10,6 +10,12 @@
 layout(local_size_x = SSIM_TILE, local_size_y = SSIM_TILE) in;
 
 layout(push_constant) uniform SsimForwardParams {
+    // Per pixel, by address (addressed_arrays.glsl): the rendered and target RGB, the
+    // blurred moments, and their gradient written.
+    uvec2 rgb_addr;
+    uvec2 target_addr;
+    uvec2 moments_addr;
+    uvec2 moment_grads_addr;
     uint width;
     uint height;
     uint stride;        // partials per slot
@@ -17,11 +23,12 @@ layout(push_constant) uniform SsimForwardParams {
     float ssim_weight;  // dL/dSSIM(p, c) = -0.2 / (3 * pixels)
 } pc;
 
-layout(set = 0, binding = 0) readonly buffer RgbBuf { float data[]; } rgb;
-layout(set = 0, binding = 1) readonly buffer TargetBuf { float data[]; } target;
-layout(set = 0, binding = 2) readonly buffer MomentsBuf { float data[]; } moments; // [5][P][3]
+#include "addressed_arrays.glsl"
+#define rgb FloatArray(pc.rgb_addr)
+#define target FloatArray(pc.target_addr)
+#define moments FloatArray(pc.moments_addr) // [5][P][3]
 // [3][P][3]: dL/d(blurred x), dL/d(blurred x^2), dL/d(blurred xy).
-layout(set = 0, binding = 3) writeonly buffer MomentGradsBuf { float data[]; } moment_grads;
+#define moment_grads FloatArrayRW(pc.moment_grads_addr)
 layout(set = 0, binding = 4) writeonly buffer PartialsBuf { float data[]; } partials;
 
 void main() {

@@ -1201,7 +1201,7 @@ impl TileLists<'_> {
     }
 
     /// Addresses of the projected per-Gaussian arrays, for the kernels that read them at
-    /// the Gaussians of the tile lists (gaussian_arrays.glsl).
+    /// the Gaussians of the tile lists (addressed_arrays.glsl).
     pub fn projected_addrs(&self) -> Result<ProjectedAddrs> {
         let b = self.bufs;
         Ok(ProjectedAddrs {

@@ -15,8 +15,8 @@ pub use super::loss_entropy::entropy_weight;
 pub use super::loss_values::LossValues;
 use super::loss_values::{L1_WEIGHT, SLOTS, SLOT_CE, SLOT_L1, SLOT_LABELED, SLOT_SE, SSIM_WEIGHT};
 use crate::contract::params::{
-    CountLabelsParams, CrossEntropyParams, ImageSizeParams, LossReduceParams, SsimBackwardParams,
-    SsimForwardParams,
+    BlurGradsParams, BlurInputsParams, CountLabelsParams, CrossEntropyParams, LossReduceParams,
+    SsimBackwardParams, SsimForwardParams,
 };
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, Gpu, Recorder};
@@ -101,13 +101,8 @@ impl ImageLoss {
                 && height.div_ceil(TILE) <= MAX_GROUPS,
             "loss image {width}x{height} is too large for one dispatch"
         );
+        // The kernels reach the per-pixel arrays by address: one allocation bounds them.
         let moment_bytes = MOMENT_PLANES * pixels * 3 * 4;
-        let max_range = gpu.caps().max_storage_buffer_range;
-        ensure!(
-            moment_bytes <= max_range,
-            "loss image {width}x{height} needs a {moment_bytes}-byte SSIM scratch binding; \
-             the device binds at most {max_range} bytes"
-        );
         // loss_cross_entropy runs three loops over the channels per pixel.
         ensure!(
             3 * channels as u64 + 3 <= LOOP_BUDGET,
@@ -200,13 +195,6 @@ impl ImageLoss {
         self.pixels().div_ceil(LOSS_WG)
     }
 
-    fn dims(&self) -> ImageSizeParams {
-        ImageSizeParams {
-            width: self.width,
-            height: self.height,
-        }
-    }
-
     /// Floats the photometric loss averages over.
     fn rgb_count(&self) -> f32 {
         3.0 * self.pixels() as f32
@@ -237,8 +225,9 @@ impl ImageLoss {
         match semantics {
             Some(s) => rec.dispatch(
                 ids::TRAIN_LOSS_COUNT_LABELS,
-                &[("labels", s.labels), ("partials", &self.count_partials)],
+                &[("partials", &self.count_partials)],
                 &CountLabelsParams {
+                    labels_addr: s.labels.address_words(4)?,
                     pixels: self.pixels(),
                     channels: self.channels,
                     stride: self.stride,
@@ -250,12 +239,14 @@ impl ImageLoss {
         }
         rec.dispatch(
             ids::TRAIN_SSIM_BLUR_INPUTS,
-            &[
-                ("rgb", images.rgb),
-                ("target", images.target),
-                ("moments", &self.moments),
-            ],
-            &self.dims(),
+            &[],
+            &BlurInputsParams {
+                rgb_addr: images.rgb.address_words(4)?,
+                target_addr: images.target.address_words(4)?,
+                moments_addr: self.moments.address_words(4)?,
+                width: self.width,
+                height: self.height,
+            },
             self.tiles(),
         )?;
         Ok(())
@@ -281,14 +272,12 @@ impl ImageLoss {
         let count = self.rgb_count();
         rec.dispatch(
             ids::TRAIN_SSIM_FORWARD,
-            &[
-                ("rgb", images.rgb),
-                ("target", images.target),
-                ("moments", &self.moments),
-                ("moment_grads", &self.moment_grads),
-                ("partials", &self.partials),
-            ],
+            &[("partials", &self.partials)],
             &SsimForwardParams {
+                rgb_addr: images.rgb.address_words(4)?,
+                target_addr: images.target.address_words(4)?,
+                moments_addr: self.moments.address_words(4)?,
+                moment_grads_addr: self.moment_grads.address_words(4)?,
                 width: self.width,
                 height: self.height,
                 stride: self.stride,
@@ -310,14 +299,11 @@ impl ImageLoss {
         if let Some(s) = semantics {
             rec.dispatch(
                 ids::TRAIN_LOSS_CROSS_ENTROPY,
-                &[
-                    ("sem_norm", s.sem_norm),
-                    ("labels", s.labels),
-                    ("values", &self.values),
-                    ("v_sem_norm", s.v_sem_norm),
-                    ("partials", &self.partials),
-                ],
+                &[("values", &self.values), ("partials", &self.partials)],
                 &CrossEntropyParams {
+                    sem_norm_addr: s.sem_norm.address_words(4)?,
+                    labels_addr: s.labels.address_words(4)?,
+                    v_sem_norm_addr: s.v_sem_norm.address_words(4)?,
                     pixels: self.pixels(),
                     channels: self.channels,
                     stride: self.stride,
@@ -332,11 +318,13 @@ impl ImageLoss {
         }
         rec.dispatch(
             ids::TRAIN_SSIM_BLUR_GRADS,
-            &[
-                ("moment_grads", &self.moment_grads),
-                ("blurred", &self.moments),
-            ],
-            &self.dims(),
+            &[],
+            &BlurGradsParams {
+                moment_grads_addr: self.moment_grads.address_words(4)?,
+                blurred_addr: self.moments.address_words(4)?,
+                width: self.width,
+                height: self.height,
+            },
             self.tiles(),
         )?;
         Ok(())
@@ -352,13 +340,12 @@ impl ImageLoss {
     ) -> Result<()> {
         rec.dispatch(
             ids::TRAIN_SSIM_BACKWARD,
-            &[
-                ("rgb", images.rgb),
-                ("target", images.target),
-                ("blurred", &self.moments),
-                ("v_rgb", images.v_rgb),
-            ],
+            &[],
             &SsimBackwardParams {
+                rgb_addr: images.rgb.address_words(4)?,
+                target_addr: images.target.address_words(4)?,
+                blurred_addr: self.moments.address_words(4)?,
+                v_rgb_addr: images.v_rgb.address_words(4)?,
                 width: self.width,
                 height: self.height,
                 l1_weight: L1_WEIGHT / self.rgb_count(),
