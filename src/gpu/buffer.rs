@@ -45,7 +45,8 @@ impl Buffer {
         let elements = self.size / elem_bytes.max(1);
         if elements > i32::MAX as u64 {
             return Err(GpuError::Limit(format!(
-                "buffer '{}' holds {elements} elements of {elem_bytes} bytes; a kernel indexes                  at most {} (use fewer Gaussians or fewer classes per pass)",
+                "buffer '{}' holds {elements} elements of {elem_bytes} bytes; a kernel indexes \
+                 at most {} (use fewer Gaussians, classes per pass or pixels)",
                 self.name,
                 i32::MAX
             )));
@@ -94,20 +95,26 @@ impl Drop for Buffer {
     }
 }
 
+/// Device-local buffers serve as kernel storage (bound, or reached by address), indirect
+/// arguments and copy ends; staging buffers only as copy ends.
+fn usage_for(location: MemoryLocation) -> vk::BufferUsageFlags {
+    match location {
+        MemoryLocation::GpuOnly => {
+            vk::BufferUsageFlags::STORAGE_BUFFER
+                | vk::BufferUsageFlags::TRANSFER_SRC
+                | vk::BufferUsageFlags::TRANSFER_DST
+                | vk::BufferUsageFlags::INDIRECT_BUFFER
+                | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS
+        }
+        _ => vk::BufferUsageFlags::TRANSFER_SRC | vk::BufferUsageFlags::TRANSFER_DST,
+    }
+}
+
 impl Gpu {
     fn create_buffer(&self, name: &str, size: u64, location: MemoryLocation) -> GpuResult<Buffer> {
         // Vulkan forbids empty buffers; a 4-byte one keeps n = 0 cases uniform.
         let size = size.max(4);
-        let usage = match location {
-            MemoryLocation::GpuOnly => {
-                vk::BufferUsageFlags::STORAGE_BUFFER
-                    | vk::BufferUsageFlags::TRANSFER_SRC
-                    | vk::BufferUsageFlags::TRANSFER_DST
-                    | vk::BufferUsageFlags::INDIRECT_BUFFER
-                    | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS
-            }
-            _ => vk::BufferUsageFlags::TRANSFER_SRC | vk::BufferUsageFlags::TRANSFER_DST,
-        };
+        let usage = usage_for(location);
         let info = vk::BufferCreateInfo::default()
             .size(size)
             .usage(usage)

@@ -20,7 +20,7 @@ use crate::contract::{
     FIXED_GROUPS, FIXED_PARAM_WORDS, FS_NONFINITE, FS_OVERFLOW, FS_STEP_MAX, FS_TOTAL_MAX,
     FS_WORDS, SEM_CHUNK, TILE_SIZE,
 };
-use crate::gpu::kernel_table::ids;
+use crate::gpu::kernel_table::{ids, Kernel};
 use crate::gpu::{Buffer, BufferRange, Gpu, Recorder};
 use crate::scene::Camera;
 
@@ -425,21 +425,7 @@ impl TileLists<'_> {
         } else {
             &grads.placeholder
         };
-        let int64_atomics = rec.gpu().caps().int64_atomics;
-        let kernel = match (grads.semantics_only, grads.accumulation) {
-            (false, Accumulation::FloatAtomics) => ids::RASTER_BLEND_BACKWARD,
-            (false, Accumulation::CompareAndSwap) => ids::RASTER_BLEND_BACKWARD_CAS,
-            (false, Accumulation::FixedPoint) if int64_atomics => {
-                ids::RASTER_BLEND_BACKWARD_FIXED64
-            }
-            (false, Accumulation::FixedPoint) => ids::RASTER_BLEND_BACKWARD_FIXED32X2,
-            (true, Accumulation::FloatAtomics) => ids::RASTER_BLEND_BACKWARD_SEM_ONLY,
-            (true, Accumulation::CompareAndSwap) => ids::RASTER_BLEND_BACKWARD_SEM_ONLY_CAS,
-            (true, Accumulation::FixedPoint) if int64_atomics => {
-                ids::RASTER_BLEND_BACKWARD_SEM_ONLY_FIXED64
-            }
-            (true, Accumulation::FixedPoint) => ids::RASTER_BLEND_BACKWARD_SEM_ONLY_FIXED32X2,
-        };
+        let kernel = backward_kernel(grads, rec.gpu().caps().int64_atomics);
         // The fixed-point variants add into their integer buffers instead.
         let (screen_target, sem_target) = match grads.accumulation {
             Accumulation::FixedPoint => (&grads.screen_fixed, &grads.sem_fixed),
@@ -684,5 +670,22 @@ impl Rasterizer {
         rec.submit_and_wait()?;
         let frame = self.download_frame(cam, &run)?;
         Ok((frame, grads.download(&gpu)?))
+    }
+}
+
+/// The blend-backward variant for `grads`' accumulation (fixed point with 64-bit atomics
+/// where the device has them) and parameters (all, or the semantic vectors only).
+fn backward_kernel(grads: &SceneGrads, int64_atomics: bool) -> Kernel<BlendParams> {
+    match (grads.semantics_only, grads.accumulation) {
+        (false, Accumulation::FloatAtomics) => ids::RASTER_BLEND_BACKWARD,
+        (false, Accumulation::CompareAndSwap) => ids::RASTER_BLEND_BACKWARD_CAS,
+        (false, Accumulation::FixedPoint) if int64_atomics => ids::RASTER_BLEND_BACKWARD_FIXED64,
+        (false, Accumulation::FixedPoint) => ids::RASTER_BLEND_BACKWARD_FIXED32X2,
+        (true, Accumulation::FloatAtomics) => ids::RASTER_BLEND_BACKWARD_SEM_ONLY,
+        (true, Accumulation::CompareAndSwap) => ids::RASTER_BLEND_BACKWARD_SEM_ONLY_CAS,
+        (true, Accumulation::FixedPoint) if int64_atomics => {
+            ids::RASTER_BLEND_BACKWARD_SEM_ONLY_FIXED64
+        }
+        (true, Accumulation::FixedPoint) => ids::RASTER_BLEND_BACKWARD_SEM_ONLY_FIXED32X2,
     }
 }
