@@ -219,7 +219,9 @@ fn assert_neighbours_are_the_nearest(means: &[[f32; 3]], k: usize) {
             })
             .collect();
         d.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-        let want: Vec<u32> = d[..k].iter().map(|e| e.1).collect();
+        // Fewer than k others: the rest of the row is empty.
+        let mut want: Vec<u32> = d.iter().take(k).map(|e| e.1).collect();
+        want.resize(k, semsplat::contract::NO_NEIGHBOUR);
         assert_eq!(&knn[g * k..(g + 1) * k], &want[..], "neighbours of {g}");
     }
 }
@@ -263,7 +265,9 @@ fn decisions_match_a_plain_transcription() {
             .iter()
             .filter(|v| va[v].0 == vb[v].0 && !va[v].1 && !vb[v].1)
             .count();
-        together as u32 >= p.min_together && apart == 0
+        together as u32 >= p.min_together
+            && apart == 0
+            && together as f64 >= p.min_together_share * shared.len() as f64
     };
     let mut label: Vec<usize> = (0..means.len()).collect();
     loop {
@@ -565,4 +569,27 @@ fn diagnose_segments() {
     .unwrap();
     eprintln!("segment consensus again {:.2}s", t.elapsed().as_secs_f64());
     check_validation(gpu);
+}
+
+/// Two neighbours seen in one region in two views but on that region's edge in three more
+/// (a floor Gaussian at a wall's foot beside a wall Gaussian) do not join: together in
+/// fewer than half the views that saw both. Their other neighbour, together in all five,
+/// does.
+#[test]
+fn neighbours_seen_mostly_on_a_label_edge_do_not_join() {
+    let means = [[0.0f32, 0.0, 0.0], [0.1, 0.0, 0.0], [0.2, 0.0, 0.0]];
+    let per_view: Vec<Vec<(u32, u32, u32, bool)>> = (0..5)
+        .map(|v| {
+            let foot_on_edge = v >= 2;
+            vec![(0, 1, 5, foot_on_edge), (1, 1, 5, false), (2, 1, 5, false)]
+        })
+        .collect();
+    let obs = Observations::from_views(3, &per_view);
+    let p = ConsensusParams::default();
+    assert!(p.min_together <= 2, "the pair passes the count alone");
+    let knn = nearest_neighbours(&means, p.neighbours);
+    assert_neighbours_are_the_nearest(&means, p.neighbours);
+    let segment = build_segments(&obs, &knn, &p);
+    assert_ne!(segment[0], segment[1], "joined through two of five views");
+    assert_eq!(segment[1], segment[2]);
 }

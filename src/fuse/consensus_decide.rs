@@ -20,8 +20,13 @@ pub struct ConsensusParams {
     /// Views that must put two neighbours in the same region before they join...
     pub min_together: u32,
     /// ...and none may put them apart beyond this share of the views seeing both (boundary
-    /// noise moves edges by a few pixels: a small share of disagreeing views is tolerated).
+    /// noise moves edges by a few pixels: a small share of disagreeing views is tolerated)...
     pub max_apart_share: f64,
+    /// ...and at least this share of all views seeing both, those that saw them in one
+    /// region on its edge included, must put them together: a floor Gaussian at a wall's
+    /// foot is seen with the wall mostly on the label edge, and joined it through the few
+    /// views that put both inside the wall's region.
+    pub min_together_share: f64,
     /// Smaller segments (boundaries, fragments) leave each Gaussian to its own views.
     pub min_segment: usize,
     /// Rounds of joining neighbouring segments whose dominant regions agree view by view...
@@ -49,6 +54,7 @@ impl Default for ConsensusParams {
             neighbours: 8,
             min_together: 2,
             max_apart_share: 0.0,
+            min_together_share: 0.5,
             min_segment: 4,
             merge_rounds: 4,
             merge_min_together: 3,
@@ -102,9 +108,12 @@ pub fn build_segments(obs: &Observations, knn: &[u32], p: &ConsensusParams) -> V
             if h == NO_NEIGHBOUR || (h as usize) < g && knn_has(knn, k, h as usize, g) {
                 continue; // absent, or the pair is tested from h's row
             }
-            let (together, apart) = co_occurrence(obs, g, h as usize);
-            let views = (together + apart) as f64;
-            if together >= p.min_together && apart as f64 <= p.max_apart_share * views {
+            let c = co_occurrence(obs, g, h as usize);
+            let views = (c.together + c.apart) as f64;
+            if c.together >= p.min_together
+                && c.apart as f64 <= p.max_apart_share * views
+                && c.together as f64 >= p.min_together_share * c.views() as f64
+            {
                 union(&mut parent, g as u32, h);
             }
         }

@@ -204,7 +204,10 @@ impl Grid {
         let n = means.len() as f64;
         let surface_cell = (faces[2] * 4.0 / n).sqrt();
         let volume_cell = (ext[0] * ext[1] * ext[2] / (n * Self::MAX_CELLS_PER_GAUSSIAN)).cbrt();
-        let cell = surface_cell.max(volume_cell).max(1e-6);
+        // Gaussians along a line (a flat box's extent is ~0 in two axes) would get cells far
+        // finer than their spacing, and find no neighbour within MAX_RING shells.
+        let line_cell = ext.iter().copied().fold(0.0, f64::max) * 4.0 / n;
+        let cell = surface_cell.max(volume_cell).max(line_cell).max(1e-6);
         let dims = [0, 1, 2].map(|i| ((ext[i] / cell).floor() as i64 + 1).min(1 << 20));
         let mut grid = Grid {
             origin: lo,
@@ -287,11 +290,12 @@ impl Grid {
 }
 
 /// Of the views that observed both rows: how many put them in the same region (both away
-/// from its edge), and how many in different ones. Rows are sorted by view.
-pub fn co_occurrence(obs: &Observations, a: usize, b: usize) -> (u32, u32) {
+/// from its edge), how many in different ones, and how many in one region on its edge (no
+/// evidence either way). Rows are sorted by view.
+pub fn co_occurrence(obs: &Observations, a: usize, b: usize) -> CoOccurrence {
     let (ra, rb) = (obs.row(a), obs.row(b));
     let (mut i, mut j) = (ra.start, rb.start);
-    let (mut together, mut apart) = (0, 0);
+    let (mut together, mut apart, mut on_edge) = (0, 0, 0);
     while i < ra.end && j < rb.end {
         match obs.view[i].cmp(&obs.view[j]) {
             std::cmp::Ordering::Less => i += 1,
@@ -301,11 +305,32 @@ pub fn co_occurrence(obs: &Observations, a: usize, b: usize) -> (u32, u32) {
                     apart += 1;
                 } else if !(obs.edge[i] || obs.edge[j]) {
                     together += 1;
-                } // one region, on its edge: no evidence (see `Observations::edge`)
+                } else {
+                    on_edge += 1; // no evidence (see `Observations::edge`)
+                }
                 i += 1;
                 j += 1;
             }
         }
     }
-    (together, apart)
+    CoOccurrence {
+        together,
+        apart,
+        on_edge,
+    }
+}
+
+/// What the views that observed two Gaussians said of them ([`co_occurrence`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CoOccurrence {
+    pub together: u32,
+    pub apart: u32,
+    pub on_edge: u32,
+}
+
+impl CoOccurrence {
+    /// Views that observed both.
+    pub fn views(&self) -> u32 {
+        self.together + self.apart + self.on_edge
+    }
 }

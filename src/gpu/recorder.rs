@@ -256,11 +256,13 @@ impl Recorder {
             return Ok(());
         }
         let limit = self.gpu.caps().max_workgroup_count;
-        assert!(
-            groups.iter().zip(limit).all(|(g, l)| *g <= l),
-            "{}: {groups:?} workgroups exceed the device limit {limit:?}",
-            kernel.info().name
-        );
+        if !groups.iter().zip(limit).all(|(g, l)| *g <= l) {
+            return Err(GpuError::Limit(format!(
+                "{}: {groups:?} workgroups exceed the device's limit {limit:?}: too many \
+                 Gaussians, pixels or classes for one dispatch",
+                kernel.info().name
+            )));
+        }
         self.bind(kernel.id(), bindings, bytemuck::bytes_of(params))?;
         // SAFETY: recording into our command buffer.
         unsafe {

@@ -4,7 +4,7 @@
 use std::ops::{Index, Range};
 
 use crate::gpu::kernel_table::ids;
-use crate::gpu::{Buffer, BufferRange, Gpu, GpuResult, Recorder};
+use crate::gpu::{Buffer, BufferRange, Gpu, GpuError, GpuResult, Recorder};
 use crate::scene::gaussians::SemanticLogits;
 use crate::scene::Gaussians;
 
@@ -261,6 +261,18 @@ impl GpuScene {
         g: &Gaussians,
         attributes: SceneAttributes,
     ) -> GpuResult<GpuScene> {
+        // Per-Gaussian kernels run one invocation per Gaussian (and one more for a scan's
+        // trailing zero) in one dimension of workgroups of 256: 16.7M Gaussians where the
+        // device allows 65,535 workgroups (lavapipe); NVIDIA allows 2^31 - 1.
+        let max_n = gpu.caps().max_workgroup_count[0] as u64 * 256 - 1;
+        if g.len() as u64 > max_n {
+            return Err(GpuError::Limit(format!(
+                "a scene of {} Gaussians is more than one dispatch covers on this device \
+                 ({max_n}: {} workgroups of 256); split the scene",
+                g.len(),
+                gpu.caps().max_workgroup_count[0]
+            )));
+        }
         let (channels, logits) = match &g.semantics {
             Some(s) if s.channels > 0 && attributes == SceneAttributes::Full => (
                 s.channels as u32,
