@@ -13,7 +13,7 @@ use anyhow::{bail, ensure, Result};
 use super::chunks::{chunks, part_of};
 use super::frame::RenderedFrame;
 use super::gpu_scene::{GaussianParams, GpuScene, HostParams, ParamTensor};
-use super::rasterizer::{FrameSpec, Rasterizer, TileLists, RGB_BYTES};
+use super::rasterizer::{Rasterizer, TileLists, RGB_BYTES};
 use super::{project_params, RenderOptions, SemanticMode};
 use crate::contract::params::{BlendParams, FixedResolveParams, SoftmaxBackwardParams};
 use crate::contract::{
@@ -27,6 +27,16 @@ use crate::scene::Camera;
 pub use crate::contract::GRAD2D_STRIDE;
 /// Floats carried per pixel between backward windows: T, S_rgb, S_sem chunk.
 const CARRY_STRIDE: u64 = crate::contract::BACKWARD_CARRY_STRIDE as u64;
+
+/// Bytes per pixel of the state the backward carries between windows of a frame walked
+/// in `windows` windows (0 with one: the carry buffer is then a placeholder).
+fn carry_bytes_per_pixel(windows: u32) -> u64 {
+    if windows > 1 {
+        CARRY_STRIDE * 4
+    } else {
+        0
+    }
+}
 
 /// Upstream gradients per pixel, on the device: dL/d(rgb) [P*3], dL/d(accumulated alpha)
 /// [P], and dL/d(normalized semantics) [P*C] (any buffer when C = 0).
@@ -274,25 +284,11 @@ impl SceneGrads {
         let pixels = cam.width as u64 * cam.height as u64;
         let chunks = self.channels.div_ceil(SEM_CHUNK);
         self.fixed.set_view(cam.width, cam.height, chunks)?;
-        let need = if windows > 1 {
-            pixels * CARRY_STRIDE * 4
-        } else {
-            4
-        };
+        let need = (pixels * carry_bytes_per_pixel(windows)).max(4);
         if self.carry.size() < need {
             self.carry = gpu.buffer("backward_carry", need)?;
         }
         Ok(())
-    }
-
-    /// Bytes per pixel of the state the backward carries between windows of `frame` (0
-    /// with one window: the carry buffer is then a placeholder).
-    fn carry_bytes_per_pixel(&self, frame: &FrameSpec) -> u64 {
-        if frame.windows > 1 {
-            CARRY_STRIDE * 4
-        } else {
-            0
-        }
     }
 
     /// Records zeroing of the parameter gradients and the fixed-point status (start of an
@@ -383,10 +379,9 @@ impl TileLists<'_> {
             "gradient buffers were made for another scene"
         );
         let f = &self.frame;
+        let pixels = f.cam.width as u64 * f.cam.height as u64;
         ensure!(
-            f.windows == 1
-                || grads.carry.size()
-                    >= f.cam.width as u64 * f.cam.height as u64 * CARRY_STRIDE * 4,
+            grads.carry.size() >= pixels * carry_bytes_per_pixel(f.windows),
             "SceneGrads::prepare_view was not called for this view size"
         );
         let fixed = grads.accumulation == Accumulation::FixedPoint;
@@ -436,8 +431,8 @@ impl TileLists<'_> {
         let grad_sem_addr = sem_target.address_words(4)?;
         // Bands of tile rows whose per-pixel buffers each fit one binding (the widest:
         // the carried state, the semantic channels or RGB).
-        let sem_bytes = f.channels as u64 * 4;
-        let bands = f.bands(RGB_BYTES.max(sem_bytes).max(grads.carry_bytes_per_pixel(f)))?;
+        let (sem_bytes, carry_bytes) = (f.channels as u64 * 4, carry_bytes_per_pixel(f.windows));
+        let bands = f.bands(RGB_BYTES.max(sem_bytes).max(carry_bytes))?;
         for chunk in 0..f.sem_chunks() {
             for start in f.window_starts().rev() {
                 let params = BlendParams {
@@ -450,10 +445,7 @@ impl TileLists<'_> {
                         tile_row_base: band.first_tile_row,
                         ..params
                     };
-                    let px = |buf, bytes_per_pixel: u64| match bytes_per_pixel {
-                        0 => BufferRange::whole(buf), // a placeholder, never read
-                        bytes => band.range(buf, bytes),
-                    };
+                    let px = |buf, bytes_per_pixel| band.range_or_whole(buf, bytes_per_pixel);
                     let bindings = [
                         ("tile_ranges", BufferRange::whole(self.ranges())),
                         ("isect_ids", BufferRange::whole(self.isect_ids())),
@@ -461,7 +453,7 @@ impl TileLists<'_> {
                         ("last_entry", px(self.last_entry(), 4)),
                         ("n_contrib", px(self.n_contrib(), 4)),
                         ("v_sem_norm", px(upstream.sem_norm, sem_bytes)),
-                        ("carry", px(&grads.carry, grads.carry_bytes_per_pixel(f))),
+                        ("carry", px(&grads.carry, carry_bytes)),
                     ];
                     // What the alpha, color and screen-space gradients read and write (not
                     // the semantic-only variant).

@@ -70,6 +70,17 @@ impl Band {
         )
     }
 
+    /// [`Band::range`], or the whole buffer where `bytes_per_pixel` is 0: a placeholder the
+    /// kernel never reads (the carried state of a frame walked in one window, semantic
+    /// channels of an RGB-only frame).
+    pub fn range_or_whole<'a>(&self, buf: &'a Buffer, bytes_per_pixel: u64) -> BufferRange<'a> {
+        if bytes_per_pixel == 0 {
+            BufferRange::whole(buf)
+        } else {
+            self.range(buf, bytes_per_pixel)
+        }
+    }
+
     /// Workgroups of a per-tile dispatch over the band: one per tile.
     pub fn groups(&self, tiles_x: u32) -> [u32; 3] {
         [tiles_x, self.tile_rows, 1]

@@ -1145,29 +1145,9 @@ impl TileLists<'_> {
         &self.bufs.isect_ids
     }
 
-    /// Per Gaussian: (floor(mean2d) x, y, depth, opacity).
-    pub fn xy_depth_opacity(&self) -> &Buffer {
-        &self.bufs.xy
-    }
-
-    /// Per Gaussian: the fraction of the 2D mean, mean2d - floor(mean2d).
-    pub fn xy_frac(&self) -> &Buffer {
-        &self.bufs.xy_frac
-    }
-
-    /// Per Gaussian: (conic A, B, C, -).
-    pub fn conics(&self) -> &Buffer {
-        &self.bufs.conic
-    }
-
     /// Expected depth per pixel, written by [`Self::record_blend`].
     pub fn depth(&self) -> &Buffer {
         &self.bufs.depth
-    }
-
-    /// Per Gaussian: view-dependent color (r, g, b, -).
-    pub fn colors(&self) -> &Buffer {
-        &self.bufs.color
     }
 
     /// Per Gaussian: 1 where this view projected it (its tile lists may hold it).
@@ -1271,7 +1251,7 @@ impl TileLists<'_> {
                     let mut bindings: Vec<(&str, BufferRange)> = vec![
                         ("tile_ranges", BufferRange::whole(&b.ranges)),
                         ("isect_ids", BufferRange::whole(&b.isect_ids)),
-                        ("carry", carry_range(&b.carry, band, carry_bytes)),
+                        ("carry", band.range_or_whole(&b.carry, carry_bytes)),
                         ("out_rgb", px(&b.rgb, RGB_BYTES)),
                         ("out_alpha", px(&b.alpha, 4)),
                         ("out_depth", px(&b.depth, 4)),
@@ -1304,25 +1284,15 @@ impl TileLists<'_> {
 
 /// Device addresses of the projected per-Gaussian arrays ([`TileLists::projected_addrs`]).
 pub struct ProjectedAddrs {
+    /// Per Gaussian: (floor(mean2d) x, y, depth, opacity).
     pub xy_depth_opacity: [u32; 2],
+    /// Per Gaussian: the fraction of the 2D mean, mean2d - floor(mean2d).
     pub xy_frac: [u32; 2],
+    /// Per Gaussian: (conic A, B, C, -).
     pub conics: [u32; 2],
+    /// Per Gaussian: view-dependent color (r, g, b, -).
     pub colors: [u32; 2],
 }
 
 /// Bytes of a pixel's RGB.
 pub(crate) const RGB_BYTES: u64 = 12;
-
-/// A band's part of a carry buffer of `bytes_per_pixel` (the whole placeholder when a
-/// frame needs no carried state: one window).
-pub(crate) fn carry_range<'a>(
-    carry: &'a Buffer,
-    band: &Band,
-    bytes_per_pixel: u64,
-) -> BufferRange<'a> {
-    if bytes_per_pixel == 0 {
-        BufferRange::whole(carry)
-    } else {
-        band.range(carry, bytes_per_pixel)
-    }
-}
