@@ -10,7 +10,8 @@ use anyhow::{ensure, Result};
 use super::accumulate::{
     center_params, check_map_size, FuseConfig, FuseStats, LabelSource, NO_LABEL,
 };
-use super::consensus_decide::{build_segments, decide, merge_segments, Consensus, ConsensusParams};
+use super::consensus_cluster::cluster_segments;
+use super::consensus_decide::{decide, Consensus, ConsensusParams};
 use super::consensus_segments::{label_regions, nearest_neighbours, region_edges, Observations};
 use super::scores::ClassScores;
 use crate::gpu::kernel_table::ids;
@@ -40,8 +41,7 @@ pub fn fuse_consensus(
     );
     let (obs, mut stats) = observe(gpu, scene, cams, labels, classes, cfg, params.occlusion)?;
     let knn = nearest_neighbours(means, params.neighbours);
-    let segment = build_segments(&obs, &knn, params);
-    let segment = merge_segments(&obs, &knn, segment, params);
+    let segment = cluster_segments(&obs, &knn, params);
     let consensus = decide(&obs, &knn, segment, classes, params);
     stats.wall_s = start.elapsed().as_secs_f64();
     stats.views_per_s = stats.views as f64 / stats.wall_s.max(1e-9);

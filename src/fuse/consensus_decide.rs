@@ -1,12 +1,13 @@
-//! Segment consensus, the decisions: 3D segments from co-occurrence in connected label
-//! regions, each segment's class with every view counted once, each Gaussian's class from its
-//! segment (its own views where the segment is too small or its own views contradict it), a
-//! posterior per Gaussian, and the segments whose vote split is close (flagged).
+//! Segment consensus, the decisions (the segments: src/fuse/consensus_cluster.rs): the
+//! knobs, each segment's class with every view counted once, each Gaussian's class from its
+//! segment (its own views where the segment is too small or its own views contradict it;
+//! its neighbours' classes where no view observed it), a posterior per Gaussian, and the
+//! segments whose vote split is close (flagged).
 
 use serde::Serialize;
 
 use super::assign::Assignment;
-use super::consensus_segments::{co_occurrence, find, union, Observations};
+use super::consensus_segments::Observations;
 use crate::contract::NO_NEIGHBOUR;
 
 /// The knobs of segment consensus (defaults: docs/robustness.md).
@@ -17,34 +18,42 @@ pub struct ConsensusParams {
     pub occlusion: bool,
     /// Nearest neighbours each Gaussian may join a segment through.
     pub neighbours: usize,
-    /// Views that must put two neighbours in the same region before they join...
+    /// Two segments join only where the views put the neighbour pairs between them in the
+    /// same region this many times (summed over the pairs)...
     pub min_together: u32,
-    /// ...and none may put them apart beyond this share of the views seeing both (boundary
-    /// noise moves edges by a few pixels: a small share of disagreeing views is tolerated)...
+    /// ...put them apart in at most this share of those views (boundary noise moves edges
+    /// by a few pixels: a small share of disagreeing views is tolerated)...
     pub max_apart_share: f64,
-    /// ...and at least this share of all views seeing both, those that saw them in one
-    /// region on its edge included, must put them together: a floor Gaussian at a wall's
-    /// foot is seen with the wall mostly on the label edge, and joined it through the few
-    /// views that put both inside the wall's region.
+    /// ...put them together in at least this share of all views seeing them, those that saw
+    /// them in one region on its edge included (a floor Gaussian at a wall's foot is seen
+    /// with the wall mostly on the label edge, and joined it through the few views that put
+    /// both inside the wall's region)...
     pub min_together_share: f64,
+    /// ...and the two segments' dominant regions disagree in at most this share of the views
+    /// that saw both (a ceiling tested against a wall on all their views, not on the few
+    /// their edge pairs share).
+    pub region_max_disagree: f64,
+    /// Merge order: one view putting a pair apart outweighs this many putting it together.
+    pub apart_weight: f64,
     /// Smaller segments (boundaries, fragments) leave each Gaussian to its own views.
     pub min_segment: usize,
-    /// Rounds of joining neighbouring segments whose dominant regions agree view by view...
-    pub merge_rounds: usize,
-    /// ...in at least this many views...
-    pub merge_min_together: u32,
-    /// ...and disagree in at most this share of the views seeing both.
-    pub merge_max_apart_share: f64,
-    /// A Gaussian seen in at least this many views keeps its own class when fewer than
-    /// a quarter of them agree with its segment (it was merged across an edge).
+    /// A Gaussian seen in at least this many views keeps its own class where its views
+    /// contradict its segment's class...
     pub min_own_views: u32,
+    /// ...that is, where so few of them give the segment's class that a view of the segment
+    /// (giving it with the segment's rate) would give as few with at most this probability.
+    pub contradiction_p: f64,
     /// Dirichlet prior per class of the posterior (0.5: Jeffreys).
     pub prior: f64,
-    /// A segment is flagged when its runner-up class holds at least this share of its views...
+    /// A segment is flagged when its runner-up class holds at least this share of its views
+    /// (or it has no decisive class)...
     pub flag_share: f64,
-    /// ...(or it has no decisive class), and it has at least this many Gaussians and views.
+    /// ...that is, at least this many views' votes: a few views differing is what boundary
+    /// noise does to a wall's strip beside a shelf; a consistently mislabeled object seen
+    /// by twenty views has ten or more against it...
+    pub flag_min_dissent: f64,
+    /// ...and it has at least this many Gaussians.
     pub flag_min_gaussians: usize,
-    pub flag_min_views: usize,
 }
 
 impl Default for ConsensusParams {
@@ -53,17 +62,17 @@ impl Default for ConsensusParams {
             occlusion: true,
             neighbours: 8,
             min_together: 2,
-            max_apart_share: 0.0,
+            max_apart_share: 0.1,
             min_together_share: 0.5,
+            region_max_disagree: 0.1,
+            apart_weight: 4.0,
             min_segment: 4,
-            merge_rounds: 4,
-            merge_min_together: 3,
-            merge_max_apart_share: 0.1,
             min_own_views: 4,
+            contradiction_p: 0.01,
             prior: 0.5,
             flag_share: 0.25,
+            flag_min_dissent: 5.0,
             flag_min_gaussians: 20,
-            flag_min_views: 5,
         }
     }
 }
@@ -86,143 +95,19 @@ pub struct SegmentVotes {
 pub struct Consensus {
     /// Class and `class_conf` (posterior mean of the class) per Gaussian.
     pub assignment: Assignment,
-    /// Entropy (nats) of each Gaussian's posterior mean; ln(classes) when unseen.
+    /// Entropy (nats) of each Gaussian's posterior mean; ln(classes) when undecided.
     pub entropy: Vec<f32>,
     /// Segment per Gaussian (index into `segments`).
     pub segment: Vec<u32>,
     pub segments: Vec<SegmentVotes>,
-    /// Gaussians whose class came from their segment (the rest: their own views).
+    /// Gaussians whose class came from their segment (the rest: their own views, or their
+    /// neighbours).
     pub from_segment: usize,
-    /// Per Gaussian, the counts its class was decided from (segment split or own views).
+    /// Gaussians no view observed, decided by their neighbours' classes.
+    pub from_neighbours: usize,
+    /// Per Gaussian, the counts its class was decided from (segment split, own views, or
+    /// neighbours' classes).
     pub evidence: Vec<Vec<f64>>,
-}
-
-/// Segment id per Gaussian: neighbours join when enough views put them in one region and
-/// (nearly) none apart. Ids are numbered by first Gaussian, so they are deterministic.
-pub fn build_segments(obs: &Observations, knn: &[u32], p: &ConsensusParams) -> Vec<u32> {
-    let n = obs.n;
-    let k = p.neighbours;
-    let mut parent: Vec<u32> = (0..n as u32).collect();
-    for g in 0..n {
-        for &h in &knn[g * k..(g + 1) * k] {
-            if h == NO_NEIGHBOUR || (h as usize) < g && knn_has(knn, k, h as usize, g) {
-                continue; // absent, or the pair is tested from h's row
-            }
-            let c = co_occurrence(obs, g, h as usize);
-            let views = (c.together + c.apart) as f64;
-            if c.together >= p.min_together
-                && c.apart as f64 <= p.max_apart_share * views
-                && c.together as f64 >= p.min_together_share * c.views() as f64
-            {
-                union(&mut parent, g as u32, h);
-            }
-        }
-    }
-    let roots: Vec<u32> = (0..n as u32).map(|g| find(&mut parent, g)).collect();
-    renumber(&roots)
-}
-
-/// Joins neighbouring segments whose dominant regions agree, view by view: a segment pools
-/// all its Gaussians' views, so this test rests on far more views than one pair of
-/// Gaussians (objects seen in few views per Gaussian, such as a ceiling, come out whole).
-/// Rounds repeat until nothing joins.
-pub fn merge_segments(
-    obs: &Observations,
-    knn: &[u32],
-    mut segment: Vec<u32>,
-    p: &ConsensusParams,
-) -> Vec<u32> {
-    let k = p.neighbours;
-    for _round in 0..p.merge_rounds {
-        let dominant = dominant_regions(obs, &segment);
-        let mut pairs: Vec<(u32, u32)> = Vec::new();
-        for g in 0..obs.n {
-            for &h in &knn[g * k..(g + 1) * k] {
-                if h != NO_NEIGHBOUR && segment[g] != segment[h as usize] {
-                    let (a, b) = (segment[g], segment[h as usize]);
-                    pairs.push((a.min(b), a.max(b)));
-                }
-            }
-        }
-        pairs.sort_unstable();
-        pairs.dedup();
-        let count = dominant.len();
-        let mut parent: Vec<u32> = (0..count as u32).collect();
-        let mut joined = false;
-        for (a, b) in pairs {
-            let (together, apart) = list_agreement(&dominant[a as usize], &dominant[b as usize]);
-            let views = (together + apart) as f64;
-            if together >= p.merge_min_together && apart as f64 <= p.merge_max_apart_share * views {
-                union(&mut parent, a, b);
-                joined = true;
-            }
-        }
-        if !joined {
-            break;
-        }
-        let roots: Vec<u32> = segment.iter().map(|&s| find(&mut parent, s)).collect();
-        segment = renumber(&roots);
-    }
-    segment
-}
-
-/// Per segment: (view, the region holding most of its observations in that view), by view.
-fn dominant_regions(obs: &Observations, segment: &[u32]) -> Vec<Vec<(u32, u32)>> {
-    let count = segment.iter().map(|&s| s as usize + 1).max().unwrap_or(0);
-    let mut entries: Vec<(u32, u32, u32)> = Vec::with_capacity(obs.view.len());
-    for (g, &seg) in segment.iter().enumerate().take(obs.n) {
-        for i in obs.row(g) {
-            entries.push((seg, obs.view[i], obs.region[i]));
-        }
-    }
-    entries.sort_unstable();
-    let mut out = vec![Vec::new(); count];
-    for group in entries.chunk_by(|a, b| a.0 == b.0 && a.1 == b.1) {
-        // Runs of one region; the longest wins, ties to the first (lowest region id).
-        let mut best = (0usize, 0u32);
-        for run in group.chunk_by(|a, b| a.2 == b.2) {
-            if run.len() > best.0 {
-                best = (run.len(), run[0].2);
-            }
-        }
-        out[group[0].0 as usize].push((group[0].1, best.1));
-    }
-    out
-}
-
-/// Of the views in both lists (sorted by view): same region, different region.
-fn list_agreement(a: &[(u32, u32)], b: &[(u32, u32)]) -> (u32, u32) {
-    let (mut i, mut j, mut together, mut apart) = (0, 0, 0, 0);
-    while i < a.len() && j < b.len() {
-        match a[i].0.cmp(&b[j].0) {
-            std::cmp::Ordering::Less => i += 1,
-            std::cmp::Ordering::Greater => j += 1,
-            std::cmp::Ordering::Equal => {
-                if a[i].1 == b[j].1 {
-                    together += 1;
-                } else {
-                    apart += 1;
-                }
-                (i, j) = (i + 1, j + 1);
-            }
-        }
-    }
-    (together, apart)
-}
-
-/// Dense ids numbered by first appearance.
-fn renumber(keys: &[u32]) -> Vec<u32> {
-    let mut id = std::collections::HashMap::new();
-    keys.iter()
-        .map(|&k| {
-            let next = id.len() as u32;
-            *id.entry(k).or_insert(next)
-        })
-        .collect()
-}
-
-fn knn_has(knn: &[u32], k: usize, row: usize, g: usize) -> bool {
-    knn[row * k..(row + 1) * k].contains(&(g as u32))
 }
 
 /// The class with the most `votes`; ties go to the most `mass`; still tied: None.
@@ -301,41 +186,151 @@ pub fn decide(
         .collect();
     let own = own_votes(obs, classes);
     let n = obs.n;
-    let (mut class, mut conf, mut entropy) = (vec![None; n], vec![0f32; n], vec![0f32; n]);
+    let mut class = vec![None; n];
     let mut from_segment = 0;
-    let mut used = Vec::with_capacity(n);
+    let mut evidence = Vec::with_capacity(n);
     for g in 0..n {
         let s = segment[g] as usize;
-        let own_total: f64 = own[g].iter().sum();
-        let seg_class = segments[s].class.filter(|_| sizes[s] >= p.min_segment);
-        let contradicted = seg_class
-            .is_some_and(|c| own_total >= p.min_own_views as f64 && own[g][c] * 4.0 < own_total);
-        let evidence: &[f64] = match seg_class {
-            Some(c) if !contradicted => {
+        match segments[s].class.filter(|_| sizes[s] >= p.min_segment) {
+            Some(c) if !contradicts(&own[g], c, &split[s], p) => {
                 class[g] = Some(c);
                 from_segment += 1;
-                &split[s]
+                evidence.push(split[s].clone());
             }
             _ => {
                 class[g] = decisive_argmax(&own[g], &neighbour_votes(&own, knn, p.neighbours, g));
-                &own[g]
+                evidence.push(own[g].clone());
             }
-        };
-        let (c, h) = posterior(evidence, class[g], p.prior);
-        (conf[g], entropy[g]) = (c as f32, h as f32);
-        used.push(evidence.to_vec());
+        }
     }
+    let from_neighbours = fill_unobserved(&mut class, &mut evidence, obs, knn, p.neighbours);
+    let (confidence, entropy) = (0..n)
+        .map(|g| {
+            let (c, h) = posterior(&evidence[g], class[g], p.prior);
+            (c as f32, h as f32)
+        })
+        .unzip();
     Consensus {
-        assignment: Assignment {
-            class,
-            confidence: conf,
-        },
+        assignment: Assignment { class, confidence },
         entropy,
         segment,
         segments,
         from_segment,
-        evidence: used,
+        from_neighbours,
+        evidence,
     }
+}
+
+/// Whether a Gaussian's own view counts `own` contradict its segment's class `c`: it has at
+/// least `min_own_views` views, and so few give `c` that views of the segment (giving `c`
+/// at the segment's rate, `split`) would give as few with probability below
+/// `contradiction_p`. Such a Gaussian was joined across an edge; a Gaussian seen by a few
+/// flickering views is not (a ceiling Gaussian seen four times as wall, in a ceiling its
+/// views call wall 40% of the time, stays ceiling).
+fn contradicts(own: &[f64], c: usize, split: &[f64], p: &ConsensusParams) -> bool {
+    let views = own.iter().sum::<f64>().round() as u64;
+    let total: f64 = split.iter().sum();
+    views >= p.min_own_views as u64
+        && total > 0.0
+        && binomial_at_most(own[c].round() as u64, views, split[c] / total) < p.contradiction_p
+}
+
+/// P(X <= k) for X ~ Binomial(n, rate), summed in log space (terms far below f64's range
+/// vanish; the sum does not underflow where it matters).
+pub fn binomial_at_most(k: u64, n: u64, rate: f64) -> f64 {
+    if rate <= 0.0 || k >= n {
+        return 1.0;
+    }
+    if rate >= 1.0 {
+        return 0.0;
+    }
+    let (ln_rate, ln_miss) = (rate.ln(), (1.0 - rate).ln());
+    let mut ln_term = n as f64 * ln_miss; // i = 0
+    let mut sum = ln_term.exp();
+    for i in 0..k {
+        ln_term += ((n - i) as f64 / (i + 1) as f64).ln() + ln_rate - ln_miss;
+        sum += ln_term.exp();
+    }
+    sum.min(1.0)
+}
+
+/// Gaussians no view observed (their centers hidden in every view) take the class most of
+/// their decided neighbours hold, in rounds outward from the observed ones; those neighbour
+/// counts are their evidence. A tie, or no decided neighbour, leaves one undecided. Returns
+/// how many were decided so.
+fn fill_unobserved(
+    class: &mut [Option<usize>],
+    evidence: &mut [Vec<f64>],
+    obs: &Observations,
+    knn: &[u32],
+    k: usize,
+) -> usize {
+    let pending: Vec<bool> = (0..obs.n).map(|g| obs.row(g).is_empty()).collect();
+    // Who lists g among its neighbours: the Gaussians a decision at g may decide next round
+    // (only they can change; a scene seen by few views has most Gaussians pending and needs
+    // many rounds).
+    let listed_by = reverse_neighbours(knn, k, obs.n);
+    let mut pending = pending;
+    let mut frontier: Vec<usize> = (0..obs.n).filter(|&g| pending[g]).collect();
+    let mut decided = 0;
+    while !frontier.is_empty() {
+        // Decided from the classes as they stood at the round's start.
+        let found: Vec<(usize, usize, Vec<f64>)> = frontier
+            .iter()
+            .filter_map(|&g| {
+                let mut counts = vec![0.0; evidence[g].len()];
+                let near = knn[g * k..(g + 1) * k]
+                    .iter()
+                    .filter(|&&h| h != NO_NEIGHBOUR);
+                for c in near.filter_map(|&h| class[h as usize]) {
+                    counts[c] += 1.0;
+                }
+                decisive_argmax(&counts, &counts).map(|c| (g, c, counts))
+            })
+            .collect();
+        decided += found.len();
+        frontier.clear();
+        for (g, c, counts) in found {
+            (class[g], evidence[g], pending[g]) = (Some(c), counts, false);
+            frontier.extend(listed_by.row(g).filter(|&f| pending[f]));
+        }
+        frontier.sort_unstable();
+        frontier.dedup();
+        frontier.retain(|&f| pending[f]);
+    }
+    decided
+}
+
+/// Reverse adjacency of a [n][k] neighbour table, in compressed rows.
+struct ReverseNeighbours {
+    offsets: Vec<u32>,
+    from: Vec<u32>,
+}
+
+impl ReverseNeighbours {
+    fn row(&self, g: usize) -> impl Iterator<Item = usize> + '_ {
+        let range = self.offsets[g] as usize..self.offsets[g + 1] as usize;
+        self.from[range].iter().map(|&f| f as usize)
+    }
+}
+
+fn reverse_neighbours(knn: &[u32], k: usize, n: usize) -> ReverseNeighbours {
+    let mut offsets = vec![0u32; n + 1];
+    for &h in knn.iter().filter(|&&h| h != NO_NEIGHBOUR) {
+        offsets[h as usize + 1] += 1;
+    }
+    for g in 0..n {
+        offsets[g + 1] += offsets[g];
+    }
+    let mut next = offsets.clone();
+    let mut from = vec![0u32; offsets[n] as usize];
+    for (i, &h) in knn.iter().enumerate() {
+        if h != NO_NEIGHBOUR {
+            from[next[h as usize] as usize] = (i / k.max(1)) as u32;
+            next[h as usize] += 1;
+        }
+    }
+    ReverseNeighbours { offsets, from }
 }
 
 fn segment_summary(
@@ -347,9 +342,9 @@ fn segment_summary(
 ) -> SegmentVotes {
     let class = decisive_argmax(split, mass);
     let total: f64 = split.iter().sum();
-    let mut shares: Vec<f64> = split.iter().map(|v| v / total.max(1e-300)).collect();
-    shares.sort_by(|a, b| b.total_cmp(a));
-    let runner_up = shares.get(1).copied().unwrap_or(0.0);
+    let mut sorted = split.to_vec();
+    sorted.sort_by(|a, b| b.total_cmp(a));
+    let runner_up = sorted.get(1).copied().unwrap_or(0.0);
     SegmentVotes {
         gaussians,
         views,
@@ -358,8 +353,8 @@ fn segment_summary(
         // Only a segment large and well enough seen for its split to mean something: a
         // singleton no view saw has no class either, and is not a finding.
         flagged: gaussians >= p.flag_min_gaussians
-            && views >= p.flag_min_views
-            && (class.is_none() || runner_up >= p.flag_share),
+            && runner_up >= p.flag_min_dissent
+            && (class.is_none() || runner_up >= p.flag_share * total),
     }
 }
 

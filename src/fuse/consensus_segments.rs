@@ -1,6 +1,7 @@
-//! The host side of segment consensus (src/fuse/consensus.rs): connected label regions of a
-//! view, the Gaussians' nearest neighbours, the 3D segments built from co-occurrence in
-//! regions, and each segment's and Gaussian's class with each view counted once.
+//! The host side of segment consensus (src/fuse/consensus.rs), its inputs: the observations,
+//! connected label regions of a view, the Gaussians' nearest neighbours, and what the views
+//! said of a pair of neighbours (co-occurrence in regions). The segments are clustered in
+//! src/fuse/consensus_cluster.rs and decided in src/fuse/consensus_decide.rs.
 //!
 //! Why regions: flicker relabels a whole object in a view but does not move its edges, so two
 //! neighbouring Gaussians of one object fall in the same connected label region in (nearly)
