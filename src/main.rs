@@ -29,7 +29,8 @@ enum Command {
     Demo(cli::demo::DemoArgs),
     /// Generate a procedural benchmark room with exact ground truth and label noise.
     Synth(cli::synth::SynthArgs),
-    /// Lift per-view label maps onto the Gaussians (vote or FlashSplat; no training).
+    /// Lift per-view label maps onto the Gaussians (vote, FlashSplat or segment consensus; no
+    /// training).
     Fuse(Box<cli::fuse::FuseArgs>),
     /// Sum the partial evidence of `fuse --shard K/N` runs (every shard once) and write what
     /// a single `fuse` of every view writes, bit for bit.

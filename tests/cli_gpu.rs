@@ -189,7 +189,8 @@ fn bench_fuse_json_times_every_method_against_the_forward_render() {
             "vote-weighted",
             "flashsplat",
             "flashsplat-per-view",
-            "segment-consensus"
+            "segment-consensus",
+            "segment-consensus-relabel"
         ]
     );
     for m in methods {

@@ -7,23 +7,11 @@ fn demo_reports_every_method_with_finite_numbers_and_valid_charts() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("demo");
     let run = Command::new(env!("CARGO_BIN_EXE_semsplat"))
-        .args([
-            "demo",
-            "--preset",
-            "tiny",
-            "--views",
-            "6",
-            "--test-views",
-            "2",
-            "--width",
-            "96",
-            "--height",
-            "72",
-            "--semantics-only-iters",
-            "25",
-            "--joint-iters",
-            "25",
-        ])
+        .args(
+            "demo --preset tiny --views 6 --test-views 2 --width 96 --height 72 \
+             --semantics-only-iters 25 --joint-iters 25"
+                .split_whitespace(),
+        )
         .arg("--out")
         .arg(&out)
         .output()
@@ -50,6 +38,7 @@ fn demo_reports_every_method_with_finite_numbers_and_valid_charts() {
             "flashsplat",
             "flashsplat --per-view",
             "segment-consensus",
+            "segment-consensus --relabel",
             "joint --semantics-only",
             "joint"
         ]

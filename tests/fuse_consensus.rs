@@ -3,6 +3,8 @@
 
 mod common;
 
+use common::consensus::{input, noisy_maps};
+use common::regions::{flood_regions, on_edge};
 use common::{check_validation, gpu};
 use semsplat::contract::NO_NEIGHBOUR;
 use semsplat::dataset::CompactClasses;
@@ -30,58 +32,9 @@ fn room(preset: &str, views: usize, size: (u32, u32), seed: u64, noise: &str) ->
     generate(&cfg).unwrap()
 }
 
-fn noisy_maps(s: &SynthScene, classes: &CompactClasses) -> Vec<Option<Vec<u32>>> {
-    s.noisy
-        .as_ref()
-        .unwrap()
-        .maps
-        .iter()
-        .map(|m| Some(classes.compact_labels(m)))
-        .collect()
-}
-
 /// A small office: `views` train views at 96x72, no held-out views.
 fn small(noise: &str, views: usize, seed: u64) -> SynthScene {
     room("office", views, (96, 72), seed, noise)
-}
-
-/// Connected regions by flood fill (an independent transcription of `label_regions`):
-/// region ids in scan order of their first pixel.
-fn flood_regions(labels: &[u32], w: usize) -> Vec<u32> {
-    let h = labels.len() / w;
-    let mut id = vec![NO_LABEL; labels.len()];
-    let mut next = 0;
-    for start in 0..labels.len() {
-        if labels[start] == NO_LABEL || id[start] != NO_LABEL {
-            continue;
-        }
-        let mut stack = vec![start];
-        id[start] = next;
-        while let Some(p) = stack.pop() {
-            let (x, y) = (p % w, p / w);
-            let mut near = Vec::new();
-            if x > 0 {
-                near.push(p - 1);
-            }
-            if x + 1 < w {
-                near.push(p + 1);
-            }
-            if y > 0 {
-                near.push(p - w);
-            }
-            if y + 1 < h {
-                near.push(p + w);
-            }
-            for q in near {
-                if labels[q] == labels[p] && id[q] == NO_LABEL {
-                    id[q] = next;
-                    stack.push(q);
-                }
-            }
-        }
-        next += 1;
-    }
-    id
 }
 
 /// The GPU's observations (occlusion off) against a plain f64 projection of every center
@@ -93,14 +46,11 @@ fn observations_match_a_cpu_transcription() {
     let classes = CompactClasses::from_table(&s.room.classes).unwrap();
     let labels = noisy_maps(&s, &classes);
     let scene = GpuScene::upload(gpu, &s.gaussians).unwrap();
-    let (obs, _) = observe(
-        gpu,
-        &scene,
-        &s.cameras,
-        &labels,
-        classes.len(),
+    let (obs, centers, _) = observe(
+        &input(gpu, &scene, &s, &labels, classes.len()),
         &FuseConfig::default(),
         false,
+        &mut |_, _| {},
     )
     .unwrap();
     let (mut checked, mut skipped) = (0usize, 0usize);
@@ -132,12 +82,28 @@ fn observations_match_a_cpu_transcription() {
             let expect = expect
                 .map(|(u, w)| w as usize * cam.width as usize + u as usize)
                 .filter(|&pix| map[pix] != NO_LABEL)
-                .map(|pix| (map[pix], regions[pix], on_edge(&regions, cam, pix)));
+                .map(|pix| {
+                    (
+                        map[pix],
+                        regions[pix],
+                        on_edge(&regions, cam.width as usize, pix),
+                    )
+                });
             let got = obs
                 .row(g)
                 .find(|&i| obs.view[i] == v as u32)
                 .map(|i| (obs.label[i], obs.region[i], obs.edge[i]));
             assert_eq!(got, expect, "view {v}, Gaussian {g}");
+            // The center pixels kept for --relabel: the same observations, at the pixel.
+            let pixel = centers[v].iter().find(|c| c.0 == g as u32).map(|c| c.1);
+            assert_eq!(pixel.is_some(), got.is_some(), "view {v}, Gaussian {g}");
+            if let Some(pixel) = pixel {
+                assert_eq!(
+                    map[pixel as usize],
+                    got.unwrap().0,
+                    "view {v}, Gaussian {g}"
+                );
+            }
             checked += 1;
         }
     }
@@ -146,18 +112,6 @@ fn observations_match_a_cpu_transcription() {
         "checked {checked}, skipped {skipped}"
     );
     check_validation(gpu);
-}
-
-/// Whether pixel `pix` has a 4-neighbour (inside the image) in another region.
-fn on_edge(regions: &[u32], cam: &semsplat::scene::Camera, pix: usize) -> bool {
-    let (w, h) = (cam.width as i64, cam.height as i64);
-    let (x, y) = (pix as i64 % w, pix as i64 / w);
-    [(-1, 0), (1, 0), (0, -1), (0, 1)].iter().any(|&(dx, dy)| {
-        let (nx, ny) = (x + dx, y + dy);
-        (0..w).contains(&nx)
-            && (0..h).contains(&ny)
-            && regions[(ny * w + nx) as usize] != regions[pix]
-    })
 }
 
 /// A tiny deterministic generator for the CPU-only tests.
@@ -499,12 +453,7 @@ fn consensus_is_deterministic() {
     let scene = GpuScene::upload(gpu, &s.gaussians).unwrap();
     let run = || {
         fuse_consensus(
-            gpu,
-            &scene,
-            &s.gaussians.means,
-            &s.cameras,
-            &labels,
-            classes.len(),
+            &input(gpu, &scene, &s, &labels, classes.len()),
             &FuseConfig::default(),
             &ConsensusParams::default(),
         )
@@ -528,12 +477,7 @@ fn planted_object_is_flagged() {
     let labels = noisy_maps(&s, &classes);
     let scene = GpuScene::upload(gpu, &s.gaussians).unwrap();
     let (c, _) = fuse_consensus(
-        gpu,
-        &scene,
-        &s.gaussians.means,
-        &s.cameras,
-        &labels,
-        classes.len(),
+        &input(gpu, &scene, &s, &labels, classes.len()),
         &FuseConfig::default(),
         &ConsensusParams::default(),
     )
@@ -645,12 +589,7 @@ fn diagnose_segments() {
     let scene = GpuScene::upload(gpu, &s.gaussians).unwrap();
     let params = ConsensusParams::default();
     let (c, stats) = fuse_consensus(
-        gpu,
-        &scene,
-        &s.gaussians.means,
-        &s.cameras,
-        &labels,
-        classes.len(),
+        &input(gpu, &scene, &s, &labels, classes.len()),
         &FuseConfig::default(),
         &params,
     )
@@ -734,12 +673,7 @@ fn diagnose_segments() {
     eprintln!("flashsplat accumulate {:.2}s", t.elapsed().as_secs_f64());
     let t = std::time::Instant::now();
     fuse_consensus(
-        gpu,
-        &scene,
-        &s.gaussians.means,
-        &s.cameras,
-        &labels,
-        classes.len(),
+        &input(gpu, &scene, &s, &labels, classes.len()),
         &FuseConfig::default(),
         &params,
     )

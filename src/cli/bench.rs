@@ -8,7 +8,7 @@ use clap::{Args, Subcommand};
 use serde::Serialize;
 
 use super::args;
-use super::joint_args::parse_methods;
+use super::joint_args::{methods_help, parse_methods};
 use super::progress::{follow, views_bar};
 use semsplat::bench::fuse::{bench_fuse, FuseBench, FuseBenchSpec};
 use semsplat::bench::render::{bench_render, BenchInput};
@@ -71,9 +71,7 @@ pub struct FuseArgs {
     /// Label classes (rows of the evidence matrix), 1..=65535.
     #[arg(long, default_value_t = 16)]
     classes: usize,
-    /// Fusion methods (default: all five): vote, vote-occlusion, vote-weighted, flashsplat,
-    /// flashsplat-per-view.
-    #[arg(long, value_delimiter = ',', num_args = 1..)]
+    #[arg(long, value_delimiter = ',', num_args = 1.., help = methods_help(&fusion_methods()))]
     methods: Vec<String>,
     /// Timed runs over all views of the forward render and of every method (after a
     /// one-view warm-up); the median is reported. One run already times every view.
@@ -359,12 +357,16 @@ fn run_render(gpu: &Gpu, a: RenderArgs) -> Result<()> {
     })
 }
 
-fn run_fuse(gpu: &Gpu, a: FuseArgs) -> Result<()> {
-    let fusion: Vec<Lifter> = ALL_METHODS
+/// The training-free methods, which `bench fuse` times.
+fn fusion_methods() -> Vec<Lifter> {
+    ALL_METHODS
         .into_iter()
         .filter(|l| matches!(l, Lifter::Fuse(_)))
-        .collect();
-    let methods = parse_methods(&a.methods, &fusion)?
+        .collect()
+}
+
+fn run_fuse(gpu: &Gpu, a: FuseArgs) -> Result<()> {
+    let methods = parse_methods(&a.methods, &fusion_methods())?
         .into_iter()
         .filter_map(|l| match l {
             Lifter::Fuse(m) => Some(m),

@@ -316,6 +316,9 @@ fn inspect_ply(path: &Path, table: Option<&ClassTable>) -> Result<Report> {
         if let Some(conf) = &g.class_conf {
             r.add("class_conf", range(conf.iter().map(|&c| c as f64)));
         }
+        if let Some(entropy) = &g.class_entropy {
+            r.add("class_entropy", range(entropy.iter().map(|&e| e as f64)));
+        }
         if table.is_none() {
             let sidecar = classes_sidecar_path(path);
             r.add(
@@ -323,6 +326,11 @@ fn inspect_ply(path: &Path, table: Option<&ClassTable>) -> Result<Report> {
                 format!("no class table ({} not found)", sidecar.display()),
             );
         }
+    }
+    if let Some(segments) = &g.segment_ids {
+        let distinct: std::collections::BTreeSet<i32> =
+            segments.iter().copied().filter(|&s| s >= 0).collect();
+        r.add("segments", distinct.len());
     }
     if let Some(inst) = &g.instance_ids {
         let distinct: std::collections::BTreeSet<i32> =
@@ -371,6 +379,12 @@ fn semantic_fields(g: &Gaussians) -> Vec<String> {
     }
     if g.instance_ids.is_some() {
         semantic.push("instance".to_owned());
+    }
+    if g.class_entropy.is_some() {
+        semantic.push("class_entropy".to_owned());
+    }
+    if g.segment_ids.is_some() {
+        semantic.push("segment".to_owned());
     }
     if let Some(s) = &g.semantics {
         semantic.push(format!(

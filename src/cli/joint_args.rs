@@ -10,10 +10,7 @@ use semsplat::synth::{RoomSource, SynthConfig};
 
 #[derive(Args, Clone)]
 pub struct MethodArgs {
-    /// Methods to run (default: all): vote, vote-occlusion, vote-weighted, flashsplat,
-    /// flashsplat-per-view (fuse --per-view), joint-semantics (train --semantics-only), joint
-    /// (full joint training).
-    #[arg(long, value_delimiter = ',', num_args = 1..)]
+    #[arg(long, value_delimiter = ',', num_args = 1.., help = methods_help(&ALL_METHODS))]
     methods: Vec<String>,
     /// Iterations of joint-semantics (one view each).
     #[arg(long, default_value_t = JointSchedule::default().semantics_only_iters, value_parser = args::at_least_one::<u32>)]
@@ -35,6 +32,18 @@ impl MethodArgs {
             ..Default::default()
         }
     }
+}
+
+/// `--methods`' help: every key of `known`, with the command each stands for.
+pub fn methods_help(known: &[Lifter]) -> String {
+    let keys: Vec<String> = known
+        .iter()
+        .map(|l| format!("{} ({})", l.key(), l.command()))
+        .collect();
+    format!(
+        "Methods to run, comma-separated (default: all): {}",
+        keys.join(", ")
+    )
 }
 
 /// The methods named by `--methods` keys, each one of `known`; no key: all of `known`.

@@ -5,6 +5,7 @@ pub mod bench;
 pub mod demo;
 pub mod eval;
 pub mod fuse;
+pub mod fuse_consensus;
 pub mod info;
 pub mod inspect;
 pub mod joint_args;

@@ -33,19 +33,35 @@ impl Lifter {
         }
     }
 
+    /// The command line the lifter stands for ("fuse --method vote --occlusion").
+    pub fn command(self) -> String {
+        match self {
+            Lifter::Fuse(method) => {
+                let s = method.spelling();
+                match s.flag {
+                    Some(flag) => format!("fuse --method {} --{flag}", s.base),
+                    None => format!("fuse --method {}", s.base),
+                }
+            }
+            Lifter::JointSemantics => "train --semantics-only".into(),
+            Lifter::JointFull => "train".into(),
+        }
+    }
+
     pub fn from_key(key: &str) -> Option<Lifter> {
         ALL_METHODS.into_iter().find(|l| l.key() == key)
     }
 }
 
 /// Every lifter: the fusion methods in [`SPELLINGS`] order, then the joint ones.
-pub const ALL_METHODS: [Lifter; 8] = [
+pub const ALL_METHODS: [Lifter; 9] = [
     Lifter::Fuse(SPELLINGS[0].method),
     Lifter::Fuse(SPELLINGS[1].method),
     Lifter::Fuse(SPELLINGS[2].method),
     Lifter::Fuse(SPELLINGS[3].method),
     Lifter::Fuse(SPELLINGS[4].method),
     Lifter::Fuse(SPELLINGS[5].method),
+    Lifter::Fuse(SPELLINGS[6].method),
     Lifter::JointSemantics,
     Lifter::JointFull,
 ];

@@ -14,8 +14,8 @@ use crate::eval::image_quality::{image_quality, ImageQuality};
 use crate::eval::label_render::LabelRenderer;
 use crate::eval::metrics::{gaussian_accuracy, ClassIou, Confusion, SegmentationScores};
 use crate::fuse::{
-    accumulate_assigned, fuse_consensus, nearest_neighbours, AssignOnGpu, ConsensusParams,
-    FuseConfig, Method, SegmentVotes, TIE_NEIGHBOURS,
+    accumulate_assigned, lift_by_consensus, nearest_neighbours, AssignOnGpu, ConsensusInput,
+    ConsensusParams, FuseConfig, Method, SegmentVotes, TIE_NEIGHBOURS,
 };
 use crate::gpu::Gpu;
 use crate::render::GpuScene;
@@ -246,24 +246,22 @@ fn fuse_lifted(
         method,
         ..Default::default()
     };
-    if method == Method::SegmentConsensus {
-        let params = ConsensusParams::default();
-        let (c, stats) = fuse_consensus(
+    if method.is_consensus() {
+        let input = ConsensusInput {
             gpu,
-            &scene,
-            &s.gaussians.means,
-            &s.cameras,
+            scene: &scene,
+            means: &s.gaussians.means,
+            cams: &s.cameras,
             labels,
-            compact.len(),
-            &cfg,
-            &params,
-        )?;
+            classes: compact.len(),
+        };
+        let lift = lift_by_consensus(&input, &cfg, &ConsensusParams::default(), &mut |_, _| {})?;
         return Ok(Lifted {
-            classes: user_classes(compact.user_ids(), c.assignment.class.iter().copied()),
-            confidence: c.assignment.confidence,
+            classes: user_classes(compact.user_ids(), lift.assignment.class.iter().copied()),
+            confidence: lift.assignment.confidence,
             lifted: None,
-            peak_device_bytes: stats.peak_device_bytes,
-            segments: Some((c.segments, c.segment)),
+            peak_device_bytes: lift.stats.peak_device_bytes,
+            segments: Some((lift.consensus.segments, lift.consensus.segment)),
         });
     }
     // Ties go to the class the Gaussian's nearest neighbours hold most evidence for.

@@ -474,7 +474,7 @@ pub fn accumulate(
     cfg: &FuseConfig,
     progress: impl FnMut(usize, usize),
 ) -> Result<(ClassScores, FuseStats)> {
-    if cfg.method == Method::SegmentConsensus {
+    if cfg.method.is_consensus() {
         return super::consensus::consensus_evidence(gpu, scene, cams, labels, classes, cfg);
     }
     let n = scene.n as usize;
@@ -546,7 +546,7 @@ pub fn accumulate_assigned(
 /// `gpu`; None where the host must ([`accumulate`]).
 pub fn gpu_assignable(gpu: &Gpu, cfg: &FuseConfig) -> Option<EvidenceKind> {
     let kind = EvidenceKind::of(cfg.method, cfg.accumulation)?;
-    (cfg.method != Method::SegmentConsensus && gpu.caps().int64).then_some(kind)
+    (!cfg.method.is_consensus() && gpu.caps().int64).then_some(kind)
 }
 
 /// Runs every pass over the views; `on_pass` takes each pass's finished rows.
@@ -679,6 +679,12 @@ pub fn accumulate_raw(
     progress: impl FnMut(usize, usize),
 ) -> Result<(RawEvidence, FuseStats)> {
     let n = scene.n as usize;
+    ensure!(
+        !cfg.method.is_consensus(),
+        "{} decides its segments from every view at once: its evidence cannot be split into \
+         parts (fuse --shard) and summed",
+        cfg.method.name()
+    );
     let Some(kind) = EvidenceKind::of(cfg.method, cfg.accumulation) else {
         bail!("float accumulation has no exact integer evidence to save; use fixed point");
     };

@@ -10,47 +10,136 @@ use anyhow::{ensure, Result};
 use super::accumulate::{
     center_params, check_map_size, FuseConfig, FuseStats, LabelSource, NO_LABEL,
 };
+use super::assign::Assignment;
 use super::consensus_cluster::cluster_segments;
 use super::consensus_decide::{decide, Consensus, ConsensusParams};
+use super::consensus_relabel::fuse_relabeled;
 use super::consensus_segments::{label_regions, nearest_neighbours, region_edges, Observations};
+use super::method::Method;
 use super::scores::ClassScores;
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, Gpu, Recorder};
 use crate::render::{GpuScene, Rasterizer};
 use crate::scene::Camera;
 
-/// Lifts the labels of `cams` by segment consensus. `means` are the scene's centers (the
-/// host builds the neighbour graph from them).
-#[allow(clippy::too_many_arguments)]
+/// What a consensus method lifts: the scene on the GPU and its centers (the host builds the
+/// neighbour graph from them), the cameras and their label maps in compact class ids.
+#[derive(Clone, Copy)]
+pub struct ConsensusInput<'a> {
+    pub gpu: &'a Gpu,
+    pub scene: &'a GpuScene,
+    pub means: &'a [[f32; 3]],
+    pub cams: &'a [Camera],
+    pub labels: &'a dyn LabelSource,
+    pub classes: usize,
+}
+
+/// Lifts the labels of `input` by segment consensus.
 pub fn fuse_consensus(
-    gpu: &Gpu,
-    scene: &GpuScene,
-    means: &[[f32; 3]],
-    cams: &[Camera],
-    labels: &dyn LabelSource,
-    classes: usize,
+    input: &ConsensusInput,
     cfg: &FuseConfig,
     params: &ConsensusParams,
 ) -> Result<(Consensus, FuseStats)> {
-    let start = std::time::Instant::now();
-    ensure!(
-        means.len() == scene.n as usize,
-        "{} centers for a scene of {} Gaussians",
-        means.len(),
-        scene.n
-    );
-    let (obs, mut stats) = observe(gpu, scene, cams, labels, classes, cfg, params.occlusion)?;
-    let knn = nearest_neighbours(means, params.neighbours);
-    let segment = cluster_segments(&obs, &knn, params);
-    let consensus = decide(&obs, &knn, segment, classes, params);
-    stats.wall_s = start.elapsed().as_secs_f64();
-    stats.views_per_s = stats.views as f64 / stats.wall_s.max(1e-9);
-    Ok((consensus, stats))
+    let run = consensus_run(input, cfg, params, &mut |_, _| {})?;
+    Ok((run.consensus, run.stats))
 }
 
-/// Segment consensus as an evidence matrix, for the callers of [`super::accumulate`] (`fuse`
-/// and `bench fuse`, through `accumulate_assigned`, which assigns it on the host): each Gaussian's column holds the counts its class was decided from (its
-/// segment's vote split, or its own views), so the argmax is that class except in exact ties.
+/// A segment consensus run and what it was decided from.
+pub struct ConsensusRun {
+    pub consensus: Consensus,
+    pub observations: Observations,
+    /// Per view, (Gaussian, pixel under its center) of every observation.
+    pub centers: Vec<Vec<(u32, u32)>>,
+    /// [n][params.neighbours] nearest neighbours.
+    pub knn: Vec<u32>,
+    pub stats: FuseStats,
+}
+
+/// [`fuse_consensus`], keeping the observations and the neighbour graph; `progress` gets
+/// (views observed, views).
+pub fn consensus_run(
+    input: &ConsensusInput,
+    cfg: &FuseConfig,
+    params: &ConsensusParams,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<ConsensusRun> {
+    let start = std::time::Instant::now();
+    ensure!(
+        input.means.len() == input.scene.n as usize,
+        "{} centers for a scene of {} Gaussians",
+        input.means.len(),
+        input.scene.n
+    );
+    let (observations, centers, mut stats) = observe(input, cfg, params.occlusion, progress)?;
+    let knn = nearest_neighbours(input.means, params.neighbours);
+    let segment = cluster_segments(&observations, &knn, params);
+    let consensus = decide(&observations, &knn, segment, input.classes, params);
+    stats.wall_s = start.elapsed().as_secs_f64();
+    stats.views_per_s = stats.views as f64 / stats.wall_s.max(1e-9);
+    Ok(ConsensusRun {
+        consensus,
+        observations,
+        centers,
+        knn,
+        stats,
+    })
+}
+
+/// What a consensus method (`segment-consensus`, `segment-consensus --relabel`) gives.
+pub struct ConsensusLift {
+    /// Class per Gaussian, and as its confidence the posterior mean of that class under the
+    /// view votes the consensus decided from ([`Consensus::evidence`]).
+    pub assignment: Assignment,
+    /// The segments, their vote splits and flags, and each Gaussian's entropy.
+    pub consensus: Consensus,
+    /// Per Gaussian, the evidence its class is the argmax of (the consensus counts; with
+    /// `--relabel` FlashSplat's over the relabeled views where it decided): what
+    /// `--save-contrib` writes.
+    pub evidence: ClassScores,
+    pub stats: FuseStats,
+}
+
+/// Lifts the labels by `cfg.method`, one of the consensus methods ([`Method::is_consensus`]);
+/// `progress` gets (views done, views to do).
+pub fn lift_by_consensus(
+    input: &ConsensusInput,
+    cfg: &FuseConfig,
+    params: &ConsensusParams,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<ConsensusLift> {
+    ensure!(
+        cfg.method.is_consensus(),
+        "{} is not a consensus method",
+        cfg.method.name()
+    );
+    if cfg.method == Method::SegmentConsensusRelabel {
+        return fuse_relabeled(input, cfg, params, progress);
+    }
+    let run = consensus_run(input, cfg, params, progress)?;
+    let evidence = scores_of(&run.consensus.evidence, input.classes);
+    Ok(ConsensusLift {
+        assignment: run.consensus.assignment.clone(),
+        consensus: run.consensus,
+        evidence,
+        stats: run.stats,
+    })
+}
+
+/// Per-Gaussian count vectors as an evidence matrix [classes][n].
+pub fn scores_of(counts: &[Vec<f64>], classes: usize) -> ClassScores {
+    let n = counts.len();
+    let mut scores = ClassScores::zeros(classes, n);
+    for (g, counts) in counts.iter().enumerate() {
+        for (c, &v) in counts.iter().enumerate() {
+            scores.data[c * n + g] = v;
+        }
+    }
+    scores
+}
+
+/// A consensus method as an evidence matrix, for the callers of [`super::accumulate`]
+/// (`bench fuse`, through `accumulate_assigned`, which assigns it on the host): the argmax
+/// of each column is the method's class except in exact ties.
 pub fn consensus_evidence(
     gpu: &Gpu,
     scene: &GpuScene,
@@ -63,28 +152,36 @@ pub fn consensus_evidence(
     let flat: Vec<f32> = gpu.download(&scene.params.means, 0, 3 * n)?;
     let means: Vec<[f32; 3]> = flat.chunks_exact(3).map(|m| [m[0], m[1], m[2]]).collect();
     let params = ConsensusParams::default();
-    let (consensus, stats) =
-        fuse_consensus(gpu, scene, &means, cams, labels, classes, cfg, &params)?;
-    let mut scores = ClassScores::zeros(classes, n);
-    for (g, counts) in consensus.evidence.iter().enumerate() {
-        for (c, &v) in counts.iter().enumerate() {
-            scores.data[c * n + g] = v;
-        }
-    }
-    Ok((scores, stats))
+    let input = ConsensusInput {
+        gpu,
+        scene,
+        means: &means,
+        cams,
+        labels,
+        classes,
+    };
+    let lift = lift_by_consensus(&input, cfg, &params, &mut |_, _| {})?;
+    Ok((lift.evidence, lift.stats))
 }
 
 /// Every view's observations of every Gaussian: label and region under its center (with
-/// `occlusion`, only where the center is within the depth tolerance of the rendered depth).
+/// `occlusion`, only where the center is within the depth tolerance of the rendered depth),
+/// and per view the (Gaussian, pixel) of each observation.
+#[allow(clippy::type_complexity)]
 pub fn observe(
-    gpu: &Gpu,
-    scene: &GpuScene,
-    cams: &[Camera],
-    labels: &dyn LabelSource,
-    classes: usize,
+    input: &ConsensusInput,
     cfg: &FuseConfig,
     occlusion: bool,
-) -> Result<(Observations, FuseStats)> {
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<(Observations, Vec<Vec<(u32, u32)>>, FuseStats)> {
+    let ConsensusInput {
+        gpu,
+        scene,
+        cams,
+        labels,
+        classes,
+        ..
+    } = *input;
     let n = scene.n as usize;
     let mut stats = FuseStats {
         views: cams.len(),
@@ -96,9 +193,12 @@ pub fn observe(
     let mut raster = Rasterizer::new(gpu);
     raster.set_split_sizes(cfg.split);
     let mut per_view = Vec::with_capacity(cams.len());
+    let mut pixels = Vec::with_capacity(cams.len());
     for (view, cam) in cams.iter().enumerate() {
+        progress(view, cams.len());
         let Some(map) = labels.labels(view, cam)? else {
             per_view.push(Vec::new());
+            pixels.push(Vec::new());
             continue;
         };
         check_map_size(cam, &map)?;
@@ -113,19 +213,24 @@ pub fn observe(
         let centers: Vec<u32> = gpu.download(&pixels_buf, 0, n)?;
         let regions = label_regions(&map, cam.width as usize);
         let edges = region_edges(&regions, cam.width as usize);
+        let seen: Vec<(u32, u32)> = centers
+            .iter()
+            .enumerate()
+            .filter(|&(_, &p)| p != NO_LABEL && map[p as usize] != NO_LABEL)
+            .map(|(g, &p)| (g as u32, p))
+            .collect();
         per_view.push(
-            centers
-                .iter()
-                .enumerate()
-                .filter(|&(_, &p)| p != NO_LABEL && map[p as usize] != NO_LABEL)
-                .map(|(g, &p)| {
+            seen.iter()
+                .map(|&(g, p)| {
                     let p = p as usize;
-                    (g as u32, map[p], regions[p], edges[p])
+                    (g, map[p], regions[p], edges[p])
                 })
                 .collect(),
         );
+        pixels.push(seen);
     }
-    Ok((Observations::from_views(n, &per_view), stats))
+    progress(cams.len(), cams.len());
+    Ok((Observations::from_views(n, &per_view), pixels, stats))
 }
 
 /// Writes the pixel under every Gaussian's visible center into `out`; returns GPU ms.

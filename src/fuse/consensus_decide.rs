@@ -7,6 +7,7 @@
 use serde::Serialize;
 
 use super::assign::Assignment;
+use super::consensus_relabel::RelabelRule;
 use super::consensus_segments::Observations;
 use crate::contract::NO_NEIGHBOUR;
 
@@ -54,6 +55,8 @@ pub struct ConsensusParams {
     pub flag_min_dissent: f64,
     /// ...and it has at least this many Gaussians.
     pub flag_min_gaussians: usize,
+    /// `--relabel`: how a view's label regions take the consensus classes.
+    pub relabel: RelabelRule,
 }
 
 impl Default for ConsensusParams {
@@ -73,6 +76,10 @@ impl Default for ConsensusParams {
             flag_share: 0.25,
             flag_min_dissent: 5.0,
             flag_min_gaussians: 20,
+            relabel: RelabelRule {
+                min_share: 0.75,
+                min_mass: 1.0,
+            },
         }
     }
 }

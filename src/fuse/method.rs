@@ -29,6 +29,11 @@ pub enum Method {
     /// counting once, and each Gaussian takes its segment's class (src/fuse/consensus.rs).
     /// Robust to per-view label flicker.
     SegmentConsensus,
+    /// Segment consensus, then FlashSplat on every view's label regions relabeled with the
+    /// consensus classes of the Gaussians observed in them (src/fuse/consensus_relabel.rs):
+    /// the consensus decides what an object is, the pixels each Gaussian covers where its
+    /// edges are.
+    SegmentConsensusRelabel,
 }
 
 impl Method {
@@ -39,6 +44,15 @@ impl Method {
             Method::Vote => SceneAttributes::Centers,
             _ => SceneAttributes::Geometry,
         }
+    }
+
+    /// Whether the method builds 3D segments (and flags them): `segment-consensus` and its
+    /// `--relabel` variant.
+    pub fn is_consensus(self) -> bool {
+        matches!(
+            self,
+            Method::SegmentConsensus | Method::SegmentConsensusRelabel
+        )
     }
 
     /// Whether the method accumulates over each view's tile lists (alpha * T per pixel and
@@ -81,17 +95,18 @@ macro_rules! spellings {
 }
 
 /// Every method, in the order tables and charts list them.
-pub const SPELLINGS: [Spelling; 6] = spellings! {
+pub const SPELLINGS: [Spelling; 7] = spellings! {
     Vote: "vote";
     VoteOcclusion: "vote" --"occlusion";
     VoteWeighted: "vote" --"weighted";
     FlashSplat: "flashsplat";
     FlashSplatPerView: "flashsplat" --"per-view";
     SegmentConsensus: "segment-consensus";
+    SegmentConsensusRelabel: "segment-consensus" --"relabel";
 };
 
 impl Method {
-    fn spelling(self) -> &'static Spelling {
+    pub fn spelling(self) -> &'static Spelling {
         SPELLINGS
             .iter()
             .find(|s| s.method == self)

@@ -7,6 +7,8 @@ pub mod assign_gpu;
 pub mod consensus;
 pub mod consensus_cluster;
 pub mod consensus_decide;
+pub mod consensus_relabel;
+pub mod consensus_report;
 pub mod consensus_segments;
 pub mod method;
 pub mod partial;
@@ -20,7 +22,7 @@ pub use assign::{
     assign_one_vs_rest, assign_semantic, assign_semantic_near, class_totals, one_vs_rest_row,
     Assignment, TIE_NEIGHBOURS,
 };
-pub use consensus::fuse_consensus;
+pub use consensus::{fuse_consensus, lift_by_consensus, ConsensusInput, ConsensusLift};
 pub use consensus_decide::{Consensus, ConsensusParams, SegmentVotes};
 pub use consensus_segments::nearest_neighbours;
 pub use method::{Method, SPELLINGS};

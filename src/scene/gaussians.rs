@@ -34,6 +34,10 @@ pub struct Gaussians {
     pub class_conf: Option<Vec<f32>>,
     /// Instance per Gaussian (-1: none).
     pub instance_ids: Option<Vec<i32>>,
+    /// Entropy (nats) of the class posterior `class_conf` comes from (segment consensus).
+    pub class_entropy: Option<Vec<f32>>,
+    /// 3D segment per Gaussian (segment consensus; -1: none).
+    pub segment_ids: Option<Vec<i32>>,
 }
 
 impl Gaussians {
@@ -101,6 +105,12 @@ impl Gaussians {
         }
         if let Some(v) = &self.instance_ids {
             lens.push(("instance_ids", v.len(), n));
+        }
+        if let Some(v) = &self.class_entropy {
+            lens.push(("class_entropy", v.len(), n));
+        }
+        if let Some(v) = &self.segment_ids {
+            lens.push(("segment_ids", v.len(), n));
         }
         for (what, got, want) in lens {
             if got != want {
@@ -176,6 +186,15 @@ impl Gaussians {
         }
         if let Some(v) = &self.instance_ids {
             tally("an instance id below -1", &mut v.iter().map(|&c| c < -1));
+        }
+        if let Some(v) = &self.class_entropy {
+            tally(
+                "a negative or non-finite class entropy",
+                &mut v.iter().map(|e| !(e.is_finite() && *e >= 0.0)),
+            );
+        }
+        if let Some(v) = &self.segment_ids {
+            tally("a segment id below -1", &mut v.iter().map(|&c| c < -1));
         }
         found
     }

@@ -3,8 +3,9 @@
 //! Vertex properties, in the order we write them (viewers need the standard ones first):
 //! `x y z nx ny nz f_dc_0..2 f_rest_0..(3*(K-1)-1) opacity scale_0..2 rot_0..3`, then the
 //! optional semantic ones `class` (int), `class_conf` (float), `instance` (int),
-//! `sem_0..sem_{C-1}` (float). INRIA stores `f_rest` channel-major (all red coefficients
-//! 1..K-1, then green, then blue); [`Gaussians::sh`] is `[n][coeff][rgb]`.
+//! `class_entropy` (float), `segment` (int), `sem_0..sem_{C-1}` (float). INRIA stores
+//! `f_rest` channel-major (all red coefficients 1..K-1, then green, then blue);
+//! [`Gaussians::sh`] is `[n][coeff][rgb]`.
 //!
 //! The reader is hand-written and streaming: it parses the header, then decodes vertex
 //! records straight into the structure-of-arrays vectors, so a 5M-Gaussian scene costs the
@@ -258,6 +259,8 @@ enum Slot {
     Class,
     ClassConf,
     Instance,
+    ClassEntropy,
+    Segment,
     Sem(usize),
     Skip,
 }
@@ -270,6 +273,8 @@ struct Layout {
     has_class: bool,
     has_conf: bool,
     has_instance: bool,
+    has_entropy: bool,
+    has_segment: bool,
 }
 
 /// `prefix<N>` -> N.
@@ -321,6 +326,22 @@ fn plan_layout(props: &[PropertyDef]) -> Result<Layout> {
         slots.push((slot, ty));
     }
 
+    check_required(&seen)?;
+    Ok(Layout {
+        slots,
+        sh_degree,
+        sem_channels: (sem_count > 0).then_some(sem_count),
+        has_class: seen.contains("class"),
+        has_conf: seen.contains("class_conf"),
+        has_instance: seen.contains("instance"),
+        has_entropy: seen.contains("class_entropy"),
+        has_segment: seen.contains("segment"),
+    })
+}
+
+/// Refuses a vertex layout without the 3DGS properties, naming what it is instead where
+/// that is recognisable (a 2DGS scene, a point cloud).
+fn check_required(seen: &std::collections::HashSet<&str>) -> Result<()> {
     const REQUIRED: [&str; 14] = [
         "x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
         "rot_0", "rot_1", "rot_2", "rot_3",
@@ -336,7 +357,7 @@ fn plan_layout(props: &[PropertyDef]) -> Result<Layout> {
              scenes are not supported, semsplat renders 3D Gaussians"
         );
     }
-    if is_point_cloud(&seen) {
+    if is_point_cloud(seen) {
         bail!(
             "this is a point cloud (x y z{} without Gaussian properties, e.g. an SfM \
              input.ply), not Gaussians: use a trained scene (an INRIA run's \
@@ -356,14 +377,7 @@ fn plan_layout(props: &[PropertyDef]) -> Result<Layout> {
             missing.join(", ")
         );
     }
-    Ok(Layout {
-        slots,
-        sh_degree,
-        sem_channels: (sem_count > 0).then_some(sem_count),
-        has_class: seen.contains("class"),
-        has_conf: seen.contains("class_conf"),
-        has_instance: seen.contains("instance"),
-    })
+    Ok(())
 }
 
 /// A plain point cloud: positions (maybe colours and normals) but none of the Gaussian
@@ -432,6 +446,8 @@ fn slot_of(name: &str, counts: &IndexedCounts) -> Result<Slot> {
         "class" => Slot::Class,
         "class_conf" => Slot::ClassConf,
         "instance" => Slot::Instance,
+        "class_entropy" => Slot::ClassEntropy,
+        "segment" => Slot::Segment,
         _ => Slot::Skip,
     })
 }
@@ -647,6 +663,8 @@ fn empty_gaussians(layout: &Layout, reserve: usize) -> Gaussians {
         class_ids: layout.has_class.then(|| Vec::with_capacity(reserve)),
         class_conf: layout.has_conf.then(|| Vec::with_capacity(reserve)),
         instance_ids: layout.has_instance.then(|| Vec::with_capacity(reserve)),
+        class_entropy: layout.has_entropy.then(|| Vec::with_capacity(reserve)),
+        segment_ids: layout.has_segment.then(|| Vec::with_capacity(reserve)),
     }
 }
 
@@ -699,6 +717,8 @@ struct VertexValues {
     class: i32,
     conf: f32,
     instance: i32,
+    entropy: f32,
+    segment: i32,
 }
 
 impl VertexValues {
@@ -711,6 +731,8 @@ impl VertexValues {
             class: -1,
             conf: 0.0,
             instance: -1,
+            entropy: 0.0,
+            segment: -1,
         }
     }
 }
@@ -751,6 +773,8 @@ fn store(
         Slot::Class => vals.class = to_i32(v, "class", vertex)?,
         Slot::ClassConf => vals.conf = v as f32,
         Slot::Instance => vals.instance = to_i32(v, "instance", vertex)?,
+        Slot::ClassEntropy => vals.entropy = v as f32,
+        Slot::Segment => vals.segment = to_i32(v, "segment", vertex)?,
         Slot::Sem(i) => sem[i] = v as f32,
         Slot::Skip => {}
     }
@@ -789,6 +813,12 @@ fn push_vertex(
     }
     if let Some(v) = &mut g.instance_ids {
         v.push(vals.instance);
+    }
+    if let Some(v) = &mut g.class_entropy {
+        v.push(vals.entropy);
+    }
+    if let Some(v) = &mut g.segment_ids {
+        v.push(vals.segment);
     }
     Ok(())
 }
@@ -937,6 +967,12 @@ fn property_names(g: &Gaussians) -> Vec<(String, &'static str)> {
     if g.instance_ids.is_some() {
         names.push(("instance".into(), "int"));
     }
+    if g.class_entropy.is_some() {
+        names.push(float("class_entropy"));
+    }
+    if g.segment_ids.is_some() {
+        names.push(("segment".into(), "int"));
+    }
     if let Some(s) = &g.semantics {
         for i in 0..s.channels {
             names.push(float(&format!("sem_{i}")));
@@ -1010,6 +1046,9 @@ pub fn check_finite(g: &Gaussians) -> Result<()> {
         if let Some(k) = g.class_conf.as_ref().filter(|c| !c[i].is_finite()) {
             bail!("Gaussian {i} has a non-finite class_conf ({})", k[i]);
         }
+        if let Some(k) = g.class_entropy.as_ref().filter(|c| !c[i].is_finite()) {
+            bail!("Gaussian {i} has a non-finite class_entropy ({})", k[i]);
+        }
     }
     Ok(())
 }
@@ -1055,6 +1094,12 @@ pub fn write_ply_to(w: &mut impl Write, g: &Gaussians) -> Result<()> {
             record.extend_from_slice(&v[i].to_le_bytes());
         }
         if let Some(v) = &g.instance_ids {
+            record.extend_from_slice(&v[i].to_le_bytes());
+        }
+        if let Some(v) = &g.class_entropy {
+            record.extend_from_slice(&v[i].to_le_bytes());
+        }
+        if let Some(v) = &g.segment_ids {
             record.extend_from_slice(&v[i].to_le_bytes());
         }
         if let Some(s) = &g.semantics {

@@ -29,6 +29,8 @@ impl Gaussians {
             class_ids: self.class_ids.as_ref().map(|v| pick(v, keep, 1)),
             class_conf: self.class_conf.as_ref().map(|v| pick(v, keep, 1)),
             instance_ids: self.instance_ids.as_ref().map(|v| pick(v, keep, 1)),
+            class_entropy: self.class_entropy.as_ref().map(|v| pick(v, keep, 1)),
+            segment_ids: self.segment_ids.as_ref().map(|v| pick(v, keep, 1)),
         }
     }
 

@@ -309,6 +309,8 @@ pub fn gaussians_from_samples(room: &Room, samples: &[SurfaceSample]) -> Gaussia
         semantics: None,
         class_ids: Some(Vec::with_capacity(n)),
         class_conf: None,
+        class_entropy: None,
+        segment_ids: None,
         instance_ids: Some(Vec::with_capacity(n)),
     };
     for s in samples {

@@ -4,6 +4,8 @@
 #![allow(dead_code)]
 
 pub mod cli;
+pub mod consensus;
+pub mod regions;
 pub mod spec_scene;
 
 use std::sync::OnceLock;

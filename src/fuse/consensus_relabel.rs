@@ -1,0 +1,180 @@
+//! Relabeled FlashSplat (`--method segment-consensus --relabel`): segment consensus decides
+//! what each object is, FlashSplat's pixel footprints decide where its edges are.
+//!
+//! Why: flicker relabels a whole object in a view but leaves its label edges where they
+//! were, and FlashSplat, which weighs each Gaussian by the pixels it covers, places edges
+//! better than any decision from a Gaussian's center (an edge Gaussian renders as the class
+//! it covers most). So every view's connected label regions are relabeled with the class
+//! the consensus gave the Gaussians observed inside them, and FlashSplat runs on the
+//! relabeled views. A region whose observed Gaussians split between classes (a view in
+//! which flicker gave two touching objects one class, so their regions merged) says
+//! nothing about where their edge is: it is left unlabeled in that view. A region no
+//! Gaussian center was observed in keeps its label.
+
+use anyhow::Result;
+use serde::Serialize;
+
+use super::accumulate::{accumulate, FuseConfig, LabelSource, NO_LABEL};
+use super::assign::{assign_semantic_near, Assignment};
+use super::consensus::{consensus_run, scores_of, ConsensusInput, ConsensusLift};
+use super::consensus_decide::{posterior, ConsensusParams};
+use super::consensus_segments::{label_regions, region_edges};
+use super::method::Method;
+use crate::scene::Camera;
+
+/// How a view's label regions take the consensus classes.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct RelabelRule {
+    /// A region takes one class where that class holds at least this share (> 0.5) of the
+    /// observed Gaussians' centers inside it (those off the region's edge; on the edge only
+    /// if none is off it); else the region is unlabeled in that view: flicker gave two
+    /// touching objects one class there and merged their regions, so the region says
+    /// nothing of where their edge runs.
+    pub min_share: f64,
+    /// A Gaussian whose footprint over the relabeled views sums to fewer pixels keeps its
+    /// consensus class.
+    pub min_mass: f64,
+}
+
+/// A label source whose views come relabeled region by region ([`RelabelRule`]).
+pub struct RelabeledViews<'a> {
+    pub inner: &'a dyn LabelSource,
+    /// Per view, (Gaussian, pixel under its center) of every observation.
+    pub centers: &'a [Vec<(u32, u32)>],
+    /// Consensus class per Gaussian.
+    pub class: &'a [Option<usize>],
+    pub rule: RelabelRule,
+}
+
+impl LabelSource for RelabeledViews<'_> {
+    fn labels(&self, view: usize, cam: &Camera) -> Result<Option<Vec<u32>>> {
+        let Some(mut map) = self.inner.labels(view, cam)? else {
+            return Ok(None);
+        };
+        let seeds = self.centers.get(view).map_or(&[][..], |c| c.as_slice());
+        let seeds = seeds
+            .iter()
+            .filter_map(|&(g, p)| self.class[g as usize].map(|c| (p, c as u32)));
+        relabel_view(&mut map, cam.width as usize, seeds, self.rule.min_share);
+        Ok(Some(map))
+    }
+}
+
+/// Relabels `map` (one view, `width` pixels a row) from `seeds`, the (pixel, class) of the
+/// observed Gaussians' centers: a region takes the class holding `min_share` of its seeds
+/// (off its edge where any are), is unlabeled where none does, and keeps its label where
+/// no seed lies.
+pub fn relabel_view(
+    map: &mut [u32],
+    width: usize,
+    seeds: impl Iterator<Item = (u32, u32)>,
+    min_share: f64,
+) {
+    debug_assert!(min_share > 0.5, "a tie could hold min_share");
+    let regions = label_regions(map, width);
+    let edges = region_edges(&regions, width);
+    // (region, on the edge, class): by region, each region's interior seeds first.
+    let mut seeds: Vec<(u32, bool, u32)> = seeds
+        .filter(|&(p, _)| regions[p as usize] != NO_LABEL)
+        .map(|(p, c)| (regions[p as usize], edges[p as usize], c))
+        .collect();
+    seeds.sort_unstable();
+    let count = regions
+        .iter()
+        .filter(|&&r| r != NO_LABEL)
+        .max()
+        .map_or(0, |&r| r + 1);
+    let mut relabel: Vec<Option<u32>> = vec![None; count as usize];
+    for region in seeds.chunk_by(|a, b| a.0 == b.0) {
+        let interior = region.partition_point(|s| !s.1);
+        let counted = if interior > 0 {
+            &region[..interior]
+        } else {
+            region
+        };
+        // Sorted by class within each part: runs of one class.
+        let (class, n) = counted
+            .chunk_by(|a, b| a.2 == b.2)
+            .map(|run| (run[0].2, run.len()))
+            .fold(
+                (NO_LABEL, 0),
+                |best, run| if run.1 > best.1 { run } else { best },
+            );
+        relabel[region[0].0 as usize] = Some(match n as f64 >= min_share * counted.len() as f64 {
+            true => class,
+            false => NO_LABEL,
+        });
+    }
+    for (label, &region) in map.iter_mut().zip(&regions) {
+        if let Some(&Some(c)) = relabel.get(region as usize) {
+            *label = c;
+        }
+    }
+}
+
+/// Segment consensus, then FlashSplat's accumulation over the views relabeled with its
+/// classes ([`RelabeledViews`]), assigned as FlashSplat (ties by the neighbours' evidence):
+/// the consensus decides what each object is, the pixels each Gaussian covers where the
+/// objects' edges run. A Gaussian keeps its consensus class where the relabeled views leave
+/// it undecided or its footprint there sums to less than `params.relabel.min_mass` pixels
+/// (too little of it is seen for its pixels to say where an edge runs, and it renders
+/// nowhere anyway). `progress` gets (views done, twice the views): every view is visited
+/// twice.
+pub fn fuse_relabeled(
+    input: &ConsensusInput,
+    cfg: &FuseConfig,
+    params: &ConsensusParams,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<ConsensusLift> {
+    let start = std::time::Instant::now();
+    let views = input.cams.len();
+    let run = consensus_run(input, cfg, params, &mut |done, _| progress(done, 2 * views))?;
+    let relabeled = RelabeledViews {
+        inner: input.labels,
+        centers: &run.centers,
+        class: &run.consensus.assignment.class,
+        rule: params.relabel,
+    };
+    let flashsplat = FuseConfig {
+        method: Method::FlashSplat,
+        ..cfg.clone()
+    };
+    let (footprints, fs_stats) = accumulate(
+        input.gpu,
+        input.scene,
+        input.cams,
+        &relabeled,
+        input.classes,
+        &flashsplat,
+        |done, _| progress(views + done, 2 * views),
+    )?;
+    let by_pixels = assign_semantic_near(&footprints, Some((&run.knn, params.neighbours)));
+    let consensus = run.consensus;
+    let mut evidence = scores_of(&consensus.evidence, input.classes);
+    let mut class = consensus.assignment.class.clone();
+    for (g, (own, &by_footprint)) in class.iter_mut().zip(&by_pixels.class).enumerate() {
+        let mass: f64 = (0..input.classes).map(|c| footprints.get(c, g)).sum();
+        if by_footprint.is_some() && mass >= params.relabel.min_mass {
+            *own = by_footprint;
+            for c in 0..input.classes {
+                evidence.data[c * footprints.n + g] = footprints.get(c, g);
+            }
+        }
+    }
+    let confidence = class
+        .iter()
+        .zip(&consensus.evidence)
+        .map(|(&c, counts)| posterior(counts, c, params.prior).0 as f32)
+        .collect();
+    let mut stats = fs_stats;
+    stats.gpu_ms += run.stats.gpu_ms;
+    stats.peak_device_bytes = stats.peak_device_bytes.max(run.stats.peak_device_bytes);
+    stats.wall_s = start.elapsed().as_secs_f64();
+    stats.views_per_s = stats.views as f64 / stats.wall_s.max(1e-9);
+    Ok(ConsensusLift {
+        assignment: Assignment { class, confidence },
+        consensus,
+        evidence,
+        stats,
+    })
+}

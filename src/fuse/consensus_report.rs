@@ -1,0 +1,117 @@
+//! What segment consensus found, for people: the segments whose views disagree (flagged:
+//! close or bimodal vote splits, where a consistently mislabeled object shows) and, per
+//! class, how the views voted on the segments given that class (`fuse --report`).
+
+use serde::Serialize;
+
+use super::consensus_decide::Consensus;
+
+/// The votes of some views over the classes, named, largest first (classes without votes
+/// left out).
+pub type NamedVotes = Vec<(String, f64)>;
+
+/// One segment's vote split.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SegmentSplit {
+    /// The `segment` property of its Gaussians in the fused PLY.
+    pub segment: u32,
+    pub gaussians: usize,
+    /// Views that observed any of its Gaussians (each votes once).
+    pub views: usize,
+    /// The class it was given (None: no decisive class).
+    pub class: Option<String>,
+    pub votes: NamedVotes,
+}
+
+/// The segments given one class, and what their views said.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ClassSplit {
+    pub class: String,
+    pub segments: usize,
+    pub gaussians: usize,
+    /// Votes summed over those segments: the share not for `class` is how often the views
+    /// called these objects something else.
+    pub votes: NamedVotes,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SegmentReport {
+    /// Segments of at least `min_segment` Gaussians.
+    pub segments: usize,
+    /// Gaussians whose class came from their segment, and those no view observed that took
+    /// their neighbours' class (the rest decided by their own views).
+    pub from_segment: usize,
+    pub from_neighbours: usize,
+    /// Flagged segments, largest first: check these objects' labels.
+    pub flagged: Vec<SegmentSplit>,
+    pub per_class: Vec<ClassSplit>,
+}
+
+/// The report of `consensus`; `names[c]` names compact class c, and segments of fewer than
+/// `min_segment` Gaussians are not counted.
+pub fn segment_report(
+    consensus: &Consensus,
+    names: &[String],
+    min_segment: usize,
+) -> SegmentReport {
+    let named = |votes: &[f64]| -> NamedVotes {
+        let mut out: NamedVotes = votes
+            .iter()
+            .enumerate()
+            .filter(|&(_, &v)| v > 0.0)
+            // Shares of views summed in floating point: 23 reads 22.999999999999595.
+            .map(|(c, &v)| (names[c].clone(), (v * 1e3).round() / 1e3))
+            .collect();
+        out.sort_by(|a, b| b.1.total_cmp(&a.1).then_with(|| a.0.cmp(&b.0)));
+        out
+    };
+    let mut flagged: Vec<SegmentSplit> = (0..consensus.segments.len())
+        .filter(|&s| consensus.segments[s].flagged)
+        .map(|s| {
+            let seg = &consensus.segments[s];
+            SegmentSplit {
+                segment: s as u32,
+                gaussians: seg.gaussians,
+                views: seg.views,
+                class: seg.class.map(|c| names[c].clone()),
+                votes: named(&seg.split),
+            }
+        })
+        .collect();
+    flagged.sort_by_key(|s| (std::cmp::Reverse(s.gaussians), s.segment));
+    let mut per_class: Vec<(usize, usize, Vec<f64>)> =
+        vec![(0, 0, vec![0.0; names.len()]); names.len()];
+    let sized = consensus
+        .segments
+        .iter()
+        .filter(|s| s.gaussians >= min_segment);
+    for seg in sized.clone() {
+        if let Some(c) = seg.class {
+            let entry = &mut per_class[c];
+            entry.0 += 1;
+            entry.1 += seg.gaussians;
+            entry
+                .2
+                .iter_mut()
+                .zip(&seg.split)
+                .for_each(|(t, v)| *t += v);
+        }
+    }
+    SegmentReport {
+        segments: sized.count(),
+        from_segment: consensus.from_segment,
+        from_neighbours: consensus.from_neighbours,
+        flagged,
+        per_class: per_class
+            .iter()
+            .enumerate()
+            .filter(|(_, e)| e.0 > 0)
+            .map(|(c, e)| ClassSplit {
+                class: names[c].clone(),
+                segments: e.0,
+                gaussians: e.1,
+                votes: named(&e.2),
+            })
+            .collect(),
+    }
+}

@@ -1,0 +1,393 @@
+//! `segment-consensus --relabel`: every view's label regions relabeled with the consensus
+//! classes, then FlashSplat on the relabeled views (issue 16).
+#![allow(clippy::needless_range_loop)] // index loops mirror the plain transcription
+
+mod common;
+
+use common::consensus::{input, noisy_maps};
+use common::regions::{flood_regions, on_edge};
+use common::{check_validation, gpu};
+use semsplat::dataset::CompactClasses;
+use semsplat::fuse::consensus::{consensus_run, ConsensusRun};
+use semsplat::fuse::consensus_relabel::{relabel_view, RelabeledViews};
+use semsplat::fuse::{
+    accumulate, assign_semantic_near, lift_by_consensus, nearest_neighbours, ConsensusParams,
+    FuseConfig, LabelSource, Method, NO_LABEL,
+};
+use semsplat::render::GpuScene;
+use semsplat::synth::{generate, RoomSource, SynthConfig, SynthScene};
+use semsplat::util::Rng;
+
+/// The rule written plainly: per region, the seeds off its edge (all of them if none is);
+/// a class holding `min_share` of them takes the region, else the region is unlabeled.
+/// Regions without seeds keep their labels.
+fn relabel_by_hand(map: &[u32], w: usize, seeds: &[(u32, u32)], min_share: f64) -> Vec<u32> {
+    let regions = flood_regions(map, w);
+    let count = regions
+        .iter()
+        .filter(|&&r| r != NO_LABEL)
+        .max()
+        .map_or(0, |&r| r + 1);
+    let mut out = map.to_vec();
+    for r in 0..count {
+        let in_region: Vec<(u32, u32)> = seeds
+            .iter()
+            .copied()
+            .filter(|&(p, _)| regions[p as usize] == r)
+            .collect();
+        if in_region.is_empty() {
+            continue;
+        }
+        let interior: Vec<(u32, u32)> = in_region
+            .iter()
+            .copied()
+            .filter(|&(p, _)| !on_edge(&regions, w, p as usize))
+            .collect();
+        let counted = if interior.is_empty() {
+            in_region
+        } else {
+            interior
+        };
+        let votes = |c: u32| counted.iter().filter(|s| s.1 == c).count();
+        let top = counted
+            .iter()
+            .map(|s| s.1)
+            .max_by_key(|&c| votes(c))
+            .unwrap();
+        let new = if votes(top) as f64 >= min_share * counted.len() as f64 {
+            top
+        } else {
+            NO_LABEL
+        };
+        for p in 0..map.len() {
+            if regions[p] == r {
+                out[p] = new;
+            }
+        }
+    }
+    out
+}
+
+/// A label map of rectangles of 4 classes over a background, some pixels unlabeled, and
+/// seeds: mostly one class per region (often not its label), another class sometimes
+/// (mixed regions), several on one pixel now and then.
+fn random_case(seed: u64, w: usize, h: usize) -> (Vec<u32>, Vec<(u32, u32)>) {
+    let mut rng = Rng::new(seed);
+    let mut map = vec![0u32; w * h];
+    for _ in 0..6 {
+        let (x0, y0) = (rng.next_u32() as usize % w, rng.next_u32() as usize % h);
+        let (rw, rh) = (
+            1 + rng.next_u32() as usize % 9,
+            1 + rng.next_u32() as usize % 7,
+        );
+        let class = rng.next_u32() % 4;
+        for y in y0..(y0 + rh).min(h) {
+            for x in x0..(x0 + rw).min(w) {
+                map[y * w + x] = class;
+            }
+        }
+    }
+    for _ in 0..w * h / 20 {
+        map[rng.next_u32() as usize % (w * h)] = NO_LABEL;
+    }
+    // Each region's "consensus" class: often not its label (flicker undone).
+    let regions = flood_regions(&map, w);
+    let consensus: Vec<u32> = (0..w * h).map(|_| rng.next_u32() % 4).collect();
+    let mut seeds = Vec::new();
+    for _ in 0..w * h / 4 {
+        let p = rng.next_u32() % (w * h) as u32;
+        if map[p as usize] == NO_LABEL {
+            continue;
+        }
+        let class = match rng.next_u32() % 10 {
+            0..=7 => consensus[regions[p as usize] as usize],
+            _ => rng.next_u32() % 4,
+        };
+        seeds.push((p, class));
+        if rng.next_u32() % 8 == 0 {
+            seeds.push((p, rng.next_u32() % 4));
+        }
+    }
+    (map, seeds)
+}
+
+#[test]
+fn relabeling_matches_a_plain_transcription() {
+    let (mut relabeled, mut unlabeled) = (0usize, 0usize);
+    for seed in 0..40 {
+        let (w, h) = (24, 18);
+        let (map, seeds) = random_case(seed, w, h);
+        for min_share in [0.75, 0.6, 1.0] {
+            let mut got = map.clone();
+            relabel_view(&mut got, w, seeds.iter().copied(), min_share);
+            let want = relabel_by_hand(&map, w, &seeds, min_share);
+            assert_eq!(got, want, "seed {seed}, min_share {min_share}");
+            for p in 0..map.len() {
+                relabeled += usize::from(want[p] != map[p] && want[p] != NO_LABEL);
+                unlabeled += usize::from(want[p] == NO_LABEL && map[p] != NO_LABEL);
+            }
+        }
+    }
+    // The cases exercise every branch: regions relabeled, regions unlabeled.
+    assert!(
+        relabeled > 1000 && unlabeled > 1000,
+        "{relabeled} {unlabeled}"
+    );
+}
+
+/// Edge seeds count only where a region has no interior seed; a split below the share
+/// unlabels the region; a region without seeds keeps its label.
+#[test]
+fn a_region_takes_its_interior_seeds_class() {
+    let w = 9;
+    let mut map = vec![5u32; w];
+    map[4] = 7; // regions 0..4 (class 5), 4 (class 7), 5..9 (class 5); 3, 4, 5 on edges
+    let mut got = map.clone();
+    relabel_view(
+        &mut got,
+        w,
+        [(0, 2), (1, 2), (2, 2), (3, 6), (6, 4)].into_iter(),
+        0.75,
+    );
+    assert_eq!(got, [2, 2, 2, 2, 7, 4, 4, 4, 4]);
+    let mut got = map.clone();
+    relabel_view(
+        &mut got,
+        w,
+        [(0, 2), (1, 3), (5, 1), (4, 1)].into_iter(),
+        0.75,
+    );
+    let x = NO_LABEL;
+    assert_eq!(got, [x, x, x, x, 1, 1, 1, 1, 1]);
+}
+
+/// The office under flicker 0.3 at 96x72: its noisy maps in compact ids, the scene on the
+/// GPU and its segment consensus.
+struct Flickered {
+    s: SynthScene,
+    classes: usize,
+    noisy: Vec<Option<Vec<u32>>>,
+    scene: GpuScene,
+    run: ConsensusRun,
+}
+
+fn flickered_office(views: usize, seed: u64) -> Flickered {
+    let mut cfg = SynthConfig::new(RoomSource::from_arg("office").unwrap());
+    cfg.train_views = views;
+    cfg.test_views = 0;
+    (cfg.width, cfg.height) = (96, 72);
+    cfg.seed = seed;
+    cfg.noise = Some("flicker=0.3".parse().unwrap());
+    let s = generate(&cfg).unwrap();
+    let compact = CompactClasses::from_table(&s.room.classes).unwrap();
+    let noisy = noisy_maps(&s, &compact);
+    let scene = GpuScene::upload(gpu(), &s.gaussians).unwrap();
+    let run = consensus_run(
+        &input(gpu(), &scene, &s, &noisy, compact.len()),
+        &FuseConfig::default(),
+        &ConsensusParams::default(),
+        &mut |_, _| {},
+    )
+    .unwrap();
+    Flickered {
+        s,
+        classes: compact.len(),
+        noisy,
+        scene,
+        run,
+    }
+}
+
+/// Flicker relabels whole objects in a view; the consensus classes put most of them back:
+/// the relabeled views disagree with the true labels on far fewer pixels than the noisy
+/// views do.
+#[test]
+fn relabeled_views_undo_most_flicker() {
+    let Flickered { s, noisy, run, .. } = flickered_office(24, 7);
+    let classes = CompactClasses::from_table(&s.room.classes).unwrap();
+    let params = ConsensusParams::default();
+    let relabeled = RelabeledViews {
+        inner: &noisy,
+        centers: &run.centers,
+        class: &run.consensus.assignment.class,
+        rule: params.relabel,
+    };
+    let (mut noisy_wrong, mut relabeled_wrong, mut unlabeled, mut labeled) = (0, 0, 0, 0);
+    for (v, cam) in s.cameras.iter().enumerate() {
+        let truth = classes.compact_labels(&s.views[v].labels);
+        let before = noisy[v].as_ref().unwrap();
+        let after = relabeled.labels(v, cam).unwrap().unwrap();
+        for p in 0..truth.len() {
+            if truth[p] == NO_LABEL || before[p] == NO_LABEL {
+                continue;
+            }
+            labeled += 1;
+            noisy_wrong += usize::from(before[p] != truth[p]);
+            match after[p] {
+                NO_LABEL => unlabeled += 1,
+                c => relabeled_wrong += usize::from(c != truth[p]),
+            }
+        }
+    }
+    eprintln!(
+        "of {labeled} pixels: noisy wrong {noisy_wrong}, relabeled wrong {relabeled_wrong}, \
+         unlabeled {unlabeled}"
+    );
+    assert!(
+        noisy_wrong * 10 > labeled,
+        "flicker should relabel >10% of pixels"
+    );
+    assert!(
+        relabeled_wrong * 3 < noisy_wrong,
+        "relabeling left {relabeled_wrong} of {noisy_wrong} wrong pixels"
+    );
+    assert!(
+        unlabeled * 5 < labeled,
+        "{unlabeled} of {labeled} unlabeled"
+    );
+    check_validation(gpu());
+}
+
+/// The whole method twice gives the same classes, confidences and evidence; each class is
+/// the one FlashSplat gives over the relabeled views where the Gaussian's footprint there
+/// reaches `min_mass`, else the consensus class (the rule rebuilt here from its parts).
+#[test]
+fn relabel_is_deterministic_and_follows_its_rule() {
+    let Flickered {
+        s,
+        classes,
+        noisy,
+        scene,
+        run,
+    } = flickered_office(8, 3);
+    let gpu = gpu();
+    let cfg = FuseConfig {
+        method: Method::SegmentConsensusRelabel,
+        ..Default::default()
+    };
+    let params = ConsensusParams::default();
+    let lift = || {
+        lift_by_consensus(
+            &input(gpu, &scene, &s, &noisy, classes),
+            &cfg,
+            &params,
+            &mut |_, _| {},
+        )
+        .unwrap()
+    };
+    let (a, b) = (lift(), lift());
+    assert_eq!(a.assignment, b.assignment);
+    assert_eq!(a.evidence.data, b.evidence.data);
+    assert_eq!(a.consensus, b.consensus);
+
+    let cons = &run.consensus.assignment.class;
+    assert_eq!(&a.consensus, &run.consensus);
+    let relabeled = RelabeledViews {
+        inner: &noisy,
+        centers: &run.centers,
+        class: cons,
+        rule: params.relabel,
+    };
+    let (footprints, _) = accumulate(
+        gpu,
+        &scene,
+        &s.cameras,
+        &relabeled,
+        classes,
+        &FuseConfig::default(),
+        |_, _| {},
+    )
+    .unwrap();
+    let k = params.neighbours;
+    let knn = nearest_neighbours(&s.gaussians.means, k);
+    let by_pixels = assign_semantic_near(&footprints, Some((&knn, k)));
+    let (mut moved, mut kept) = (0, 0);
+    for g in 0..footprints.n {
+        let mass: f64 = (0..classes).map(|c| footprints.get(c, g)).sum();
+        let f = by_pixels.class[g];
+        let want = match f.is_some() && mass >= params.relabel.min_mass {
+            true => f,
+            false => cons[g],
+        };
+        assert_eq!(a.assignment.class[g], want, "Gaussian {g}");
+        if want != cons[g] {
+            moved += 1;
+        } else {
+            kept += 1;
+        }
+    }
+    assert!(moved > 100 && kept > 1000, "{moved} moved, {kept} kept");
+    check_validation(gpu);
+}
+
+/// `fuse --method segment-consensus [--relabel]` writes each Gaussian's entropy and segment
+/// beside its class, and the segments' vote splits in the report; the consensus methods
+/// refuse --shard (segments need every view at once).
+#[test]
+fn fuse_cli_writes_entropy_segments_and_the_segment_report() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    common::cli::synth_tiny(d, 6, (64, 48));
+    let p = |f: &str| d.join(f).to_str().unwrap().to_string();
+    for (extra, name) in [
+        (vec![], "segment-consensus"),
+        (vec!["--relabel"], "segment-consensus --relabel"),
+    ] {
+        let mut args = vec!["--method", "segment-consensus", "--out", "", "--report", ""];
+        let (out, report) = (p(&format!("{}.ply", extra.len())), p("report.json"));
+        (args[3], args[5]) = (out.as_str(), report.as_str());
+        args.extend(extra);
+        common::cli::fuse_synth(d, &args);
+        let g = semsplat::scene::ply::read_ply(std::path::Path::new(&out)).unwrap();
+        let classes = g.class_ids.as_ref().unwrap();
+        let conf = g.class_conf.as_ref().unwrap();
+        let entropy = g.class_entropy.as_ref().expect("class_entropy");
+        let segment = g.segment_ids.as_ref().expect("segment");
+        let report: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+        assert_eq!(report["method"], name);
+        let table_len = report["classes"].as_u64().unwrap() as f32;
+        for i in 0..g.len() {
+            assert!((0.0..=1.0).contains(&conf[i]), "{name}: conf {}", conf[i]);
+            assert!(
+                entropy[i] >= 0.0 && entropy[i] <= table_len.ln() + 1e-5,
+                "{name}: entropy {}",
+                entropy[i]
+            );
+            assert!(segment[i] >= 0, "{name}: every Gaussian has a segment");
+            // Undecided Gaussians are -1 with confidence 0 and the entropy of no evidence.
+            if classes[i] == -1 {
+                assert_eq!(conf[i], 0.0);
+            }
+        }
+        let segments = &report["segments"];
+        let per_class = segments["per_class"].as_array().unwrap();
+        assert!(segments["segments"].as_u64().unwrap() > 0, "{segments}");
+        assert!(!per_class.is_empty() && segments["flagged"].is_array());
+        // A class's segments vote for it more than for anything else on true labels.
+        for c in per_class {
+            assert_eq!(c["votes"][0][0], c["class"], "{c}");
+        }
+    }
+    let err = common::cli::fuse_synth_fails(
+        d,
+        &[
+            "--method",
+            "segment-consensus",
+            "--shard",
+            "0/2",
+            "--out",
+            &p("part.npy"),
+        ],
+    );
+    assert!(err.contains("cannot be split"), "{err}");
+    assert!(!d.join("part.npy").exists());
+    let err = common::cli::fuse_synth_fails(
+        d,
+        &["--method", "flashsplat", "--relabel", "--out", &p("x.ply")],
+    );
+    assert!(
+        err.contains("--relabel is a variant of --method segment-consensus"),
+        "{err}"
+    );
+}
