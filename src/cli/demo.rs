@@ -139,13 +139,20 @@ fn build_room(args: &DemoArgs) -> Result<SynthScene> {
 }
 
 fn print_scores(scores: &[MethodScore]) {
+    // The method column fits the longest name ("segment-consensus --relabel").
+    let name = scores
+        .iter()
+        .map(|r| r.method.len())
+        .max()
+        .unwrap_or(0)
+        .max(24);
     println!(
-        "{:<24} {:>9} {:>8} {:>10} {:>10} {:>10} {:>10}",
+        "{:<name$} {:>9} {:>8} {:>10} {:>10} {:>10} {:>10}",
         "method", "seconds", "mIoU", "pixel acc", "3D acc", "memory", "PSNR"
     );
     for r in scores {
         println!(
-            "{:<24} {:>9.2} {:>8.3} {:>10.3} {:>10.3} {:>7.0} MiB {:>10}",
+            "{:<name$} {:>9.2} {:>8.3} {:>10.3} {:>10.3} {:>7.0} MiB {:>10}",
             r.method,
             r.seconds,
             r.miou,

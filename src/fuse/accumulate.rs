@@ -127,6 +127,9 @@ pub struct FuseStats {
     pub scene_device_bytes: u64,
     /// Peak resident memory of the process so far (Linux; 0 where unknown).
     pub peak_host_bytes: u64,
+    /// Segment consensus: views whose label regions the GPU left incomplete (a CPU
+    /// driver's loop cap), found again on the host (src/fuse/regions_gpu.rs).
+    pub region_host_fallbacks: usize,
 }
 
 fn bytes_per_entry(method: Method, acc: Accumulation) -> u64 {

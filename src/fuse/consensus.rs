@@ -14,9 +14,11 @@ use super::assign::Assignment;
 use super::consensus_cluster::cluster_segments;
 use super::consensus_decide::{decide, Consensus, ConsensusParams};
 use super::consensus_relabel::fuse_relabeled;
-use super::consensus_segments::{label_regions, nearest_neighbours, region_edges, Observations};
+use super::consensus_segments::{nearest_neighbours, Observations};
 use super::method::Method;
+use super::regions_gpu::RegionFinder;
 use super::scores::ClassScores;
+use crate::contract::REGION_EDGE_BIT;
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, Gpu, Recorder};
 use crate::render::{GpuScene, Rasterizer};
@@ -190,6 +192,7 @@ pub fn observe(
         ..Default::default()
     };
     let pixels_buf = gpu.buffer("center-pixels", (n.max(1) * 4) as u64)?;
+    let mut finder = RegionFinder::new(gpu, n)?;
     let mut raster = Rasterizer::new(gpu);
     raster.set_split_sizes(cfg.split);
     let mut per_view = Vec::with_capacity(cams.len());
@@ -211,25 +214,32 @@ pub fn observe(
         stats.gpu_ms += center_pixels(&mut raster, scene, cam, &pixels_buf, cfg, occlusion)?;
         stats.peak_device_bytes = stats.peak_device_bytes.max(gpu.memory_reserved());
         let centers: Vec<u32> = gpu.download(&pixels_buf, 0, n)?;
-        let regions = label_regions(&map, cam.width as usize);
-        let edges = region_edges(&regions, cam.width as usize);
+        let regions = finder.regions_at(&map, cam.width, &pixels_buf)?;
         let seen: Vec<(u32, u32)> = centers
             .iter()
+            .zip(&regions)
             .enumerate()
-            .filter(|&(_, &p)| p != NO_LABEL && map[p as usize] != NO_LABEL)
-            .map(|(g, &p)| (g as u32, p))
+            .filter(|&(_, (_, &r))| r != NO_LABEL)
+            .map(|(g, (&p, _))| (g as u32, p))
             .collect();
         per_view.push(
             seen.iter()
                 .map(|&(g, p)| {
-                    let p = p as usize;
-                    (g, map[p], regions[p], edges[p])
+                    let r = regions[g as usize];
+                    (
+                        g,
+                        map[p as usize],
+                        r & !REGION_EDGE_BIT,
+                        r & REGION_EDGE_BIT != 0,
+                    )
                 })
                 .collect(),
         );
         pixels.push(seen);
     }
     progress(cams.len(), cams.len());
+    stats.gpu_ms += finder.stats.gpu_ms;
+    stats.region_host_fallbacks = finder.stats.host_fallbacks;
     Ok((Observations::from_views(n, &per_view), pixels, stats))
 }
 

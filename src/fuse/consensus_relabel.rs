@@ -169,6 +169,7 @@ pub fn fuse_relabeled(
     let mut stats = fs_stats;
     stats.gpu_ms += run.stats.gpu_ms;
     stats.peak_device_bytes = stats.peak_device_bytes.max(run.stats.peak_device_bytes);
+    stats.region_host_fallbacks = run.stats.region_host_fallbacks;
     stats.wall_s = start.elapsed().as_secs_f64();
     stats.views_per_s = stats.views as f64 / stats.wall_s.max(1e-9);
     Ok(ConsensusLift {

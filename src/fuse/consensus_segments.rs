@@ -18,8 +18,9 @@ use crate::util::parallel_map;
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Observations {
     pub n: usize,
-    /// Rows: Gaussian g's observations are `offsets[g]..offsets[g + 1]`.
-    pub offsets: Vec<u32>,
+    /// Rows: Gaussian g's observations are `offsets[g]..offsets[g + 1]` (usize: a large
+    /// scene seen in many views passes 2^32 observations).
+    pub offsets: Vec<usize>,
     pub view: Vec<u32>,
     /// Compact class of the pixel under the center.
     pub label: Vec<u32>,
@@ -37,7 +38,7 @@ pub struct Observations {
 impl Observations {
     /// From per-view lists of (Gaussian, label, region, edge), views in order.
     pub fn from_views(n: usize, per_view: &[Vec<(u32, u32, u32, bool)>]) -> Observations {
-        let mut counts = vec![0u32; n + 1];
+        let mut counts = vec![0usize; n + 1];
         for list in per_view {
             for &(g, ..) in list {
                 counts[g as usize + 1] += 1;
@@ -46,14 +47,14 @@ impl Observations {
         for g in 0..n {
             counts[g + 1] += counts[g];
         }
-        let total = counts[n] as usize;
+        let total = counts[n];
         let mut next = counts.clone();
         let (mut view, mut label, mut region) = (vec![0; total], vec![0; total], vec![0; total]);
         let mut edge = vec![false; total];
         // Views in order, so every row ends up sorted by view.
         for (v, list) in per_view.iter().enumerate() {
             for &(g, l, r, e) in list {
-                let at = next[g as usize] as usize;
+                let at = next[g as usize];
                 next[g as usize] += 1;
                 (view[at], label[at], region[at], edge[at]) = (v as u32, l, r, e);
             }
@@ -69,12 +70,14 @@ impl Observations {
     }
 
     pub fn row(&self, g: usize) -> std::ops::Range<usize> {
-        self.offsets[g] as usize..self.offsets[g + 1] as usize
+        self.offsets[g]..self.offsets[g + 1]
     }
 }
 
 /// Connected regions (4-neighbourhood) of equal labels; unlabeled pixels get [`NO_LABEL`].
-/// Region ids are numbered in scan order of their first pixel, so they are deterministic.
+/// A region's id is the index of its first pixel in scan order (the root union-find keeps,
+/// as it links the larger root under the smaller), so ids are deterministic and the GPU's
+/// (src/fuse/regions_gpu.rs) are the same.
 pub fn label_regions(labels: &[u32], width: usize) -> Vec<u32> {
     let mut parent: Vec<u32> = (0..labels.len() as u32).collect();
     for p in 0..labels.len() {
@@ -88,20 +91,12 @@ pub fn label_regions(labels: &[u32], width: usize) -> Vec<u32> {
             union(&mut parent, p as u32, (p - width) as u32);
         }
     }
-    let mut id = vec![NO_LABEL; labels.len()];
-    let mut next = 0u32;
-    for p in 0..labels.len() {
-        if labels[p] == NO_LABEL {
-            continue;
-        }
-        let root = find(&mut parent, p as u32) as usize;
-        if id[root] == NO_LABEL {
-            id[root] = next;
-            next += 1;
-        }
-        id[p] = id[root];
-    }
-    id
+    (0..labels.len())
+        .map(|p| match labels[p] {
+            NO_LABEL => NO_LABEL,
+            _ => find(&mut parent, p as u32),
+        })
+        .collect()
 }
 
 /// Per pixel of `regions` (a view's [`label_regions`]): whether a 4-neighbour inside the image

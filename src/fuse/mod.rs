@@ -12,6 +12,7 @@ pub mod consensus_report;
 pub mod consensus_segments;
 pub mod method;
 pub mod partial;
+pub mod regions_gpu;
 pub mod scores;
 
 pub use accumulate::{

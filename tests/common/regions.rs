@@ -2,17 +2,17 @@
 
 use semsplat::fuse::NO_LABEL;
 
-/// Connected regions by flood fill (an independent transcription of `label_regions`):
-/// region ids in scan order of their first pixel.
+/// Connected regions by flood fill (an independent transcription of `label_regions`): a
+/// region's id is the index of its first pixel in scan order.
 pub fn flood_regions(labels: &[u32], w: usize) -> Vec<u32> {
     let h = labels.len() / w;
     let mut id = vec![NO_LABEL; labels.len()];
-    let mut next = 0;
     for start in 0..labels.len() {
         if labels[start] == NO_LABEL || id[start] != NO_LABEL {
             continue;
         }
         let mut stack = vec![start];
+        let next = start as u32;
         id[start] = next;
         while let Some(p) = stack.pop() {
             let (x, y) = (p % w, p / w);
@@ -36,7 +36,6 @@ pub fn flood_regions(labels: &[u32], w: usize) -> Vec<u32> {
                 }
             }
         }
-        next += 1;
     }
     id
 }

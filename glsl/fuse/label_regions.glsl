@@ -1,0 +1,47 @@
+// Connected label regions of one view on the GPU, for the segment consensus
+// (src/fuse/regions_gpu.rs; the host version is label_regions in
+// src/fuse/consensus_segments.rs). Union-find over the pixels (4-neighbourhood of equal
+// labels): every pixel starts as its own root, each joins its left and upper neighbour of
+// the same label by linking the larger root under the smaller with atomicMin, so a region's
+// root is its first pixel in scan order whatever order the invocations run in. The region
+// id is that pixel's index, as on the host. Kernels, one per file: region_init,
+// region_merge, region_flatten, region_check (a pass that finds any link the loop cap of a
+// CPU driver cut short, so the host can redo that view), region_lookup (per Gaussian).
+#ifndef LABEL_REGIONS_GLSL
+#define LABEL_REGIONS_GLSL
+
+#include "shared_constants.glsl" // NO_LABEL, REGION_EDGE_BIT
+
+layout(push_constant) uniform RegionParams {
+    uvec2 labels_addr; // [pixels] the view's labels (NO_LABEL: unlabeled)
+    uvec2 parent_addr; // [pixels] union-find links (NO_LABEL where unlabeled)
+    uvec2 region_addr; // [pixels] each pixel's root: its region id
+    uvec2 status_addr; // [1] 0, or 1 once region_check found a pixel not joined
+    uvec2 pixels_addr; // [n] each Gaussian's center pixel (NO_LABEL: none)
+    uvec2 out_addr;    // [n] region id of the center pixel, bit 31 set on the region's edge
+    uint width;
+    uint height;
+    uint n;
+} pc;
+
+#include "addressed_arrays.glsl"
+layout(buffer_reference, std430, buffer_reference_align = 4) coherent buffer CoherentUints { uint data[]; };
+#define labels UintArray(pc.labels_addr)
+#define parent CoherentUints(pc.parent_addr)
+#define region UintArrayRW(pc.region_addr)
+
+uint pixel_count() {
+    return pc.width * pc.height;
+}
+
+// The root of pixel p's tree (links only point to smaller indices, so this ends).
+uint find_root(uint p) {
+    uint up = parent.data[p];
+    while (up != p) {
+        p = up;
+        up = parent.data[p];
+    }
+    return p;
+}
+
+#endif
