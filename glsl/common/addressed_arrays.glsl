@@ -22,5 +22,8 @@ layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer Uin
 // Arrays kernels write (gradient sums, often atomically).
 layout(buffer_reference, std430, buffer_reference_align = 4) buffer FloatArrayRW { float data[]; };
 layout(buffer_reference, std430, buffer_reference_align = 4) buffer UintArrayRW { uint data[]; };
+// Written by some invocations while others of the same dispatch read it (lock-free
+// union-find links): every access goes to memory, none is cached.
+layout(buffer_reference, std430, buffer_reference_align = 4) coherent buffer UintArrayCoherent { uint data[]; };
 
 #endif

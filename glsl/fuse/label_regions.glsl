@@ -25,9 +25,8 @@ layout(push_constant) uniform RegionParams {
 } pc;
 
 #include "addressed_arrays.glsl"
-layout(buffer_reference, std430, buffer_reference_align = 4) coherent buffer CoherentUints { uint data[]; };
 #define labels UintArray(pc.labels_addr)
-#define parent CoherentUints(pc.parent_addr)
+#define parent UintArrayCoherent(pc.parent_addr)
 #define region UintArrayRW(pc.region_addr)
 
 uint pixel_count() {

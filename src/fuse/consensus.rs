@@ -215,26 +215,15 @@ pub fn observe(
         stats.peak_device_bytes = stats.peak_device_bytes.max(gpu.memory_reserved());
         let centers: Vec<u32> = gpu.download(&pixels_buf, 0, n)?;
         let regions = finder.regions_at(&map, cam.width, &pixels_buf)?;
-        let seen: Vec<(u32, u32)> = centers
-            .iter()
-            .zip(&regions)
-            .enumerate()
-            .filter(|&(_, (_, &r))| r != NO_LABEL)
-            .map(|(g, (&p, _))| (g as u32, p))
-            .collect();
-        per_view.push(
-            seen.iter()
-                .map(|&(g, p)| {
-                    let r = regions[g as usize];
-                    (
-                        g,
-                        map[p as usize],
-                        r & !REGION_EDGE_BIT,
-                        r & REGION_EDGE_BIT != 0,
-                    )
-                })
-                .collect(),
-        );
+        let (mut observed, mut seen) = (Vec::new(), Vec::new());
+        for (g, (&p, &r)) in centers.iter().zip(&regions).enumerate() {
+            if r != NO_LABEL {
+                let (region, edge) = (r & !REGION_EDGE_BIT, r & REGION_EDGE_BIT != 0);
+                observed.push((g as u32, map[p as usize], region, edge));
+                seen.push((g as u32, p));
+            }
+        }
+        per_view.push(observed);
         pixels.push(seen);
     }
     progress(cams.len(), cams.len());

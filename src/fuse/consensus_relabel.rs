@@ -79,12 +79,8 @@ pub fn relabel_view(
         .map(|(p, c)| (regions[p as usize], edges[p as usize], c))
         .collect();
     seeds.sort_unstable();
-    let count = regions
-        .iter()
-        .filter(|&&r| r != NO_LABEL)
-        .max()
-        .map_or(0, |&r| r + 1);
-    let mut relabel: Vec<Option<u32>> = vec![None; count as usize];
+    // Per region id (the index of the region's first pixel): its new label, if any.
+    let mut relabel: Vec<Option<u32>> = vec![None; map.len()];
     for region in seeds.chunk_by(|a, b| a.0 == b.0) {
         let interior = region.partition_point(|s| !s.1);
         let counted = if interior > 0 {
@@ -106,6 +102,7 @@ pub fn relabel_view(
         });
     }
     for (label, &region) in map.iter_mut().zip(&regions) {
+        // NO_LABEL (unlabeled pixels) lies past the table.
         if let Some(&Some(c)) = relabel.get(region as usize) {
             *label = c;
         }
