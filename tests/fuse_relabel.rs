@@ -9,7 +9,7 @@ use common::regions::{flood_regions, on_edge};
 use common::{check_validation, gpu};
 use semsplat::dataset::CompactClasses;
 use semsplat::fuse::consensus::{consensus_run, ConsensusRun};
-use semsplat::fuse::consensus_relabel::{relabel_view, RelabeledViews};
+use semsplat::fuse::consensus_relabel::{edge_depth, relabel_view, RelabelRule, RelabeledViews};
 use semsplat::fuse::{
     accumulate, assign_semantic_near, lift_by_consensus, nearest_neighbours, ConsensusParams,
     FuseConfig, LabelSource, Method, NO_LABEL,
@@ -18,10 +18,20 @@ use semsplat::render::GpuScene;
 use semsplat::synth::{generate, RoomSource, SynthConfig, SynthScene};
 use semsplat::util::Rng;
 
-/// The rule written plainly: per region, the seeds off its edge (all of them if none is);
-/// a class holding `min_share` of them takes the region, else the region is unlabeled.
-/// Regions without seeds keep their labels.
-fn relabel_by_hand(map: &[u32], w: usize, seeds: &[(u32, u32)], min_share: f64) -> Vec<u32> {
+/// A pixel's depth written plainly: the city-block distance to the nearest edge pixel of
+/// its region, capped at `cap` (`cap` where the region has no edge).
+fn depth_by_hand(regions: &[u32], w: usize, p: usize, cap: u32) -> u32 {
+    let manhattan = |q: usize| ((p % w).abs_diff(q % w) + (p / w).abs_diff(q / w)) as u32;
+    (0..regions.len())
+        .filter(|&q| regions[q] == regions[p] && on_edge(regions, w, q))
+        .map(manhattan)
+        .fold(cap, u32::min)
+}
+
+/// The rule written plainly: per region, the seeds at least `rule.depth` inside it (its
+/// deepest if none is); a class holding `rule.min_share` of them takes the region, else the
+/// region is unlabeled. Regions without seeds keep their labels.
+fn relabel_by_hand(map: &[u32], w: usize, seeds: &[(u32, u32)], rule: &RelabelRule) -> Vec<u32> {
     let regions = flood_regions(map, w);
     let count = regions
         .iter()
@@ -32,29 +42,22 @@ fn relabel_by_hand(map: &[u32], w: usize, seeds: &[(u32, u32)], min_share: f64) 
     for r in 0..count {
         let in_region: Vec<(u32, u32)> = seeds
             .iter()
-            .copied()
-            .filter(|&(p, _)| regions[p as usize] == r)
+            .map(|&(p, c)| (depth_by_hand(&regions, w, p as usize, rule.depth), c))
+            .zip(seeds)
+            .filter(|(_, &(p, _))| regions[p as usize] == r)
+            .map(|(depth_class, _)| depth_class)
             .collect();
-        if in_region.is_empty() {
+        let Some(deepest) = in_region.iter().map(|s| s.0).max() else {
             continue;
-        }
-        let interior: Vec<(u32, u32)> = in_region
-            .iter()
-            .copied()
-            .filter(|&(p, _)| !on_edge(&regions, w, p as usize))
-            .collect();
-        let counted = if interior.is_empty() {
-            in_region
-        } else {
-            interior
         };
+        let counted: Vec<(u32, u32)> = in_region.into_iter().filter(|s| s.0 == deepest).collect();
         let votes = |c: u32| counted.iter().filter(|s| s.1 == c).count();
         let top = counted
             .iter()
             .map(|s| s.1)
             .max_by_key(|&c| votes(c))
             .unwrap();
-        let new = if votes(top) as f64 >= min_share * counted.len() as f64 {
+        let new = if votes(top) as f64 >= rule.min_share * counted.len() as f64 {
             top
         } else {
             NO_LABEL
@@ -66,6 +69,15 @@ fn relabel_by_hand(map: &[u32], w: usize, seeds: &[(u32, u32)], min_share: f64) 
         }
     }
     out
+}
+
+/// A rule with the given share and depth (the footprint mass plays no part in relabeling).
+fn rule(min_share: f64, depth: u32) -> RelabelRule {
+    RelabelRule {
+        min_share,
+        depth,
+        min_mass: 1.0,
+    }
 }
 
 /// A label map of rectangles of 4 classes over a background, some pixels unlabeled, and
@@ -117,11 +129,21 @@ fn relabeling_matches_a_plain_transcription() {
     for seed in 0..40 {
         let (w, h) = (24, 18);
         let (map, seeds) = random_case(seed, w, h);
-        for min_share in [0.75, 0.6, 1.0] {
+        let regions = flood_regions(&map, w);
+        let depth = edge_depth(&regions, w, 3);
+        for p in (0..map.len()).filter(|&p| map[p] != NO_LABEL) {
+            assert_eq!(
+                depth[p],
+                depth_by_hand(&regions, w, p, 3),
+                "seed {seed}, pixel {p}"
+            );
+        }
+        for (min_share, depth) in [(0.75, 1), (0.6, 1), (1.0, 1), (0.75, 2), (0.75, 3)] {
             let mut got = map.clone();
-            relabel_view(&mut got, w, seeds.iter().copied(), min_share);
-            let want = relabel_by_hand(&map, w, &seeds, min_share);
-            assert_eq!(got, want, "seed {seed}, min_share {min_share}");
+            let rule = rule(min_share, depth);
+            relabel_view(&mut got, w, seeds.iter().copied(), &rule);
+            let want = relabel_by_hand(&map, w, &seeds, &rule);
+            assert_eq!(got, want, "seed {seed}, {rule:?}");
             for p in 0..map.len() {
                 relabeled += usize::from(want[p] != map[p] && want[p] != NO_LABEL);
                 unlabeled += usize::from(want[p] == NO_LABEL && map[p] != NO_LABEL);
@@ -135,30 +157,51 @@ fn relabeling_matches_a_plain_transcription() {
     );
 }
 
-/// Edge seeds count only where a region has no interior seed; a split below the share
-/// unlabels the region; a region without seeds keeps its label.
+/// At depth 1, edge seeds count only where a region has no interior seed; a split below
+/// the share unlabels the region; a region without seeds keeps its label.
 #[test]
 fn a_region_takes_its_interior_seeds_class() {
     let w = 9;
     let mut map = vec![5u32; w];
     map[4] = 7; // regions 0..4 (class 5), 4 (class 7), 5..9 (class 5); 3, 4, 5 on edges
     let mut got = map.clone();
-    relabel_view(
-        &mut got,
-        w,
-        [(0, 2), (1, 2), (2, 2), (3, 6), (6, 4)].into_iter(),
-        0.75,
-    );
+    let seeds = [(0, 2), (1, 2), (2, 2), (3, 6), (6, 4)];
+    relabel_view(&mut got, w, seeds.into_iter(), &rule(0.75, 1));
     assert_eq!(got, [2, 2, 2, 2, 7, 4, 4, 4, 4]);
     let mut got = map.clone();
-    relabel_view(
-        &mut got,
-        w,
-        [(0, 2), (1, 3), (5, 1), (4, 1)].into_iter(),
-        0.75,
-    );
+    let seeds = [(0, 2), (1, 3), (5, 1), (4, 1)];
+    relabel_view(&mut got, w, seeds.into_iter(), &rule(0.75, 1));
     let x = NO_LABEL;
     assert_eq!(got, [x, x, x, x, 1, 1, 1, 1, 1]);
+}
+
+/// A label edge drawn two pixels off puts a neighbour's Gaussians (class 2) just inside a
+/// region whose own Gaussians (class 1) lie deep in it: at depth 3 the deep ones decide
+/// and the region keeps class 1; at depth 1 the region counts as mixed and is unlabeled.
+#[test]
+fn deep_seeds_outvote_a_shifted_edge() {
+    let (w, h) = (12, 9);
+    let map: Vec<u32> = (0..w * h)
+        .map(|p| u32::from((1..11).contains(&(p % w)) && (1..8).contains(&(p / w))))
+        .collect();
+    // Region 1 spans x 1..=10, y 1..=7: (5, 4) is 3 deep, (4, 4) 3 deep, x = 2 one deep.
+    let seeds = [
+        (4 * w + 5, 1),
+        (4 * w + 4, 1),
+        (3 * w + 2, 2),
+        (4 * w + 2, 2),
+        (5 * w + 2, 2),
+    ]
+    .map(|(p, c)| (p as u32, c));
+    let mut got = map.clone();
+    relabel_view(&mut got, w, seeds.into_iter(), &rule(0.75, 3));
+    assert_eq!(got, map, "the deep seeds keep class 1");
+    relabel_view(&mut got, w, seeds.into_iter(), &rule(0.75, 1));
+    let expect: Vec<u32> = map
+        .iter()
+        .map(|&l| if l == 1 { NO_LABEL } else { l })
+        .collect();
+    assert_eq!(got, expect, "two of five at depth 1: mixed");
 }
 
 /// The office under flicker 0.3 at 96x72: its noisy maps in compact ids, the scene on the

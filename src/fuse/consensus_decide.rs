@@ -78,6 +78,7 @@ impl Default for ConsensusParams {
             flag_min_gaussians: 20,
             relabel: RelabelRule {
                 min_share: 0.75,
+                depth: 3,
                 min_mass: 1.0,
             },
         }

@@ -11,6 +11,8 @@
 //! nothing about where their edge is: it is left unlabeled in that view. A region no
 //! Gaussian center was observed in keeps its label.
 
+use std::cmp::Reverse;
+
 use anyhow::Result;
 use serde::Serialize;
 
@@ -26,11 +28,16 @@ use crate::scene::Camera;
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct RelabelRule {
     /// A region takes one class where that class holds at least this share (> 0.5) of the
-    /// observed Gaussians' centers inside it (those off the region's edge; on the edge only
-    /// if none is off it); else the region is unlabeled in that view: flicker gave two
-    /// touching objects one class there and merged their regions, so the region says
-    /// nothing of where their edge runs.
+    /// observed Gaussians' centers that decide ([`RelabelRule::depth`]); else the region is
+    /// unlabeled in that view: flicker gave two touching objects one class there and merged
+    /// their regions, so the region says nothing of where their edge runs.
     pub min_share: f64,
+    /// The centers at least this many pixels (city-block, within the region) from the
+    /// region's edge decide; in a region with none that deep, its deepest ones. A label edge
+    /// a segmenter drew a few pixels off puts a neighbour's Gaussians just inside the
+    /// region, where a flicker merge puts the other object's deep inside: counting only
+    /// deep centers keeps the shifted region labeled and still finds the merge.
+    pub depth: u32,
     /// A Gaussian whose footprint over the relabeled views sums to fewer pixels keeps its
     /// consensus class.
     pub min_mass: f64,
@@ -55,51 +62,47 @@ impl LabelSource for RelabeledViews<'_> {
         let seeds = seeds
             .iter()
             .filter_map(|&(g, p)| self.class[g as usize].map(|c| (p, c as u32)));
-        relabel_view(&mut map, cam.width as usize, seeds, self.rule.min_share);
+        relabel_view(&mut map, cam.width as usize, seeds, &self.rule);
         Ok(Some(map))
     }
 }
 
 /// Relabels `map` (one view, `width` pixels a row) from `seeds`, the (pixel, class) of the
-/// observed Gaussians' centers: a region takes the class holding `min_share` of its seeds
-/// (off its edge where any are), is unlabeled where none does, and keeps its label where
-/// no seed lies.
+/// observed Gaussians' centers: a region takes the class holding `rule.min_share` of its
+/// deciding seeds (those at least `rule.depth` pixels inside it, else its deepest), is
+/// unlabeled where none does, and keeps its label where no seed lies.
 pub fn relabel_view(
     map: &mut [u32],
     width: usize,
     seeds: impl Iterator<Item = (u32, u32)>,
-    min_share: f64,
+    rule: &RelabelRule,
 ) {
-    debug_assert!(min_share > 0.5, "a tie could hold min_share");
+    debug_assert!(rule.min_share > 0.5, "a tie could hold min_share");
     let regions = label_regions(map, width);
-    let edges = region_edges(&regions, width);
-    // (region, on the edge, class): by region, each region's interior seeds first.
-    let mut seeds: Vec<(u32, bool, u32)> = seeds
+    let depth = edge_depth(&regions, width, rule.depth);
+    // (region, depth from deepest, class): by region, each region's deciding seeds first.
+    let mut seeds: Vec<(u32, Reverse<u32>, u32)> = seeds
         .filter(|&(p, _)| regions[p as usize] != NO_LABEL)
-        .map(|(p, c)| (regions[p as usize], edges[p as usize], c))
+        .map(|(p, c)| (regions[p as usize], Reverse(depth[p as usize]), c))
         .collect();
     seeds.sort_unstable();
     // Per region id (the index of the region's first pixel): its new label, if any.
     let mut relabel: Vec<Option<u32>> = vec![None; map.len()];
     for region in seeds.chunk_by(|a, b| a.0 == b.0) {
-        let interior = region.partition_point(|s| !s.1);
-        let counted = if interior > 0 {
-            &region[..interior]
-        } else {
-            region
-        };
-        // Sorted by class within each part: runs of one class.
-        let (class, n) = counted
+        let deciding = &region[..region.partition_point(|s| s.1 == region[0].1)];
+        // Sorted by class within one depth: runs of one class.
+        let (class, n) = deciding
             .chunk_by(|a, b| a.2 == b.2)
             .map(|run| (run[0].2, run.len()))
             .fold(
                 (NO_LABEL, 0),
                 |best, run| if run.1 > best.1 { run } else { best },
             );
-        relabel[region[0].0 as usize] = Some(match n as f64 >= min_share * counted.len() as f64 {
-            true => class,
-            false => NO_LABEL,
-        });
+        relabel[region[0].0 as usize] =
+            Some(match n as f64 >= rule.min_share * deciding.len() as f64 {
+                true => class,
+                false => NO_LABEL,
+            });
     }
     for (label, &region) in map.iter_mut().zip(&regions) {
         // NO_LABEL (unlabeled pixels) lies past the table.
@@ -107,6 +110,40 @@ pub fn relabel_view(
             *label = c;
         }
     }
+}
+
+/// Per pixel of `regions` (a view's [`label_regions`]), its city-block distance within its
+/// region to the region's edge ([`region_edges`]: 0 on the edge), capped at `cap`; pixels
+/// of a region without an edge get `cap`. A breadth-first search out from the edges, `cap`
+/// steps deep.
+pub fn edge_depth(regions: &[u32], width: usize, cap: u32) -> Vec<u32> {
+    let edges = region_edges(regions, width);
+    let mut depth = vec![cap; regions.len()];
+    let mut front: Vec<usize> = (0..regions.len()).filter(|&p| edges[p]).collect();
+    for &p in &front {
+        depth[p] = 0;
+    }
+    // A pixel still at `cap` is unreached: every depth set below is under `cap`.
+    for d in 1..cap {
+        let mut next = Vec::new();
+        for &p in &front {
+            let x = p % width;
+            let near = [
+                (x > 0).then(|| p - 1),
+                (x + 1 < width).then(|| p + 1),
+                (p >= width).then(|| p - width),
+                (p + width < regions.len()).then(|| p + width),
+            ];
+            for q in near.into_iter().flatten() {
+                if regions[q] == regions[p] && depth[q] == cap {
+                    depth[q] = d;
+                    next.push(q);
+                }
+            }
+        }
+        front = next;
+    }
+    depth
 }
 
 /// Segment consensus, then FlashSplat's accumulation over the views relabeled with its
