@@ -38,14 +38,20 @@ fn relabel_by_hand(map: &[u32], w: usize, seeds: &[(u32, u32)], rule: &RelabelRu
         .filter(|&&r| r != NO_LABEL)
         .max()
         .map_or(0, |&r| r + 1);
+    // (region, depth, class) of every seed on a labeled pixel.
+    let placed: Vec<(u32, u32, u32)> = seeds
+        .iter()
+        .map(|&(p, c)| {
+            let depth = depth_by_hand(&regions, w, p as usize, rule.depth);
+            (regions[p as usize], depth, c)
+        })
+        .collect();
     let mut out = map.to_vec();
     for r in 0..count {
-        let in_region: Vec<(u32, u32)> = seeds
+        let in_region: Vec<(u32, u32)> = placed
             .iter()
-            .map(|&(p, c)| (depth_by_hand(&regions, w, p as usize, rule.depth), c))
-            .zip(seeds)
-            .filter(|(_, &(p, _))| regions[p as usize] == r)
-            .map(|(depth_class, _)| depth_class)
+            .filter(|s| s.0 == r)
+            .map(|s| (s.1, s.2))
             .collect();
         let Some(deepest) = in_region.iter().map(|s| s.0).max() else {
             continue;
