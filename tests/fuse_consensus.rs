@@ -819,6 +819,58 @@ fn own_views_overrule_the_segment_only_when_improbable_for_a_member() {
     );
 }
 
+/// A Gaussian in a segment under `min_segment` (here alone) takes the class most of its
+/// neighbours in decided segments hold, where at least `min_segment_neighbours` are and one
+/// class holds more than half of them; else its own views decide.
+#[test]
+fn small_segments_take_their_neighbours_segments_class() {
+    // Gaussians 0..n_a: segment 0, class 0 in every view; n_a..8: segment 1, class 1;
+    // Gaussian 8 alone (segment 2), its own three views saying class 1.
+    let decide_with = |n_a: u32, min_segment_neighbours: usize| {
+        let per_view: Vec<Vec<(u32, u32, u32, bool)>> = (0..3)
+            .map(|_| {
+                let mut list: Vec<_> = (0..8u32)
+                    .map(|g| (g, u32::from(g >= n_a), u32::from(g >= n_a), false))
+                    .collect();
+                list.push((8, 1, 2, false));
+                list
+            })
+            .collect();
+        let obs = Observations::from_views(9, &per_view);
+        let p = ConsensusParams {
+            min_segment_neighbours,
+            ..Default::default()
+        };
+        let means: Vec<[f32; 3]> = (0..9).map(|g| [g as f32, 0.0, 0.0]).collect();
+        let knn = nearest_neighbours(&means, p.neighbours);
+        let segment: Vec<u32> = (0..9u32)
+            .map(|g| if g == 8 { 2 } else { u32::from(g >= n_a) })
+            .collect();
+        decide(&obs, &knn, segment, 2, &p)
+    };
+    // Eight segments of one: every neighbour of 8 in segment 0 (8 Gaussians, class 0).
+    let c = decide_with(8, 3);
+    assert_eq!(c.assignment.class[8], Some(0), "its 8 neighbours' segment");
+    assert_eq!(c.evidence[8], [8.0, 0.0]);
+    assert_eq!(c.from_neighbour_segments, 1);
+    let c = decide_with(8, 9);
+    assert_eq!(
+        c.assignment.class[8],
+        Some(1),
+        "too few neighbours: own views"
+    );
+    // Segments of 4 and 4: a tie among the neighbours, so its own views decide.
+    let c = decide_with(4, 3);
+    assert_eq!(c.segments[0].class, Some(0));
+    assert_eq!(c.segments[1].class, Some(1));
+    assert_eq!(c.assignment.class[8], Some(1));
+    assert_eq!(c.evidence[8], [0.0, 3.0], "own views");
+    // Segments of 5 and 3: only the 5 count (3 is under min_segment), all class 0.
+    let c = decide_with(5, 3);
+    assert_eq!(c.assignment.class[8], Some(0));
+    assert_eq!(c.evidence[8], [5.0, 0.0]);
+}
+
 /// Gaussians no view observed take their decided neighbours' majority, outward in rounds; a
 /// tie leaves one undecided.
 #[test]

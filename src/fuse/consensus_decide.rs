@@ -1,8 +1,8 @@
 //! Segment consensus, the decisions (the segments: src/fuse/consensus_cluster.rs): the
 //! knobs, each segment's class with every view counted once, each Gaussian's class from its
-//! segment (its own views where the segment is too small or its own views contradict it;
-//! its neighbours' classes where no view observed it), a posterior per Gaussian, and the
-//! segments whose vote split is close (flagged).
+//! segment (in a small segment its neighbours' segments, else its own views, as where its
+//! own views contradict its segment; its neighbours' classes where no view observed it), a
+//! posterior per Gaussian, and the segments whose vote split is close (flagged).
 
 use serde::Serialize;
 
@@ -36,8 +36,15 @@ pub struct ConsensusParams {
     pub region_max_disagree: f64,
     /// Merge order: one view putting a pair apart outweighs this many putting it together.
     pub apart_weight: f64,
-    /// Smaller segments (boundaries, fragments) leave each Gaussian to its own views.
+    /// Smaller segments (boundaries, fragments) leave each Gaussian to its neighbours'
+    /// segments ([`ConsensusParams::min_segment_neighbours`]), else to its own views.
     pub min_segment: usize,
+    /// A Gaussian in a smaller segment takes the class more than half of its neighbours in
+    /// decided segments of at least `min_segment` hold, where at least this many are.
+    /// Segments stay that small where the views give no joining evidence (center pixels on
+    /// label edges: thin parts such as a table's legs, rims); a Gaussian's own few views
+    /// there flicker, its neighbours' segments pool many views.
+    pub min_segment_neighbours: usize,
     /// A Gaussian seen in at least this many views keeps its own class where its views
     /// contradict its segment's class...
     pub min_own_views: u32,
@@ -70,6 +77,7 @@ impl Default for ConsensusParams {
             region_max_disagree: 0.1,
             apart_weight: 4.0,
             min_segment: 4,
+            min_segment_neighbours: 3,
             min_own_views: 4,
             contradiction_p: 0.01,
             prior: 0.5,
@@ -108,9 +116,11 @@ pub struct Consensus {
     /// Segment per Gaussian (index into `segments`).
     pub segment: Vec<u32>,
     pub segments: Vec<SegmentVotes>,
-    /// Gaussians whose class came from their segment (the rest: their own views, or their
-    /// neighbours).
+    /// Gaussians whose class came from their segment (the rest: their neighbours' segments,
+    /// their own views, or their neighbours).
     pub from_segment: usize,
+    /// Observed Gaussians of small segments that took their neighbours' segments' class.
+    pub from_neighbour_segments: usize,
     /// Gaussians no view observed, decided by their neighbours' classes.
     pub from_neighbours: usize,
     /// Per Gaussian, the counts its class was decided from (segment split, own views, or
@@ -195,7 +205,7 @@ pub fn decide(
     let own = own_votes(obs, classes);
     let n = obs.n;
     let mut class = vec![None; n];
-    let mut from_segment = 0;
+    let (mut from_segment, mut from_neighbour_segments) = (0, 0);
     let mut evidence = Vec::with_capacity(n);
     for g in 0..n {
         let s = segment[g] as usize;
@@ -206,8 +216,20 @@ pub fn decide(
                 evidence.push(split[s].clone());
             }
             _ => {
-                class[g] = decisive_argmax(&own[g], &neighbour_votes(&own, knn, p.neighbours, g));
-                evidence.push(own[g].clone());
+                let near = match sizes[s] < p.min_segment {
+                    true => neighbour_segments(g, knn, &segment, &segments, &sizes, classes, p),
+                    false => None,
+                };
+                if let Some((c, counts)) = near {
+                    class[g] = Some(c);
+                    // Unobserved ones are counted where their neighbours decide them below.
+                    from_neighbour_segments += usize::from(!obs.row(g).is_empty());
+                    evidence.push(counts);
+                } else {
+                    let tie_break = neighbour_votes(&own, knn, p.neighbours, g);
+                    class[g] = decisive_argmax(&own[g], &tie_break);
+                    evidence.push(own[g].clone());
+                }
             }
         }
     }
@@ -224,9 +246,38 @@ pub fn decide(
         segment,
         segments,
         from_segment,
+        from_neighbour_segments,
         from_neighbours,
         evidence,
     }
+}
+
+/// The class more than half of Gaussian `g`'s neighbours in decided segments of at least
+/// `min_segment` Gaussians hold, where at least `min_segment_neighbours` are, with the
+/// count of those neighbours per class ([`ConsensusParams::min_segment_neighbours`]).
+fn neighbour_segments(
+    g: usize,
+    knn: &[u32],
+    segment: &[u32],
+    segments: &[SegmentVotes],
+    sizes: &[usize],
+    classes: usize,
+    p: &ConsensusParams,
+) -> Option<(usize, Vec<f64>)> {
+    let k = p.neighbours;
+    let mut counts = vec![0.0; classes];
+    for &h in knn[g * k..(g + 1) * k]
+        .iter()
+        .filter(|&&h| h != NO_NEIGHBOUR)
+    {
+        let s = segment[h as usize] as usize;
+        if let Some(c) = segments[s].class.filter(|_| sizes[s] >= p.min_segment) {
+            counts[c] += 1.0;
+        }
+    }
+    let total: f64 = counts.iter().sum();
+    let top = (0..classes).find(|&c| 2.0 * counts[c] > total)?;
+    (total >= p.min_segment_neighbours as f64).then_some((top, counts))
 }
 
 /// Whether a Gaussian's own view counts `own` contradict its segment's class `c`: it has at

@@ -38,9 +38,11 @@ pub struct ClassSplit {
 pub struct SegmentReport {
     /// Segments of at least `min_segment` Gaussians.
     pub segments: usize,
-    /// Gaussians whose class came from their segment, and those no view observed that took
-    /// their neighbours' class (the rest decided by their own views).
+    /// Gaussians whose class came from their segment, those of small segments that took
+    /// their neighbours' segments' class, and those no view observed that took their
+    /// neighbours' class (the rest decided by their own views).
     pub from_segment: usize,
+    pub from_neighbour_segments: usize,
     pub from_neighbours: usize,
     /// Flagged segments, largest first: check these objects' labels.
     pub flagged: Vec<SegmentSplit>,
@@ -100,6 +102,7 @@ pub fn segment_report(
     SegmentReport {
         segments: sized.count(),
         from_segment: consensus.from_segment,
+        from_neighbour_segments: consensus.from_neighbour_segments,
         from_neighbours: consensus.from_neighbours,
         flagged,
         per_class: per_class
