@@ -209,15 +209,15 @@ pub fn decide(
     let mut evidence = Vec::with_capacity(n);
     for g in 0..n {
         let s = segment[g] as usize;
-        match segments[s].class.filter(|_| sizes[s] >= p.min_segment) {
+        match deciding_class(&segments[s], p) {
             Some(c) if !contradicts(&own[g], c, &split[s], p) => {
                 class[g] = Some(c);
                 from_segment += 1;
                 evidence.push(split[s].clone());
             }
             _ => {
-                let near = match sizes[s] < p.min_segment {
-                    true => neighbour_segments(g, knn, &segment, &segments, &sizes, classes, p),
+                let near = match segments[s].gaussians < p.min_segment {
+                    true => neighbour_segments(g, knn, &segment, &segments, classes, p),
                     false => None,
                 };
                 if let Some((c, counts)) = near {
@@ -252,6 +252,11 @@ pub fn decide(
     }
 }
 
+/// A segment's class where it holds enough Gaussians (`min_segment`) to decide its members.
+fn deciding_class(votes: &SegmentVotes, p: &ConsensusParams) -> Option<usize> {
+    votes.class.filter(|_| votes.gaussians >= p.min_segment)
+}
+
 /// The class more than half of Gaussian `g`'s neighbours in decided segments of at least
 /// `min_segment` Gaussians hold, where at least `min_segment_neighbours` are, with the
 /// count of those neighbours per class ([`ConsensusParams::min_segment_neighbours`]).
@@ -260,7 +265,6 @@ fn neighbour_segments(
     knn: &[u32],
     segment: &[u32],
     segments: &[SegmentVotes],
-    sizes: &[usize],
     classes: usize,
     p: &ConsensusParams,
 ) -> Option<(usize, Vec<f64>)> {
@@ -270,8 +274,7 @@ fn neighbour_segments(
         .iter()
         .filter(|&&h| h != NO_NEIGHBOUR)
     {
-        let s = segment[h as usize] as usize;
-        if let Some(c) = segments[s].class.filter(|_| sizes[s] >= p.min_segment) {
+        if let Some(c) = deciding_class(&segments[segment[h as usize] as usize], p) {
             counts[c] += 1.0;
         }
     }
