@@ -10,6 +10,7 @@ use common::{check_validation, gpu};
 use semsplat::dataset::CompactClasses;
 use semsplat::fuse::consensus::{consensus_run, ConsensusRun};
 use semsplat::fuse::consensus_relabel::{edge_depth, relabel_view, RelabelRule, RelabeledViews};
+use semsplat::fuse::regions_gpu::RegionFinder;
 use semsplat::fuse::{
     accumulate, assign_semantic_near, lift_by_consensus, nearest_neighbours, ConsensusParams,
     FuseConfig, LabelSource, Method, NO_LABEL,
@@ -17,6 +18,7 @@ use semsplat::fuse::{
 use semsplat::render::GpuScene;
 use semsplat::synth::{generate, RoomSource, SynthConfig, SynthScene};
 use semsplat::util::Rng;
+use std::sync::Mutex;
 
 /// A pixel's depth written plainly: the city-block distance to the nearest edge pixel of
 /// its region, capped at `cap` (`cap` where the region has no edge).
@@ -163,6 +165,37 @@ fn relabeling_matches_a_plain_transcription() {
     );
 }
 
+/// The GPU's relabeling (regions and the seeds' depths found there, the pixels rewritten
+/// there) against the same plain transcription, on maps of several sizes; a view with more
+/// seeds than the finder holds Gaussians is relabeled on the host, to the same result.
+#[test]
+fn gpu_relabeling_matches_the_plain_transcription() {
+    let gpu = gpu();
+    let sizes = [(24, 18), (24, 18), (7, 31), (64, 48), (160, 120)];
+    let most_seeds = 160 * 120 / 4 + 160 * 120 / 32;
+    let mut finder = RegionFinder::new(gpu, most_seeds).unwrap();
+    let mut relabeled = 0usize;
+    for (seed, &(w, h)) in (100..).zip(sizes.iter().cycle().take(25)) {
+        let (map, seeds) = random_case(seed, w, h);
+        for (min_share, depth) in [(0.75, 1), (0.6, 1), (1.0, 1), (0.75, 3), (0.75, 6)] {
+            let rule = rule(min_share, depth);
+            let got = finder.relabel(&map, w as u32, &seeds, &rule).unwrap();
+            let want = relabel_by_hand(&map, w, &seeds, &rule);
+            assert_eq!(got, want, "seed {seed} ({w}x{h}), {rule:?}");
+            relabeled += (0..map.len()).filter(|&p| want[p] != map[p]).count();
+        }
+    }
+    assert!(relabeled > 10_000, "{relabeled} pixels changed");
+    assert_eq!(finder.stats.host_fallbacks, 0, "views left to the host");
+    // Too many seeds for the finder: the host relabels the view.
+    let (map, seeds) = random_case(7, 24, 18);
+    let mut small = RegionFinder::new(gpu, seeds.len() - 1).unwrap();
+    let got = small.relabel(&map, 24, &seeds, &rule(0.75, 3)).unwrap();
+    assert_eq!(got, relabel_by_hand(&map, 24, &seeds, &rule(0.75, 3)));
+    assert_eq!(small.stats.host_fallbacks, 1);
+    check_validation(gpu);
+}
+
 /// At depth 1, edge seeds count only where a region has no interior seed; a split below
 /// the share unlabels the region; a region without seeds keeps its label.
 #[test]
@@ -249,23 +282,29 @@ fn flickered_office(views: usize, seed: u64) -> Flickered {
 
 /// Flicker relabels whole objects in a view; the consensus classes put most of them back:
 /// the relabeled views disagree with the true labels on far fewer pixels than the noisy
-/// views do.
+/// views do. The GPU relabels every view as the host does.
 #[test]
 fn relabeled_views_undo_most_flicker() {
     let Flickered { s, noisy, run, .. } = flickered_office(24, 7);
     let classes = CompactClasses::from_table(&s.room.classes).unwrap();
     let params = ConsensusParams::default();
-    let relabeled = RelabeledViews {
+    let relabeled = |finder| RelabeledViews {
         inner: &noisy,
         centers: &run.centers,
         class: &run.consensus.assignment.class,
         rule: params.relabel,
+        finder,
     };
+    let on_gpu = relabeled(Some(Mutex::new(
+        RegionFinder::new(gpu(), s.gaussians.len()).unwrap(),
+    )));
+    let relabeled = relabeled(None);
     let (mut noisy_wrong, mut relabeled_wrong, mut unlabeled, mut labeled) = (0, 0, 0, 0);
     for (v, cam) in s.cameras.iter().enumerate() {
         let truth = classes.compact_labels(&s.views[v].labels);
         let before = noisy[v].as_ref().unwrap();
         let after = relabeled.labels(v, cam).unwrap().unwrap();
+        assert_eq!(on_gpu.labels(v, cam).unwrap().unwrap(), after, "view {v}");
         for p in 0..truth.len() {
             if truth[p] == NO_LABEL || before[p] == NO_LABEL {
                 continue;
@@ -336,6 +375,8 @@ fn relabel_is_deterministic_and_follows_its_rule() {
         centers: &run.centers,
         class: cons,
         rule: params.relabel,
+        // The lift relabeled on the GPU: the host's relabeling must give its classes.
+        finder: None,
     };
     let (footprints, _) = accumulate(
         gpu,

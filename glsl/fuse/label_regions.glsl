@@ -6,7 +6,9 @@
 // root is its first pixel in scan order whatever order the invocations run in. The region
 // id is that pixel's index, as on the host. Kernels, one per file: region_init,
 // region_merge, region_flatten, region_check (a pass that finds any link the loop cap of a
-// CPU driver cut short, so the host can redo that view), region_lookup (per Gaussian).
+// CPU driver cut short, so the host can redo that view), region_lookup (per Gaussian); for
+// relabeling a view (src/fuse/consensus_relabel.rs): region_depth (per center pixel),
+// region_relabel_scatter (per decided region) and region_relabel (per pixel).
 #ifndef LABEL_REGIONS_GLSL
 #define LABEL_REGIONS_GLSL
 
@@ -19,15 +21,22 @@ layout(push_constant) uniform RegionParams {
     uvec2 status_addr; // [1] 0, or 1 once region_check found a pixel not joined
     uvec2 pixels_addr; // [n] each Gaussian's center pixel (NO_LABEL: none)
     uvec2 out_addr;    // [n] region id of the center pixel, bit 31 set on the region's edge
+    uvec2 depth_addr;  // [n] city-block depth of the center pixel in its region, capped
+    uvec2 pairs_addr;  // [2 * pairs] (region id, new label) of each region relabeled
     uint width;
     uint height;
     uint n;
+    uint max_depth;    // region_depth's cap
+    uint pairs;
 } pc;
 
 #include "addressed_arrays.glsl"
 #define labels UintArray(pc.labels_addr)
 #define parent UintArrayCoherent(pc.parent_addr)
 #define region UintArrayRW(pc.region_addr)
+// Relabeling reuses the links, done with once the ids are flat, as the per-region table
+// (indexed by region id, the root pixel) of new labels.
+#define relabel_table UintArrayRW(pc.parent_addr)
 
 uint pixel_count() {
     return pc.width * pc.height;

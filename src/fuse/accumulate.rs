@@ -128,7 +128,8 @@ pub struct FuseStats {
     /// Peak resident memory of the process so far (Linux; 0 where unknown).
     pub peak_host_bytes: u64,
     /// Segment consensus: views whose label regions the GPU left incomplete (a CPU
-    /// driver's loop cap), found again on the host (src/fuse/regions_gpu.rs).
+    /// driver's loop cap), found again on the host (src/fuse/regions_gpu.rs); with
+    /// `--relabel`, also the views it relabeled on the host.
     pub region_host_fallbacks: usize,
 }
 

@@ -12,6 +12,7 @@
 //! Gaussian center was observed in keeps its label.
 
 use std::cmp::Reverse;
+use std::sync::Mutex;
 
 use anyhow::Result;
 use serde::Serialize;
@@ -22,6 +23,7 @@ use super::consensus::{consensus_run, scores_of, ConsensusInput, ConsensusLift};
 use super::consensus_decide::{posterior, ConsensusParams};
 use super::consensus_segments::{label_regions, region_edges};
 use super::method::Method;
+use super::regions_gpu::RegionFinder;
 use crate::scene::Camera;
 
 /// How a view's label regions take the consensus classes.
@@ -51,6 +53,9 @@ pub struct RelabeledViews<'a> {
     /// Consensus class per Gaussian.
     pub class: &'a [Option<usize>],
     pub rule: RelabelRule,
+    /// Relabels on the GPU ([`RegionFinder::relabel`]; one view at a time: the label
+    /// source is read from several worker threads); None: on the host ([`relabel_view`]).
+    pub finder: Option<Mutex<RegionFinder<'a>>>,
 }
 
 impl LabelSource for RelabeledViews<'_> {
@@ -62,7 +67,14 @@ impl LabelSource for RelabeledViews<'_> {
         let seeds = seeds
             .iter()
             .filter_map(|&(g, p)| self.class[g as usize].map(|c| (p, c as u32)));
-        relabel_view(&mut map, cam.width as usize, seeds, &self.rule);
+        match &self.finder {
+            Some(finder) => {
+                let seeds: Vec<(u32, u32)> = seeds.collect();
+                let mut finder = finder.lock().unwrap_or_else(|e| e.into_inner());
+                map = finder.relabel(&map, cam.width, &seeds, &self.rule)?;
+            }
+            None => relabel_view(&mut map, cam.width as usize, seeds, &self.rule),
+        }
         Ok(Some(map))
     }
 }
@@ -70,24 +82,57 @@ impl LabelSource for RelabeledViews<'_> {
 /// Relabels `map` (one view, `width` pixels a row) from `seeds`, the (pixel, class) of the
 /// observed Gaussians' centers: a region takes the class holding `rule.min_share` of its
 /// deciding seeds (those at least `rule.depth` pixels inside it, else its deepest), is
-/// unlabeled where none does, and keeps its label where no seed lies.
+/// unlabeled where none does, and keeps its label where no seed lies. The host version of
+/// [`RegionFinder::relabel`](super::regions_gpu::RegionFinder::relabel).
 pub fn relabel_view(
     map: &mut [u32],
     width: usize,
     seeds: impl Iterator<Item = (u32, u32)>,
     rule: &RelabelRule,
 ) {
-    debug_assert!(rule.min_share > 0.5, "a tie could hold min_share");
     let regions = label_regions(map, width);
     let depth = edge_depth(&regions, width, rule.depth);
-    // (region, depth from deepest, class): by region, each region's deciding seeds first.
-    let mut seeds: Vec<(u32, Reverse<u32>, u32)> = seeds
+    let seeds = seeds
         .filter(|&(p, _)| regions[p as usize] != NO_LABEL)
-        .map(|(p, c)| (regions[p as usize], Reverse(depth[p as usize]), c))
-        .collect();
-    seeds.sort_unstable();
+        .map(|(p, c)| RegionSeed {
+            region: regions[p as usize],
+            depth: depth[p as usize],
+            class: c,
+        });
     // Per region id (the index of the region's first pixel): its new label, if any.
     let mut relabel: Vec<Option<u32>> = vec![None; map.len()];
+    for (region, label) in decide_regions(seeds.collect(), rule) {
+        relabel[region as usize] = Some(label);
+    }
+    for (label, &region) in map.iter_mut().zip(&regions) {
+        // NO_LABEL (unlabeled pixels) lies past the table.
+        if let Some(&Some(c)) = relabel.get(region as usize) {
+            *label = c;
+        }
+    }
+}
+
+/// An observed Gaussian's center in a view: the label region it lies in, its depth there
+/// ([`edge_depth`], capped at the rule's depth), and the Gaussian's consensus class.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RegionSeed {
+    pub region: u32,
+    pub depth: u32,
+    pub class: u32,
+}
+
+/// Every region holding seeds, with its new label: the class holding `rule.min_share` of
+/// its deciding seeds (its deepest, all of them from `rule.depth` pixels inward), or
+/// NO_LABEL where none does. Regions in increasing id.
+pub fn decide_regions(seeds: Vec<RegionSeed>, rule: &RelabelRule) -> Vec<(u32, u32)> {
+    debug_assert!(rule.min_share > 0.5, "a tie could hold min_share");
+    // (region, depth from deepest, class): by region, each region's deciding seeds first.
+    let mut seeds: Vec<(u32, Reverse<u32>, u32)> = seeds
+        .into_iter()
+        .map(|s| (s.region, Reverse(s.depth.min(rule.depth)), s.class))
+        .collect();
+    seeds.sort_unstable();
+    let mut decided = Vec::new();
     for region in seeds.chunk_by(|a, b| a.0 == b.0) {
         let deciding = &region[..region.partition_point(|s| s.1 == region[0].1)];
         // Sorted by class within one depth: runs of one class.
@@ -98,18 +143,13 @@ pub fn relabel_view(
                 (NO_LABEL, 0),
                 |best, run| if run.1 > best.1 { run } else { best },
             );
-        relabel[region[0].0 as usize] =
-            Some(match n as f64 >= rule.min_share * deciding.len() as f64 {
-                true => class,
-                false => NO_LABEL,
-            });
+        let label = match n as f64 >= rule.min_share * deciding.len() as f64 {
+            true => class,
+            false => NO_LABEL,
+        };
+        decided.push((region[0].0, label));
     }
-    for (label, &region) in map.iter_mut().zip(&regions) {
-        // NO_LABEL (unlabeled pixels) lies past the table.
-        if let Some(&Some(c)) = relabel.get(region as usize) {
-            *label = c;
-        }
-    }
+    decided
 }
 
 /// Per pixel of `regions` (a view's [`label_regions`]), its city-block distance within its
@@ -168,6 +208,7 @@ pub fn fuse_relabeled(
         centers: &run.centers,
         class: &run.consensus.assignment.class,
         rule: params.relabel,
+        finder: Some(Mutex::new(RegionFinder::new(input.gpu, input.means.len())?)),
     };
     let flashsplat = FuseConfig {
         method: Method::FlashSplat,
@@ -182,6 +223,10 @@ pub fn fuse_relabeled(
         &flashsplat,
         |done, _| progress(views + done, 2 * views),
     )?;
+    let relabel_stats = match relabeled.finder {
+        Some(finder) => finder.into_inner().unwrap_or_else(|e| e.into_inner()).stats,
+        None => Default::default(),
+    };
     let by_pixels = assign_semantic_near(&footprints, Some((&run.knn, params.neighbours)));
     let consensus = run.consensus;
     let mut evidence = scores_of(&consensus.evidence, input.classes);
@@ -201,9 +246,9 @@ pub fn fuse_relabeled(
         .map(|(&c, counts)| posterior(counts, c, params.prior).0 as f32)
         .collect();
     let mut stats = fs_stats;
-    stats.gpu_ms += run.stats.gpu_ms;
+    stats.gpu_ms += run.stats.gpu_ms + relabel_stats.gpu_ms;
     stats.peak_device_bytes = stats.peak_device_bytes.max(run.stats.peak_device_bytes);
-    stats.region_host_fallbacks = run.stats.region_host_fallbacks;
+    stats.region_host_fallbacks = run.stats.region_host_fallbacks + relabel_stats.host_fallbacks;
     stats.wall_s = start.elapsed().as_secs_f64();
     stats.views_per_s = stats.views as f64 / stats.wall_s.max(1e-9);
     Ok(ConsensusLift {

@@ -2,7 +2,8 @@
 //! kernels), for the segment consensus's observations: per view, the region under every
 //! Gaussian's center pixel and whether that pixel is on the region's edge, without the
 //! host touching the view's pixels. Region ids are the index of the region's first pixel in
-//! scan order, as [`label_regions`] gives them.
+//! scan order, as [`label_regions`] gives them. `--relabel` relabels each view's regions
+//! here too ([`RegionFinder::relabel`]): only the per-region decision runs on the host.
 //!
 //! A CPU Vulkan driver caps the loop iterations of one invocation (lavapipe: 65,535), which
 //! could cut a union short on a pathological map; a check pass finds any such view and the
@@ -10,15 +11,20 @@
 
 use anyhow::Result;
 
+use super::consensus_relabel::{decide_regions, relabel_view, RegionSeed, RelabelRule};
 use super::consensus_segments::{label_regions, region_edges};
 use super::NO_LABEL;
 use crate::contract::params::RegionParams;
-use crate::contract::REGION_EDGE_BIT;
+use crate::contract::{REGION_EDGE_BIT, RELABEL_KEEP};
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, Gpu, Recorder};
 
 /// Workgroups one dispatch dimension holds (Vulkan's guaranteed minimum, lavapipe's limit).
 const MAX_GROUPS: u32 = 65_535;
+
+/// Deepest relabel depth region_depth searches for (its diamond of (2d + 1)^2 pixels stays
+/// far under a CPU driver's loop cap); a deeper rule relabels on the host.
+const MAX_GPU_DEPTH: u32 = 32;
 
 /// What the region finder did over its views.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -37,6 +43,9 @@ pub struct RegionFinder<'a> {
     status: Buffer,
     out: Buffer,
     n: usize,
+    /// For [`RegionFinder::relabel`], made on its first call: the seeds' pixels, their
+    /// depths ([n] each) and the decided (region, label) pairs ([2n]).
+    relabel_bufs: Option<[Buffer; 3]>,
     pub stats: RegionStats,
 }
 
@@ -50,6 +59,7 @@ impl<'a> RegionFinder<'a> {
             status: gpu.buffer("region-status", 4)?,
             out: gpu.buffer("region-lookup", (n.max(1) * 4) as u64)?,
             n,
+            relabel_bufs: None,
             stats: RegionStats::default(),
         })
     }
@@ -58,12 +68,35 @@ impl<'a> RegionFinder<'a> {
     /// the view labeled `map` (`width` pixels a row), with [`REGION_EDGE_BIT`] set where the
     /// pixel is on the region's edge; NO_LABEL where there is no pixel or it is unlabeled.
     pub fn regions_at(&mut self, map: &[u32], width: u32, centers: &Buffer) -> Result<Vec<u32>> {
-        let pixel_groups = ids::FUSE_REGION_INIT.groups_for(map.len() as u32);
-        if map.len() > u32::MAX as usize || pixel_groups[0] > MAX_GROUPS {
-            // Past one dispatch's reach: a view of over 16.7M pixels.
+        if !Self::fits(map) {
             return self.on_host(map, width, centers);
         }
         let params = self.upload_view(map, width, centers.address_words(4)?)?;
+        let lookup = |rec: &mut Recorder| {
+            let groups = ids::FUSE_REGION_LOOKUP.groups_for(params.n);
+            rec.dispatch(ids::FUSE_REGION_LOOKUP, &[], &params, groups)
+        };
+        if self.find_regions(&params, lookup)? {
+            return Ok(self.gpu.download(&self.out, 0, self.n)?);
+        }
+        self.on_host(map, width, centers)
+    }
+
+    /// Whether one dispatch over the pixels of `map` reaches them all (past 16.7M pixels
+    /// it does not).
+    fn fits(map: &[u32]) -> bool {
+        let pixel_groups = ids::FUSE_REGION_INIT.groups_for(map.len() as u32);
+        map.len() <= u32::MAX as usize && pixel_groups[0] <= MAX_GROUPS
+    }
+
+    /// Finds the regions of the uploaded view (`params`), then records `then` (lookups over
+    /// them) in the same submission; false where the check found the regions incomplete.
+    fn find_regions(
+        &mut self,
+        params: &RegionParams,
+        then: impl FnOnce(&mut Recorder) -> crate::gpu::GpuResult<()>,
+    ) -> Result<bool> {
+        let pixel_groups = ids::FUSE_REGION_INIT.groups_for(params.width * params.height);
         let mut rec = Recorder::new(self.gpu)?;
         rec.fill(&self.status, 0, 4, 0);
         rec.barrier();
@@ -74,18 +107,124 @@ impl<'a> RegionFinder<'a> {
             ids::FUSE_REGION_FLATTEN,
             ids::FUSE_REGION_CHECK,
         ] {
-            rec.dispatch(kernel, &[], &params, pixel_groups)?;
+            rec.dispatch(kernel, &[], params, pixel_groups)?;
             rec.barrier();
         }
-        let lookup_groups = ids::FUSE_REGION_LOOKUP.groups_for(self.n as u32);
-        rec.dispatch(ids::FUSE_REGION_LOOKUP, &[], &params, lookup_groups)?;
+        then(&mut rec)?;
         let m1 = rec.mark();
         let t = rec.submit_and_wait()?;
         self.stats.gpu_ms += t.between(m0, m1).unwrap_or(0.0) * 1e-6;
-        if self.gpu.download::<u32>(&self.status, 0, 1)?[0] == 0 {
-            return Ok(self.gpu.download(&self.out, 0, self.n)?);
+        Ok(self.gpu.download::<u32>(&self.status, 0, 1)?[0] == 0)
+    }
+
+    /// `map` (`width` pixels a row) relabeled from `seeds`, the (pixel, class) of the
+    /// observed Gaussians' centers, by `rule`: what [`relabel_view`] gives. The regions and
+    /// the seeds' regions and depths are found on the GPU, each region's label decided on
+    /// the host from its seeds ([`decide_regions`]), the pixels rewritten on the GPU. A view
+    /// past the GPU's reach (more seeds than the finder's Gaussians, an incomplete region
+    /// check, a depth past [`MAX_GPU_DEPTH`]) is relabeled on the host.
+    pub fn relabel(
+        &mut self,
+        map: &[u32],
+        width: u32,
+        seeds: &[(u32, u32)],
+        rule: &RelabelRule,
+    ) -> Result<Vec<u32>> {
+        if !Self::fits(map) || seeds.len() > self.n || rule.depth > MAX_GPU_DEPTH {
+            return Ok(self.relabel_on_host(map, width, seeds, rule));
         }
-        self.on_host(map, width, centers)
+        let bufs = match self.relabel_bufs.take() {
+            Some(bufs) => bufs,
+            None => {
+                let words = (self.n.max(1) * 4) as u64;
+                [
+                    self.gpu.buffer("relabel-seed-pixels", words)?,
+                    self.gpu.buffer("relabel-seed-depths", words)?,
+                    self.gpu.buffer("relabel-pairs", 2 * words)?,
+                ]
+            }
+        };
+        let relabeled = self.relabel_with(&bufs, map, width, seeds, rule);
+        self.relabel_bufs = Some(bufs);
+        relabeled
+    }
+
+    /// [`RegionFinder::relabel`] on the GPU with `bufs` (seed pixels, seed depths, pairs).
+    fn relabel_with(
+        &mut self,
+        [seed_pixels, seed_depths, pairs]: &[Buffer; 3],
+        map: &[u32],
+        width: u32,
+        seeds: &[(u32, u32)],
+        rule: &RelabelRule,
+    ) -> Result<Vec<u32>> {
+        let pixels: Vec<u32> = seeds.iter().map(|s| s.0).collect();
+        self.gpu.upload(seed_pixels, 0, &pixels)?;
+        let mut params = self.upload_view(map, width, seed_pixels.address_words(4)?)?;
+        params.n = seeds.len() as u32;
+        params.depth_addr = seed_depths.address_words(4)?;
+        params.pairs_addr = pairs.address_words(4)?;
+        params.max_depth = rule.depth;
+        let lookups = |rec: &mut Recorder| {
+            let groups = ids::FUSE_REGION_LOOKUP.groups_for(params.n);
+            rec.dispatch(ids::FUSE_REGION_LOOKUP, &[], &params, groups)?;
+            rec.dispatch(ids::FUSE_REGION_DEPTH, &[], &params, groups)
+        };
+        if !self.find_regions(&params, lookups)? {
+            return Ok(self.relabel_on_host(map, width, seeds, rule));
+        }
+        let regions: Vec<u32> = self.gpu.download(&self.out, 0, seeds.len())?;
+        let depths: Vec<u32> = self.gpu.download(seed_depths, 0, seeds.len())?;
+        let found = (0..seeds.len())
+            .filter(|&i| regions[i] != NO_LABEL)
+            .map(|i| RegionSeed {
+                region: regions[i] & !REGION_EDGE_BIT,
+                depth: depths[i],
+                class: seeds[i].1,
+            });
+        let decided: Vec<u32> = decide_regions(found.collect(), rule)
+            .into_iter()
+            .flat_map(|(region, label)| [region, label])
+            .collect();
+        if decided.is_empty() {
+            return Ok(map.to_vec());
+        }
+        self.gpu.upload(pairs, 0, &decided)?;
+        params.pairs = (decided.len() / 2) as u32;
+        self.rewrite_labels(&params, map.len())
+    }
+
+    /// Rewrites the uploaded view's labels from the decided pairs of `params` (the table
+    /// filled with RELABEL_KEEP, the pairs scattered into it, every pixel looked up) and
+    /// downloads them.
+    fn rewrite_labels(&mut self, params: &RegionParams, pixels: usize) -> Result<Vec<u32>> {
+        let [labels, table, _] = self.pixel_bufs.as_ref().expect("sized by upload_view");
+        let mut rec = Recorder::new(self.gpu)?;
+        let m0 = rec.mark();
+        rec.fill(table, 0, (pixels * 4) as u64, RELABEL_KEEP);
+        rec.barrier();
+        let pair_groups = ids::FUSE_REGION_RELABEL_SCATTER.groups_for(params.pairs);
+        rec.dispatch(ids::FUSE_REGION_RELABEL_SCATTER, &[], params, pair_groups)?;
+        rec.barrier();
+        let pixel_groups = ids::FUSE_REGION_RELABEL.groups_for(pixels as u32);
+        rec.dispatch(ids::FUSE_REGION_RELABEL, &[], params, pixel_groups)?;
+        let m1 = rec.mark();
+        let t = rec.submit_and_wait()?;
+        self.stats.gpu_ms += t.between(m0, m1).unwrap_or(0.0) * 1e-6;
+        Ok(self.gpu.download(labels, 0, pixels)?)
+    }
+
+    fn relabel_on_host(
+        &mut self,
+        map: &[u32],
+        width: u32,
+        seeds: &[(u32, u32)],
+        rule: &RelabelRule,
+    ) -> Vec<u32> {
+        self.stats.host_fallbacks += 1;
+        let mut relabeled = map.to_vec();
+        relabel_view(&mut relabeled, width as usize, seeds.iter().copied(), rule);
+        relabeled
     }
 
     /// Whether `region_ids` (per pixel of `map`, NO_LABEL where unlabeled) are complete
@@ -136,9 +275,14 @@ impl<'a> RegionFinder<'a> {
             status_addr: self.status.address_words(4)?,
             pixels_addr: centers_addr,
             out_addr: self.out.address_words(4)?,
+            // Set by the relabeling that reads them.
+            depth_addr: [0; 2],
+            pairs_addr: [0; 2],
             width,
             height: (map.len() / width.max(1) as usize) as u32,
             n: self.n as u32,
+            max_depth: 0,
+            pairs: 0,
         })
     }
 
