@@ -340,29 +340,43 @@ fn cluster_by_hand(
     }
 }
 
-/// Of the views that observed segments `a` and `b` (labels): in how many the region holding
-/// most of each one's observations (ties: the lowest region) is the same, in how many not.
-fn dominant_agreement(obs: &Observations, label: &[usize], a: usize, b: usize) -> (u32, u32) {
-    let dominant = |seg: usize| -> BTreeMap<u32, u32> {
-        let mut counts: BTreeMap<(u32, u32), u32> = BTreeMap::new();
+/// Of the views that observed segments `a` and `b` (labels), each counted as many times as
+/// the fewer of the two segments' observations it holds: how often the region holding most
+/// of each one's observations (ties: the lowest region) is the same, how often not.
+fn dominant_agreement(obs: &Observations, label: &[usize], a: usize, b: usize) -> (u64, u64) {
+    // Per view: (dominant region, observations of the segment).
+    let dominant = |seg: usize| -> BTreeMap<u32, (u32, u64)> {
+        let mut counts: BTreeMap<(u32, u32), u64> = BTreeMap::new();
         for g in (0..obs.n).filter(|&g| label[g] == seg) {
             for i in obs.row(g) {
                 *counts.entry((obs.view[i], obs.region[i])).or_default() += 1;
             }
         }
-        let mut best: BTreeMap<u32, (u32, u32)> = BTreeMap::new();
+        let mut best: BTreeMap<u32, (u32, u64)> = BTreeMap::new();
         for (&(view, region), &count) in &counts {
             let entry = best.entry(view).or_insert((region, count));
             if count > entry.1 {
                 *entry = (region, count);
             }
         }
-        best.into_iter().map(|(v, (r, _))| (v, r)).collect()
+        best.into_iter()
+            .map(|(v, (r, _))| {
+                let seen = counts.range((v, 0)..=(v, u32::MAX)).map(|e| e.1).sum();
+                (v, (r, seen))
+            })
+            .collect()
     };
     let (da, db) = (dominant(a), dominant(b));
-    let shared = da.keys().filter(|v| db.contains_key(v));
-    let same = shared.clone().filter(|v| da[v] == db[v]).count() as u32;
-    (same, shared.count() as u32 - same)
+    let (mut same, mut differ) = (0, 0);
+    for (v, &(ra, na)) in &da {
+        if let Some(&(rb, nb)) = db.get(v) {
+            match ra == rb {
+                true => same += na.min(nb),
+                false => differ += na.min(nb),
+            }
+        }
+    }
+    (same, differ)
 }
 
 /// `nearest_neighbours(means, k)` equals a brute-force search (ties by index).

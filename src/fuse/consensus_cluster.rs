@@ -93,25 +93,35 @@ impl RegionCounts {
     }
 
     /// Per view: the region holding most of the segment's observations (ties: the lowest
-    /// region id), by view.
-    pub fn dominant(&self) -> Vec<(u32, u32)> {
-        let mut out: Vec<(u32, u32)> = Vec::new();
+    /// region id) and how many of its observations the view holds, by view.
+    pub fn dominant(&self) -> Vec<(u32, u32, u32)> {
+        let mut out: Vec<(u32, u32, u32)> = Vec::new();
         let mut best = 0;
         for &(view, region, count) in &self.0 {
-            if out.last().map(|d| d.0) != Some(view) {
-                out.push((view, region));
-                best = count;
-            } else if count > best {
-                out.last_mut().expect("pushed above").1 = region;
-                best = count;
+            match out.last_mut() {
+                Some(last) if last.0 == view => {
+                    last.2 += count;
+                    if count > best {
+                        last.1 = region;
+                        best = count;
+                    }
+                }
+                _ => {
+                    out.push((view, region, count));
+                    best = count;
+                }
             }
         }
         out
     }
 
-    /// Of the views that observed both segments: in how many their dominant regions are the
-    /// same, in how many different.
-    pub fn agreement(&self, other: &RegionCounts) -> (u32, u32) {
+    /// Of the views that observed both segments, weighed by the fewer of the two segments'
+    /// observations each holds: how much say their dominant regions are the same, how much
+    /// different. A view that glimpsed one Gaussian of a segment says little about where the
+    /// segment lies (one ceiling Gaussian seen at a frame's edge beside a shelf kept two
+    /// halves of a ceiling apart, and flicker then decided each half on a few views); a
+    /// ceiling and its wall are both seen whole in the views that keep them apart.
+    pub fn agreement(&self, other: &RegionCounts) -> (u64, u64) {
         let (a, b) = (self.dominant(), other.dominant());
         let (mut i, mut j, mut same, mut differ) = (0, 0, 0, 0);
         while i < a.len() && j < b.len() {
@@ -119,10 +129,11 @@ impl RegionCounts {
                 std::cmp::Ordering::Less => i += 1,
                 std::cmp::Ordering::Greater => j += 1,
                 std::cmp::Ordering::Equal => {
+                    let say = a[i].2.min(b[j].2) as u64;
                     if a[i].1 == b[j].1 {
-                        same += 1;
+                        same += say;
                     } else {
-                        differ += 1;
+                        differ += say;
                     }
                     (i, j) = (i + 1, j + 1);
                 }
@@ -133,8 +144,9 @@ impl RegionCounts {
 }
 
 /// Whether two segments may join: their pairs' evidence allows it, and their dominant regions
-/// disagree in at most `region_max_disagree` of the views that saw both (a segment seen by
-/// many views is tested on all of them, not on the few its edge pairs share).
+/// disagree in at most `region_max_disagree` of the views that saw both, weighed as in
+/// [`RegionCounts::agreement`] (a segment seen by many views is tested on all of them, not on
+/// the few its edge pairs share).
 pub fn may_join(
     evidence: &PairEvidence,
     a: &RegionCounts,

@@ -31,8 +31,9 @@ pub struct ConsensusParams {
     /// both inside the wall's region)...
     pub min_together_share: f64,
     /// ...and the two segments' dominant regions disagree in at most this share of the views
-    /// that saw both (a ceiling tested against a wall on all their views, not on the few
-    /// their edge pairs share).
+    /// that saw both, each view weighed by the fewer of the two segments' observations it
+    /// holds (a ceiling tested against a wall on all their views, not on the few their edge
+    /// pairs share; a view that glimpsed one Gaussian of either has little say).
     pub region_max_disagree: f64,
     /// Merge order: one view putting a pair apart outweighs this many putting it together.
     pub apart_weight: f64,
