@@ -130,6 +130,9 @@ impl<'a> RegionFinder<'a> {
         seeds: &[(u32, u32)],
         rule: &RelabelRule,
     ) -> Result<Vec<u32>> {
+        if seeds.is_empty() {
+            return Ok(map.to_vec()); // no region holds a seed: every one keeps its label
+        }
         if !Self::fits(map) || seeds.len() > self.n || rule.depth > MAX_GPU_DEPTH {
             return Ok(self.relabel_on_host(map, width, seeds, rule));
         }
