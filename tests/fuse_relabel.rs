@@ -10,7 +10,7 @@ use common::{check_validation, gpu};
 use semsplat::dataset::CompactClasses;
 use semsplat::fuse::consensus::{consensus_run, ConsensusRun};
 use semsplat::fuse::consensus_relabel::{edge_depth, relabel_view, RelabelRule, RelabeledViews};
-use semsplat::fuse::regions_gpu::RegionFinder;
+use semsplat::fuse::regions_gpu::{RegionFinder, MAX_GPU_DEPTH};
 use semsplat::fuse::{
     accumulate, assign_semantic_near, lift_by_consensus, nearest_neighbours, ConsensusParams,
     FuseConfig, LabelSource, Method, NO_LABEL,
@@ -167,7 +167,8 @@ fn relabeling_matches_a_plain_transcription() {
 
 /// The GPU's relabeling (regions and the seeds' depths found there, the pixels rewritten
 /// there) against the same plain transcription, on maps of several sizes; a view with more
-/// seeds than the finder holds Gaussians is relabeled on the host, to the same result.
+/// seeds than the finder holds Gaussians, or a depth past the GPU's search, is relabeled on
+/// the host, to the same result.
 #[test]
 fn gpu_relabeling_matches_the_plain_transcription() {
     let gpu = gpu();
@@ -193,6 +194,11 @@ fn gpu_relabeling_matches_the_plain_transcription() {
     let got = small.relabel(&map, 24, &seeds, &rule(0.75, 3)).unwrap();
     assert_eq!(got, relabel_by_hand(&map, 24, &seeds, &rule(0.75, 3)));
     assert_eq!(small.stats.host_fallbacks, 1);
+    // Deeper than region_depth searches: the host relabels the view.
+    let deep = rule(0.75, MAX_GPU_DEPTH + 1);
+    let got = finder.relabel(&map, 24, &seeds, &deep).unwrap();
+    assert_eq!(got, relabel_by_hand(&map, 24, &seeds, &deep));
+    assert_eq!(finder.stats.host_fallbacks, 1);
     check_validation(gpu);
 }
 

@@ -129,7 +129,7 @@ pub fn decide_regions(seeds: Vec<RegionSeed>, rule: &RelabelRule) -> Vec<(u32, u
     // (region, depth from deepest, class): by region, each region's deciding seeds first.
     let mut seeds: Vec<(u32, Reverse<u32>, u32)> = seeds
         .into_iter()
-        .map(|s| (s.region, Reverse(s.depth.min(rule.depth)), s.class))
+        .map(|s| (s.region, Reverse(s.depth), s.class))
         .collect();
     seeds.sort_unstable();
     let mut decided = Vec::new();

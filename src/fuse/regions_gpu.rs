@@ -24,7 +24,7 @@ const MAX_GROUPS: u32 = 65_535;
 
 /// Deepest relabel depth region_depth searches for (its diamond of (2d + 1)^2 pixels stays
 /// far under a CPU driver's loop cap); a deeper rule relabels on the host.
-const MAX_GPU_DEPTH: u32 = 32;
+pub const MAX_GPU_DEPTH: u32 = 32;
 
 /// What the region finder did over its views.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
