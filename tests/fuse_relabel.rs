@@ -18,6 +18,7 @@ use semsplat::fuse::{
 use semsplat::render::GpuScene;
 use semsplat::synth::{generate, RoomSource, SynthConfig, SynthScene};
 use semsplat::util::Rng;
+use std::collections::BTreeSet;
 use std::sync::Mutex;
 
 /// A pixel's depth written plainly: the city-block distance to the nearest edge pixel of
@@ -31,8 +32,10 @@ fn depth_by_hand(regions: &[u32], w: usize, p: usize, cap: u32) -> u32 {
 }
 
 /// The rule written plainly: per region, the seeds at least `rule.depth` inside it (its
-/// deepest if none is); a class holding `rule.min_share` of them takes the region, else the
-/// region is unlabeled. Regions without seeds keep their labels.
+/// deepest if none is); a class holding `rule.min_share` of them takes the region; else, if
+/// they are of two classes, the region's own label holding `rule.keep_share` of them and
+/// the other the label of a pixel beside the region, it keeps its label; else it is
+/// unlabeled. Regions without seeds keep their labels.
 fn relabel_by_hand(map: &[u32], w: usize, seeds: &[(u32, u32)], rule: &RelabelRule) -> Vec<u32> {
     let regions = flood_regions(map, w);
     let count = regions
@@ -65,8 +68,27 @@ fn relabel_by_hand(map: &[u32], w: usize, seeds: &[(u32, u32)], rule: &RelabelRu
             .map(|s| s.1)
             .max_by_key(|&c| votes(c))
             .unwrap();
-        let new = if votes(top) as f64 >= rule.min_share * counted.len() as f64 {
+        let pixels: Vec<usize> = (0..map.len()).filter(|&p| regions[p] == r).collect();
+        let own = map[pixels[0]];
+        let classes: BTreeSet<u32> = counted.iter().map(|s| s.1).collect();
+        let touches = |c: u32| {
+            pixels.iter().any(|&p| {
+                let (x, y) = (p % w, p / w);
+                (x > 0 && map[p - 1] == c)
+                    || (x + 1 < w && map[p + 1] == c)
+                    || (y > 0 && map[p - w] == c)
+                    || (p + w < map.len() && map[p + w] == c)
+            })
+        };
+        let holds = |c: u32, share: f64| votes(c) as f64 >= share * counted.len() as f64;
+        let new = if holds(top, rule.min_share) {
             top
+        } else if classes.len() == 2
+            && classes.contains(&own)
+            && holds(own, rule.keep_share)
+            && classes.iter().any(|&c| c != own && touches(c))
+        {
+            own
         } else {
             NO_LABEL
         };
@@ -79,14 +101,25 @@ fn relabel_by_hand(map: &[u32], w: usize, seeds: &[(u32, u32)], rule: &RelabelRu
     out
 }
 
-/// A rule with the given share and depth (the footprint mass plays no part in relabeling).
-fn rule(min_share: f64, depth: u32) -> RelabelRule {
+/// A rule with the given shares and depth (the footprint mass plays no part in relabeling).
+fn rule(min_share: f64, depth: u32, keep_share: f64) -> RelabelRule {
     RelabelRule {
         min_share,
         depth,
+        keep_share,
         min_mass: 1.0,
     }
 }
+
+/// Rules over both shares and four depths; a keep share above 1 never keeps a mixed region.
+const RULES: [(f64, u32, f64); 6] = [
+    (0.75, 1, 2.0),
+    (0.6, 1, 0.25),
+    (1.0, 1, 0.25),
+    (0.75, 2, 2.0),
+    (0.75, 3, 0.25),
+    (0.75, 6, 0.4),
+];
 
 /// A label map of rectangles of 4 classes over a background, some pixels unlabeled, and
 /// seeds: mostly one class per region (often not its label), another class sometimes
@@ -133,7 +166,7 @@ fn random_case(seed: u64, w: usize, h: usize) -> (Vec<u32>, Vec<(u32, u32)>) {
 
 #[test]
 fn relabeling_matches_a_plain_transcription() {
-    let (mut relabeled, mut unlabeled) = (0usize, 0usize);
+    let (mut relabeled, mut unlabeled, mut kept) = (0usize, 0usize, 0usize);
     for seed in 0..40 {
         let (w, h) = (24, 18);
         let (map, seeds) = random_case(seed, w, h);
@@ -146,22 +179,28 @@ fn relabeling_matches_a_plain_transcription() {
                 "seed {seed}, pixel {p}"
             );
         }
-        for (min_share, depth) in [(0.75, 1), (0.6, 1), (1.0, 1), (0.75, 2), (0.75, 3)] {
+        for (min_share, depth, keep_share) in RULES {
             let mut got = map.clone();
-            let rule = rule(min_share, depth);
+            let rule = rule(min_share, depth, keep_share);
             relabel_view(&mut got, w, seeds.iter().copied(), &rule);
             let want = relabel_by_hand(&map, w, &seeds, &rule);
             assert_eq!(got, want, "seed {seed}, {rule:?}");
-            for p in 0..map.len() {
+            let never_kept = RelabelRule {
+                keep_share: 2.0,
+                ..rule
+            };
+            let never_kept = relabel_by_hand(&map, w, &seeds, &never_kept);
+            for p in (0..map.len()).filter(|&p| map[p] != NO_LABEL) {
                 relabeled += usize::from(want[p] != map[p] && want[p] != NO_LABEL);
-                unlabeled += usize::from(want[p] == NO_LABEL && map[p] != NO_LABEL);
+                unlabeled += usize::from(want[p] == NO_LABEL);
+                kept += usize::from(want[p] == map[p] && never_kept[p] == NO_LABEL);
             }
         }
     }
-    // The cases exercise every branch: regions relabeled, regions unlabeled.
+    // The cases exercise every branch: regions relabeled, unlabeled, and mixed but kept.
     assert!(
-        relabeled > 1000 && unlabeled > 1000,
-        "{relabeled} {unlabeled}"
+        relabeled > 1000 && unlabeled > 1000 && kept > 200,
+        "{relabeled} {unlabeled} {kept}"
     );
 }
 
@@ -178,8 +217,8 @@ fn gpu_relabeling_matches_the_plain_transcription() {
     let mut relabeled = 0usize;
     for (seed, &(w, h)) in (100..).zip(sizes.iter().cycle().take(25)) {
         let (map, seeds) = random_case(seed, w, h);
-        for (min_share, depth) in [(0.75, 1), (0.6, 1), (1.0, 1), (0.75, 3), (0.75, 6)] {
-            let rule = rule(min_share, depth);
+        for (min_share, depth, keep_share) in RULES {
+            let rule = rule(min_share, depth, keep_share);
             let got = finder.relabel(&map, w as u32, &seeds, &rule).unwrap();
             let want = relabel_by_hand(&map, w, &seeds, &rule);
             assert_eq!(got, want, "seed {seed} ({w}x{h}), {rule:?}");
@@ -191,11 +230,13 @@ fn gpu_relabeling_matches_the_plain_transcription() {
     // Too many seeds for the finder: the host relabels the view.
     let (map, seeds) = random_case(7, 24, 18);
     let mut small = RegionFinder::new(gpu, seeds.len() - 1).unwrap();
-    let got = small.relabel(&map, 24, &seeds, &rule(0.75, 3)).unwrap();
-    assert_eq!(got, relabel_by_hand(&map, 24, &seeds, &rule(0.75, 3)));
+    let got = small
+        .relabel(&map, 24, &seeds, &rule(0.75, 3, 0.25))
+        .unwrap();
+    assert_eq!(got, relabel_by_hand(&map, 24, &seeds, &rule(0.75, 3, 0.25)));
     assert_eq!(small.stats.host_fallbacks, 1);
     // Deeper than region_depth searches: the host relabels the view.
-    let deep = rule(0.75, MAX_GPU_DEPTH + 1);
+    let deep = rule(0.75, MAX_GPU_DEPTH + 1, 0.25);
     let got = finder.relabel(&map, 24, &seeds, &deep).unwrap();
     assert_eq!(got, relabel_by_hand(&map, 24, &seeds, &deep));
     assert_eq!(finder.stats.host_fallbacks, 1);
@@ -211,18 +252,19 @@ fn a_region_takes_its_interior_seeds_class() {
     map[4] = 7; // regions 0..4 (class 5), 4 (class 7), 5..9 (class 5); 3, 4, 5 on edges
     let mut got = map.clone();
     let seeds = [(0, 2), (1, 2), (2, 2), (3, 6), (6, 4)];
-    relabel_view(&mut got, w, seeds.into_iter(), &rule(0.75, 1));
+    relabel_view(&mut got, w, seeds.into_iter(), &rule(0.75, 1, 2.0));
     assert_eq!(got, [2, 2, 2, 2, 7, 4, 4, 4, 4]);
     let mut got = map.clone();
     let seeds = [(0, 2), (1, 3), (5, 1), (4, 1)];
-    relabel_view(&mut got, w, seeds.into_iter(), &rule(0.75, 1));
+    relabel_view(&mut got, w, seeds.into_iter(), &rule(0.75, 1, 2.0));
     let x = NO_LABEL;
     assert_eq!(got, [x, x, x, x, 1, 1, 1, 1, 1]);
 }
 
 /// A label edge drawn two pixels off puts a neighbour's Gaussians (class 2) just inside a
 /// region whose own Gaussians (class 1) lie deep in it: at depth 3 the deep ones decide
-/// and the region keeps class 1; at depth 1 the region counts as mixed and is unlabeled.
+/// and the region keeps class 1; at depth 1 the region counts as mixed: unlabeled, unless
+/// it touches the other class's label and its own holds the keep share.
 #[test]
 fn deep_seeds_outvote_a_shifted_edge() {
     let (w, h) = (12, 9);
@@ -239,14 +281,32 @@ fn deep_seeds_outvote_a_shifted_edge() {
     ]
     .map(|(p, c)| (p as u32, c));
     let mut got = map.clone();
-    relabel_view(&mut got, w, seeds.into_iter(), &rule(0.75, 3));
+    relabel_view(&mut got, w, seeds.into_iter(), &rule(0.75, 3, 2.0));
     assert_eq!(got, map, "the deep seeds keep class 1");
-    relabel_view(&mut got, w, seeds.into_iter(), &rule(0.75, 1));
-    let expect: Vec<u32> = map
-        .iter()
-        .map(|&l| if l == 1 { NO_LABEL } else { l })
-        .collect();
-    assert_eq!(got, expect, "two of five at depth 1: mixed");
+    // At depth 1 the region is mixed, two of five seeds its own class 1, three class 2: with
+    // a keep share of 0.4 it keeps its label only where it touches a pixel labeled 2.
+    let unlabeled = |map: &[u32]| -> Vec<u32> {
+        map.iter()
+            .map(|&l| if l == 1 { NO_LABEL } else { l })
+            .collect()
+    };
+    relabel_view(&mut got, w, seeds.into_iter(), &rule(0.75, 1, 0.4));
+    assert_eq!(
+        got,
+        unlabeled(&map),
+        "mixed, touching no class 2: unlabeled"
+    );
+    let mut touching = map.clone();
+    touching[4 * w + 11] = 2; // beside the region's pixel (10, 4)
+    let mut got = touching.clone();
+    relabel_view(&mut got, w, seeds.into_iter(), &rule(0.75, 1, 0.4));
+    assert_eq!(got, touching, "mixed, touching class 2: kept");
+    relabel_view(&mut got, w, seeds.into_iter(), &rule(0.75, 1, 0.5));
+    assert_eq!(
+        got,
+        unlabeled(&touching),
+        "its own class under the keep share"
+    );
 }
 
 /// The office under flicker 0.3 at 96x72: its noisy maps in compact ids, the scene on the

@@ -720,3 +720,60 @@ fn large_images_and_many_classes_render_in_bands() {
     compare_allowing_threshold_pixels(&g, &hd, Some(SemanticMode::Softmax), 64 * 4);
     check_validation(gpu);
 }
+
+/// Median depth (the occlusion test of segment consensus): per pixel, the depth of the
+/// Gaussian that takes the transmittance below one half, against the f64 reference's
+/// contributions; in windows of 50 entries, so the state is carried between dispatches.
+#[test]
+fn median_depth_matches_the_reference() {
+    let gpu = gpu();
+    let mut raster = Rasterizer::new(gpu);
+    raster.set_window_len(50);
+    let g = random_scene(&RandomSceneSpec {
+        n: 3_000,
+        channels: 5,
+        seed: 33,
+        ..Default::default()
+    });
+    for cam in poses(80, 50) {
+        let g = separate_depth_ties(&g, &cam);
+        let scene = GpuScene::upload(gpu, &g).unwrap();
+        // Semantics on: the kernel's carried state must not follow the frame's channels.
+        let opts = RenderOptions::default();
+        raster
+            .run_tiled_in_bands(&scene, &cam, &opts, |rec, tiles| {
+                tiles.record_median_depth(rec)
+            })
+            .unwrap();
+        let got: Vec<f32> = gpu
+            .download(raster.depth(), 0, (cam.width * cam.height) as usize)
+            .unwrap();
+        let want = common::reference_median_depth(&g, &cam);
+        let (mut surface, mut empty) = (0, 0);
+        for (i, (&got, want)) in got.iter().zip(&want).enumerate() {
+            let Some(want) = *want else { continue };
+            let d = (got as f64 - want).abs();
+            assert!(
+                d <= TOL * want.max(1.0),
+                "{}: pixel {i}: gpu {got} cpu {want}",
+                cam.name
+            );
+            match want > 0.0 {
+                true => surface += 1,
+                false => empty += 1,
+            }
+        }
+        // Both kinds of pixel are checked, most of them.
+        assert!(
+            surface > 500 && empty > 0,
+            "{}: {surface} surface, {empty} empty",
+            cam.name
+        );
+        assert!(
+            surface + empty > want.len() * 9 / 10,
+            "{}: too few pixels checked",
+            cam.name
+        );
+    }
+    check_validation(gpu);
+}

@@ -8,7 +8,8 @@
 // region_merge, region_flatten, region_check (a pass that finds any link the loop cap of a
 // CPU driver cut short, so the host can redo that view), region_lookup (per Gaussian); for
 // relabeling a view (src/fuse/consensus_relabel.rs): region_depth (per center pixel),
-// region_relabel_scatter (per decided region) and region_relabel (per pixel).
+// region_relabel_scatter (per decided region), region_relabel_touch and region_relabel
+// (per pixel).
 #ifndef LABEL_REGIONS_GLSL
 #define LABEL_REGIONS_GLSL
 
@@ -40,6 +41,12 @@ layout(push_constant) uniform RegionParams {
 
 uint pixel_count() {
     return pc.width * pc.height;
+}
+
+// A relabel-table entry that waits on a touch test: RELABEL_TOUCH_BIT and a compact class
+// (RELABEL_KEEP and NO_LABEL have the bit set too, and are not).
+bool is_touch_entry(uint entry) {
+    return entry < RELABEL_KEEP && (entry & RELABEL_TOUCH_BIT) != 0u;
 }
 
 // The root of pixel p's tree (links only point to smaller indices, so this ends).

@@ -1,5 +1,6 @@
 // Forward blending of one 16x16 tile per workgroup (included by blend_rgb.comp with
-// CHUNK_CHANNELS 0 and blend_sem.comp with CHUNK_CHANNELS 16).
+// CHUNK_CHANNELS 0, blend_sem.comp with CHUNK_CHANNELS 16, blend_label.comp, and
+// blend_median_depth.comp with MEDIAN_DEPTH: only each pixel's median depth).
 //
 // Each workgroup loads its tile's Gaussians into shared memory in batches; a pixel stops at
 // the transmittance threshold, and the tile stops once every pixel is done (subgroup vote,
@@ -98,7 +99,9 @@ void main() {
             s_xy_depth_opacity[t] = xy_depth_opacity.data[g];
             s_frac[t] = xy_frac.data[g];
             s_conic[t] = conics.data[g];
+#if !defined(MEDIAN_DEPTH)
             s_color[t] = colors.data[g];
+#endif
 #if defined(LABEL_ARGMAX)
             uint cls = classes.data[g];
             [[unroll]] for (uint k = 0; k < CHUNK_CHANNELS; k++) {
@@ -126,6 +129,16 @@ void main() {
                 continue;
             }
             float next_t = T * (1.0 - alpha);
+#if defined(MEDIAN_DEPTH)
+            // The Gaussian that takes the pixel's transmittance below one half: its depth is
+            // the pixel's; nothing behind it is needed.
+            if (next_t < MEDIAN_T) {
+                depth_sum = g.z;
+                T = next_t;
+                done = true;
+                break;
+            }
+#endif
             if (next_t <= T_MIN) {
                 done = true;
                 break;
@@ -165,6 +178,11 @@ void main() {
         }
         return;
     }
+#if defined(MEDIAN_DEPTH)
+    // 0 where the transmittance never fell below one half (no surface to test against).
+    out_depth.data[pix] = T < MEDIAN_T ? depth_sum : 0.0;
+    return;
+#endif
     float acc_alpha = 1.0 - T;
     if (write_rgb) {
         vec3 c = rgb + T * pc.background;

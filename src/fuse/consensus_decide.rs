@@ -14,8 +14,9 @@ use crate::contract::NO_NEIGHBOUR;
 /// The knobs of segment consensus (defaults: docs/robustness.md).
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct ConsensusParams {
-    /// Observe a Gaussian only where its center is not hidden (the rendered depth test of
-    /// `vote --occlusion`).
+    /// Observe a Gaussian only where its center is not hidden: within the depth tolerance
+    /// of the rendered median depth at its pixel (`vote --occlusion` tests against the
+    /// expected depth).
     pub occlusion: bool,
     /// Nearest neighbours each Gaussian may join a segment through.
     pub neighbours: usize,
@@ -88,6 +89,7 @@ impl Default for ConsensusParams {
             relabel: RelabelRule {
                 min_share: 0.75,
                 depth: 3,
+                keep_share: 0.25,
                 min_mass: 1.0,
             },
         }

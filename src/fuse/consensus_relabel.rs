@@ -8,8 +8,10 @@
 //! the consensus gave the Gaussians observed inside them, and FlashSplat runs on the
 //! relabeled views. A region whose observed Gaussians split between classes (a view in
 //! which flicker gave two touching objects one class, so their regions merged) says
-//! nothing about where their edge is: it is left unlabeled in that view. A region no
-//! Gaussian center was observed in keeps its label.
+//! nothing about where their edge is: it is left unlabeled in that view, unless its centers
+//! split between its own label and the label of a region it touches (boundary noise,
+//! below: [`RelabelRule::keep_share`]). A region no Gaussian center was observed in keeps
+//! its label.
 
 use std::cmp::Reverse;
 use std::sync::Mutex;
@@ -24,6 +26,7 @@ use super::consensus_decide::{posterior, ConsensusParams};
 use super::consensus_segments::{label_regions, region_edges};
 use super::method::Method;
 use super::regions_gpu::RegionFinder;
+use crate::contract::{RELABEL_KEEP, RELABEL_TOUCH_BIT};
 use crate::scene::Camera;
 
 /// How a view's label regions take the consensus classes.
@@ -40,6 +43,16 @@ pub struct RelabelRule {
     /// region, where a flicker merge puts the other object's deep inside: counting only
     /// deep centers keeps the shifted region labeled and still finds the merge.
     pub depth: u32,
+    /// A region no class holds `min_share` of keeps its own label where its deciding
+    /// centers split between that label, holding at least this share, and one other class,
+    /// and the region touches (4-neighbourhood) a pixel with that other label; else it is
+    /// unlabeled. Boundary noise erodes a small or thin object (a lamp's stem, a cup) in
+    /// most views, so the consensus gives part of its Gaussians the class around it, and
+    /// the object's remnant regions hold both classes: unlabeling them would take away the
+    /// only views that still show it. A flicker merge (two touching objects given one
+    /// class) splits between the merged objects' classes, and the flickered one's class is
+    /// rarely the label of a neighbouring region in that view.
+    pub keep_share: f64,
     /// A Gaussian whose footprint over the relabeled views sums to fewer pixels keeps its
     /// consensus class.
     pub min_mass: f64,
@@ -82,7 +95,8 @@ impl LabelSource for RelabeledViews<'_> {
 /// Relabels `map` (one view, `width` pixels a row) from `seeds`, the (pixel, class) of the
 /// observed Gaussians' centers: a region takes the class holding `rule.min_share` of its
 /// deciding seeds (those at least `rule.depth` pixels inside it, else its deepest), is
-/// unlabeled where none does, and keeps its label where no seed lies. The host version of
+/// unlabeled where none does (unless it keeps its label by [`RelabelRule::keep_share`]),
+/// and keeps its label where no seed lies. The host version of
 /// [`RegionFinder::relabel`](super::regions_gpu::RegionFinder::relabel).
 pub fn relabel_view(
     map: &mut [u32],
@@ -99,15 +113,47 @@ pub fn relabel_view(
             depth: depth[p as usize],
             class: c,
         });
-    // Per region id (the index of the region's first pixel): its new label, if any.
-    let mut relabel: Vec<Option<u32>> = vec![None; map.len()];
-    for (region, label) in decide_regions(seeds.collect(), rule) {
-        relabel[region as usize] = Some(label);
+    // Per region id (the index of the region's first pixel): its table entry (a class,
+    // NO_LABEL, RELABEL_KEEP or a touch entry), as on the GPU.
+    let mut table = vec![RELABEL_KEEP; map.len()];
+    for (region, entry) in decide_regions(seeds.collect(), map, rule) {
+        table[region as usize] = entry;
     }
+    resolve_touch_entries(&mut table, map, &regions, width);
     for (label, &region) in map.iter_mut().zip(&regions) {
         // NO_LABEL (unlabeled pixels) lies past the table.
-        if let Some(&Some(c)) = relabel.get(region as usize) {
-            *label = c;
+        match table.get(region as usize).copied() {
+            None | Some(RELABEL_KEEP) => {}
+            Some(entry) if is_touch_entry(entry) => *label = NO_LABEL,
+            Some(entry) => *label = entry,
+        }
+    }
+}
+
+/// Whether a relabel-table entry waits on a touch test ([`RELABEL_TOUCH_BIT`] and a class).
+pub fn is_touch_entry(entry: u32) -> bool {
+    entry < RELABEL_KEEP && entry & RELABEL_TOUCH_BIT != 0
+}
+
+/// Turns the touch entries of regions that touch a pixel labeled their entry's class into
+/// RELABEL_KEEP (the host version of region_relabel_touch.comp).
+fn resolve_touch_entries(table: &mut [u32], map: &[u32], regions: &[u32], width: usize) {
+    let height = map.len() / width.max(1);
+    for p in (0..map.len()).filter(|&p| regions[p] != NO_LABEL) {
+        let entry = table[regions[p] as usize];
+        if !is_touch_entry(entry) {
+            continue;
+        }
+        let other = entry & !RELABEL_TOUCH_BIT;
+        let (x, y) = (p % width, p / width);
+        let near = [
+            (x > 0).then(|| p - 1),
+            (x + 1 < width).then(|| p + 1),
+            (y > 0).then(|| p - width),
+            (y + 1 < height).then(|| p + width),
+        ];
+        if near.into_iter().flatten().any(|q| map[q] == other) {
+            table[regions[p] as usize] = RELABEL_KEEP;
         }
     }
 }
@@ -121,10 +167,13 @@ pub struct RegionSeed {
     pub class: u32,
 }
 
-/// Every region holding seeds, with its new label: the class holding `rule.min_share` of
-/// its deciding seeds (its deepest, all of them from `rule.depth` pixels inward), or
-/// NO_LABEL where none does. Regions in increasing id.
-pub fn decide_regions(seeds: Vec<RegionSeed>, rule: &RelabelRule) -> Vec<(u32, u32)> {
+/// Every region holding seeds, with its relabel-table entry: the class holding
+/// `rule.min_share` of its deciding seeds (its deepest, all of them from `rule.depth`
+/// pixels inward); where none does and they split between the region's own label (in
+/// `map`, the view's labels, at the region's id: its first pixel) holding
+/// `rule.keep_share` and one other class c, `RELABEL_TOUCH_BIT | c` (kept if it touches a
+/// pixel labeled c); else NO_LABEL. Regions in increasing id.
+pub fn decide_regions(seeds: Vec<RegionSeed>, map: &[u32], rule: &RelabelRule) -> Vec<(u32, u32)> {
     debug_assert!(rule.min_share > 0.5, "a tie could hold min_share");
     // (region, depth from deepest, class): by region, each region's deciding seeds first.
     let mut seeds: Vec<(u32, Reverse<u32>, u32)> = seeds
@@ -136,18 +185,30 @@ pub fn decide_regions(seeds: Vec<RegionSeed>, rule: &RelabelRule) -> Vec<(u32, u
     for region in seeds.chunk_by(|a, b| a.0 == b.0) {
         let deciding = &region[..region.partition_point(|s| s.1 == region[0].1)];
         // Sorted by class within one depth: runs of one class.
-        let (class, n) = deciding
+        let runs: Vec<(u32, usize)> = deciding
             .chunk_by(|a, b| a.2 == b.2)
             .map(|run| (run[0].2, run.len()))
-            .fold(
-                (NO_LABEL, 0),
-                |best, run| if run.1 > best.1 { run } else { best },
-            );
-        let label = match n as f64 >= rule.min_share * deciding.len() as f64 {
-            true => class,
-            false => NO_LABEL,
+            .collect();
+        let holds = |n: usize, share: f64| n as f64 >= share * deciding.len() as f64;
+        let (class, n) = runs.iter().fold(
+            (NO_LABEL, 0),
+            |best, &run| if run.1 > best.1 { run } else { best },
+        );
+        // Split between the region's own label (with its seed count) and one other class?
+        let own = map[region[0].0 as usize];
+        let own_and_other = match runs[..] {
+            [(a, own_seeds), (b, _)] if a == own => Some((own_seeds, b)),
+            [(a, _), (b, own_seeds)] if b == own => Some((own_seeds, a)),
+            _ => None,
         };
-        decided.push((region[0].0, label));
+        let entry = match own_and_other {
+            _ if holds(n, rule.min_share) => class,
+            Some((own_seeds, other)) if holds(own_seeds, rule.keep_share) => {
+                RELABEL_TOUCH_BIT | other
+            }
+            _ => NO_LABEL,
+        };
+        decided.push((region[0].0, entry));
     }
     decided
 }

@@ -185,7 +185,7 @@ impl<'a> RegionFinder<'a> {
                 depth: depths[i],
                 class: seeds[i].1,
             });
-        let decided: Vec<u32> = decide_regions(found.collect(), rule)
+        let decided: Vec<u32> = decide_regions(found.collect(), map, rule)
             .into_iter()
             .flat_map(|(region, label)| [region, label])
             .collect();
@@ -198,8 +198,8 @@ impl<'a> RegionFinder<'a> {
     }
 
     /// Rewrites the uploaded view's labels from the decided pairs of `params` (the table
-    /// filled with RELABEL_KEEP, the pairs scattered into it, every pixel looked up) and
-    /// downloads them.
+    /// filled with RELABEL_KEEP, the pairs scattered into it, the touch entries resolved,
+    /// every pixel looked up) and downloads them.
     fn rewrite_labels(&mut self, params: &RegionParams, pixels: usize) -> Result<Vec<u32>> {
         let [labels, table, _] = self.pixel_bufs.as_ref().expect("sized by upload_view");
         let mut rec = Recorder::new(self.gpu)?;
@@ -210,6 +210,8 @@ impl<'a> RegionFinder<'a> {
         rec.dispatch(ids::FUSE_REGION_RELABEL_SCATTER, &[], params, pair_groups)?;
         rec.barrier();
         let pixel_groups = ids::FUSE_REGION_RELABEL.groups_for(pixels as u32);
+        rec.dispatch(ids::FUSE_REGION_RELABEL_TOUCH, &[], params, pixel_groups)?;
+        rec.barrier();
         rec.dispatch(ids::FUSE_REGION_RELABEL, &[], params, pixel_groups)?;
         let m1 = rec.mark();
         let t = rec.submit_and_wait()?;

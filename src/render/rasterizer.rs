@@ -1248,17 +1248,15 @@ impl TileLists<'_> {
                     let mut params = self.blend_params(start, chunk, chunk == 0)?;
                     params.tile_row_base = band.first_tile_row;
                     let px = |buf, bytes| band.range(buf, bytes);
-                    let mut bindings: Vec<(&str, BufferRange)> = vec![
-                        ("tile_ranges", BufferRange::whole(&b.ranges)),
-                        ("isect_ids", BufferRange::whole(&b.isect_ids)),
-                        ("carry", band.range_or_whole(&b.carry, carry_bytes)),
+                    let mut bindings = self.window_bindings(band, carry_bytes);
+                    bindings.extend([
                         ("out_rgb", px(&b.rgb, RGB_BYTES)),
                         ("out_alpha", px(&b.alpha, 4)),
                         ("out_depth", px(&b.depth, 4)),
                         ("out_final_t", px(&b.final_t, 4)),
                         ("out_last", px(&b.last, 4)),
                         ("out_n_contrib", px(&b.n_contrib, 4)),
-                    ];
+                    ]);
                     let kernel = match (f.labels, f.semantics) {
                         (Some(_), _) => {
                             bindings.push(("label_best", px(&b.label_best, 8)));
@@ -1279,6 +1277,43 @@ impl TileLists<'_> {
             }
         }
         Ok(())
+    }
+
+    /// Records each pixel's median depth into the depth image (the depth of the Gaussian
+    /// that takes its transmittance below one half; 0 where none does) and nothing else: a
+    /// pixel stops there, not at saturation. For occlusion tests, which need only the
+    /// nearest surface (src/fuse/consensus.rs).
+    pub fn record_median_depth(&self, rec: &mut Recorder) -> Result<()> {
+        let f = &self.frame;
+        // The kernel carries no semantic channels, whatever the frame blends.
+        let carry_bytes = f.blend_carry_floats().min(BLEND_CARRY_BASE as u64) * 4;
+        let bands = f.bands(carry_bytes.max(4))?;
+        for start in f.window_starts() {
+            for band in &bands {
+                let mut params = self.blend_params(start, 0, false)?;
+                params.tile_row_base = band.first_tile_row;
+                let mut bindings = self.window_bindings(band, carry_bytes);
+                bindings.push(("out_depth", band.range(&self.bufs.depth, 4)));
+                let kernel = ids::RASTER_BLEND_MEDIAN_DEPTH;
+                rec.dispatch_ranges(kernel, &bindings, &params, band.groups(f.tiles_x))?;
+            }
+            rec.barrier();
+        }
+        Ok(())
+    }
+
+    /// The bindings every forward-blending window reads and carries its state in.
+    fn window_bindings<'b>(
+        &'b self,
+        band: &Band,
+        carry_bytes: u64,
+    ) -> Vec<(&'static str, BufferRange<'b>)> {
+        let b = self.bufs;
+        vec![
+            ("tile_ranges", BufferRange::whole(&b.ranges)),
+            ("isect_ids", BufferRange::whole(&b.isect_ids)),
+            ("carry", band.range_or_whole(&b.carry, carry_bytes)),
+        ]
     }
 }
 

@@ -79,3 +79,39 @@ pub fn separate_depth_ties(g: &Gaussians, cam: &Camera) -> Gaussians {
     }
     g
 }
+
+/// Per pixel of `cam`, the median depth written plainly from the f64 reference's
+/// contributions: the camera-space depth of the Gaussian that takes the pixel's
+/// transmittance below one half, 0 where none does. None where a step lands within 1e-5 of
+/// one half, where float32 may take the neighbouring Gaussian.
+pub fn reference_median_depth(g: &Gaussians, cam: &Camera) -> Vec<Option<f64>> {
+    use semsplat::render::reference::{for_each_contribution, RenderSettings};
+    let pixels = (cam.width * cam.height) as usize;
+    let (mut t, mut found) = (vec![1.0f64; pixels], vec![false; pixels]);
+    let mut depth = vec![Some(0.0); pixels];
+    let settings = RenderSettings {
+        semantics: false,
+        ..Default::default()
+    };
+    for_each_contribution(g, cam, &settings, |px, py, id, weight| {
+        let i = (py * cam.width + px) as usize;
+        if found[i] {
+            return;
+        }
+        // weight = alpha T: the transmittance after this Gaussian is T - weight.
+        let next = t[i] - weight;
+        if (next - 0.5).abs() < 1e-5 {
+            depth[i] = None;
+        }
+        if next < 0.5 {
+            found[i] = true;
+            let m = g.means[id as usize];
+            let z = cam
+                .world_to_camera(DVec3::new(m[0] as f64, m[1] as f64, m[2] as f64))
+                .z;
+            depth[i] = depth[i].map(|_| z);
+        }
+        t[i] = next;
+    });
+    depth
+}
