@@ -84,7 +84,9 @@ pub struct FuseArgs {
     /// flicker; visits every view twice).
     #[arg(long)]
     relabel: bool,
-    /// Relative depth tolerance of --occlusion (> 0).
+    /// Relative depth tolerance of the visibility test (> 0): vote --occlusion's, against the
+    /// expected depth, and segment consensus's, against the median depth (the depth of the
+    /// Gaussian that takes a pixel's transmittance below one half).
     #[arg(long, default_value_t = 0.05, value_parser = args::positive::<f32>)]
     depth_tol: f32,
     /// Class table (JSON: id, name, color). Default: classes.json beside or inside the label
