@@ -46,7 +46,7 @@ pub struct RelabelRule {
     /// A region no class holds `min_share` of keeps its own label where its deciding
     /// centers split between that label, holding at least this share, and one other class,
     /// and the region touches (4-neighbourhood) a pixel with that other label; else it is
-    /// unlabeled. Boundary noise erodes a small or thin object (a lamp's stem, a cup) in
+    /// unlabeled. Boundary noise erodes a small or thin object (a lamp, a cup) in
     /// most views, so the consensus gives part of its Gaussians the class around it, and
     /// the object's remnant regions hold both classes: unlabeling them would take away the
     /// only views that still show it. A flicker merge (two touching objects given one
