@@ -16,6 +16,7 @@ use semsplat::fuse::{
     assign_semantic, assign_semantic_near, fuse_consensus, nearest_neighbours, ClassScores,
     ConsensusParams, FuseConfig, NO_LABEL,
 };
+use semsplat::gpu::Gpu;
 use semsplat::render::GpuScene;
 use semsplat::synth::{generate, RoomSource, SynthConfig, SynthScene};
 use semsplat::util::Rng;
@@ -37,17 +38,41 @@ fn small(noise: &str, views: usize, seed: u64) -> SynthScene {
     room("office", views, (96, 72), seed, noise)
 }
 
+/// The observation tests' room: the small office under flicker 0.3 (4 views, seed 3), its
+/// noisy maps in compact ids, its class count and the scene on the GPU.
+struct Observed {
+    s: SynthScene,
+    labels: Vec<Option<Vec<u32>>>,
+    classes: usize,
+    scene: GpuScene,
+}
+
+fn observed_office(gpu: &Gpu) -> Observed {
+    let s = small("flicker=0.3", 4, 3);
+    let compact = CompactClasses::from_table(&s.room.classes).unwrap();
+    let labels = noisy_maps(&s, &compact);
+    let scene = GpuScene::upload(gpu, &s.gaussians).unwrap();
+    Observed {
+        s,
+        labels,
+        classes: compact.len(),
+        scene,
+    }
+}
+
 /// The GPU's observations (occlusion off) against a plain f64 projection of every center
 /// and flood-filled regions; centers within 1e-3 px of a pixel edge may land either side.
 #[test]
 fn observations_match_a_cpu_transcription() {
-    let s = small("flicker=0.3", 4, 3);
     let gpu = gpu();
-    let classes = CompactClasses::from_table(&s.room.classes).unwrap();
-    let labels = noisy_maps(&s, &classes);
-    let scene = GpuScene::upload(gpu, &s.gaussians).unwrap();
+    let Observed {
+        s,
+        labels,
+        classes,
+        scene,
+    } = observed_office(gpu);
     let (obs, centers, _) = observe(
-        &input(gpu, &scene, &s, &labels, classes.len()),
+        &input(gpu, &scene, &s, &labels, classes),
         &FuseConfig::default(),
         false,
         &mut |_, _| {},
@@ -121,13 +146,15 @@ fn observations_match_a_cpu_transcription() {
 /// tolerance, may go either way.
 #[test]
 fn occluded_centers_are_not_observed() {
-    let s = small("flicker=0.3", 4, 3);
     let gpu = gpu();
-    let classes = CompactClasses::from_table(&s.room.classes).unwrap();
-    let labels = noisy_maps(&s, &classes);
-    let scene = GpuScene::upload(gpu, &s.gaussians).unwrap();
+    let Observed {
+        s,
+        labels,
+        classes,
+        scene,
+    } = observed_office(gpu);
     let cfg = FuseConfig::default();
-    let inp = input(gpu, &scene, &s, &labels, classes.len());
+    let inp = input(gpu, &scene, &s, &labels, classes);
     let (_, all, _) = observe(&inp, &cfg, false, &mut |_, _| {}).unwrap();
     let (_, visible, _) = observe(&inp, &cfg, true, &mut |_, _| {}).unwrap();
     let tol = cfg.depth_tolerance as f64;

@@ -1,9 +1,10 @@
 #version 460
 // Where each Gaussian is observed in one view, for the segment consensus (src/fuse/consensus.rs):
 // the pixel under its projected center, or NO_LABEL where the center is behind the camera,
-// outside the image or (with occlusion on) not within a tolerance of the rendered median
-// depth there (raster/blend_median_depth.comp). The host reads that pixel's label and connected label region. One invocation
-// per Gaussian writes its own entry, so no atomics are needed.
+// outside the image or (with occlusion on) not within a tolerance of the rendered depth
+// there (the consensus renders the median depth: raster/blend_median_depth.comp). The host
+// reads that pixel's label and connected label region. One invocation per Gaussian writes
+// its own entry, so no atomics are needed.
 
 layout(local_size_x = 256) in;
 

@@ -43,6 +43,18 @@ uint pixel_count() {
     return pc.width * pc.height;
 }
 
+// Pixel p's k-th 4-neighbour (k = 0..3: left, right, up, down), or NO_LABEL outside the
+// image (src/fuse/consensus_segments.rs four_neighbours on the host).
+uint neighbour(uint p, uint k) {
+    uint x = p % pc.width, y = p / pc.width;
+    switch (k) {
+    case 0u: return x > 0u ? p - 1u : NO_LABEL;
+    case 1u: return x + 1u < pc.width ? p + 1u : NO_LABEL;
+    case 2u: return y > 0u ? p - pc.width : NO_LABEL;
+    default: return y + 1u < pc.height ? p + pc.width : NO_LABEL;
+    }
+}
+
 // A relabel-table entry that waits on a touch test: RELABEL_TOUCH_BIT and a compact class
 // (RELABEL_KEEP and NO_LABEL have the bit set too, and are not).
 bool is_touch_entry(uint entry) {

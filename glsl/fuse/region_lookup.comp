@@ -21,11 +21,10 @@ void main() {
         out_regions.data[i] = NO_LABEL;
         return;
     }
-    uint x = p % pc.width;
-    uint y = p / pc.width;
-    bool edge = (x > 0 && region.data[p - 1] != id)
-        || (x + 1 < pc.width && region.data[p + 1] != id)
-        || (y > 0 && region.data[p - pc.width] != id)
-        || (y + 1 < pc.height && region.data[p + pc.width] != id);
+    bool edge = false;
+    for (uint k = 0u; k < 4u; k++) {
+        uint q = neighbour(p, k);
+        edge = edge || (q != NO_LABEL && region.data[q] != id);
+    }
     out_regions.data[i] = id | (edge ? REGION_EDGE_BIT : 0u);
 }

@@ -10,10 +10,6 @@ layout(local_size_x = 256) in;
 
 #include "label_regions.glsl"
 
-bool labeled_at(uint q, uint class_id) {
-    return labels.data[q] == class_id;
-}
-
 void main() {
     uint p = gl_GlobalInvocationID.x;
     if (p >= pixel_count() || labels.data[p] == NO_LABEL) {
@@ -25,12 +21,11 @@ void main() {
         return;
     }
     uint other = entry & ~RELABEL_TOUCH_BIT;
-    uint x = p % pc.width, y = p / pc.width;
-    bool touches = (x > 0u && labeled_at(p - 1u, other))
-        || (x + 1u < pc.width && labeled_at(p + 1u, other))
-        || (y > 0u && labeled_at(p - pc.width, other))
-        || (y + 1u < pc.height && labeled_at(p + pc.width, other));
-    if (touches) {
-        relabel_table.data[r] = RELABEL_KEEP;
+    for (uint k = 0u; k < 4u; k++) {
+        uint q = neighbour(p, k);
+        if (q != NO_LABEL && labels.data[q] == other) {
+            relabel_table.data[r] = RELABEL_KEEP;
+            return;
+        }
     }
 }

@@ -131,7 +131,8 @@ void main() {
             float next_t = T * (1.0 - alpha);
 #if defined(MEDIAN_DEPTH)
             // The Gaussian that takes the pixel's transmittance below one half: its depth is
-            // the pixel's; nothing behind it is needed.
+            // the pixel's (held in depth_sum, the carried state's depth slot); nothing
+            // behind it is needed.
             if (next_t < MEDIAN_T) {
                 depth_sum = g.z;
                 T = next_t;

@@ -168,8 +168,7 @@ pub fn consensus_evidence(
 
 /// Every view's observations of every Gaussian: label and region under its center (with
 /// `occlusion`, only where the center is within the depth tolerance of the rendered median
-/// depth),
-/// and per view the (Gaussian, pixel) of each observation.
+/// depth), and per view the (Gaussian, pixel) of each observation.
 #[allow(clippy::type_complexity)]
 pub fn observe(
     input: &ConsensusInput,

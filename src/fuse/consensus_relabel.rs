@@ -23,7 +23,7 @@ use super::accumulate::{accumulate, FuseConfig, LabelSource, NO_LABEL};
 use super::assign::{assign_semantic_near, Assignment};
 use super::consensus::{consensus_run, scores_of, ConsensusInput, ConsensusLift};
 use super::consensus_decide::{posterior, ConsensusParams};
-use super::consensus_segments::{label_regions, region_edges};
+use super::consensus_segments::{four_neighbours, label_regions, region_edges};
 use super::method::Method;
 use super::regions_gpu::RegionFinder;
 use crate::contract::{RELABEL_KEEP, RELABEL_TOUCH_BIT};
@@ -138,21 +138,13 @@ pub fn is_touch_entry(entry: u32) -> bool {
 /// Turns the touch entries of regions that touch a pixel labeled their entry's class into
 /// RELABEL_KEEP (the host version of region_relabel_touch.comp).
 fn resolve_touch_entries(table: &mut [u32], map: &[u32], regions: &[u32], width: usize) {
-    let height = map.len() / width.max(1);
     for p in (0..map.len()).filter(|&p| regions[p] != NO_LABEL) {
         let entry = table[regions[p] as usize];
         if !is_touch_entry(entry) {
             continue;
         }
         let other = entry & !RELABEL_TOUCH_BIT;
-        let (x, y) = (p % width, p / width);
-        let near = [
-            (x > 0).then(|| p - 1),
-            (x + 1 < width).then(|| p + 1),
-            (y > 0).then(|| p - width),
-            (y + 1 < height).then(|| p + width),
-        ];
-        if near.into_iter().flatten().any(|q| map[q] == other) {
+        if four_neighbours(p, width, map.len()).any(|q| map[q] == other) {
             table[regions[p] as usize] = RELABEL_KEEP;
         }
     }
@@ -185,20 +177,22 @@ pub fn decide_regions(seeds: Vec<RegionSeed>, map: &[u32], rule: &RelabelRule) -
     for region in seeds.chunk_by(|a, b| a.0 == b.0) {
         let deciding = &region[..region.partition_point(|s| s.1 == region[0].1)];
         // Sorted by class within one depth: runs of one class.
-        let runs: Vec<(u32, usize)> = deciding
-            .chunk_by(|a, b| a.2 == b.2)
-            .map(|run| (run[0].2, run.len()))
-            .collect();
+        let runs = || {
+            deciding
+                .chunk_by(|a, b| a.2 == b.2)
+                .map(|run| (run[0].2, run.len()))
+        };
         let holds = |n: usize, share: f64| n as f64 >= share * deciding.len() as f64;
-        let (class, n) = runs.iter().fold(
+        let (class, n) = runs().fold(
             (NO_LABEL, 0),
-            |best, &run| if run.1 > best.1 { run } else { best },
+            |best, run| if run.1 > best.1 { run } else { best },
         );
         // Split between the region's own label (with its seed count) and one other class?
         let own = map[region[0].0 as usize];
-        let own_and_other = match runs[..] {
-            [(a, own_seeds), (b, _)] if a == own => Some((own_seeds, b)),
-            [(a, _), (b, own_seeds)] if b == own => Some((own_seeds, a)),
+        let mut two = runs();
+        let own_and_other = match (two.next(), two.next(), two.next()) {
+            (Some((a, own_seeds)), Some((b, _)), None) if a == own => Some((own_seeds, b)),
+            (Some((a, _)), Some((b, own_seeds)), None) if b == own => Some((own_seeds, a)),
             _ => None,
         };
         let entry = match own_and_other {
@@ -228,14 +222,7 @@ pub fn edge_depth(regions: &[u32], width: usize, cap: u32) -> Vec<u32> {
     for d in 1..cap {
         let mut next = Vec::new();
         for &p in &front {
-            let x = p % width;
-            let near = [
-                (x > 0).then(|| p - 1),
-                (x + 1 < width).then(|| p + 1),
-                (p >= width).then(|| p - width),
-                (p + width < regions.len()).then(|| p + width),
-            ];
-            for q in near.into_iter().flatten() {
+            for q in four_neighbours(p, width, regions.len()) {
                 if regions[q] == regions[p] && depth[q] == cap {
                     depth[q] = d;
                     next.push(q);

@@ -102,17 +102,22 @@ pub fn label_regions(labels: &[u32], width: usize) -> Vec<u32> {
 /// Per pixel of `regions` (a view's [`label_regions`]): whether a 4-neighbour inside the image
 /// lies in another region (or is unlabeled). The image border is not an edge.
 pub fn region_edges(regions: &[u32], width: usize) -> Vec<bool> {
-    let height = regions.len() / width.max(1);
     (0..regions.len())
-        .map(|p| {
-            let (x, y) = (p % width, p / width);
-            let differs = |q: usize| regions[q] != regions[p];
-            (x > 0 && differs(p - 1))
-                || (x + 1 < width && differs(p + 1))
-                || (y > 0 && differs(p - width))
-                || (y + 1 < height && differs(p + width))
-        })
+        .map(|p| four_neighbours(p, width, regions.len()).any(|q| regions[q] != regions[p]))
         .collect()
+}
+
+/// The 4-neighbours of pixel `p` inside an image of `pixels` pixels, `width` a row.
+pub fn four_neighbours(p: usize, width: usize, pixels: usize) -> impl Iterator<Item = usize> {
+    let x = p % width;
+    [
+        (x > 0).then(|| p - 1),
+        (x + 1 < width).then(|| p + 1),
+        (p >= width).then(|| p - width),
+        (p + width < pixels).then(|| p + width),
+    ]
+    .into_iter()
+    .flatten()
 }
 
 pub(crate) fn find(parent: &mut [u32], mut x: u32) -> u32 {

@@ -11,7 +11,9 @@
 
 use anyhow::Result;
 
-use super::consensus_relabel::{decide_regions, relabel_view, RegionSeed, RelabelRule};
+use super::consensus_relabel::{
+    decide_regions, is_touch_entry, relabel_view, RegionSeed, RelabelRule,
+};
 use super::consensus_segments::{label_regions, region_edges};
 use super::NO_LABEL;
 use crate::contract::params::RegionParams;
@@ -194,13 +196,24 @@ impl<'a> RegionFinder<'a> {
         }
         self.gpu.upload(pairs, 0, &decided)?;
         params.pairs = (decided.len() / 2) as u32;
-        self.rewrite_labels(&params, map.len())
+        let touch_tests = decided
+            .iter()
+            .skip(1)
+            .step_by(2)
+            .any(|&e| is_touch_entry(e));
+        self.rewrite_labels(&params, map.len(), touch_tests)
     }
 
     /// Rewrites the uploaded view's labels from the decided pairs of `params` (the table
-    /// filled with RELABEL_KEEP, the pairs scattered into it, the touch entries resolved,
-    /// every pixel looked up) and downloads them.
-    fn rewrite_labels(&mut self, params: &RegionParams, pixels: usize) -> Result<Vec<u32>> {
+    /// filled with RELABEL_KEEP, the pairs scattered into it, the touch entries resolved
+    /// where `touch_tests` says any pair holds one, every pixel looked up) and downloads
+    /// them.
+    fn rewrite_labels(
+        &mut self,
+        params: &RegionParams,
+        pixels: usize,
+        touch_tests: bool,
+    ) -> Result<Vec<u32>> {
         let [labels, table, _] = self.pixel_bufs.as_ref().expect("sized by upload_view");
         let mut rec = Recorder::new(self.gpu)?;
         let m0 = rec.mark();
@@ -210,8 +223,10 @@ impl<'a> RegionFinder<'a> {
         rec.dispatch(ids::FUSE_REGION_RELABEL_SCATTER, &[], params, pair_groups)?;
         rec.barrier();
         let pixel_groups = ids::FUSE_REGION_RELABEL.groups_for(pixels as u32);
-        rec.dispatch(ids::FUSE_REGION_RELABEL_TOUCH, &[], params, pixel_groups)?;
-        rec.barrier();
+        if touch_tests {
+            rec.dispatch(ids::FUSE_REGION_RELABEL_TOUCH, &[], params, pixel_groups)?;
+            rec.barrier();
+        }
         rec.dispatch(ids::FUSE_REGION_RELABEL, &[], params, pixel_groups)?;
         let m1 = rec.mark();
         let t = rec.submit_and_wait()?;
