@@ -348,29 +348,48 @@ fn flickered_office(views: usize, seed: u64) -> Flickered {
 
 /// Flicker relabels whole objects in a view; the consensus classes put most of them back:
 /// the relabeled views disagree with the true labels on far fewer pixels than the noisy
-/// views do. The GPU relabels every view as the host does.
+/// views do. The GPU relabels every view as the host does, and with an undecided channel
+/// the pixels the relabeling unlabeled (and only those) carry it. The default rule asks 85%
+/// of a region's deciding centers, so about a fifth of the pixels are left undecided (18%
+/// at 75%, before the undecided pixels counted for the consensus).
 #[test]
 fn relabeled_views_undo_most_flicker() {
     let Flickered { s, noisy, run, .. } = flickered_office(24, 7);
     let classes = CompactClasses::from_table(&s.room.classes).unwrap();
     let params = ConsensusParams::default();
-    let relabeled = |finder| RelabeledViews {
+    let relabeled = |finder, undecided| RelabeledViews {
         inner: &noisy,
         centers: &run.centers,
         class: &run.consensus.assignment.class,
         rule: params.relabel,
         finder,
+        undecided,
     };
-    let on_gpu = relabeled(Some(Mutex::new(
-        RegionFinder::new(gpu(), s.gaussians.len()).unwrap(),
-    )));
-    let relabeled = relabeled(None);
+    let finder = || {
+        Some(Mutex::new(
+            RegionFinder::new(gpu(), s.gaussians.len()).unwrap(),
+        ))
+    };
+    let channel = classes.len() as u32;
+    let on_gpu = relabeled(finder(), None);
+    let with_channel = [
+        relabeled(None, Some(channel)),
+        relabeled(finder(), Some(channel)),
+    ];
+    let relabeled = relabeled(None, None);
     let (mut noisy_wrong, mut relabeled_wrong, mut unlabeled, mut labeled) = (0, 0, 0, 0);
     for (v, cam) in s.cameras.iter().enumerate() {
         let truth = classes.compact_labels(&s.views[v].labels);
         let before = noisy[v].as_ref().unwrap();
         let after = relabeled.labels(v, cam).unwrap().unwrap();
         assert_eq!(on_gpu.labels(v, cam).unwrap().unwrap(), after, "view {v}");
+        let undecided = |p: usize| before[p] != NO_LABEL && after[p] == NO_LABEL;
+        let want: Vec<u32> = (0..after.len())
+            .map(|p| if undecided(p) { channel } else { after[p] })
+            .collect();
+        for source in &with_channel {
+            assert_eq!(source.labels(v, cam).unwrap().unwrap(), want, "view {v}");
+        }
         for p in 0..truth.len() {
             if truth[p] == NO_LABEL || before[p] == NO_LABEL {
                 continue;
@@ -392,11 +411,11 @@ fn relabeled_views_undo_most_flicker() {
         "flicker should relabel >10% of pixels"
     );
     assert!(
-        relabeled_wrong * 3 < noisy_wrong,
+        relabeled_wrong * 8 < noisy_wrong,
         "relabeling left {relabeled_wrong} of {noisy_wrong} wrong pixels"
     );
     assert!(
-        unlabeled * 5 < labeled,
+        unlabeled * 4 < labeled,
         "{unlabeled} of {labeled} unlabeled"
     );
     check_validation(gpu());
@@ -404,7 +423,10 @@ fn relabeled_views_undo_most_flicker() {
 
 /// The whole method twice gives the same classes, confidences and evidence; each class is
 /// the one FlashSplat gives over the relabeled views where the Gaussian's footprint there
-/// reaches `min_mass`, else the consensus class (the rule rebuilt here from its parts).
+/// reaches `min_mass`, else the consensus class (the rule rebuilt here from its parts). The
+/// pixels the relabeling left undecided count for each Gaussian's consensus class: rebuilt
+/// from two plain accumulations, one over the relabeled views (undecided pixels unlabeled)
+/// and one over maps of the undecided pixels alone.
 #[test]
 fn relabel_is_deterministic_and_follows_its_rule() {
     let Flickered {
@@ -443,20 +465,40 @@ fn relabel_is_deterministic_and_follows_its_rule() {
         rule: params.relabel,
         // The lift relabeled on the GPU: the host's relabeling must give its classes.
         finder: None,
+        undecided: None,
     };
-    let (footprints, _) = accumulate(
-        gpu,
-        &scene,
-        &s.cameras,
-        &relabeled,
-        classes,
-        &FuseConfig::default(),
-        |_, _| {},
-    )
-    .unwrap();
+    let mut undecided_only: Vec<Option<Vec<u32>>> = Vec::new();
+    for (v, cam) in s.cameras.iter().enumerate() {
+        let before = noisy[v].as_ref().unwrap();
+        let after = relabeled.labels(v, cam).unwrap().unwrap();
+        let only = (0..after.len()).map(|p| match before[p] != NO_LABEL && after[p] == NO_LABEL {
+            true => 0,
+            false => NO_LABEL,
+        });
+        undecided_only.push(Some(only.collect()));
+    }
+    let footprint = |labels: &dyn LabelSource, classes| {
+        let fs = FuseConfig::default();
+        accumulate(gpu, &scene, &s.cameras, labels, classes, &fs, |_, _| {})
+            .unwrap()
+            .0
+    };
+    let mut footprints = footprint(&relabeled, classes);
     let k = params.neighbours;
     let knn = nearest_neighbours(&s.gaussians.means, k);
+    let unfolded = assign_semantic_near(&footprints, Some((&knn, k)));
+    let undecided_mass = footprint(&undecided_only, 1);
+    let mut undecided_gaussians = 0;
+    for g in 0..footprints.n {
+        if let Some(c) = cons[g] {
+            footprints.data[c * footprints.n + g] += undecided_mass.get(0, g);
+            undecided_gaussians += usize::from(undecided_mass.get(0, g) > 0.0);
+        }
+    }
     let by_pixels = assign_semantic_near(&footprints, Some((&knn, k)));
+    let folding_decides = (0..footprints.n)
+        .filter(|&g| by_pixels.class[g] != unfolded.class[g])
+        .count();
     let (mut moved, mut kept) = (0, 0);
     for g in 0..footprints.n {
         let mass: f64 = (0..classes).map(|c| footprints.get(c, g)).sum();
@@ -473,6 +515,11 @@ fn relabel_is_deterministic_and_follows_its_rule() {
         }
     }
     assert!(moved > 100 && kept > 1000, "{moved} moved, {kept} kept");
+    assert!(
+        undecided_gaussians > 100 && folding_decides > 0,
+        "{undecided_gaussians} Gaussians cover an undecided pixel, \
+         {folding_decides} take another class for it"
+    );
     check_validation(gpu);
 }
 

@@ -81,7 +81,9 @@ pub struct FuseArgs {
     /// segment-consensus: then relabel every view's connected label regions with the
     /// consensus classes of the Gaussians seen in them and run FlashSplat on the relabeled
     /// views, so object edges fall where the pixels put them (the best held-out mIoU under
-    /// flicker; visits every view twice).
+    /// flicker; visits every view twice). A region whose Gaussians' classes are mixed is
+    /// left undecided; its pixels count for the consensus class of each Gaussian that
+    /// renders there.
     #[arg(long)]
     relabel: bool,
     /// Relative depth tolerance of the visibility test (> 0): vote --occlusion's, against the

@@ -87,7 +87,7 @@ impl Default for ConsensusParams {
             flag_min_dissent: 5.0,
             flag_min_gaussians: 20,
             relabel: RelabelRule {
-                min_share: 0.75,
+                min_share: 0.85,
                 depth: 3,
                 keep_share: 0.25,
                 min_mass: 1.0,

@@ -26,6 +26,7 @@ use super::consensus_decide::{posterior, ConsensusParams};
 use super::consensus_segments::{four_neighbours, label_regions, region_edges};
 use super::method::Method;
 use super::regions_gpu::RegionFinder;
+use super::scores::ClassScores;
 use crate::contract::{RELABEL_KEEP, RELABEL_TOUCH_BIT};
 use crate::scene::Camera;
 
@@ -35,7 +36,10 @@ pub struct RelabelRule {
     /// A region takes one class where that class holds at least this share (> 0.5) of the
     /// observed Gaussians' centers that decide ([`RelabelRule::depth`]); else the region is
     /// unlabeled in that view: flicker gave two touching objects one class there and merged
-    /// their regions, so the region says nothing of where their edge runs.
+    /// their regions, so the region says nothing of where their edge runs. Its pixels then
+    /// count for the consensus class of whichever Gaussian renders there
+    /// ([`fold_undecided`]), so an undecided region costs little, and the share can ask
+    /// for more than a relabeled region whose edge is wrong would give.
     pub min_share: f64,
     /// The centers at least this many pixels (city-block, within the region) from the
     /// region's edge decide; in a region with none that deep, its deepest ones. A label edge
@@ -69,12 +73,20 @@ pub struct RelabeledViews<'a> {
     /// Relabels on the GPU ([`RegionFinder::relabel`]; one view at a time: the label
     /// source is read from several worker threads); None: on the host ([`relabel_view`]).
     pub finder: Option<Mutex<RegionFinder<'a>>>,
+    /// The label given to the pixels the relabeling left undecided (labeled before,
+    /// unlabeled after): a channel past the classes, which [`fold_undecided`] counts for
+    /// each Gaussian's own consensus class. None leaves them unlabeled.
+    pub undecided: Option<u32>,
 }
 
 impl LabelSource for RelabeledViews<'_> {
     fn labels(&self, view: usize, cam: &Camera) -> Result<Option<Vec<u32>>> {
         let Some(mut map) = self.inner.labels(view, cam)? else {
             return Ok(None);
+        };
+        let labeled: Vec<bool> = match self.undecided {
+            Some(_) => map.iter().map(|&l| l != NO_LABEL).collect(),
+            None => Vec::new(),
         };
         let seeds = self.centers.get(view).map_or(&[][..], |c| c.as_slice());
         let seeds = seeds
@@ -87,6 +99,15 @@ impl LabelSource for RelabeledViews<'_> {
                 map = finder.relabel(&map, cam.width, &seeds, &self.rule)?;
             }
             None => relabel_view(&mut map, cam.width as usize, seeds, &self.rule),
+        }
+        if let Some(undecided) = self.undecided {
+            for (label, _) in map
+                .iter_mut()
+                .zip(labeled)
+                .filter(|(l, was)| *was && **l == NO_LABEL)
+            {
+                *label = undecided;
+            }
         }
         Ok(Some(map))
     }
@@ -234,8 +255,32 @@ pub fn edge_depth(regions: &[u32], width: usize, cap: u32) -> Vec<u32> {
     depth
 }
 
+/// Footprints over views relabeled with an undecided channel ([`RelabeledViews::undecided`],
+/// the last of `footprints`' rows) to footprints over the classes alone: each Gaussian's
+/// mass on undecided pixels counts for its own consensus `class` (dropped where it has
+/// none). Where the relabeling could not tell which object a region's pixels show, each
+/// Gaussian rendering there is taken to show its own; left out instead, an object's
+/// Gaussians at an edge whose own side was undecided in a view see only the other side's
+/// pixels there, and take its class.
+pub fn fold_undecided(footprints: &ClassScores, class: &[Option<usize>]) -> ClassScores {
+    let classes = footprints.classes - 1;
+    let n = footprints.n;
+    let mut folded = ClassScores {
+        classes,
+        n,
+        data: footprints.data[..classes * n].to_vec(),
+    };
+    for (g, (&mass, c)) in footprints.row(classes).iter().zip(class).enumerate() {
+        if let Some(c) = *c {
+            folded.data[c * n + g] += mass;
+        }
+    }
+    folded
+}
+
 /// Segment consensus, then FlashSplat's accumulation over the views relabeled with its
-/// classes ([`RelabeledViews`]), assigned as FlashSplat (ties by the neighbours' evidence):
+/// classes ([`RelabeledViews`], the undecided pixels counting for each Gaussian's consensus
+/// class: [`fold_undecided`]), assigned as FlashSplat (ties by the neighbours' evidence):
 /// the consensus decides what each object is, the pixels each Gaussian covers where the
 /// objects' edges run. A Gaussian keeps its consensus class where the relabeled views leave
 /// it undecided or its footprint there sums to less than `params.relabel.min_mass` pixels
@@ -257,6 +302,7 @@ pub fn fuse_relabeled(
         class: &run.consensus.assignment.class,
         rule: params.relabel,
         finder: Some(Mutex::new(RegionFinder::new(input.gpu, input.means.len())?)),
+        undecided: Some(input.classes as u32),
     };
     let flashsplat = FuseConfig {
         method: Method::FlashSplat,
@@ -267,7 +313,7 @@ pub fn fuse_relabeled(
         input.scene,
         input.cams,
         &relabeled,
-        input.classes,
+        input.classes + 1,
         &flashsplat,
         |done, _| progress(views + done, 2 * views),
     )?;
@@ -275,8 +321,9 @@ pub fn fuse_relabeled(
         Some(finder) => finder.into_inner().unwrap_or_else(|e| e.into_inner()).stats,
         None => Default::default(),
     };
-    let by_pixels = assign_semantic_near(&footprints, Some((&run.knn, params.neighbours)));
     let consensus = run.consensus;
+    let footprints = fold_undecided(&footprints, &consensus.assignment.class);
+    let by_pixels = assign_semantic_near(&footprints, Some((&run.knn, params.neighbours)));
     let mut evidence = scores_of(&consensus.evidence, input.classes);
     let mut class = consensus.assignment.class.clone();
     for (g, (own, &by_footprint)) in class.iter_mut().zip(&by_pixels.class).enumerate() {
