@@ -84,6 +84,7 @@ impl LabelSource for RelabeledViews<'_> {
         let Some(mut map) = self.inner.labels(view, cam)? else {
             return Ok(None);
         };
+        // Which pixels the view labeled: its unlabeled ones (an ignore id) stay unlabeled.
         let labeled: Vec<bool> = match self.undecided {
             Some(_) => map.iter().map(|&l| l != NO_LABEL).collect(),
             None => Vec::new(),
