@@ -81,33 +81,31 @@ pub struct RelabeledViews<'a> {
 
 impl LabelSource for RelabeledViews<'_> {
     fn labels(&self, view: usize, cam: &Camera) -> Result<Option<Vec<u32>>> {
-        let Some(mut map) = self.inner.labels(view, cam)? else {
+        let Some(labels) = self.inner.labels(view, cam)? else {
             return Ok(None);
-        };
-        // Which pixels the view labeled: its unlabeled ones (an ignore id) stay unlabeled.
-        let labeled: Vec<bool> = match self.undecided {
-            Some(_) => map.iter().map(|&l| l != NO_LABEL).collect(),
-            None => Vec::new(),
         };
         let seeds = self.centers.get(view).map_or(&[][..], |c| c.as_slice());
         let seeds = seeds
             .iter()
             .filter_map(|&(g, p)| self.class[g as usize].map(|c| (p, c as u32)));
-        match &self.finder {
+        let mut map = match &self.finder {
             Some(finder) => {
                 let seeds: Vec<(u32, u32)> = seeds.collect();
                 let mut finder = finder.lock().unwrap_or_else(|e| e.into_inner());
-                map = finder.relabel(&map, cam.width, &seeds, &self.rule)?;
+                finder.relabel(&labels, cam.width, &seeds, &self.rule)?
             }
-            None => relabel_view(&mut map, cam.width as usize, seeds, &self.rule),
-        }
+            None => {
+                let mut map = labels.clone();
+                relabel_view(&mut map, cam.width as usize, seeds, &self.rule);
+                map
+            }
+        };
         if let Some(undecided) = self.undecided {
-            for (label, _) in map
-                .iter_mut()
-                .zip(labeled)
-                .filter(|(l, was)| *was && **l == NO_LABEL)
-            {
-                *label = undecided;
+            // Only the relabeling's unlabeled pixels: the view's own (an ignore id) stay so.
+            for (label, &before) in map.iter_mut().zip(&labels) {
+                if *label == NO_LABEL && before != NO_LABEL {
+                    *label = undecided;
+                }
             }
         }
         Ok(Some(map))
