@@ -10,7 +10,7 @@ use common::{check_validation, gpu};
 use semsplat::dataset::CompactClasses;
 use semsplat::fuse::consensus::{consensus_run, ConsensusRun};
 use semsplat::fuse::consensus_relabel::{edge_depth, relabel_view, RelabelRule, RelabeledViews};
-use semsplat::fuse::regions_gpu::{RegionFinder, MAX_GPU_DEPTH};
+use semsplat::fuse::regions_gpu::{RegionFinder, MAX_GPU_REACH};
 use semsplat::fuse::{
     accumulate, assign_semantic_near, lift_by_consensus, nearest_neighbours, ConsensusParams,
     FuseConfig, LabelSource, Method, NO_LABEL,
@@ -18,7 +18,6 @@ use semsplat::fuse::{
 use semsplat::render::GpuScene;
 use semsplat::synth::{generate, RoomSource, SynthConfig, SynthScene};
 use semsplat::util::Rng;
-use std::collections::BTreeSet;
 use std::sync::Mutex;
 
 /// A pixel's depth written plainly: the city-block distance to the nearest edge pixel of
@@ -33,9 +32,9 @@ fn depth_by_hand(regions: &[u32], w: usize, p: usize, cap: u32) -> u32 {
 
 /// The rule written plainly: per region, the seeds at least `rule.depth` inside it (its
 /// deepest if none is); a class holding `rule.min_share` of them takes the region; else, if
-/// they are of two classes, the region's own label holding `rule.keep_share` of them and
-/// the other the label of a pixel beside the region, it keeps its label; else it is
-/// unlabeled. Regions without seeds keep their labels.
+/// the region's own label holds `rule.keep_share` of them, and `rule.min_share` with the
+/// seeds of other classes that lie within `rule.near` (city-block) of a pixel labeled their
+/// class, it keeps its label; else it is unlabeled. Regions without seeds keep their labels.
 fn relabel_by_hand(map: &[u32], w: usize, seeds: &[(u32, u32)], rule: &RelabelRule) -> Vec<u32> {
     let regions = flood_regions(map, w);
     let count = regions
@@ -43,50 +42,49 @@ fn relabel_by_hand(map: &[u32], w: usize, seeds: &[(u32, u32)], rule: &RelabelRu
         .filter(|&&r| r != NO_LABEL)
         .max()
         .map_or(0, |&r| r + 1);
-    // (region, depth, class) of every seed on a labeled pixel.
-    let placed: Vec<(u32, u32, u32)> = seeds
+    // (region, depth, class, pixel) of every seed on a labeled pixel.
+    let placed: Vec<(u32, u32, u32, usize)> = seeds
         .iter()
         .map(|&(p, c)| {
             let depth = depth_by_hand(&regions, w, p as usize, rule.depth);
-            (regions[p as usize], depth, c)
+            (regions[p as usize], depth, c, p as usize)
         })
         .collect();
     let mut out = map.to_vec();
     for r in 0..count {
-        let in_region: Vec<(u32, u32)> = placed
+        let in_region: Vec<(u32, u32, usize)> = placed
             .iter()
             .filter(|s| s.0 == r)
-            .map(|s| (s.1, s.2))
+            .map(|s| (s.1, s.2, s.3))
             .collect();
         let Some(deepest) = in_region.iter().map(|s| s.0).max() else {
             continue;
         };
-        let counted: Vec<(u32, u32)> = in_region.into_iter().filter(|s| s.0 == deepest).collect();
+        let counted: Vec<(u32, u32, usize)> =
+            in_region.into_iter().filter(|s| s.0 == deepest).collect();
         let votes = |c: u32| counted.iter().filter(|s| s.1 == c).count();
         let top = counted
             .iter()
             .map(|s| s.1)
             .max_by_key(|&c| votes(c))
             .unwrap();
-        let pixels: Vec<usize> = (0..map.len()).filter(|&p| regions[p] == r).collect();
-        let own = map[pixels[0]];
-        let classes: BTreeSet<u32> = counted.iter().map(|s| s.1).collect();
-        let touches = |c: u32| {
-            pixels.iter().any(|&p| {
-                let (x, y) = (p % w, p / w);
-                (x > 0 && map[p - 1] == c)
-                    || (x + 1 < w && map[p + 1] == c)
-                    || (y > 0 && map[p - w] == c)
-                    || (p + w < map.len() && map[p + w] == c)
+        let own = map[(0..map.len()).find(|&p| regions[p] == r).unwrap()];
+        // Seeds of another class than `own` lying near a pixel of their class.
+        let near = |c: u32, p: usize| {
+            (0..map.len()).any(|q| {
+                let distance = (p % w).abs_diff(q % w) + (p / w).abs_diff(q / w);
+                map[q] == c && distance <= rule.near as usize
             })
         };
-        let holds = |c: u32, share: f64| votes(c) as f64 >= share * counted.len() as f64;
-        let new = if holds(top, rule.min_share) {
+        let near_seeds = counted
+            .iter()
+            .filter(|s| s.1 != own && near(s.1, s.2))
+            .count();
+        let holds = |n: usize, share: f64| n as f64 >= share * counted.len() as f64;
+        let new = if holds(votes(top), rule.min_share) {
             top
-        } else if classes.len() == 2
-            && classes.contains(&own)
-            && holds(own, rule.keep_share)
-            && classes.iter().any(|&c| c != own && touches(c))
+        } else if holds(votes(own), rule.keep_share)
+            && holds(votes(own) + near_seeds, rule.min_share)
         {
             own
         } else {
@@ -101,24 +99,27 @@ fn relabel_by_hand(map: &[u32], w: usize, seeds: &[(u32, u32)], rule: &RelabelRu
     out
 }
 
-/// A rule with the given shares and depth (the footprint mass plays no part in relabeling).
-fn rule(min_share: f64, depth: u32, keep_share: f64) -> RelabelRule {
+/// A rule with the given shares, depth and near radius (the footprint mass plays no part in
+/// relabeling).
+fn rule(min_share: f64, depth: u32, keep_share: f64, near: u32) -> RelabelRule {
     RelabelRule {
         min_share,
         depth,
         keep_share,
+        near,
         min_mass: 1.0,
     }
 }
 
-/// Rules over both shares and four depths; a keep share above 1 never keeps a mixed region.
-const RULES: [(f64, u32, f64); 6] = [
-    (0.75, 1, 2.0),
-    (0.6, 1, 0.25),
-    (1.0, 1, 0.25),
-    (0.75, 2, 2.0),
-    (0.75, 3, 0.25),
-    (0.75, 6, 0.4),
+/// Rules over both shares, four depths and three near radii; a keep share above 1 never
+/// keeps a mixed region.
+const RULES: [(f64, u32, f64, u32); 6] = [
+    (0.75, 1, 2.0, 8),
+    (0.6, 1, 0.25, 1),
+    (1.0, 1, 0.25, 3),
+    (0.75, 2, 2.0, 3),
+    (0.75, 3, 0.25, 3),
+    (0.75, 6, 0.4, 8),
 ];
 
 /// A label map of rectangles of 4 classes over a background, some pixels unlabeled, and
@@ -166,7 +167,7 @@ fn random_case(seed: u64, w: usize, h: usize) -> (Vec<u32>, Vec<(u32, u32)>) {
 
 #[test]
 fn relabeling_matches_a_plain_transcription() {
-    let (mut relabeled, mut unlabeled, mut kept) = (0usize, 0usize, 0usize);
+    let (mut relabeled, mut unlabeled, mut kept, mut kept_by_near) = (0, 0, 0, 0);
     for seed in 0..40 {
         let (w, h) = (24, 18);
         let (map, seeds) = random_case(seed, w, h);
@@ -179,9 +180,9 @@ fn relabeling_matches_a_plain_transcription() {
                 "seed {seed}, pixel {p}"
             );
         }
-        for (min_share, depth, keep_share) in RULES {
+        for (min_share, depth, keep_share, near) in RULES {
             let mut got = map.clone();
-            let rule = rule(min_share, depth, keep_share);
+            let rule = rule(min_share, depth, keep_share, near);
             relabel_view(&mut got, w, seeds.iter().copied(), &rule);
             let want = relabel_by_hand(&map, w, &seeds, &rule);
             assert_eq!(got, want, "seed {seed}, {rule:?}");
@@ -190,24 +191,28 @@ fn relabeling_matches_a_plain_transcription() {
                 ..rule
             };
             let never_kept = relabel_by_hand(&map, w, &seeds, &never_kept);
+            // No seed of another class lies within 0 pixels of its class's label.
+            let none_near = relabel_by_hand(&map, w, &seeds, &RelabelRule { near: 0, ..rule });
             for p in (0..map.len()).filter(|&p| map[p] != NO_LABEL) {
                 relabeled += usize::from(want[p] != map[p] && want[p] != NO_LABEL);
                 unlabeled += usize::from(want[p] == NO_LABEL);
                 kept += usize::from(want[p] == map[p] && never_kept[p] == NO_LABEL);
+                kept_by_near += usize::from(want[p] == map[p] && none_near[p] == NO_LABEL);
             }
         }
     }
-    // The cases exercise every branch: regions relabeled, unlabeled, and mixed but kept.
+    // The cases exercise every branch: regions relabeled, unlabeled, and mixed but kept,
+    // some of them only through seeds near their class's label.
     assert!(
-        relabeled > 1000 && unlabeled > 1000 && kept > 200,
-        "{relabeled} {unlabeled} {kept}"
+        relabeled > 1000 && unlabeled > 1000 && kept > 200 && kept_by_near > 100,
+        "{relabeled} {unlabeled} {kept} {kept_by_near}"
     );
 }
 
-/// The GPU's relabeling (regions and the seeds' depths found there, the pixels rewritten
-/// there) against the same plain transcription, on maps of several sizes; a view with more
-/// seeds than the finder holds Gaussians, or a depth past the GPU's search, is relabeled on
-/// the host, to the same result.
+/// The GPU's relabeling (regions, the seeds' depths and near flags found there, the pixels
+/// rewritten there) against the same plain transcription, on maps of several sizes; a view
+/// with more seeds than the finder holds Gaussians, or a depth or near radius past the GPU's
+/// search, is relabeled on the host, to the same result.
 #[test]
 fn gpu_relabeling_matches_the_plain_transcription() {
     let gpu = gpu();
@@ -217,8 +222,8 @@ fn gpu_relabeling_matches_the_plain_transcription() {
     let mut relabeled = 0usize;
     for (seed, &(w, h)) in (100..).zip(sizes.iter().cycle().take(25)) {
         let (map, seeds) = random_case(seed, w, h);
-        for (min_share, depth, keep_share) in RULES {
-            let rule = rule(min_share, depth, keep_share);
+        for (min_share, depth, keep_share, near) in RULES {
+            let rule = rule(min_share, depth, keep_share, near);
             let got = finder.relabel(&map, w as u32, &seeds, &rule).unwrap();
             let want = relabel_by_hand(&map, w, &seeds, &rule);
             assert_eq!(got, want, "seed {seed} ({w}x{h}), {rule:?}");
@@ -231,15 +236,23 @@ fn gpu_relabeling_matches_the_plain_transcription() {
     let (map, seeds) = random_case(7, 24, 18);
     let mut small = RegionFinder::new(gpu, seeds.len() - 1).unwrap();
     let got = small
-        .relabel(&map, 24, &seeds, &rule(0.75, 3, 0.25))
+        .relabel(&map, 24, &seeds, &rule(0.75, 3, 0.25, 8))
         .unwrap();
-    assert_eq!(got, relabel_by_hand(&map, 24, &seeds, &rule(0.75, 3, 0.25)));
+    assert_eq!(
+        got,
+        relabel_by_hand(&map, 24, &seeds, &rule(0.75, 3, 0.25, 8))
+    );
     assert_eq!(small.stats.host_fallbacks, 1);
     // Deeper than region_depth searches: the host relabels the view.
-    let deep = rule(0.75, MAX_GPU_DEPTH + 1, 0.25);
+    let deep = rule(0.75, MAX_GPU_REACH + 1, 0.25, 8);
     let got = finder.relabel(&map, 24, &seeds, &deep).unwrap();
     assert_eq!(got, relabel_by_hand(&map, 24, &seeds, &deep));
     assert_eq!(finder.stats.host_fallbacks, 1);
+    // A near radius past region_near's search: the host again.
+    let far = rule(0.75, 3, 0.25, MAX_GPU_REACH + 1);
+    let got = finder.relabel(&map, 24, &seeds, &far).unwrap();
+    assert_eq!(got, relabel_by_hand(&map, 24, &seeds, &far));
+    assert_eq!(finder.stats.host_fallbacks, 2);
     check_validation(gpu);
 }
 
@@ -252,11 +265,11 @@ fn a_region_takes_its_interior_seeds_class() {
     map[4] = 7; // regions 0..4 (class 5), 4 (class 7), 5..9 (class 5); 3, 4, 5 on edges
     let mut got = map.clone();
     let seeds = [(0, 2), (1, 2), (2, 2), (3, 6), (6, 4)];
-    relabel_view(&mut got, w, seeds.into_iter(), &rule(0.75, 1, 2.0));
+    relabel_view(&mut got, w, seeds.into_iter(), &rule(0.75, 1, 2.0, 8));
     assert_eq!(got, [2, 2, 2, 2, 7, 4, 4, 4, 4]);
     let mut got = map.clone();
     let seeds = [(0, 2), (1, 3), (5, 1), (4, 1)];
-    relabel_view(&mut got, w, seeds.into_iter(), &rule(0.75, 1, 2.0));
+    relabel_view(&mut got, w, seeds.into_iter(), &rule(0.75, 1, 2.0, 8));
     let x = NO_LABEL;
     assert_eq!(got, [x, x, x, x, 1, 1, 1, 1, 1]);
 }
@@ -264,7 +277,8 @@ fn a_region_takes_its_interior_seeds_class() {
 /// A label edge drawn two pixels off puts a neighbour's Gaussians (class 2) just inside a
 /// region whose own Gaussians (class 1) lie deep in it: at depth 3 the deep ones decide
 /// and the region keeps class 1; at depth 1 the region counts as mixed: unlabeled, unless
-/// it touches the other class's label and its own holds the keep share.
+/// its own label holds the keep share and, with the class-2 seeds lying within the near
+/// radius of a pixel labeled 2, the min share.
 #[test]
 fn deep_seeds_outvote_a_shifted_edge() {
     let (w, h) = (12, 9);
@@ -281,32 +295,48 @@ fn deep_seeds_outvote_a_shifted_edge() {
     ]
     .map(|(p, c)| (p as u32, c));
     let mut got = map.clone();
-    relabel_view(&mut got, w, seeds.into_iter(), &rule(0.75, 3, 2.0));
+    relabel_view(&mut got, w, seeds.into_iter(), &rule(0.75, 3, 2.0, 8));
     assert_eq!(got, map, "the deep seeds keep class 1");
-    // At depth 1 the region is mixed, two of five seeds its own class 1, three class 2: with
-    // a keep share of 0.4 it keeps its label only where it touches a pixel labeled 2.
+    // At depth 1 the region is mixed, two of five seeds its own class 1, three class 2.
     let unlabeled = |map: &[u32]| -> Vec<u32> {
         map.iter()
             .map(|&l| if l == 1 { NO_LABEL } else { l })
             .collect()
     };
-    relabel_view(&mut got, w, seeds.into_iter(), &rule(0.75, 1, 0.4));
-    assert_eq!(
-        got,
-        unlabeled(&map),
-        "mixed, touching no class 2: unlabeled"
-    );
-    let mut touching = map.clone();
-    touching[4 * w + 11] = 2; // beside the region's pixel (10, 4)
-    let mut got = touching.clone();
-    relabel_view(&mut got, w, seeds.into_iter(), &rule(0.75, 1, 0.4));
-    assert_eq!(got, touching, "mixed, touching class 2: kept");
-    relabel_view(&mut got, w, seeds.into_iter(), &rule(0.75, 1, 0.5));
-    assert_eq!(
-        got,
-        unlabeled(&touching),
-        "its own class under the keep share"
-    );
+    // A pixel labeled 2 beside the region at (0, 4): 2 from the seed at (2, 4), 3 from
+    // those at (2, 3) and (2, 5). Or far, at (11, 4): 9 from (2, 4), 10 from the others.
+    let with_2_at = |p: usize| {
+        let mut labels = map.clone();
+        labels[p] = 2;
+        labels
+    };
+    let (beside, far) = (with_2_at(4 * w), with_2_at(4 * w + 11));
+    let cases = [
+        (&map, 0.4, 8, false, "no pixel labeled 2"),
+        (&beside, 0.4, 3, true, "every class-2 seed near a 2"),
+        (
+            &beside,
+            0.4,
+            2,
+            false,
+            "one class-2 seed near: 3 of 5 under the min share",
+        ),
+        (&beside, 0.5, 3, false, "its own class under the keep share"),
+        (&far, 0.4, 8, false, "class 2 too far"),
+        (&far, 0.4, 9, false, "one class-2 seed within 9"),
+        (&far, 0.4, 10, true, "every class-2 seed within 10"),
+    ];
+    for (labels, keep_share, near, kept, what) in cases {
+        let mut got = labels.clone();
+        let rule = rule(0.75, 1, keep_share, near);
+        relabel_view(&mut got, w, seeds.into_iter(), &rule);
+        let want = if kept {
+            labels.clone()
+        } else {
+            unlabeled(labels)
+        };
+        assert_eq!(got, want, "{what}");
+    }
 }
 
 /// The office under flicker 0.3 at 96x72: its noisy maps in compact ids, the scene on the

@@ -7,9 +7,9 @@
 // id is that pixel's index, as on the host. Kernels, one per file: region_init,
 // region_merge, region_flatten, region_check (a pass that finds any link the loop cap of a
 // CPU driver cut short, so the host can redo that view), region_lookup (per Gaussian); for
-// relabeling a view (src/fuse/consensus_relabel.rs): region_depth (per center pixel),
-// region_relabel_scatter (per decided region), region_relabel_touch and region_relabel
-// (per pixel).
+// relabeling a view (src/fuse/consensus_relabel.rs): region_depth and region_near (per
+// center pixel), region_relabel_scatter (per decided region) and region_relabel (per
+// pixel).
 #ifndef LABEL_REGIONS_GLSL
 #define LABEL_REGIONS_GLSL
 
@@ -24,10 +24,13 @@ layout(push_constant) uniform RegionParams {
     uvec2 out_addr;    // [n] region id of the center pixel, bit 31 set on the region's edge
     uvec2 depth_addr;  // [n] city-block depth of the center pixel in its region, capped
     uvec2 pairs_addr;  // [2 * pairs] (region id, new label) of each region relabeled
+    uvec2 classes_addr; // [n] the consensus class of each center pixel's Gaussian
+    uvec2 near_addr;   // [n] 1 where a pixel of that class lies within near_radius, else 0
     uint width;
     uint height;
     uint n;
     uint max_depth;    // region_depth's cap
+    uint near_radius;  // region_near's reach
     uint pairs;
 } pc;
 
@@ -53,12 +56,6 @@ uint neighbour(uint p, uint k) {
     case 2u: return y > 0u ? p - pc.width : NO_LABEL;
     default: return y + 1u < pc.height ? p + pc.width : NO_LABEL;
     }
-}
-
-// A relabel-table entry that waits on a touch test: RELABEL_TOUCH_BIT and a compact class
-// (RELABEL_KEEP and NO_LABEL have the bit set too, and are not).
-bool is_touch_entry(uint entry) {
-    return entry < RELABEL_KEEP && (entry & RELABEL_TOUCH_BIT) != 0u;
 }
 
 // The root of pixel p's tree (links only point to smaller indices, so this ends).

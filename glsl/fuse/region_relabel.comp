@@ -1,7 +1,6 @@
 #version 460
 // Rewrites every labeled pixel with its region's entry of the relabel table (a compact
-// class, or NO_LABEL: unlabeled) unless the entry is RELABEL_KEEP (label_regions.glsl); a
-// touch entry region_relabel_touch left standing unlabels the region.
+// class, or NO_LABEL: unlabeled) unless the entry is RELABEL_KEEP (label_regions.glsl).
 
 layout(local_size_x = 256) in;
 
@@ -15,6 +14,6 @@ void main() {
     }
     uint label = relabel_table.data[region.data[p]];
     if (label != RELABEL_KEEP) {
-        labels_out.data[p] = is_touch_entry(label) ? NO_LABEL : label;
+        labels_out.data[p] = label;
     }
 }

@@ -90,6 +90,7 @@ impl Default for ConsensusParams {
                 min_share: 0.85,
                 depth: 3,
                 keep_share: 0.25,
+                near: 8,
                 min_mass: 1.0,
             },
         }

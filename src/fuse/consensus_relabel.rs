@@ -8,10 +8,11 @@
 //! the consensus gave the Gaussians observed inside them, and FlashSplat runs on the
 //! relabeled views. A region whose observed Gaussians split between classes (a view in
 //! which flicker gave two touching objects one class, so their regions merged) says
-//! nothing about where their edge is: it is left unlabeled in that view, unless its centers
-//! split between its own label and the label of a region it touches (boundary noise,
-//! below: [`RelabelRule::keep_share`]). A region no Gaussian center was observed in keeps
-//! its label.
+//! nothing about where their edge is: it is left unlabeled in that view, unless the
+//! centers of its own label, with those of other classes lying near a pixel of their
+//! class, make up the share a class needs (boundary noise, below:
+//! [`RelabelRule::keep_share`]). A region no Gaussian center was observed in keeps its
+//! label.
 
 use std::cmp::Reverse;
 use std::sync::Mutex;
@@ -27,7 +28,7 @@ use super::consensus_segments::{four_neighbours, label_regions, region_edges};
 use super::method::Method;
 use super::regions_gpu::RegionFinder;
 use super::scores::ClassScores;
-use crate::contract::{RELABEL_KEEP, RELABEL_TOUCH_BIT};
+use crate::contract::RELABEL_KEEP;
 use crate::scene::Camera;
 
 /// How a view's label regions take the consensus classes.
@@ -47,16 +48,21 @@ pub struct RelabelRule {
     /// region, where a flicker merge puts the other object's deep inside: counting only
     /// deep centers keeps the shifted region labeled and still finds the merge.
     pub depth: u32,
-    /// A region no class holds `min_share` of keeps its own label where its deciding
-    /// centers split between that label, holding at least this share, and one other class,
-    /// and the region touches (4-neighbourhood) a pixel with that other label; else it is
-    /// unlabeled. Boundary noise erodes a small or thin object (a lamp, a cup) in
-    /// most views, so the consensus gives part of its Gaussians the class around it, and
-    /// the object's remnant regions hold both classes: unlabeling them would take away the
-    /// only views that still show it. A flicker merge (two touching objects given one
-    /// class) splits between the merged objects' classes, and the flickered one's class is
-    /// rarely the label of a neighbouring region in that view.
+    /// A region no class holds `min_share` of keeps its own label where that label holds
+    /// at least this share of its deciding centers and, with the centers of other classes
+    /// that lie within `near` pixels of a pixel labeled their class, `min_share` of them;
+    /// else it is unlabeled. Boundary noise shifts a label edge by a few pixels: a small or
+    /// thin object (a lamp, a cup) loses part of its region to its neighbours and takes
+    /// part of theirs, so its remnant regions hold its neighbours' Gaussians, each a few
+    /// pixels from its own class's label; unlabeling those regions would take away the only
+    /// views that still show it. In a flicker merge (two touching objects given one class)
+    /// the flickered object's Gaussians fill its whole extent, most of them far from any
+    /// pixel of their class, which flicker took from this view.
     pub keep_share: f64,
+    /// How near (city-block pixels) a center of another class must lie to a pixel labeled
+    /// its class to count for its region's own label ([`RelabelRule::keep_share`]). The
+    /// default, 8, forgives label edges moved by up to 4 pixels along each axis.
+    pub near: u32,
     /// A Gaussian whose footprint over the relabeled views sums to fewer pixels keeps its
     /// consensus class.
     pub min_mass: f64,
@@ -126,103 +132,91 @@ pub fn relabel_view(
 ) {
     let regions = label_regions(map, width);
     let depth = edge_depth(&regions, width, rule.depth);
-    let seeds = seeds
+    let seeds: Vec<RegionSeed> = seeds
         .filter(|&(p, _)| regions[p as usize] != NO_LABEL)
         .map(|(p, c)| RegionSeed {
             region: regions[p as usize],
             depth: depth[p as usize],
             class: c,
-        });
-    // Per region id (the index of the region's first pixel): its table entry (a class,
-    // NO_LABEL, RELABEL_KEEP or a touch entry), as on the GPU.
+            near: label_near(map, width, p as usize, c, rule.near),
+        })
+        .collect();
+    // Per region id (the index of the region's first pixel): its new label, as on the GPU.
     let mut table = vec![RELABEL_KEEP; map.len()];
-    for (region, entry) in decide_regions(seeds.collect(), map, rule) {
+    for (region, entry) in decide_regions(seeds, map, rule) {
         table[region as usize] = entry;
     }
-    resolve_touch_entries(&mut table, map, &regions, width);
     for (label, &region) in map.iter_mut().zip(&regions) {
         // NO_LABEL (unlabeled pixels) lies past the table.
-        match table.get(region as usize).copied() {
-            None | Some(RELABEL_KEEP) => {}
-            Some(entry) if is_touch_entry(entry) => *label = NO_LABEL,
-            Some(entry) => *label = entry,
+        if let Some(&entry) = table.get(region as usize) {
+            if entry != RELABEL_KEEP {
+                *label = entry;
+            }
         }
     }
 }
 
-/// Whether a relabel-table entry waits on a touch test ([`RELABEL_TOUCH_BIT`] and a class).
-pub fn is_touch_entry(entry: u32) -> bool {
-    entry < RELABEL_KEEP && entry & RELABEL_TOUCH_BIT != 0
-}
-
-/// Turns the touch entries of regions that touch a pixel labeled their entry's class into
-/// RELABEL_KEEP (the host version of region_relabel_touch.comp).
-fn resolve_touch_entries(table: &mut [u32], map: &[u32], regions: &[u32], width: usize) {
-    for p in (0..map.len()).filter(|&p| regions[p] != NO_LABEL) {
-        let entry = table[regions[p] as usize];
-        if !is_touch_entry(entry) {
-            continue;
-        }
-        let other = entry & !RELABEL_TOUCH_BIT;
-        if four_neighbours(p, width, map.len()).any(|q| map[q] == other) {
-            table[regions[p] as usize] = RELABEL_KEEP;
-        }
-    }
+/// Whether a pixel labeled `class` lies within `radius` (city-block) of pixel `p` of `map`
+/// (`width` pixels a row): what region_near.comp gives a center.
+pub fn label_near(map: &[u32], width: usize, p: usize, class: u32, radius: u32) -> bool {
+    let height = map.len() / width;
+    let (x, y, r) = (p % width, p / width, radius as usize);
+    (y.saturating_sub(r)..(y + r + 1).min(height)).any(|qy| {
+        let reach = r - qy.abs_diff(y);
+        (x.saturating_sub(reach)..(x + reach + 1).min(width))
+            .any(|qx| map[qy * width + qx] == class)
+    })
 }
 
 /// An observed Gaussian's center in a view: the label region it lies in, its depth there
-/// ([`edge_depth`], capped at the rule's depth), and the Gaussian's consensus class.
+/// ([`edge_depth`], capped at the rule's depth), the Gaussian's consensus class, and whether
+/// a pixel labeled that class lies within the rule's `near` pixels ([`label_near`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct RegionSeed {
     pub region: u32,
     pub depth: u32,
     pub class: u32,
+    pub near: bool,
 }
 
-/// Every region holding seeds, with its relabel-table entry: the class holding
-/// `rule.min_share` of its deciding seeds (its deepest, all of them from `rule.depth`
-/// pixels inward); where none does and they split between the region's own label (in
-/// `map`, the view's labels, at the region's id: its first pixel) holding
-/// `rule.keep_share` and one other class c, `RELABEL_TOUCH_BIT | c` (kept if it touches a
-/// pixel labeled c); else NO_LABEL. Regions in increasing id.
+/// Every region holding seeds, with its new label: the class holding `rule.min_share` of its
+/// deciding seeds (its deepest, all of them from `rule.depth` pixels inward); where none
+/// does, its own label (in `map`, the view's labels, at the region's id: its first pixel)
+/// if that holds `rule.keep_share` of them and, with the seeds of other classes that lie
+/// near their class's label, `rule.min_share`; else NO_LABEL. Regions in increasing id.
 pub fn decide_regions(seeds: Vec<RegionSeed>, map: &[u32], rule: &RelabelRule) -> Vec<(u32, u32)> {
     debug_assert!(rule.min_share > 0.5, "a tie could hold min_share");
-    // (region, depth from deepest, class): by region, each region's deciding seeds first.
-    let mut seeds: Vec<(u32, Reverse<u32>, u32)> = seeds
+    // (region, depth from deepest, class, near): by region, each region's deciding seeds
+    // first.
+    let mut seeds: Vec<(u32, Reverse<u32>, u32, bool)> = seeds
         .into_iter()
-        .map(|s| (s.region, Reverse(s.depth), s.class))
+        .map(|s| (s.region, Reverse(s.depth), s.class, s.near))
         .collect();
     seeds.sort_unstable();
     let mut decided = Vec::new();
     for region in seeds.chunk_by(|a, b| a.0 == b.0) {
         let deciding = &region[..region.partition_point(|s| s.1 == region[0].1)];
-        // Sorted by class within one depth: runs of one class.
-        let runs = || {
-            deciding
-                .chunk_by(|a, b| a.2 == b.2)
-                .map(|run| (run[0].2, run.len()))
-        };
         let holds = |n: usize, share: f64| n as f64 >= share * deciding.len() as f64;
-        let (class, n) = runs().fold(
-            (NO_LABEL, 0),
-            |best, run| if run.1 > best.1 { run } else { best },
-        );
-        // Split between the region's own label (with its seed count) and one other class?
+        // Sorted by class within one depth: runs of one class.
+        let (class, n) = deciding
+            .chunk_by(|a, b| a.2 == b.2)
+            .map(|run| (run[0].2, run.len()))
+            .fold(
+                (NO_LABEL, 0),
+                |best, run| if run.1 > best.1 { run } else { best },
+            );
         let own = map[region[0].0 as usize];
-        let mut two = runs();
-        let own_and_other = match (two.next(), two.next(), two.next()) {
-            (Some((a, own_seeds)), Some((b, _)), None) if a == own => Some((own_seeds, b)),
-            (Some((a, _)), Some((b, own_seeds)), None) if b == own => Some((own_seeds, a)),
-            _ => None,
+        let own_seeds = deciding.iter().filter(|s| s.2 == own).count();
+        let near_seeds = deciding.iter().filter(|s| s.2 != own && s.3).count();
+        let label = if holds(n, rule.min_share) {
+            class
+        } else if holds(own_seeds, rule.keep_share) && holds(own_seeds + near_seeds, rule.min_share)
+        {
+            own
+        } else {
+            NO_LABEL
         };
-        let entry = match own_and_other {
-            _ if holds(n, rule.min_share) => class,
-            Some((own_seeds, other)) if holds(own_seeds, rule.keep_share) => {
-                RELABEL_TOUCH_BIT | other
-            }
-            _ => NO_LABEL,
-        };
-        decided.push((region[0].0, entry));
+        decided.push((region[0].0, label));
     }
     decided
 }

@@ -11,9 +11,7 @@
 
 use anyhow::Result;
 
-use super::consensus_relabel::{
-    decide_regions, is_touch_entry, relabel_view, RegionSeed, RelabelRule,
-};
+use super::consensus_relabel::{decide_regions, relabel_view, RegionSeed, RelabelRule};
 use super::consensus_segments::{label_regions, region_edges};
 use super::NO_LABEL;
 use crate::contract::params::RegionParams;
@@ -24,9 +22,10 @@ use crate::gpu::{Buffer, Gpu, Recorder};
 /// Workgroups one dispatch dimension holds (Vulkan's guaranteed minimum, lavapipe's limit).
 const MAX_GROUPS: u32 = 65_535;
 
-/// Deepest relabel depth region_depth searches for (its diamond of (2d + 1)^2 pixels stays
-/// far under a CPU driver's loop cap); a deeper rule relabels on the host.
-pub const MAX_GPU_DEPTH: u32 = 32;
+/// Farthest region_depth and region_near search (city-block; a diamond of (2d + 1)^2 pixels
+/// stays far under a CPU driver's loop cap); a rule reaching farther (`depth` or `near`)
+/// relabels on the host.
+pub const MAX_GPU_REACH: u32 = 32;
 
 /// What the region finder did over its views.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -45,9 +44,9 @@ pub struct RegionFinder<'a> {
     status: Buffer,
     out: Buffer,
     n: usize,
-    /// For [`RegionFinder::relabel`], made on its first call: the seeds' pixels, their
-    /// depths ([n] each) and the decided (region, label) pairs ([2n]).
-    relabel_bufs: Option<[Buffer; 3]>,
+    /// For [`RegionFinder::relabel`], made on its first call: the seeds' pixels, classes,
+    /// depths and near flags ([n] each) and the decided (region, label) pairs ([2n]).
+    relabel_bufs: Option<[Buffer; 5]>,
     pub stats: RegionStats,
 }
 
@@ -121,10 +120,10 @@ impl<'a> RegionFinder<'a> {
 
     /// `map` (`width` pixels a row) relabeled from `seeds`, the (pixel, class) of the
     /// observed Gaussians' centers, by `rule`: what [`relabel_view`] gives. The regions and
-    /// the seeds' regions and depths are found on the GPU, each region's label decided on
+    /// the seeds' regions, depths and near flags are found on the GPU, each region's label decided on
     /// the host from its seeds ([`decide_regions`]), the pixels rewritten on the GPU. A view
     /// past the GPU's reach (more seeds than the finder's Gaussians, an incomplete region
-    /// check, a depth past [`MAX_GPU_DEPTH`]) is relabeled on the host.
+    /// check, a depth or near radius past [`MAX_GPU_REACH`]) is relabeled on the host.
     pub fn relabel(
         &mut self,
         map: &[u32],
@@ -135,7 +134,7 @@ impl<'a> RegionFinder<'a> {
         if seeds.is_empty() {
             return Ok(map.to_vec()); // no region holds a seed: every one keeps its label
         }
-        if !Self::fits(map) || seeds.len() > self.n || rule.depth > MAX_GPU_DEPTH {
+        if !Self::fits(map) || seeds.len() > self.n || rule.depth.max(rule.near) > MAX_GPU_REACH {
             return Ok(self.relabel_on_host(map, width, seeds, rule));
         }
         let bufs = match self.relabel_bufs.take() {
@@ -144,7 +143,9 @@ impl<'a> RegionFinder<'a> {
                 let words = (self.n.max(1) * 4) as u64;
                 [
                     self.gpu.buffer("relabel-seed-pixels", words)?,
+                    self.gpu.buffer("relabel-seed-classes", words)?,
                     self.gpu.buffer("relabel-seed-depths", words)?,
+                    self.gpu.buffer("relabel-seed-near", words)?,
                     self.gpu.buffer("relabel-pairs", 2 * words)?,
                 ]
             }
@@ -154,38 +155,46 @@ impl<'a> RegionFinder<'a> {
         relabeled
     }
 
-    /// [`RegionFinder::relabel`] on the GPU with `bufs` (seed pixels, seed depths, pairs).
+    /// [`RegionFinder::relabel`] on the GPU with `bufs` (the seeds' pixels, classes, depths
+    /// and near flags, the decided pairs).
     fn relabel_with(
         &mut self,
-        [seed_pixels, seed_depths, pairs]: &[Buffer; 3],
+        [seed_pixels, seed_classes, seed_depths, seed_near, pairs]: &[Buffer; 5],
         map: &[u32],
         width: u32,
         seeds: &[(u32, u32)],
         rule: &RelabelRule,
     ) -> Result<Vec<u32>> {
-        let pixels: Vec<u32> = seeds.iter().map(|s| s.0).collect();
+        let (pixels, classes): (Vec<u32>, Vec<u32>) = seeds.iter().copied().unzip();
         self.gpu.upload(seed_pixels, 0, &pixels)?;
+        self.gpu.upload(seed_classes, 0, &classes)?;
         let mut params = self.upload_view(map, width, seed_pixels.address_words(4)?)?;
         params.n = seeds.len() as u32;
+        params.classes_addr = seed_classes.address_words(4)?;
         params.depth_addr = seed_depths.address_words(4)?;
+        params.near_addr = seed_near.address_words(4)?;
         params.pairs_addr = pairs.address_words(4)?;
         params.max_depth = rule.depth;
-        let lookups = |rec: &mut Recorder| {
+        params.near_radius = rule.near;
+        let per_seed = |rec: &mut Recorder| {
             let groups = ids::FUSE_REGION_LOOKUP.groups_for(params.n);
             rec.dispatch(ids::FUSE_REGION_LOOKUP, &[], &params, groups)?;
-            rec.dispatch(ids::FUSE_REGION_DEPTH, &[], &params, groups)
+            rec.dispatch(ids::FUSE_REGION_DEPTH, &[], &params, groups)?;
+            rec.dispatch(ids::FUSE_REGION_NEAR, &[], &params, groups)
         };
-        if !self.find_regions(&params, lookups)? {
+        if !self.find_regions(&params, per_seed)? {
             return Ok(self.relabel_on_host(map, width, seeds, rule));
         }
         let regions: Vec<u32> = self.gpu.download(&self.out, 0, seeds.len())?;
         let depths: Vec<u32> = self.gpu.download(seed_depths, 0, seeds.len())?;
+        let near: Vec<u32> = self.gpu.download(seed_near, 0, seeds.len())?;
         let found = (0..seeds.len())
             .filter(|&i| regions[i] != NO_LABEL)
             .map(|i| RegionSeed {
                 region: regions[i] & !REGION_EDGE_BIT,
                 depth: depths[i],
                 class: seeds[i].1,
+                near: near[i] != 0,
             });
         let decided: Vec<u32> = decide_regions(found.collect(), map, rule)
             .into_iter()
@@ -196,24 +205,13 @@ impl<'a> RegionFinder<'a> {
         }
         self.gpu.upload(pairs, 0, &decided)?;
         params.pairs = (decided.len() / 2) as u32;
-        let touch_tests = decided
-            .iter()
-            .skip(1)
-            .step_by(2)
-            .any(|&e| is_touch_entry(e));
-        self.rewrite_labels(&params, map.len(), touch_tests)
+        self.rewrite_labels(&params, map.len())
     }
 
     /// Rewrites the uploaded view's labels from the decided pairs of `params` (the table
-    /// filled with RELABEL_KEEP, the pairs scattered into it, the touch entries resolved
-    /// where `touch_tests` says any pair holds one, every pixel looked up) and downloads
-    /// them.
-    fn rewrite_labels(
-        &mut self,
-        params: &RegionParams,
-        pixels: usize,
-        touch_tests: bool,
-    ) -> Result<Vec<u32>> {
+    /// filled with RELABEL_KEEP, the pairs scattered into it, every pixel looked up) and
+    /// downloads them.
+    fn rewrite_labels(&mut self, params: &RegionParams, pixels: usize) -> Result<Vec<u32>> {
         let [labels, table, _] = self.pixel_bufs.as_ref().expect("sized by upload_view");
         let mut rec = Recorder::new(self.gpu)?;
         let m0 = rec.mark();
@@ -223,10 +221,6 @@ impl<'a> RegionFinder<'a> {
         rec.dispatch(ids::FUSE_REGION_RELABEL_SCATTER, &[], params, pair_groups)?;
         rec.barrier();
         let pixel_groups = ids::FUSE_REGION_RELABEL.groups_for(pixels as u32);
-        if touch_tests {
-            rec.dispatch(ids::FUSE_REGION_RELABEL_TOUCH, &[], params, pixel_groups)?;
-            rec.barrier();
-        }
         rec.dispatch(ids::FUSE_REGION_RELABEL, &[], params, pixel_groups)?;
         let m1 = rec.mark();
         let t = rec.submit_and_wait()?;
@@ -298,10 +292,13 @@ impl<'a> RegionFinder<'a> {
             // Set by the relabeling that reads them.
             depth_addr: [0; 2],
             pairs_addr: [0; 2],
+            classes_addr: [0; 2],
+            near_addr: [0; 2],
             width,
             height: (map.len() / width.max(1) as usize) as u32,
             n: self.n as u32,
             max_depth: 0,
+            near_radius: 0,
             pairs: 0,
         })
     }
