@@ -83,8 +83,9 @@ pub struct FuseArgs {
     /// views, so object edges fall where the pixels put them (the best held-out mIoU under
     /// flicker; visits every view twice). A region whose Gaussians' classes are mixed is
     /// left undecided (its pixels count for the consensus class of each Gaussian that
-    /// renders there), unless its own class holds a quarter of them and the others lie
-    /// within 8 pixels of their own class's label: a label edge drawn a few pixels off.
+    /// renders there), unless its own class holds a quarter of them and, with those of
+    /// other classes lying within 8 pixels of their own class's label (a label edge drawn a
+    /// few pixels off), 85%.
     #[arg(long)]
     relabel: bool,
     /// Relative depth tolerance of the visibility test (> 0): vote --occlusion's, against the
