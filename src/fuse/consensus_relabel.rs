@@ -54,8 +54,8 @@ pub struct RelabelRule {
     /// else it is unlabeled. Boundary noise shifts a label edge by a few pixels: a small or
     /// thin object (a lamp, a cup) loses part of its region to its neighbours and takes
     /// part of theirs, so its remnant regions hold its neighbours' Gaussians, each a few
-    /// pixels from its own class's label; unlabeling those regions would take away the only
-    /// views that still show it. In a flicker merge (two touching objects given one class)
+    /// pixels from a pixel labeled with its neighbour's class; unlabeling those regions
+    /// would take away the only views that still show it. In a flicker merge (two touching objects given one class)
     /// the flickered object's Gaussians fill its whole extent, most of them far from any
     /// pixel of their class, which flicker took from this view.
     pub keep_share: f64,
