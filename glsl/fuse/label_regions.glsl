@@ -58,6 +58,13 @@ uint neighbour(uint p, uint k) {
     }
 }
 
+// Pixel (x, y)'s index, or NO_LABEL outside the image: the diamond searches of region_depth
+// and region_near.
+uint pixel_at(int x, int y) {
+    bool inside = x >= 0 && y >= 0 && x < int(pc.width) && y < int(pc.height);
+    return inside ? uint(y) * pc.width + uint(x) : NO_LABEL;
+}
+
 // The root of pixel p's tree (links only point to smaller indices, so this ends).
 uint find_root(uint p) {
     uint up = parent.data[p];

@@ -34,8 +34,8 @@ void main() {
             continue;
         }
         for (int dx = -reach; dx <= reach; dx++) {
-            int qx = x + dx;
-            if (qx >= 0 && qx < int(pc.width) && region.data[uint(qy) * pc.width + uint(qx)] != id) {
+            uint q = pixel_at(x + dx, qy);
+            if (q != NO_LABEL && region.data[q] != id) {
                 nearest = min(nearest, abs(dx) + abs(dy));
             }
         }

@@ -39,8 +39,8 @@ void main() {
             continue;
         }
         for (int dx = -reach; dx <= reach; dx++) {
-            int qx = x + dx;
-            if (qx >= 0 && qx < int(pc.width) && labels.data[uint(qy) * pc.width + uint(qx)] == class_id) {
+            uint q = pixel_at(x + dx, qy);
+            if (q != NO_LABEL && labels.data[q] == class_id) {
                 near = 1u;
                 break;
             }

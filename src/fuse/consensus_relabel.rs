@@ -55,9 +55,9 @@ pub struct RelabelRule {
     /// thin object (a lamp, a cup) loses part of its region to its neighbours and takes
     /// part of theirs, so its remnant regions hold its neighbours' Gaussians, each a few
     /// pixels from a pixel labeled with its neighbour's class; unlabeling those regions
-    /// would take away the only views that still show it. In a flicker merge (two touching objects given one class)
-    /// the flickered object's Gaussians fill its whole extent, most of them far from any
-    /// pixel of their class, which flicker took from this view.
+    /// would take away the only views that still show it. In a flicker merge (two touching
+    /// objects given one class) the flickered object's Gaussians fill its whole extent,
+    /// most of them far from any pixel of their class, which flicker took from this view.
     pub keep_share: f64,
     /// How near (city-block pixels) a center of another class must lie to a pixel labeled
     /// its class to count for its region's own label ([`RelabelRule::keep_share`]). The

@@ -120,10 +120,11 @@ impl<'a> RegionFinder<'a> {
 
     /// `map` (`width` pixels a row) relabeled from `seeds`, the (pixel, class) of the
     /// observed Gaussians' centers, by `rule`: what [`relabel_view`] gives. The regions and
-    /// the seeds' regions, depths and near flags are found on the GPU, each region's label decided on
-    /// the host from its seeds ([`decide_regions`]), the pixels rewritten on the GPU. A view
-    /// past the GPU's reach (more seeds than the finder's Gaussians, an incomplete region
-    /// check, a depth or near radius past [`MAX_GPU_REACH`]) is relabeled on the host.
+    /// the seeds' regions, depths and near flags are found on the GPU, each region's label
+    /// decided on the host from its seeds ([`decide_regions`]), the pixels rewritten on the
+    /// GPU. A view past the GPU's reach (more seeds than the finder's Gaussians, an
+    /// incomplete region check, a depth or near radius past [`MAX_GPU_REACH`]) is relabeled
+    /// on the host.
     pub fn relabel(
         &mut self,
         map: &[u32],
