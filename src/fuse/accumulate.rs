@@ -121,6 +121,10 @@ pub struct FuseStats {
     /// Setting up the evidence and, after each pass, assigning it on the GPU (or
     /// downloading and widening it for the host), streaming rows where asked.
     pub evidence_s: f64,
+    /// Consensus methods: the host's neighbour search and clustering of the segments, and
+    /// the segments' decision (the observations are `view_s`).
+    pub segments_s: f64,
+    pub decide_s: f64,
     pub views_per_s: f64,
     pub peak_device_bytes: u64,
     /// Device memory of the scene as this method uploaded it (only what it reads).
@@ -462,8 +466,8 @@ impl ViewLabels<'_> {
 
 /// Worker threads reading label maps ahead of the GPU, and how many views they may run
 /// ahead (each a label map in memory).
-const LABEL_THREADS: usize = 4;
-const LABELS_AHEAD: usize = 8;
+pub(crate) const LABEL_THREADS: usize = 4;
+pub(crate) const LABELS_AHEAD: usize = 8;
 
 /// Bytes per pixel of the weighted methods' carried state between windows: (T, done).
 const CONTRIB_CARRY_BYTES: u64 = 8;

@@ -8,7 +8,8 @@
 use anyhow::{ensure, Result};
 
 use super::accumulate::{
-    center_params, check_map_size, FuseConfig, FuseStats, LabelSource, NO_LABEL,
+    center_params, check_map_size, FuseConfig, FuseStats, LabelSource, LABELS_AHEAD, LABEL_THREADS,
+    NO_LABEL,
 };
 use super::assign::Assignment;
 use super::consensus_cluster::cluster_segments;
@@ -23,6 +24,7 @@ use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, Gpu, Recorder};
 use crate::render::{GpuScene, Rasterizer};
 use crate::scene::Camera;
+use crate::util::prefetch_ordered;
 
 /// What a consensus method lifts: the scene on the GPU and its centers (the host builds the
 /// neighbour graph from them), the cameras and their label maps in compact class ids.
@@ -73,9 +75,13 @@ pub fn consensus_run(
         input.scene.n
     );
     let (observations, centers, mut stats) = observe(input, cfg, params.occlusion, progress)?;
+    stats.view_s = start.elapsed().as_secs_f64();
     let knn = nearest_neighbours(input.means, params.neighbours);
     let segment = cluster_segments(&observations, &knn, params);
+    stats.segments_s = start.elapsed().as_secs_f64() - stats.view_s;
+    let decide_start = std::time::Instant::now();
     let consensus = decide(&observations, &knn, segment, input.classes, params);
+    stats.decide_s = decide_start.elapsed().as_secs_f64();
     stats.wall_s = start.elapsed().as_secs_f64();
     stats.views_per_s = stats.views as f64 / stats.wall_s.max(1e-9);
     Ok(ConsensusRun {
@@ -197,35 +203,55 @@ pub fn observe(
     raster.set_split_sizes(cfg.split);
     let mut per_view = Vec::with_capacity(cams.len());
     let mut pixels = Vec::with_capacity(cams.len());
-    for (view, cam) in cams.iter().enumerate() {
-        progress(view, cams.len());
-        let Some(map) = labels.labels(view, cam)? else {
-            per_view.push(Vec::new());
-            pixels.push(Vec::new());
-            continue;
-        };
-        check_map_size(cam, &map)?;
-        ensure!(
-            map.iter().all(|&l| l == NO_LABEL || (l as usize) < classes),
-            "labels of view {} hold a class outside the {classes} classes",
-            cam.name
-        );
-        stats.views_with_labels += 1;
-        stats.gpu_ms += center_pixels(&mut raster, scene, cam, &pixels_buf, cfg, occlusion)?;
-        stats.peak_device_bytes = stats.peak_device_bytes.max(gpu.memory_reserved());
-        let centers: Vec<u32> = gpu.download(&pixels_buf, 0, n)?;
-        let regions = finder.regions_at(&map, cam.width, &pixels_buf)?;
-        let (mut observed, mut seen) = (Vec::new(), Vec::new());
-        for (g, (&p, &r)) in centers.iter().zip(&regions).enumerate() {
-            if r != NO_LABEL {
-                let (region, edge) = (r & !REGION_EDGE_BIT, r & REGION_EDGE_BIT != 0);
-                observed.push((g as u32, map[p as usize], region, edge));
-                seen.push((g as u32, p));
-            }
+    // Label maps are read (decoded) and checked on worker threads a few views ahead, as
+    // the FlashSplat pass does: read here in turn, they took most of a view's host time.
+    let read = |view: usize| -> Result<Option<Vec<u32>>> {
+        let (cam, map) = (&cams[view], labels.labels(view, &cams[view])?);
+        if let Some(map) = &map {
+            check_map_size(cam, map)?;
+            ensure!(
+                map.iter().all(|&l| l == NO_LABEL || (l as usize) < classes),
+                "labels of view {} hold a class outside the {classes} classes",
+                cam.name
+            );
         }
-        per_view.push(observed);
-        pixels.push(seen);
-    }
+        Ok(map)
+    };
+    let mut waited_since = std::time::Instant::now();
+    prefetch_ordered(
+        cams.len(),
+        LABEL_THREADS,
+        LABELS_AHEAD,
+        read,
+        |view, map| {
+            stats.label_wait_s += waited_since.elapsed().as_secs_f64();
+            progress(view, cams.len());
+            let Some(map) = map else {
+                per_view.push(Vec::new());
+                pixels.push(Vec::new());
+                waited_since = std::time::Instant::now();
+                return Ok(());
+            };
+            let cam = &cams[view];
+            stats.views_with_labels += 1;
+            stats.gpu_ms += center_pixels(&mut raster, scene, cam, &pixels_buf, cfg, occlusion)?;
+            stats.peak_device_bytes = stats.peak_device_bytes.max(gpu.memory_reserved());
+            let centers: Vec<u32> = gpu.download(&pixels_buf, 0, n)?;
+            let regions = finder.regions_at(&map, cam.width, &pixels_buf)?;
+            let (mut observed, mut seen) = (Vec::new(), Vec::new());
+            for (g, (&p, &r)) in centers.iter().zip(&regions).enumerate() {
+                if r != NO_LABEL {
+                    let (region, edge) = (r & !REGION_EDGE_BIT, r & REGION_EDGE_BIT != 0);
+                    observed.push((g as u32, map[p as usize], region, edge));
+                    seen.push((g as u32, p));
+                }
+            }
+            per_view.push(observed);
+            pixels.push(seen);
+            waited_since = std::time::Instant::now();
+            Ok(())
+        },
+    )?;
     progress(cams.len(), cams.len());
     stats.gpu_ms += finder.stats.gpu_ms;
     stats.region_host_fallbacks = finder.stats.host_fallbacks;

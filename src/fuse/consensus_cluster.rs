@@ -12,13 +12,14 @@
 //! neighbours already formed rather than whichever neighbour it was tested with first.
 
 use std::cmp::Reverse;
-use std::collections::{BinaryHeap, HashMap};
+use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
 
 use super::consensus_decide::ConsensusParams;
 use super::consensus_segments::{co_occurrence, Observations};
 use crate::contract::NO_NEIGHBOUR;
 use crate::util::parallel_map;
+use crate::util::quad_heap::QuadHeap;
 
 /// What the views said of the neighbour pairs between two segments, summed over the pairs
 /// ([`co_occurrence`] per pair).
@@ -59,60 +60,81 @@ impl PairEvidence {
     }
 }
 
-/// A segment's observations counted per (view, region), sorted.
+/// A segment's observations counted per (view, region), and per view its dominant region.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub struct RegionCounts(pub Vec<(u32, u32, u32)>);
+pub struct RegionCounts {
+    /// (view, region, observations), sorted by view, then region.
+    counts: Vec<(u32, u32, u32)>,
+    /// Per view: the region holding most of the segment's observations (ties: the lowest
+    /// region id) and how many of its observations the view holds; sorted by view. Kept
+    /// up to date on every join, because every candidate a segment is tested with reads it.
+    /// Empty while it would equal `counts` (one region per view: every single Gaussian,
+    /// which is most segments, so they hold their observations once).
+    dominant: Vec<(u32, u32, u32)>,
+}
 
 impl RegionCounts {
     pub fn of_gaussian(obs: &Observations, g: usize) -> RegionCounts {
-        RegionCounts(
-            obs.row(g)
+        RegionCounts {
+            counts: obs
+                .row(g)
                 .map(|i| (obs.view[i], obs.region[i], 1))
                 .collect(),
-        )
+            dominant: Vec::new(), // one observation per view: the counts
+        }
     }
 
-    fn merged(&self, other: &RegionCounts) -> RegionCounts {
-        let (a, b) = (&self.0, &other.0);
-        let mut out = Vec::with_capacity(a.len() + b.len());
-        let (mut i, mut j) = (0, 0);
-        while i < a.len() || j < b.len() {
-            let key = |e: &(u32, u32, u32)| (e.0, e.1);
-            if j == b.len() || (i < a.len() && key(&a[i]) < key(&b[j])) {
-                out.push(a[i]);
-                i += 1;
-            } else if i == a.len() || key(&b[j]) < key(&a[i]) {
-                out.push(b[j]);
-                j += 1;
-            } else {
-                out.push((a[i].0, a[i].1, a[i].2 + b[j].2));
-                (i, j) = (i + 1, j + 1);
+    /// Adds `other`'s counts. The smaller of the two is added into the larger, so a large
+    /// segment taking in a Gaussian costs the Gaussian's views (with binary searches), not
+    /// a copy of the segment's counts.
+    fn absorb(&mut self, mut other: RegionCounts) {
+        if other.counts.len() > self.counts.len() {
+            std::mem::swap(self, &mut other);
+        }
+        if self.dominant.is_empty() {
+            self.dominant = self.counts.clone();
+        }
+        let mut fresh = Vec::new();
+        for &(view, region, count) in &other.counts {
+            match self
+                .counts
+                .binary_search_by_key(&(view, region), |e| (e.0, e.1))
+            {
+                Ok(i) => self.counts[i].2 += count,
+                Err(_) => fresh.push((view, region, count)),
             }
         }
-        RegionCounts(out)
+        merge_into(&mut self.counts, &fresh);
+        let mut new_views = Vec::new();
+        for &(view, ..) in other.dominant() {
+            let d = self.dominant_in(view);
+            match self.dominant.binary_search_by_key(&d.0, |e| e.0) {
+                Ok(i) => self.dominant[i] = d,
+                Err(_) => new_views.push(d),
+            }
+        }
+        merge_into(&mut self.dominant, &new_views);
     }
 
-    /// Per view: the region holding most of the segment's observations (ties: the lowest
-    /// region id) and how many of its observations the view holds, by view.
-    pub fn dominant(&self) -> Vec<(u32, u32, u32)> {
-        let mut out: Vec<(u32, u32, u32)> = Vec::new();
-        let mut best = 0;
-        for &(view, region, count) in &self.0 {
-            match out.last_mut() {
-                Some(last) if last.0 == view => {
-                    last.2 += count;
-                    if count > best {
-                        last.1 = region;
-                        best = count;
-                    }
-                }
-                _ => {
-                    out.push((view, region, count));
-                    best = count;
-                }
+    /// (view, dominant region, observations) of one view, from the counts.
+    fn dominant_in(&self, view: u32) -> (u32, u32, u32) {
+        let first = self.counts.partition_point(|e| e.0 < view);
+        let (mut best, mut total) = ((view, 0, 0), 0);
+        for &(_, region, count) in self.counts[first..].iter().take_while(|e| e.0 == view) {
+            total += count;
+            if count > best.2 {
+                best = (view, region, count);
             }
         }
-        out
+        (view, best.1, total)
+    }
+
+    /// Per view: (view, dominant region, observations the view holds), by view.
+    pub fn dominant(&self) -> &[(u32, u32, u32)] {
+        match self.dominant.is_empty() {
+            true => &self.counts,
+            false => &self.dominant,
+        }
     }
 
     /// Of the views that observed both segments, weighed by the fewer of the two segments'
@@ -122,24 +144,37 @@ impl RegionCounts {
     /// halves of a ceiling apart, and flicker then decided each half on a few views); a
     /// ceiling and its wall are both seen whole in the views that keep them apart.
     pub fn agreement(&self, other: &RegionCounts) -> (u64, u64) {
+        // Each view of the segment seen in fewer views is looked up in the other's.
         let (a, b) = (self.dominant(), other.dominant());
-        let (mut i, mut j, mut same, mut differ) = (0, 0, 0, 0);
-        while i < a.len() && j < b.len() {
-            match a[i].0.cmp(&b[j].0) {
-                std::cmp::Ordering::Less => i += 1,
-                std::cmp::Ordering::Greater => j += 1,
-                std::cmp::Ordering::Equal => {
-                    let say = a[i].2.min(b[j].2) as u64;
-                    if a[i].1 == b[j].1 {
-                        same += say;
-                    } else {
-                        differ += say;
-                    }
-                    (i, j) = (i + 1, j + 1);
+        let (few, many) = if a.len() <= b.len() { (a, b) } else { (b, a) };
+        let (mut same, mut differ) = (0, 0);
+        for &(view, region, count) in few {
+            if let Ok(i) = many.binary_search_by_key(&view, |e| e.0) {
+                let say = count.min(many[i].2) as u64;
+                match region == many[i].1 {
+                    true => same += say,
+                    false => differ += say,
                 }
             }
         }
         (same, differ)
+    }
+}
+
+/// Merges `fresh` (sorted, no element equal to one of `into`) into the sorted `into`, from
+/// the back, in place.
+fn merge_into<T: Ord + Copy + Default>(into: &mut Vec<T>, fresh: &[T]) {
+    let (mut i, mut j) = (into.len(), fresh.len());
+    into.resize(i + j, T::default());
+    while j > 0 {
+        let at = i + j - 1;
+        if i > 0 && into[i - 1] > fresh[j - 1] {
+            into[at] = into[i - 1];
+            i -= 1;
+        } else {
+            into[at] = fresh[j - 1];
+            j -= 1;
+        }
     }
 }
 
@@ -161,8 +196,10 @@ pub fn may_join(
 }
 
 /// A candidate join in the queue: highest priority first, then most views together, then
-/// the lowest segment ids; `evidence` is what it was queued with (stale once it changed).
-type Candidate = (i64, u32, Reverse<u32>, Reverse<u32>, [u32; 4]);
+/// the lowest segment ids. Stale once the pair's evidence gives another (priority,
+/// together): a candidate whose evidence changed without changing those two stands where
+/// its requeued copy would, so taking it with the current evidence decides the same.
+type Candidate = (i64, u32, Reverse<u32>, Reverse<u32>);
 
 /// Segment id per Gaussian (numbered by first Gaussian). Every segment starts as one Gaussian
 /// and is named by its lowest Gaussian index. Candidates (adjacent segments with their summed
@@ -172,25 +209,23 @@ type Candidate = (i64, u32, Reverse<u32>, Reverse<u32>, [u32; 4]);
 pub fn cluster_segments(obs: &Observations, knn: &[u32], p: &ConsensusParams) -> Vec<u32> {
     let n = obs.n;
     let mut graph = SegmentGraph::new(obs, knn, p.neighbours);
-    let mut queue: BinaryHeap<Candidate> = BinaryHeap::new();
-    for a in 0..n as u32 {
-        for (&b, &e) in &graph.edges[a as usize] {
-            if a < b {
-                queue.push(candidate(a, b, e, p));
-            }
+    let mut queue = Queue::new(&graph, p);
+    let mut changed = Vec::new();
+    while let Some(queued) = queue.pop() {
+        let (_, _, Reverse(a), Reverse(b)) = queued;
+        if graph.parent[a as usize] != a || graph.parent[b as usize] != b {
+            continue; // joined another segment (most stale candidates: no map lookup needed)
         }
-    }
-    while let Some((_, _, Reverse(a), Reverse(b), queued)) = queue.pop() {
         let current = graph.edges[a as usize].get(&b).copied();
-        if current.map(words) != Some(queued) {
+        let Some(evidence) = current.filter(|&e| candidate(a, b, e, p) == queued) else {
             continue; // a segment joined another, or the evidence grew: queued again since
-        }
-        let evidence = current.expect("checked above");
+        };
         let regions = (&graph.regions[a as usize], &graph.regions[b as usize]);
         if may_join(&evidence, regions.0, regions.1, p) {
-            for (c, e) in graph.join(a, b) {
+            graph.join(a, b, &mut changed);
+            for &(c, e) in &changed {
                 let (lo, hi) = (a.min(c), a.max(c));
-                queue.push(candidate(lo, hi, e, p));
+                queue.heap.push(candidate(lo, hi, e, p));
             }
         }
     }
@@ -201,13 +236,46 @@ pub fn cluster_segments(obs: &Observations, knn: &[u32], p: &ConsensusParams) ->
     renumber(&roots)
 }
 
-fn words(e: PairEvidence) -> [u32; 4] {
-    [e.together, e.apart, e.on_edge, e.pairs]
+/// The candidates, greatest first: the neighbour pairs' in one sorted list, and those a
+/// join changed in a heap. Most candidates are the pairs', and a heap of millions of them
+/// spent most of the clustering's time on cache misses; sorted once, they are read in order.
+struct Queue {
+    /// Ascending: the greatest at the end.
+    sorted: Vec<Candidate>,
+    heap: QuadHeap<Candidate>,
+}
+
+impl Queue {
+    fn new(graph: &SegmentGraph, p: &ConsensusParams) -> Queue {
+        let mut sorted: Vec<Candidate> = Vec::new();
+        for (a, edges) in graph.edges.iter().enumerate() {
+            let a = a as u32;
+            sorted.extend(
+                edges
+                    .iter()
+                    .filter(|(&b, _)| a < b)
+                    .map(|(&b, &e)| candidate(a, b, e, p)),
+            );
+        }
+        sorted.sort_unstable();
+        Queue {
+            sorted,
+            heap: QuadHeap::new(),
+        }
+    }
+
+    fn pop(&mut self) -> Option<Candidate> {
+        match (self.sorted.last(), self.heap.peek()) {
+            (Some(s), Some(h)) if h > s => self.heap.pop(),
+            (Some(_), _) => self.sorted.pop(),
+            (None, _) => self.heap.pop(),
+        }
+    }
 }
 
 fn candidate(a: u32, b: u32, e: PairEvidence, p: &ConsensusParams) -> Candidate {
     let key = e.priority(p.apart_weight);
-    (key, e.together, Reverse(a), Reverse(b), words(e))
+    (key, e.together, Reverse(a), Reverse(b))
 }
 
 /// Every neighbour pair once, with what the views said of it (on every core: millions of
@@ -277,8 +345,18 @@ struct SegmentGraph {
 impl SegmentGraph {
     fn new(obs: &Observations, knn: &[u32], k: usize) -> SegmentGraph {
         let n = obs.n;
-        let mut edges: Vec<Adjacent> = vec![Adjacent::default(); n];
-        for (g, h, e) in neighbour_pairs(obs, knn, k) {
+        let pairs = neighbour_pairs(obs, knn, k);
+        let mut degree = vec![0usize; n];
+        for &(g, h, _) in &pairs {
+            degree[g as usize] += 1;
+            degree[h as usize] += 1;
+        }
+        // Sized once rather than grown pair by pair (a million maps, each rehashed as it grows).
+        let mut edges: Vec<Adjacent> = degree
+            .iter()
+            .map(|&d| Adjacent::with_capacity_and_hasher(d, Default::default()))
+            .collect();
+        for (g, h, e) in pairs {
             edges[g as usize].insert(h, e);
             edges[h as usize].insert(g, e);
         }
@@ -289,17 +367,17 @@ impl SegmentGraph {
         }
     }
 
-    /// Joins segment `b` into `a` (a < b); returns the segments whose evidence with `a`
-    /// changed, with that evidence.
-    fn join(&mut self, a: u32, b: u32) -> Vec<(u32, PairEvidence)> {
+    /// Joins segment `b` into `a` (a < b); `changed` gets the segments whose evidence with
+    /// `a` changed, with that evidence (a buffer reused over the joins).
+    fn join(&mut self, a: u32, b: u32, changed: &mut Vec<(u32, PairEvidence)>) {
         let (ai, bi) = (a as usize, b as usize);
         self.parent[bi] = a;
-        self.regions[ai] = self.regions[ai].merged(&self.regions[bi]);
-        self.regions[bi] = RegionCounts::default();
+        let taken = std::mem::take(&mut self.regions[bi]);
+        self.regions[ai].absorb(taken);
         let mut moved = std::mem::take(&mut self.edges[bi]);
         moved.remove(&a);
         self.edges[ai].remove(&b);
-        let mut changed = Vec::with_capacity(moved.len());
+        changed.clear();
         for (c, e) in moved {
             let other = &mut self.edges[c as usize];
             other.remove(&b);
@@ -309,7 +387,6 @@ impl SegmentGraph {
             self.edges[c as usize].insert(a, sum);
             changed.push((c, sum));
         }
-        changed
     }
 }
 

@@ -5,6 +5,7 @@ pub mod interrupt;
 pub mod memory;
 pub mod npy;
 pub mod parallel;
+pub mod quad_heap;
 pub mod rng;
 
 pub use atomic_write::{

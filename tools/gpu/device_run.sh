@@ -4,12 +4,15 @@
 # (at most 8 files come back): summary.txt, tests.log, bench.log, ours.jsonl, peers.jsonl,
 # info.txt, and the built peers (peers_built.tar.xz) for a later call.
 #
-# usage: bash tools/gpu/device_run.sh [STAGE...]   (default: all)
+# usage: bash tools/gpu/device_run.sh [STAGE...]   (default: tests ours lift peers)
 #   tests   every test binary, validation layer and synchronization validation on
 #   ours    semsplat's benchmarks: sort 2^25, forward and training at C = 0/16/32/64 on a
 #           1M random scene and an office room at ~1M Gaussians (spacing 0.0053, one view), fusion of 1M x 200 views
 #           of the random scene and of the room (~1M Gaussians seen from 200 views)
 #   peers   gsplat 1.5.3 and FlashSplat's rasterizer on the scenes `ours` exported
+#   lift    the scene packed with LIFT_SCENE fused by FlashSplat, segment consensus and
+#           --relabel (train views' noisy labels), each evaluated on the held-out views:
+#           lift.tar (classes, eval JSON, seconds) for tools/gpu/lift_check.py compare
 # env: PEERS: the peers to build and run (default "gsplat flashsplat");
 #      BUDGET_S (default 540): benchmarks starting after this many seconds are skipped;
 #      N, W, H, VIEWS, SPACING: scene size (1000000, 1920x1080, 200 fusion views, room
@@ -28,7 +31,7 @@ mkdir -p "$OUT"
 summary=$OUT/summary.txt
 say() { printf '[%4ds] %s\n' $(($(date +%s) - START)) "$*" | tee -a "$summary"; }
 left() { echo $((BUDGET_S - ($(date +%s) - START))); }
-stages=${*:-tests ours peers}
+stages=${*:-tests ours lift peers}
 
 setup() {
   [ -f "$gpu/bins.tar.xz" ] || { say "no .gpu/bins.tar.xz: run tools/gpu/pack.sh and carry .gpu"; exit 2; }
@@ -87,7 +90,7 @@ build_peers() {
 run_tests() {
   local logs=/tmp/test_logs
   rm -rf "$logs" && mkdir -p "$logs"
-  ls "$bin/tests" | grep -E "${TESTS:-.}" | xargs -P 4 -I{} sh -c \
+  ls "$bin/tests" | grep -E "${TESTS:-.}" | xargs -P 6 -I{} sh -c \
     "cd '$built' && timeout 240 '$bin/tests/{}' >'$logs/{}.log' 2>&1; echo \"{} \$?\" >>'$logs/rc'"
   local failed=0
   while read -r name rc; do
@@ -107,7 +110,8 @@ b() {
   [[ $case =~ ${CASES:-.} ]] || return 0
   [ "$(left)" -gt 20 ] || { say "skipped $case (budget)"; return; }
   echo "=== $case: semsplat $*" >>"$OUT/bench.log"
-  if timeout "$(left)" semsplat "$@" --json >/tmp/b.json 2>>"$OUT/bench.log"; then
+  local limit; limit=$(left); [ "${CAP:-$limit}" -lt "$limit" ] && limit=$CAP
+  if timeout "$limit" semsplat "$@" --json >/tmp/b.json 2>>"$OUT/bench.log"; then
     python3 -c 'import json,sys; d=json.load(open("/tmp/b.json")); d["case"]=sys.argv[1]; print(json.dumps(d))' \
       "$case" >>"$OUT/ours.jsonl"
   else
@@ -124,7 +128,7 @@ run_ours() {
   done
   # The first case again: a drift of the GPU's clocks over the run would show here.
   b "render random C=0 (repeat)" bench render "${big[@]}" --channels 0 --iters 10
-  if [[ -z ${CASES:-} || $CASES == *room* ]]; then
+  if [[ "render room C=0" =~ ${CASES:-.} ]]; then
     timeout 120 semsplat synth --preset office --spacing "${SPACING:-0.0053}" --views 1 \
       --test-views 0 --width "${W:-1920}" --height "${H:-1080}" --out /tmp/room \
       >>"$OUT/bench.log" 2>&1 || say "synth room failed"
@@ -150,6 +154,9 @@ run_ours() {
   b "fuse room x ${VIEWS:-200}" bench fuse --scene /tmp/room_fuse --views "${VIEWS:-200}" \
     --width "${W:-1920}" --height "${H:-1080}" --classes 16 \
     --methods flashsplat,vote,vote-weighted --export /tmp/exp_fuse_room
+  CAP=120 b "fuse room consensus x ${VIEWS:-200}" bench fuse --scene /tmp/room_fuse \
+    --views "${VIEWS:-200}" --width "${W:-1920}" --height "${H:-1080}" --classes 16 \
+    --methods segment-consensus,segment-consensus-relabel
   # Real size (#14): 6M Gaussians, as Mip-NeRF 360's garden.
   b "render random 6M C=16" bench render --n 6000000 --width "${W:-1920}" --height "${H:-1080}" \
     --channels 16 --iters 5
@@ -196,9 +203,19 @@ json.dump(runs, open("'"$OUT"'/peers.json", "w"), indent=1)' \
   say "peers done"
 }
 
+run_lift() {
+  [ -f "$gpu/lift/scene.tar.xz" ] || { say "no .gpu/lift: pack with LIFT_SCENE=dir"; return; }
+  mkdir -p /tmp/lift && tar -C /tmp/lift -xJf "$gpu/lift/scene.tar.xz"
+  timeout "$(left)" bash tools/gpu/lift_run.sh /tmp/lift /tmp/lift_out 2>>"$summary" \
+    || say "lift failed or ran out of budget"
+  tar -C /tmp/lift_out -cf "$OUT/lift.tar" --exclude='*.log' . 2>/dev/null
+  say "lift: $(tr '\n' ' ' </tmp/lift_out/seconds.txt 2>/dev/null)"
+}
+
 setup
 case " $stages " in *" peers "*) build_peers ;; esac
 case " $stages " in *" tests "*) run_tests ;; esac
+case " $stages " in *" lift "*) run_lift ;; esac
 case " $stages " in *" ours "*) run_ours ;; esac
 case " $stages " in *" peers "*) run_peers ;; esac
 say "finished"

@@ -9,6 +9,9 @@
 # env:   FLASHSPLAT_SRC  a git checkout or mirror of github.com/florinshen/flashsplat-rasterization
 #                        (default: cloned from GitHub into a temporary folder)
 #        GSPLAT_VERSION  default 1.5.3
+#        LIFT_SCENE      a `synth` folder (scene.ply, cameras.json, labels, labels_noisy) for
+#                        device_run.sh's `lift` stage: fused there, compared here
+#                        (tools/gpu/compare_lift.py)
 set -euo pipefail
 say() { printf '[pack] %s\n' "$*"; }
 die() { printf '[pack] ERROR: %s\n' "$*" >&2; exit 1; }
@@ -70,6 +73,14 @@ git -C "$src" archive --prefix=flashsplat-rasterization/ HEAD \
       'flashsplat-rasterization/third_party/glm/test' 2>/dev/null \
   | gzip -9 >"$out/src/flashsplat-rasterization.tar.gz"
 echo "$commit" >"$out/src/flashsplat-rasterization.commit"
+
+if [ -n "${LIFT_SCENE:-}" ]; then
+  say "packing the lift scene $LIFT_SCENE"
+  mkdir -p "$out/lift"
+  tar -C "$LIFT_SCENE" -cf - scene.ply cameras.json labels labels_noisy \
+    $(cd "$LIFT_SCENE" && ls classes.json scene.classes.json 2>/dev/null) \
+    | xz -6 -T0 >"$out/lift/scene.tar.xz" || die "cannot pack $LIFT_SCENE"
+fi
 
 size=$(du -sm "$out" | cut -f1)
 tracked=$(git ls-files -z | du -cm --files0-from=- | tail -1 | cut -f1)
