@@ -122,7 +122,8 @@ pub struct FuseStats {
     /// downloading and widening it for the host), streaming rows where asked.
     pub evidence_s: f64,
     /// Consensus methods: the host's neighbour search and clustering of the segments, and
-    /// the segments' decision (the observations are `view_s`).
+    /// the segments' decision. Their `view_s` is the whole observation pass over the views
+    /// (its label waits included; with `--relabel` plus FlashSplat's pass).
     pub segments_s: f64,
     pub decide_s: f64,
     pub views_per_s: f64,
