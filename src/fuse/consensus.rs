@@ -204,7 +204,7 @@ pub fn observe(
     let mut per_view = Vec::with_capacity(cams.len());
     let mut pixels = Vec::with_capacity(cams.len());
     // Label maps are read (decoded) and checked on worker threads a few views ahead, as
-    // the FlashSplat pass does: read here in turn, they took most of a view's host time.
+    // the FlashSplat pass does, instead of in turn between the views' GPU work.
     let read = |view: usize| -> Result<Option<Vec<u32>>> {
         let (cam, map) = (&cams[view], labels.labels(view, &cams[view])?);
         if let Some(map) = &map {
@@ -236,8 +236,7 @@ pub fn observe(
             stats.views_with_labels += 1;
             stats.gpu_ms += center_pixels(&mut raster, scene, cam, &pixels_buf, cfg, occlusion)?;
             stats.peak_device_bytes = stats.peak_device_bytes.max(gpu.memory_reserved());
-            let centers: Vec<u32> = gpu.download(&pixels_buf, 0, n)?;
-            let regions = finder.regions_at(&map, cam.width, &pixels_buf)?;
+            let (centers, regions) = finder.regions_at(&map, cam.width, &pixels_buf)?;
             let (mut observed, mut seen) = (Vec::new(), Vec::new());
             for (g, (&p, &r)) in centers.iter().zip(&regions).enumerate() {
                 if r != NO_LABEL {

@@ -65,10 +65,16 @@ impl<'a> RegionFinder<'a> {
         })
     }
 
-    /// Per Gaussian, the region id of its center pixel in `centers` ([n], NO_LABEL: none) of
-    /// the view labeled `map` (`width` pixels a row), with [`REGION_EDGE_BIT`] set where the
-    /// pixel is on the region's edge; NO_LABEL where there is no pixel or it is unlabeled.
-    pub fn regions_at(&mut self, map: &[u32], width: u32, centers: &Buffer) -> Result<Vec<u32>> {
+    /// Per Gaussian, its center pixel as `centers` holds it ([n], NO_LABEL: none) and the
+    /// region id of that pixel in the view labeled `map` (`width` pixels a row), with
+    /// [`REGION_EDGE_BIT`] set where the pixel is on the region's edge; NO_LABEL where there
+    /// is no pixel or it is unlabeled. Both come back in one transfer.
+    pub fn regions_at(
+        &mut self,
+        map: &[u32],
+        width: u32,
+        centers: &Buffer,
+    ) -> Result<(Vec<u32>, Vec<u32>)> {
         if !Self::fits(map) {
             return self.on_host(map, width, centers);
         }
@@ -78,9 +84,21 @@ impl<'a> RegionFinder<'a> {
             rec.dispatch(ids::FUSE_REGION_LOOKUP, &[], &params, groups)
         };
         if self.find_regions(&params, lookup)? {
-            return Ok(self.gpu.download(&self.out, 0, self.n)?);
+            let bytes = (self.n * 4) as u64;
+            let [pixels, regions] = self.read_words([(centers, bytes), (&self.out, bytes)])?;
+            return Ok((pixels, regions));
         }
         self.on_host(map, width, centers)
+    }
+
+    /// The leading bytes of each buffer as u32 words, through one staging buffer and one
+    /// submission.
+    fn read_words<const K: usize>(&self, ranges: [(&Buffer, u64); K]) -> Result<[Vec<u32>; K]> {
+        let ranges = ranges.map(|(buffer, bytes)| (buffer, 0, bytes));
+        let parts = self.gpu.download_many(&ranges)?;
+        Ok(std::array::from_fn(|k| {
+            bytemuck::pod_collect_to_vec(&parts[k])
+        }))
     }
 
     /// Whether one dispatch over the pixels of `map` reaches them all (past 16.7M pixels
@@ -186,9 +204,9 @@ impl<'a> RegionFinder<'a> {
         if !self.find_regions(&params, per_seed)? {
             return Ok(self.relabel_on_host(map, width, seeds, rule));
         }
-        let regions: Vec<u32> = self.gpu.download(&self.out, 0, seeds.len())?;
-        let depths: Vec<u32> = self.gpu.download(seed_depths, 0, seeds.len())?;
-        let near: Vec<u32> = self.gpu.download(seed_near, 0, seeds.len())?;
+        let bytes = (seeds.len() * 4) as u64;
+        let [regions, depths, near] =
+            self.read_words([(&self.out, bytes), (seed_depths, bytes), (seed_near, bytes)])?;
         let found = (0..seeds.len())
             .filter(|&i| regions[i] != NO_LABEL)
             .map(|i| RegionSeed {
@@ -266,10 +284,16 @@ impl<'a> RegionFinder<'a> {
         Ok(self.gpu.download::<u32>(&self.status, 0, 1)?[0] == 0)
     }
 
-    fn on_host(&mut self, map: &[u32], width: u32, centers: &Buffer) -> Result<Vec<u32>> {
+    fn on_host(
+        &mut self,
+        map: &[u32],
+        width: u32,
+        centers: &Buffer,
+    ) -> Result<(Vec<u32>, Vec<u32>)> {
         self.stats.host_fallbacks += 1;
         let pixels: Vec<u32> = self.gpu.download(centers, 0, self.n)?;
-        Ok(regions_on_host(map, width as usize, &pixels))
+        let regions = regions_on_host(map, width as usize, &pixels);
+        Ok((pixels, regions))
     }
 
     /// Uploads the view's labels (buffers grown to fit) and gives the kernels' parameters,

@@ -2,7 +2,7 @@
 # Runs on a GPU machine lent through the `device` tool, in the repository root, with the
 # folder .gpu/ made by tools/gpu/pack.sh carried along. Writes its results under $OUT
 # (at most 8 files come back): summary.txt, tests.log, bench.log, ours.jsonl, peers.jsonl,
-# info.txt, and the built peers (peers_built.tar.xz) for a later call.
+# info.txt, lift.tar, and the built peers (peers_built.tar.xz) for a later call.
 #
 # usage: bash tools/gpu/device_run.sh [STAGE...]   (default: tests ours lift peers)
 #   tests   every test binary, validation layer and synchronization validation on

@@ -10,8 +10,8 @@
 #                        (default: cloned from GitHub into a temporary folder)
 #        GSPLAT_VERSION  default 1.5.3
 #        LIFT_SCENE      a `synth` folder (scene.ply, cameras.json, labels, labels_noisy) for
-#                        device_run.sh's `lift` stage: fused there, compared here
-#                        (tools/gpu/compare_lift.py)
+#                        device_run.sh's `lift` stage: fused there and here by
+#                        tools/gpu/lift_run.sh, compared by tools/gpu/lift_check.py compare
 set -euo pipefail
 say() { printf '[pack] %s\n' "$*"; }
 die() { printf '[pack] ERROR: %s\n' "$*" >&2; exit 1; }
