@@ -223,7 +223,7 @@ pub fn cluster_segments(obs: &Observations, knn: &[u32], p: &ConsensusParams) ->
         let regions = (&graph.regions[a as usize], &graph.regions[b as usize]);
         if may_join(&evidence, regions.0, regions.1, p) {
             graph.join(a, b, &mut changed);
-            for &(c, e) in &changed {
+            for &(c, e) in changed.iter().filter(|(_, e)| e.allows_join(p)) {
                 let (lo, hi) = (a.min(c), a.max(c));
                 queue.heap.push(candidate(lo, hi, e, p));
             }
@@ -239,6 +239,9 @@ pub fn cluster_segments(obs: &Observations, knn: &[u32], p: &ConsensusParams) ->
 /// The candidates, greatest first: the neighbour pairs' in one sorted list, and those a
 /// join changed in a heap. Most candidates are the pairs', and a heap of millions of them
 /// spent most of the clustering's time on cache misses; sorted once, they are read in order.
+/// A candidate whose evidence does not allow a join ([`PairEvidence::allows_join`]) is never
+/// queued: taken, it would be refused (the evidence it holds is the pair's until a join
+/// changes it, and that queues it again), so the segments are the same.
 struct Queue {
     /// Ascending: the greatest at the end.
     sorted: Vec<Candidate>,
@@ -253,7 +256,7 @@ impl Queue {
             sorted.extend(
                 edges
                     .iter()
-                    .filter(|(&b, _)| a < b)
+                    .filter(|(&b, e)| a < b && e.allows_join(p))
                     .map(|(&b, &e)| candidate(a, b, e, p)),
             );
         }

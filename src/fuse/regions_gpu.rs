@@ -17,7 +17,8 @@ use super::NO_LABEL;
 use crate::contract::params::RegionParams;
 use crate::contract::{REGION_EDGE_BIT, RELABEL_KEEP};
 use crate::gpu::kernel_table::ids;
-use crate::gpu::{Buffer, Gpu, Recorder};
+use crate::gpu::{Buffer, Gpu, GpuResult, Recorder, Staging};
+use std::cell::RefCell;
 
 /// Workgroups one dispatch dimension holds (Vulkan's guaranteed minimum, lavapipe's limit).
 const MAX_GROUPS: u32 = 65_535;
@@ -35,6 +36,15 @@ pub struct RegionStats {
     pub host_fallbacks: usize,
 }
 
+/// What [`RegionFinder::find_regions`] read back.
+struct Found {
+    /// Whether the region check passed (else the regions must be found on the host).
+    complete: bool,
+    /// The downloads asked for, as words.
+    words: Vec<Vec<u32>>,
+    gpu_ms: f64,
+}
+
 /// Device buffers for one view's regions at a time (sized for the largest view so far).
 pub struct RegionFinder<'a> {
     gpu: &'a Gpu,
@@ -47,6 +57,8 @@ pub struct RegionFinder<'a> {
     /// For [`RegionFinder::relabel`], made on its first call: the seeds' pixels, classes,
     /// depths and near flags ([n] each) and the decided (region, label) pairs ([2n]).
     relabel_bufs: Option<[Buffer; 5]>,
+    /// Every view's uploads and downloads go through these, in the view's submissions.
+    staging: RefCell<Staging>,
     pub stats: RegionStats,
 }
 
@@ -61,6 +73,7 @@ impl<'a> RegionFinder<'a> {
             out: gpu.buffer("region-lookup", (n.max(1) * 4) as u64)?,
             n,
             relabel_bufs: None,
+            staging: RefCell::default(),
             stats: RegionStats::default(),
         })
     }
@@ -78,27 +91,27 @@ impl<'a> RegionFinder<'a> {
         if !Self::fits(map) {
             return self.on_host(map, width, centers);
         }
-        let params = self.upload_view(map, width, centers.address_words(4)?)?;
+        let params = self.view_params(map, width, centers.address_words(4)?)?;
         let lookup = |rec: &mut Recorder| {
             let groups = ids::FUSE_REGION_LOOKUP.groups_for(params.n);
             rec.dispatch(ids::FUSE_REGION_LOOKUP, &[], &params, groups)
         };
-        if self.find_regions(&params, lookup)? {
-            let bytes = (self.n * 4) as u64;
-            let [pixels, regions] = self.read_words([(centers, bytes), (&self.out, bytes)])?;
+        let bytes = (self.n * 4) as u64;
+        let uploads = [(self.labels_buffer(), map)];
+        let found = self.find_regions(
+            &params,
+            &uploads,
+            lookup,
+            &[(centers, bytes), (&self.out, bytes)],
+        )?;
+        self.stats.gpu_ms += found.gpu_ms;
+        let [pixels, regions] = found.words.try_into().expect("two downloads");
+        if found.complete {
             return Ok((pixels, regions));
         }
-        self.on_host(map, width, centers)
-    }
-
-    /// The leading bytes of each buffer as u32 words, through one staging buffer and one
-    /// submission.
-    fn read_words<const K: usize>(&self, ranges: [(&Buffer, u64); K]) -> Result<[Vec<u32>; K]> {
-        let ranges = ranges.map(|(buffer, bytes)| (buffer, 0, bytes));
-        let parts = self.gpu.download_many(&ranges)?;
-        Ok(std::array::from_fn(|k| {
-            bytemuck::pod_collect_to_vec(&parts[k])
-        }))
+        self.stats.host_fallbacks += 1;
+        let regions = regions_on_host(map, width as usize, &pixels);
+        Ok((pixels, regions))
     }
 
     /// Whether one dispatch over the pixels of `map` reaches them all (past 16.7M pixels
@@ -108,15 +121,20 @@ impl<'a> RegionFinder<'a> {
         map.len() <= u32::MAX as usize && pixel_groups[0] <= MAX_GROUPS
     }
 
-    /// Finds the regions of the uploaded view (`params`), then records `then` (lookups over
-    /// them) in the same submission; false where the check found the regions incomplete.
+    /// One submission and wait: `uploads` copied in, the regions of the view (`params`)
+    /// found, `then` recorded (lookups over them), the region check's status and the
+    /// leading bytes of each of `downloads` copied out.
     fn find_regions(
-        &mut self,
+        &self,
         params: &RegionParams,
-        then: impl FnOnce(&mut Recorder) -> crate::gpu::GpuResult<()>,
-    ) -> Result<bool> {
+        uploads: &[(&Buffer, &[u32])],
+        then: impl FnOnce(&mut Recorder) -> GpuResult<()>,
+        downloads: &[(&Buffer, u64)],
+    ) -> Result<Found> {
         let pixel_groups = ids::FUSE_REGION_INIT.groups_for(params.width * params.height);
+        let mut staging = self.staging.borrow_mut();
         let mut rec = Recorder::new(self.gpu)?;
+        staging.record_uploads(self.gpu, &mut rec, uploads)?;
         rec.fill(&self.status, 0, 4, 0);
         rec.barrier();
         let m0 = rec.mark();
@@ -131,9 +149,16 @@ impl<'a> RegionFinder<'a> {
         }
         then(&mut rec)?;
         let m1 = rec.mark();
+        rec.barrier();
+        let status = [(&self.status, 4)];
+        staging.record_downloads(self.gpu, &mut rec, &[&status[..], downloads].concat())?;
         let t = rec.submit_and_wait()?;
-        self.stats.gpu_ms += t.between(m0, m1).unwrap_or(0.0) * 1e-6;
-        Ok(self.gpu.download::<u32>(&self.status, 0, 1)?[0] == 0)
+        let mut words = staging.read::<u32>();
+        Ok(Found {
+            complete: words.remove(0)[0] == 0,
+            words,
+            gpu_ms: t.between(m0, m1).unwrap_or(0.0) * 1e-6,
+        })
     }
 
     /// `map` (`width` pixels a row) relabeled from `seeds`, the (pixel, class) of the
@@ -185,9 +210,7 @@ impl<'a> RegionFinder<'a> {
         rule: &RelabelRule,
     ) -> Result<Vec<u32>> {
         let (pixels, classes): (Vec<u32>, Vec<u32>) = seeds.iter().copied().unzip();
-        self.gpu.upload(seed_pixels, 0, &pixels)?;
-        self.gpu.upload(seed_classes, 0, &classes)?;
-        let mut params = self.upload_view(map, width, seed_pixels.address_words(4)?)?;
+        let mut params = self.view_params(map, width, seed_pixels.address_words(4)?)?;
         params.n = seeds.len() as u32;
         params.classes_addr = seed_classes.address_words(4)?;
         params.depth_addr = seed_depths.address_words(4)?;
@@ -201,12 +224,19 @@ impl<'a> RegionFinder<'a> {
             rec.dispatch(ids::FUSE_REGION_DEPTH, &[], &params, groups)?;
             rec.dispatch(ids::FUSE_REGION_NEAR, &[], &params, groups)
         };
-        if !self.find_regions(&params, per_seed)? {
+        let uploads = [
+            (seed_pixels, &pixels[..]),
+            (seed_classes, &classes[..]),
+            (self.labels_buffer(), map),
+        ];
+        let bytes = (seeds.len() * 4) as u64;
+        let downloads = [(&self.out, bytes), (seed_depths, bytes), (seed_near, bytes)];
+        let found = self.find_regions(&params, &uploads, per_seed, &downloads)?;
+        self.stats.gpu_ms += found.gpu_ms;
+        if !found.complete {
             return Ok(self.relabel_on_host(map, width, seeds, rule));
         }
-        let bytes = (seeds.len() * 4) as u64;
-        let [regions, depths, near] =
-            self.read_words([(&self.out, bytes), (seed_depths, bytes), (seed_near, bytes)])?;
+        let [regions, depths, near] = found.words.try_into().expect("three downloads");
         let found = (0..seeds.len())
             .filter(|&i| regions[i] != NO_LABEL)
             .map(|i| RegionSeed {
@@ -222,17 +252,24 @@ impl<'a> RegionFinder<'a> {
         if decided.is_empty() {
             return Ok(map.to_vec());
         }
-        self.gpu.upload(pairs, 0, &decided)?;
         params.pairs = (decided.len() / 2) as u32;
-        self.rewrite_labels(&params, map.len())
+        self.rewrite_labels(&params, pairs, &decided, map.len())
     }
 
-    /// Rewrites the uploaded view's labels from the decided pairs of `params` (the table
-    /// filled with RELABEL_KEEP, the pairs scattered into it, every pixel looked up) and
-    /// downloads them.
-    fn rewrite_labels(&mut self, params: &RegionParams, pixels: usize) -> Result<Vec<u32>> {
-        let [labels, table, _] = self.pixel_bufs.as_ref().expect("sized by upload_view");
+    /// Rewrites the view's labels (uploaded with the regions) from the `decided` (region,
+    /// label) pairs, copied into `pairs`: the table filled with RELABEL_KEEP, the pairs
+    /// scattered into it, every pixel looked up; one submission, the labels read back.
+    fn rewrite_labels(
+        &mut self,
+        params: &RegionParams,
+        pairs: &Buffer,
+        decided: &[u32],
+        pixels: usize,
+    ) -> Result<Vec<u32>> {
+        let [labels, table, _] = self.pixel_bufs.as_ref().expect("sized by view_params");
+        let staging = self.staging.get_mut();
         let mut rec = Recorder::new(self.gpu)?;
+        staging.record_uploads(self.gpu, &mut rec, &[(pairs, decided)])?;
         let m0 = rec.mark();
         rec.fill(table, 0, (pixels * 4) as u64, RELABEL_KEEP);
         rec.barrier();
@@ -242,9 +279,11 @@ impl<'a> RegionFinder<'a> {
         let pixel_groups = ids::FUSE_REGION_RELABEL.groups_for(pixels as u32);
         rec.dispatch(ids::FUSE_REGION_RELABEL, &[], params, pixel_groups)?;
         let m1 = rec.mark();
+        rec.barrier();
+        staging.record_downloads(self.gpu, &mut rec, &[(labels, (pixels * 4) as u64)])?;
         let t = rec.submit_and_wait()?;
         self.stats.gpu_ms += t.between(m0, m1).unwrap_or(0.0) * 1e-6;
-        Ok(self.gpu.download(labels, 0, pixels)?)
+        Ok(staging.read::<u32>().pop().expect("one download"))
     }
 
     fn relabel_on_host(
@@ -272,16 +311,19 @@ impl<'a> RegionFinder<'a> {
     ) -> Result<bool> {
         assert_eq!(map.len(), region_ids.len(), "one id per pixel");
         // region_check reads no center pixels: any address will do.
-        let params = self.upload_view(map, width, self.out.address_words(4)?)?;
-        let [_, _, region] = self.pixel_bufs.as_ref().expect("sized by upload_view");
-        self.gpu.upload(region, 0, region_ids)?;
+        let params = self.view_params(map, width, self.out.address_words(4)?)?;
+        let [labels, _, region] = self.pixel_bufs.as_ref().expect("sized by view_params");
+        let staging = self.staging.get_mut();
         let mut rec = Recorder::new(self.gpu)?;
+        staging.record_uploads(self.gpu, &mut rec, &[(labels, map), (region, region_ids)])?;
         rec.fill(&self.status, 0, 4, 0);
         rec.barrier();
         let groups = ids::FUSE_REGION_CHECK.groups_for(map.len() as u32);
         rec.dispatch(ids::FUSE_REGION_CHECK, &[], &params, groups)?;
+        rec.barrier();
+        staging.record_downloads(self.gpu, &mut rec, &[(&self.status, 4)])?;
         rec.submit_and_wait()?;
-        Ok(self.gpu.download::<u32>(&self.status, 0, 1)?[0] == 0)
+        Ok(staging.read::<u32>()[0][0] == 0)
     }
 
     fn on_host(
@@ -296,9 +338,9 @@ impl<'a> RegionFinder<'a> {
         Ok((pixels, regions))
     }
 
-    /// Uploads the view's labels (buffers grown to fit) and gives the kernels' parameters,
-    /// for the center pixels at `centers_addr`.
-    fn upload_view(
+    /// The kernels' parameters for a view labeled `map` (buffers grown to fit; the labels
+    /// are uploaded in the view's submission), for the center pixels at `centers_addr`.
+    fn view_params(
         &mut self,
         map: &[u32],
         width: u32,
@@ -306,7 +348,6 @@ impl<'a> RegionFinder<'a> {
     ) -> Result<RegionParams> {
         self.size_pixel_buffers(map.len())?;
         let [labels, parent, region] = self.pixel_bufs.as_ref().expect("sized above");
-        self.gpu.upload(labels, 0, map)?;
         Ok(RegionParams {
             labels_addr: labels.address_words(4)?,
             parent_addr: parent.address_words(4)?,
@@ -326,6 +367,11 @@ impl<'a> RegionFinder<'a> {
             near_radius: 0,
             pairs: 0,
         })
+    }
+
+    /// The buffer the view's labels are uploaded to (sized by [`RegionFinder::view_params`]).
+    fn labels_buffer(&self) -> &Buffer {
+        &self.pixel_bufs.as_ref().expect("sized by view_params")[0]
     }
 
     fn size_pixel_buffers(&mut self, pixels: usize) -> Result<()> {

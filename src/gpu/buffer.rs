@@ -56,13 +56,19 @@ impl Buffer {
 
     /// Writes `data` at the start of this host-mapped (staging) buffer.
     pub fn write_mapped<T: Pod>(&mut self, data: &[T]) {
+        self.write_mapped_at(0, data);
+    }
+
+    /// Writes `data` at byte `offset` of this host-mapped (staging) buffer.
+    pub fn write_mapped_at<T: Pod>(&mut self, offset: u64, data: &[T]) {
         let bytes: &[u8] = bytemuck::cast_slice(data);
         assert!(
-            bytes.len() as u64 <= self.size,
+            offset + bytes.len() as u64 <= self.size,
             "staging buffer {} is too small",
             self.name
         );
-        self.mapped()[..bytes.len()].copy_from_slice(bytes);
+        let at = offset as usize;
+        self.mapped()[at..at + bytes.len()].copy_from_slice(bytes);
     }
 
     /// The first `count` elements of this host-mapped (readback) buffer; the GPU writes must
@@ -72,7 +78,7 @@ impl Buffer {
         bytemuck::pod_collect_to_vec(&self.mapped()[..bytes])
     }
 
-    fn mapped(&mut self) -> &mut [u8] {
+    pub(crate) fn mapped(&mut self) -> &mut [u8] {
         let size = self.size as usize;
         self.allocation
             .as_mut()

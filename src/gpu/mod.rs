@@ -11,6 +11,7 @@ pub mod kernel_table;
 pub mod recorder;
 pub mod scan;
 pub mod sort;
+pub mod staging;
 pub mod timings;
 mod validation;
 
@@ -23,4 +24,5 @@ pub use kernel_table::{ids, KernelId, KERNELS};
 pub use recorder::{BufferRange, Recorder, Submission};
 pub use scan::PrefixScan;
 pub use sort::RadixSort;
+pub use staging::Staging;
 pub use timings::{Mark, Timings};
