@@ -12,7 +12,7 @@ use super::export::{export_inputs, ExportLabels};
 use super::median;
 use crate::fuse::{
     accumulate_assigned, nearest_neighbours, AssignOnGpu, FuseConfig, LabelSource, Method,
-    NO_LABEL, TIE_NEIGHBOURS,
+    ObserveTimes, NO_LABEL, TIE_NEIGHBOURS,
 };
 use crate::gpu::timings::KernelTotal;
 use crate::gpu::Gpu;
@@ -90,6 +90,8 @@ pub struct MethodBench {
     /// Consensus methods: the host's neighbour search and clustering, and the decision.
     pub segments_s: f64,
     pub decide_s: f64,
+    /// Consensus methods: their observation pass split (`FuseStats::observe`).
+    pub observe: ObserveTimes,
     /// Passes over the views (the evidence matrix split into class-row batches).
     pub passes: usize,
     pub rows_per_pass: usize,
@@ -429,6 +431,7 @@ impl Setup<'_> {
                     evidence_s: stats.evidence_s,
                     segments_s: stats.segments_s,
                     decide_s: stats.decide_s,
+                    observe: stats.observe,
                     kernels: stats.kernels,
                     peak_device_bytes: stats.peak_device_bytes,
                     passes: stats.passes,
@@ -476,6 +479,7 @@ fn method_bench(
         evidence_s: m.evidence_s,
         segments_s: m.segments_s,
         decide_s: m.decide_s,
+        observe: m.observe,
         views_per_s: (views * m.passes) as f64 / m.wall_s,
         passes: m.passes,
         rows_per_pass: m.rows_per_pass,
@@ -500,6 +504,7 @@ struct RunTotal {
     evidence_s: f64,
     segments_s: f64,
     decide_s: f64,
+    observe: ObserveTimes,
     kernels: Vec<KernelTotal>,
     peak_device_bytes: u64,
     passes: usize,

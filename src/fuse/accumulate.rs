@@ -126,6 +126,8 @@ pub struct FuseStats {
     /// (its label waits included; with `--relabel` plus FlashSplat's pass).
     pub segments_s: f64,
     pub decide_s: f64,
+    /// Consensus methods: their observation pass split (`view_s` holds it all).
+    pub observe: ObserveTimes,
     pub views_per_s: f64,
     pub peak_device_bytes: u64,
     /// Device memory of the scene as this method uploaded it (only what it reads).
@@ -136,6 +138,18 @@ pub struct FuseStats {
     /// driver's loop cap), found again on the host (src/fuse/regions_gpu.rs); with
     /// `--relabel`, also the views it relabeled on the host.
     pub region_host_fallbacks: usize,
+}
+
+/// Segment consensus's observation pass, split (host seconds, GPU waits included): each
+/// view's median-depth render and center-pixel lookup; its label regions, with the label
+/// map's upload and the readback of every center's pixel and region; and the host's
+/// gathering of those into observations. On a GPU the pass is host-bound (27 ms a view
+/// against 3.7 ms of GPU time on an H200): these say which part to cut.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct ObserveTimes {
+    pub render_s: f64,
+    pub regions_s: f64,
+    pub gather_s: f64,
 }
 
 fn bytes_per_entry(method: Method, acc: Accumulation) -> u64 {

@@ -234,9 +234,14 @@ pub fn observe(
             };
             let cam = &cams[view];
             stats.views_with_labels += 1;
+            let rendering = std::time::Instant::now();
             stats.gpu_ms += center_pixels(&mut raster, scene, cam, &pixels_buf, cfg, occlusion)?;
             stats.peak_device_bytes = stats.peak_device_bytes.max(gpu.memory_reserved());
+            stats.observe.render_s += rendering.elapsed().as_secs_f64();
+            let finding = std::time::Instant::now();
             let (centers, regions) = finder.regions_at(&map, cam.width, &pixels_buf)?;
+            stats.observe.regions_s += finding.elapsed().as_secs_f64();
+            let gathering = std::time::Instant::now();
             let (mut observed, mut seen) = (Vec::new(), Vec::new());
             for (g, (&p, &r)) in centers.iter().zip(&regions).enumerate() {
                 if r != NO_LABEL {
@@ -247,6 +252,7 @@ pub fn observe(
             }
             per_view.push(observed);
             pixels.push(seen);
+            stats.observe.gather_s += gathering.elapsed().as_secs_f64();
             waited_since = std::time::Instant::now();
             Ok(())
         },
@@ -254,7 +260,10 @@ pub fn observe(
     progress(cams.len(), cams.len());
     stats.gpu_ms += finder.stats.gpu_ms;
     stats.region_host_fallbacks = finder.stats.host_fallbacks;
-    Ok((Observations::from_views(n, &per_view), pixels, stats))
+    let gathering = std::time::Instant::now();
+    let observations = Observations::from_views(n, &per_view);
+    stats.observe.gather_s += gathering.elapsed().as_secs_f64();
+    Ok((observations, pixels, stats))
 }
 
 /// Writes the pixel under every Gaussian's visible center into `out`; returns GPU ms.

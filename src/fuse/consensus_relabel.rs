@@ -337,6 +337,7 @@ pub fn fuse_relabeled(
     stats.gpu_ms += run.stats.gpu_ms + relabel_stats.gpu_ms;
     stats.view_s += run.stats.view_s; // the consensus's visit of the views
     (stats.segments_s, stats.decide_s) = (run.stats.segments_s, run.stats.decide_s);
+    stats.observe = run.stats.observe;
     stats.peak_device_bytes = stats.peak_device_bytes.max(run.stats.peak_device_bytes);
     stats.region_host_fallbacks = run.stats.region_host_fallbacks + relabel_stats.host_fallbacks;
     stats.wall_s = start.elapsed().as_secs_f64();
