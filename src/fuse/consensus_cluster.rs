@@ -227,6 +227,7 @@ pub fn cluster_segments(obs: &Observations, knn: &[u32], p: &ConsensusParams) ->
                 let (lo, hi) = (a.min(c), a.max(c));
                 queue.heap.push(candidate(lo, hi, e, p));
             }
+            queue.sweep_if_grown(&graph.parent);
         }
     }
     let mut roots: Vec<u32> = (0..n as u32).collect();
@@ -246,6 +247,8 @@ struct Queue {
     /// Ascending: the greatest at the end.
     sorted: Vec<Candidate>,
     heap: QuadHeap<Candidate>,
+    /// The heap's length after its last sweep.
+    swept: usize,
 }
 
 impl Queue {
@@ -264,7 +267,22 @@ impl Queue {
         Queue {
             sorted,
             heap: QuadHeap::new(),
+            swept: 0,
         }
+    }
+
+    /// Drops the heap's candidates whose segment joined another, once the heap has doubled
+    /// since the last sweep. Most requeued candidates end so (a segment's candidates are
+    /// requeued at each join that changes them, and the segment then joins through one of
+    /// them): each would otherwise cost a pop; a sweep reads the heap once, in order.
+    fn sweep_if_grown(&mut self, parent: &[u32]) {
+        if self.heap.len() < (self.swept + self.swept / 2).max(1 << 16) {
+            return;
+        }
+        let root = |s: u32| parent[s as usize] == s;
+        self.heap
+            .retain(|&(_, _, Reverse(a), Reverse(b))| root(a) && root(b));
+        self.swept = self.heap.len();
     }
 
     fn pop(&mut self) -> Option<Candidate> {

@@ -41,13 +41,27 @@ impl<T: Ord> QuadHeap<T> {
         }
     }
 
+    /// Keeps only the items `keep` accepts, and restores the heap order (bottom up, O(len)).
+    pub fn retain(&mut self, keep: impl FnMut(&T) -> bool) {
+        self.items.retain(keep);
+        for at in (0..self.items.len().div_ceil(4)).rev() {
+            self.sift_down(at);
+        }
+    }
+
     pub fn pop(&mut self) -> Option<T> {
         let last = self.items.pop()?;
         if self.items.is_empty() {
             return Some(last);
         }
         let top = std::mem::replace(&mut self.items[0], last);
-        let (mut at, len) = (0, self.items.len());
+        self.sift_down(0);
+        Some(top)
+    }
+
+    /// Moves the item at `at` down until no child is greater.
+    fn sift_down(&mut self, mut at: usize) {
+        let len = self.items.len();
         loop {
             let first = 4 * at + 1;
             if first >= len {
@@ -63,7 +77,6 @@ impl<T: Ord> QuadHeap<T> {
             self.items.swap(best, at);
             at = best;
         }
-        Some(top)
     }
 }
 
@@ -97,5 +110,36 @@ mod tests {
         assert_eq!(heap.pop(), None);
         assert!(popped.0.len() > 3000);
         assert_eq!(popped.0, popped.1);
+    }
+
+    #[test]
+    fn retain_keeps_the_accepted_items_in_heap_order() {
+        let mut rng = Rng::new(11);
+        let mut heap = QuadHeap::new();
+        let items: Vec<u32> = (0..5000).map(|_| rng.next_u32() % 1000).collect();
+        for &x in &items {
+            heap.push(x);
+        }
+        for _ in 0..700 {
+            heap.pop();
+        }
+        heap.retain(|&x| x % 3 != 0);
+        // What a sort of the survivors gives: the 700 greatest popped, then the multiples of
+        // three dropped; pushes after the sweep go in order too.
+        let mut expect: Vec<u32> = items.clone();
+        expect.sort_unstable_by(|a, b| b.cmp(a));
+        let mut expect: Vec<u32> = expect[700..]
+            .iter()
+            .copied()
+            .filter(|x| x % 3 != 0)
+            .collect();
+        for x in [999, 0, 500] {
+            heap.push(x);
+            expect.push(x);
+        }
+        expect.sort_unstable_by(|a, b| b.cmp(a));
+        let popped: Vec<u32> = std::iter::from_fn(|| heap.pop()).collect();
+        assert!(popped.len() > 2500);
+        assert_eq!(popped, expect);
     }
 }
