@@ -9,6 +9,8 @@
 //! could cut a union short on a pathological map; a check pass finds any such view and the
 //! host then finds its regions itself ([`RegionStats::host_fallbacks`]).
 
+use std::cell::RefCell;
+
 use anyhow::Result;
 
 use super::consensus_relabel::{decide_regions, relabel_view, RegionSeed, RelabelRule};
@@ -18,7 +20,6 @@ use crate::contract::params::RegionParams;
 use crate::contract::{REGION_EDGE_BIT, RELABEL_KEEP};
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, Gpu, GpuResult, Recorder, Staging};
-use std::cell::RefCell;
 
 /// Workgroups one dispatch dimension holds (Vulkan's guaranteed minimum, lavapipe's limit).
 const MAX_GROUPS: u32 = 65_535;
@@ -57,7 +58,8 @@ pub struct RegionFinder<'a> {
     /// For [`RegionFinder::relabel`], made on its first call: the seeds' pixels, classes,
     /// depths and near flags ([n] each) and the decided (region, label) pairs ([2n]).
     relabel_bufs: Option<[Buffer; 5]>,
-    /// Every view's uploads and downloads go through these, in the view's submissions.
+    /// Every view's uploads and downloads go through these, in the view's submissions (a
+    /// cell: a submission records into them while it reads the finder's own buffers).
     staging: RefCell<Staging>,
     pub stats: RegionStats,
 }
