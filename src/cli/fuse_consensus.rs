@@ -60,7 +60,17 @@ pub(super) fn fuse_by_consensus(
         labels: &Interruptible(&data),
         classes: data.classes.len(),
     };
-    let lift = lift_by_consensus(&input, cfg, &params, &mut |done, total| track(done, total))?;
+    let views = data.cameras.len();
+    let lift = lift_by_consensus(&input, cfg, &params, &mut |done, total| {
+        track(done, total);
+        // Once every view is observed the segments are clustered and decided: seconds on a
+        // million Gaussians with no view to count, so the bar says what it waits for.
+        bar.set_message(if done == views {
+            "clustering segments"
+        } else {
+            ""
+        });
+    })?;
     bar.finish_and_clear();
     let names: Vec<String> = data.table.classes.iter().map(|c| c.name.clone()).collect();
     let outputs = ConsensusOutputs {
