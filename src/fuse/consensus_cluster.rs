@@ -271,10 +271,12 @@ impl Queue {
         }
     }
 
-    /// Drops the heap's candidates whose segment joined another, once the heap has doubled
-    /// since the last sweep. Most requeued candidates end so (a segment's candidates are
-    /// requeued at each join that changes them, and the segment then joins through one of
-    /// them): each would otherwise cost a pop; a sweep reads the heap once, in order.
+    /// Drops the heap's candidates whose segment joined another, once the heap has grown by
+    /// half since the last sweep (and holds 65,536: a small heap's pops stay in the cache).
+    /// Most requeued candidates end so (a segment's candidates are requeued at each join
+    /// that changes them, and the segment then joins through one of them): each would
+    /// otherwise cost a pop through the heap's levels; a sweep reads the heap once, in
+    /// order, and the growth condition keeps its cost linear in the pushes.
     fn sweep_if_grown(&mut self, parent: &[u32]) {
         if self.heap.len() < (self.swept + self.swept / 2).max(1 << 16) {
             return;
