@@ -9,7 +9,7 @@ use common::{check_validation, gpu};
 use semsplat::contract::NO_NEIGHBOUR;
 use semsplat::dataset::CompactClasses;
 use semsplat::fuse::consensus::observe;
-use semsplat::fuse::consensus_cluster::cluster_segments;
+use semsplat::fuse::consensus_cluster::{cluster_segments, cluster_segments_sweeping_from};
 use semsplat::fuse::consensus_decide::{binomial_at_most, decide};
 use semsplat::fuse::consensus_segments::{co_occurrence, label_regions, Observations};
 use semsplat::fuse::{
@@ -328,6 +328,10 @@ fn clustering_matches_a_plain_transcription_under_heavy_noise() {
         let knn = nearest_neighbours(&means, p.neighbours);
         let (label, refused) = cluster_by_hand(&obs, &knn, &p);
         assert_same_partition(&cluster_segments(&obs, &knn, &p), &label);
+        // The heap swept of dead candidates at every growth (large scenes only reach the
+        // default threshold): the same segments.
+        let swept = cluster_segments_sweeping_from(&obs, &knn, &p, 0);
+        assert_same_partition(&swept, &label);
         let segments = label.iter().collect::<BTreeSet<_>>().len();
         eprintln!("seed {seed}: {segments} segments, refused {refused:?}");
         assert!(

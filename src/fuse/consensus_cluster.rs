@@ -207,9 +207,25 @@ type Candidate = (i64, u32, Reverse<u32>, Reverse<u32>);
 /// together, then the lowest ids); one that [`may_join`] joins, any other is dropped until its
 /// evidence changes (a join adds pairs to it).
 pub fn cluster_segments(obs: &Observations, knn: &[u32], p: &ConsensusParams) -> Vec<u32> {
+    cluster_segments_sweeping_from(obs, knn, p, SWEEP_FROM)
+}
+
+/// A heap of requeued candidates smaller than this is not swept ([`Queue::sweep_if_grown`]):
+/// its pops stay in the cache.
+const SWEEP_FROM: usize = 1 << 16;
+
+/// [`cluster_segments`], its heap swept of candidates whose segment joined another from
+/// `sweep_from` candidates on. The segments do not depend on it (the tests sweep from 0,
+/// which small scenes otherwise never reach).
+pub fn cluster_segments_sweeping_from(
+    obs: &Observations,
+    knn: &[u32],
+    p: &ConsensusParams,
+    sweep_from: usize,
+) -> Vec<u32> {
     let n = obs.n;
     let mut graph = SegmentGraph::new(obs, knn, p.neighbours);
-    let mut queue = Queue::new(&graph, p);
+    let mut queue = Queue::new(&graph, p, sweep_from);
     let mut changed = Vec::new();
     while let Some(queued) = queue.pop() {
         let (_, _, Reverse(a), Reverse(b)) = queued;
@@ -247,12 +263,13 @@ struct Queue {
     /// Ascending: the greatest at the end.
     sorted: Vec<Candidate>,
     heap: QuadHeap<Candidate>,
-    /// The heap's length after its last sweep.
+    /// The heap's length after its last sweep, and the least it is swept at.
     swept: usize,
+    sweep_from: usize,
 }
 
 impl Queue {
-    fn new(graph: &SegmentGraph, p: &ConsensusParams) -> Queue {
+    fn new(graph: &SegmentGraph, p: &ConsensusParams, sweep_from: usize) -> Queue {
         let mut sorted: Vec<Candidate> = Vec::new();
         for (a, edges) in graph.edges.iter().enumerate() {
             let a = a as u32;
@@ -268,17 +285,18 @@ impl Queue {
             sorted,
             heap: QuadHeap::new(),
             swept: 0,
+            sweep_from,
         }
     }
 
     /// Drops the heap's candidates whose segment joined another, once the heap has grown by
-    /// half since the last sweep (and holds 65,536: a small heap's pops stay in the cache).
+    /// half since the last sweep (and holds `sweep_from`).
     /// Most requeued candidates end so (a segment's candidates are requeued at each join
     /// that changes them, and the segment then joins through one of them): each would
     /// otherwise cost a pop through the heap's levels; a sweep reads the heap once, in
     /// order, and the growth condition keeps its cost linear in the pushes.
     fn sweep_if_grown(&mut self, parent: &[u32]) {
-        if self.heap.len() < (self.swept + self.swept / 2).max(1 << 16) {
+        if self.heap.len() < (self.swept + self.swept / 2).max(self.sweep_from) {
             return;
         }
         let root = |s: u32| parent[s as usize] == s;
