@@ -61,11 +61,15 @@ pub(super) fn fuse_by_consensus(
         classes: data.classes.len(),
     };
     let views = data.cameras.len();
+    let mut observed_all = false;
     let lift = lift_by_consensus(&input, cfg, &params, &mut |done, total| {
         track(done, total);
         // Once every view is observed the segments are clustered and decided: seconds on a
-        // million Gaussians with no view to count, so the bar says what it waits for.
-        bar.set_message(if done == views {
+        // million Gaussians with no view to count, so the bar says what it waits for until
+        // the next report (`--relabel`'s second visit starts at `views` too).
+        let clustering = done >= views && !observed_all;
+        observed_all |= done >= views;
+        bar.set_message(if clustering {
             "clustering segments"
         } else {
             ""

@@ -17,6 +17,7 @@ use super::partial::{fixed_to_f64, EvidenceKind, RawEvidence};
 use super::scores::ClassScores;
 use crate::contract::params::{CenterParams, ContribParams};
 use crate::gpu::kernel_table::ids;
+use crate::gpu::staging::grown;
 use crate::gpu::timings::KernelTotal;
 use crate::gpu::{Buffer, BufferRange, Gpu, Recorder, Timings};
 use crate::render::rasterizer::{SplitSizes, TileLists};
@@ -455,11 +456,7 @@ impl LabelStaging {
     /// Copies `map` into view `view`'s slot (grown as needed).
     fn stage(&self, gpu: &Gpu, view: usize, map: &[u32]) -> Result<()> {
         let bytes = std::mem::size_of_val(map) as u64;
-        let mut slot = self.slot(view);
-        if slot.as_ref().is_none_or(|b| b.size() < bytes) {
-            *slot = Some(gpu.staging_buffer(bytes)?);
-        }
-        slot.as_mut().expect("allocated above").write_mapped(map);
+        grown(&mut self.slot(view), gpu, bytes, Gpu::staging_buffer)?.write_mapped(map);
         Ok(())
     }
 }

@@ -91,7 +91,8 @@ impl<'a> RegionFinder<'a> {
         centers: &Buffer,
     ) -> Result<(Vec<u32>, Vec<u32>)> {
         if !Self::fits(map) {
-            return self.on_host(map, width, centers);
+            let pixels = self.gpu.download(centers, 0, self.n)?;
+            return Ok(self.on_host(map, width, pixels));
         }
         let params = self.view_params(map, width, centers.address_words(4)?)?;
         let lookup = |rec: &mut Recorder| {
@@ -108,12 +109,10 @@ impl<'a> RegionFinder<'a> {
         )?;
         self.stats.gpu_ms += found.gpu_ms;
         let [pixels, regions] = found.words.try_into().expect("two downloads");
-        if found.complete {
-            return Ok((pixels, regions));
+        match found.complete {
+            true => Ok((pixels, regions)),
+            false => Ok(self.on_host(map, width, pixels)),
         }
-        self.stats.host_fallbacks += 1;
-        let regions = regions_on_host(map, width as usize, &pixels);
-        Ok((pixels, regions))
     }
 
     /// Whether one dispatch over the pixels of `map` reaches them all (past 16.7M pixels
@@ -328,16 +327,11 @@ impl<'a> RegionFinder<'a> {
         Ok(staging.read::<u32>()[0][0] == 0)
     }
 
-    fn on_host(
-        &mut self,
-        map: &[u32],
-        width: u32,
-        centers: &Buffer,
-    ) -> Result<(Vec<u32>, Vec<u32>)> {
+    /// [`RegionFinder::regions_at`] on the host, from the center pixels read back.
+    fn on_host(&mut self, map: &[u32], width: u32, pixels: Vec<u32>) -> (Vec<u32>, Vec<u32>) {
         self.stats.host_fallbacks += 1;
-        let pixels: Vec<u32> = self.gpu.download(centers, 0, self.n)?;
         let regions = regions_on_host(map, width as usize, &pixels);
-        Ok((pixels, regions))
+        (pixels, regions)
     }
 
     /// The kernels' parameters for a view labeled `map` (buffers grown to fit; the labels

@@ -96,7 +96,7 @@ impl Staging {
 }
 
 /// `slot`'s buffer, replaced by a new one from `make` where it is smaller than `bytes`.
-fn grown<'a>(
+pub fn grown<'a>(
     slot: &'a mut Option<Buffer>,
     gpu: &Gpu,
     bytes: u64,
