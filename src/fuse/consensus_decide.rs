@@ -7,6 +7,7 @@
 use serde::Serialize;
 
 use super::assign::Assignment;
+use super::consensus_confusion::decide_near_ties;
 use super::consensus_relabel::RelabelRule;
 use super::consensus_segments::Observations;
 use crate::contract::NO_NEIGHBOUR;
@@ -54,6 +55,15 @@ pub struct ConsensusParams {
     /// ...that is, where so few of them give the segment's class that a view of the segment
     /// (giving it with the segment's rate) would give as few with at most this probability.
     pub contradiction_p: f64,
+    /// A segment whose top classes are within this many views' votes is a near tie,
+    /// decided by the scene's confusions (src/fuse/consensus_confusion.rs)...
+    pub tie_margin: f64,
+    /// ...estimated from the segments of at least this many views...
+    pub confusion_min_views: usize,
+    /// ...whose class holds at least this share of their votes, each class's row smoothed
+    /// toward a prior worth this many views.
+    pub confusion_min_share: f64,
+    pub confusion_prior_views: f64,
     /// Dirichlet prior per class of the posterior (0.5: Jeffreys).
     pub prior: f64,
     /// A segment is flagged when its runner-up class holds at least this share of its views
@@ -83,6 +93,10 @@ impl Default for ConsensusParams {
             min_segment_neighbours: 3,
             min_own_views: 4,
             contradiction_p: 0.01,
+            tie_margin: 1.0,
+            confusion_min_views: 5,
+            confusion_min_share: 0.6,
+            confusion_prior_views: 10.0,
             prior: 0.5,
             flag_share: 0.25,
             flag_min_dissent: 5.0,
@@ -108,6 +122,9 @@ pub struct SegmentVotes {
     /// Gaussians it gave the class (sums to `views`).
     pub split: Vec<f64>,
     pub class: Option<usize>,
+    /// Its top classes were within `tie_margin` views' votes: `class` is the one the
+    /// scene's confusions make likeliest (unchanged where they tie too).
+    pub near_tie: bool,
     pub flagged: bool,
 }
 
@@ -246,9 +263,10 @@ pub fn decide(
     for &s in &segment {
         sizes[s as usize] += 1;
     }
-    let segments: Vec<SegmentVotes> = (0..count)
+    let mut segments: Vec<SegmentVotes> = (0..count)
         .map(|s| segment_summary(&split[s], &mass[s], sizes[s], views[s], p))
         .collect();
+    decide_near_ties(&mut segments, classes, p);
     let own = own_votes(obs, classes);
     let n = obs.n;
     let mut class = vec![None; n];
@@ -459,6 +477,7 @@ fn segment_summary(
         views,
         split: split.to_vec(),
         class,
+        near_tie: false,
         // Only a segment large and well enough seen for its split to mean something: a
         // singleton no view saw has no class either, and is not a finding.
         flagged: gaussians >= p.flag_min_gaussians

@@ -20,6 +20,9 @@ pub struct SegmentSplit {
     pub views: usize,
     /// The class it was given (None: no decisive class).
     pub class: Option<String>,
+    /// Its top classes were within one view's vote; `class` is the one the scene's class
+    /// confusions make likeliest.
+    pub near_tie: bool,
     pub votes: NamedVotes,
 }
 
@@ -76,6 +79,7 @@ pub fn segment_report(
                 gaussians: seg.gaussians,
                 views: seg.views,
                 class: seg.class.map(|c| names[c].clone()),
+                near_tie: seg.near_tie,
                 votes: named(&seg.split),
             }
         })

@@ -6,6 +6,7 @@ pub mod assign;
 pub mod assign_gpu;
 pub mod consensus;
 pub mod consensus_cluster;
+pub mod consensus_confusion;
 pub mod consensus_decide;
 pub mod consensus_relabel;
 pub mod consensus_report;
