@@ -597,6 +597,9 @@ fn fuse_cli_writes_entropy_segments_and_the_segment_report() {
         let per_class = segments["per_class"].as_array().unwrap();
         assert!(segments["segments"].as_u64().unwrap() > 0, "{segments}");
         assert!(!per_class.is_empty() && segments["flagged"].is_array());
+        for flagged in segments["flagged"].as_array().unwrap() {
+            assert!(flagged["near_tie"].is_boolean(), "{flagged}");
+        }
         // A class's segments vote for it more than for anything else on true labels.
         for c in per_class {
             assert_eq!(c["votes"][0][0], c["class"], "{c}");
