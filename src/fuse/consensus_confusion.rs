@@ -104,12 +104,8 @@ pub fn near_tie(split: &[f64], margin: f64) -> Vec<usize> {
 
 /// Decides the near ties of segments of at least `min_segment` Gaussians by the
 /// confusions estimated from the others; a segment keeps its class where the likelihoods
-/// tie. Returns the confusions used.
-pub fn decide_near_ties(
-    segments: &mut [SegmentVotes],
-    classes: usize,
-    p: &ConsensusParams,
-) -> Confusions {
+/// tie.
+pub fn decide_near_ties(segments: &mut [SegmentVotes], classes: usize, p: &ConsensusParams) {
     let confusions = Confusions::estimate(segments, classes, p);
     for s in segments.iter_mut().filter(|s| s.gaussians >= p.min_segment) {
         let tied = near_tie(&s.split, p.tie_margin);
@@ -127,7 +123,6 @@ pub fn decide_near_ties(
             s.class = Some(tied[only]);
         }
     }
-    confusions
 }
 
 #[cfg(test)]

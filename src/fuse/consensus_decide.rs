@@ -1,5 +1,6 @@
 //! Segment consensus, the decisions (the segments: src/fuse/consensus_cluster.rs): the
-//! knobs, each segment's class with every view counted once, each Gaussian's class from its
+//! knobs, each segment's class with every view counted once (near ties by the scene's class
+//! confusions: src/fuse/consensus_confusion.rs), each Gaussian's class from its
 //! segment (in a small segment its neighbours' segments, else its own views, as where its
 //! own views contradict its segment; its neighbours' classes where no view observed it), a
 //! posterior per Gaussian, and the segments whose vote split is close (flagged).
@@ -60,9 +61,9 @@ pub struct ConsensusParams {
     pub tie_margin: f64,
     /// ...estimated from the segments of at least this many views...
     pub confusion_min_views: usize,
-    /// ...whose class holds at least this share of their votes, each class's row smoothed
-    /// toward a prior worth this many views.
+    /// ...whose class holds at least this share of their votes...
     pub confusion_min_share: f64,
+    /// ...each class's row smoothed toward a prior worth this many views.
     pub confusion_prior_views: f64,
     /// Dirichlet prior per class of the posterior (0.5: Jeffreys).
     pub prior: f64,
