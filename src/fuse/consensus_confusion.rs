@@ -8,8 +8,8 @@
 //! between the two, with no side-table vote, is far likelier a dining table. Counting views
 //! alone leaves such a segment to a coin flip, and a large one (a whole table) moves the
 //! mean IoU by points. Deciding every segment this way instead was measured and dropped:
-//! clear majorities are better left to the votes (the estimate also carries the views'
-//! correlated mistakes, e.g. a wall behind a picture).
+//! clear majorities are better left to the votes (likely, not checked: the estimate also
+//! carries the views' correlated mistakes, as of a wall behind a picture).
 
 use super::consensus_decide::{ConsensusParams, SegmentVotes};
 
@@ -17,11 +17,11 @@ use super::consensus_decide::{ConsensusParams, SegmentVotes};
 /// are shares of the segment's observations, so a row sums to the views counted), and the
 /// prior each row is smoothed toward.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Confusions {
+struct Confusions {
     /// `votes[k][l]`: votes for class l from the views of segments decided as class k.
-    pub votes: Vec<Vec<f64>>,
+    votes: Vec<Vec<f64>>,
     /// `prior[k][l]`: P(a view says l | the segment is k) before the row's own votes.
-    pub prior: Vec<Vec<f64>>,
+    prior: Vec<Vec<f64>>,
 }
 
 /// Spread over the other classes and added to every rate at which one class's views call
@@ -33,7 +33,7 @@ impl Confusions {
     /// From the segments decided clearly: at least `min_segment` Gaussians, at least
     /// `confusion_min_views` views, the class holding at least `confusion_min_share` of the
     /// votes, and not a near tie.
-    pub fn estimate(segments: &[SegmentVotes], classes: usize, p: &ConsensusParams) -> Self {
+    fn estimate(segments: &[SegmentVotes], classes: usize, p: &ConsensusParams) -> Self {
         let mut votes = vec![vec![0.0; classes]; classes];
         for s in segments {
             let Some(k) = s.class else { continue };
@@ -41,7 +41,7 @@ impl Confusions {
             let clear = s.gaussians >= p.min_segment
                 && s.views >= p.confusion_min_views
                 && s.split[k] >= p.confusion_min_share * total
-                && near_tie(&s.split, p.tie_margin).len() < 2;
+                && tied_classes(&s.split, p.tie_margin).len() < 2;
             if clear {
                 votes[k].iter_mut().zip(&s.split).for_each(|(t, v)| *t += v);
             }
@@ -53,7 +53,7 @@ impl Confusions {
     /// ln P(split | the segment is class k): each vote an independent draw from row k,
     /// smoothed toward its prior with the weight of `prior_views` views, so a class seen in
     /// few clear segments is neither trusted nor ruled out.
-    pub fn log_likelihood(&self, k: usize, split: &[f64], prior_views: f64) -> f64 {
+    fn log_likelihood(&self, k: usize, split: &[f64], prior_views: f64) -> f64 {
         let row = &self.votes[k];
         let total: f64 = row.iter().sum::<f64>() + prior_views;
         (0..split.len())
@@ -95,7 +95,7 @@ fn mirrored_prior(votes: &[Vec<f64>]) -> Vec<Vec<f64>> {
 }
 
 /// The classes within `margin` votes of a split's top (none where nothing was voted).
-pub fn near_tie(split: &[f64], margin: f64) -> Vec<usize> {
+fn tied_classes(split: &[f64], margin: f64) -> Vec<usize> {
     let top = split.iter().cloned().fold(0.0f64, f64::max);
     (0..split.len())
         .filter(|&c| split[c] > 0.0 && split[c] >= top - margin)
@@ -108,7 +108,7 @@ pub fn near_tie(split: &[f64], margin: f64) -> Vec<usize> {
 pub fn decide_near_ties(segments: &mut [SegmentVotes], classes: usize, p: &ConsensusParams) {
     let confusions = Confusions::estimate(segments, classes, p);
     for s in segments.iter_mut().filter(|s| s.gaussians >= p.min_segment) {
-        let tied = near_tie(&s.split, p.tie_margin);
+        let tied = tied_classes(&s.split, p.tie_margin);
         if tied.len() < 2 {
             continue;
         }
