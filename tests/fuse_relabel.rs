@@ -31,7 +31,9 @@ fn depth_by_hand(regions: &[u32], w: usize, p: usize, cap: u32) -> u32 {
 }
 
 /// The rule written plainly: per region, the seeds at least `rule.depth` inside it (its
-/// deepest if none is); a class holding `rule.min_share` of them takes the region; else, if
+/// deepest if none is); a class holding `rule.min_share` of them takes the region, unless
+/// it is not the region's label and half or more of its seeds lie within `rule.near` of a
+/// pixel labeled it (the view labels it beside the region); else, if
 /// the region's own label holds `rule.keep_share` of them, and `rule.min_share` with the
 /// seeds of other classes that lie within `rule.near` (city-block) of a pixel labeled their
 /// class, it keeps its label; else it is unlabeled. Regions without seeds keep their labels.
@@ -81,7 +83,12 @@ fn relabel_by_hand(map: &[u32], w: usize, seeds: &[(u32, u32)], rule: &RelabelRu
             .filter(|s| s.1 != own && near(s.1, s.2))
             .count();
         let holds = |n: usize, share: f64| n as f64 >= share * counted.len() as f64;
-        let new = if holds(votes(top), rule.min_share) {
+        let top_near = counted
+            .iter()
+            .filter(|s| s.1 == top && near(top, s.2))
+            .count();
+        let beside = top != own && top_near * 2 >= votes(top);
+        let new = if holds(votes(top), rule.min_share) && !beside {
             top
         } else if holds(votes(own), rule.keep_share)
             && holds(votes(own) + near_seeds, rule.min_share)
@@ -168,6 +175,7 @@ fn random_case(seed: u64, w: usize, h: usize) -> (Vec<u32>, Vec<(u32, u32)>) {
 #[test]
 fn relabeling_matches_a_plain_transcription() {
     let (mut relabeled, mut unlabeled, mut kept, mut kept_by_near) = (0, 0, 0, 0);
+    let mut not_taken_beside = 0;
     for seed in 0..40 {
         let (w, h) = (24, 18);
         let (map, seeds) = random_case(seed, w, h);
@@ -198,14 +206,22 @@ fn relabeling_matches_a_plain_transcription() {
                 unlabeled += usize::from(want[p] == NO_LABEL);
                 kept += usize::from(want[p] == map[p] && never_kept[p] == NO_LABEL);
                 kept_by_near += usize::from(want[p] == map[p] && none_near[p] == NO_LABEL);
+                // With no seed near its class's label no class counts as labeled beside.
+                let taken = |l: u32| l != map[p] && l != NO_LABEL;
+                not_taken_beside += usize::from(taken(none_near[p]) && !taken(want[p]));
             }
         }
     }
     // The cases exercise every branch: regions relabeled, unlabeled, and mixed but kept,
-    // some of them only through seeds near their class's label.
+    // some of them only through seeds near their class's label, and regions not taken by
+    // a class labeled beside them.
     assert!(
-        relabeled > 1000 && unlabeled > 1000 && kept > 200 && kept_by_near > 100,
-        "{relabeled} {unlabeled} {kept} {kept_by_near}"
+        relabeled > 1000
+            && unlabeled > 1000
+            && kept > 200
+            && kept_by_near > 100
+            && not_taken_beside > 100,
+        "{relabeled} {unlabeled} {kept} {kept_by_near} {not_taken_beside}"
     );
 }
 
@@ -256,6 +272,18 @@ fn gpu_relabeling_matches_the_plain_transcription() {
     check_validation(gpu);
 }
 
+/// A `w` x `h` map labeled 1 inside the rectangle `xs` x `ys`, 0 around it.
+fn rectangle(
+    w: usize,
+    h: usize,
+    xs: std::ops::Range<usize>,
+    ys: std::ops::Range<usize>,
+) -> Vec<u32> {
+    (0..w * h)
+        .map(|p| u32::from(xs.contains(&(p % w)) && ys.contains(&(p / w))))
+        .collect()
+}
+
 /// At depth 1, edge seeds count only where a region has no interior seed; a split below
 /// the share unlabels the region; a region without seeds keeps its label.
 #[test]
@@ -282,9 +310,7 @@ fn a_region_takes_its_interior_seeds_class() {
 #[test]
 fn deep_seeds_outvote_a_shifted_edge() {
     let (w, h) = (12, 9);
-    let map: Vec<u32> = (0..w * h)
-        .map(|p| u32::from((1..11).contains(&(p % w)) && (1..8).contains(&(p / w))))
-        .collect();
+    let map = rectangle(w, h, 1..11, 1..8);
     // Region 1 spans x 1..=10, y 1..=7: (5, 4) is 3 deep, (4, 4) 3 deep, x = 2 one deep.
     let seeds = [
         (4 * w + 5, 1),
@@ -337,6 +363,62 @@ fn deep_seeds_outvote_a_shifted_edge() {
         };
         assert_eq!(got, want, "{what}");
     }
+}
+
+/// A region labeled 1 whose Gaussians the consensus gave class 2 takes class 2 where no
+/// pixel near them is labeled 2 (flicker: the view called the object 1); where the view
+/// labels 2 right beside it (an edge the segmenter drew: a small object whose Gaussians
+/// the consensus gave its neighbour's class) it is unlabeled, and keeps its label where
+/// its own Gaussians hold the keep share.
+#[test]
+fn a_region_does_not_take_a_class_labeled_beside_it() {
+    let (w, h) = (12, 9);
+    // Region 1 spans x 3..=8, y 2..=6 over a background of 0.
+    let map = rectangle(w, h, 3..9, 2..7);
+    // Four seeds of class 2 at depth 2 (x 5..=6, y 4: 2 from the region's edge).
+    let twos = [(4 * w + 5) as u32, (4 * w + 6) as u32];
+    let seeds = [(twos[0], 2), (twos[1], 2), (twos[0], 2), (twos[1], 2)];
+    let with_2_at = |p: usize| {
+        let mut labels = map.clone();
+        labels[p] = 2;
+        labels
+    };
+    // A 2 at (2, 4), just left of the region: 3 and 4 from the seeds; or at (11, 0): far.
+    let (beside, far) = (with_2_at(4 * w + 2), with_2_at(11));
+    let relabeled = |labels: &[u32], rule: &RelabelRule, seeds: &[(u32, u32)]| {
+        let mut got = labels.to_vec();
+        relabel_view(&mut got, w, seeds.iter().copied(), rule);
+        got
+    };
+    let taken = |labels: &[u32], to: u32| -> Vec<u32> {
+        labels
+            .iter()
+            .map(|&l| if l == 1 { to } else { l })
+            .collect()
+    };
+    let rule8 = rule(0.75, 2, 0.25, 8);
+    assert_eq!(relabeled(&far, &rule8, &seeds), taken(&far, 2), "no 2 near");
+    assert_eq!(
+        relabeled(&map, &rule8, &seeds),
+        taken(&map, 2),
+        "no 2 at all"
+    );
+    assert_eq!(
+        relabeled(&beside, &rule8, &seeds),
+        taken(&beside, NO_LABEL),
+        "a 2 beside"
+    );
+    // Within 3 of one seed pixel of two: half the class's seeds near still counts.
+    let rule3 = rule(0.75, 2, 0.25, 3);
+    assert_eq!(relabeled(&beside, &rule3, &seeds), taken(&beside, NO_LABEL));
+    // Within 2 of none: taken.
+    let rule2 = rule(0.75, 2, 0.25, 2);
+    assert_eq!(relabeled(&beside, &rule2, &seeds), taken(&beside, 2));
+    // One seed of its own among five, at the keep share of 0.2: kept.
+    let mut five = seeds.to_vec();
+    five.push((twos[0], 1));
+    let keep_a_fifth = rule(0.75, 2, 0.2, 8);
+    assert_eq!(relabeled(&beside, &keep_a_fifth, &five), beside);
 }
 
 /// The office under flicker 0.3 at 96x72: its noisy maps in compact ids, the scene on the

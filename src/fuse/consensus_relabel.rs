@@ -11,8 +11,9 @@
 //! nothing about where their edge is: it is left unlabeled in that view, unless the
 //! centers of its own label, with those of other classes lying near a pixel of their
 //! class, make up the share a class needs (boundary noise, below:
-//! [`RelabelRule::keep_share`]). A region no Gaussian center was observed in keeps its
-//! label.
+//! [`RelabelRule::keep_share`]). Nor is a region relabeled to a class the view labels
+//! beside it, an edge the segmenter drew ([`decide_regions`]). A region no Gaussian center
+//! was observed in keeps its label.
 
 use std::cmp::Reverse;
 use std::sync::Mutex;
@@ -35,7 +36,8 @@ use crate::scene::Camera;
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct RelabelRule {
     /// A region takes one class where that class holds at least this share (> 0.5) of the
-    /// observed Gaussians' centers that decide ([`RelabelRule::depth`]); else the region is
+    /// observed Gaussians' centers that decide ([`RelabelRule::depth`]) and the view does not
+    /// label that class beside the region ([`decide_regions`]); else the region is
     /// unlabeled in that view: flicker gave two touching objects one class there and merged
     /// their regions, so the region says nothing of where their edge runs. Its pixels then
     /// count for the consensus class of whichever Gaussian renders there
@@ -60,8 +62,10 @@ pub struct RelabelRule {
     /// most of them far from any pixel of their class, which flicker took from this view.
     pub keep_share: f64,
     /// How near (city-block pixels) a center of another class must lie to a pixel labeled
-    /// its class to count for its region's own label ([`RelabelRule::keep_share`]). The
-    /// default, 8, forgives label edges moved by up to 4 pixels along each axis.
+    /// its class to count for its region's own label ([`RelabelRule::keep_share`]), and to
+    /// count as seen beside the region, which then does not take its class
+    /// ([`decide_regions`]). The default, 8, forgives label edges moved by up to 4 pixels
+    /// along each axis.
     pub near: u32,
     /// A Gaussian whose footprint over the relabeled views sums to fewer pixels keeps its
     /// consensus class.
@@ -120,8 +124,9 @@ impl LabelSource for RelabeledViews<'_> {
 
 /// Relabels `map` (one view, `width` pixels a row) from `seeds`, the (pixel, class) of the
 /// observed Gaussians' centers: a region takes the class holding `rule.min_share` of its
-/// deciding seeds (those at least `rule.depth` pixels inside it, else its deepest), is
-/// unlabeled where none does (unless it keeps its label by [`RelabelRule::keep_share`]),
+/// deciding seeds (those at least `rule.depth` pixels inside it, else its deepest) where
+/// the view does not label that class beside it ([`decide_regions`]), is unlabeled where
+/// none does (unless it keeps its label by [`RelabelRule::keep_share`]),
 /// and keeps its label where no seed lies. The host version of
 /// [`RegionFinder::relabel`](super::regions_gpu::RegionFinder::relabel).
 pub fn relabel_view(
@@ -180,10 +185,26 @@ pub struct RegionSeed {
 }
 
 /// Every region holding seeds, with its new label: the class holding `rule.min_share` of its
-/// deciding seeds (its deepest, all of them from `rule.depth` pixels inward); where none
-/// does, its own label (in `map`, the view's labels, at the region's id: its first pixel)
-/// if that holds `rule.keep_share` of them and, with the seeds of other classes that lie
-/// near their class's label, `rule.min_share`; else NO_LABEL. Regions in increasing id.
+/// deciding seeds (its deepest, all of them from `rule.depth` pixels inward), unless it is
+/// another class than the region's own label and at least half of its seeds lie near a
+/// pixel the view labels it (the view labels that class beside the region); where no class
+/// takes the region, its own label (in `map`, the view's labels, at the region's id: its
+/// first pixel) if that holds `rule.keep_share` of them and, with the seeds of other classes
+/// that lie near their class's label, `rule.min_share`; else NO_LABEL. Regions in
+/// increasing id.
+///
+/// Why not a class the view labels beside the region: the segmenter drew an edge between
+/// the region and that class, and relabeling would erase the region from the view. Under
+/// boundary noise a small object (a lamp, a cup) loses its edges to its neighbour's label,
+/// wholly in the views that see it small, and the consensus (every view once) gives part
+/// of its Gaussians the neighbour's class (living room, seed 5, boundary=4: 324 of the
+/// lamps' 1,157 Gaussians wall); relabeled as the neighbour, the object's remaining
+/// regions would leave it no pixels at all. Unlabeled, each Gaussian rendering there
+/// counts for its own consensus class ([`fold_undecided`]), so those the consensus got
+/// right keep the object.
+/// Flicker relabels whole objects and moves no edge: an object flickered to a look-alike
+/// next to one of its own class (a book beside books) is unlabeled instead of relabeled,
+/// and its Gaussians count for the class the consensus gave them either way.
 pub fn decide_regions(seeds: Vec<RegionSeed>, map: &[u32], rule: &RelabelRule) -> Vec<(u32, u32)> {
     debug_assert!(rule.min_share > 0.5, "a tie could hold min_share");
     // (region, depth from deepest, class, near): by region, each region's deciding seeds
@@ -208,7 +229,9 @@ pub fn decide_regions(seeds: Vec<RegionSeed>, map: &[u32], rule: &RelabelRule) -
         let own = map[region[0].0 as usize];
         let own_seeds = deciding.iter().filter(|s| s.2 == own).count();
         let near_seeds = deciding.iter().filter(|s| s.2 != own && s.3).count();
-        let label = if holds(n, rule.min_share) {
+        let near_class = deciding.iter().filter(|s| s.2 == class && s.3).count();
+        let labeled_beside = class != own && 2 * near_class >= n;
+        let label = if holds(n, rule.min_share) && !labeled_beside {
             class
         } else if holds(own_seeds, rule.keep_share) && holds(own_seeds + near_seeds, rule.min_share)
         {
