@@ -237,17 +237,19 @@ fn votes_of(sorted: &[u64], classes: usize) -> (Vec<f64>, Vec<f64>, usize) {
     (split, mass, views)
 }
 
-/// Per Gaussian: how many of its views gave each class.
-fn own_votes(obs: &Observations, classes: usize) -> Vec<Vec<f64>> {
-    (0..obs.n)
-        .map(|g| {
-            let mut v = vec![0.0; classes];
-            for i in obs.row(g) {
-                v[obs.label[i] as usize] += 1.0;
-            }
-            v
-        })
-        .collect()
+/// How many of Gaussian `g`'s views gave each class. Counted as each Gaussian is decided
+/// rather than kept for all of them at once (a million Gaussians over 64 classes: 0.5 GB),
+/// and again for the few whose neighbours' votes break a tie.
+fn own_votes(obs: &Observations, g: usize, classes: usize) -> Vec<f64> {
+    let mut votes = vec![0.0; classes];
+    add_own_votes(obs, g, &mut votes);
+    votes
+}
+
+fn add_own_votes(obs: &Observations, g: usize, votes: &mut [f64]) {
+    for i in obs.row(g) {
+        votes[obs.label[i] as usize] += 1.0;
+    }
 }
 
 /// Decides segments and Gaussians from the observations, the neighbours and the segments.
@@ -268,15 +270,15 @@ pub fn decide(
         .map(|s| segment_summary(&split[s], &mass[s], sizes[s], views[s], p))
         .collect();
     decide_near_ties(&mut segments, classes, p);
-    let own = own_votes(obs, classes);
     let n = obs.n;
     let mut class = vec![None; n];
     let (mut from_segment, mut from_neighbour_segments) = (0, 0);
     let mut evidence = Vec::with_capacity(n);
     for g in 0..n {
         let s = segment[g] as usize;
+        let own = own_votes(obs, g, classes);
         match deciding_class(&segments[s], p) {
-            Some(c) if !contradicts(&own[g], c, &split[s], p) => {
+            Some(c) if !contradicts(&own, c, &split[s], p) => {
                 class[g] = Some(c);
                 from_segment += 1;
                 evidence.push(split[s].clone());
@@ -292,9 +294,9 @@ pub fn decide(
                     from_neighbour_segments += usize::from(!obs.row(g).is_empty());
                     evidence.push(counts);
                 } else {
-                    let tie_break = neighbour_votes(&own, knn, p.neighbours, g);
-                    class[g] = decisive_argmax(&own[g], &tie_break);
-                    evidence.push(own[g].clone());
+                    let tie_break = neighbour_votes(obs, knn, p.neighbours, g, classes);
+                    class[g] = decisive_argmax(&own, &tie_break);
+                    evidence.push(own);
                 }
             }
         }
@@ -488,13 +490,17 @@ fn segment_summary(
 }
 
 /// The own votes of g's neighbours, summed: breaks a tie of g's own views.
-fn neighbour_votes(own: &[Vec<f64>], knn: &[u32], k: usize, g: usize) -> Vec<f64> {
-    let mut sum = vec![0.0; own[g].len()];
+fn neighbour_votes(
+    obs: &Observations,
+    knn: &[u32],
+    k: usize,
+    g: usize,
+    classes: usize,
+) -> Vec<f64> {
+    let mut sum = vec![0.0; classes];
     for &h in &knn[g * k..(g + 1) * k] {
         if h != NO_NEIGHBOUR {
-            for (s, v) in sum.iter_mut().zip(&own[h as usize]) {
-                *s += v;
-            }
+            add_own_votes(obs, h as usize, &mut sum);
         }
     }
     sum
