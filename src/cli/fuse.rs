@@ -87,7 +87,8 @@ pub struct FuseArgs {
     /// renders there), unless its own class holds a quarter of them and, with those of
     /// other classes lying within 8 pixels of their own class's label (a label edge drawn a
     /// few pixels off), 85%. Nor does a region take a class the view labels within 8 pixels
-    /// of most of that class's Gaussians there: an edge the segmenter drew (undecided).
+    /// of half or more of that class's Gaussians there: an edge the segmenter drew (then
+    /// decided as a mixed region).
     #[arg(long)]
     relabel: bool,
     /// Relative depth tolerance of the visibility test (> 0): vote --occlusion's, against the
