@@ -284,6 +284,21 @@ fn rectangle(
         .collect()
 }
 
+/// `map` with pixel `p` labeled 2.
+fn with_2_at(map: &[u32], p: usize) -> Vec<u32> {
+    let mut labels = map.to_vec();
+    labels[p] = 2;
+    labels
+}
+
+/// `labels` with every pixel labeled 1 labeled `to`.
+fn ones_to(labels: &[u32], to: u32) -> Vec<u32> {
+    labels
+        .iter()
+        .map(|&l| if l == 1 { to } else { l })
+        .collect()
+}
+
 /// At depth 1, edge seeds count only where a region has no interior seed; a split below
 /// the share unlabels the region; a region without seeds keeps its label.
 #[test]
@@ -324,19 +339,9 @@ fn deep_seeds_outvote_a_shifted_edge() {
     relabel_view(&mut got, w, seeds.into_iter(), &rule(0.75, 3, 2.0, 8));
     assert_eq!(got, map, "the deep seeds keep class 1");
     // At depth 1 the region is mixed, two of five seeds its own class 1, three class 2.
-    let unlabeled = |map: &[u32]| -> Vec<u32> {
-        map.iter()
-            .map(|&l| if l == 1 { NO_LABEL } else { l })
-            .collect()
-    };
     // A pixel labeled 2 beside the region at (0, 4): 2 from the seed at (2, 4), 3 from
     // those at (2, 3) and (2, 5). Or far, at (11, 4): 9 from (2, 4), 10 from the others.
-    let with_2_at = |p: usize| {
-        let mut labels = map.clone();
-        labels[p] = 2;
-        labels
-    };
-    let (beside, far) = (with_2_at(4 * w), with_2_at(4 * w + 11));
+    let (beside, far) = (with_2_at(&map, 4 * w), with_2_at(&map, 4 * w + 11));
     let cases = [
         (&map, 0.4, 8, false, "no pixel labeled 2"),
         (&beside, 0.4, 3, true, "every class-2 seed near a 2"),
@@ -359,7 +364,7 @@ fn deep_seeds_outvote_a_shifted_edge() {
         let want = if kept {
             labels.clone()
         } else {
-            unlabeled(labels)
+            ones_to(labels, NO_LABEL)
         };
         assert_eq!(got, want, "{what}");
     }
@@ -378,42 +383,38 @@ fn a_region_does_not_take_a_class_labeled_beside_it() {
     // Four seeds of class 2 at depth 2 (x 5..=6, y 4: 2 from the region's edge).
     let twos = [(4 * w + 5) as u32, (4 * w + 6) as u32];
     let seeds = [(twos[0], 2), (twos[1], 2), (twos[0], 2), (twos[1], 2)];
-    let with_2_at = |p: usize| {
-        let mut labels = map.clone();
-        labels[p] = 2;
-        labels
-    };
     // A 2 at (2, 4), just left of the region: 3 and 4 from the seeds; or at (11, 0): far.
-    let (beside, far) = (with_2_at(4 * w + 2), with_2_at(11));
+    let (beside, far) = (with_2_at(&map, 4 * w + 2), with_2_at(&map, 11));
     let relabeled = |labels: &[u32], rule: &RelabelRule, seeds: &[(u32, u32)]| {
         let mut got = labels.to_vec();
         relabel_view(&mut got, w, seeds.iter().copied(), rule);
         got
     };
-    let taken = |labels: &[u32], to: u32| -> Vec<u32> {
-        labels
-            .iter()
-            .map(|&l| if l == 1 { to } else { l })
-            .collect()
-    };
     let rule8 = rule(0.75, 2, 0.25, 8);
-    assert_eq!(relabeled(&far, &rule8, &seeds), taken(&far, 2), "no 2 near");
+    assert_eq!(
+        relabeled(&far, &rule8, &seeds),
+        ones_to(&far, 2),
+        "no 2 near"
+    );
     assert_eq!(
         relabeled(&map, &rule8, &seeds),
-        taken(&map, 2),
+        ones_to(&map, 2),
         "no 2 at all"
     );
     assert_eq!(
         relabeled(&beside, &rule8, &seeds),
-        taken(&beside, NO_LABEL),
+        ones_to(&beside, NO_LABEL),
         "a 2 beside"
     );
     // Within 3 of one seed pixel of two: half the class's seeds near still counts.
     let rule3 = rule(0.75, 2, 0.25, 3);
-    assert_eq!(relabeled(&beside, &rule3, &seeds), taken(&beside, NO_LABEL));
+    assert_eq!(
+        relabeled(&beside, &rule3, &seeds),
+        ones_to(&beside, NO_LABEL)
+    );
     // Within 2 of none: taken.
     let rule2 = rule(0.75, 2, 0.25, 2);
-    assert_eq!(relabeled(&beside, &rule2, &seeds), taken(&beside, 2));
+    assert_eq!(relabeled(&beside, &rule2, &seeds), ones_to(&beside, 2));
     // One seed of its own among five, at the keep share of 0.2: kept.
     let mut five = seeds.to_vec();
     five.push((twos[0], 1));

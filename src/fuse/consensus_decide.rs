@@ -237,15 +237,9 @@ fn votes_of(sorted: &[u64], classes: usize) -> (Vec<f64>, Vec<f64>, usize) {
     (split, mass, views)
 }
 
-/// How many of Gaussian `g`'s views gave each class. Counted as each Gaussian is decided
-/// rather than kept for all of them at once (a million Gaussians over 64 classes: 0.5 GB),
-/// and again for the few whose neighbours' votes break a tie.
-fn own_votes(obs: &Observations, g: usize, classes: usize) -> Vec<f64> {
-    let mut votes = vec![0.0; classes];
-    add_own_votes(obs, g, &mut votes);
-    votes
-}
-
+/// Adds how many of Gaussian `g`'s views gave each class to `votes`. Counted as each
+/// Gaussian is decided rather than kept for all of them at once (a million Gaussians over
+/// 64 classes: 0.5 GB), and again for the few whose neighbours' votes break a tie.
 fn add_own_votes(obs: &Observations, g: usize, votes: &mut [f64]) {
     for i in obs.row(g) {
         votes[obs.label[i] as usize] += 1.0;
@@ -274,9 +268,11 @@ pub fn decide(
     let mut class = vec![None; n];
     let (mut from_segment, mut from_neighbour_segments) = (0, 0);
     let mut evidence = Vec::with_capacity(n);
+    let mut own = vec![0.0; classes];
     for g in 0..n {
         let s = segment[g] as usize;
-        let own = own_votes(obs, g, classes);
+        own.fill(0.0);
+        add_own_votes(obs, g, &mut own);
         match deciding_class(&segments[s], p) {
             Some(c) if !contradicts(&own, c, &split[s], p) => {
                 class[g] = Some(c);
@@ -296,7 +292,7 @@ pub fn decide(
                 } else {
                     let tie_break = neighbour_votes(obs, knn, p.neighbours, g, classes);
                     class[g] = decisive_argmax(&own, &tie_break);
-                    evidence.push(own);
+                    evidence.push(own.clone());
                 }
             }
         }

@@ -20,8 +20,8 @@ pub struct SegmentSplit {
     pub views: usize,
     /// The class it was given (None: no decisive class).
     pub class: Option<String>,
-    /// Its top classes were within one view's vote; `class` is the one the scene's class
-    /// confusions make likeliest.
+    /// Its top classes were within the tie margin (one view's vote by default); `class` is
+    /// the one the scene's class confusions make likeliest.
     pub near_tie: bool,
     pub votes: NamedVotes,
 }
