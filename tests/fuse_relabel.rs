@@ -566,7 +566,7 @@ fn relabel_is_deterministic_and_follows_its_rule() {
     };
     let (a, b) = (lift(), lift());
     assert_eq!(a.assignment, b.assignment);
-    assert_eq!(a.evidence.data, b.evidence.data);
+    assert_eq!(a.evidence, b.evidence);
     assert_eq!(a.consensus, b.consensus);
 
     let cons = &run.consensus.assignment.class;

@@ -10,9 +10,7 @@ use super::progress::{follow, views_bar};
 use super::Interruptible;
 use semsplat::dataset::Dataset;
 use semsplat::fuse::consensus_report::{segment_report, SegmentReport};
-use semsplat::fuse::{
-    lift_by_consensus, ConsensusInput, ConsensusParams, EvidenceRows, FuseConfig, Method,
-};
+use semsplat::fuse::{lift_by_consensus, ConsensusInput, ConsensusParams, FuseConfig, Method};
 use semsplat::gpu::Gpu;
 use semsplat::render::GpuScene;
 use semsplat::scene::Gaussians;
@@ -84,7 +82,7 @@ pub(super) fn fuse_by_consensus(
     };
     Ok(Evidence {
         assignment: lift.assignment,
-        rows: Some(Box::new(lift.evidence) as Box<dyn EvidenceRows>),
+        rows: Some(lift.evidence.into_rows()),
         table: data.table,
         stats: Some(lift.stats),
         consensus: Some(outputs),

@@ -18,7 +18,7 @@ use super::consensus_relabel::fuse_relabeled;
 use super::consensus_segments::{nearest_neighbours, Observations};
 use super::method::Method;
 use super::regions_gpu::RegionFinder;
-use super::scores::ClassScores;
+use super::scores::{ClassScores, EvidenceRows, SharedCounts};
 use crate::contract::REGION_EDGE_BIT;
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, Gpu, Recorder};
@@ -100,11 +100,37 @@ pub struct ConsensusLift {
     pub assignment: Assignment,
     /// The segments, their vote splits and flags, and each Gaussian's entropy.
     pub consensus: Consensus,
-    /// Per Gaussian, the evidence its class is the argmax of (the consensus counts; with
-    /// `--relabel` FlashSplat's over the relabeled views where it decided): what
-    /// `--save-contrib` writes.
-    pub evidence: ClassScores,
+    /// Per Gaussian, the evidence its class is the argmax of: what `--save-contrib` writes.
+    pub evidence: LiftEvidence,
     pub stats: FuseStats,
+}
+
+/// A consensus lift's evidence per Gaussian.
+#[derive(Clone, Debug, PartialEq)]
+pub enum LiftEvidence {
+    /// The consensus counts (each segment's split stored once for its members).
+    Consensus(SharedCounts),
+    /// `--relabel`: FlashSplat's over the relabeled views where it decided, else the
+    /// consensus counts; most Gaussians hold a column of their own.
+    Relabeled(ClassScores),
+}
+
+impl LiftEvidence {
+    /// As a matrix [classes][n].
+    pub fn into_scores(self) -> ClassScores {
+        match self {
+            LiftEvidence::Consensus(counts) => counts.to_scores(),
+            LiftEvidence::Relabeled(scores) => scores,
+        }
+    }
+
+    /// Read a class row at a time (the consensus counts never as a whole matrix).
+    pub fn into_rows(self) -> Box<dyn EvidenceRows> {
+        match self {
+            LiftEvidence::Consensus(counts) => Box::new(counts),
+            LiftEvidence::Relabeled(scores) => Box::new(scores),
+        }
+    }
 }
 
 /// Lifts the labels by `cfg.method`, one of the consensus methods ([`Method::is_consensus`]);
@@ -124,25 +150,13 @@ pub fn lift_by_consensus(
         return fuse_relabeled(input, cfg, params, progress);
     }
     let run = consensus_run(input, cfg, params, progress)?;
-    let evidence = scores_of(&run.consensus.evidence, input.classes);
+    let evidence = LiftEvidence::Consensus(run.consensus.evidence.clone());
     Ok(ConsensusLift {
         assignment: run.consensus.assignment.clone(),
         consensus: run.consensus,
         evidence,
         stats: run.stats,
     })
-}
-
-/// Per-Gaussian count vectors as an evidence matrix [classes][n].
-pub fn scores_of(counts: &[Vec<f64>], classes: usize) -> ClassScores {
-    let n = counts.len();
-    let mut scores = ClassScores::zeros(classes, n);
-    for (g, counts) in counts.iter().enumerate() {
-        for (c, &v) in counts.iter().enumerate() {
-            scores.data[c * n + g] = v;
-        }
-    }
-    scores
 }
 
 /// A consensus method as an evidence matrix, for the callers of [`super::accumulate`]
@@ -169,7 +183,7 @@ pub fn consensus_evidence(
         classes,
     };
     let lift = lift_by_consensus(&input, cfg, &params, &mut |_, _| {})?;
-    Ok((lift.evidence, lift.stats))
+    Ok((lift.evidence.into_scores(), lift.stats))
 }
 
 /// Every view's observations of every Gaussian: label and region under its center (with

@@ -11,6 +11,7 @@ use super::assign::Assignment;
 use super::consensus_confusion::decide_near_ties;
 use super::consensus_relabel::RelabelRule;
 use super::consensus_segments::Observations;
+use super::scores::SharedCounts;
 use crate::contract::NO_NEIGHBOUR;
 use crate::util::parallel_map;
 
@@ -147,8 +148,8 @@ pub struct Consensus {
     /// Gaussians no view observed, decided by their neighbours' classes.
     pub from_neighbours: usize,
     /// Per Gaussian, the counts its class was decided from (segment split, own views, or
-    /// neighbours' classes).
-    pub evidence: Vec<Vec<f64>>,
+    /// neighbours' classes); a segment's split is stored once for its members.
+    pub evidence: SharedCounts,
 }
 
 /// The class with the most `votes`; ties go to the most `mass`; still tied: None.
@@ -267,7 +268,8 @@ pub fn decide(
     let n = obs.n;
     let mut class = vec![None; n];
     let (mut from_segment, mut from_neighbour_segments) = (0, 0);
-    let mut evidence = Vec::with_capacity(n);
+    let mut evidence = SharedCounts::zeros(classes, n);
+    let split_row: Vec<u32> = split.iter().map(|s| evidence.add_row(s)).collect();
     let mut own = vec![0.0; classes];
     for g in 0..n {
         let s = segment[g] as usize;
@@ -277,7 +279,7 @@ pub fn decide(
             Some(c) if !contradicts(&own, c, &split[s], p) => {
                 class[g] = Some(c);
                 from_segment += 1;
-                evidence.push(split[s].clone());
+                evidence.share(g, split_row[s]);
             }
             _ => {
                 let near = match segments[s].gaussians < p.min_segment {
@@ -288,11 +290,11 @@ pub fn decide(
                     class[g] = Some(c);
                     // Unobserved ones are counted where their neighbours decide them below.
                     from_neighbour_segments += usize::from(!obs.row(g).is_empty());
-                    evidence.push(counts);
+                    evidence.set(g, &counts);
                 } else {
                     let tie_break = neighbour_votes(obs, knn, p.neighbours, g, classes);
                     class[g] = decisive_argmax(&own, &tie_break);
-                    evidence.push(own.clone());
+                    evidence.set(g, &own);
                 }
             }
         }
@@ -386,7 +388,7 @@ pub fn binomial_at_most(k: u64, n: u64, rate: f64) -> f64 {
 /// how many were decided so.
 fn fill_unobserved(
     class: &mut [Option<usize>],
-    evidence: &mut [Vec<f64>],
+    evidence: &mut SharedCounts,
     obs: &Observations,
     knn: &[u32],
     k: usize,
@@ -404,7 +406,7 @@ fn fill_unobserved(
         let found: Vec<(usize, usize, Vec<f64>)> = frontier
             .iter()
             .filter_map(|&g| {
-                let mut counts = vec![0.0; evidence[g].len()];
+                let mut counts = vec![0.0; evidence.classes()];
                 let near = knn[g * k..(g + 1) * k]
                     .iter()
                     .filter(|&&h| h != NO_NEIGHBOUR);
@@ -417,7 +419,8 @@ fn fill_unobserved(
         decided += found.len();
         frontier.clear();
         for (g, c, counts) in found {
-            (class[g], evidence[g], pending[g]) = (Some(c), counts, false);
+            (class[g], pending[g]) = (Some(c), false);
+            evidence.set(g, &counts);
             frontier.extend(listed_by.row(g).filter(|&f| pending[f]));
         }
         frontier.sort_unstable();

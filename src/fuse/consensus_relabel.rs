@@ -23,7 +23,7 @@ use serde::Serialize;
 
 use super::accumulate::{accumulate, FuseConfig, LabelSource, NO_LABEL};
 use super::assign::{assign_semantic_near, Assignment};
-use super::consensus::{consensus_run, scores_of, ConsensusInput, ConsensusLift};
+use super::consensus::{consensus_run, ConsensusInput, ConsensusLift, LiftEvidence};
 use super::consensus_decide::{posterior, ConsensusParams};
 use super::consensus_segments::{four_neighbours, label_regions, region_edges};
 use super::method::Method;
@@ -340,7 +340,7 @@ pub fn fuse_relabeled(
     let consensus = run.consensus;
     let footprints = fold_undecided(&footprints, &consensus.assignment.class);
     let by_pixels = assign_semantic_near(&footprints, Some((&run.knn, params.neighbours)));
-    let mut evidence = scores_of(&consensus.evidence, input.classes);
+    let mut evidence = consensus.evidence.to_scores();
     let mut class = consensus.assignment.class.clone();
     for (g, (own, &by_footprint)) in class.iter_mut().zip(&by_pixels.class).enumerate() {
         let mass: f64 = (0..input.classes).map(|c| footprints.get(c, g)).sum();
@@ -353,8 +353,8 @@ pub fn fuse_relabeled(
     }
     let confidence = class
         .iter()
-        .zip(&consensus.evidence)
-        .map(|(&c, counts)| posterior(counts, c, params.prior).0 as f32)
+        .enumerate()
+        .map(|(g, &c)| posterior(&consensus.evidence[g], c, params.prior).0 as f32)
         .collect();
     let mut stats = fs_stats;
     stats.gpu_ms += run.stats.gpu_ms + relabel_stats.gpu_ms;
@@ -368,7 +368,7 @@ pub fn fuse_relabeled(
     Ok(ConsensusLift {
         assignment: Assignment { class, confidence },
         consensus,
-        evidence,
+        evidence: LiftEvidence::Relabeled(evidence),
         stats,
     })
 }

@@ -24,9 +24,11 @@ pub use assign::{
     assign_one_vs_rest, assign_semantic, assign_semantic_near, class_totals, one_vs_rest_row,
     Assignment, TIE_NEIGHBOURS,
 };
-pub use consensus::{fuse_consensus, lift_by_consensus, ConsensusInput, ConsensusLift};
+pub use consensus::{
+    fuse_consensus, lift_by_consensus, ConsensusInput, ConsensusLift, LiftEvidence,
+};
 pub use consensus_decide::{Consensus, ConsensusParams, SegmentVotes};
 pub use consensus_segments::nearest_neighbours;
 pub use method::{Method, SPELLINGS};
 pub use partial::{EvidenceKind, PartManifest, RawEvidence, Shard};
-pub use scores::{ClassScores, EvidenceRows, SpilledRows};
+pub use scores::{ClassScores, EvidenceRows, SharedCounts, SpilledRows};

@@ -60,6 +60,92 @@ impl ClassScores {
     }
 }
 
+/// Per-Gaussian count vectors, each distinct one stored once: segment consensus decides most
+/// Gaussians from their segment's vote split, so a million Gaussians share a few thousand
+/// rows (a vector per Gaussian held n x classes values, and as many again in the matrix
+/// built from them).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SharedCounts {
+    classes: usize,
+    /// Row-major [rows][classes]; row 0 is zeros.
+    counts: Vec<f64>,
+    /// Per Gaussian, its row.
+    row_of: Vec<u32>,
+}
+
+impl SharedCounts {
+    /// `n` Gaussians over `classes` classes, each at the row of zeros.
+    pub fn zeros(classes: usize, n: usize) -> SharedCounts {
+        SharedCounts {
+            classes,
+            counts: vec![0.0; classes],
+            row_of: vec![0; n],
+        }
+    }
+
+    /// Adds a row of counts (`classes` long) no Gaussian holds yet; returns its index.
+    pub fn add_row(&mut self, counts: &[f64]) -> u32 {
+        assert_eq!(counts.len(), self.classes, "a row of counts per class");
+        let row = (self.counts.len() / self.classes.max(1)) as u32;
+        self.counts.extend_from_slice(counts);
+        row
+    }
+
+    /// Gaussian `g` holds row `row`.
+    pub fn share(&mut self, g: usize, row: u32) {
+        self.row_of[g] = row;
+    }
+
+    /// Gaussian `g` holds counts of its own.
+    pub fn set(&mut self, g: usize, counts: &[f64]) {
+        self.row_of[g] = self.add_row(counts);
+    }
+
+    pub fn classes(&self) -> usize {
+        self.classes
+    }
+
+    /// Distinct rows stored (the row of zeros included).
+    pub fn rows(&self) -> usize {
+        self.counts.len() / self.classes.max(1)
+    }
+
+    /// Gaussians.
+    pub fn len(&self) -> usize {
+        self.row_of.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.row_of.is_empty()
+    }
+
+    /// Gaussian `g`'s counts.
+    pub fn get(&self, g: usize) -> &[f64] {
+        let at = self.row_of[g] as usize * self.classes;
+        &self.counts[at..at + self.classes]
+    }
+
+    /// As an evidence matrix [classes][n].
+    pub fn to_scores(&self) -> ClassScores {
+        let n = self.len();
+        let mut scores = ClassScores::zeros(self.classes, n);
+        for g in 0..n {
+            for (c, &v) in self.get(g).iter().enumerate() {
+                scores.data[c * n + g] = v;
+            }
+        }
+        scores
+    }
+}
+
+impl std::ops::Index<usize> for SharedCounts {
+    type Output = [f64];
+
+    fn index(&self, g: usize) -> &[f64] {
+        self.get(g)
+    }
+}
+
 /// The evidence matrix read one class row at a time, wherever it is: in memory
 /// ([`ClassScores`]) or spilled to disk as it streamed from the GPU ([`SpilledRows`]).
 pub trait EvidenceRows {
@@ -88,6 +174,30 @@ impl EvidenceRows for ClassScores {
 
     fn row(&mut self, class: usize) -> Result<Cow<'_, [f64]>> {
         Ok(Cow::Borrowed(ClassScores::row(self, class)))
+    }
+}
+
+impl EvidenceRows for SharedCounts {
+    fn classes(&self) -> usize {
+        self.classes
+    }
+
+    fn n(&self) -> usize {
+        self.len()
+    }
+
+    fn row(&mut self, class: usize) -> Result<Cow<'_, [f64]>> {
+        ensure!(
+            class < self.classes,
+            "no class row {class} of {}",
+            self.classes
+        );
+        let classes = self.classes;
+        let row = self
+            .row_of
+            .iter()
+            .map(|&r| self.counts[r as usize * classes + class]);
+        Ok(Cow::Owned(row.collect()))
     }
 }
 
@@ -161,5 +271,43 @@ impl EvidenceRows for SpilledRows {
             .map(|b| f64::from_le_bytes(b.try_into().expect("8 bytes")))
             .collect();
         Ok(Cow::Owned(row))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Shared rows read back per Gaussian, as a matrix and a class row at a time, all the
+    /// same as the vectors they stand for; a shared row is stored once.
+    #[test]
+    fn shared_counts_read_back_as_the_vectors_they_hold() {
+        let vectors = [
+            vec![2.0, 1.0, 0.0],
+            vec![0.5, 0.0, 3.0],
+            vec![2.0, 1.0, 0.0],
+            vec![0.0, 0.0, 0.0],
+            vec![0.0, 4.0, 0.0],
+        ];
+        let mut counts = SharedCounts::zeros(3, vectors.len());
+        let segment = counts.add_row(&vectors[0]);
+        counts.share(0, segment);
+        counts.share(2, segment);
+        counts.set(1, &vectors[1]);
+        counts.set(4, &vectors[4]); // Gaussian 3 keeps the row of zeros
+        assert_eq!(counts.rows(), 4);
+        for (g, v) in vectors.iter().enumerate() {
+            assert_eq!(&counts[g], v.as_slice());
+        }
+        let scores = counts.to_scores();
+        for (g, v) in vectors.iter().enumerate() {
+            for (c, &x) in v.iter().enumerate() {
+                assert_eq!(scores.get(c, g), x);
+            }
+        }
+        for c in 0..3 {
+            assert_eq!(EvidenceRows::row(&mut counts, c).unwrap(), scores.row(c));
+        }
+        assert!(EvidenceRows::row(&mut counts, 3).is_err());
     }
 }
