@@ -5,6 +5,8 @@
 //! both form 3D segments; each segment's class is voted with every view counting once, and
 //! each Gaussian takes its segment's class (docs/robustness.md).
 
+use std::sync::Arc;
+
 use anyhow::{ensure, Result};
 
 use super::accumulate::{
@@ -108,8 +110,8 @@ pub struct ConsensusLift {
 /// A consensus lift's evidence per Gaussian.
 #[derive(Clone, Debug, PartialEq)]
 pub enum LiftEvidence {
-    /// The consensus counts (each segment's split stored once for its members).
-    Consensus(SharedCounts),
+    /// The consensus counts ([`Consensus::evidence`], shared).
+    Consensus(Arc<SharedCounts>),
     /// `--relabel`: FlashSplat's over the relabeled views where it decided, else the
     /// consensus counts; most Gaussians hold a column of their own.
     Relabeled(ClassScores),
@@ -150,7 +152,7 @@ pub fn lift_by_consensus(
         return fuse_relabeled(input, cfg, params, progress);
     }
     let run = consensus_run(input, cfg, params, progress)?;
-    let evidence = LiftEvidence::Consensus(run.consensus.evidence.clone());
+    let evidence = LiftEvidence::Consensus(Arc::clone(&run.consensus.evidence));
     Ok(ConsensusLift {
         assignment: run.consensus.assignment.clone(),
         consensus: run.consensus,

@@ -61,6 +61,9 @@ impl PairEvidence {
 }
 
 /// A segment's observations counted per (view, region), and per view its dominant region.
+/// Empty for a single Gaussian (most segments, most of the time): its observations are read
+/// in place ([`Dominant::Row`]) rather than copied, 12 bytes for every observation of the
+/// scene; a segment's counts are built when it first joins another.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct RegionCounts {
     /// (view, region, observations), sorted by view, then region.
@@ -84,10 +87,23 @@ impl RegionCounts {
         }
     }
 
-    /// Adds `other`'s counts. The smaller of the two is added into the larger, so a large
-    /// segment taking in a Gaussian costs the Gaussian's views (with binary searches), not
-    /// a copy of the segment's counts.
-    fn absorb(&mut self, mut other: RegionCounts) {
+    /// Adds `other`'s counts; `first` and `other_first` are the two segments' lowest
+    /// Gaussians, whose observations are the counts of a segment of one. The smaller of the
+    /// two is added into the larger, so a large segment taking in a Gaussian costs the
+    /// Gaussian's views (with binary searches), not a copy of the segment's counts.
+    fn absorb(
+        &mut self,
+        first: usize,
+        mut other: RegionCounts,
+        other_first: usize,
+        obs: &Observations,
+    ) {
+        if self.counts.is_empty() {
+            *self = RegionCounts::of_gaussian(obs, first);
+        }
+        if other.counts.is_empty() {
+            other = RegionCounts::of_gaussian(obs, other_first);
+        }
         if other.counts.len() > self.counts.len() {
             std::mem::swap(self, &mut other);
         }
@@ -106,7 +122,7 @@ impl RegionCounts {
         }
         merge_into(&mut self.counts, &fresh);
         let mut new_views = Vec::new();
-        for &(view, ..) in other.dominant() {
+        for &(view, ..) in other.table() {
             let d = self.dominant_in(view);
             match self.dominant.binary_search_by_key(&d.0, |e| e.0) {
                 Ok(i) => self.dominant[i] = d,
@@ -129,12 +145,58 @@ impl RegionCounts {
         (view, best.1, total)
     }
 
-    /// Per view: (view, dominant region, observations the view holds), by view.
-    pub fn dominant(&self) -> &[(u32, u32, u32)] {
+    /// Per view: (view, dominant region, observations the view holds), by view, once the
+    /// counts are built.
+    fn table(&self) -> &[(u32, u32, u32)] {
         match self.dominant.is_empty() {
             true => &self.counts,
             false => &self.dominant,
         }
+    }
+
+    /// The dominant regions of the segment whose lowest Gaussian is `first`.
+    pub fn dominant<'a>(&'a self, first: usize, obs: &'a Observations) -> Dominant<'a> {
+        match self.counts.is_empty() {
+            true => Dominant::Row {
+                view: &obs.view[obs.row(first)],
+                region: &obs.region[obs.row(first)],
+            },
+            false => Dominant::Table(self.table()),
+        }
+    }
+}
+
+/// A segment's dominant region per view, by view: (view, region, observations the view
+/// holds).
+#[derive(Clone, Copy, Debug)]
+pub enum Dominant<'a> {
+    /// A single Gaussian's observations, read in place: one per view, each its own region.
+    Row { view: &'a [u32], region: &'a [u32] },
+    /// A joined segment's table ([`RegionCounts`]).
+    Table(&'a [(u32, u32, u32)]),
+}
+
+impl Dominant<'_> {
+    fn len(&self) -> usize {
+        match self {
+            Dominant::Row { view, .. } => view.len(),
+            Dominant::Table(table) => table.len(),
+        }
+    }
+
+    fn at(&self, i: usize) -> (u32, u32, u32) {
+        match self {
+            Dominant::Row { view, region } => (view[i], region[i], 1),
+            Dominant::Table(table) => table[i],
+        }
+    }
+
+    fn find(&self, view: u32) -> Option<(u32, u32, u32)> {
+        let found = match self {
+            Dominant::Row { view: views, .. } => views.binary_search(&view),
+            Dominant::Table(table) => table.binary_search_by_key(&view, |e| e.0),
+        };
+        found.ok().map(|i| self.at(i))
     }
 
     /// Of the views that observed both segments, weighed by the fewer of the two segments'
@@ -143,15 +205,18 @@ impl RegionCounts {
     /// segment lies (one ceiling Gaussian seen at a frame's edge beside a shelf kept two
     /// halves of a ceiling apart, and flicker then decided each half on a few views); a
     /// ceiling and its wall are both seen whole in the views that keep them apart.
-    pub fn agreement(&self, other: &RegionCounts) -> (u64, u64) {
+    pub fn agreement(&self, other: &Dominant) -> (u64, u64) {
         // Each view of the segment seen in fewer views is looked up in the other's.
-        let (a, b) = (self.dominant(), other.dominant());
-        let (few, many) = if a.len() <= b.len() { (a, b) } else { (b, a) };
+        let (few, many) = match self.len() <= other.len() {
+            true => (self, other),
+            false => (other, self),
+        };
         let (mut same, mut differ) = (0, 0);
-        for &(view, region, count) in few {
-            if let Ok(i) = many.binary_search_by_key(&view, |e| e.0) {
-                let say = count.min(many[i].2) as u64;
-                match region == many[i].1 {
+        for i in 0..few.len() {
+            let (view, region, count) = few.at(i);
+            if let Some((_, other_region, other_count)) = many.find(view) {
+                let say = count.min(other_count) as u64;
+                match region == other_region {
                     true => same += say,
                     false => differ += say,
                 }
@@ -180,18 +245,13 @@ fn merge_into<T: Ord + Copy + Default>(into: &mut Vec<T>, fresh: &[T]) {
 
 /// Whether two segments may join: their pairs' evidence allows it, and their dominant regions
 /// disagree in at most `region_max_disagree` of the views that saw both, weighed as in
-/// [`RegionCounts::agreement`] (a segment seen by many views is tested on all of them, not on
+/// [`Dominant::agreement`] (a segment seen by many views is tested on all of them, not on
 /// the few its edge pairs share).
-pub fn may_join(
-    evidence: &PairEvidence,
-    a: &RegionCounts,
-    b: &RegionCounts,
-    p: &ConsensusParams,
-) -> bool {
+pub fn may_join(evidence: &PairEvidence, a: Dominant, b: Dominant, p: &ConsensusParams) -> bool {
     if !evidence.allows_join(p) {
         return false;
     }
-    let (same, differ) = a.agreement(b);
+    let (same, differ) = a.agreement(&b);
     differ as f64 <= p.region_max_disagree * (same + differ) as f64
 }
 
@@ -236,8 +296,7 @@ pub fn cluster_segments_sweeping_from(
         let Some(evidence) = current.filter(|&e| candidate(a, b, e, p) == queued) else {
             continue; // a segment joined another, or the evidence grew: queued again since
         };
-        let regions = (&graph.regions[a as usize], &graph.regions[b as usize]);
-        if may_join(&evidence, regions.0, regions.1, p) {
+        if may_join(&evidence, graph.dominant(a), graph.dominant(b), p) {
             graph.join(a, b, &mut changed);
             for &(c, e) in changed.iter().filter(|(_, e)| e.allows_join(p)) {
                 let (lo, hi) = (a.min(c), a.max(c));
@@ -376,15 +435,16 @@ impl Hasher for IdHasher {
 
 /// The segments while they join: per segment (by its lowest Gaussian) the adjacent segments
 /// with the summed evidence, and its region counts.
-struct SegmentGraph {
+struct SegmentGraph<'a> {
+    obs: &'a Observations,
     edges: Vec<Adjacent>,
     regions: Vec<RegionCounts>,
     /// Each Gaussian's segment at the time it joined (a lower index, or itself).
     parent: Vec<u32>,
 }
 
-impl SegmentGraph {
-    fn new(obs: &Observations, knn: &[u32], k: usize) -> SegmentGraph {
+impl<'a> SegmentGraph<'a> {
+    fn new(obs: &'a Observations, knn: &[u32], k: usize) -> SegmentGraph<'a> {
         let n = obs.n;
         let pairs = neighbour_pairs(obs, knn, k);
         let mut degree = vec![0usize; n];
@@ -402,10 +462,16 @@ impl SegmentGraph {
             edges[h as usize].insert(g, e);
         }
         SegmentGraph {
+            obs,
             edges,
-            regions: (0..n).map(|g| RegionCounts::of_gaussian(obs, g)).collect(),
+            regions: vec![RegionCounts::default(); n], // single Gaussians: read in place
             parent: (0..n as u32).collect(),
         }
+    }
+
+    /// Segment `s`'s dominant regions.
+    fn dominant(&self, s: u32) -> Dominant<'_> {
+        self.regions[s as usize].dominant(s as usize, self.obs)
     }
 
     /// Joins segment `b` into `a` (a < b); `changed` gets the segments whose evidence with
@@ -414,7 +480,7 @@ impl SegmentGraph {
         let (ai, bi) = (a as usize, b as usize);
         self.parent[bi] = a;
         let taken = std::mem::take(&mut self.regions[bi]);
-        self.regions[ai].absorb(taken);
+        self.regions[ai].absorb(ai, taken, bi, self.obs);
         let mut moved = std::mem::take(&mut self.edges[bi]);
         moved.remove(&a);
         self.edges[ai].remove(&b);

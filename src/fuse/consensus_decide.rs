@@ -14,6 +14,7 @@ use super::consensus_segments::Observations;
 use super::scores::SharedCounts;
 use crate::contract::NO_NEIGHBOUR;
 use crate::util::parallel_map;
+use std::sync::Arc;
 
 /// The knobs of segment consensus (defaults: docs/robustness.md).
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -148,8 +149,9 @@ pub struct Consensus {
     /// Gaussians no view observed, decided by their neighbours' classes.
     pub from_neighbours: usize,
     /// Per Gaussian, the counts its class was decided from (segment split, own views, or
-    /// neighbours' classes); a segment's split is stored once for its members.
-    pub evidence: SharedCounts,
+    /// neighbours' classes); a segment's split is stored once for its members (shared with
+    /// the lift's evidence, not copied).
+    pub evidence: Arc<SharedCounts>,
 }
 
 /// The class with the most `votes`; ties go to the most `mass`; still tied: None.
@@ -261,25 +263,31 @@ pub fn decide(
     for &s in &segment {
         sizes[s as usize] += 1;
     }
-    let mut segments: Vec<SegmentVotes> = (0..count)
-        .map(|s| segment_summary(&split[s], &mass[s], sizes[s], views[s], p))
+    // Each split moves into its segment's summary (a scene of fragments holds as many
+    // segments as Gaussians); the masses only break its ties.
+    let mut segments: Vec<SegmentVotes> = (split.into_iter().zip(mass).enumerate())
+        .map(|(s, (split, mass))| segment_summary(split, &mass, sizes[s], views[s], p))
         .collect();
     decide_near_ties(&mut segments, classes, p);
     let n = obs.n;
     let mut class = vec![None; n];
     let (mut from_segment, mut from_neighbour_segments) = (0, 0);
     let mut evidence = SharedCounts::zeros(classes, n);
-    let split_row: Vec<u32> = split.iter().map(|s| evidence.add_row(s)).collect();
+    // A segment's split is stored when a member first takes it (segments too small to
+    // decide their members, every Gaussian's in a scene no view agrees on, never are).
+    let mut split_row: Vec<Option<u32>> = vec![None; count];
     let mut own = vec![0.0; classes];
     for g in 0..n {
         let s = segment[g] as usize;
         own.fill(0.0);
         add_own_votes(obs, g, &mut own);
         match deciding_class(&segments[s], p) {
-            Some(c) if !contradicts(&own, c, &split[s], p) => {
+            Some(c) if !contradicts(&own, c, &segments[s].split, p) => {
                 class[g] = Some(c);
                 from_segment += 1;
-                evidence.share(g, split_row[s]);
+                let split = &segments[s].split;
+                let row = *split_row[s].get_or_insert_with(|| evidence.add_row(split));
+                evidence.share(g, row);
             }
             _ => {
                 let near = match segments[s].gaussians < p.min_segment {
@@ -314,7 +322,7 @@ pub fn decide(
         from_segment,
         from_neighbour_segments,
         from_neighbours,
-        evidence,
+        evidence: Arc::new(evidence),
     }
 }
 
@@ -463,21 +471,21 @@ fn reverse_neighbours(knn: &[u32], k: usize, n: usize) -> ReverseNeighbours {
 }
 
 fn segment_summary(
-    split: &[f64],
+    split: Vec<f64>,
     mass: &[f64],
     gaussians: usize,
     views: usize,
     p: &ConsensusParams,
 ) -> SegmentVotes {
-    let class = decisive_argmax(split, mass);
+    let class = decisive_argmax(&split, mass);
     let total: f64 = split.iter().sum();
-    let mut sorted = split.to_vec();
+    let mut sorted = split.clone();
     sorted.sort_by(|a, b| b.total_cmp(a));
     let runner_up = sorted.get(1).copied().unwrap_or(0.0);
     SegmentVotes {
         gaussians,
         views,
-        split: split.to_vec(),
+        split,
         class,
         near_tie: false,
         // Only a segment large and well enough seen for its split to mean something: a

@@ -5,6 +5,7 @@ use std::borrow::Cow;
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom, Write};
 use std::path::Path;
+use std::sync::Arc;
 
 use anyhow::{ensure, Context, Result};
 
@@ -96,9 +97,13 @@ impl SharedCounts {
         self.row_of[g] = row;
     }
 
-    /// Gaussian `g` holds counts of its own.
+    /// Gaussian `g` holds counts of its own (all zeros: the shared row of zeros, as for
+    /// a Gaussian no view observed).
     pub fn set(&mut self, g: usize, counts: &[f64]) {
-        self.row_of[g] = self.add_row(counts);
+        self.row_of[g] = match counts.iter().all(|&c| c == 0.0) {
+            true => 0,
+            false => self.add_row(counts),
+        };
     }
 
     pub fn classes(&self) -> usize {
@@ -177,7 +182,9 @@ impl EvidenceRows for ClassScores {
     }
 }
 
-impl EvidenceRows for SharedCounts {
+/// Read a class row at a time, never as a whole matrix; shared with the consensus that holds
+/// it (no copy).
+impl EvidenceRows for Arc<SharedCounts> {
     fn classes(&self) -> usize {
         self.classes
     }
@@ -294,7 +301,8 @@ mod tests {
         counts.share(0, segment);
         counts.share(2, segment);
         counts.set(1, &vectors[1]);
-        counts.set(4, &vectors[4]); // Gaussian 3 keeps the row of zeros
+        counts.set(4, &vectors[4]);
+        counts.set(3, &vectors[3]); // zeros: the shared row
         assert_eq!(counts.rows(), 4);
         for (g, v) in vectors.iter().enumerate() {
             assert_eq!(&counts[g], v.as_slice());
@@ -305,9 +313,10 @@ mod tests {
                 assert_eq!(scores.get(c, g), x);
             }
         }
+        let mut rows = Arc::new(counts);
         for c in 0..3 {
-            assert_eq!(EvidenceRows::row(&mut counts, c).unwrap(), scores.row(c));
+            assert_eq!(EvidenceRows::row(&mut rows, c).unwrap(), scores.row(c));
         }
-        assert!(EvidenceRows::row(&mut counts, 3).is_err());
+        assert!(EvidenceRows::row(&mut rows, 3).is_err());
     }
 }
