@@ -533,15 +533,23 @@ fn decisions_match_a_plain_transcription() {
             assert!((votes.split[e] - split[e]).abs() < 1e-9, "segment {s}");
         }
     }
-    // Each plane is one segment (its regions never split), and its class is the truth.
+    // Each plane is one segment (its regions never split), and its class is the truth; every
+    // Gaussian was decided from its segment, so its evidence is the segment's split, stored
+    // once per segment (and the row of zeros).
     assert_eq!(c.segments.len(), 2);
+    assert_eq!(c.from_segment, means.len());
     for g in 0..means.len() {
         assert_eq!(
             c.assignment.class[g],
             Some(object[g] as usize),
             "Gaussian {g}"
         );
+        assert_eq!(
+            &c.evidence[g],
+            c.segments[segment[g] as usize].split.as_slice()
+        );
     }
+    assert_eq!(c.evidence.rows(), 3);
 }
 
 /// Same input, same output: segments, classes, confidences, entropies.

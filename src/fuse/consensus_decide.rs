@@ -5,6 +5,8 @@
 //! own views contradict its segment; its neighbours' classes where no view observed it), a
 //! posterior per Gaussian, and the segments whose vote split is close (flagged).
 
+use std::sync::Arc;
+
 use serde::Serialize;
 
 use super::assign::Assignment;
@@ -14,7 +16,6 @@ use super::consensus_segments::Observations;
 use super::scores::SharedCounts;
 use crate::contract::NO_NEIGHBOUR;
 use crate::util::parallel_map;
-use std::sync::Arc;
 
 /// The knobs of segment consensus (defaults: docs/robustness.md).
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -273,8 +274,8 @@ pub fn decide(
     let mut class = vec![None; n];
     let (mut from_segment, mut from_neighbour_segments) = (0, 0);
     let mut evidence = SharedCounts::zeros(classes, n);
-    // A segment's split is stored when a member first takes it (segments too small to
-    // decide their members, every Gaussian's in a scene no view agrees on, never are).
+    // A segment's split is stored when a member first takes it: one that decides none of
+    // its members (too small, or contradicted) is never stored.
     let mut split_row: Vec<Option<u32>> = vec![None; count];
     let mut own = vec![0.0; classes];
     for g in 0..n {
