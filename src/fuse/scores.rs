@@ -130,14 +130,20 @@ impl SharedCounts {
         &self.counts[at..at + self.classes]
     }
 
+    /// Every Gaussian's count of `class` (< `classes`), in Gaussian order.
+    fn class_row(&self, class: usize) -> impl Iterator<Item = f64> + '_ {
+        let classes = self.classes;
+        (self.row_of.iter()).map(move |&r| self.counts[r as usize * classes + class])
+    }
+
     /// As an evidence matrix [classes][n].
     pub fn to_scores(&self) -> ClassScores {
         let n = self.len();
         let mut scores = ClassScores::zeros(self.classes, n);
-        for g in 0..n {
-            for (c, &v) in self.get(g).iter().enumerate() {
-                scores.data[c * n + g] = v;
-            }
+        for (c, row) in scores.data.chunks_exact_mut(n.max(1)).enumerate() {
+            row.iter_mut()
+                .zip(self.class_row(c))
+                .for_each(|(x, v)| *x = v);
         }
         scores
     }
@@ -199,12 +205,7 @@ impl EvidenceRows for Arc<SharedCounts> {
             "no class row {class} of {}",
             self.classes
         );
-        let classes = self.classes;
-        let row = self
-            .row_of
-            .iter()
-            .map(|&r| self.counts[r as usize * classes + class]);
-        Ok(Cow::Owned(row.collect()))
+        Ok(Cow::Owned(self.class_row(class).collect()))
     }
 }
 
