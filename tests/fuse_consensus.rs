@@ -489,6 +489,53 @@ fn assert_neighbours_are_the_nearest(means: &[[f32; 3]], k: usize) {
     }
 }
 
+/// The observations gathered from per-view lists on every core, Gaussians in ranges, are a
+/// plain counting sort's: each Gaussian's entries by view, a view's entries of one Gaussian
+/// in list order. More Gaussians than one range holds; lists in Gaussian order as `observe`
+/// writes them, and some shuffled with a Gaussian listed twice (sorted first).
+#[test]
+fn observations_from_views_are_a_plain_counting_sort() {
+    let n = 100_000;
+    let mut rng = Rng::new(17);
+    let per_view: Vec<Vec<(u32, u32, u32, bool)>> = (0..7)
+        .map(|v| {
+            let mut list = Vec::new();
+            for g in 0..n as u32 {
+                if rng.bool(0.3) {
+                    list.push((g, rng.next_u32() % 5, rng.next_u32(), rng.bool(0.2)));
+                }
+            }
+            if v % 3 == 2 {
+                let twice = list[list.len() / 2];
+                list.push((twice.0, 9, 1, false));
+                for i in (1..list.len()).rev() {
+                    list.swap(i, rng.below(i as u64 + 1) as usize);
+                }
+            }
+            list
+        })
+        .collect();
+    let obs = Observations::from_views(n, &per_view);
+    let mut rows: Vec<Vec<(u32, u32, u32, bool)>> = vec![Vec::new(); n];
+    for (v, list) in per_view.iter().enumerate() {
+        let mut in_order = list.clone();
+        in_order.sort_by_key(|e| e.0); // stable: a Gaussian's two entries keep their order
+        for &(g, l, r, e) in &in_order {
+            rows[g as usize].push((v as u32, l, r, e));
+        }
+    }
+    let twice = |r: &Vec<(u32, u32, u32, bool)>| r.windows(2).any(|w| w[0].0 == w[1].0);
+    assert!(rows.iter().any(twice), "a Gaussian listed twice in a view");
+    assert_eq!(obs.offsets.len(), n + 1);
+    for g in 0..n {
+        let got: Vec<_> = obs
+            .row(g)
+            .map(|i| (obs.view[i], obs.label[i], obs.region[i], obs.edge[i]))
+            .collect();
+        assert_eq!(got, rows[g], "Gaussian {g}");
+    }
+}
+
 /// Gaussians filling a volume (as a random scene does), not lying on surfaces: the grid
 /// sizes its cells by the volume there, and the neighbours are still the nearest.
 #[test]

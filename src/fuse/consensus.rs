@@ -17,7 +17,7 @@ use super::assign::Assignment;
 use super::consensus_cluster::cluster_segments;
 use super::consensus_decide::{decide, Consensus, ConsensusParams};
 use super::consensus_relabel::fuse_relabeled;
-use super::consensus_segments::{nearest_neighbours, Observations};
+use super::consensus_segments::{nearest_neighbours, Observations, ViewEntry};
 use super::method::Method;
 use super::regions_gpu::RegionFinder;
 use super::scores::{ClassScores, EvidenceRows, SharedCounts};
@@ -26,7 +26,7 @@ use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, Gpu, Recorder};
 use crate::render::{GpuScene, Rasterizer};
 use crate::scene::Camera;
-use crate::util::prefetch_ordered;
+use crate::util::{parallel_map, prefetch_ordered, split_parts, take_part};
 
 /// What a consensus method lifts: the scene on the GPU and its centers (the host builds the
 /// neighbour graph from them), the cameras and their label maps in compact class ids.
@@ -258,14 +258,7 @@ pub fn observe(
             let (centers, regions) = finder.regions_at(&map, cam.width, &pixels_buf)?;
             stats.observe.regions_s += finding.elapsed().as_secs_f64();
             let gathering = std::time::Instant::now();
-            let (mut observed, mut seen) = (Vec::new(), Vec::new());
-            for (g, (&p, &r)) in centers.iter().zip(&regions).enumerate() {
-                if r != NO_LABEL {
-                    let (region, edge) = (r & !REGION_EDGE_BIT, r & REGION_EDGE_BIT != 0);
-                    observed.push((g as u32, map[p as usize], region, edge));
-                    seen.push((g as u32, p));
-                }
-            }
+            let (observed, seen) = view_observations(&map, &centers, &regions);
             per_view.push(observed);
             pixels.push(seen);
             stats.observe.gather_s += gathering.elapsed().as_secs_f64();
@@ -280,6 +273,43 @@ pub fn observe(
     let observations = Observations::from_views(n, &per_view);
     stats.observe.gather_s += gathering.elapsed().as_secs_f64();
     Ok((observations, pixels, stats))
+}
+
+/// One view's observations from its readback (per Gaussian, the pixel under its center and
+/// that pixel's region, [`NO_LABEL`] where unobserved): (Gaussian, label, region, edge) and
+/// (Gaussian, pixel), in Gaussian order. On every core, in blocks of Gaussians: each view
+/// reads an entry for every Gaussian of the scene (a million, most unobserved). Each block's
+/// observations are counted, then written into its part of the lists.
+fn view_observations(
+    map: &[u32],
+    centers: &[u32],
+    regions: &[u32],
+) -> (Vec<ViewEntry>, Vec<(u32, u32)>) {
+    const BLOCK: usize = 1 << 16;
+    let block = |b: usize| b * BLOCK..regions.len().min((b + 1) * BLOCK);
+    let blocks = regions.len().div_ceil(BLOCK);
+    let counts = parallel_map(blocks, |b| {
+        regions[block(b)].iter().filter(|&&r| r != NO_LABEL).count()
+    });
+    let total = counts.iter().sum();
+    let (mut observed, mut seen) = (vec![(0, 0, 0, false); total], vec![(0, 0); total]);
+    let observed_parts = split_parts(&mut observed, counts.iter().copied());
+    let seen_parts = split_parts(&mut seen, counts);
+    parallel_map(blocks, |b| {
+        let (mut observed, mut seen) = (take_part(&observed_parts[b]), take_part(&seen_parts[b]));
+        let mut at = 0;
+        for g in block(b) {
+            let (p, r) = (centers[g], regions[g]);
+            if r != NO_LABEL {
+                let (region, edge) = (r & !REGION_EDGE_BIT, r & REGION_EDGE_BIT != 0);
+                observed[at] = (g as u32, map[p as usize], region, edge);
+                seen[at] = (g as u32, p);
+                at += 1;
+            }
+        }
+    });
+    drop((observed_parts, seen_parts));
+    (observed, seen)
 }
 
 /// Writes the pixel under every Gaussian's visible center into `out`; returns GPU ms.

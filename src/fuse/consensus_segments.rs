@@ -11,7 +11,9 @@
 
 use super::accumulate::NO_LABEL;
 use crate::contract::NO_NEIGHBOUR;
-use crate::util::parallel_map;
+use crate::util::{parallel_map, split_parts, take_part};
+use std::borrow::Cow;
+use std::ops::Range;
 
 /// Per Gaussian, the views that observed it (center visible on a labeled pixel), in
 /// compressed rows sorted by view: what a view says about a Gaussian.
@@ -36,32 +38,66 @@ pub struct Observations {
 }
 
 impl Observations {
-    /// From per-view lists of (Gaussian, label, region, edge), views in order.
-    pub fn from_views(n: usize, per_view: &[Vec<(u32, u32, u32, bool)>]) -> Observations {
-        let mut counts = vec![0usize; n + 1];
-        for list in per_view {
-            for &(g, ..) in list {
-                counts[g as usize + 1] += 1;
+    /// From per-view lists of (Gaussian, label, region, edge), views in order. A counting
+    /// sort by Gaussian, on every core: the Gaussians are split into ranges, each gathered
+    /// from its slice of every view's list (lists in Gaussian order, as `observe` writes
+    /// them; any other is sorted first). Each row ends up sorted by view, a view's entries
+    /// for one Gaussian in list order.
+    pub fn from_views(n: usize, per_view: &[Vec<ViewEntry>]) -> Observations {
+        let sorted: Vec<Cow<[ViewEntry]>> = per_view.iter().map(|l| in_gaussian_order(l)).collect();
+        let ranges: Vec<Range<usize>> = (0..n.div_ceil(GATHER_RANGE))
+            .map(|r| r * GATHER_RANGE..n.min((r + 1) * GATHER_RANGE))
+            .collect();
+        let range_lens = || ranges.iter().map(|r| r.len());
+        // offsets[g + 1] counts Gaussian g's entries, then sums them: row g's start at g.
+        let mut offsets = vec![0usize; n + 1];
+        let counts = split_parts(&mut offsets[1..], range_lens());
+        parallel_map(ranges.len(), |r| {
+            let mut count = take_part(&counts[r]);
+            for &(g, ..) in range_parts(&sorted, &ranges[r]).flatten() {
+                count[g as usize - ranges[r].start] += 1;
             }
-        }
+        });
+        drop(counts);
         for g in 0..n {
-            counts[g + 1] += counts[g];
+            offsets[g + 1] += offsets[g];
         }
-        let total = counts[n];
-        let mut next = counts.clone();
+        let total = offsets[n];
         let (mut view, mut label, mut region) = (vec![0; total], vec![0; total], vec![0; total]);
         let mut edge = vec![false; total];
-        // Views in order, so every row ends up sorted by view.
-        for (v, list) in per_view.iter().enumerate() {
-            for &(g, l, r, e) in list {
-                let at = next[g as usize];
-                next[g as usize] += 1;
-                (view[at], label[at], region[at], edge[at]) = (v as u32, l, r, e);
+        let rows = |r: &Range<usize>| offsets[r.end] - offsets[r.start];
+        let row_lens: Vec<usize> = ranges.iter().map(rows).collect();
+        let (views, labels) = (
+            split_parts(&mut view, row_lens.clone()),
+            split_parts(&mut label, row_lens.clone()),
+        );
+        let (regions, edges) = (
+            split_parts(&mut region, row_lens.clone()),
+            split_parts(&mut edge, row_lens),
+        );
+        // offsets[g] is row g's next free entry as it fills: its end (g + 1's start) after.
+        let cursors = split_parts(&mut offsets[..n], range_lens());
+        parallel_map(ranges.len(), |r| {
+            let mut next = take_part(&cursors[r]);
+            let base = next.first().copied().unwrap_or(0);
+            let (mut v_out, mut l_out) = (take_part(&views[r]), take_part(&labels[r]));
+            let (mut r_out, mut e_out) = (take_part(&regions[r]), take_part(&edges[r]));
+            // Views in order, so every row ends up sorted by view.
+            for (v, part) in range_parts(&sorted, &ranges[r]).enumerate() {
+                for &(g, l, rg, e) in part {
+                    let at = &mut next[g as usize - ranges[r].start];
+                    let i = *at - base;
+                    (v_out[i], l_out[i], r_out[i], e_out[i]) = (v as u32, l, rg, e);
+                    *at += 1;
+                }
             }
-        }
+        });
+        drop((cursors, views, labels, regions, edges));
+        offsets.copy_within(0..n, 1);
+        offsets[0] = 0;
         Observations {
             n,
-            offsets: counts,
+            offsets,
             view,
             label,
             region,
@@ -72,6 +108,36 @@ impl Observations {
     pub fn row(&self, g: usize) -> std::ops::Range<usize> {
         self.offsets[g]..self.offsets[g + 1]
     }
+}
+
+/// One view's observation of a Gaussian: (Gaussian, label, region, edge).
+pub type ViewEntry = (u32, u32, u32, bool);
+
+/// Gaussians per range of [`Observations::from_views`]'s counting sort.
+const GATHER_RANGE: usize = 1 << 15;
+
+/// `list` in Gaussian order: as it is when it already is (stable, so a Gaussian's entries
+/// keep their order).
+fn in_gaussian_order(list: &[ViewEntry]) -> Cow<'_, [ViewEntry]> {
+    if list.is_sorted_by_key(|e| e.0) {
+        Cow::Borrowed(list)
+    } else {
+        let mut sorted = list.to_vec();
+        sorted.sort_by_key(|e| e.0);
+        Cow::Owned(sorted)
+    }
+}
+
+/// Each list's entries of the Gaussians in `range`: one slice of each, found by binary search.
+fn range_parts<'a>(
+    lists: &'a [Cow<[ViewEntry]>],
+    range: &Range<usize>,
+) -> impl Iterator<Item = &'a [ViewEntry]> {
+    let (start, end) = (range.start, range.end);
+    lists.iter().map(move |list| {
+        let at = |g: usize| list.partition_point(|e| (e.0 as usize) < g);
+        &list[at(start)..at(end)]
+    })
 }
 
 /// Connected regions (4-neighbourhood) of equal labels; unlabeled pixels get [`NO_LABEL`].

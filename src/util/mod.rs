@@ -12,5 +12,5 @@ pub use atomic_write::{
     check_output_file, check_output_folder, stage_atomic, write_atomic, write_bytes_atomic,
     StagedFile,
 };
-pub use parallel::{parallel_map, prefetch_ordered};
+pub use parallel::{parallel_map, prefetch_ordered, split_parts, take_part};
 pub use rng::Rng;

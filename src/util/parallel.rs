@@ -2,7 +2,7 @@
 //! (threads take the next index as they finish, so slow items do not stall a fixed split).
 
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
+use std::sync::{Mutex, MutexGuard};
 
 /// `f(0), ..., f(count - 1)`, computed on up to all cores, in index order.
 pub fn parallel_map<T: Send>(count: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
@@ -30,6 +30,28 @@ pub fn parallel_map<T: Send>(count: usize, f: impl Fn(usize) -> T + Sync) -> Vec
         .into_iter()
         .map(|v| v.expect("every index was computed"))
         .collect()
+}
+
+/// `data` cut into consecutive parts of `lens` (summing to at most its length), each behind
+/// a lock: the disjoint outputs of a [`parallel_map`] whose index `i` fills part `i` (each
+/// lock taken once, never waited on). Filled so, a parallel pass allocates nothing on its
+/// worker threads.
+pub fn split_parts<T>(
+    mut data: &mut [T],
+    lens: impl IntoIterator<Item = usize>,
+) -> Vec<Mutex<&mut [T]>> {
+    let mut parts = Vec::new();
+    for len in lens {
+        let (part, rest) = std::mem::take(&mut data).split_at_mut(len);
+        parts.push(Mutex::new(part));
+        data = rest;
+    }
+    parts
+}
+
+/// Part `part` of [`split_parts`], locked (a panic on another thread does not poison it).
+pub fn take_part<'p, 'd, T>(part: &'p Mutex<&'d mut [T]>) -> MutexGuard<'p, &'d mut [T]> {
+    part.lock().unwrap_or_else(|e| e.into_inner())
 }
 
 /// Runs `produce(0), ..., produce(count - 1)` on up to `threads` worker threads, at most
@@ -99,4 +121,24 @@ pub fn prefetch_ordered<T: Send>(
         changed.notify_all();
         result
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Each index fills its own part: the parts cover the data in order, of the lengths asked.
+    #[test]
+    fn split_parts_hand_each_index_its_own_part() {
+        let mut data = vec![0usize; 10];
+        let lens = [3, 0, 4, 2];
+        let parts = split_parts(&mut data, lens);
+        parallel_map(lens.len(), |i| {
+            let mut part = take_part(&parts[i]);
+            assert_eq!(part.len(), lens[i]);
+            part.iter_mut().for_each(|x| *x = i + 1);
+        });
+        drop(parts);
+        assert_eq!(data, [1, 1, 1, 3, 3, 3, 3, 4, 4, 0]);
+    }
 }

@@ -13,7 +13,11 @@
 #   lift    the scene packed with LIFT_SCENE fused by FlashSplat, segment consensus and
 #           --relabel (train views' noisy labels), each evaluated on the held-out views:
 #           lift.tar (classes, eval JSON, seconds) for tools/gpu/lift_check.py compare
-# env: PEERS: the peers to build and run (default "gsplat flashsplat");
+# env: BEFORE: run every semsplat case also with the build packed by pack.sh's BEFORE_BIN
+#      (.gpu/before.xz), right after this build's, its line in ours.jsonl marked
+#      "build": "before" (this build's "after"): a change timed against the build before it
+#      on the same machine;
+#      PEERS: the peers to build and run (default "gsplat flashsplat");
 #      BUDGET_S (default 540): benchmarks starting after this many seconds are skipped;
 #      N, W, H, VIEWS, SPACING: scene size (1000000, 1920x1080, 200 fusion views, room
 #      spacing 0.0053), smaller for a dry run on lavapipe; TESTS: a grep -E filter on the
@@ -53,6 +57,10 @@ setup() {
     mkdir -p "$(dirname "$built")" && ln -sfn "$repo" "$built"
   fi
   export PATH=$bin:$PATH
+  if [ -n "${BEFORE:-}" ]; then
+    xz -dc "$gpu/before.xz" >/tmp/semsplat_before && chmod +x /tmp/semsplat_before ||
+      { say "BEFORE set but no .gpu/before.xz: pack with BEFORE_BIN"; exit 2; }
+  fi
   { nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv; semsplat info; } \
     >"$OUT/info.txt" 2>&1 || {
     # No device: what the loader saw, for the next try.
@@ -104,18 +112,26 @@ run_tests() {
   say "tests: $(wc -l <"$logs/rc") binaries, $failed failed"
 }
 
-# One semsplat benchmark: its JSON (with "case") appended to ours.jsonl.
+# One semsplat benchmark: its JSON (with "case") appended to ours.jsonl; with BEFORE, the
+# build before too.
 b() {
   local case=$1; shift
   [[ $case =~ ${CASES:-.} ]] || return 0
-  [ "$(left)" -gt 20 ] || { say "skipped $case (budget)"; return; }
-  echo "=== $case: semsplat $*" >>"$OUT/bench.log"
+  b_with semsplat "" "$case" "$@"
+  [ -z "${BEFORE:-}" ] || b_with /tmp/semsplat_before before "$case" "$@"
+}
+
+b_with() {
+  local exe=$1 build=$2 case=$3; shift 3
+  [ "$(left)" -gt 20 ] || { say "skipped $case $build (budget)"; return; }
+  echo "=== $case ${build:+($build)}: semsplat $*" >>"$OUT/bench.log"
   local limit; limit=$(left); [ "${CAP:-$limit}" -lt "$limit" ] && limit=$CAP
-  if timeout "$limit" semsplat "$@" --json >/tmp/b.json 2>>"$OUT/bench.log"; then
-    python3 -c 'import json,sys; d=json.load(open("/tmp/b.json")); d["case"]=sys.argv[1]; print(json.dumps(d))' \
-      "$case" >>"$OUT/ours.jsonl"
+  if timeout "$limit" "$exe" "$@" --json >/tmp/b.json 2>>"$OUT/bench.log"; then
+    python3 -c 'import json,sys; d=json.load(open("/tmp/b.json")); d["case"]=sys.argv[1]
+if sys.argv[2]: d["build"]=sys.argv[2]
+print(json.dumps(d))' "$case" "${build:-${BEFORE:+after}}" >>"$OUT/ours.jsonl"
   else
-    say "FAILED $case (see bench.log)"
+    say "FAILED $case $build (see bench.log)"
   fi
 }
 

@@ -9,6 +9,8 @@
 # env:   FLASHSPLAT_SRC  a git checkout or mirror of github.com/florinshen/flashsplat-rasterization
 #                        (default: cloned from GitHub into a temporary folder)
 #        GSPLAT_VERSION  default 1.5.3
+#        BEFORE_BIN      another build's semsplat binary, for device_run.sh's BEFORE (a change
+#                        timed against the build before it in the same run)
 #        LIFT_SCENE      a `synth` folder (scene.ply, cameras.json, labels, labels_noisy) for
 #                        device_run.sh's `lift` stage: fused there and here by
 #                        tools/gpu/lift_run.sh, compared by tools/gpu/lift_check.py compare
@@ -73,6 +75,11 @@ git -C "$src" archive --prefix=flashsplat-rasterization/ HEAD \
       'flashsplat-rasterization/third_party/glm/test' 2>/dev/null \
   | gzip -9 >"$out/src/flashsplat-rasterization.tar.gz"
 echo "$commit" >"$out/src/flashsplat-rasterization.commit"
+
+if [ -n "${BEFORE_BIN:-}" ]; then
+  say "packing the build before: $BEFORE_BIN"
+  strip -o "$out/before" "$BEFORE_BIN" && xz -9 -T0 "$out/before" || die "cannot pack $BEFORE_BIN"
+fi
 
 if [ -n "${LIFT_SCENE:-}" ]; then
   say "packing the lift scene $LIFT_SCENE"
