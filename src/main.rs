@@ -70,6 +70,7 @@ impl Command {
 }
 
 fn main() -> ExitCode {
+    semsplat::util::memory::use_one_malloc_arena();
     let cli = Cli::parse();
     if let Err(e) = interrupt::install_handler(cli.command.polls_for_interrupt()) {
         eprintln!("warning: {e:#}; Ctrl-C may leave temp files behind");
