@@ -255,13 +255,18 @@ pub fn observe(
             stats.peak_device_bytes = stats.peak_device_bytes.max(gpu.memory_reserved());
             stats.observe.render_s += rendering.elapsed().as_secs_f64();
             let finding = std::time::Instant::now();
-            let (centers, regions) = finder.regions_at(&map, cam.width, &pixels_buf)?;
-            stats.observe.regions_s += finding.elapsed().as_secs_f64();
-            let gathering = std::time::Instant::now();
-            let (observed, seen) = view_observations(&map, &centers, &regions);
+            let mut gather_s = 0.0;
+            // Gathered straight from the readback (a million Gaussians' words, not copied).
+            let (observed, seen) = finder.regions_with(&map, cam.width, &pixels_buf, |c, r| {
+                let gathering = std::time::Instant::now();
+                let gathered = view_observations(&map, c, r);
+                gather_s = gathering.elapsed().as_secs_f64();
+                gathered
+            })?;
+            stats.observe.regions_s += finding.elapsed().as_secs_f64() - gather_s;
+            stats.observe.gather_s += gather_s;
             per_view.push(observed);
             pixels.push(seen);
-            stats.observe.gather_s += gathering.elapsed().as_secs_f64();
             waited_since = std::time::Instant::now();
             Ok(())
         },

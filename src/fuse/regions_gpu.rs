@@ -37,12 +37,9 @@ pub struct RegionStats {
     pub host_fallbacks: usize,
 }
 
-/// What [`RegionFinder::find_regions`] read back.
-struct Found {
-    /// Whether the region check passed (else the regions must be found on the host).
-    complete: bool,
-    /// The downloads asked for, as words.
-    words: Vec<Vec<u32>>,
+/// What [`RegionFinder::find_regions`]'s reader made of its read-back.
+struct Found<R> {
+    read: R,
     gpu_ms: f64,
 }
 
@@ -90,9 +87,23 @@ impl<'a> RegionFinder<'a> {
         width: u32,
         centers: &Buffer,
     ) -> Result<(Vec<u32>, Vec<u32>)> {
+        self.regions_with(map, width, centers, |pixels, regions| {
+            (pixels.to_vec(), regions.to_vec())
+        })
+    }
+
+    /// `read` given what [`RegionFinder::regions_at`] returns (pixels, regions), read where
+    /// the transfer left them (two words for each Gaussian of the scene, a view after view:
+    /// not copied first).
+    pub fn regions_with<R>(
+        &mut self,
+        map: &[u32],
+        width: u32,
+        centers: &Buffer,
+        read: impl FnOnce(&[u32], &[u32]) -> R,
+    ) -> Result<R> {
         if !Self::fits(map) {
-            let pixels = self.gpu.download(centers, 0, self.n)?;
-            return Ok(self.on_host(map, width, pixels));
+            return self.read_on_host(map, width, centers, read);
         }
         let params = self.view_params(map, width, centers.address_words(4)?)?;
         let lookup = |rec: &mut Recorder| {
@@ -101,17 +112,21 @@ impl<'a> RegionFinder<'a> {
         };
         let bytes = (self.n * 4) as u64;
         let uploads = [(self.labels_buffer(), map)];
-        let found = self.find_regions(
-            &params,
-            &uploads,
-            lookup,
-            &[(centers, bytes), (&self.out, bytes)],
-        )?;
+        let downloads = [(centers, bytes), (&self.out, bytes)];
+        // Read in place where the check passed (else on the host, below).
+        let mut read = Some(read);
+        let found =
+            self.find_regions(&params, &uploads, lookup, &downloads, |complete, words| {
+                let read = read.take().filter(|_| complete)?;
+                Some(read(words[0], words[1]))
+            })?;
         self.stats.gpu_ms += found.gpu_ms;
-        let [pixels, regions] = found.words.try_into().expect("two downloads");
-        match found.complete {
-            true => Ok((pixels, regions)),
-            false => Ok(self.on_host(map, width, pixels)),
+        match (found.read, read) {
+            (Some(read_back), _) => Ok(read_back),
+            (None, read) => {
+                let read = read.expect("the reader is kept where the check failed");
+                self.read_on_host(map, width, centers, read)
+            }
         }
     }
 
@@ -125,13 +140,14 @@ impl<'a> RegionFinder<'a> {
     /// One submission and wait: `uploads` copied in, the regions of the view (`params`)
     /// found, `then` recorded (lookups over them), the region check's status and the
     /// leading bytes of each of `downloads` copied out.
-    fn find_regions(
+    fn find_regions<R>(
         &self,
         params: &RegionParams,
         uploads: &[(&Buffer, &[u32])],
         then: impl FnOnce(&mut Recorder) -> GpuResult<()>,
         downloads: &[(&Buffer, u64)],
-    ) -> Result<Found> {
+        read: impl FnOnce(bool, &[&[u32]]) -> R,
+    ) -> Result<Found<R>> {
         let pixel_groups = ids::FUSE_REGION_INIT.groups_for(params.width * params.height);
         let mut staging = self.staging.borrow_mut();
         let mut rec = Recorder::new(self.gpu)?;
@@ -154,10 +170,9 @@ impl<'a> RegionFinder<'a> {
         let status = [(&self.status, 4)];
         staging.record_downloads(self.gpu, &mut rec, &[&status[..], downloads].concat())?;
         let t = rec.submit_and_wait()?;
-        let mut words = staging.read::<u32>();
+        let read = staging.read_with(|words: &[&[u32]]| read(words[0][0] == 0, &words[1..]));
         Ok(Found {
-            complete: words.remove(0)[0] == 0,
-            words,
+            read,
             gpu_ms: t.between(m0, m1).unwrap_or(0.0) * 1e-6,
         })
     }
@@ -232,12 +247,20 @@ impl<'a> RegionFinder<'a> {
         ];
         let bytes = (seeds.len() * 4) as u64;
         let downloads = [(&self.out, bytes), (seed_depths, bytes), (seed_near, bytes)];
-        let found = self.find_regions(&params, &uploads, per_seed, &downloads)?;
+        let found = self.find_regions(
+            &params,
+            &uploads,
+            per_seed,
+            &downloads,
+            |complete, words| {
+                complete.then(|| words.iter().map(|w| w.to_vec()).collect::<Vec<_>>())
+            },
+        )?;
         self.stats.gpu_ms += found.gpu_ms;
-        if !found.complete {
+        let Some(words) = found.read else {
             return Ok(self.relabel_on_host(map, width, seeds, rule));
-        }
-        let [regions, depths, near] = found.words.try_into().expect("three downloads");
+        };
+        let [regions, depths, near] = words.try_into().expect("three downloads");
         let found = (0..seeds.len())
             .filter(|&i| regions[i] != NO_LABEL)
             .map(|i| RegionSeed {
@@ -327,11 +350,18 @@ impl<'a> RegionFinder<'a> {
         Ok(staging.read::<u32>()[0][0] == 0)
     }
 
-    /// [`RegionFinder::regions_at`] on the host, from the center pixels read back.
-    fn on_host(&mut self, map: &[u32], width: u32, pixels: Vec<u32>) -> (Vec<u32>, Vec<u32>) {
+    /// [`RegionFinder::regions_with`] on the host, from the center pixels read back.
+    fn read_on_host<R>(
+        &mut self,
+        map: &[u32],
+        width: u32,
+        centers: &Buffer,
+        read: impl FnOnce(&[u32], &[u32]) -> R,
+    ) -> Result<R> {
         self.stats.host_fallbacks += 1;
+        let pixels: Vec<u32> = self.gpu.download(centers, 0, self.n)?;
         let regions = regions_on_host(map, width as usize, &pixels);
-        (pixels, regions)
+        Ok(read(&pixels, &regions))
     }
 
     /// The kernels' parameters for a view labeled `map` (buffers grown to fit; the labels

@@ -9,6 +9,8 @@
 //! start of the caller's submission and the downloads copied out at its end, so a view's
 //! transfers cost one wait.
 
+use std::borrow::Cow;
+
 use bytemuck::Pod;
 
 use super::buffer::Buffer;
@@ -83,15 +85,29 @@ impl Staging {
 
     /// The downloads last recorded, as elements of T each (their submission waited for).
     pub fn read<T: Pod>(&mut self) -> Vec<Vec<T>> {
+        self.read_with(|parts: &[&[T]]| parts.iter().map(|p| p.to_vec()).collect())
+    }
+
+    /// `read` given the downloads last recorded as elements of T each, read where they lie
+    /// in the mapped buffer (a copy only where a part is not aligned for T): a large
+    /// readback is read once instead of copied first.
+    pub fn read_with<T: Pod, R>(&mut self, read: impl FnOnce(&[&[T]]) -> R) -> R {
         let bytes: &[u8] = self.down.as_mut().map(|d| &*d.mapped()).unwrap_or_default();
         let mut at = 0;
-        self.downloads
+        let parts: Vec<Cow<[T]>> = self
+            .downloads
             .iter()
             .map(|&len| {
                 at += len as usize;
-                bytemuck::pod_collect_to_vec(&bytes[at - len as usize..at])
+                let part = &bytes[at - len as usize..at];
+                match bytemuck::try_cast_slice(part) {
+                    Ok(words) => Cow::Borrowed(words),
+                    Err(_) => Cow::Owned(bytemuck::pod_collect_to_vec(part)),
+                }
             })
-            .collect()
+            .collect();
+        let slices: Vec<&[T]> = parts.iter().map(|p| &**p).collect();
+        read(&slices)
     }
 }
 

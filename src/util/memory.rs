@@ -15,12 +15,14 @@ pub fn peak_host_bytes() -> Option<u64> {
 /// consensus of a million-Gaussian room peaked at 2.1 GB with them and 1.36 GB with one,
 /// no slower (docs/gpu.md). Our worker threads allocate little (large buffers are
 /// allocated once and filled in place), so they rarely wait for the one arena's lock.
-/// Elsewhere than glibc, nothing.
+/// A `MALLOC_ARENA_MAX` in the environment is left to glibc. Elsewhere than glibc, nothing.
 pub fn use_one_malloc_arena() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    // SAFETY: mallopt only sets an allocator parameter; called before any thread starts.
-    unsafe {
-        libc::mallopt(libc::M_ARENA_MAX, 1);
+    if std::env::var_os("MALLOC_ARENA_MAX").is_none() {
+        // SAFETY: mallopt only sets an allocator parameter; called before any thread starts.
+        unsafe {
+            libc::mallopt(libc::M_ARENA_MAX, 1);
+        }
     }
 }
 
