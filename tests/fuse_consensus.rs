@@ -71,13 +71,21 @@ fn observations_match_a_cpu_transcription() {
         classes,
         scene,
     } = observed_office(gpu);
-    let (obs, centers, _) = observe(
-        &input(gpu, &scene, &s, &labels, classes),
-        &FuseConfig::default(),
-        false,
-        &mut |_, _| {},
-    )
-    .unwrap();
+    let inp = input(gpu, &scene, &s, &labels, classes);
+    let (obs, centers, stats) =
+        observe(&inp, &FuseConfig::default(), false, &mut |_, _| {}).unwrap();
+    // Two views in flight, each on its own lane; one at a time observes the same.
+    assert_eq!(stats.views_in_flight, 2);
+    let one_lane = FuseConfig {
+        views_in_flight: 1,
+        ..FuseConfig::default()
+    };
+    let (obs_1, centers_1, stats_1) = observe(&inp, &one_lane, false, &mut |_, _| {}).unwrap();
+    assert_eq!(stats_1.views_in_flight, 1);
+    assert!(
+        obs_1 == obs && centers_1 == centers,
+        "the lanes changed the observations"
+    );
     let (mut checked, mut skipped) = (0usize, 0usize);
     for (v, cam) in s.cameras.iter().enumerate() {
         let map = labels[v].as_ref().unwrap();

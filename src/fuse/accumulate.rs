@@ -106,7 +106,8 @@ pub struct FuseStats {
     pub views_with_labels: usize,
     /// Passes over the views (1 when the evidence matrix fits the budget).
     pub passes: usize,
-    /// Views the tiled methods had in flight at once (1 for the votes).
+    /// Views the tiled methods and the consensus's observation pass had in flight at once
+    /// (1 for the votes).
     pub views_in_flight: usize,
     pub rows_per_pass: usize,
     /// GPU time (timestamps): binning + per-tile stages, and the vote kernels.
@@ -141,7 +142,9 @@ pub struct FuseStats {
     pub region_host_fallbacks: usize,
 }
 
-/// Segment consensus's observation pass, split (host seconds, GPU waits included): each
+/// Segment consensus's observation pass, split (host seconds, GPU waits included, summed
+/// over its lanes: with two views in flight the parts overlap and add up to more than
+/// `view_s`): each
 /// view's median-depth render and center-pixel lookup; its label regions, with the label
 /// map's upload and the readback of every center's pixel and region; and the host's
 /// gathering of those into observations. On a GPU the pass is host-bound: on an H100, 22
@@ -318,15 +321,26 @@ impl Lanes {
         let mut work = self.lanes[0].submit(ctx, view, staged, pixels)?;
         work.add(self.lanes[0].finish(ctx)?);
         let lane_bytes = ctx.gpu.memory_reserved().saturating_sub(before);
-        let budget = ctx.gpu.caps().device_local_bytes() as f64 * LANE_MEMORY_SHARE;
-        while self.lanes.len() < ctx.cfg.views_in_flight.clamp(1, LANES)
-            && (ctx.gpu.memory_reserved() + lane_bytes) as f64 <= budget
-        {
+        for _ in 1..lanes_that_fit(ctx.gpu, ctx.cfg, lane_bytes) {
             self.lanes.push(Lane::new(ctx.gpu, ctx.cfg.split));
         }
         self.settled = true;
         Ok(work)
     }
+}
+
+/// How many lanes to keep (1..=`cfg.views_in_flight`, at most [`LANES`]) when one took
+/// `lane_bytes` of device memory for its first view: more only while the device-local
+/// memory has room for their buffers too.
+pub(crate) fn lanes_that_fit(gpu: &Gpu, cfg: &FuseConfig, lane_bytes: u64) -> usize {
+    let budget = gpu.caps().device_local_bytes() as f64 * LANE_MEMORY_SHARE;
+    let mut lanes = 1;
+    while lanes < cfg.views_in_flight.clamp(1, LANES)
+        && (gpu.memory_reserved() + lanes as u64 * lane_bytes) as f64 <= budget
+    {
+        lanes += 1;
+    }
+    lanes
 }
 
 /// What every view of one pass shares.

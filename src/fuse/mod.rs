@@ -8,6 +8,7 @@ pub mod consensus;
 pub mod consensus_cluster;
 pub mod consensus_confusion;
 pub mod consensus_decide;
+pub mod consensus_observe;
 pub mod consensus_relabel;
 pub mod consensus_report;
 pub mod consensus_segments;

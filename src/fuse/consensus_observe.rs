@@ -1,0 +1,403 @@
+//! Segment consensus's observation pass (src/fuse/consensus.rs): per view, the pixel under
+//! every Gaussian's visible center (rendered on the GPU, occlusion-checked against the
+//! median depth) and that pixel's label and connected label region (regions_gpu.rs),
+//! gathered on the host into each Gaussian's observations.
+//!
+//! Views run on up to `views_in_flight` lanes, each a thread with its own rasterizer,
+//! center-pixel buffer and region finder, view `v` on lane `v % lanes`: while one lane waits
+//! for the GPU, another records, uploads or gathers. On a GPU one lane was host-bound (an
+//! H100: 12 ms a view against 3.2 ms of GPU time, docs/gpu.md). The first view runs alone on
+//! the calling thread, and what its lane took decides whether another fits, as in the
+//! FlashSplat pass. The observations do not depend on the lanes: each view's are stored by
+//! its index.
+
+use std::sync::mpsc;
+use std::time::Instant;
+
+use anyhow::{anyhow, ensure, Result};
+
+use super::accumulate::{
+    center_params, check_map_size, lanes_that_fit, FuseConfig, FuseStats, ObserveTimes,
+    LABELS_AHEAD, LABEL_THREADS, NO_LABEL,
+};
+use super::consensus::ConsensusInput;
+use super::consensus_segments::{Observations, ViewEntry};
+use super::regions_gpu::{RegionFinder, RegionStats};
+use crate::contract::REGION_EDGE_BIT;
+use crate::gpu::kernel_table::ids;
+use crate::gpu::{Buffer, Gpu, Recorder};
+use crate::render::{GpuScene, Rasterizer};
+use crate::scene::Camera;
+use crate::util::{parallel_map, prefetch_ordered, split_parts, take_part};
+
+/// Every view's observations of every Gaussian: label and region under its center (with
+/// `occlusion`, only where the center is within the depth tolerance of the rendered median
+/// depth), and per view the (Gaussian, pixel) of each observation. `stats.observe` sums the
+/// lanes' host seconds (which overlap when two lanes run).
+#[allow(clippy::type_complexity)]
+pub fn observe(
+    input: &ConsensusInput,
+    cfg: &FuseConfig,
+    occlusion: bool,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<(Observations, Vec<Vec<(u32, u32)>>, FuseStats)> {
+    let (gpu, cams, n) = (input.gpu, input.cams, input.scene.n as usize);
+    let mut stats = FuseStats {
+        views: cams.len(),
+        passes: 1,
+        rows_per_pass: input.classes,
+        ..Default::default()
+    };
+    let mut views = ObservedViews::new(cams.len());
+    let pass = Pass {
+        input,
+        cfg,
+        occlusion,
+    };
+    // Label maps are read (decoded) and checked on worker threads a few views ahead, as
+    // the FlashSplat pass does, instead of in turn between the views' GPU work.
+    let read = |view: usize| read_labels(input, view);
+    let mut first = Some(Lane::new(gpu, n, cfg)?);
+    std::thread::scope(|scope| -> Result<()> {
+        let (done, finished) = mpsc::channel::<Result<ObservedView>>();
+        let mut running = Running::default();
+        let mut waited_since = Instant::now();
+        let fed = prefetch_ordered(
+            cams.len(),
+            LABEL_THREADS,
+            LABELS_AHEAD,
+            read,
+            |view, map| {
+                stats.label_wait_s += waited_since.elapsed().as_secs_f64();
+                progress(view, cams.len());
+                while let Ok(observed) = finished.try_recv() {
+                    views.store(observed?, &mut stats);
+                }
+                if let Some(map) = map {
+                    stats.views_with_labels += 1;
+                    match first.take() {
+                        // Alone: what its lane takes says how many lanes fit.
+                        Some(mut lane) => {
+                            let before = gpu.memory_reserved();
+                            views.store(lane.observe(&pass, view, &map)?, &mut stats);
+                            let lane_bytes = gpu.memory_reserved().saturating_sub(before);
+                            running.start(scope, lane, lane_bytes, &pass, &done)?;
+                        }
+                        None => running.feed(view, map)?,
+                    }
+                }
+                waited_since = Instant::now();
+                Ok(())
+            },
+        );
+        stats.views_in_flight = running.feeds.len().max(1);
+        drop(done);
+        for regions in running.finish() {
+            stats.gpu_ms += regions.gpu_ms;
+            stats.region_host_fallbacks += regions.host_fallbacks;
+        }
+        // A lane's own error stands before the feed's (which may be only that it stopped).
+        let failed = finished.into_iter().find_map(|observed| match observed {
+            Ok(observed) => {
+                views.store(observed, &mut stats);
+                None
+            }
+            Err(e) => Some(e),
+        });
+        failed.map_or(fed, Err)
+    })?;
+    progress(cams.len(), cams.len());
+    let gathering = Instant::now();
+    let observations = Observations::from_views(n, &views.observed);
+    stats.observe.gather_s += gathering.elapsed().as_secs_f64();
+    Ok((observations, views.pixels, stats))
+}
+
+/// View `view`'s label map (None: no labels), checked against its camera and the classes.
+fn read_labels(input: &ConsensusInput, view: usize) -> Result<Option<Vec<u32>>> {
+    let (cam, classes) = (&input.cams[view], input.classes);
+    let map = input.labels.labels(view, cam)?;
+    if let Some(map) = &map {
+        check_map_size(cam, map)?;
+        ensure!(
+            map.iter().all(|&l| l == NO_LABEL || (l as usize) < classes),
+            "labels of view {} hold a class outside the {classes} classes",
+            cam.name
+        );
+    }
+    Ok(map)
+}
+
+/// The lanes' threads, each fed its views through a channel of its own.
+#[derive(Default)]
+struct Running<'scope> {
+    feeds: Vec<mpsc::SyncSender<(usize, Vec<u32>)>>,
+    threads: Vec<std::thread::ScopedJoinHandle<'scope, RegionStats>>,
+}
+
+impl<'scope> Running<'scope> {
+    /// Starts `first`, whose first view took `lane_bytes` of device memory, and as many
+    /// more lanes as fit ([`lanes_that_fit`]), each on a thread of `scope`.
+    fn start<'env>(
+        &mut self,
+        scope: &'scope std::thread::Scope<'scope, 'env>,
+        first: Lane<'env>,
+        lane_bytes: u64,
+        pass: &'env Pass<'env>,
+        done: &mpsc::Sender<Result<ObservedView>>,
+    ) -> Result<()> {
+        let (gpu, n) = (pass.input.gpu, pass.input.scene.n as usize);
+        let more = (1..lanes_that_fit(gpu, pass.cfg, lane_bytes))
+            .map(|_| Lane::new(gpu, n, pass.cfg))
+            .collect::<Result<Vec<_>>>()?;
+        for lane in std::iter::once(first).chain(more) {
+            self.spawn(scope, lane, pass, done.clone());
+        }
+        Ok(())
+    }
+
+    /// Starts `lane` on a thread of `scope`, its views' results sent to `done`.
+    fn spawn<'env>(
+        &mut self,
+        scope: &'scope std::thread::Scope<'scope, 'env>,
+        lane: Lane<'env>,
+        pass: &'env Pass<'env>,
+        done: mpsc::Sender<Result<ObservedView>>,
+    ) {
+        let (feed, views) = mpsc::sync_channel(1);
+        self.threads
+            .push(scope.spawn(move || lane.run(pass, views, done)));
+        self.feeds.push(feed);
+    }
+
+    /// Hands view `view` (labeled `map`) to lane `view % lanes`, once it has room.
+    fn feed(&self, view: usize, map: Vec<u32>) -> Result<()> {
+        let lane = &self.feeds[view % self.feeds.len()];
+        lane.send((view, map))
+            .map_err(|_| anyhow!("an observation lane stopped"))
+    }
+
+    /// Closes the feeds and waits for the lanes to finish their views: what each one's
+    /// region finder did.
+    fn finish(self) -> Vec<RegionStats> {
+        drop(self.feeds);
+        let finished = self.threads.into_iter().map(|t| t.join());
+        finished
+            .map(|stats| stats.expect("an observation lane panicked"))
+            .collect()
+    }
+}
+
+/// What every view of the pass shares.
+struct Pass<'a> {
+    input: &'a ConsensusInput<'a>,
+    cfg: &'a FuseConfig,
+    occlusion: bool,
+}
+
+/// One view's observations, as a lane found them.
+struct ObservedView {
+    view: usize,
+    observed: Vec<ViewEntry>,
+    /// (Gaussian, pixel under its center) of each observation.
+    seen: Vec<(u32, u32)>,
+    gpu_ms: f64,
+    times: ObserveTimes,
+    device_bytes: u64,
+}
+
+/// The views' observations, stored by view as the lanes finish them (views without labels
+/// keep none).
+struct ObservedViews {
+    observed: Vec<Vec<ViewEntry>>,
+    pixels: Vec<Vec<(u32, u32)>>,
+}
+
+impl ObservedViews {
+    fn new(views: usize) -> ObservedViews {
+        ObservedViews {
+            observed: vec![Vec::new(); views],
+            pixels: vec![Vec::new(); views],
+        }
+    }
+
+    fn store(&mut self, view: ObservedView, stats: &mut FuseStats) {
+        self.observed[view.view] = view.observed;
+        self.pixels[view.view] = view.seen;
+        stats.gpu_ms += view.gpu_ms;
+        stats.peak_device_bytes = stats.peak_device_bytes.max(view.device_bytes);
+        stats.observe.render_s += view.times.render_s;
+        stats.observe.regions_s += view.times.regions_s;
+        stats.observe.gather_s += view.times.gather_s;
+    }
+}
+
+/// The GPU resources of one view at a time.
+struct Lane<'a> {
+    /// The first field: a dropped lane waits for its view before its buffers are freed.
+    raster: Rasterizer,
+    /// The pixel under each Gaussian's visible center ([n]).
+    centers: Buffer,
+    finder: RegionFinder<'a>,
+}
+
+impl<'a> Lane<'a> {
+    fn new(gpu: &'a Gpu, n: usize, cfg: &FuseConfig) -> Result<Lane<'a>> {
+        let mut raster = Rasterizer::new(gpu);
+        raster.set_split_sizes(cfg.split);
+        Ok(Lane {
+            raster,
+            centers: gpu.buffer("center-pixels", (n.max(1) * 4) as u64)?,
+            finder: RegionFinder::new(gpu, n)?,
+        })
+    }
+
+    /// Observes the views fed to it until the feed closes or a view fails (its error sent
+    /// as its result); returns what its region finder did.
+    fn run(
+        mut self,
+        pass: &Pass,
+        feed: mpsc::Receiver<(usize, Vec<u32>)>,
+        done: mpsc::Sender<Result<ObservedView>>,
+    ) -> RegionStats {
+        for (view, map) in feed {
+            let observed = self.observe(pass, view, &map);
+            let failed = observed.is_err();
+            if done.send(observed).is_err() || failed {
+                break;
+            }
+        }
+        self.finder.stats
+    }
+
+    /// View `view` labeled `map`: its centers' pixels rendered, their regions found, and
+    /// its observations gathered straight from the readback (not copied first).
+    fn observe(&mut self, pass: &Pass, view: usize, map: &[u32]) -> Result<ObservedView> {
+        let (gpu, scene) = (pass.input.gpu, pass.input.scene);
+        let cam = &pass.input.cams[view];
+        let mut times = ObserveTimes::default();
+        let rendering = Instant::now();
+        let gpu_ms = center_pixels(&mut self.raster, scene, cam, &self.centers, pass)?;
+        let device_bytes = gpu.memory_reserved();
+        times.render_s = rendering.elapsed().as_secs_f64();
+        let finding = Instant::now();
+        let (observed, seen) =
+            self.finder
+                .regions_with(map, cam.width, &self.centers, |c, r| {
+                    let gathering = Instant::now();
+                    let gathered = view_observations(map, c, r);
+                    times.gather_s = gathering.elapsed().as_secs_f64();
+                    gathered
+                })?;
+        times.regions_s = finding.elapsed().as_secs_f64() - times.gather_s;
+        Ok(ObservedView {
+            view,
+            observed,
+            seen,
+            gpu_ms,
+            times,
+            device_bytes,
+        })
+    }
+}
+
+/// One view's observations from its readback (per Gaussian, the pixel under its center and
+/// that pixel's region, [`NO_LABEL`] where unobserved): (Gaussian, label, region, edge) and
+/// (Gaussian, pixel), in Gaussian order. On every core, in blocks of Gaussians: each view
+/// reads an entry for every Gaussian of the scene (a million, most unobserved). Each block's
+/// observations are counted, then written into its part of the lists.
+fn view_observations(
+    map: &[u32],
+    centers: &[u32],
+    regions: &[u32],
+) -> (Vec<ViewEntry>, Vec<(u32, u32)>) {
+    const BLOCK: usize = 1 << 16;
+    let block = |b: usize| b * BLOCK..regions.len().min((b + 1) * BLOCK);
+    let blocks = regions.len().div_ceil(BLOCK);
+    let counts = parallel_map(blocks, |b| {
+        regions[block(b)].iter().filter(|&&r| r != NO_LABEL).count()
+    });
+    let total = counts.iter().sum();
+    let (mut observed, mut seen) = (vec![(0, 0, 0, false); total], vec![(0, 0); total]);
+    let observed_parts = split_parts(&mut observed, counts.iter().copied());
+    let seen_parts = split_parts(&mut seen, counts);
+    parallel_map(blocks, |b| {
+        let (mut observed, mut seen) = (take_part(&observed_parts[b]), take_part(&seen_parts[b]));
+        let mut at = 0;
+        for g in block(b) {
+            let (p, r) = (centers[g], regions[g]);
+            if r != NO_LABEL {
+                let (region, edge) = (r & !REGION_EDGE_BIT, r & REGION_EDGE_BIT != 0);
+                observed[at] = (g as u32, map[p as usize], region, edge);
+                seen[at] = (g as u32, p);
+                at += 1;
+            }
+        }
+    });
+    drop((observed_parts, seen_parts));
+    (observed, seen)
+}
+
+/// Writes the pixel under every Gaussian's visible center into `out`; returns GPU ms.
+fn center_pixels(
+    raster: &mut Rasterizer,
+    scene: &GpuScene,
+    cam: &Camera,
+    out: &Buffer,
+    pass: &Pass,
+) -> Result<f64> {
+    let cfg = pass.cfg;
+    if !pass.occlusion {
+        let mut rec = Recorder::new(raster.gpu())?;
+        let m0 = rec.mark();
+        dispatch_center_pixels(&mut rec, scene, cam, None, out, cfg)?;
+        let m1 = rec.mark();
+        let t = rec.submit_and_wait()?;
+        return Ok(t.between(m0, m1).unwrap_or(0.0) * 1e-6);
+    }
+    // The centers are looked up once the whole view's depth is rendered (every Gaussian's
+    // entry is written, so a binning that overflowed and runs again leaves nothing behind).
+    // The median depth, not the expected one `vote --occlusion` tests against: a pixel
+    // stops at the surface in front instead of at saturation (a third of the consensus's
+    // time on lavapipe), and on an object's silhouette it is the depth of one of the two
+    // surfaces, not a blend that matches neither.
+    let run = raster.run_tiled_in_bands(scene, cam, &cfg.render_options(), |rec, tiles| {
+        tiles.record_median_depth(rec)?;
+        if !tiles.is_last_band() {
+            return Ok(());
+        }
+        rec.barrier();
+        dispatch_center_pixels(rec, scene, cam, Some(tiles.depth()), out, cfg)
+    })?;
+    Ok(run.timings.total_ns() * 1e-6)
+}
+
+fn dispatch_center_pixels(
+    rec: &mut Recorder,
+    scene: &GpuScene,
+    cam: &Camera,
+    depth: Option<&Buffer>,
+    out: &Buffer,
+    cfg: &FuseConfig,
+) -> Result<()> {
+    // No class rows: the observations take every label.
+    let params = center_params(
+        cam,
+        scene,
+        cfg,
+        depth.is_some(),
+        (0, 0),
+        out.address_words(4)?,
+    )?;
+    rec.dispatch(
+        ids::FUSE_CENTER_PIXEL,
+        &[
+            // Never read without occlusion: any readable buffer fills the binding.
+            ("depth", depth.unwrap_or(&scene.params.means)),
+        ],
+        &params,
+        ids::FUSE_CENTER_PIXEL.groups_for(scene.n),
+    )?;
+    rec.barrier();
+    Ok(())
+}
