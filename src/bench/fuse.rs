@@ -95,6 +95,9 @@ pub struct MethodBench {
     /// Passes over the views (the evidence matrix split into class-row batches).
     pub passes: usize,
     pub rows_per_pass: usize,
+    /// Views in flight at once (`FuseStats::views_in_flight`): the tiled methods' and the
+    /// consensus's observation pass's lanes (whose `observe` parts are summed over them).
+    pub views_in_flight: usize,
     /// Device memory the allocator held at most (every method's scene is resident).
     pub peak_device_bytes: u64,
     /// Device memory of the scene as this method uploads it (only what it reads).
@@ -436,6 +439,7 @@ impl Setup<'_> {
                     peak_device_bytes: stats.peak_device_bytes,
                     passes: stats.passes,
                     rows_per_pass: stats.rows_per_pass,
+                    views_in_flight: stats.views_in_flight,
                     ..Default::default()
                 });
             }
@@ -483,6 +487,7 @@ fn method_bench(
         views_per_s: (views * m.passes) as f64 / m.wall_s,
         passes: m.passes,
         rows_per_pass: m.rows_per_pass,
+        views_in_flight: m.views_in_flight,
         peak_device_bytes: m.peak_device_bytes,
         scene_device_bytes,
         gpu_ratio: m.gpu_ms / forward.gpu_ms,
@@ -509,6 +514,7 @@ struct RunTotal {
     peak_device_bytes: u64,
     passes: usize,
     rows_per_pass: usize,
+    views_in_flight: usize,
     visible: f64,
     intersections: f64,
 }
