@@ -76,7 +76,11 @@ fn check_maps(maps: &[(String, Vec<u32>, usize)]) -> usize {
         let mut centers: Vec<u32> = (0..map.len() as u32).collect();
         centers.resize(n, NO_LABEL);
         gpu.upload(&centers_buf, 0, &centers).unwrap();
-        let (pixels, got) = finder.regions_at(map, *width as u32, &centers_buf).unwrap();
+        let (pixels, got) = finder
+            .regions_with(map, *width as u32, &centers_buf, |p, r| {
+                (p.to_vec(), r.to_vec())
+            })
+            .unwrap();
         assert_eq!(pixels, centers, "{name}: the center pixels read back");
         let want = expected(map, *width, &centers);
         for (p, (g, w)) in got.iter().zip(&want).enumerate() {

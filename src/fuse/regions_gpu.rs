@@ -77,23 +77,11 @@ impl<'a> RegionFinder<'a> {
         })
     }
 
-    /// Per Gaussian, its center pixel as `centers` holds it ([n], NO_LABEL: none) and the
-    /// region id of that pixel in the view labeled `map` (`width` pixels a row), with
-    /// [`REGION_EDGE_BIT`] set where the pixel is on the region's edge; NO_LABEL where there
-    /// is no pixel or it is unlabeled. Both come back in one transfer.
-    pub fn regions_at(
-        &mut self,
-        map: &[u32],
-        width: u32,
-        centers: &Buffer,
-    ) -> Result<(Vec<u32>, Vec<u32>)> {
-        self.regions_with(map, width, centers, |pixels, regions| {
-            (pixels.to_vec(), regions.to_vec())
-        })
-    }
-
-    /// `read` given what [`RegionFinder::regions_at`] returns (pixels, regions), read where
-    /// the transfer left them (two words for each Gaussian of the scene, a view after view:
+    /// `read` given, per Gaussian, its center pixel as `centers` holds it ([n], NO_LABEL:
+    /// none) and the region id of that pixel in the view labeled `map` (`width` pixels a
+    /// row), with [`REGION_EDGE_BIT`] set where the pixel is on the region's edge; NO_LABEL
+    /// where there is no pixel or it is unlabeled. Both come back in one transfer and are
+    /// read where it left them (two words for each Gaussian of the scene, view after view:
     /// not copied first).
     pub fn regions_with<R>(
         &mut self,

@@ -13,8 +13,10 @@ pub fn peak_host_bytes() -> Option<u64> {
 /// (before any thread). By default each thread that allocates gets an arena of its own (up
 /// to eight per core), which keeps what was freed in it: on a 16-core machine the segment
 /// consensus of a million-Gaussian room peaked at 2.1 GB with them and 1.36 GB with one,
-/// no slower (docs/gpu.md). Our worker threads allocate little (large buffers are
-/// allocated once and filled in place), so they rarely wait for the one arena's lock.
+/// no slower (one run, docs/gpu.md). The parallel passes make few allocations each (a
+/// block's list, not an entry at a time; the observations' are filled in place), so their
+/// threads rarely wait for the one arena's lock; lavapipe's own threads allocate more (its
+/// rendering there was 3-9% slower).
 /// A `MALLOC_ARENA_MAX` in the environment is left to glibc. Elsewhere than glibc, nothing.
 pub fn use_one_malloc_arena() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
