@@ -327,10 +327,12 @@ fn assert_same_partition(segment: &[u32], label: &[usize]) {
 
 /// The clustering against its plain transcription where every rule decides something:
 /// candidates refused by the pairs' evidence and by the dominant regions, rarely seen
-/// Gaussians, stray regions.
+/// Gaussians, stray regions. Twelve seeds (about a second): some rules decide only a few of
+/// them (a candidate order broken by the pairs summed instead of the views together passed
+/// seeds 1-3 and failed from seed 4).
 #[test]
 fn clustering_matches_a_plain_transcription_under_heavy_noise() {
-    for seed in 1..=3 {
+    for seed in 1..=12 {
         let (means, obs) = four_objects(10, seed);
         let p = ConsensusParams::default();
         let knn = nearest_neighbours(&means, p.neighbours);
