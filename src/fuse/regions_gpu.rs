@@ -101,21 +101,22 @@ impl<'a> RegionFinder<'a> {
         let bytes = (self.n * 4) as u64;
         let uploads = [(self.labels_buffer(), map)];
         let downloads = [(centers, bytes), (&self.out, bytes)];
-        // Read in place where the check passed (else on the host, below).
-        let mut read = Some(read);
+        // Read in place; where the check failed, the regions are found on the host from
+        // the center pixels already read back.
         let found =
             self.find_regions(&params, &uploads, lookup, &downloads, |complete, words| {
-                let read = read.take().filter(|_| complete)?;
-                Some(read(words[0], words[1]))
+                match complete {
+                    true => (read(words[0], words[1]), false),
+                    false => {
+                        let regions = regions_on_host(map, width as usize, words[0]);
+                        (read(words[0], &regions), true)
+                    }
+                }
             })?;
         self.stats.gpu_ms += found.gpu_ms;
-        match (found.read, read) {
-            (Some(read_back), _) => Ok(read_back),
-            (None, read) => {
-                let read = read.expect("the reader is kept where the check failed");
-                self.read_on_host(map, width, centers, read)
-            }
-        }
+        let (read_back, on_host) = found.read;
+        self.stats.host_fallbacks += on_host as usize;
+        Ok(read_back)
     }
 
     /// Whether one dispatch over the pixels of `map` reaches them all (past 16.7M pixels
@@ -338,7 +339,8 @@ impl<'a> RegionFinder<'a> {
         Ok(staging.read::<u32>()[0][0] == 0)
     }
 
-    /// [`RegionFinder::regions_with`] on the host, from the center pixels read back.
+    /// [`RegionFinder::regions_with`] on the host, for a label map the GPU path does not fit:
+    /// the center pixels read back, their regions found here.
     fn read_on_host<R>(
         &mut self,
         map: &[u32],
