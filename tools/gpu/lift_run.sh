@@ -20,8 +20,12 @@ one() {
     "$semsplat" eval --scene "$out/$tag.ply" --cameras "$scene/cameras.json" \
       --labels "$scene/labels" --views test --json "$out/$tag.eval.json" >>"$out/$tag.log" 2>&1 \
       || { echo "lift: $tag: no held-out evaluation (see $out/$tag.log)" >&2; failed=1; }
-    python3 "$(dirname "$0")/lift_check.py" extract "$out/$tag.ply" "$out/$tag.npy"
-    rm -f "$out/$tag.ply" "$out/$tag.classes.json"
+    if python3 "$(dirname "$0")/lift_check.py" extract "$out/$tag.ply" "$out/$tag.npy"; then
+      rm -f "$out/$tag.ply" "$out/$tag.classes.json"
+    else
+      echo "lift: $tag: cannot read the classes of $out/$tag.ply (is numpy installed?)" >&2
+      failed=1
+    fi
   else
     echo "lift: $tag failed (see $out/$tag.log)" >&2
     failed=1
