@@ -13,8 +13,8 @@
 
 use std::cmp::Reverse;
 use std::collections::HashMap;
-use std::hash::{BuildHasherDefault, Hasher};
 
+use super::consensus_adjacent::Adjacent;
 use super::consensus_decide::ConsensusParams;
 use super::consensus_segments::{co_occurrence, Observations};
 use crate::contract::NO_NEIGHBOUR;
@@ -33,7 +33,7 @@ pub struct PairEvidence {
 }
 
 impl PairEvidence {
-    fn add(&mut self, other: PairEvidence) {
+    pub(crate) fn add(&mut self, other: PairEvidence) {
         self.together += other.together;
         self.apart += other.apart;
         self.on_edge += other.on_edge;
@@ -292,7 +292,7 @@ pub fn cluster_segments_sweeping_from(
         if graph.parent[a as usize] != a || graph.parent[b as usize] != b {
             continue; // joined another segment (most stale candidates: no map lookup needed)
         }
-        let current = graph.edges[a as usize].get(&b).copied();
+        let current = graph.edges[a as usize].get(b);
         let Some(evidence) = current.filter(|&e| candidate(a, b, e, p) == queued) else {
             continue; // a segment joined another, or the evidence grew: queued again since
         };
@@ -335,8 +335,8 @@ impl Queue {
             sorted.extend(
                 edges
                     .iter()
-                    .filter(|(&b, e)| a < b && e.allows_join(p))
-                    .map(|(&b, &e)| candidate(a, b, e, p)),
+                    .filter(|&(b, e)| a < b && e.allows_join(p))
+                    .map(|(b, e)| candidate(a, b, e, p)),
             );
         }
         sorted.sort_unstable();
@@ -406,33 +406,6 @@ fn neighbour_pairs(obs: &Observations, knn: &[u32], k: usize) -> Vec<(u32, u32, 
     blocks.concat()
 }
 
-/// A segment's adjacent segments with the summed evidence. Keys are segment ids, so a
-/// multiplicative hash does (SipHash, the default, took most of the graph's build time).
-type Adjacent = HashMap<u32, PairEvidence, BuildHasherDefault<IdHasher>>;
-
-#[derive(Default)]
-struct IdHasher(u64);
-
-impl Hasher for IdHasher {
-    fn finish(&self) -> u64 {
-        self.0
-    }
-
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.write_u64(b as u64);
-        }
-    }
-
-    fn write_u32(&mut self, id: u32) {
-        self.write_u64(id as u64);
-    }
-
-    fn write_u64(&mut self, x: u64) {
-        self.0 = (self.0.rotate_left(5) ^ x).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-    }
-}
-
 /// The segments while they join: per segment (by its lowest Gaussian) the adjacent segments
 /// with the summed evidence, and its region counts.
 struct SegmentGraph<'a> {
@@ -452,14 +425,11 @@ impl<'a> SegmentGraph<'a> {
             degree[g as usize] += 1;
             degree[h as usize] += 1;
         }
-        // Sized once rather than grown pair by pair (a million maps, each rehashed as it grows).
-        let mut edges: Vec<Adjacent> = degree
-            .iter()
-            .map(|&d| Adjacent::with_capacity_and_hasher(d, Default::default()))
-            .collect();
+        // Sized once rather than grown pair by pair (a million lists and maps).
+        let mut edges: Vec<Adjacent> = degree.iter().map(|&d| Adjacent::with_capacity(d)).collect();
         for (g, h, e) in pairs {
-            edges[g as usize].insert(h, e);
-            edges[h as usize].insert(g, e);
+            edges[g as usize].add(h, e);
+            edges[h as usize].add(g, e);
         }
         SegmentGraph {
             obs,
@@ -482,16 +452,12 @@ impl<'a> SegmentGraph<'a> {
         let taken = std::mem::take(&mut self.regions[bi]);
         self.regions[ai].absorb(ai, taken, bi, self.obs);
         let mut moved = std::mem::take(&mut self.edges[bi]);
-        moved.remove(&a);
-        self.edges[ai].remove(&b);
+        moved.remove(a);
+        self.edges[ai].remove(b);
         changed.clear();
-        for (c, e) in moved {
-            let other = &mut self.edges[c as usize];
-            other.remove(&b);
-            let sum = self.edges[ai].entry(c).or_default();
-            sum.add(e);
-            let sum = *sum;
-            self.edges[c as usize].insert(a, sum);
+        for (c, e) in moved.iter() {
+            let sum = self.edges[ai].add(c, e);
+            self.edges[c as usize].rename(b, a, sum);
             changed.push((c, sum));
         }
     }

@@ -5,6 +5,7 @@ pub mod accumulate;
 pub mod assign;
 pub mod assign_gpu;
 pub mod consensus;
+pub mod consensus_adjacent;
 pub mod consensus_cluster;
 pub mod consensus_confusion;
 pub mod consensus_decide;
