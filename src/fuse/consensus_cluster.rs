@@ -290,7 +290,7 @@ pub fn cluster_segments_sweeping_from(
     while let Some(queued) = queue.pop() {
         let (_, _, Reverse(a), Reverse(b)) = queued;
         if graph.parent[a as usize] != a || graph.parent[b as usize] != b {
-            continue; // joined another segment (most stale candidates: no map lookup needed)
+            continue; // joined another segment (most stale candidates: no adjacency lookup needed)
         }
         let current = graph.edges[a as usize].get(b);
         let Some(evidence) = current.filter(|&e| candidate(a, b, e, p) == queued) else {
