@@ -26,6 +26,15 @@ pub struct ConsensusParams {
     pub occlusion: bool,
     /// Nearest neighbours each Gaussian may join a segment through.
     pub neighbours: usize,
+    /// Before the joins in order of evidence, two neighbours join outright where at least
+    /// this many views saw both and every one of them put them in one region, neither on its
+    /// edge (0: none). The ordered joins then start from these pieces rather than from single
+    /// Gaussians: they are most of the joins, and sequential, where this step is not. Such a
+    /// pair would pass every test as two single Gaussians; what it skips is waiting for its
+    /// turn in the order, and the region test of the segments it links. Not fewer than 6:
+    /// from 4, a few pairs across a ceiling's edge, seen only by views that flicker had
+    /// labeled the ceiling as wall, joined the two (docs/robustness.md).
+    pub premerge_views: u32,
     /// Two segments join only where the views put the neighbour pairs between them in the
     /// same region this many times (summed over the pairs)...
     pub min_together: u32,
@@ -88,6 +97,7 @@ impl Default for ConsensusParams {
         ConsensusParams {
             occlusion: true,
             neighbours: 8,
+            premerge_views: 6,
             min_together: 2,
             max_apart_share: 0.1,
             min_together_share: 0.5,
