@@ -17,8 +17,8 @@
 //! clustering's sequential time. A pair across two objects passes too where every view
 //! that saw it had merged their regions (flicker gave both one class): from 4 such views
 //! that joined a ceiling to its wall on one sweep run; from 6 (the default) the flicker
-//! sweep's means moved by at most 0.4 mIoU points, up (docs/robustness.md, "Unanimous
-//! pairs joined outright").
+//! sweep's means moved by at most 0.4 mIoU points (the office's segment consensus, up;
+//! docs/robustness.md, "Unanimous pairs joined outright").
 
 use std::cmp::Reverse;
 use std::collections::HashMap;

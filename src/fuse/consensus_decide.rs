@@ -29,11 +29,12 @@ pub struct ConsensusParams {
     /// Before the joins in order of evidence, two neighbours join outright where at least
     /// this many views saw both and every one of them put them in one region, neither on its
     /// edge (0: none). The ordered joins then start from these pieces rather than from single
-    /// Gaussians: they are most of the joins, and sequential, where this step is not. Such a
-    /// pair would pass every test as two single Gaussians; what it skips is waiting for its
-    /// turn in the order, and the region test of the segments it links. Not fewer than 6:
-    /// from 4, a few pairs across a ceiling's edge, seen only by views that flicker had
-    /// labeled the ceiling as wall, joined the two (docs/robustness.md).
+    /// Gaussians: they are most of the joins, each a step of one sequential order, where this
+    /// step is one pass of union-find over the pairs (the pieces' counts built on every
+    /// core). Such a pair would pass every test as two single Gaussians; what it skips is
+    /// waiting for its turn in the order, and the region test of the segments it links. Not
+    /// fewer than 6: from 4, a few pairs across a ceiling's edge, seen only by views that
+    /// flicker had labeled the ceiling as wall, joined the two (docs/robustness.md).
     pub premerge_views: u32,
     /// Two segments join only where the views put the neighbour pairs between them in the
     /// same region this many times (summed over the pairs)...
