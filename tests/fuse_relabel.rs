@@ -9,6 +9,7 @@ use common::regions::{flood_regions, on_edge};
 use common::{check_validation, gpu};
 use semsplat::dataset::CompactClasses;
 use semsplat::fuse::consensus::{consensus_run, ConsensusRun};
+use semsplat::fuse::consensus_confusion::ConfusionRates;
 use semsplat::fuse::consensus_relabel::{edge_depth, relabel_view, RelabelRule, RelabeledViews};
 use semsplat::fuse::regions_gpu::{RegionFinder, MAX_GPU_REACH};
 use semsplat::fuse::{
@@ -36,8 +37,16 @@ fn depth_by_hand(regions: &[u32], w: usize, p: usize, cap: u32) -> u32 {
 /// pixel labeled it (the view labels it beside the region); else, if
 /// the region's own label holds `rule.keep_share` of them, and `rule.min_share` with the
 /// seeds of other classes that lie within `rule.near` (city-block) of a pixel labeled their
-/// class, it keeps its label; else it is unlabeled. Regions without seeds keep their labels.
-fn relabel_by_hand(map: &[u32], w: usize, seeds: &[(u32, u32)], rule: &RelabelRule) -> Vec<u32> {
+/// class, it keeps its label; so it does if the seeds of classes whose rate of being taken
+/// for its label exceeds `rule.max_edge_confusion` fall short of `1 - rule.min_share` of
+/// them; else it is unlabeled. Regions without seeds keep their labels.
+fn relabel_by_hand(
+    map: &[u32],
+    w: usize,
+    seeds: &[(u32, u32)],
+    rule: &RelabelRule,
+    rates: &ConfusionRates,
+) -> Vec<u32> {
     let regions = flood_regions(map, w);
     let count = regions
         .iter()
@@ -88,11 +97,18 @@ fn relabel_by_hand(map: &[u32], w: usize, seeds: &[(u32, u32)], rule: &RelabelRu
             .filter(|s| s.1 == top && near(top, s.2))
             .count();
         let beside = top != own && top_near * 2 >= votes(top);
+        let look_alikes = counted
+            .iter()
+            .filter(|s| {
+                s.1 != own && rates.rate(s.1 as usize, own as usize) > rule.max_edge_confusion
+            })
+            .count();
+        let kept_by_own =
+            holds(votes(own), rule.keep_share) && holds(votes(own) + near_seeds, rule.min_share);
+        let kept_by_confusions = holds(counted.len() - look_alikes, rule.min_share);
         let new = if holds(votes(top), rule.min_share) && !beside {
             top
-        } else if holds(votes(own), rule.keep_share)
-            && holds(votes(own) + near_seeds, rule.min_share)
-        {
+        } else if kept_by_own || kept_by_confusions {
             own
         } else {
             NO_LABEL
@@ -106,8 +122,8 @@ fn relabel_by_hand(map: &[u32], w: usize, seeds: &[(u32, u32)], rule: &RelabelRu
     out
 }
 
-/// A rule with the given shares, depth and near radius (the footprint mass plays no part in
-/// relabeling).
+/// A rule with the given shares, depth and near radius, which keeps no region by the
+/// scene's confusions (the footprint mass plays no part in relabeling).
 fn rule(min_share: f64, depth: u32, keep_share: f64, near: u32) -> RelabelRule {
     RelabelRule {
         min_share,
@@ -115,19 +131,37 @@ fn rule(min_share: f64, depth: u32, keep_share: f64, near: u32) -> RelabelRule {
         keep_share,
         near,
         min_mass: 1.0,
+        max_edge_confusion: 0.0,
     }
 }
 
-/// Rules over both shares, four depths and three near radii; a keep share above 1 never
-/// keeps a mixed region.
-const RULES: [(f64, u32, f64, u32); 6] = [
-    (0.75, 1, 2.0, 8),
-    (0.6, 1, 0.25, 1),
-    (1.0, 1, 0.25, 3),
-    (0.75, 2, 2.0, 3),
-    (0.75, 3, 0.25, 3),
-    (0.75, 6, 0.4, 8),
+/// Rules over both shares, four depths, three near radii and two confusion thresholds
+/// (against rates drawn uniformly: none or about half of the pairs rule flicker out); a
+/// keep share above 1 never keeps a mixed region by its own seeds.
+const RULES: [(f64, u32, f64, u32, f64); 7] = [
+    (0.75, 1, 2.0, 8, 0.0),
+    (0.6, 1, 0.25, 1, 0.0),
+    (1.0, 1, 0.25, 3, 0.5),
+    (0.75, 2, 2.0, 3, 0.5),
+    (0.75, 3, 0.25, 3, 0.0),
+    (0.75, 6, 0.4, 8, 0.5),
+    (0.75, 3, 0.25, 8, 0.5),
 ];
+
+/// A rule of [`RULES`].
+fn rule_of(
+    (min_share, depth, keep_share, near, max_edge_confusion): (f64, u32, f64, u32, f64),
+) -> RelabelRule {
+    RelabelRule {
+        max_edge_confusion,
+        ..rule(min_share, depth, keep_share, near)
+    }
+}
+
+/// Rates at which the views take each of 4 classes for each other, drawn uniformly.
+fn random_rates(rng: &mut Rng) -> ConfusionRates {
+    ConfusionRates::from_rows(4, (0..16).map(|_| rng.f64()).collect())
+}
 
 /// A label map of rectangles of 4 classes over a background, some pixels unlabeled, and
 /// seeds: mostly one class per region (often not its label), another class sometimes
@@ -175,10 +209,11 @@ fn random_case(seed: u64, w: usize, h: usize) -> (Vec<u32>, Vec<(u32, u32)>) {
 #[test]
 fn relabeling_matches_a_plain_transcription() {
     let (mut relabeled, mut unlabeled, mut kept, mut kept_by_near) = (0, 0, 0, 0);
-    let mut not_taken_beside = 0;
+    let (mut not_taken_beside, mut kept_by_confusions) = (0, 0);
     for seed in 0..40 {
         let (w, h) = (24, 18);
         let (map, seeds) = random_case(seed, w, h);
+        let rates = random_rates(&mut Rng::new(seed + 1000));
         let regions = flood_regions(&map, w);
         let depth = edge_depth(&regions, w, 3);
         for p in (0..map.len()).filter(|&p| map[p] != NO_LABEL) {
@@ -188,24 +223,34 @@ fn relabeling_matches_a_plain_transcription() {
                 "seed {seed}, pixel {p}"
             );
         }
-        for (min_share, depth, keep_share, near) in RULES {
+        for rule in RULES.map(rule_of) {
             let mut got = map.clone();
-            let rule = rule(min_share, depth, keep_share, near);
-            relabel_view(&mut got, w, seeds.iter().copied(), &rule);
-            let want = relabel_by_hand(&map, w, &seeds, &rule);
+            relabel_view(&mut got, w, seeds.iter().copied(), &rule, &rates);
+            let want = relabel_by_hand(&map, w, &seeds, &rule, &rates);
             assert_eq!(got, want, "seed {seed}, {rule:?}");
-            let never_kept = RelabelRule {
+            let by_hand = |rule: &RelabelRule| relabel_by_hand(&map, w, &seeds, rule, &rates);
+            let never_kept = by_hand(&RelabelRule {
                 keep_share: 2.0,
+                max_edge_confusion: 0.0,
                 ..rule
-            };
-            let never_kept = relabel_by_hand(&map, w, &seeds, &never_kept);
+            });
+            let no_confusions = by_hand(&RelabelRule {
+                max_edge_confusion: 0.0,
+                ..rule
+            });
             // No seed of another class lies within 0 pixels of its class's label.
-            let none_near = relabel_by_hand(&map, w, &seeds, &RelabelRule { near: 0, ..rule });
+            let none_near = by_hand(&RelabelRule {
+                near: 0,
+                max_edge_confusion: 0.0,
+                ..rule
+            });
             for p in (0..map.len()).filter(|&p| map[p] != NO_LABEL) {
                 relabeled += usize::from(want[p] != map[p] && want[p] != NO_LABEL);
                 unlabeled += usize::from(want[p] == NO_LABEL);
                 kept += usize::from(want[p] == map[p] && never_kept[p] == NO_LABEL);
                 kept_by_near += usize::from(want[p] == map[p] && none_near[p] == NO_LABEL);
+                kept_by_confusions +=
+                    usize::from(want[p] == map[p] && no_confusions[p] == NO_LABEL);
                 // With no seed near its class's label no class counts as labeled beside.
                 let taken = |l: u32| l != map[p] && l != NO_LABEL;
                 not_taken_beside += usize::from(taken(none_near[p]) && !taken(want[p]));
@@ -213,15 +258,17 @@ fn relabeling_matches_a_plain_transcription() {
         }
     }
     // The cases exercise every branch: regions relabeled, unlabeled, and mixed but kept,
-    // some of them only through seeds near their class's label, and regions not taken by
-    // a class labeled beside them.
+    // some of them only through seeds near their class's label, some only because their
+    // seeds' classes are not taken for their label, and regions not taken by a class
+    // labeled beside them.
     assert!(
         relabeled > 1000
             && unlabeled > 1000
             && kept > 200
             && kept_by_near > 100
+            && kept_by_confusions > 100
             && not_taken_beside > 100,
-        "{relabeled} {unlabeled} {kept} {kept_by_near} {not_taken_beside}"
+        "{relabeled} {unlabeled} {kept} {kept_by_near} {kept_by_confusions} {not_taken_beside}"
     );
 }
 
@@ -238,10 +285,12 @@ fn gpu_relabeling_matches_the_plain_transcription() {
     let mut relabeled = 0usize;
     for (seed, &(w, h)) in (100..).zip(sizes.iter().cycle().take(25)) {
         let (map, seeds) = random_case(seed, w, h);
-        for (min_share, depth, keep_share, near) in RULES {
-            let rule = rule(min_share, depth, keep_share, near);
-            let got = finder.relabel(&map, w as u32, &seeds, &rule).unwrap();
-            let want = relabel_by_hand(&map, w, &seeds, &rule);
+        let rates = random_rates(&mut Rng::new(seed + 1000));
+        for rule in RULES.map(rule_of) {
+            let got = finder
+                .relabel(&map, w as u32, &seeds, &rule, &rates)
+                .unwrap();
+            let want = relabel_by_hand(&map, w, &seeds, &rule, &rates);
             assert_eq!(got, want, "seed {seed} ({w}x{h}), {rule:?}");
             relabeled += (0..map.len()).filter(|&p| want[p] != map[p]).count();
         }
@@ -250,24 +299,22 @@ fn gpu_relabeling_matches_the_plain_transcription() {
     assert_eq!(finder.stats.host_fallbacks, 0, "views left to the host");
     // Too many seeds for the finder: the host relabels the view.
     let (map, seeds) = random_case(7, 24, 18);
+    let rates = random_rates(&mut Rng::new(7));
+    let by_hand = |rule: &RelabelRule| relabel_by_hand(&map, 24, &seeds, rule, &rates);
     let mut small = RegionFinder::new(gpu, seeds.len() - 1).unwrap();
-    let got = small
-        .relabel(&map, 24, &seeds, &rule(0.75, 3, 0.25, 8))
-        .unwrap();
-    assert_eq!(
-        got,
-        relabel_by_hand(&map, 24, &seeds, &rule(0.75, 3, 0.25, 8))
-    );
+    let shallow = rule_of((0.75, 3, 0.25, 8, 0.5));
+    let got = small.relabel(&map, 24, &seeds, &shallow, &rates).unwrap();
+    assert_eq!(got, by_hand(&shallow));
     assert_eq!(small.stats.host_fallbacks, 1);
     // Deeper than region_depth searches: the host relabels the view.
     let deep = rule(0.75, MAX_GPU_REACH + 1, 0.25, 8);
-    let got = finder.relabel(&map, 24, &seeds, &deep).unwrap();
-    assert_eq!(got, relabel_by_hand(&map, 24, &seeds, &deep));
+    let got = finder.relabel(&map, 24, &seeds, &deep, &rates).unwrap();
+    assert_eq!(got, by_hand(&deep));
     assert_eq!(finder.stats.host_fallbacks, 1);
     // A near radius past region_near's search: the host again.
     let far = rule(0.75, 3, 0.25, MAX_GPU_REACH + 1);
-    let got = finder.relabel(&map, 24, &seeds, &far).unwrap();
-    assert_eq!(got, relabel_by_hand(&map, 24, &seeds, &far));
+    let got = finder.relabel(&map, 24, &seeds, &far, &rates).unwrap();
+    assert_eq!(got, by_hand(&far));
     assert_eq!(finder.stats.host_fallbacks, 2);
     check_validation(gpu);
 }
@@ -308,11 +355,23 @@ fn a_region_takes_its_interior_seeds_class() {
     map[4] = 7; // regions 0..4 (class 5), 4 (class 7), 5..9 (class 5); 3, 4, 5 on edges
     let mut got = map.clone();
     let seeds = [(0, 2), (1, 2), (2, 2), (3, 6), (6, 4)];
-    relabel_view(&mut got, w, seeds.into_iter(), &rule(0.75, 1, 2.0, 8));
+    relabel_view(
+        &mut got,
+        w,
+        seeds.into_iter(),
+        &rule(0.75, 1, 2.0, 8),
+        &ConfusionRates::unknown(),
+    );
     assert_eq!(got, [2, 2, 2, 2, 7, 4, 4, 4, 4]);
     let mut got = map.clone();
     let seeds = [(0, 2), (1, 3), (5, 1), (4, 1)];
-    relabel_view(&mut got, w, seeds.into_iter(), &rule(0.75, 1, 2.0, 8));
+    relabel_view(
+        &mut got,
+        w,
+        seeds.into_iter(),
+        &rule(0.75, 1, 2.0, 8),
+        &ConfusionRates::unknown(),
+    );
     let x = NO_LABEL;
     assert_eq!(got, [x, x, x, x, 1, 1, 1, 1, 1]);
 }
@@ -336,7 +395,13 @@ fn deep_seeds_outvote_a_shifted_edge() {
     ]
     .map(|(p, c)| (p as u32, c));
     let mut got = map.clone();
-    relabel_view(&mut got, w, seeds.into_iter(), &rule(0.75, 3, 2.0, 8));
+    relabel_view(
+        &mut got,
+        w,
+        seeds.into_iter(),
+        &rule(0.75, 3, 2.0, 8),
+        &ConfusionRates::unknown(),
+    );
     assert_eq!(got, map, "the deep seeds keep class 1");
     // At depth 1 the region is mixed, two of five seeds its own class 1, three class 2.
     // A pixel labeled 2 beside the region at (0, 4): 2 from the seed at (2, 4), 3 from
@@ -360,7 +425,13 @@ fn deep_seeds_outvote_a_shifted_edge() {
     for (labels, keep_share, near, kept, what) in cases {
         let mut got = labels.clone();
         let rule = rule(0.75, 1, keep_share, near);
-        relabel_view(&mut got, w, seeds.into_iter(), &rule);
+        relabel_view(
+            &mut got,
+            w,
+            seeds.into_iter(),
+            &rule,
+            &ConfusionRates::unknown(),
+        );
         let want = if kept {
             labels.clone()
         } else {
@@ -387,7 +458,13 @@ fn a_region_does_not_take_a_class_labeled_beside_it() {
     let (beside, far) = (with_2_at(&map, 4 * w + 2), with_2_at(&map, 11));
     let relabeled = |labels: &[u32], rule: &RelabelRule, seeds: &[(u32, u32)]| {
         let mut got = labels.to_vec();
-        relabel_view(&mut got, w, seeds.iter().copied(), rule);
+        relabel_view(
+            &mut got,
+            w,
+            seeds.iter().copied(),
+            rule,
+            &ConfusionRates::unknown(),
+        );
         got
     };
     let rule8 = rule(0.75, 2, 0.25, 8);
@@ -420,6 +497,56 @@ fn a_region_does_not_take_a_class_labeled_beside_it() {
     five.push((twos[0], 1));
     let keep_a_fifth = rule(0.75, 2, 0.2, 8);
     assert_eq!(relabeled(&beside, &keep_a_fifth, &five), beside);
+}
+
+/// A region labeled 1 holding only Gaussians of class 2, which the view labels right
+/// beside it: undecided where the scene's views take class 2 for class 1 more often than
+/// `max_edge_confusion` (a flickered object beside one of its own class), kept as 1 where
+/// they do not (an edge drawn off: the label cannot be class 2's flicker); a threshold of 0
+/// never keeps it, and neither does a threshold where a third of its seeds are class 3,
+/// which the views take for 1 (under the `1 - min_share` a region may hold).
+#[test]
+fn a_region_keeps_a_label_its_gaussians_are_never_taken_for() {
+    let (w, h) = (12, 9);
+    let map = rectangle(w, h, 3..9, 2..7);
+    let twos = [(4 * w + 5) as u32, (4 * w + 6) as u32];
+    let mut seeds = vec![(twos[0], 2), (twos[1], 2), (twos[0], 2), (twos[1], 2)];
+    let beside = with_2_at(&map, 4 * w + 2);
+    // Rates [class][label] over classes 0..4: 2 is taken for 1 at `rate`, 3 for 1 at 0.2.
+    let rates = |rate: f64| {
+        let mut rows = vec![0.001; 16];
+        (rows[2 * 4 + 1], rows[3 * 4 + 1]) = (rate, 0.2);
+        ConfusionRates::from_rows(4, rows)
+    };
+    let relabeled = |seeds: &[(u32, u32)], max_edge_confusion: f64, rate: f64| {
+        let rule = RelabelRule {
+            max_edge_confusion,
+            ..rule(0.75, 2, 0.25, 8)
+        };
+        let mut got = beside.clone();
+        relabel_view(&mut got, w, seeds.iter().copied(), &rule, &rates(rate));
+        got
+    };
+    let undecided = ones_to(&beside, NO_LABEL);
+    assert_eq!(
+        relabeled(&seeds, 0.03, 0.01),
+        beside,
+        "2 rarely taken for 1"
+    );
+    assert_eq!(relabeled(&seeds, 0.03, 0.1), undecided, "2 taken for 1");
+    assert_eq!(relabeled(&seeds, 0.0, 0.01), undecided, "threshold 0");
+    seeds.extend([(twos[0], 3); 2]); // two of six: 3 is taken for 1
+    assert_eq!(
+        relabeled(&seeds, 0.03, 0.01),
+        undecided,
+        "a look-alike's third"
+    );
+    seeds.extend([(twos[1], 2); 3]); // two of nine, under 1 - 0.75
+    assert_eq!(
+        relabeled(&seeds, 0.03, 0.01),
+        beside,
+        "a look-alike's two ninths"
+    );
 }
 
 /// The office under flicker 0.3 at 96x72: its noisy maps in compact ids, the scene on the
@@ -475,6 +602,7 @@ fn relabeled_views_undo_most_flicker() {
         centers: &run.centers,
         class: &run.consensus.assignment.class,
         rule: params.relabel,
+        confusions: &run.consensus.confusions,
         finder,
         undecided,
     };
@@ -576,6 +704,7 @@ fn relabel_is_deterministic_and_follows_its_rule() {
         centers: &run.centers,
         class: cons,
         rule: params.relabel,
+        confusions: &run.consensus.confusions,
         // The lift relabeled on the GPU: the host's relabeling must give its classes.
         finder: None,
         undecided: None,

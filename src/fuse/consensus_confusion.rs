@@ -50,16 +50,56 @@ impl Confusions {
         Confusions { votes, prior }
     }
 
-    /// ln P(split | the segment is class k): each vote an independent draw from row k,
-    /// smoothed toward its prior with the weight of `prior_views` views, so a class seen in
-    /// few clear segments is neither trusted nor ruled out.
-    fn log_likelihood(&self, k: usize, split: &[f64], prior_views: f64) -> f64 {
+    /// P(a view votes l | the segment is class k): row k's votes smoothed toward its prior
+    /// with the weight of `prior_views` views, so a class seen in few clear segments is
+    /// neither trusted nor ruled out.
+    fn rate(&self, k: usize, l: usize, prior_views: f64) -> f64 {
         let row = &self.votes[k];
         let total: f64 = row.iter().sum::<f64>() + prior_views;
+        (row[l] + prior_views * self.prior[k][l]) / total
+    }
+
+    /// ln P(split | the segment is class k): each vote an independent draw from row k.
+    fn log_likelihood(&self, k: usize, split: &[f64], prior_views: f64) -> f64 {
         (0..split.len())
             .filter(|&l| split[l] > 0.0)
-            .map(|l| split[l] * ((row[l] + prior_views * self.prior[k][l]) / total).ln())
+            .map(|l| split[l] * self.rate(k, l, prior_views).ln())
             .sum()
+    }
+}
+
+/// P(a view votes l | its segment is class k) for every pair of classes, as the scene's
+/// clearly decided segments show it (the rates the near ties are decided by). `--relabel`
+/// reads it to tell a label region that may show a whole object relabeled (its Gaussians'
+/// class is one the views take for the region's label) from one whose edge was drawn a few
+/// pixels off ([`RelabelRule::max_edge_confusion`](super::consensus_relabel::RelabelRule)).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ConfusionRates {
+    classes: usize,
+    /// Row-major [k][l].
+    rates: Vec<f64>,
+}
+
+impl ConfusionRates {
+    /// From a row-major [classes][classes] table.
+    pub fn from_rows(classes: usize, rates: Vec<f64>) -> Self {
+        assert_eq!(rates.len(), classes * classes, "a [classes][classes] table");
+        ConfusionRates { classes, rates }
+    }
+
+    /// None known: every class may be taken for every label.
+    pub fn unknown() -> Self {
+        ConfusionRates::from_rows(0, Vec::new())
+    }
+
+    /// P(a view votes `label` | the segment is `class`); 1 where either is outside the
+    /// table (nothing known rules a confusion out).
+    pub fn rate(&self, class: usize, label: usize) -> f64 {
+        if class < self.classes && label < self.classes {
+            self.rates[class * self.classes + label]
+        } else {
+            1.0
+        }
     }
 }
 
@@ -104,8 +144,12 @@ fn tied_classes(split: &[f64], margin: f64) -> Vec<usize> {
 
 /// Decides the near ties of segments of at least `min_segment` Gaussians by the
 /// confusions estimated from the others; a segment keeps its class where the likelihoods
-/// tie.
-pub fn decide_near_ties(segments: &mut [SegmentVotes], classes: usize, p: &ConsensusParams) {
+/// tie. Returns the confusions' rates.
+pub fn decide_near_ties(
+    segments: &mut [SegmentVotes],
+    classes: usize,
+    p: &ConsensusParams,
+) -> ConfusionRates {
     let confusions = Confusions::estimate(segments, classes, p);
     for s in segments.iter_mut().filter(|s| s.gaussians >= p.min_segment) {
         let tied = tied_classes(&s.split, p.tie_margin);
@@ -123,6 +167,11 @@ pub fn decide_near_ties(segments: &mut [SegmentVotes], classes: usize, p: &Conse
             s.class = Some(tied[only]);
         }
     }
+    let pv = p.confusion_prior_views;
+    let rates = (0..classes * classes)
+        .map(|i| confusions.rate(i / classes, i % classes, pv))
+        .collect();
+    ConfusionRates::from_rows(classes, rates)
 }
 
 #[cfg(test)]

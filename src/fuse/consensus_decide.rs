@@ -10,7 +10,7 @@ use std::sync::Arc;
 use serde::Serialize;
 
 use super::assign::Assignment;
-use super::consensus_confusion::decide_near_ties;
+use super::consensus_confusion::{decide_near_ties, ConfusionRates};
 use super::consensus_relabel::RelabelRule;
 use super::consensus_segments::Observations;
 use super::scores::SharedCounts;
@@ -122,6 +122,7 @@ impl Default for ConsensusParams {
                 keep_share: 0.25,
                 near: 8,
                 min_mass: 1.0,
+                max_edge_confusion: 0.03,
             },
         }
     }
@@ -164,6 +165,9 @@ pub struct Consensus {
     /// neighbours' classes); a segment's split is stored once for its members (shared with
     /// the lift's evidence, not copied).
     pub evidence: Arc<SharedCounts>,
+    /// How often the views of each class's clearly decided segments give each class (what
+    /// the near ties were decided by; `--relabel` reads it).
+    pub confusions: ConfusionRates,
 }
 
 /// The class with the most `votes`; ties go to the most `mass`; still tied: None.
@@ -280,7 +284,7 @@ pub fn decide(
     let mut segments: Vec<SegmentVotes> = (split.into_iter().zip(mass).enumerate())
         .map(|(s, (split, mass))| segment_summary(split, &mass, sizes[s], views[s], p))
         .collect();
-    decide_near_ties(&mut segments, classes, p);
+    let confusions = decide_near_ties(&mut segments, classes, p);
     let n = obs.n;
     let mut class = vec![None; n];
     let (mut from_segment, mut from_neighbour_segments) = (0, 0);
@@ -335,6 +339,7 @@ pub fn decide(
         from_neighbour_segments,
         from_neighbours,
         evidence: Arc::new(evidence),
+        confusions,
     }
 }
 

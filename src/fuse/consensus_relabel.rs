@@ -11,9 +11,11 @@
 //! nothing about where their edge is: it is left unlabeled in that view, unless the
 //! centers of its own label, with those of other classes lying near a pixel of their
 //! class, make up the share a class needs (boundary noise, below:
-//! [`RelabelRule::keep_share`]). Nor is a region relabeled to a class the view labels
-//! beside it, an edge the segmenter drew ([`decide_regions`]). A region no Gaussian center
-//! was observed in keeps its label.
+//! [`RelabelRule::keep_share`]), or its Gaussians are of classes the scene's views hardly
+//! ever take for its label, so that the label cannot be their flicker
+//! ([`RelabelRule::max_edge_confusion`]). Nor is a region relabeled to a class the view
+//! labels beside it, an edge the segmenter drew ([`decide_regions`]). A region no Gaussian
+//! center was observed in keeps its label.
 
 use std::cmp::Reverse;
 use std::sync::Mutex;
@@ -24,6 +26,7 @@ use serde::Serialize;
 use super::accumulate::{accumulate, FuseConfig, LabelSource, NO_LABEL};
 use super::assign::{assign_semantic_near, Assignment};
 use super::consensus::{consensus_run, ConsensusInput, ConsensusLift, LiftEvidence};
+use super::consensus_confusion::ConfusionRates;
 use super::consensus_decide::{posterior, ConsensusParams};
 use super::consensus_segments::{four_neighbours, label_regions, region_edges};
 use super::method::Method;
@@ -70,6 +73,17 @@ pub struct RelabelRule {
     /// A Gaussian whose footprint over the relabeled views sums to fewer pixels keeps its
     /// consensus class.
     pub min_mass: f64,
+    /// A region no class takes keeps its own label where the classes whose Gaussians it
+    /// holds are ones the scene's views take for that label at most this often (the
+    /// consensus's [`ConfusionRates`], from its clearly decided segments), except centers
+    /// short of `1 - min_share` of its deciding ones. Such a label cannot be a whole object
+    /// relabeled by flicker (the views never give those objects that class), so the region
+    /// is an edge drawn a few pixels off, and its pixels are right where the label says:
+    /// under boundary noise most undecided regions were of this kind (living room, seed 1:
+    /// chair Gaussians inside a wall region beside the chair), and leaving them undecided
+    /// gave their pixels to the Gaussians' consensus classes instead. Under flicker 0.3 a
+    /// look-alike is taken at 5-25% of the views, other classes at under 2%. 0: never.
+    pub max_edge_confusion: f64,
 }
 
 /// A label source whose views come relabeled region by region ([`RelabelRule`]).
@@ -80,6 +94,8 @@ pub struct RelabeledViews<'a> {
     /// Consensus class per Gaussian.
     pub class: &'a [Option<usize>],
     pub rule: RelabelRule,
+    /// The consensus's class confusions ([`RelabelRule::max_edge_confusion`]).
+    pub confusions: &'a ConfusionRates,
     /// Relabels on the GPU ([`RegionFinder::relabel`]; one view at a time: the label
     /// source is read from several worker threads); None: on the host ([`relabel_view`]).
     pub finder: Option<Mutex<RegionFinder<'a>>>,
@@ -102,11 +118,17 @@ impl LabelSource for RelabeledViews<'_> {
             Some(finder) => {
                 let seeds: Vec<(u32, u32)> = seeds.collect();
                 let mut finder = finder.lock().unwrap_or_else(|e| e.into_inner());
-                finder.relabel(&labels, cam.width, &seeds, &self.rule)?
+                finder.relabel(&labels, cam.width, &seeds, &self.rule, self.confusions)?
             }
             None => {
                 let mut map = labels.clone();
-                relabel_view(&mut map, cam.width as usize, seeds, &self.rule);
+                relabel_view(
+                    &mut map,
+                    cam.width as usize,
+                    seeds,
+                    &self.rule,
+                    self.confusions,
+                );
                 map
             }
         };
@@ -126,14 +148,15 @@ impl LabelSource for RelabeledViews<'_> {
 /// observed Gaussians' centers: a region takes the class holding `rule.min_share` of its
 /// deciding seeds (those at least `rule.depth` pixels inside it, else its deepest) where
 /// the view does not label that class beside it ([`decide_regions`]), is unlabeled where
-/// none does (unless it keeps its label by [`RelabelRule::keep_share`]),
-/// and keeps its label where no seed lies. The host version of
+/// none does (unless it keeps its label by [`RelabelRule::keep_share`] or
+/// [`RelabelRule::max_edge_confusion`]), and keeps its label where no seed lies. The host version of
 /// [`RegionFinder::relabel`](super::regions_gpu::RegionFinder::relabel).
 pub fn relabel_view(
     map: &mut [u32],
     width: usize,
     seeds: impl Iterator<Item = (u32, u32)>,
     rule: &RelabelRule,
+    confusions: &ConfusionRates,
 ) {
     let regions = label_regions(map, width);
     let depth = edge_depth(&regions, width, rule.depth);
@@ -148,7 +171,7 @@ pub fn relabel_view(
         .collect();
     // Per region id (the index of the region's first pixel): its new label, as on the GPU.
     let mut table = vec![RELABEL_KEEP; map.len()];
-    for (region, entry) in decide_regions(seeds, map, rule) {
+    for (region, entry) in decide_regions(seeds, map, rule, confusions) {
         table[region as usize] = entry;
     }
     for (label, &region) in map.iter_mut().zip(&regions) {
@@ -190,8 +213,9 @@ pub struct RegionSeed {
 /// pixel the view labels it (the view labels that class beside the region); where no class
 /// takes the region, its own label (in `map`, the view's labels, at the region's id: its
 /// first pixel) if that holds `rule.keep_share` of them and, with the seeds of other classes
-/// that lie near their class's label, `rule.min_share`; else NO_LABEL. Regions in
-/// increasing id.
+/// that lie near their class's label, `rule.min_share`; or if the seeds of classes the
+/// views take for its label more often than `rule.max_edge_confusion` (by `confusions`) are
+/// short of `1 - rule.min_share` of them; else NO_LABEL. Regions in increasing id.
 ///
 /// Why not a class the view labels beside the region: the segmenter drew an edge between
 /// the region and that class, and relabeling would erase the region from the view. Under
@@ -205,7 +229,12 @@ pub struct RegionSeed {
 /// Flicker relabels whole objects and moves no edge: an object flickered to a look-alike
 /// next to one of its own class (a book beside books) is unlabeled instead of relabeled,
 /// and its Gaussians count for the class the consensus gave them either way.
-pub fn decide_regions(seeds: Vec<RegionSeed>, map: &[u32], rule: &RelabelRule) -> Vec<(u32, u32)> {
+pub fn decide_regions(
+    seeds: Vec<RegionSeed>,
+    map: &[u32],
+    rule: &RelabelRule,
+    confusions: &ConfusionRates,
+) -> Vec<(u32, u32)> {
     debug_assert!(rule.min_share > 0.5, "a tie could hold min_share");
     // (region, depth from deepest, class, near): by region, each region's deciding seeds
     // first.
@@ -231,9 +260,18 @@ pub fn decide_regions(seeds: Vec<RegionSeed>, map: &[u32], rule: &RelabelRule) -
         let near_seeds = deciding.iter().filter(|s| s.2 != own && s.3).count();
         let near_class = deciding.iter().filter(|s| s.2 == class && s.3).count();
         let labeled_beside = class != own && 2 * near_class >= n;
+        // Seeds of classes that flicker could have given this label.
+        let confusable =
+            |c: u32| confusions.rate(c as usize, own as usize) > rule.max_edge_confusion;
+        let look_alike_seeds = deciding
+            .iter()
+            .filter(|s| s.2 != own && confusable(s.2))
+            .count();
         let label = if holds(n, rule.min_share) && !labeled_beside {
             class
-        } else if holds(own_seeds, rule.keep_share) && holds(own_seeds + near_seeds, rule.min_share)
+        } else if (holds(own_seeds, rule.keep_share)
+            && holds(own_seeds + near_seeds, rule.min_share))
+            || holds(deciding.len() - look_alike_seeds, rule.min_share)
         {
             own
         } else {
@@ -317,6 +355,7 @@ pub fn fuse_relabeled(
         centers: &run.centers,
         class: &run.consensus.assignment.class,
         rule: params.relabel,
+        confusions: &run.consensus.confusions,
         finder: Some(Mutex::new(RegionFinder::new(input.gpu, input.means.len())?)),
         undecided: Some(input.classes as u32),
     };

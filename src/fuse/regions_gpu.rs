@@ -13,6 +13,7 @@ use std::cell::RefCell;
 
 use anyhow::Result;
 
+use super::consensus_confusion::ConfusionRates;
 use super::consensus_relabel::{decide_regions, relabel_view, RegionSeed, RelabelRule};
 use super::consensus_segments::{label_regions, region_edges};
 use super::NO_LABEL;
@@ -167,7 +168,8 @@ impl<'a> RegionFinder<'a> {
     }
 
     /// `map` (`width` pixels a row) relabeled from `seeds`, the (pixel, class) of the
-    /// observed Gaussians' centers, by `rule`: what [`relabel_view`] gives. The regions and
+    /// observed Gaussians' centers, by `rule` and the scene's `confusions`: what
+    /// [`relabel_view`] gives. The regions and
     /// the seeds' regions, depths and near flags are found on the GPU, each region's label
     /// decided on the host from its seeds ([`decide_regions`]), the pixels rewritten on the
     /// GPU. A view past the GPU's reach (more seeds than the finder's Gaussians, an
@@ -179,12 +181,13 @@ impl<'a> RegionFinder<'a> {
         width: u32,
         seeds: &[(u32, u32)],
         rule: &RelabelRule,
+        confusions: &ConfusionRates,
     ) -> Result<Vec<u32>> {
         if seeds.is_empty() {
             return Ok(map.to_vec()); // no region holds a seed: every one keeps its label
         }
         if !Self::fits(map) || seeds.len() > self.n || rule.depth.max(rule.near) > MAX_GPU_REACH {
-            return Ok(self.relabel_on_host(map, width, seeds, rule));
+            return Ok(self.relabel_on_host(map, width, seeds, rule, confusions));
         }
         let bufs = match self.relabel_bufs.take() {
             Some(bufs) => bufs,
@@ -199,7 +202,7 @@ impl<'a> RegionFinder<'a> {
                 ]
             }
         };
-        let relabeled = self.relabel_with(&bufs, map, width, seeds, rule);
+        let relabeled = self.relabel_with(&bufs, map, width, seeds, rule, confusions);
         self.relabel_bufs = Some(bufs);
         relabeled
     }
@@ -213,6 +216,7 @@ impl<'a> RegionFinder<'a> {
         width: u32,
         seeds: &[(u32, u32)],
         rule: &RelabelRule,
+        confusions: &ConfusionRates,
     ) -> Result<Vec<u32>> {
         let (pixels, classes): (Vec<u32>, Vec<u32>) = seeds.iter().copied().unzip();
         let mut params = self.view_params(map, width, seed_pixels.address_words(4)?)?;
@@ -247,7 +251,7 @@ impl<'a> RegionFinder<'a> {
         )?;
         self.stats.gpu_ms += found.gpu_ms;
         let Some(words) = found.read else {
-            return Ok(self.relabel_on_host(map, width, seeds, rule));
+            return Ok(self.relabel_on_host(map, width, seeds, rule, confusions));
         };
         let [regions, depths, near] = words.try_into().expect("three downloads");
         let found = (0..seeds.len())
@@ -258,7 +262,7 @@ impl<'a> RegionFinder<'a> {
                 class: seeds[i].1,
                 near: near[i] != 0,
             });
-        let decided: Vec<u32> = decide_regions(found.collect(), map, rule)
+        let decided: Vec<u32> = decide_regions(found.collect(), map, rule, confusions)
             .into_iter()
             .flat_map(|(region, label)| [region, label])
             .collect();
@@ -305,10 +309,12 @@ impl<'a> RegionFinder<'a> {
         width: u32,
         seeds: &[(u32, u32)],
         rule: &RelabelRule,
+        confusions: &ConfusionRates,
     ) -> Vec<u32> {
         self.stats.host_fallbacks += 1;
         let mut relabeled = map.to_vec();
-        relabel_view(&mut relabeled, width as usize, seeds.iter().copied(), rule);
+        let seeds = seeds.iter().copied();
+        relabel_view(&mut relabeled, width as usize, seeds, rule, confusions);
         relabeled
     }
 
