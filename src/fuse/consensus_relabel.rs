@@ -73,16 +73,15 @@ pub struct RelabelRule {
     /// A Gaussian whose footprint over the relabeled views sums to fewer pixels keeps its
     /// consensus class.
     pub min_mass: f64,
-    /// A region no class takes keeps its own label where the classes whose Gaussians it
-    /// holds are ones the scene's views take for that label at most this often (the
-    /// consensus's [`ConfusionRates`], from its clearly decided segments), except centers
-    /// short of `1 - min_share` of its deciding ones. Such a label cannot be a whole object
-    /// relabeled by flicker (the views never give those objects that class), so the region
-    /// is an edge drawn a few pixels off, and its pixels are right where the label says:
-    /// under boundary noise most undecided regions were of this kind (living room, seed 1:
-    /// chair Gaussians inside a wall region beside the chair), and leaving them undecided
-    /// gave their pixels to the Gaussians' consensus classes instead. Under flicker 0.3 a
-    /// look-alike is taken at 5-25% of the views, other classes at under 2%. 0: never.
+    /// A region no class takes keeps its own label where the centers of classes the
+    /// scene's views call by that label more often than this (the consensus's
+    /// [`ConfusionRates`], from its clearly decided segments) are under `1 - min_share` of
+    /// its deciding ones. The label cannot then be those objects' flicker, so the region is
+    /// an edge drawn a few pixels off and its pixels are right where the label says: under
+    /// boundary noise (living room, seed 1) the eroded lamps' regions held Gaussians the
+    /// consensus had given the wall, and left undecided they gave those pixels to the wall.
+    /// Under flicker 0.3 a look-alike is called so in 5-27% of the views, other classes in
+    /// under 2%. 0: never.
     pub max_edge_confusion: f64,
 }
 
