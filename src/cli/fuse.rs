@@ -88,10 +88,10 @@ pub struct FuseArgs {
     /// other classes lying within 8 pixels of their own class's label (a label edge drawn a
     /// few pixels off), 85%. Nor does a region take a class the view labels within 8 pixels
     /// of half or more of that class's Gaussians there: an edge the segmenter drew (then
-    /// decided as a mixed region). A region no class takes keeps its label where 85% of
-    /// its Gaussians are of classes the views call by that label at most 3% of the time
-    /// (in the scene's clearly decided segments): the label cannot be their flicker, so
-    /// its edge was drawn off.
+    /// decided as a mixed region). A region no class takes keeps its label where under 15%
+    /// of its Gaussians are of other classes that the views call by that label more than
+    /// 3% of the time (in the scene's clearly decided segments): the label cannot be the
+    /// others' flicker, so its edge was drawn off.
     #[arg(long)]
     relabel: bool,
     /// Relative depth tolerance of the visibility test (> 0): vote --occlusion's, against the
