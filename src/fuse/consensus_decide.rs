@@ -72,6 +72,18 @@ pub struct ConsensusParams {
     /// A segment whose top classes are within this many views' votes is a near tie,
     /// decided by the scene's confusions (src/fuse/consensus_confusion.rs)...
     pub tie_margin: f64,
+    /// ...and a segment of at least `large_tie_gaussians` Gaussians (a whole object or a
+    /// large part of one) also where its top classes are within `large_tie_z` standard
+    /// deviations of a fair coin's difference (`large_tie_z` sqrt(a + b) views): its views'
+    /// votes are the object's label view by view, so 9 : 7 over sixteen views is as near a
+    /// coin flip as 5 : 4 over nine (office seed 3 at flicker 0.3: a window labelled wall
+    /// in 9 of its 16 views). A small segment's votes come partly from where it lies (a
+    /// strip of wall beside a window takes the window's label in the views whose label edge
+    /// is off), which the confusions' independent draws do not model: widening every
+    /// segment's ties turned such strips into window and lamps into plant...
+    pub large_tie_gaussians: usize,
+    /// ...(the z).
+    pub large_tie_z: f64,
     /// ...estimated from the segments of at least this many views...
     pub confusion_min_views: usize,
     /// ...whose class holds at least this share of their votes...
@@ -109,6 +121,8 @@ impl Default for ConsensusParams {
             min_own_views: 4,
             contradiction_p: 0.01,
             tie_margin: 1.0,
+            large_tie_gaussians: 1000,
+            large_tie_z: 1.0,
             confusion_min_views: 5,
             confusion_min_share: 0.6,
             confusion_prior_views: 10.0,
@@ -138,8 +152,9 @@ pub struct SegmentVotes {
     /// Gaussians it gave the class (sums to `views`).
     pub split: Vec<f64>,
     pub class: Option<usize>,
-    /// Its top classes were within `tie_margin` views' votes: `class` is the one the
-    /// scene's confusions make likeliest (unchanged where they tie too).
+    /// Its top classes were within `tie_margin` views' votes (or, being large, within
+    /// `large_tie_z` standard deviations): `class` is the one the scene's confusions make
+    /// likeliest (unchanged where they tie too).
     pub near_tie: bool,
     pub flagged: bool,
 }
