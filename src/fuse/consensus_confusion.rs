@@ -135,7 +135,10 @@ fn mirrored_prior(votes: &[Vec<f64>]) -> Vec<Vec<f64>> {
             false => scene_mistaken,
         })
         .collect();
-    let floor = UNSEEN_CONFUSION / (classes - 1).max(1) as f64;
+    if classes < 2 {
+        return vec![vec![1.0; classes]; classes]; // nothing to be taken for
+    }
+    let floor = UNSEEN_CONFUSION / (classes - 1) as f64;
     (0..classes)
         .map(|k| {
             let taken_for: Vec<f64> = (0..classes)

@@ -148,8 +148,8 @@ impl LabelSource for RelabeledViews<'_> {
 /// deciding seeds (those at least `rule.depth` pixels inside it, else its deepest) where
 /// the view does not label that class beside it ([`decide_regions`]), is unlabeled where
 /// none does (unless it keeps its label by [`RelabelRule::keep_share`] or
-/// [`RelabelRule::max_edge_confusion`]), and keeps its label where no seed lies. The host version of
-/// [`RegionFinder::relabel`](super::regions_gpu::RegionFinder::relabel).
+/// [`RelabelRule::max_edge_confusion`]), and keeps its label where no seed lies. The host
+/// version of [`RegionFinder::relabel`](super::regions_gpu::RegionFinder::relabel).
 pub fn relabel_view(
     map: &mut [u32],
     width: usize,
