@@ -1070,6 +1070,7 @@ fn small_segments_take_their_neighbours_segments_class() {
         let obs = Observations::from_views(9, &per_view);
         let p = ConsensusParams {
             min_segment_neighbours,
+            smooth_rounds: 0, // this rule alone (the next test: what follows it)
             ..Default::default()
         };
         let means: Vec<[f32; 3]> = (0..9).map(|g| [g as f32, 0.0, 0.0]).collect();
@@ -1100,6 +1101,76 @@ fn small_segments_take_their_neighbours_segments_class() {
     let c = decide_with(5, 3);
     assert_eq!(c.assignment.class[8], Some(0));
     assert_eq!(c.evidence[8], [5.0, 0.0]);
+}
+
+/// After the rules above, the observed Gaussians of small segments are decided again from
+/// their own views plus one vote per neighbour's class, each round from the classes at its
+/// start. A line: segments of eight at x = 0..7 and 11..18 (class 0 in all three views),
+/// and three Gaussians alone between them: 8 seen by one view as class 1 (too few of its
+/// neighbours are in decided segments, so its own view decided it), 9 and 10 by three views
+/// as class 0.
+#[test]
+fn small_segments_are_smoothed_by_their_neighbours_classes() {
+    let decide_with = |views_of_8: u32, smooth_rounds: usize| {
+        let per_view: Vec<Vec<(u32, u32, u32, bool)>> = (0..views_of_8.max(3))
+            .map(|v| {
+                let mut list: Vec<(u32, u32, u32, bool)> = Vec::new();
+                for g in 0..19u32 {
+                    let seen = match g {
+                        8 => v < views_of_8,
+                        _ => v < 3,
+                    };
+                    if seen {
+                        list.push((g, u32::from(g == 8), g, false));
+                    }
+                }
+                list
+            })
+            .collect();
+        let obs = Observations::from_views(19, &per_view);
+        let p = ConsensusParams {
+            neighbours: 4,
+            smooth_rounds,
+            ..Default::default()
+        };
+        let means: Vec<[f32; 3]> = (0..19).map(|g| [g as f32, 0.0, 0.0]).collect();
+        let knn = nearest_neighbours(&means, p.neighbours);
+        let mut near_8 = knn[8 * 4..9 * 4].to_vec();
+        near_8.sort();
+        assert_eq!(near_8, [6, 7, 9, 10]);
+        let segment: Vec<u32> = (0..19u32)
+            .map(|g| match g {
+                0..=7 => 0,
+                8..=10 => g - 7,
+                _ => 4,
+            })
+            .collect();
+        decide(&obs, &knn, segment, 2, &p)
+    };
+    let c = decide_with(1, 0);
+    assert_eq!(c.assignment.class[8], Some(1), "its own view, not smoothed");
+    assert_eq!(c.evidence[8], [0.0, 1.0]);
+    assert_eq!(c.smoothed, 0);
+    // One round: 8 counts its four neighbours' class 0; 9 still counts 8 as class 1, as it
+    // stood at the round's start.
+    let c = decide_with(1, 1);
+    assert_eq!(c.assignment.class[8], Some(0));
+    assert_eq!(c.evidence[8], [4.0, 1.0]);
+    assert_eq!(c.evidence[9], [6.0, 1.0], "own 3 + neighbours 7, 8, 10, 11");
+    assert_eq!(c.smoothed, 1);
+    let c = decide_with(1, 3);
+    assert_eq!(
+        c.evidence[9],
+        [7.0, 0.0],
+        "8 is class 0 from the second round"
+    );
+    assert_eq!(c.assignment.class[9], Some(0));
+    assert_eq!(c.smoothed, 1);
+    // Seen as class 1 by four views: 4 : 4, a tie, which keeps its class and evidence.
+    let c = decide_with(4, 3);
+    assert_eq!(c.assignment.class[8], Some(1));
+    assert_eq!(c.evidence[8], [0.0, 4.0]);
+    assert_eq!(c.smoothed, 0);
 }
 
 /// Gaussians no view observed take their decided neighbours' majority, outward in rounds; a

@@ -63,6 +63,13 @@ pub struct ConsensusParams {
     /// label edges: thin parts such as a table's legs, rims); a Gaussian's own few views
     /// there flicker, its neighbours' segments pool many views.
     pub min_segment_neighbours: usize,
+    /// Then, in this many rounds, every observed Gaussian of a segment under `min_segment`
+    /// is decided again from its own views plus one vote per neighbour for the neighbour's
+    /// class (each round from the classes at its start). Its few views flicker together,
+    /// where a fragment's neighbours are decided on views of their own: a face of a box seen
+    /// by one view, which called the box a book, takes the box from the Gaussians around it.
+    /// 0: off.
+    pub smooth_rounds: usize,
     /// A Gaussian seen in at least this many views keeps its own class where its views
     /// contradict its segment's class...
     pub min_own_views: u32,
@@ -118,6 +125,7 @@ impl Default for ConsensusParams {
             apart_weight: 4.0,
             min_segment: 4,
             min_segment_neighbours: 3,
+            smooth_rounds: 3,
             min_own_views: 4,
             contradiction_p: 0.01,
             tie_margin: 1.0,
@@ -176,6 +184,9 @@ pub struct Consensus {
     pub from_neighbour_segments: usize,
     /// Gaussians no view observed, decided by their neighbours' classes.
     pub from_neighbours: usize,
+    /// Observed Gaussians of small segments whose class their neighbours' classes changed
+    /// ([`ConsensusParams::smooth_rounds`]).
+    pub smoothed: usize,
     /// Per Gaussian, the counts its class was decided from (segment split, own views, or
     /// neighbours' classes); a segment's split is stored once for its members (shared with
     /// the lift's evidence, not copied).
@@ -339,6 +350,8 @@ pub fn decide(
         }
     }
     let from_neighbours = fill_unobserved(&mut class, &mut evidence, obs, knn, p.neighbours);
+    let smoothed =
+        smooth_small_segments(&mut class, &mut evidence, obs, knn, &segment, &segments, p);
     let (confidence, entropy) = (0..n)
         .map(|g| {
             let (c, h) = posterior(&evidence[g], class[g], p.prior);
@@ -353,6 +366,7 @@ pub fn decide(
         from_segment,
         from_neighbour_segments,
         from_neighbours,
+        smoothed,
         evidence: Arc::new(evidence),
         confusions,
     }
@@ -468,6 +482,56 @@ fn fill_unobserved(
         frontier.retain(|&f| pending[f]);
     }
     decided
+}
+
+/// [`ConsensusParams::smooth_rounds`]: each round decides every observed Gaussian of a
+/// segment under `min_segment` from its own view votes plus a vote per neighbour's class, as
+/// the classes stood at the round's start; a tie keeps its class. The votes it takes its
+/// class from become its evidence, in its own row (such a Gaussian's evidence was set for
+/// it alone: a small segment's split is never shared). Returns how many ended with another
+/// class than they started with.
+fn smooth_small_segments(
+    class: &mut [Option<usize>],
+    evidence: &mut SharedCounts,
+    obs: &Observations,
+    knn: &[u32],
+    segment: &[u32],
+    segments: &[SegmentVotes],
+    p: &ConsensusParams,
+) -> usize {
+    let k = p.neighbours;
+    let small: Vec<usize> = (0..obs.n)
+        .filter(|&g| segments[segment[g] as usize].gaussians < p.min_segment)
+        .filter(|&g| !obs.row(g).is_empty())
+        .collect();
+    let first: Vec<Option<usize>> = small.iter().map(|&g| class[g]).collect();
+    let mut votes = vec![0.0; evidence.classes()];
+    for _ in 0..p.smooth_rounds {
+        let mut decided = Vec::with_capacity(small.len());
+        for &g in &small {
+            votes.fill(0.0);
+            add_own_votes(obs, g, &mut votes);
+            let near = knn[g * k..(g + 1) * k]
+                .iter()
+                .filter(|&&h| h != NO_NEIGHBOUR);
+            for c in near.filter_map(|&h| class[h as usize]) {
+                votes[c] += 1.0;
+            }
+            let c = decisive_argmax(&votes, &votes);
+            if c.is_some() {
+                evidence.replace_own(g, &votes); // the rounds read classes, not evidence
+            }
+            decided.push(c);
+        }
+        for (&g, c) in small.iter().zip(decided) {
+            class[g] = c.or(class[g]);
+        }
+    }
+    small
+        .iter()
+        .zip(first)
+        .filter(|&(&g, c)| class[g] != c)
+        .count()
 }
 
 /// Reverse adjacency of a [n][k] neighbour table, in compressed rows.

@@ -47,6 +47,9 @@ pub struct SegmentReport {
     pub from_segment: usize,
     pub from_neighbour_segments: usize,
     pub from_neighbours: usize,
+    /// Observed Gaussians of small segments whose class their neighbours' classes then
+    /// changed.
+    pub smoothed: usize,
     /// Flagged segments, largest first: check these objects' labels.
     pub flagged: Vec<SegmentSplit>,
     pub per_class: Vec<ClassSplit>,
@@ -108,6 +111,7 @@ pub fn segment_report(
         from_segment: consensus.from_segment,
         from_neighbour_segments: consensus.from_neighbour_segments,
         from_neighbours: consensus.from_neighbours,
+        smoothed: consensus.smoothed,
         flagged,
         per_class: per_class
             .iter()

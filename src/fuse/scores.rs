@@ -106,6 +106,18 @@ impl SharedCounts {
         };
     }
 
+    /// Gaussian `g`'s counts rewritten in place where it holds a row of its own (from
+    /// [`SharedCounts::set`]; the caller knows no other Gaussian shares it), else stored as
+    /// by `set`: rounds that decide a Gaussian again do not store a row each time.
+    pub fn replace_own(&mut self, g: usize, counts: &[f64]) {
+        match self.row_of[g] as usize {
+            0 => self.set(g, counts),
+            row => {
+                self.counts[row * self.classes..(row + 1) * self.classes].copy_from_slice(counts)
+            }
+        }
+    }
+
     pub fn classes(&self) -> usize {
         self.classes
     }
@@ -313,6 +325,18 @@ mod tests {
             for (c, &x) in v.iter().enumerate() {
                 assert_eq!(scores.get(c, g), x);
             }
+        }
+        // Rewritten in place where a Gaussian holds a row of its own; the row of zeros is
+        // never overwritten (Gaussian 3 gets a row instead).
+        let mut rewritten = counts.clone();
+        rewritten.replace_own(1, &[1.0, 1.0, 1.0]);
+        assert_eq!(rewritten.rows(), 4);
+        rewritten.replace_own(3, &[0.0, 0.0, 2.0]);
+        assert_eq!(rewritten.rows(), 5);
+        assert_eq!(&rewritten[1], &[1.0, 1.0, 1.0]);
+        assert_eq!(&rewritten[3], &[0.0, 0.0, 2.0]);
+        for g in [0, 2, 4] {
+            assert_eq!(&rewritten[g], vectors[g].as_slice());
         }
         let mut rows = Arc::new(counts);
         for c in 0..3 {
