@@ -291,6 +291,22 @@ fn add_own_votes(obs: &Observations, g: usize, votes: &mut [f64]) {
     }
 }
 
+/// A vote per neighbour of Gaussian `g` for that neighbour's class (undecided ones: none).
+fn add_neighbour_classes(
+    class: &[Option<usize>],
+    knn: &[u32],
+    k: usize,
+    g: usize,
+    votes: &mut [f64],
+) {
+    let near = knn[g * k..(g + 1) * k]
+        .iter()
+        .filter(|&&h| h != NO_NEIGHBOUR);
+    for c in near.filter_map(|&h| class[h as usize]) {
+        votes[c] += 1.0;
+    }
+}
+
 /// Decides segments and Gaussians from the observations, the neighbours and the segments.
 pub fn decide(
     obs: &Observations,
@@ -461,12 +477,7 @@ fn fill_unobserved(
             .iter()
             .filter_map(|&g| {
                 let mut counts = vec![0.0; evidence.classes()];
-                let near = knn[g * k..(g + 1) * k]
-                    .iter()
-                    .filter(|&&h| h != NO_NEIGHBOUR);
-                for c in near.filter_map(|&h| class[h as usize]) {
-                    counts[c] += 1.0;
-                }
+                add_neighbour_classes(class, knn, k, g, &mut counts);
                 decisive_argmax(&counts, &counts).map(|c| (g, c, counts))
             })
             .collect();
@@ -511,12 +522,7 @@ fn smooth_small_segments(
         for &g in &small {
             votes.fill(0.0);
             add_own_votes(obs, g, &mut votes);
-            let near = knn[g * k..(g + 1) * k]
-                .iter()
-                .filter(|&&h| h != NO_NEIGHBOUR);
-            for c in near.filter_map(|&h| class[h as usize]) {
-                votes[c] += 1.0;
-            }
+            add_neighbour_classes(class, knn, k, g, &mut votes);
             let c = decisive_argmax(&votes, &votes);
             if c.is_some() {
                 evidence.replace_own(g, &votes); // the rounds read classes, not evidence
