@@ -10,7 +10,7 @@ use semsplat::contract::NO_NEIGHBOUR;
 use semsplat::dataset::CompactClasses;
 use semsplat::fuse::consensus::observe;
 use semsplat::fuse::consensus_cluster::{cluster_segments, cluster_segments_sweeping_from};
-use semsplat::fuse::consensus_decide::{binomial_at_most, decide};
+use semsplat::fuse::consensus_decide::{binomial_at_most, decide, Consensus};
 use semsplat::fuse::consensus_segments::{co_occurrence, label_regions, Observations};
 use semsplat::fuse::{
     assign_semantic, assign_semantic_near, fuse_consensus, nearest_neighbours, ClassScores,
@@ -1050,6 +1050,21 @@ fn own_views_overrule_the_segment_only_when_improbable_for_a_member() {
     );
 }
 
+/// [`decide`] (two classes) on Gaussians at x = 0, 1, 2, ... along a line, observed as
+/// `per_view` lists (Gaussian, label, region, on edge) say, into `segment`; and the
+/// neighbour lists it used.
+fn decide_on_a_line(
+    per_view: &[Vec<(u32, u32, u32, bool)>],
+    segment: Vec<u32>,
+    p: &ConsensusParams,
+) -> (Consensus, Vec<u32>) {
+    let n = segment.len();
+    let obs = Observations::from_views(n, per_view);
+    let means: Vec<[f32; 3]> = (0..n).map(|g| [g as f32, 0.0, 0.0]).collect();
+    let knn = nearest_neighbours(&means, p.neighbours);
+    (decide(&obs, &knn, segment, 2, p), knn)
+}
+
 /// A Gaussian in a segment under `min_segment` (here alone) takes the class most of its
 /// neighbours in decided segments hold, where at least `min_segment_neighbours` are and one
 /// class holds more than half of them; else its own views decide.
@@ -1067,18 +1082,15 @@ fn small_segments_take_their_neighbours_segments_class() {
                 list
             })
             .collect();
-        let obs = Observations::from_views(9, &per_view);
         let p = ConsensusParams {
             min_segment_neighbours,
             smooth_rounds: 0, // this rule alone (the next test: what follows it)
             ..Default::default()
         };
-        let means: Vec<[f32; 3]> = (0..9).map(|g| [g as f32, 0.0, 0.0]).collect();
-        let knn = nearest_neighbours(&means, p.neighbours);
         let segment: Vec<u32> = (0..9u32)
             .map(|g| if g == 8 { 2 } else { u32::from(g >= n_a) })
             .collect();
-        decide(&obs, &knn, segment, 2, &p)
+        decide_on_a_line(&per_view, segment, &p).0
     };
     // Eight segments of one: every neighbour of 8 in segment 0 (8 Gaussians, class 0).
     let c = decide_with(8, 3);
@@ -1127,17 +1139,11 @@ fn small_segments_are_smoothed_by_their_neighbours_classes() {
                 list
             })
             .collect();
-        let obs = Observations::from_views(19, &per_view);
         let p = ConsensusParams {
             neighbours: 4,
             smooth_rounds,
             ..Default::default()
         };
-        let means: Vec<[f32; 3]> = (0..19).map(|g| [g as f32, 0.0, 0.0]).collect();
-        let knn = nearest_neighbours(&means, p.neighbours);
-        let mut near_8 = knn[8 * 4..9 * 4].to_vec();
-        near_8.sort();
-        assert_eq!(near_8, [6, 7, 9, 10]);
         let segment: Vec<u32> = (0..19u32)
             .map(|g| match g {
                 0..=7 => 0,
@@ -1145,7 +1151,11 @@ fn small_segments_are_smoothed_by_their_neighbours_classes() {
                 _ => 4,
             })
             .collect();
-        decide(&obs, &knn, segment, 2, &p)
+        let (c, knn) = decide_on_a_line(&per_view, segment, &p);
+        let mut near_8 = knn[8 * 4..9 * 4].to_vec();
+        near_8.sort();
+        assert_eq!(near_8, [6, 7, 9, 10]);
+        c
     };
     let c = decide_with(1, 0);
     assert_eq!(c.assignment.class[8], Some(1), "its own view, not smoothed");
