@@ -173,9 +173,9 @@ struct SweepReport {
     levels: Vec<LevelSummary>,
     /// None when the levels do not include 0.
     clean_reference: Option<CleanReference>,
-    /// method -> first level where its mean mIoU fell below half of its mean at the first
-    /// level.
-    breaks_at: Vec<(String, Option<f64>)>,
+    /// method -> the lowest level where its mean mIoU fell below half of its clean mean
+    /// ([`breaks_at`]); None when the levels do not include 0.
+    breaks_at: Option<Vec<(String, Option<f64>)>>,
     runs: Vec<RunResult>,
 }
 
@@ -257,7 +257,11 @@ fn print_summary(report: &SweepReport) {
             }
         }
     }
-    for (m, b) in &report.breaks_at {
+    let Some(breaks) = &report.breaks_at else {
+        println!("no clean level among the levels: add 0 to --levels to see where each method falls below half of its clean mIoU");
+        return;
+    };
+    for (m, b) in breaks {
         match b {
             Some(l) => println!("{m}: below half of its clean mIoU at {key}={l}"),
             None => println!("{m}: never below half of its clean mIoU in this range"),
@@ -361,21 +365,25 @@ fn clean_reference(summary: &[LevelSummary]) -> Option<CleanReference> {
         })
 }
 
-/// Per method (and the oracle): the first level where its mean mIoU fell below half of its
-/// mean at the first level.
-fn breaks_at(summary: &[LevelSummary]) -> Vec<(String, Option<f64>)> {
-    (0..summary[0].methods.len())
-        .map(|k| {
-            let clean = summary[0].methods[k].miou.mean;
-            (
-                summary[0].methods[k].method.clone(),
-                summary
-                    .iter()
-                    .find(|l| l.methods[k].miou.mean < 0.5 * clean)
-                    .map(|l| l.level),
-            )
-        })
-        .collect()
+/// Per method (and the oracle): the lowest noise level at which its mean mIoU fell below
+/// half of its mean on clean labels (level 0), None where it never did; None for all when
+/// the levels do not include 0 (a first noisy level is no clean value to halve).
+fn breaks_at(summary: &[LevelSummary]) -> Option<Vec<(String, Option<f64>)>> {
+    let clean = summary.iter().find(|l| l.level == 0.0)?;
+    let mut noisy: Vec<&LevelSummary> = summary.iter().filter(|l| l.level > 0.0).collect();
+    noisy.sort_by(|a, b| a.level.total_cmp(&b.level));
+    let first_below = |k: usize, half: f64| {
+        noisy
+            .iter()
+            .find(|l| l.methods[k].miou.mean < half)
+            .map(|l| l.level)
+    };
+    let methods = clean.methods.iter().enumerate();
+    Some(
+        methods
+            .map(|(k, m)| (m.method.clone(), first_below(k, 0.5 * m.miou.mean)))
+            .collect(),
+    )
 }
 
 /// robustness_<noise>.png: every method's mean mIoU against the noise level, with its
@@ -452,4 +460,47 @@ fn write_chart(
 ) -> Result<()> {
     eprintln!("built without the charts feature: no robustness chart");
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn level(level: f64, mious: &[f64]) -> LevelSummary {
+        let spread = |v: f64| Spread {
+            mean: v,
+            min: v,
+            max: v,
+        };
+        let methods = mious.iter().enumerate().map(|(k, &v)| MethodSpread {
+            method: format!("m{k}"),
+            miou: spread(v),
+            gaussian_accuracy: spread(v),
+        });
+        LevelSummary {
+            level,
+            methods: methods.collect(),
+        }
+    }
+
+    /// Against the clean level wherever it is listed, the noisy levels searched from the
+    /// lowest; without a clean level there is nothing to halve.
+    #[test]
+    fn breaks_at_halves_the_clean_miou_only() {
+        let noisy_only = [level(0.4, &[0.8, 0.6]), level(0.5, &[0.3, 0.5])];
+        assert!(
+            breaks_at(&noisy_only).is_none(),
+            "0.3 is not half of a clean value"
+        );
+        let listed = [
+            level(0.5, &[0.2, 0.5]),
+            level(0.0, &[0.9, 0.9]),
+            level(0.3, &[0.4, 0.8]),
+        ];
+        let breaks = breaks_at(&listed).unwrap();
+        assert_eq!(
+            breaks,
+            [("m0".to_string(), Some(0.3)), ("m1".to_string(), None)]
+        );
+    }
 }
