@@ -71,6 +71,7 @@ impl Command {
 
 fn main() -> ExitCode {
     semsplat::util::memory::use_one_malloc_arena();
+    interrupt::end_quietly_on_closed_stdout();
     let cli = Cli::parse();
     if let Err(e) = interrupt::install_handler(cli.command.polls_for_interrupt()) {
         eprintln!("warning: {e:#}; Ctrl-C may leave temp files behind");

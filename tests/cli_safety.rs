@@ -61,6 +61,39 @@ fn temp_files(dir: &Path) -> Vec<String> {
 }
 
 // ---------------------------------------------------------------------------------------
+// A closed standard output
+
+/// `semsplat eval ... | head` with the reader gone before the first line: the process ends
+/// as a shell tool does (SIGPIPE), without a panic and its backtrace on stderr.
+#[test]
+fn a_closed_stdout_ends_the_process_quietly() {
+    use std::os::unix::process::ExitStatusExt;
+    let tmp = tempfile::tempdir().unwrap();
+    let room = tmp.path();
+    synth(room);
+    let path = |name: &str| room.join(name).to_str().unwrap().to_owned();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_semsplat"))
+        .args(["eval", "--scene", &path("scene.ply"), "--cameras"])
+        .args([&path("cameras.json"), "--labels", &path("labels")])
+        .args(["--truth", &path("scene.ply")])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take()); // the reader closes before eval prints anything
+    let out = child.wait_with_output().unwrap();
+    let err = stderr(&out);
+    assert!(!err.contains("panicked"), "{err}");
+    const SIGPIPE: i32 = 13;
+    assert_eq!(
+        out.status.signal(),
+        Some(SIGPIPE),
+        "{:?}: {err}",
+        out.status
+    );
+}
+
+// ---------------------------------------------------------------------------------------
 // Numeric options
 
 #[test]

@@ -40,6 +40,20 @@ pub fn install_handler(cooperative: bool) -> anyhow::Result<()> {
     ctrlc::set_handler(on_signal).map_err(|e| anyhow::anyhow!("installing the Ctrl-C handler: {e}"))
 }
 
+/// Lets a closed standard output (`semsplat eval ... | head`) end the process quietly, as it
+/// ends a shell tool, instead of panicking at the next print: SIGPIPE back to its default
+/// action (Rust starts programs with it ignored, so a write to the closed pipe fails and
+/// `println!` panics). Outputs are written to temp files and renamed ([`super::write_atomic`]),
+/// so no partial output can appear; the process writes to no other pipe or socket.
+pub fn end_quietly_on_closed_stdout() {
+    #[cfg(unix)]
+    // SAFETY: called at the start of main, before any thread starts; SIG_DFL is a valid
+    // disposition for SIGPIPE.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
 /// Whether a signal arrived.
 pub fn is_interrupted() -> bool {
     INTERRUPTED.load(Ordering::SeqCst)
