@@ -1,5 +1,5 @@
 //! Ctrl-C (SIGINT), SIGTERM and SIGHUP: the long loops stop cleanly, and no partial output
-//! or temp file is left behind.
+//! or temp file is left behind. A closed standard output (SIGPIPE) ends the process quietly.
 //!
 //! The handler sets a flag that the commands' loops poll ([`check`]); a cooperative command
 //! then returns [`Interrupted`] and exits with [`EXIT_CODE`]. [`write_atomic`] refuses to
