@@ -44,7 +44,8 @@ pub fn install_handler(cooperative: bool) -> anyhow::Result<()> {
 /// ends a shell tool, instead of panicking at the next print: SIGPIPE back to its default
 /// action (Rust starts programs with it ignored, so a write to the closed pipe fails and
 /// `println!` panics). Outputs are written to temp files and renamed ([`super::write_atomic`]),
-/// so no partial output can appear; the process writes to no other pipe or socket.
+/// so no partial output can appear (a temp file the signal cuts short is a dead run's, which
+/// the next write to that folder removes); the process writes to no other pipe or socket.
 pub fn end_quietly_on_closed_stdout() {
     #[cfg(unix)]
     // SAFETY: called at the start of main, before any thread starts; SIG_DFL is a valid
