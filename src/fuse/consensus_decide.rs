@@ -517,8 +517,8 @@ fn smooth_small_segments(
         .collect();
     let first: Vec<Option<usize>> = small.iter().map(|&g| class[g]).collect();
     let mut votes = vec![0.0; evidence.classes()];
+    let mut decided = Vec::with_capacity(small.len());
     for _ in 0..p.smooth_rounds {
-        let mut decided = Vec::with_capacity(small.len());
         for &g in &small {
             votes.fill(0.0);
             add_own_votes(obs, g, &mut votes);
@@ -529,7 +529,7 @@ fn smooth_small_segments(
             }
             decided.push(c);
         }
-        for (&g, c) in small.iter().zip(decided) {
+        for (&g, c) in small.iter().zip(decided.drain(..)) {
             class[g] = c.or(class[g]);
         }
     }
