@@ -3,6 +3,8 @@
 
 use std::process::Command;
 
+mod common;
+
 use semsplat::gpu::context::choose_device;
 use semsplat::gpu::{list_devices, GpuError};
 
@@ -155,18 +157,9 @@ fn info_json_lists_the_selected_device() {
 
 #[test]
 fn bench_fuse_json_times_every_method_against_the_forward_render() {
-    let out = semsplat()
-        .args([
-            "bench", "fuse", "--n", "3000", "--views", "3", "--width", "96", "--height", "64",
-            "--json",
-        ])
-        .env("SEMSPLAT_VALIDATION", "1")
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{stderr}");
-    assert!(!stderr.contains("[vulkan"), "validation layer: {stderr}");
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let v = bench_fuse_json(semsplat().args([
+        "bench", "fuse", "--n", "3000", "--views", "3", "--width", "96", "--height", "64",
+    ]));
     assert_eq!(v["views"], 3);
     assert_eq!(v["n"], 3000);
     assert_eq!(v["goal_ratio"], 1.3);
@@ -211,10 +204,82 @@ fn bench_fuse_json_times_every_method_against_the_forward_render() {
                 parts.iter().sum::<f64>() <= lanes * positive(m, "view_s"),
                 "{m}"
             );
-            positive(m, "segments_s");
+            // The clustering's parts lie within segments_s, and its counts add up.
+            let c = &m["clustering"];
+            let parts = ["neighbours_s", "pairs_s", "pieces_s", "joins_s"].map(|k| positive(c, k));
+            assert!(
+                parts.iter().sum::<f64>() <= positive(m, "segments_s"),
+                "{m}"
+            );
+            let count = |k: &str| {
+                c[k].as_u64()
+                    .unwrap_or_else(|| panic!("{k} missing in {c}"))
+            };
+            assert_eq!(count("pieces") - count("joins"), count("segments"), "{m}");
+            assert!(count("segments") > 0 && count("pieces") <= 3000, "{m}");
             positive(m, "decide_s");
         }
     }
+}
+
+/// `bench fuse ... --json` run with the validation layer on: its JSON, once the run
+/// succeeded with the layer silent.
+fn bench_fuse_json(bench: &mut Command) -> serde_json::Value {
+    let out = bench
+        .arg("--json")
+        .env("SEMSPLAT_VALIDATION", "1")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(!stderr.contains("[vulkan"), "validation layer: {stderr}");
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// `--labels`: a scene folder's own label maps instead of random blocks; the views take
+/// the maps' size and the classes are those the maps hold.
+#[test]
+fn bench_fuse_reads_a_scene_folders_label_maps() {
+    let dir = std::env::temp_dir().join(format!("semsplat-bench-labels-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    common::cli::synth_tiny(&dir, 3, (32, 24));
+    let labels = dir.join("labels");
+    let mut present = std::collections::BTreeSet::new();
+    for entry in std::fs::read_dir(&labels).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "png") {
+            let map = semsplat::scene::labels::read_label_png(&path).unwrap();
+            present.extend(map.labels.into_iter().filter(|&l| l != 255 && l != 65535));
+        }
+    }
+    let mut bench = semsplat();
+    bench.args(["bench", "fuse", "--scene"]).arg(&dir);
+    bench.arg("--labels").arg(&labels);
+    bench.args([
+        "--views",
+        "4",
+        "--width",
+        "640",
+        "--height",
+        "480",
+        "--classes",
+        "16",
+    ]);
+    let v = bench_fuse_json(bench.args(["--methods", "vote,segment-consensus"]));
+    // The maps' size and classes, not the flags'.
+    assert_eq!(
+        (v["width"].as_u64(), v["height"].as_u64()),
+        (Some(32), Some(24)),
+        "{v}"
+    );
+    assert_eq!(v["classes"].as_u64(), Some(present.len() as u64), "{v}");
+    assert_eq!(v["views"], 4);
+    // Segment consensus's clustering saw the scene's regions: more than one segment, and
+    // fewer than the Gaussians.
+    let c = &v["methods"][1]["clustering"];
+    let segments = c["segments"].as_u64().unwrap();
+    assert!(segments > 1 && segments < v["n"].as_u64().unwrap(), "{c}");
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
@@ -225,6 +290,7 @@ fn bench_fuse_rejects_bad_input() {
         (vec!["--classes", "0"], "--classes"),
         (vec!["--classes", "65536"], "--classes"),
         (vec!["--methods", "vote,joint"], "unknown method 'joint'"),
+        (vec!["--labels", "/nonexistent"], "--scene"),
     ] {
         let out = semsplat()
             .args(["bench", "fuse"])

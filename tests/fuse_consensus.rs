@@ -9,7 +9,9 @@ use common::{check_validation, gpu};
 use semsplat::contract::NO_NEIGHBOUR;
 use semsplat::dataset::CompactClasses;
 use semsplat::fuse::consensus::observe;
-use semsplat::fuse::consensus_cluster::{cluster_segments, cluster_segments_sweeping_from};
+use semsplat::fuse::consensus_cluster::{
+    cluster_segments, cluster_segments_sweeping_from, cluster_segments_timed,
+};
 use semsplat::fuse::consensus_decide::{binomial_at_most, decide, Consensus};
 use semsplat::fuse::consensus_segments::{co_occurrence, label_regions, Observations};
 use semsplat::fuse::{
@@ -345,7 +347,18 @@ fn clustering_matches_a_plain_transcription_under_heavy_noise() {
         };
         let knn = nearest_neighbours(&means, p.neighbours);
         let (label, refused, outright) = cluster_by_hand(&obs, &knn, &p);
-        assert_same_partition(&cluster_segments(&obs, &knn, &p), &label);
+        let (segment, done) = cluster_segments_timed(&obs, &knn, &p);
+        assert_same_partition(&segment, &label);
+        // What the clustering says it did, against the transcription's segments.
+        // Without outright joins every Gaussian starts alone.
+        assert_eq!(done.pieces == obs.n, outright == 0, "seed {seed}: {done:?}");
+        assert_eq!(done.segments, label.iter().collect::<BTreeSet<_>>().len());
+        assert_eq!(
+            done.joins,
+            done.pieces - done.segments,
+            "seed {seed}: {done:?}"
+        );
+        assert!(done.pairs >= done.candidates, "seed {seed}: {done:?}");
         assert_eq!(
             outright > 0,
             premerge_views > 0,

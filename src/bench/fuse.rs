@@ -10,13 +10,15 @@ use serde::Serialize;
 
 use super::export::{export_inputs, ExportLabels};
 use super::median;
+use crate::dataset::{Dataset, DatasetPaths};
 use crate::fuse::{
-    accumulate_assigned, nearest_neighbours, AssignOnGpu, FuseConfig, LabelSource, Method,
-    ObserveTimes, NO_LABEL, TIE_NEIGHBOURS,
+    accumulate_assigned, nearest_neighbours, AssignOnGpu, ClusterProfile, FuseConfig, LabelSource,
+    Method, ObserveTimes, NO_LABEL, TIE_NEIGHBOURS,
 };
 use crate::gpu::timings::KernelTotal;
 use crate::gpu::Gpu;
 use crate::render::{GpuScene, Rasterizer, RenderOptions};
+use crate::scene::labels::LabelFormat;
 use crate::scene::random_scene::{random_scene, RandomSceneSpec};
 use crate::scene::{Camera, Gaussians};
 use crate::util::Rng;
@@ -45,6 +47,9 @@ pub struct FuseBenchSpec {
     /// A folder with `scene.ply` and `cameras.json` to fuse instead of the random scene
     /// (its first `views` cameras, scaled to `width` x `height`); `n` becomes its size.
     pub scene: Option<PathBuf>,
+    /// With `scene`: its own label maps instead of random blocks (matched to its cameras by name); the
+    /// views take the maps' size and `classes` becomes the classes they hold.
+    pub labels: Option<PathBuf>,
     /// Write the scene, cameras and label maps here first (see [`super::export`]).
     #[serde(skip)]
     pub export: Option<PathBuf>,
@@ -92,6 +97,9 @@ pub struct MethodBench {
     pub decide_s: f64,
     /// Consensus methods: their observation pass split (`FuseStats::observe`).
     pub observe: ObserveTimes,
+    /// Consensus methods: `segments_s` split, with what the clustering did
+    /// (`FuseStats::clustering`).
+    pub clustering: ClusterProfile,
     /// Passes over the views (the evidence matrix split into class-row batches).
     pub passes: usize,
     pub rows_per_pass: usize,
@@ -231,19 +239,21 @@ pub fn bench_fuse(
     progress: impl FnMut(&str, usize, usize),
 ) -> Result<FuseBench> {
     check_spec(gpu, spec, methods)?;
-    let (g, cams) = scene_and_cameras(spec)?;
+    let (g, cams, labels) = scene_and_cameras(spec)?;
     let spec = &FuseBenchSpec {
         n: g.len(),
         views: cams.len(),
+        width: cams[0].width,
+        height: cams[0].height,
+        classes: labels.classes(),
         ..spec.clone()
     };
-    let labels = BlockLabels::new(spec.classes, spec.seed);
     let opts = FuseConfig::default().render_options();
     let neighbours_start = Instant::now();
     let knn = nearest_neighbours(&g.means, TIE_NEIGHBOURS);
     let neighbours_s = neighbours_start.elapsed().as_secs_f64();
     if let Some(dir) = &spec.export {
-        let source = &labels as &dyn LabelSource;
+        let source = labels.source();
         let classes = spec.classes;
         export_inputs(
             dir,
@@ -301,8 +311,10 @@ pub fn bench_fuse(
 }
 
 /// The random scene (SH degree 3 as a trained 3DGS scene, and `bench render`: projection
-/// evaluates it) on its ring of cameras, or the folder's scene and first cameras.
-fn scene_and_cameras(spec: &FuseBenchSpec) -> Result<(Gaussians, Vec<Camera>)> {
+/// evaluates it) on its ring of cameras, or the folder's scene and first cameras; their
+/// label maps.
+fn scene_and_cameras(spec: &FuseBenchSpec) -> Result<(Gaussians, Vec<Camera>, BenchLabels)> {
+    let blocks = || BenchLabels::Blocks(BlockLabels::new(spec.classes, spec.seed));
     let Some(dir) = &spec.scene else {
         let g = random_scene(&RandomSceneSpec {
             n: spec.n,
@@ -310,15 +322,57 @@ fn scene_and_cameras(spec: &FuseBenchSpec) -> Result<(Gaussians, Vec<Camera>)> {
             seed: spec.seed,
             ..Default::default()
         });
-        return Ok((g, ring_cameras(spec.views, spec.width, spec.height)));
+        let cams = ring_cameras(spec.views, spec.width, spec.height);
+        return Ok((g, cams, blocks()));
     };
     let (g, cams) = super::read_scene_folder(dir)?;
-    let cams = cams
-        .iter()
-        .take(spec.views)
-        .map(|c| c.scaled_to(spec.width, spec.height))
-        .collect();
-    Ok((g, cams))
+    let Some(labels) = &spec.labels else {
+        let cams = cams.iter().take(spec.views);
+        let cams = cams.map(|c| c.scaled_to(spec.width, spec.height)).collect();
+        return Ok((g, cams, blocks()));
+    };
+    // The cameras again, matched to the maps (and scaled to them where they are resized).
+    let mut dataset = Dataset::open(&DatasetPaths {
+        cameras: &dir.join("cameras.json"),
+        labels,
+        class_table: None,
+        train_only: false,
+        format: LabelFormat::default(),
+    })?;
+    dataset.cameras.truncate(spec.views);
+    let cams = dataset.cameras.clone();
+    ensure!(
+        cams.iter()
+            .all(|c| (c.width, c.height) == (cams[0].width, cams[0].height)),
+        "the label maps of {} differ in size; the benchmark's views share one",
+        labels.display()
+    );
+    Ok((g, cams, BenchLabels::Scene(Box::new(dataset))))
+}
+
+/// The label maps a benchmark fuses.
+enum BenchLabels {
+    /// Random blocks, drawn for each view ([`BlockLabels`]).
+    Blocks(BlockLabels),
+    /// The scene folder's own maps, matched to its cameras by name.
+    Scene(Box<Dataset>),
+}
+
+impl BenchLabels {
+    fn source(&self) -> &dyn LabelSource {
+        match self {
+            BenchLabels::Blocks(blocks) => blocks,
+            BenchLabels::Scene(dataset) => dataset.as_ref(),
+        }
+    }
+
+    /// Rows of the evidence matrix: the spec's classes, or those the maps hold.
+    fn classes(&self) -> usize {
+        match self {
+            BenchLabels::Blocks(blocks) => blocks.classes as usize,
+            BenchLabels::Scene(dataset) => dataset.classes.len(),
+        }
+    }
 }
 
 /// Refuses specs the benchmark cannot run or measure.
@@ -355,7 +409,7 @@ struct Setup<'a> {
     /// Per method, what of the scene it reads.
     method_scenes: &'a [GpuScene],
     cams: Vec<Camera>,
-    labels: BlockLabels,
+    labels: BenchLabels,
     classes: usize,
     /// [n][TIE_NEIGHBOURS] nearest neighbours, for the assignment's tie-breaks.
     knn: Vec<u32>,
@@ -391,7 +445,7 @@ impl Setup<'_> {
             self.gpu,
             scene,
             cams,
-            &self.labels,
+            self.labels.source(),
             self.classes,
             cfg,
             with,
@@ -435,6 +489,7 @@ impl Setup<'_> {
                     segments_s: stats.segments_s,
                     decide_s: stats.decide_s,
                     observe: stats.observe,
+                    clustering: stats.clustering,
                     kernels: stats.kernels,
                     peak_device_bytes: stats.peak_device_bytes,
                     passes: stats.passes,
@@ -484,6 +539,7 @@ fn method_bench(
         segments_s: m.segments_s,
         decide_s: m.decide_s,
         observe: m.observe,
+        clustering: m.clustering,
         views_per_s: (views * m.passes) as f64 / m.wall_s,
         passes: m.passes,
         rows_per_pass: m.rows_per_pass,
@@ -510,6 +566,7 @@ struct RunTotal {
     segments_s: f64,
     decide_s: f64,
     observe: ObserveTimes,
+    clustering: ClusterProfile,
     kernels: Vec<KernelTotal>,
     peak_device_bytes: u64,
     passes: usize,

@@ -60,9 +60,17 @@ pub struct FuseArgs {
     scene: Option<PathBuf>,
     /// Views: cameras on a ring in front of the scene, each seeing most of it (or the
     /// --scene folder's first ones), with a label map of blocks of random classes each
-    /// (seeded, streamed view by view).
+    /// (seeded, streamed view by view), or the --labels folder's maps.
     #[arg(long, default_value_t = 100)]
     views: usize,
+    /// With --scene: the folder's own label maps (PNGs named like its cameras, such as a
+    /// `synth` room's labels_noisy) instead of random blocks. Random blocks are drawn
+    /// independently in every view, so their edges cut every surface somewhere: the worst
+    /// case for segment consensus's clustering, where a segmenter's regions follow the
+    /// objects. The views take the maps' size (--width and --height are not used) and the
+    /// classes are those the maps hold (--classes is not used).
+    #[arg(long, value_name = "DIR", requires = "scene")]
+    labels: Option<PathBuf>,
     /// Image size of every view.
     #[arg(long, default_value_t = 640)]
     width: u32,
@@ -213,8 +221,12 @@ fn against_goal(ratio: f64, goal: f64) -> String {
 
 fn print_fuse(r: &FuseBench) {
     let s = &r.spec;
+    let labels = match &s.labels {
+        Some(dir) => format!("labels of {}", dir.display()),
+        None => "random block labels".to_string(),
+    };
     println!(
-        "fuse: {} Gaussians, {} views at {}x{}, {} classes, on {} (median of {} run{})",
+        "fuse: {} Gaussians, {} views at {}x{}, {} classes ({labels}), on {} (median of {} run{})",
         s.n,
         s.views,
         s.width,
@@ -387,6 +399,7 @@ fn run_fuse(gpu: &Gpu, a: FuseArgs) -> Result<()> {
         iters: a.iters,
         seed: a.seed,
         scene: a.scene,
+        labels: a.labels,
         export: a.export,
     };
     let bar = views_bar(0);

@@ -12,6 +12,7 @@ use serde::Serialize;
 
 use super::assign::{assign_semantic_near, Assignment};
 use super::assign_gpu::GpuAssigner;
+use super::consensus_cluster::ClusterProfile;
 use super::method::Method;
 use super::partial::{fixed_to_f64, EvidenceKind, RawEvidence};
 use super::scores::ClassScores;
@@ -130,6 +131,8 @@ pub struct FuseStats {
     pub decide_s: f64,
     /// Consensus methods: their observation pass split (`view_s` holds it all).
     pub observe: ObserveTimes,
+    /// Consensus methods: `segments_s` split, with what the clustering did.
+    pub clustering: ClusterProfile,
     pub views_per_s: f64,
     pub peak_device_bytes: u64,
     /// Device memory of the scene as this method uploaded it (only what it reads).

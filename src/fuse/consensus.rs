@@ -11,7 +11,7 @@ use anyhow::{ensure, Result};
 
 use super::accumulate::{FuseConfig, FuseStats, LabelSource};
 use super::assign::Assignment;
-use super::consensus_cluster::cluster_segments;
+use super::consensus_cluster::cluster_segments_timed;
 use super::consensus_decide::{decide, Consensus, ConsensusParams};
 pub use super::consensus_observe::observe;
 use super::consensus_relabel::fuse_relabeled;
@@ -73,7 +73,10 @@ pub fn consensus_run(
     let (observations, centers, mut stats) = observe(input, cfg, params.occlusion, progress)?;
     stats.view_s = start.elapsed().as_secs_f64();
     let knn = nearest_neighbours(input.means, params.neighbours);
-    let segment = cluster_segments(&observations, &knn, params);
+    let neighbours_s = start.elapsed().as_secs_f64() - stats.view_s;
+    let segment;
+    (segment, stats.clustering) = cluster_segments_timed(&observations, &knn, params);
+    stats.clustering.neighbours_s = neighbours_s;
     stats.segments_s = start.elapsed().as_secs_f64() - stats.view_s;
     let decide_start = std::time::Instant::now();
     let consensus = decide(&observations, &knn, segment, input.classes, params);

@@ -22,6 +22,9 @@
 
 use std::cmp::Reverse;
 use std::collections::HashMap;
+use std::time::Instant;
+
+use serde::Serialize;
 
 use super::consensus_adjacent::Adjacent;
 use super::consensus_decide::ConsensusParams;
@@ -296,7 +299,39 @@ type Candidate = (i64, u32, Reverse<u32>, Reverse<u32>);
 /// together, then the lowest ids); one that [`may_join`] joins, any other is dropped until its
 /// evidence changes (a join adds pairs to it).
 pub fn cluster_segments(obs: &Observations, knn: &[u32], p: &ConsensusParams) -> Vec<u32> {
-    cluster_segments_sweeping_from(obs, knn, p, SWEEP_FROM)
+    cluster_segments_timed(obs, knn, p).0
+}
+
+/// [`cluster_segments`], and where its time went.
+pub fn cluster_segments_timed(
+    obs: &Observations,
+    knn: &[u32],
+    p: &ConsensusParams,
+) -> (Vec<u32>, ClusterProfile) {
+    cluster(obs, knn, p, SWEEP_FROM)
+}
+
+/// Where the clustering's time went (host seconds) and how much it did: what a profile
+/// of a scene's clustering needs first (`bench fuse --json` reports it).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct ClusterProfile {
+    /// Each Gaussian's nearest neighbours, the graph clustered (timed by the caller, which
+    /// searches them: [`super::consensus_segments::nearest_neighbours`]).
+    pub neighbours_s: f64,
+    /// What the views said of every neighbour pair ([`co_occurrence`], on every core).
+    pub pairs_s: f64,
+    /// The outright joins ([`premerge`]), the pieces' region counts and adjacency.
+    pub pieces_s: f64,
+    /// The ordered joins: the candidates sorted, then taken one at a time.
+    pub joins_s: f64,
+    /// Neighbour pairs, the segments the ordered joins start from (pieces and single
+    /// Gaussians), the candidates they start with, the joins they make and the segments
+    /// at the end.
+    pub pairs: usize,
+    pub pieces: usize,
+    pub candidates: usize,
+    pub joins: usize,
+    pub segments: usize,
 }
 
 /// A heap of requeued candidates smaller than this is not swept ([`Queue::sweep_if_grown`]):
@@ -312,9 +347,31 @@ pub fn cluster_segments_sweeping_from(
     p: &ConsensusParams,
     sweep_from: usize,
 ) -> Vec<u32> {
+    cluster(obs, knn, p, sweep_from).0
+}
+
+/// The clustering, its heap swept from `sweep_from` candidates on, and what it did.
+fn cluster(
+    obs: &Observations,
+    knn: &[u32],
+    p: &ConsensusParams,
+    sweep_from: usize,
+) -> (Vec<u32>, ClusterProfile) {
     let n = obs.n;
-    let mut graph = SegmentGraph::new(obs, knn, p);
+    let mut done = ClusterProfile::default();
+    let mut clock = Instant::now();
+    let mut lap = || {
+        std::mem::replace(&mut clock, Instant::now())
+            .elapsed()
+            .as_secs_f64()
+    };
+    let pairs = neighbour_pairs(obs, knn, p.neighbours);
+    (done.pairs, done.pairs_s) = (pairs.len(), lap());
+    let mut graph = SegmentGraph::new(obs, pairs, p);
+    done.pieces_s = lap();
+    done.pieces = (0..n).filter(|&g| graph.parent[g] as usize == g).count();
     let mut queue = Queue::new(&graph, p, sweep_from);
+    done.candidates = queue.sorted.len();
     let mut changed = Vec::new();
     while let Some(queued) = queue.pop() {
         let (_, _, Reverse(a), Reverse(b)) = queued;
@@ -326,6 +383,7 @@ pub fn cluster_segments_sweeping_from(
             continue; // a segment joined another, or the evidence grew: queued again since
         };
         if may_join(&evidence, graph.dominant(a), graph.dominant(b), p) {
+            done.joins += 1;
             graph.join(a, b, &mut changed);
             for &(c, e) in changed.iter().filter(|(_, e)| e.allows_join(p)) {
                 let (lo, hi) = (a.min(c), a.max(c));
@@ -338,7 +396,9 @@ pub fn cluster_segments_sweeping_from(
     for g in 0..n {
         roots[g] = roots[graph.parent[g] as usize]; // parents have lower indices
     }
-    renumber(&roots)
+    done.joins_s = lap();
+    done.segments = done.pieces - done.joins;
+    (renumber(&roots), done)
 }
 
 /// The candidates, greatest first: the neighbour pairs' in one sorted list, and those a
@@ -507,9 +567,12 @@ struct SegmentGraph<'a> {
 impl<'a> SegmentGraph<'a> {
     /// The graph after the outright joins ([`premerge`]): its segments are those pieces and
     /// the remaining Gaussians, adjacent through the neighbour pairs between them.
-    fn new(obs: &'a Observations, knn: &[u32], p: &ConsensusParams) -> SegmentGraph<'a> {
+    fn new(
+        obs: &'a Observations,
+        pairs: Vec<(u32, u32, PairEvidence)>,
+        p: &ConsensusParams,
+    ) -> SegmentGraph<'a> {
         let n = obs.n;
-        let pairs = neighbour_pairs(obs, knn, p.neighbours);
         let piece = premerge(n, &pairs, p.premerge_views);
         let between =
             |&(g, h, _): &(u32, u32, PairEvidence)| piece[g as usize] != piece[h as usize];

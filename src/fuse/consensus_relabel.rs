@@ -399,6 +399,7 @@ pub fn fuse_relabeled(
     stats.view_s += run.stats.view_s; // the consensus's visit of the views
     (stats.segments_s, stats.decide_s) = (run.stats.segments_s, run.stats.decide_s);
     stats.observe = run.stats.observe;
+    stats.clustering = run.stats.clustering;
     stats.peak_device_bytes = stats.peak_device_bytes.max(run.stats.peak_device_bytes);
     stats.region_host_fallbacks = run.stats.region_host_fallbacks + relabel_stats.host_fallbacks;
     stats.wall_s = start.elapsed().as_secs_f64();

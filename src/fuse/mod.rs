@@ -29,6 +29,7 @@ pub use assign::{
 pub use consensus::{
     fuse_consensus, lift_by_consensus, ConsensusInput, ConsensusLift, LiftEvidence,
 };
+pub use consensus_cluster::ClusterProfile;
 pub use consensus_decide::{Consensus, ConsensusParams, SegmentVotes};
 pub use consensus_segments::nearest_neighbours;
 pub use method::{Method, SPELLINGS};

@@ -8,7 +8,8 @@
 #   tests   every test binary, validation layer and synchronization validation on
 #   ours    semsplat's benchmarks: sort 2^25, forward and training at C = 0/16/32/64 on a
 #           1M random scene and an office room at ~1M Gaussians (spacing 0.0053, one view), fusion of 1M x 200 views
-#           of the random scene and of the room (~1M Gaussians seen from 200 views)
+#           of the random scene and of the room (~1M Gaussians seen from 200 views), and of
+#           the room over 190 views with its own noisy label maps (FlashSplat and consensus)
 #   peers   gsplat 1.5.3 and FlashSplat's rasterizer on the scenes `ours` exported
 #   lift    the scene packed with LIFT_SCENE fused by FlashSplat, segment consensus and
 #           --relabel (train views' noisy labels), each evaluated on the held-out views:
@@ -173,6 +174,18 @@ run_ours() {
   CAP=120 b "fuse room consensus x ${VIEWS:-200}" bench fuse --scene /tmp/room_fuse \
     --views "${VIEWS:-200}" --width "${W:-1920}" --height "${H:-1080}" --classes 16 \
     --methods segment-consensus,segment-consensus-relabel
+  # The same room with its own label maps (flicker 0.3): a segmenter's regions follow the
+  # objects, where random blocks, drawn anew in every view, cut every surface somewhere (the
+  # consensus's clustering's worst case). 190 views: synth holds at most 400M pixels.
+  if [[ "fuse office labels x 190" =~ ${CASES:-.} ]]; then
+    timeout 300 semsplat synth --preset office --spacing "${ROOM_FUSE_SPACING:-0.0115}" \
+      --views 190 --test-views 0 --width "${W:-1920}" --height "${H:-1080}" \
+      --noise flicker=0.3 --no-previews --out /tmp/office_labels >>"$OUT/bench.log" 2>&1 ||
+      say "synth office_labels failed"
+  fi
+  CAP=120 b "fuse office labels x 190" bench fuse --scene /tmp/office_labels \
+    --labels /tmp/office_labels/labels_noisy --views 190 \
+    --methods flashsplat,segment-consensus,segment-consensus-relabel
   # Real size (#14): 6M Gaussians, as Mip-NeRF 360's garden.
   b "render random 6M C=16" bench render --n 6000000 --width "${W:-1920}" --height "${H:-1080}" \
     --channels 16 --iters 5
