@@ -7,6 +7,7 @@ mod common;
 
 use semsplat::gpu::context::choose_device;
 use semsplat::gpu::{list_devices, GpuError};
+use semsplat::scene::labels::{read_label_png, LabelMap};
 
 fn semsplat() -> Command {
     Command::new(env!("CARGO_BIN_EXE_semsplat"))
@@ -240,16 +241,16 @@ fn bench_fuse_json(bench: &mut Command) -> serde_json::Value {
 /// the maps' size and the classes are those the maps hold.
 #[test]
 fn bench_fuse_reads_a_scene_folders_label_maps() {
-    let dir = std::env::temp_dir().join(format!("semsplat-bench-labels-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("room");
     common::cli::synth_tiny(&dir, 3, (32, 24));
     let labels = dir.join("labels");
     let mut present = std::collections::BTreeSet::new();
     for entry in std::fs::read_dir(&labels).unwrap() {
         let path = entry.unwrap().path();
         if path.extension().is_some_and(|e| e == "png") {
-            let map = semsplat::scene::labels::read_label_png(&path).unwrap();
-            present.extend(map.labels.into_iter().filter(|&l| l != 255 && l != 65535));
+            let map = read_label_png(&path).unwrap();
+            present.extend(map.labels.into_iter().filter(|&l| l != LabelMap::IGNORE));
         }
     }
     let mut bench = semsplat();
@@ -279,7 +280,6 @@ fn bench_fuse_reads_a_scene_folders_label_maps() {
     let c = &v["methods"][1]["clustering"];
     let segments = c["segments"].as_u64().unwrap();
     assert!(segments > 1 && segments < v["n"].as_u64().unwrap(), "{c}");
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]

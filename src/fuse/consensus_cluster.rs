@@ -214,7 +214,8 @@ fn counts_sorted(obs: &Observations, members: &[u32]) -> Vec<(u32, u32, u32)> {
 /// [`counts_sorted`], counted per view in a short list of (region, observations): a piece
 /// of outright joins lies in one region of nearly every view that sees it, so each
 /// observation is a search of a list of one or two, where sorting a wall's millions of
-/// observations on one core took most of the pieces' time (0.6 of 0.7 s on a 1080p room).
+/// observations on one core took most of the pieces' time (0.56-0.81 of 0.65-0.93 s on a
+/// noisy 1080p office, docs/robustness.md).
 fn counts_by_view(obs: &Observations, members: &[u32]) -> Vec<(u32, u32, u32)> {
     let mut per_view: Vec<Vec<(u32, u32)>> = Vec::new();
     for &g in members {

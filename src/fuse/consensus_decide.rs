@@ -338,8 +338,6 @@ pub fn decide(
     let mut own = vec![0.0; classes];
     for g in 0..n {
         let s = segment[g] as usize;
-        own.fill(0.0);
-        add_own_votes(obs, g, &mut own);
         match kept[g] {
             Some(c) => {
                 class[g] = Some(c);
@@ -348,7 +346,7 @@ pub fn decide(
                 let row = *split_row[s].get_or_insert_with(|| evidence.add_row(split));
                 evidence.share(g, row);
             }
-            _ => {
+            None => {
                 let near = match segments[s].gaussians < p.min_segment {
                     true => neighbour_segments(g, knn, &segment, &segments, classes, p),
                     false => None,
@@ -359,6 +357,8 @@ pub fn decide(
                     from_neighbour_segments += usize::from(!obs.row(g).is_empty());
                     evidence.set(g, &counts);
                 } else {
+                    own.fill(0.0);
+                    add_own_votes(obs, g, &mut own);
                     let tie_break = neighbour_votes(obs, knn, p.neighbours, g, classes);
                     class[g] = decisive_argmax(&own, &tie_break);
                     evidence.set(g, &own);
