@@ -7,7 +7,7 @@ mod common;
 use common::regions::{flood_regions, on_edge};
 use common::{check_validation, gpu};
 use semsplat::contract::REGION_EDGE_BIT;
-use semsplat::fuse::regions_gpu::{regions_on_host, RegionFinder};
+use semsplat::fuse::regions_gpu::{regions_on_host, Observed, RegionFinder};
 use semsplat::fuse::NO_LABEL;
 use semsplat::util::Rng;
 
@@ -72,6 +72,7 @@ fn check_maps(maps: &[(String, Vec<u32>, usize)]) -> usize {
     let n = largest + 1;
     let mut finder = RegionFinder::new(gpu, n).unwrap();
     let centers_buf = gpu.buffer("test-centers", (n * 4) as u64).unwrap();
+    let mut rng = Rng::new(5);
     for (name, map, width) in maps {
         let mut centers: Vec<u32> = (0..map.len() as u32).collect();
         centers.resize(n, NO_LABEL);
@@ -91,9 +92,54 @@ fn check_maps(maps: &[(String, Vec<u32>, usize)]) -> usize {
             want,
             "{name}: the host fallback"
         );
+        // The observations compacted on the GPU: every pixel as above, then centers drawn
+        // at random (repeated pixels, gaps of none).
+        check_observations(&mut finder, &centers_buf, name, map, *width, &centers);
+        let random: Vec<u32> = (0..n)
+            .map(|_| match rng.below(4) {
+                0 => NO_LABEL,
+                _ => rng.below(map.len() as u64) as u32,
+            })
+            .collect();
+        check_observations(&mut finder, &centers_buf, name, map, *width, &random);
     }
     check_validation(gpu);
     finder.stats.host_fallbacks
+}
+
+/// [`RegionFinder::observations`] for Gaussians centered on `centers`: in Gaussian order,
+/// each one on a labeled pixel with that pixel, its label and the flood fill's region
+/// (edge bit included), and no other.
+fn check_observations(
+    finder: &mut RegionFinder,
+    centers_buf: &semsplat::gpu::Buffer,
+    name: &str,
+    map: &[u32],
+    width: usize,
+    centers: &[u32],
+) {
+    gpu().upload(centers_buf, 0, centers).unwrap();
+    let got = finder
+        .observations(map, width as u32, centers_buf, |o| o.to_vec())
+        .unwrap();
+    let regions = expected(map, width, centers);
+    let want: Vec<Observed> = (0..centers.len())
+        .filter(|&g| regions[g] != NO_LABEL)
+        .map(|g| Observed {
+            gaussian: g as u32,
+            pixel: centers[g],
+            label: map[centers[g] as usize],
+            region: regions[g],
+        })
+        .collect();
+    assert!(
+        !want.is_empty() || map.iter().all(|&l| l == NO_LABEL),
+        "{name}"
+    );
+    assert_eq!(got.len(), want.len(), "{name}: observations");
+    for (got, want) in got.iter().zip(&want) {
+        assert_eq!(got, want, "{name}");
+    }
 }
 
 #[test]

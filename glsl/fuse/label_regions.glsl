@@ -6,7 +6,8 @@
 // root is its first pixel in scan order whatever order the invocations run in. The region
 // id is that pixel's index, as on the host. Kernels, one per file: region_init,
 // region_merge, region_flatten, region_check (a pass that finds any link the loop cap of a
-// CPU driver cut short, so the host can redo that view), region_lookup (per Gaussian); for
+// CPU driver cut short, so the host can redo that view), region_lookup (per Gaussian),
+// observed_flag and observed_compact (each view's observations, compacted); for
 // relabeling a view (src/fuse/consensus_relabel.rs): region_depth and region_near (per
 // center pixel), region_relabel_scatter (per decided region) and region_relabel (per
 // pixel).
@@ -26,6 +27,8 @@ layout(push_constant) uniform RegionParams {
     uvec2 pairs_addr;  // [2 * pairs] (region id, new label) of each region relabeled
     uvec2 classes_addr; // [n] the consensus class of each center pixel's Gaussian
     uvec2 near_addr;   // [n] 1 where a pixel of that class lies within near_radius, else 0
+    uvec2 slots_addr;  // [n] 1 where out_addr holds a region, then each observation's place
+    uvec2 observed_addr; // host-visible: the count, then the view's observations in order
     uint width;
     uint height;
     uint n;

@@ -1,9 +1,10 @@
 //! Segment consensus (`--method segment-consensus`): lifting robust to per-view label noise.
 //! Per view, the GPU finds the pixel under every Gaussian's visible center (occlusion-checked
-//! against the rendered median depth); the host reads that pixel's label and
-//! connected label region. Neighbouring Gaussians that share a region in the views that see
-//! both form 3D segments; each segment's class is voted with every view counting once, and
-//! each Gaussian takes its segment's class (docs/robustness.md).
+//! against the rendered median depth), that pixel's label and connected label region, and
+//! the host reads those of the observed Gaussians. Neighbouring Gaussians that share a
+//! region in the views that see both form 3D segments; each segment's class is voted with
+//! every view counting once, and each Gaussian takes its segment's class
+//! (docs/robustness.md).
 
 use std::sync::Arc;
 
@@ -70,9 +71,17 @@ pub fn consensus_run(
         input.means.len(),
         input.scene.n
     );
-    let (observations, centers, mut stats) = observe(input, cfg, params.occlusion, progress)?;
+    // The neighbour graph reads only the centers: searched on the host while the views
+    // keep the GPU busy (a million Gaussians take 0.2 s on 16 cores, docs/gpu.md), and
+    // waited for after them. `neighbours_s` is that wait.
+    let (observed, knn) = std::thread::scope(|scope| {
+        let search = scope.spawn(|| nearest_neighbours(input.means, params.neighbours));
+        let observed = observe(input, cfg, params.occlusion, progress);
+        (observed, search.join())
+    });
+    let (observations, centers, mut stats) = observed?;
     stats.view_s = start.elapsed().as_secs_f64();
-    let knn = nearest_neighbours(input.means, params.neighbours);
+    let knn = knn.unwrap_or_else(|panic| std::panic::resume_unwind(panic));
     let neighbours_s = start.elapsed().as_secs_f64() - stats.view_s;
     let segment;
     (segment, stats.clustering) = cluster_segments_timed(&observations, &knn, params);

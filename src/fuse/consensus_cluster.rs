@@ -356,8 +356,9 @@ pub fn cluster_segments_timed(
 /// of a scene's clustering needs first (`bench fuse --json` reports it).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct ClusterProfile {
-    /// Each Gaussian's nearest neighbours, the graph clustered (timed by the caller, which
-    /// searches them: [`super::consensus_segments::nearest_neighbours`]).
+    /// The wait, after the views, for each Gaussian's nearest neighbours, the graph
+    /// clustered (timed by the caller, which searches them beside the views:
+    /// [`super::consensus_segments::nearest_neighbours`]).
     pub neighbours_s: f64,
     /// What the views said of every neighbour pair ([`co_occurrence`], on every core).
     pub pairs_s: f64,

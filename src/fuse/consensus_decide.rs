@@ -369,12 +369,7 @@ pub fn decide(
     let from_neighbours = fill_unobserved(&mut class, &mut evidence, obs, knn, p.neighbours);
     let smoothed =
         smooth_small_segments(&mut class, &mut evidence, obs, knn, &segment, &segments, p);
-    let (confidence, entropy) = (0..n)
-        .map(|g| {
-            let (c, h) = posterior(&evidence[g], class[g], p.prior);
-            (c as f32, h as f32)
-        })
-        .unzip();
+    let (confidence, entropy) = posteriors(&evidence, &class, p.prior);
     Consensus {
         assignment: Assignment { class, confidence },
         entropy,
@@ -641,6 +636,26 @@ fn neighbour_votes(
         }
     }
     sum
+}
+
+/// Every Gaussian's [`posterior`] (confidence, entropy), on every core: a logarithm per
+/// class and Gaussian, a fifth of the decision's time on one core (911k Gaussians).
+fn posteriors(
+    evidence: &SharedCounts,
+    class: &[Option<usize>],
+    prior: f64,
+) -> (Vec<f32>, Vec<f32>) {
+    const BLOCK: usize = 16384;
+    let blocks = parallel_map(class.len().div_ceil(BLOCK), |b| {
+        let block = b * BLOCK..class.len().min((b + 1) * BLOCK);
+        block
+            .map(|g| {
+                let (c, h) = posterior(&evidence[g], class[g], prior);
+                (c as f32, h as f32)
+            })
+            .collect::<Vec<_>>()
+    });
+    blocks.into_iter().flatten().unzip()
 }
 
 /// Posterior mean of `class` under a Dirichlet(prior + counts), and the entropy (nats) of the

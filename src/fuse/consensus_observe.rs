@@ -1,7 +1,8 @@
 //! Segment consensus's observation pass (src/fuse/consensus.rs): per view, the pixel under
 //! every Gaussian's visible center (rendered on the GPU, occlusion-checked against the
 //! median depth) and that pixel's label and connected label region (regions_gpu.rs),
-//! gathered on the host into each Gaussian's observations.
+//! compacted on the GPU to the observed Gaussians and gathered on the host into each
+//! Gaussian's observations.
 //!
 //! Views run on up to `views_in_flight` lanes, each a thread with its own rasterizer,
 //! center-pixel buffer and region finder, view `v` on lane `v % lanes`: while one lane waits
@@ -22,13 +23,13 @@ use super::accumulate::{
 };
 use super::consensus::ConsensusInput;
 use super::consensus_segments::{Observations, ViewEntry};
-use super::regions_gpu::{RegionFinder, RegionStats};
+use super::regions_gpu::{Observed, RegionFinder, RegionStats};
 use crate::contract::REGION_EDGE_BIT;
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, Gpu, Recorder};
 use crate::render::{GpuScene, Rasterizer};
 use crate::scene::Camera;
-use crate::util::{parallel_map, prefetch_ordered, split_parts, take_part};
+use crate::util::prefetch_ordered;
 
 /// Every view's observations of every Gaussian: label and region under its center (with
 /// `occlusion`, only where the center is within the depth tolerance of the rendered median
@@ -283,9 +284,9 @@ impl<'a> Lane<'a> {
         let finding = Instant::now();
         let (observed, seen) =
             self.finder
-                .regions_with(map, cam.width, &self.centers, |c, r| {
+                .observations(map, cam.width, &self.centers, |observed| {
                     let gathering = Instant::now();
-                    let gathered = view_observations(map, c, r);
+                    let gathered = view_observations(observed);
                     times.gather_s = gathering.elapsed().as_secs_f64();
                     gathered
                 })?;
@@ -301,41 +302,15 @@ impl<'a> Lane<'a> {
     }
 }
 
-/// One view's observations from its readback (per Gaussian, the pixel under its center and
-/// that pixel's region, [`NO_LABEL`] where unobserved): (Gaussian, label, region, edge) and
-/// (Gaussian, pixel), in Gaussian order. On every core, in blocks of Gaussians: each view
-/// reads an entry for every Gaussian of the scene (a million, most unobserved). Each block's
-/// observations are counted, then written into its part of the lists.
-fn view_observations(
-    map: &[u32],
-    centers: &[u32],
-    regions: &[u32],
-) -> (Vec<ViewEntry>, Vec<(u32, u32)>) {
-    const BLOCK: usize = 1 << 16;
-    let block = |b: usize| b * BLOCK..regions.len().min((b + 1) * BLOCK);
-    let blocks = regions.len().div_ceil(BLOCK);
-    let counts = parallel_map(blocks, |b| {
-        regions[block(b)].iter().filter(|&&r| r != NO_LABEL).count()
-    });
-    let total = counts.iter().sum();
-    let (mut observed, mut seen) = (vec![(0, 0, 0, false); total], vec![(0, 0); total]);
-    let observed_parts = split_parts(&mut observed, counts.iter().copied());
-    let seen_parts = split_parts(&mut seen, counts);
-    parallel_map(blocks, |b| {
-        let (mut observed, mut seen) = (take_part(&observed_parts[b]), take_part(&seen_parts[b]));
-        let mut at = 0;
-        for g in block(b) {
-            let (p, r) = (centers[g], regions[g]);
-            if r != NO_LABEL {
-                let (region, edge) = (r & !REGION_EDGE_BIT, r & REGION_EDGE_BIT != 0);
-                observed[at] = (g as u32, map[p as usize], region, edge);
-                seen[at] = (g as u32, p);
-                at += 1;
-            }
-        }
-    });
-    drop((observed_parts, seen_parts));
-    (observed, seen)
+/// One view's observations as the GPU compacted them ([`Observed`], in Gaussian order):
+/// (Gaussian, label, region, edge) and (Gaussian, pixel).
+fn view_observations(observed: &[Observed]) -> (Vec<ViewEntry>, Vec<(u32, u32)>) {
+    let entry = |o: &Observed| {
+        let (region, edge) = (o.region & !REGION_EDGE_BIT, o.region & REGION_EDGE_BIT != 0);
+        (o.gaussian, o.label, region, edge)
+    };
+    let seen = observed.iter().map(|o| (o.gaussian, o.pixel)).collect();
+    (observed.iter().map(entry).collect(), seen)
 }
 
 /// Writes the pixel under every Gaussian's visible center into `out`; returns GPU ms.

@@ -314,8 +314,14 @@ impl Grid {
                     best.push((dist2(means[g], means[h as usize]), h));
                 }
             });
-            best.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-            best.truncate(k);
+            // The k nearest first (a selection, then a sort of those k only): a shell
+            // holds about a hundred candidates, and sorting them all was most of the time.
+            let nearer = |a: &(f64, u32), b: &(f64, u32)| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1));
+            if best.len() > k {
+                best.select_nth_unstable_by(k - 1, nearer);
+                best.truncate(k);
+            }
+            best.sort_by(nearer);
             // Every Gaussian outside the searched cube is farther than ring * cell.
             let reach = ring as f64 * self.cell;
             if best.len() == k && best[k - 1].0 <= reach * reach {

@@ -18,9 +18,9 @@ use super::consensus_relabel::{decide_regions, relabel_view, RegionSeed, Relabel
 use super::consensus_segments::{label_regions, region_edges};
 use super::NO_LABEL;
 use crate::contract::params::RegionParams;
-use crate::contract::{REGION_EDGE_BIT, RELABEL_KEEP};
+use crate::contract::{OBSERVED_HEADER_WORDS, OBSERVED_WORDS, REGION_EDGE_BIT, RELABEL_KEEP};
 use crate::gpu::kernel_table::ids;
-use crate::gpu::{Buffer, Gpu, GpuResult, Recorder, Staging};
+use crate::gpu::{Buffer, Gpu, GpuCount, GpuResult, PrefixScan, Recorder, Staging};
 
 /// Workgroups one dispatch dimension holds (Vulkan's guaranteed minimum, lavapipe's limit).
 const MAX_GROUPS: u32 = 65_535;
@@ -36,6 +36,43 @@ pub struct RegionStats {
     pub gpu_ms: f64,
     /// Views whose regions the check found incomplete, found again on the host.
     pub host_fallbacks: usize,
+}
+
+/// One observation of a view, as observed_compact writes it: a Gaussian whose center lies
+/// on a labeled pixel, that pixel, its label and its region id (with [`REGION_EDGE_BIT`]
+/// where the pixel is on the region's edge).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, bytemuck::Pod, bytemuck::Zeroable)]
+#[repr(C)]
+pub struct Observed {
+    pub gaussian: u32,
+    pub pixel: u32,
+    pub label: u32,
+    pub region: u32,
+}
+
+const _: () = assert!(std::mem::size_of::<Observed>() == OBSERVED_WORDS as usize * 4);
+
+/// The device side of [`RegionFinder::observations`], made on its first call.
+struct Compaction {
+    /// [n]: 1 per observed Gaussian, then scanned in place into each one's place.
+    slots: Buffer,
+    /// [1]: n, the scan's element count read on the GPU.
+    count: Buffer,
+    scan: PrefixScan,
+    /// Host-visible: the count, then the observations ([`Observed`]).
+    out: Buffer,
+}
+
+impl Compaction {
+    fn new(gpu: &Gpu, n: usize) -> Result<Compaction> {
+        let words = OBSERVED_HEADER_WORDS as u64 + OBSERVED_WORDS as u64 * n as u64;
+        Ok(Compaction {
+            slots: gpu.buffer("observed-slots", (n.max(1) * 4) as u64)?,
+            count: gpu.buffer_from("observed-count", &[n as u32])?,
+            scan: PrefixScan::new(gpu, n as u64)?,
+            out: gpu.host_output_buffer("observed", words * 4)?,
+        })
+    }
 }
 
 /// What [`RegionFinder::find_regions`]'s reader made of its read-back.
@@ -56,6 +93,7 @@ pub struct RegionFinder<'a> {
     /// For [`RegionFinder::relabel`], made on its first call: the seeds' pixels, classes,
     /// depths and near flags ([n] each) and the decided (region, label) pairs ([2n]).
     relabel_bufs: Option<[Buffer; 5]>,
+    compaction: Option<Compaction>,
     /// Every view's uploads and downloads go through these, in the view's submissions (a
     /// cell: a submission records into them while it reads the finder's own buffers).
     staging: RefCell<Staging>,
@@ -73,6 +111,7 @@ impl<'a> RegionFinder<'a> {
             out: gpu.buffer("region-lookup", (n.max(1) * 4) as u64)?,
             n,
             relabel_bufs: None,
+            compaction: None,
             staging: RefCell::default(),
             stats: RegionStats::default(),
         })
@@ -118,6 +157,86 @@ impl<'a> RegionFinder<'a> {
         let (read_back, on_host) = found.read;
         self.stats.host_fallbacks += on_host as usize;
         Ok(read_back)
+    }
+
+    /// `read` given the view's observations, in Gaussian order: each Gaussian whose center
+    /// pixel (as `centers` holds it, [n], NO_LABEL: none) is labeled in `map` (`width`
+    /// pixels a row), with that pixel, its label and its region, as [`Observed`]. Compacted
+    /// on the GPU (a prefix scan places each one) and read where the kernel wrote them:
+    /// only the observations cross to the host, not two words for every Gaussian as from
+    /// [`RegionFinder::regions_with`]. Where the region check fails, or the map is too
+    /// large for one dispatch, found on the host from the center pixels.
+    pub fn observations<R>(
+        &mut self,
+        map: &[u32],
+        width: u32,
+        centers: &Buffer,
+        read: impl FnOnce(&[Observed]) -> R,
+    ) -> Result<R> {
+        if self.n == 0 {
+            return Ok(read(&[]));
+        }
+        if !Self::fits(map) {
+            return Ok(read(&self.observed_on_host(map, width, centers)?));
+        }
+        if self.compaction.is_none() {
+            self.compaction = Some(Compaction::new(self.gpu, self.n)?);
+        }
+        let mut params = self.view_params(map, width, centers.address_words(4)?)?;
+        let c = self.compaction.as_ref().expect("made above");
+        params.slots_addr = c.slots.address_words(4)?;
+        params.observed_addr = c.out.address_words(4)?;
+        let compact = |rec: &mut Recorder| {
+            let groups = ids::FUSE_REGION_LOOKUP.groups_for(params.n);
+            for kernel in [ids::FUSE_REGION_LOOKUP, ids::FUSE_OBSERVED_FLAG] {
+                rec.dispatch(kernel, &[], &params, groups)?;
+                rec.barrier();
+            }
+            c.scan
+                .record(rec, &c.slots, &c.slots, GpuCount::at(&c.count, 0))?;
+            rec.dispatch(ids::FUSE_OBSERVED_COMPACT, &[], &params, groups)?;
+            rec.host_barrier();
+            Ok(())
+        };
+        let uploads = [(self.labels_buffer(), map)];
+        let found = self.find_regions(&params, &uploads, compact, &[], |complete, _| complete)?;
+        self.stats.gpu_ms += found.gpu_ms;
+        if !found.read {
+            return Ok(read(&self.observed_on_host(map, width, centers)?));
+        }
+        let out = &mut self.compaction.as_mut().expect("made above").out;
+        let words: &[u32] = bytemuck::cast_slice(out.mapped());
+        let count = words[0] as usize;
+        anyhow::ensure!(
+            count <= self.n,
+            "the GPU compacted {count} observations of {} Gaussians",
+            self.n
+        );
+        let start = OBSERVED_HEADER_WORDS as usize;
+        let end = start + count * OBSERVED_WORDS as usize;
+        Ok(read(bytemuck::cast_slice(&words[start..end])))
+    }
+
+    /// [`RegionFinder::observations`] on the host: the center pixels read back, their
+    /// regions found here.
+    fn observed_on_host(
+        &mut self,
+        map: &[u32],
+        width: u32,
+        centers: &Buffer,
+    ) -> Result<Vec<Observed>> {
+        self.stats.host_fallbacks += 1;
+        let pixels: Vec<u32> = self.gpu.download(centers, 0, self.n)?;
+        let regions = regions_on_host(map, width as usize, &pixels);
+        let observed = (0..self.n)
+            .filter(|&g| regions[g] != NO_LABEL)
+            .map(|g| Observed {
+                gaussian: g as u32,
+                pixel: pixels[g],
+                label: map[pixels[g] as usize],
+                region: regions[g],
+            });
+        Ok(observed.collect())
     }
 
     /// Whether one dispatch over the pixels of `map` reaches them all (past 16.7M pixels
@@ -382,6 +501,9 @@ impl<'a> RegionFinder<'a> {
             pairs_addr: [0; 2],
             classes_addr: [0; 2],
             near_addr: [0; 2],
+            // Set by the compaction of observations.
+            slots_addr: [0; 2],
+            observed_addr: [0; 2],
             width,
             height: (map.len() / width.max(1) as usize) as u32,
             n: self.n as u32,

@@ -118,9 +118,18 @@ fn usage_for(location: MemoryLocation) -> vk::BufferUsageFlags {
 
 impl Gpu {
     fn create_buffer(&self, name: &str, size: u64, location: MemoryLocation) -> GpuResult<Buffer> {
+        self.create_buffer_for(name, size, location, usage_for(location))
+    }
+
+    fn create_buffer_for(
+        &self,
+        name: &str,
+        size: u64,
+        location: MemoryLocation,
+        usage: vk::BufferUsageFlags,
+    ) -> GpuResult<Buffer> {
         // Vulkan forbids empty buffers; a 4-byte one keeps n = 0 cases uniform.
         let size = size.max(4);
-        let usage = usage_for(location);
         let info = vk::BufferCreateInfo::default()
             .size(size)
             .usage(usage)
@@ -236,6 +245,18 @@ impl Gpu {
     /// A host-readable buffer that GPU copies write into ([`Buffer::read_mapped`]).
     pub fn readback_buffer(&self, size: u64) -> GpuResult<Buffer> {
         self.create_buffer("readback", size, MemoryLocation::GpuToCpu)
+    }
+
+    /// A host-readable buffer that kernels write by address ([`Buffer::address_words`]),
+    /// read on the host after the fence ([`Recorder::host_barrier`]) with no copy: for an
+    /// output whose size only the GPU knows (a view's compacted observations), which a
+    /// copy recorded beforehand would have to take whole. Cached system memory, as
+    /// [`Gpu::readback_buffer`].
+    pub fn host_output_buffer(&self, name: &str, size: u64) -> GpuResult<Buffer> {
+        let usage = vk::BufferUsageFlags::STORAGE_BUFFER
+            | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS
+            | vk::BufferUsageFlags::TRANSFER_DST;
+        self.create_buffer_for(name, size, MemoryLocation::GpuToCpu, usage)
     }
 
     /// Copies `data` into `dst` at byte `offset` through a fresh staging buffer, and waits.

@@ -355,16 +355,16 @@ impl Recorder {
         }
     }
 
-    /// Makes transfer writes visible to the host after the fence.
-    pub(crate) fn host_barrier(&mut self) {
+    /// Makes transfer and shader writes visible to the host after the fence.
+    pub fn host_barrier(&mut self) {
         let mb = vk::MemoryBarrier::default()
-            .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+            .src_access_mask(vk::AccessFlags::TRANSFER_WRITE | vk::AccessFlags::SHADER_WRITE)
             .dst_access_mask(vk::AccessFlags::HOST_READ);
         // SAFETY: recording into our command buffer.
         unsafe {
             self.gpu.device().cmd_pipeline_barrier(
                 self.parts.cmd,
-                vk::PipelineStageFlags::TRANSFER,
+                vk::PipelineStageFlags::TRANSFER | vk::PipelineStageFlags::COMPUTE_SHADER,
                 vk::PipelineStageFlags::HOST,
                 vk::DependencyFlags::empty(),
                 &[mb],
