@@ -187,14 +187,14 @@ impl<'a> RegionFinder<'a> {
         params.slots_addr = c.slots.address_words(4)?;
         params.observed_addr = c.out.address_words(4)?;
         let compact = |rec: &mut Recorder| {
-            let groups = ids::FUSE_REGION_LOOKUP.groups_for(params.n);
             for kernel in [ids::FUSE_REGION_LOOKUP, ids::FUSE_OBSERVED_FLAG] {
-                rec.dispatch(kernel, &[], &params, groups)?;
+                rec.dispatch(kernel, &[], &params, kernel.groups_for(params.n))?;
                 rec.barrier();
             }
             c.scan
                 .record(rec, &c.slots, &c.slots, GpuCount::at(&c.count, 0))?;
-            rec.dispatch(ids::FUSE_OBSERVED_COMPACT, &[], &params, groups)?;
+            let scatter = ids::FUSE_OBSERVED_COMPACT;
+            rec.dispatch(scatter, &[], &params, scatter.groups_for(params.n))?;
             rec.host_barrier();
             Ok(())
         };
