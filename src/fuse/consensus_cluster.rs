@@ -28,7 +28,7 @@ use serde::Serialize;
 
 use super::consensus_adjacent::Adjacent;
 use super::consensus_decide::ConsensusParams;
-use super::consensus_segments::{co_occurrence, find, union, Observations};
+use super::consensus_segments::{co_occurrence, find, group_by_key, union, Observations};
 use crate::contract::NO_NEIGHBOUR;
 use crate::util::parallel_map;
 use crate::util::quad_heap::QuadHeap;
@@ -562,26 +562,11 @@ fn piece_regions(obs: &Observations, piece: &[u32]) -> Vec<RegionCounts> {
     const BLOCK: usize = 1024;
     let n = obs.n;
     let mut regions = vec![RegionCounts::default(); n];
-    // Members by piece: a counting sort (pieces are named by their lowest member).
-    let mut start = vec![0usize; n + 1];
-    for &s in piece {
-        start[s as usize + 1] += 1;
-    }
+    // Pieces are named by their lowest member.
+    let (start, members) = group_by_key(piece, n);
     let pieces: Vec<u32> = (0..n as u32)
-        .filter(|&s| start[s as usize + 1] > 1)
+        .filter(|&s| start[s as usize + 1] - start[s as usize] > 1)
         .collect();
-    if pieces.is_empty() {
-        return regions;
-    }
-    for s in 0..n {
-        start[s + 1] += start[s];
-    }
-    let mut members = vec![0u32; n];
-    let mut next = start.clone();
-    for (g, &s) in piece.iter().enumerate() {
-        members[next[s as usize]] = g as u32;
-        next[s as usize] += 1;
-    }
     let built = parallel_map(pieces.len().div_ceil(BLOCK), |b| {
         pieces[b * BLOCK..pieces.len().min((b + 1) * BLOCK)]
             .iter()

@@ -12,7 +12,7 @@ use serde::Serialize;
 use super::assign::Assignment;
 use super::consensus_confusion::{decide_near_ties, ConfusionRates};
 use super::consensus_relabel::RelabelRule;
-use super::consensus_segments::Observations;
+use super::consensus_segments::{group_by_key, Observations};
 use super::scores::SharedCounts;
 use crate::contract::NO_NEIGHBOUR;
 use crate::util::parallel_map;
@@ -212,23 +212,28 @@ fn decisive_argmax(votes: &[f64], mass: &[f64]) -> Option<usize> {
 }
 
 /// Per segment: the views' votes (each view once) and the raw observation counts, and how
-/// many views observed it. Each segment's observations are gathered (a counting sort by
-/// segment) and sorted on their own, on every core: one sort of all (segment, view, label)
-/// took most of the decision's time on a million Gaussians.
+/// many views observed it. Each segment's observations are gathered from its members' rows
+/// as keys `view << 32 | label` and sorted on their own, on every core: one sort of all
+/// (segment, view, label) took most of the decision's time on a million Gaussians, and
+/// gathering every observation into its segment's place on one thread was a serial pass
+/// over tens of millions.
 fn segment_votes(
     obs: &Observations,
     segment: &[u32],
     segments: usize,
     classes: usize,
 ) -> (Vec<Vec<f64>>, Vec<Vec<f64>>, Vec<usize>) {
-    let (starts, keys) = keys_by_segment(obs, segment, segments);
+    let (starts, members) = group_by_key(&segment[..segment.len().min(obs.n)], segments);
     const BLOCK: usize = 1024;
     let blocks = parallel_map(segments.div_ceil(BLOCK), |b| {
         let mut sorted = Vec::new();
         (b * BLOCK..segments.min((b + 1) * BLOCK))
             .map(|s| {
                 sorted.clear();
-                sorted.extend_from_slice(&keys[starts[s]..starts[s + 1]]);
+                for &g in &members[starts[s]..starts[s + 1]] {
+                    let row = obs.row(g as usize);
+                    sorted.extend(row.map(|i| (obs.view[i] as u64) << 32 | obs.label[i] as u64));
+                }
                 sorted.sort_unstable();
                 votes_of(&sorted, classes)
             })
@@ -241,27 +246,6 @@ fn segment_votes(
         views.push(v);
     }
     (split, mass, views)
-}
-
-/// Every observation as a key `view << 32 | label`, grouped by segment: segment s holds
-/// `keys[starts[s]..starts[s + 1]]`.
-fn keys_by_segment(obs: &Observations, segment: &[u32], segments: usize) -> (Vec<usize>, Vec<u64>) {
-    let mut starts = vec![0usize; segments + 1];
-    for (g, &s) in segment.iter().enumerate().take(obs.n) {
-        starts[s as usize + 1] += obs.row(g).len();
-    }
-    for s in 0..segments {
-        starts[s + 1] += starts[s];
-    }
-    let mut next = starts.clone();
-    let mut keys = vec![0u64; starts[segments]];
-    for (g, &s) in segment.iter().enumerate().take(obs.n) {
-        for i in obs.row(g) {
-            keys[next[s as usize]] = (obs.view[i] as u64) << 32 | obs.label[i] as u64;
-            next[s as usize] += 1;
-        }
-    }
-    (starts, keys)
 }
 
 /// One segment's votes from its observation keys sorted (by view, then label): every view

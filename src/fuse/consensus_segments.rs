@@ -186,6 +186,26 @@ pub fn four_neighbours(p: usize, width: usize, pixels: usize) -> impl Iterator<I
     .flatten()
 }
 
+/// Indices grouped by their key (each below `keys`), in index order within a group: group
+/// `k` is `members[starts[k]..starts[k + 1]]` (a counting sort; Gaussians by segment or by
+/// piece).
+pub(crate) fn group_by_key(key: &[u32], keys: usize) -> (Vec<usize>, Vec<u32>) {
+    let mut starts = vec![0usize; keys + 1];
+    for &k in key {
+        starts[k as usize + 1] += 1;
+    }
+    for k in 0..keys {
+        starts[k + 1] += starts[k];
+    }
+    let mut members = vec![0u32; key.len()];
+    let mut next = starts.clone();
+    for (i, &k) in key.iter().enumerate() {
+        members[next[k as usize]] = i as u32;
+        next[k as usize] += 1;
+    }
+    (starts, members)
+}
+
 pub(crate) fn find(parent: &mut [u32], mut x: u32) -> u32 {
     while parent[x as usize] != x {
         let up = parent[parent[x as usize] as usize];
