@@ -2,8 +2,8 @@
 // Each observation of the view written at its place in Gaussian order (slots: the exclusive
 // prefix sum of observed_flag) as (Gaussian, center pixel, label, region id with
 // REGION_EDGE_BIT), after OBSERVED_HEADER_WORDS whose first the last Gaussian sets to the
-// count. The output is host-visible memory: the host reads the observations alone (about a
-// sixth of the Gaussians at 1080p) instead of two words for every Gaussian of the scene.
+// count. The output is host-visible memory: the host reads the observations alone (about
+// one Gaussian in eight per view at 1080p) instead of two words for every Gaussian.
 // One invocation per Gaussian.
 
 layout(local_size_x = 256) in;

@@ -28,7 +28,7 @@ use serde::Serialize;
 
 use super::consensus_adjacent::Adjacent;
 use super::consensus_decide::ConsensusParams;
-use super::consensus_segments::{co_occurrence, find, group_by_key, union, Observations};
+use super::consensus_segments::{co_occurrence, find, union, Groups, Observations};
 use crate::contract::NO_NEIGHBOUR;
 use crate::util::parallel_map;
 use crate::util::quad_heap::QuadHeap;
@@ -563,16 +563,14 @@ fn piece_regions(obs: &Observations, piece: &[u32]) -> Vec<RegionCounts> {
     let n = obs.n;
     let mut regions = vec![RegionCounts::default(); n];
     // Pieces are named by their lowest member.
-    let (start, members) = group_by_key(piece, n);
+    let members = Groups::by_key(piece, n);
     let pieces: Vec<u32> = (0..n as u32)
-        .filter(|&s| start[s as usize + 1] - start[s as usize] > 1)
+        .filter(|&s| members.group(s as usize).len() > 1)
         .collect();
     let built = parallel_map(pieces.len().div_ceil(BLOCK), |b| {
         pieces[b * BLOCK..pieces.len().min((b + 1) * BLOCK)]
             .iter()
-            .map(|&s| {
-                RegionCounts::of_gaussians(obs, &members[start[s as usize]..start[s as usize + 1]])
-            })
+            .map(|&s| RegionCounts::of_gaussians(obs, members.group(s as usize)))
             .collect::<Vec<_>>()
     });
     for (&s, counts) in pieces.iter().zip(built.into_iter().flatten()) {

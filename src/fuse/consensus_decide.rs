@@ -12,7 +12,7 @@ use serde::Serialize;
 use super::assign::Assignment;
 use super::consensus_confusion::{decide_near_ties, ConfusionRates};
 use super::consensus_relabel::RelabelRule;
-use super::consensus_segments::{group_by_key, Observations};
+use super::consensus_segments::{Groups, Observations};
 use super::scores::SharedCounts;
 use crate::contract::NO_NEIGHBOUR;
 use crate::util::parallel_map;
@@ -223,14 +223,14 @@ fn segment_votes(
     segments: usize,
     classes: usize,
 ) -> (Vec<Vec<f64>>, Vec<Vec<f64>>, Vec<usize>) {
-    let (starts, members) = group_by_key(&segment[..segment.len().min(obs.n)], segments);
+    let members = Groups::by_key(&segment[..segment.len().min(obs.n)], segments);
     const BLOCK: usize = 1024;
     let blocks = parallel_map(segments.div_ceil(BLOCK), |b| {
         let mut sorted = Vec::new();
         (b * BLOCK..segments.min((b + 1) * BLOCK))
             .map(|s| {
                 sorted.clear();
-                for &g in &members[starts[s]..starts[s + 1]] {
+                for &g in members.group(s) {
                     let row = obs.row(g as usize);
                     sorted.extend(row.map(|i| (obs.view[i] as u64) << 32 | obs.label[i] as u64));
                 }

@@ -186,24 +186,38 @@ pub fn four_neighbours(p: usize, width: usize, pixels: usize) -> impl Iterator<I
     .flatten()
 }
 
-/// Indices grouped by their key (each below `keys`), in index order within a group: group
-/// `k` is `members[starts[k]..starts[k + 1]]` (a counting sort; Gaussians by segment or by
-/// piece).
-pub(crate) fn group_by_key(key: &[u32], keys: usize) -> (Vec<usize>, Vec<u32>) {
-    let mut starts = vec![0usize; keys + 1];
-    for &k in key {
-        starts[k as usize + 1] += 1;
+/// Indices grouped by their key, in index order within a group (a counting sort): the
+/// Gaussians of each segment, piece or grid cell.
+#[derive(Default)]
+pub(crate) struct Groups {
+    /// Group `k` is `members[starts[k]..starts[k + 1]]`.
+    starts: Vec<u32>,
+    members: Vec<u32>,
+}
+
+impl Groups {
+    /// The indices `0..key.len()` grouped by `key[i]`, each below `keys`.
+    pub(crate) fn by_key(key: &[u32], keys: usize) -> Groups {
+        let mut starts = vec![0u32; keys + 1];
+        for &k in key {
+            starts[k as usize + 1] += 1;
+        }
+        for k in 0..keys {
+            starts[k + 1] += starts[k];
+        }
+        let mut members = vec![0u32; key.len()];
+        let mut next = starts.clone();
+        for (i, &k) in key.iter().enumerate() {
+            members[next[k as usize] as usize] = i as u32;
+            next[k as usize] += 1;
+        }
+        Groups { starts, members }
     }
-    for k in 0..keys {
-        starts[k + 1] += starts[k];
+
+    /// The indices of key `k`.
+    pub(crate) fn group(&self, k: usize) -> &[u32] {
+        &self.members[self.starts[k] as usize..self.starts[k + 1] as usize]
     }
-    let mut members = vec![0u32; key.len()];
-    let mut next = starts.clone();
-    for (i, &k) in key.iter().enumerate() {
-        members[next[k as usize]] = i as u32;
-        next[k as usize] += 1;
-    }
-    (starts, members)
 }
 
 pub(crate) fn find(parent: &mut [u32], mut x: u32) -> u32 {
@@ -260,9 +274,8 @@ struct Grid {
     origin: [f64; 3],
     cell: f64,
     dims: [i64; 3],
-    /// Gaussians sorted by cell; cell c holds `members[starts[c]..starts[c + 1]]`.
-    starts: Vec<u32>,
-    members: Vec<u32>,
+    /// The Gaussians of each cell.
+    cells: Groups,
 }
 
 impl Grid {
@@ -300,25 +313,13 @@ impl Grid {
             origin: lo,
             cell,
             dims,
-            starts: Vec::new(),
-            members: Vec::new(),
+            cells: Groups::default(),
         };
-        let cells: Vec<usize> = means.iter().map(|&m| grid.index(grid.cell_of(m))).collect();
-        let total = (dims[0] * dims[1] * dims[2]) as usize;
-        let mut starts = vec![0u32; total + 1];
-        for &c in &cells {
-            starts[c + 1] += 1;
-        }
-        for c in 0..total {
-            starts[c + 1] += starts[c];
-        }
-        let mut next = starts.clone();
-        let mut members = vec![0u32; means.len()];
-        for (g, &c) in cells.iter().enumerate() {
-            members[next[c] as usize] = g as u32;
-            next[c] += 1;
-        }
-        (grid.starts, grid.members) = (starts, members);
+        let cells: Vec<u32> = means
+            .iter()
+            .map(|&m| grid.index(grid.cell_of(m)) as u32)
+            .collect();
+        grid.cells = Groups::by_key(&cells, (dims[0] * dims[1] * dims[2]) as usize);
         grid
     }
 
@@ -373,7 +374,7 @@ impl Grid {
                         continue;
                     }
                     let i = self.index(c);
-                    for &g in &self.members[self.starts[i] as usize..self.starts[i + 1] as usize] {
+                    for &g in self.cells.group(i) {
                         f(g);
                     }
                 }

@@ -117,55 +117,13 @@ impl<'a> RegionFinder<'a> {
         })
     }
 
-    /// `read` given, per Gaussian, its center pixel as `centers` holds it ([n], NO_LABEL:
-    /// none) and the region id of that pixel in the view labeled `map` (`width` pixels a
-    /// row), with [`REGION_EDGE_BIT`] set where the pixel is on the region's edge; NO_LABEL
-    /// where there is no pixel or it is unlabeled. Both come back in one transfer and are
-    /// read where it left them (two words for each Gaussian of the scene, view after view:
-    /// not copied first).
-    pub fn regions_with<R>(
-        &mut self,
-        map: &[u32],
-        width: u32,
-        centers: &Buffer,
-        read: impl FnOnce(&[u32], &[u32]) -> R,
-    ) -> Result<R> {
-        if !Self::fits(map) {
-            return self.read_on_host(map, width, centers, read);
-        }
-        let params = self.view_params(map, width, centers.address_words(4)?)?;
-        let lookup = |rec: &mut Recorder| {
-            let groups = ids::FUSE_REGION_LOOKUP.groups_for(params.n);
-            rec.dispatch(ids::FUSE_REGION_LOOKUP, &[], &params, groups)
-        };
-        let bytes = (self.n * 4) as u64;
-        let uploads = [(self.labels_buffer(), map)];
-        let downloads = [(centers, bytes), (&self.out, bytes)];
-        // Read in place; where the check failed, the regions are found on the host from
-        // the center pixels already read back.
-        let found =
-            self.find_regions(&params, &uploads, lookup, &downloads, |complete, words| {
-                match complete {
-                    true => (read(words[0], words[1]), false),
-                    false => {
-                        let regions = regions_on_host(map, width as usize, words[0]);
-                        (read(words[0], &regions), true)
-                    }
-                }
-            })?;
-        self.stats.gpu_ms += found.gpu_ms;
-        let (read_back, on_host) = found.read;
-        self.stats.host_fallbacks += on_host as usize;
-        Ok(read_back)
-    }
-
     /// `read` given the view's observations, in Gaussian order: each Gaussian whose center
     /// pixel (as `centers` holds it, [n], NO_LABEL: none) is labeled in `map` (`width`
     /// pixels a row), with that pixel, its label and its region, as [`Observed`]. Compacted
     /// on the GPU (a prefix scan places each one) and read where the kernel wrote them:
-    /// only the observations cross to the host, not two words for every Gaussian as from
-    /// [`RegionFinder::regions_with`]. Where the region check fails, or the map is too
-    /// large for one dispatch, found on the host from the center pixels.
+    /// only the observations cross to the host, not two words for every Gaussian of the
+    /// scene. Where the region check fails, or the map is too large for one dispatch, found
+    /// on the host from the center pixels.
     pub fn observations<R>(
         &mut self,
         map: &[u32],
@@ -462,21 +420,6 @@ impl<'a> RegionFinder<'a> {
         staging.record_downloads(self.gpu, &mut rec, &[(&self.status, 4)])?;
         rec.submit_and_wait()?;
         Ok(staging.read::<u32>()[0][0] == 0)
-    }
-
-    /// [`RegionFinder::regions_with`] on the host, for a label map the GPU path does not fit:
-    /// the center pixels read back, their regions found here.
-    fn read_on_host<R>(
-        &mut self,
-        map: &[u32],
-        width: u32,
-        centers: &Buffer,
-        read: impl FnOnce(&[u32], &[u32]) -> R,
-    ) -> Result<R> {
-        self.stats.host_fallbacks += 1;
-        let pixels: Vec<u32> = self.gpu.download(centers, 0, self.n)?;
-        let regions = regions_on_host(map, width as usize, &pixels);
-        Ok(read(&pixels, &regions))
     }
 
     /// The kernels' parameters for a view labeled `map` (buffers grown to fit; the labels

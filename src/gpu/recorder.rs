@@ -356,7 +356,7 @@ impl Recorder {
     }
 
     /// Makes transfer and shader writes visible to the host after the fence.
-    pub fn host_barrier(&mut self) {
+    pub(crate) fn host_barrier(&mut self) {
         let mb = vk::MemoryBarrier::default()
             .src_access_mask(vk::AccessFlags::TRANSFER_WRITE | vk::AccessFlags::SHADER_WRITE)
             .dst_access_mask(vk::AccessFlags::HOST_READ);
