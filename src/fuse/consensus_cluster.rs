@@ -215,8 +215,9 @@ fn counts_sorted(obs: &Observations, members: &[u32]) -> Vec<(u32, u32, u32)> {
 /// of outright joins lies in one region of nearly every view that sees it, so each
 /// observation is a search of a list of one or two, where sorting a wall's millions of
 /// observations on one core took most of the pieces' time (0.56-0.81 of 0.65-0.93 s on a
-/// noisy 1080p office, docs/robustness.md).
-fn counts_by_view(obs: &Observations, members: &[u32]) -> Vec<(u32, u32, u32)> {
+/// noisy 1080p office, docs/robustness.md). A segment's counts too, where the flags are
+/// tested (src/fuse/consensus_flags.rs): a segment lies in a region or two of each view.
+pub(crate) fn counts_by_view(obs: &Observations, members: &[u32]) -> Vec<(u32, u32, u32)> {
     let mut per_view: Vec<Vec<(u32, u32)>> = Vec::new();
     for &g in members {
         for i in obs.row(g as usize) {
@@ -538,18 +539,28 @@ fn neighbour_pairs(obs: &Observations, knn: &[u32], k: usize) -> Vec<(u32, u32, 
 }
 
 /// Each Gaussian's piece (its lowest Gaussian) after the outright joins: neighbour pairs
-/// that at least `min_views` views saw, every one of them in one region with neither center
-/// on its edge ([`ConsensusParams::premerge_views`]; 0: every Gaussian alone). Such a pair
-/// would pass every test of [`may_join`] as two single Gaussians, and most of an object's
-/// interior is such pairs; the ordered joins, one at a time, are left the rest.
+/// that at least `premerge_views` views saw, every one of them in one region with neither
+/// center on its edge, those views being at least `premerge_common_share` of the views that
+/// saw either Gaussian ([`ConsensusParams::premerge_views`]; 0: every Gaussian alone). Such
+/// a pair would pass every test of [`may_join`] as two single Gaussians, and most of an
+/// object's interior is such pairs; the ordered joins, one at a time, are left the rest.
 /// Union-find under the lowest index, so the pieces do not depend on the pairs' order.
-fn premerge(n: usize, pairs: &[(u32, u32, PairEvidence)], min_views: u32) -> Vec<u32> {
+fn premerge(
+    obs: &Observations,
+    pairs: &[(u32, u32, PairEvidence)],
+    p: &ConsensusParams,
+) -> Vec<u32> {
+    let n = obs.n;
     let mut parent: Vec<u32> = (0..n as u32).collect();
-    if min_views == 0 {
+    if p.premerge_views == 0 {
         return parent;
     }
+    let seen_by = |g: u32| obs.row(g as usize).len() as f64;
     for &(g, h, e) in pairs {
-        if e.together >= min_views && e.apart == 0 && e.on_edge == 0 {
+        let unanimous = e.together >= p.premerge_views && e.apart == 0 && e.on_edge == 0;
+        // Views that saw either: each Gaussian's, less the `together` that saw both.
+        let either = seen_by(g) + seen_by(h) - e.together as f64;
+        if unanimous && e.together as f64 >= p.premerge_common_share * either {
             union(&mut parent, g, h);
         }
     }
@@ -598,7 +609,7 @@ impl<'a> SegmentGraph<'a> {
         p: &ConsensusParams,
     ) -> SegmentGraph<'a> {
         let n = obs.n;
-        let piece = premerge(n, &pairs, p.premerge_views);
+        let piece = premerge(obs, &pairs, p);
         let between =
             |&(g, h, _): &(u32, u32, PairEvidence)| piece[g as usize] != piece[h as usize];
         let mut degree = vec![0usize; n];

@@ -11,6 +11,7 @@ use serde::Serialize;
 
 use super::assign::Assignment;
 use super::consensus_confusion::{decide_near_ties, ConfusionRates};
+use super::consensus_flags::unflag_slivers;
 use super::consensus_relabel::RelabelRule;
 use super::consensus_segments::{Groups, Observations};
 use super::scores::SharedCounts;
@@ -36,6 +37,11 @@ pub struct ConsensusParams {
     /// fewer than 6: from 4, a few pairs across a ceiling's edge, seen only by views that
     /// flicker had labeled the ceiling as wall, joined the two (docs/robustness.md).
     pub premerge_views: u32,
+    /// ...and those views are at least this share of the views that saw either of the two:
+    /// where most views see only one, the views that could have told them apart did not see
+    /// both (a rug seen by 8 views and the floor beside it by 7, both only in the 6 that
+    /// labeled the rug floor, joined the rug to the floor).
+    pub premerge_common_share: f64,
     /// Two segments join only where the views put the neighbour pairs between them in the
     /// same region this many times (summed over the pairs)...
     pub min_together: u32,
@@ -106,8 +112,14 @@ pub struct ConsensusParams {
     /// noise does to a wall's strip beside a shelf; a consistently mislabeled object seen
     /// by twenty views has ten or more against it...
     pub flag_min_dissent: f64,
-    /// ...and it has at least this many Gaussians.
+    /// ...and it has at least this many Gaussians...
     pub flag_min_gaussians: usize,
+    /// ...and it is what its views show, not a sliver of it: it holds at least this share of
+    /// the observations of the region it lies in...
+    pub flag_region_share: f64,
+    /// ...in at least this many of its views (a strip of wall behind a shelf is a sliver of
+    /// the shelf's region in the views that put it there; src/fuse/consensus_flags.rs).
+    pub flag_region_views: usize,
     /// `--relabel`: how a view's label regions take the consensus classes.
     pub relabel: RelabelRule,
 }
@@ -118,6 +130,7 @@ impl Default for ConsensusParams {
             occlusion: true,
             neighbours: 8,
             premerge_views: 6,
+            premerge_common_share: 0.75,
             min_together: 2,
             max_apart_share: 0.1,
             min_together_share: 0.5,
@@ -138,6 +151,8 @@ impl Default for ConsensusParams {
             flag_share: 0.25,
             flag_min_dissent: 5.0,
             flag_min_gaussians: 20,
+            flag_region_share: 0.25,
+            flag_region_views: 5,
             relabel: RelabelRule {
                 min_share: 0.85,
                 depth: 3,
@@ -311,6 +326,7 @@ pub fn decide(
         .map(|(s, (split, mass))| segment_summary(split, &mass, sizes[s], views[s], p))
         .collect();
     let confusions = decide_near_ties(&mut segments, classes, p);
+    unflag_slivers(obs, &segment, &mut segments, p);
     let n = obs.n;
     let mut class = vec![None; n];
     let (mut from_segment, mut from_neighbour_segments) = (0, 0);

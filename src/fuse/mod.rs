@@ -9,6 +9,7 @@ pub mod consensus_adjacent;
 pub mod consensus_cluster;
 pub mod consensus_confusion;
 pub mod consensus_decide;
+pub mod consensus_flags;
 pub mod consensus_observe;
 pub mod consensus_relabel;
 pub mod consensus_report;
