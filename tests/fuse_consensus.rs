@@ -1017,20 +1017,18 @@ fn an_edge_seen_only_in_relabeled_views_does_not_join_two_objects() {
 }
 
 /// Two objects side by side, seen by ten views, six of which give both one class (one
-/// region). The columns along their shared edge are each seen in two of the other four
-/// views, never together: every view that saw an edge pair put it in one region, six of
-/// them, enough to join outright, but they are six of the ten views that saw either
-/// Gaussian. Joined outright, the pair would join the two objects (a rug to the floor on
-/// the consistent-mislabel sweep); left to the ordered joins, the objects are tested whole
-/// and stay apart (their regions differ in four views).
-#[test]
-fn a_pair_most_views_see_only_one_of_is_not_joined_outright() {
-    let means = objects_in_a_row(2, 1.0);
+/// region). The columns along their shared edge are each seen alone in `alone` of the other
+/// four views (object 0's from view 6 on, object 1's from view 8 on), never together: every
+/// view that saw an edge pair put it in one region, six of them, enough to join outright.
+fn objects_seen_apart_only_alone(alone: u32) -> Observations {
     let edge_column = |g: usize| (g < 60 && g % 10 == 9) || (g >= 60 && g % 10 == 0);
     let per_view: Vec<Vec<(u32, u32, u32, bool)>> = (0..10u32)
         .map(|v| {
             let merged = v < 6;
-            let sees = |g: usize| merged || !edge_column(g) || (g < 60) == (v < 8);
+            let sees = |g: usize| {
+                let first = if g < 60 { 6 } else { 8 };
+                merged || !edge_column(g) || (first..first + alone).contains(&v)
+            };
             (0..120)
                 .filter(|&g| sees(g))
                 .map(|g| {
@@ -1041,16 +1039,28 @@ fn a_pair_most_views_see_only_one_of_is_not_joined_outright() {
                 .collect()
         })
         .collect();
-    let obs = Observations::from_views(120, &per_view);
+    Observations::from_views(120, &per_view)
+}
+
+/// [`objects_seen_apart_only_alone`]: seen alone in two views each, the edge pairs' six
+/// views are six of the ten that saw either Gaussian. Joined outright, such a pair would
+/// join the two objects (a rug to the floor on the consistent-mislabel sweep); left to the
+/// ordered joins, the objects are tested whole and stay apart (their regions differ in four
+/// views). Seen alone in one view each, six of eight: exactly the share, joined outright.
+#[test]
+fn a_pair_most_views_see_only_one_of_is_not_joined_outright() {
+    let means = objects_in_a_row(2, 1.0);
     let p = ConsensusParams::default();
+    assert_eq!(p.premerge_common_share, 0.75);
+    let knn = nearest_neighbours(&means, p.neighbours);
+    assert!(knn[9 * p.neighbours..10 * p.neighbours].contains(&60));
+    let obs = objects_seen_apart_only_alone(2);
     let edge_pair = co_occurrence(&obs, 9, 60);
     assert_eq!((edge_pair.together, edge_pair.apart), (6, 0));
     assert!(
         edge_pair.together >= p.premerge_views,
         "unanimous and seen enough"
     );
-    let knn = nearest_neighbours(&means, p.neighbours);
-    assert!(knn[9 * p.neighbours..10 * p.neighbours].contains(&60));
     assert_two_objects(
         &cluster_segments(&obs, &knn, &p),
         "joined outright through the edge pairs",
@@ -1064,6 +1074,8 @@ fn a_pair_most_views_see_only_one_of_is_not_joined_outright() {
         segment[0], segment[60],
         "without the share, the pair joins them"
     );
+    let segment = cluster_segments(&objects_seen_apart_only_alone(1), &knn, &p);
+    assert_eq!(segment[0], segment[60], "six of eight views is the share");
 }
 
 /// `binomial_at_most` against the sum of the probabilities written out with factorials.

@@ -199,8 +199,9 @@ impl RegionCounts {
 const COUNT_BY_VIEW_FROM: usize = 4096;
 
 /// (view, region, observations) of `members`, sorted: every observation sorted, then
-/// counted in runs. For small pieces (most), where a list per view would cost more.
-fn counts_sorted(obs: &Observations, members: &[u32]) -> Vec<(u32, u32, u32)> {
+/// counted in runs. For small pieces (most), where a list per view would cost more, and for
+/// flagged segments (src/fuse/consensus_flags.rs), which may lie in many regions of a view.
+pub(crate) fn counts_sorted(obs: &Observations, members: &[u32]) -> Vec<(u32, u32, u32)> {
     let rows = members.iter().map(|&g| obs.row(g as usize));
     let mut seen: Vec<(u32, u32)> = rows
         .flat_map(|row| row.map(|i| (obs.view[i], obs.region[i])))
@@ -215,9 +216,8 @@ fn counts_sorted(obs: &Observations, members: &[u32]) -> Vec<(u32, u32, u32)> {
 /// of outright joins lies in one region of nearly every view that sees it, so each
 /// observation is a search of a list of one or two, where sorting a wall's millions of
 /// observations on one core took most of the pieces' time (0.56-0.81 of 0.65-0.93 s on a
-/// noisy 1080p office, docs/robustness.md). A segment's counts too, where the flags are
-/// tested (src/fuse/consensus_flags.rs): a segment lies in a region or two of each view.
-pub(crate) fn counts_by_view(obs: &Observations, members: &[u32]) -> Vec<(u32, u32, u32)> {
+/// noisy 1080p office, docs/robustness.md).
+fn counts_by_view(obs: &Observations, members: &[u32]) -> Vec<(u32, u32, u32)> {
     let mut per_view: Vec<Vec<(u32, u32)>> = Vec::new();
     for &g in members {
         for i in obs.row(g as usize) {

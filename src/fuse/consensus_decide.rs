@@ -3,7 +3,8 @@
 //! confusions: src/fuse/consensus_confusion.rs), each Gaussian's class from its
 //! segment (in a small segment its neighbours' segments, else its own views, as where its
 //! own views contradict its segment; its neighbours' classes where no view observed it), a
-//! posterior per Gaussian, and the segments whose vote split is close (flagged).
+//! posterior per Gaussian, and the segments whose vote split is close (flagged, where they
+//! are objects in their views rather than slivers at an edge: src/fuse/consensus_flags.rs).
 
 use std::sync::Arc;
 
@@ -38,9 +39,10 @@ pub struct ConsensusParams {
     /// flicker had labeled the ceiling as wall, joined the two (docs/robustness.md).
     pub premerge_views: u32,
     /// ...and those views are at least this share of the views that saw either of the two:
-    /// where most views see only one, the views that could have told them apart did not see
-    /// both (a rug seen by 8 views and the floor beside it by 7, both only in the 6 that
-    /// labeled the rug floor, joined the rug to the floor).
+    /// where more than a quarter of them saw only one, the views that could have told the
+    /// two apart may not have seen both (a rug Gaussian seen by 8 views and a floor one
+    /// beside it by 7, both by only the 6 that labeled the rug floor, joined the rug to the
+    /// floor).
     pub premerge_common_share: f64,
     /// Two segments join only where the views put the neighbour pairs between them in the
     /// same region this many times (summed over the pairs)...
@@ -234,11 +236,10 @@ fn decisive_argmax(votes: &[f64], mass: &[f64]) -> Option<usize> {
 /// over tens of millions.
 fn segment_votes(
     obs: &Observations,
-    segment: &[u32],
+    members: &Groups,
     segments: usize,
     classes: usize,
 ) -> (Vec<Vec<f64>>, Vec<Vec<f64>>, Vec<usize>) {
-    let members = Groups::by_key(&segment[..segment.len().min(obs.n)], segments);
     const BLOCK: usize = 1024;
     let blocks = parallel_map(segments.div_ceil(BLOCK), |b| {
         let mut sorted = Vec::new();
@@ -315,7 +316,9 @@ pub fn decide(
     p: &ConsensusParams,
 ) -> Consensus {
     let count = segment.iter().map(|&s| s as usize + 1).max().unwrap_or(0);
-    let (split, mass, views) = segment_votes(obs, &segment, count, classes);
+    // Each segment's Gaussians, for its votes and, if flagged, its regions.
+    let members = Groups::by_key(&segment[..segment.len().min(obs.n)], count);
+    let (split, mass, views) = segment_votes(obs, &members, count, classes);
     let mut sizes = vec![0usize; count];
     for &s in &segment {
         sizes[s as usize] += 1;
@@ -326,7 +329,7 @@ pub fn decide(
         .map(|(s, (split, mass))| segment_summary(split, &mass, sizes[s], views[s], p))
         .collect();
     let confusions = decide_near_ties(&mut segments, classes, p);
-    unflag_slivers(obs, &segment, &mut segments, p);
+    unflag_slivers(obs, &members, &mut segments, p);
     let n = obs.n;
     let mut class = vec![None; n];
     let (mut from_segment, mut from_neighbour_segments) = (0, 0);

@@ -10,7 +10,7 @@
 //! views that call it by its own class (docs/robustness.md, "Flags on objects, not on
 //! slivers").
 
-use super::consensus_cluster::counts_by_view;
+use super::consensus_cluster::counts_sorted;
 use super::consensus_decide::{ConsensusParams, SegmentVotes};
 use super::consensus_segments::{Groups, Observations};
 use crate::util::parallel_map;
@@ -21,9 +21,10 @@ type Placement = (u32, u32, u32);
 /// Clears the flag of every flagged segment that holds at least `flag_region_share` of the
 /// observations of its region in fewer than `flag_region_views` of its views (its region in
 /// a view: the one holding most of its observations there).
+/// `members`: each segment's Gaussians.
 pub(crate) fn unflag_slivers(
     obs: &Observations,
-    segment: &[u32],
+    members: &Groups,
     segments: &mut [SegmentVotes],
     p: &ConsensusParams,
 ) {
@@ -33,7 +34,7 @@ pub(crate) fn unflag_slivers(
     if flagged.is_empty() {
         return;
     }
-    let placements = dominant_regions(obs, segment, segments.len(), &flagged);
+    let placements = dominant_regions(obs, members, &flagged);
     let totals = region_totals(obs, &placements);
     for ((&s, placed), total) in flagged.iter().zip(&placements).zip(&totals) {
         let as_object = placed
@@ -49,16 +50,15 @@ pub(crate) fn unflag_slivers(
 
 /// Per segment of `flagged` (in its order), per view that observes it, the region holding
 /// most of its observations there (ties: the lowest region id) and how many; the segments
-/// on every core (a flagged wall holds millions of observations).
+/// on every core (a flagged wall holds millions of observations, and under salt noise lies
+/// in hundreds of regions of a view: they are sorted, not searched).
 pub(crate) fn dominant_regions(
     obs: &Observations,
-    segment: &[u32],
-    segments: usize,
+    members: &Groups,
     flagged: &[u32],
 ) -> Vec<Vec<Placement>> {
-    let members = Groups::by_key(segment, segments);
     parallel_map(flagged.len(), |k| {
-        let counts = counts_by_view(obs, members.group(flagged[k] as usize));
+        let counts = counts_sorted(obs, members.group(flagged[k] as usize));
         let mut best: Vec<Placement> = Vec::new();
         for (view, region, count) in counts {
             match best.last_mut() {
@@ -139,40 +139,50 @@ mod tests {
         }
     }
 
-    /// Segments (by their Gaussians' ranges), each observed in views 0..10: a region of its
-    /// own in `own` views, else inside region 900, which a segment of 200 Gaussians fills.
-    fn scene(segments: &[(std::ops::Range<u32>, usize)]) -> (Observations, Vec<u32>) {
-        let background = segments.last().map_or(0, |s| s.0.end);
-        let n = background as usize + 200;
+    /// Segments 1.. of (Gaussians, views as an object, company), each observed in views
+    /// 0..10: a region of its own in the first `own` views, in the others one it shares with
+    /// `company` Gaussians of segment 0 (its own company, seen in every view).
+    fn scene(flagged: &[(u32, usize, u32)]) -> (Observations, Groups) {
         let mut per_view: Vec<Vec<ViewEntry>> = vec![Vec::new(); 10];
-        let mut segment = vec![segments.len() as u32; n];
-        for (s, (members, own)) in segments.iter().enumerate() {
-            for g in members.clone() {
-                segment[g as usize] = s as u32;
-                for (v, list) in per_view.iter_mut().enumerate() {
-                    let region = if v < *own { s as u32 } else { 900 };
-                    list.push((g, 0, region, false));
+        let mut segment = Vec::new();
+        for (k, &(size, own, company)) in flagged.iter().enumerate() {
+            let (s, shared) = (k as u32 + 1, 1000 + k as u32);
+            for (id, count) in [(s, size), (0, company)] {
+                for _ in 0..count {
+                    let g = segment.len() as u32;
+                    segment.push(id);
+                    for (v, list) in per_view.iter_mut().enumerate() {
+                        let region = if id == s && v < own { s } else { shared };
+                        list.push((g, 0, region, false));
+                    }
                 }
             }
         }
-        for list in per_view.iter_mut() {
-            list.extend((background..n as u32).map(|g| (g, 1, 900, false)));
-        }
-        (Observations::from_views(n, &per_view), segment)
+        let n = segment.len();
+        let members = Groups::by_key(&segment, flagged.len() + 1);
+        (Observations::from_views(n, &per_view), members)
     }
 
     #[test]
     fn slivers_lose_their_flag_objects_keep_it() {
         let p = ConsensusParams::default();
         assert_eq!((p.flag_region_views, p.flag_region_share), (5, 0.25));
-        // A sliver in every view; an object in every view; its own region in 4 views and
-        // in 5 (a sliver of the 200 in the rest).
-        let (obs, segment) = scene(&[(0..25, 0), (25..55, 10), (55..85, 4), (85..115, 5)]);
-        let mut segments: Vec<SegmentVotes> = [25, 30, 30, 30, 200].map(votes).to_vec();
-        segments[4].flagged = false;
-        unflag_slivers(&obs, &segment, &mut segments, &p);
+        let cases = [
+            (25, 0, 200, false), // a sliver in every view
+            (30, 10, 200, true), // an object in every view
+            (30, 4, 200, false), // an object in 4 views, a sliver in the rest
+            (30, 5, 200, true),  // ... in 5
+            (10, 0, 30, true),   // a quarter of its region in every view
+            (10, 0, 31, false),  // just under
+        ];
+        let (obs, members) = scene(&cases.map(|c| (c.0, c.1, c.2)));
+        let sizes = [0].into_iter().chain(cases.map(|c| c.0 as usize));
+        let mut segments: Vec<SegmentVotes> = sizes.map(votes).collect();
+        segments[0].flagged = false;
+        unflag_slivers(&obs, &members, &mut segments, &p);
         let flags: Vec<bool> = segments.iter().map(|s| s.flagged).collect();
-        assert_eq!(flags, [false, true, false, true, false]);
+        let expected: Vec<bool> = [false].into_iter().chain(cases.map(|c| c.3)).collect();
+        assert_eq!(flags, expected);
     }
 
     #[test]
@@ -193,7 +203,7 @@ mod tests {
         let obs = Observations::from_views(n, &per_view);
         let segment: Vec<u32> = (0..n).map(|_| rng.next_u32() % 9).collect();
         let flagged = [2u32, 5, 7];
-        let placements = dominant_regions(&obs, &segment, 9, &flagged);
+        let placements = dominant_regions(&obs, &Groups::by_key(&segment, 9), &flagged);
         let totals = region_totals(&obs, &placements);
         for (k, &s) in flagged.iter().enumerate() {
             let mut expected = Vec::new();

@@ -1,5 +1,6 @@
 //! What segment consensus found, for people: the segments whose views disagree (flagged:
-//! close or bimodal vote splits, where a consistently mislabeled object shows) and, per
+//! close or bimodal vote splits of segments that are objects in their views, not slivers at
+//! an edge; where a consistently mislabeled object shows) and, per
 //! class, how the views voted on the segments given that class (`fuse --report`).
 
 use serde::Serialize;
