@@ -315,14 +315,12 @@ pub fn decide(
     classes: usize,
     p: &ConsensusParams,
 ) -> Consensus {
+    assert_eq!(segment.len(), obs.n, "one segment per Gaussian");
     let count = segment.iter().map(|&s| s as usize + 1).max().unwrap_or(0);
-    // Each segment's Gaussians, for its votes and, if flagged, its regions.
-    let members = Groups::by_key(&segment[..segment.len().min(obs.n)], count);
+    // Each segment's Gaussians: its size, its votes and, if flagged, its regions.
+    let members = Groups::by_key(&segment, count);
     let (split, mass, views) = segment_votes(obs, &members, count, classes);
-    let mut sizes = vec![0usize; count];
-    for &s in &segment {
-        sizes[s as usize] += 1;
-    }
+    let sizes: Vec<usize> = (0..count).map(|s| members.group(s).len()).collect();
     // Each split moves into its segment's summary (a scene of fragments holds as many
     // segments as Gaussians); the masses only break its ties.
     let mut segments: Vec<SegmentVotes> = (split.into_iter().zip(mass).enumerate())
