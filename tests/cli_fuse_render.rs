@@ -2,36 +2,59 @@
 
 mod common;
 
-use common::cli::{fuse_synth, fuse_synth_args, ok, semsplat, semsplat_with_env, synth_tiny};
+use std::path::Path;
+
+use common::cli::{
+    arg_in, fuse_synth, fuse_synth_args, ok, read_json, semsplat, semsplat_with_env, strings,
+    synth_tiny,
+};
+use semsplat::scene::Gaussians;
+
+/// The scene file `f` in the folder `d`.
+fn read_scene(d: &Path, f: &str) -> Gaussians {
+    semsplat::scene::ply::read_ply(&d.join(f)).unwrap()
+}
 
 #[test]
 fn fuse_writes_classes_reassigns_from_saved_evidence_and_extracts() {
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();
     synth_tiny(d, 4, (64, 48));
-    let p = |f: &str| d.join(f).to_str().unwrap().to_string();
-    let fuse = |extra: &[&str]| fuse_synth(d, extra);
-    fuse(&[
-        "--out",
-        &p("fused.ply"),
-        "--report",
-        &p("report.json"),
-        "--save-contrib",
-        &p("A.npy"),
-        "--palette-ply",
-        &p("palette.ply"),
-    ]);
-    let g = semsplat::scene::ply::read_ply(&d.join("fused.ply")).unwrap();
-    let truth = semsplat::scene::ply::read_ply(&d.join("scene.ply")).unwrap();
+    let p = |f: &str| arg_in(d, f);
+    fuse_synth(
+        d,
+        &[
+            "--out",
+            &p("fused.ply"),
+            "--report",
+            &p("report.json"),
+            "--save-contrib",
+            &p("A.npy"),
+            "--palette-ply",
+            &p("palette.ply"),
+        ],
+    );
+    let g = read_scene(d, "fused.ply");
+    let truth = read_scene(d, "scene.ply");
+    check_fused_classes(&g, &truth);
+    check_report_and_side_outputs(d);
+    check_per_view_agrees(d, g.class_ids.as_ref().unwrap());
+    check_eval_scores(d);
+    check_rendered_views_and_membership(d, truth.len());
+    check_reassigned_from_saved_evidence(d, &g);
+    check_extract_and_remove_add_up(d, truth.len());
+}
+
+/// Unseen Gaussians are -1 (never 0) with confidence 0; seen ones have a label id. Four
+/// 64x48 views leave many Gaussians unseen; those seen are mostly right.
+fn check_fused_classes(g: &Gaussians, truth: &Gaussians) {
     let classes = g.class_ids.as_ref().unwrap();
     let conf = g.class_conf.as_ref().unwrap();
     assert_eq!(classes.len(), truth.len());
-    // Unseen Gaussians are -1 (never 0) with confidence 0; seen ones have a label id.
     for (c, p) in classes.iter().zip(conf) {
         assert!(*c >= -1);
         assert_eq!(*c == -1, *p == 0.0);
     }
-    // Four 64x48 views leave many Gaussians unseen; those seen are mostly right.
     let seen = classes.iter().filter(|&&c| c >= 0).count();
     let right = classes
         .iter()
@@ -43,26 +66,35 @@ fn fuse_writes_classes_reassigns_from_saved_evidence_and_extracts() {
         right as f64 > 0.8 * seen as f64,
         "{right} of {seen} seen Gaussians right"
     );
-    let report: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(d.join("report.json")).unwrap()).unwrap();
+}
+
+/// The report names the method and its speed and memory; the class table and the palette
+/// scene are written beside it.
+fn check_report_and_side_outputs(d: &Path) {
+    let report = read_json(&d.join("report.json"));
     assert_eq!(report["method"], "flashsplat");
     assert!(report["stats"]["views_per_s"].as_f64().unwrap() > 0.0);
     assert!(report["stats"]["peak_device_bytes"].as_u64().unwrap() > 0);
     assert!(d.join("A.classes.json").is_file() && d.join("palette.ply").is_file());
+}
 
-    // The per-view variant runs end to end and says so; it agrees with plain FlashSplat on
-    // most Gaussians of these true labels.
-    fuse(&[
-        "--per-view",
-        "--out",
-        &p("per_view.ply"),
-        "--report",
-        &p("per_view.json"),
-    ]);
-    let per_view: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(d.join("per_view.json")).unwrap()).unwrap();
+/// The per-view variant runs end to end and says so; it agrees with plain FlashSplat's
+/// `classes` on most Gaussians of these true labels.
+fn check_per_view_agrees(d: &Path, classes: &[i32]) {
+    let p = |f: &str| arg_in(d, f);
+    fuse_synth(
+        d,
+        &[
+            "--per-view",
+            "--out",
+            &p("per_view.ply"),
+            "--report",
+            &p("per_view.json"),
+        ],
+    );
+    let per_view = read_json(&d.join("per_view.json"));
     assert_eq!(per_view["method"], "flashsplat --per-view");
-    let pv = semsplat::scene::ply::read_ply(&d.join("per_view.ply")).unwrap();
+    let pv = read_scene(d, "per_view.ply");
     let same = pv
         .class_ids
         .as_ref()
@@ -72,8 +104,11 @@ fn fuse_writes_classes_reassigns_from_saved_evidence_and_extracts() {
         .filter(|(a, b)| a == b)
         .count();
     assert!(same as f64 > 0.9 * classes.len() as f64, "{same} agree");
+}
 
-    // Scores on the views, with 3D accuracy against the synth truth.
+/// Scores on the views, with 3D accuracy against the synth truth.
+fn check_eval_scores(d: &Path) {
+    let p = |f: &str| arg_in(d, f);
     let out = semsplat(&[
         "eval",
         "--scene",
@@ -94,13 +129,16 @@ fn fuse_writes_classes_reassigns_from_saved_evidence_and_extracts() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let eval: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(d.join("eval.json")).unwrap()).unwrap();
+    let eval = read_json(&d.join("eval.json"));
     let miou = eval["miou"].as_f64().unwrap();
     assert!(miou > 0.5 && miou <= 1.0, "{eval}");
     assert!(eval["gaussian_accuracy"].as_f64().unwrap() > 0.2);
+}
 
-    // Label maps rendered from the fused scene, and the multi-instance membership.
+/// Label maps rendered from the fused scene, and the multi-instance membership of the
+/// scene's `gaussians` Gaussians (0 or 1, some 1).
+fn check_rendered_views_and_membership(d: &Path, gaussians: usize) {
+    let p = |f: &str| arg_in(d, f);
     ok(&[
         "fuse",
         "--scene",
@@ -131,11 +169,15 @@ fn fuse_writes_classes_reassigns_from_saved_evidence_and_extracts() {
     }
     let s_bytes = std::fs::read(d.join("S.npy")).unwrap();
     let s_npy = npyz::NpyFile::new(&s_bytes[..]).unwrap();
-    assert_eq!(s_npy.shape()[1], truth.len() as u64);
+    assert_eq!(s_npy.shape()[1], gaussians as u64);
     let s_vals: Vec<f32> = s_npy.into_vec().unwrap();
     assert!(s_vals.iter().all(|&v| v == 0.0 || v == 1.0) && s_vals.contains(&1.0));
+}
 
-    // Reassigning from the saved matrix gives the same classes without rendering.
+/// Reassigning from the saved matrix gives the same classes as the fused scene `g`
+/// without rendering.
+fn check_reassigned_from_saved_evidence(d: &Path, g: &Gaussians) {
+    let p = |f: &str| arg_in(d, f);
     ok(&[
         "fuse",
         "--scene",
@@ -145,47 +187,37 @@ fn fuse_writes_classes_reassigns_from_saved_evidence_and_extracts() {
         "--out",
         &p("again.ply"),
     ]);
-    let again = semsplat::scene::ply::read_ply(&d.join("again.ply")).unwrap();
+    let again = read_scene(d, "again.ply");
     assert_eq!(again.class_ids, g.class_ids);
-
-    // Extract and remove one class: the two parts add up to the scene.
-    let table = semsplat::scene::classes::read_class_table(&d.join("A.classes.json")).unwrap();
-    let name = &table.classes[0].name;
-    ok(&[
-        "fuse",
-        "--scene",
-        &p("scene.ply"),
-        "--contrib",
-        &p("A.npy"),
-        "--extract",
-        name,
-        "--out",
-        &p("only.ply"),
-    ]);
-    ok(&[
-        "fuse",
-        "--scene",
-        &p("scene.ply"),
-        "--contrib",
-        &p("A.npy"),
-        "--remove",
-        name,
-        "--out",
-        &p("rest.ply"),
-    ]);
-    let only = semsplat::scene::ply::read_ply(&d.join("only.ply")).unwrap();
-    let rest = semsplat::scene::ply::read_ply(&d.join("rest.ply")).unwrap();
-    assert!(!only.is_empty());
-    assert_eq!(only.len() + rest.len(), truth.len());
 }
 
-#[test]
-fn render_writes_images_labels_and_raw_arrays() {
-    let tmp = tempfile::tempdir().unwrap();
-    let d = tmp.path();
-    synth_tiny(d, 4, (64, 48));
-    let p = |f: &str| d.join(f).to_str().unwrap().to_string();
-    // A scene with semantic logits: one-hot from the true classes.
+/// Extract and remove one class: the two parts add up to the scene's `gaussians`.
+fn check_extract_and_remove_add_up(d: &Path, gaussians: usize) {
+    let p = |f: &str| arg_in(d, f);
+    let table = semsplat::scene::classes::read_class_table(&d.join("A.classes.json")).unwrap();
+    let name = &table.classes[0].name;
+    for (what, out) in [("--extract", "only.ply"), ("--remove", "rest.ply")] {
+        ok(&[
+            "fuse",
+            "--scene",
+            &p("scene.ply"),
+            "--contrib",
+            &p("A.npy"),
+            what,
+            name,
+            "--out",
+            &p(out),
+        ]);
+    }
+    let only = read_scene(d, "only.ply");
+    let rest = read_scene(d, "rest.ply");
+    assert!(!only.is_empty());
+    assert_eq!(only.len() + rest.len(), gaussians);
+}
+
+/// Writes `d`'s scene.ply with semantic logits, one-hot from the true classes, as sem.ply;
+/// returns the number of channels.
+fn write_one_hot_logits_scene(d: &Path) -> usize {
     let mut g = semsplat::scene::ply::read_ply(&d.join("scene.ply")).unwrap();
     let ids = g.class_ids.clone().unwrap();
     let c = (*ids.iter().max().unwrap() + 1) as usize;
@@ -198,6 +230,16 @@ fn render_writes_images_labels_and_raw_arrays() {
         logits,
     });
     semsplat::scene::ply::write_ply(&d.join("sem.ply"), &g).unwrap();
+    c
+}
+
+#[test]
+fn render_writes_images_labels_and_raw_arrays() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    synth_tiny(d, 4, (64, 48));
+    let p = |f: &str| d.join(f).to_str().unwrap().to_string();
+    let c = write_one_hot_logits_scene(d);
     let cams = semsplat::scene::cameras::load_cameras(&d.join("cameras.json")).unwrap();
     let view = cams[0].name.clone();
     ok(&[
@@ -256,50 +298,69 @@ fn bad_input_is_one_clear_error_and_writes_nothing() {
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();
     synth_tiny(d, 4, (64, 48));
-    let p = |f: &str| d.join(f).to_str().unwrap().to_string();
+    for (args, needle) in bad_fuse_inputs(d).into_iter().chain(bad_render_inputs(d)) {
+        assert_one_clear_error(&args, needle);
+    }
+    assert!(
+        !d.join("x.ply").exists() && !d.join("r").exists(),
+        "a failed run left output behind"
+    );
+}
+
+/// `args` fails with an error that mentions `needle`, not a panic.
+fn assert_one_clear_error(args: &[String], needle: &str) {
+    let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+    let out = semsplat(&refs);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{refs:?} succeeded");
+    assert!(
+        err.contains(needle),
+        "{refs:?}: error does not mention {needle}: {err}"
+    );
+    assert!(!err.contains("panicked"), "{refs:?}: {err}");
+}
+
+/// `fuse` runs into x.ply in `d` with a missing, wrong or conflicting input, each with what
+/// its error must mention.
+fn bad_fuse_inputs(d: &Path) -> Vec<(Vec<String>, &'static str)> {
+    let p = |f: &str| arg_in(d, f);
     // A complete `fuse` command writing x.ply, with `extra` options.
     let fuse_with = |extra: &[&str]| -> Vec<String> {
         let mut args = fuse_synth_args(d, extra);
         args.extend(["--out".into(), p("x.ply")]);
         args
     };
-    let cases: Vec<(Vec<String>, &str)> = vec![
+    vec![
         (
-            vec![
-                "fuse".into(),
-                "--scene".into(),
-                p("missing.ply"),
-                "--cameras".into(),
-                p("cameras.json"),
-                "--labels".into(),
-                p("labels"),
-                "--out".into(),
-                p("x.ply"),
-            ],
+            strings(&[
+                "fuse",
+                "--scene",
+                &p("missing.ply"),
+                "--cameras",
+                &p("cameras.json"),
+                "--labels",
+                &p("labels"),
+                "--out",
+                &p("x.ply"),
+            ]),
             "missing.ply",
         ),
         (
-            vec![
-                "fuse".into(),
-                "--scene".into(),
-                p("scene.ply"),
-                "--cameras".into(),
-                p("cameras.json"),
-                "--labels".into(),
-                p("images"),
-                "--out".into(),
-                p("x.ply"),
-            ],
+            strings(&[
+                "fuse",
+                "--scene",
+                &p("scene.ply"),
+                "--cameras",
+                &p("cameras.json"),
+                "--labels",
+                &p("images"),
+                "--out",
+                &p("x.ply"),
+            ]),
             "images",
         ),
         (
-            vec![
-                "fuse".into(),
-                "--scene".into(),
-                p("scene.ply"),
-                "--out".into(),
-                p("x.ply"),
-            ],
+            strings(&["fuse", "--scene", &p("scene.ply"), "--out", &p("x.ply")]),
             "--cameras",
         ),
         (fuse_with(&["--gamma", "3"]), "gamma"),
@@ -308,61 +369,54 @@ fn bad_input_is_one_clear_error_and_writes_nothing() {
             "--per-view is a variant of --method flashsplat",
         ),
         (
-            vec![
-                "fuse".into(),
-                "--scene".into(),
-                p("scene.ply"),
-                "--contrib".into(),
-                p("cameras.json"),
-                "--out".into(),
-                p("x.ply"),
-            ],
+            strings(&[
+                "fuse",
+                "--scene",
+                &p("scene.ply"),
+                "--contrib",
+                &p("cameras.json"),
+                "--out",
+                &p("x.ply"),
+            ]),
             "cameras.json",
         ),
+    ]
+}
+
+/// `render` runs into r in `d` with input it cannot draw, each with what its error must
+/// mention.
+fn bad_render_inputs(d: &Path) -> Vec<(Vec<String>, &'static str)> {
+    let p = |f: &str| arg_in(d, f);
+    vec![
         (
             // init.ply has neither logits nor classes (scene.ply's classes would be drawn).
-            vec![
-                "render".into(),
-                "--scene".into(),
-                p("init.ply"),
-                "--cameras".into(),
-                p("cameras.json"),
-                "--out".into(),
-                p("r"),
-                "--semantics".into(),
-            ],
+            strings(&[
+                "render",
+                "--scene",
+                &p("init.ply"),
+                "--cameras",
+                &p("cameras.json"),
+                "--out",
+                &p("r"),
+                "--semantics",
+            ]),
             "sem_",
         ),
         (
-            vec![
-                "render".into(),
-                "--scene".into(),
-                p("scene.ply"),
-                "--cameras".into(),
-                p("cameras.json"),
-                "--out".into(),
-                p("r"),
-                "--views".into(),
-                "nope".into(),
-            ],
+            strings(&[
+                "render",
+                "--scene",
+                &p("scene.ply"),
+                "--cameras",
+                &p("cameras.json"),
+                "--out",
+                &p("r"),
+                "--views",
+                "nope",
+            ]),
             "nope",
         ),
-    ];
-    for (args, needle) in cases {
-        let refs: Vec<&str> = args.iter().map(String::as_str).collect();
-        let out = semsplat(&refs);
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert!(!out.status.success(), "{refs:?} succeeded");
-        assert!(
-            err.contains(needle),
-            "{refs:?}: error does not mention {needle}: {err}"
-        );
-        assert!(!err.contains("panicked"), "{refs:?}: {err}");
-    }
-    assert!(
-        !d.join("x.ply").exists() && !d.join("r").exists(),
-        "a failed run left output behind"
-    );
+    ]
 }
 
 /// `bench fuse --scene` times a folder's scene on its first `--views` cameras, scaled to the
@@ -502,15 +556,26 @@ fn render_and_fuse_past_one_binding_write_the_same_bytes() {
         // The fused classes, rendered as labels (the blend reads each Gaussian's class).
         render(&format!("{out}/flashsplat.ply"), "labels", &[]);
     }
+    let compared = assert_same_files(
+        &d.join("whole"),
+        &d.join("limited"),
+        &["", "logits", "labels"],
+    );
+    assert!(compared >= 10, "{compared} files compared");
+}
+
+/// Every file in the folders `subs` of `whole` has the same bytes as its namesake under
+/// `limited`; returns how many files were compared.
+fn assert_same_files(whole: &Path, limited: &Path, subs: &[&str]) -> usize {
     let mut compared = 0;
-    for sub in ["", "logits", "labels"] {
-        for entry in std::fs::read_dir(d.join("whole").join(sub)).unwrap() {
+    for sub in subs {
+        for entry in std::fs::read_dir(whole.join(sub)).unwrap() {
             let path = entry.unwrap().path();
             if path.is_dir() {
                 continue;
             }
             let name = path.file_name().unwrap();
-            let limited = std::fs::read(d.join("limited").join(sub).join(name)).unwrap();
+            let limited = std::fs::read(limited.join(sub).join(name)).unwrap();
             assert!(
                 std::fs::read(&path).unwrap() == limited,
                 "{path:?} differs under the limit"
@@ -518,5 +583,5 @@ fn render_and_fuse_past_one_binding_write_the_same_bytes() {
             compared += 1;
         }
     }
-    assert!(compared >= 10, "{compared} files compared");
+    compared
 }

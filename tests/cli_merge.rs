@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::cli::{fails, fuse_synth, fuse_synth_fails, ok, synth_tiny};
+use common::cli::{arg_in, fails, fuse_synth, fuse_synth_fails, ok, read_json, synth_tiny};
 
 use std::path::Path;
 
@@ -11,62 +11,54 @@ fn bytes(path: &Path) -> Vec<u8> {
     std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
-fn json(path: &Path) -> serde_json::Value {
-    serde_json::from_slice(&bytes(path)).unwrap()
+/// The output options shared by `fuse` and `merge`, every file named `{tag}.*` in `d`.
+fn output_args(d: &Path, tag: &str) -> Vec<String> {
+    vec![
+        "--out".to_string(),
+        arg_in(d, &format!("{tag}.ply")),
+        "--palette-ply".into(),
+        arg_in(d, &format!("{tag}.palette.ply")),
+        "--report".into(),
+        arg_in(d, &format!("{tag}.json")),
+        "--save-contrib".into(),
+        arg_in(d, &format!("{tag}.contrib.npy")),
+        "--save-membership".into(),
+        arg_in(d, &format!("{tag}.membership.npy")),
+    ]
 }
 
-/// Fuses the room once and in 3 shards merged (in a scrambled order, in chunks that do not
-/// divide the Gaussian count) with the same outputs, and compares them.
-fn shards_merge_to_the_single_run(method: &[&str]) {
-    let tmp = tempfile::tempdir().unwrap();
-    let d = tmp.path();
-    synth_tiny(d, 6, (48, 32));
-    let p = |f: &str| d.join(f).to_str().unwrap().to_string();
-    let (scene, cameras, labels) = (p("scene.ply"), p("cameras.json"), p("labels"));
-    let inputs = [
-        "--scene",
-        &scene,
-        "--cameras",
-        &cameras,
-        "--labels",
-        &labels,
-    ];
-    let outputs = |tag: &str| {
-        vec![
-            "--out".to_string(),
-            p(&format!("{tag}.ply")),
-            "--palette-ply".into(),
-            p(&format!("{tag}.palette.ply")),
-            "--report".into(),
-            p(&format!("{tag}.json")),
-            "--save-contrib".into(),
-            p(&format!("{tag}.contrib.npy")),
-            "--save-membership".into(),
-            p(&format!("{tag}.membership.npy")),
-        ]
-    };
+/// One `fuse` of every view, into `single.*`.
+fn fuse_single(d: &Path, inputs: &[&str], method: &[&str]) {
     let mut single = vec!["fuse"];
-    single.extend_from_slice(&inputs);
+    single.extend_from_slice(inputs);
     single.extend_from_slice(method);
-    let single_out = outputs("single");
+    let single_out = output_args(d, "single");
     single.extend(single_out.iter().map(String::as_str));
     ok(&single);
+}
 
+/// `fuse --shard K/3` for K = 0, 1, 2 into `partK.npy`; returns the views their manifests
+/// list, after checking each manifest names its shard.
+fn fuse_three_shards(d: &Path, inputs: &[&str], method: &[&str]) -> Vec<String> {
     let mut views = Vec::new();
     for k in 0..3 {
-        let (shard, part) = (format!("{k}/3"), p(&format!("part{k}.npy")));
+        let (shard, part) = (format!("{k}/3"), arg_in(d, &format!("part{k}.npy")));
         let mut args = vec!["fuse"];
-        args.extend_from_slice(&inputs);
+        args.extend_from_slice(inputs);
         args.extend_from_slice(method);
         args.extend_from_slice(&["--shard", &shard, "--out", &part]);
         ok(&args);
-        let manifest = json(&d.join(format!("part{k}.manifest.json")));
+        let manifest = read_json(&d.join(format!("part{k}.manifest.json")));
         assert_eq!(manifest["shard"]["index"], k);
         for v in manifest["views"].as_array().unwrap() {
             views.push(v.as_str().unwrap().to_string());
         }
     }
-    // The shards cover every labeled view exactly once.
+    views
+}
+
+/// The shards cover every labeled view exactly once.
+fn assert_shards_cover_every_labeled_view_once(d: &Path, mut views: Vec<String>) {
     views.sort();
     let mut labeled: Vec<String> = std::fs::read_dir(d.join("labels"))
         .unwrap()
@@ -77,14 +69,26 @@ fn shards_merge_to_the_single_run(method: &[&str]) {
         .collect();
     labeled.sort();
     assert_eq!(views, labeled);
+}
 
-    let (p0, p1, p2) = (p("part0.npy"), p("part1.npy"), p("part2.npy"));
-    let mut merge = vec!["merge", &p2, &p0, &p1, "--scene", &scene];
+/// `merge` of the three parts (in a scrambled order, in chunks that do not divide the
+/// Gaussian count) into `merged.*`.
+fn merge_scrambled_parts(d: &Path, scene: &str) {
+    let (p0, p1, p2) = (
+        arg_in(d, "part0.npy"),
+        arg_in(d, "part1.npy"),
+        arg_in(d, "part2.npy"),
+    );
+    let mut merge = vec!["merge", &p2, &p0, &p1, "--scene", scene];
     merge.extend_from_slice(&["--chunk-gaussians", "777"]);
-    let merged_out = outputs("merged");
+    let merged_out = output_args(d, "merged");
     merge.extend(merged_out.iter().map(String::as_str));
     ok(&merge);
+}
 
+/// `merged.*` are `single.*` byte for byte, with the same report, nothing of `fuse`'s
+/// scratch file is left, and the result is not empty.
+fn assert_merged_is_the_single_run(d: &Path) {
     for (a, b) in [
         ("single.ply", "merged.ply"),
         ("single.palette.ply", "merged.palette.ply"),
@@ -102,8 +106,10 @@ fn shards_merge_to_the_single_run(method: &[&str]) {
         .filter(|name| name.starts_with('.'))
         .collect();
     assert!(hidden.is_empty(), "left behind: {hidden:?}");
-    let (single_report, merged_report) =
-        (json(&d.join("single.json")), json(&d.join("merged.json")));
+    let (single_report, merged_report) = (
+        read_json(&d.join("single.json")),
+        read_json(&d.join("merged.json")),
+    );
     assert_eq!(single_report["per_class"], merged_report["per_class"]);
     assert_eq!(single_report["method"], merged_report["method"]);
     // Something was classified, so equal files are not two empty results.
@@ -113,6 +119,32 @@ fn shards_merge_to_the_single_run(method: &[&str]) {
         .last()
         .unwrap()["gaussians"];
     assert!(unseen.as_u64().unwrap() < single_report["gaussians"].as_u64().unwrap() / 2);
+}
+
+/// Fuses the room once and in 3 shards merged (in a scrambled order, in chunks that do not
+/// divide the Gaussian count) with the same outputs, and compares them.
+fn shards_merge_to_the_single_run(method: &[&str]) {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    synth_tiny(d, 6, (48, 32));
+    let (scene, cameras, labels) = (
+        arg_in(d, "scene.ply"),
+        arg_in(d, "cameras.json"),
+        arg_in(d, "labels"),
+    );
+    let inputs = [
+        "--scene",
+        &scene,
+        "--cameras",
+        &cameras,
+        "--labels",
+        &labels,
+    ];
+    fuse_single(d, &inputs, method);
+    let views = fuse_three_shards(d, &inputs, method);
+    assert_shards_cover_every_labeled_view_once(d, views);
+    merge_scrambled_parts(d, &scene);
+    assert_merged_is_the_single_run(d);
 }
 
 #[test]

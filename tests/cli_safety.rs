@@ -13,6 +13,7 @@ use std::process::{Child, Command, Output, Stdio};
 use std::sync::mpsc;
 use std::time::Duration;
 
+use common::cli::strings;
 use semsplat::util::{write_atomic, write_bytes_atomic};
 
 fn semsplat<I, S>(args: I) -> Output
@@ -95,46 +96,24 @@ fn a_closed_stdout_ends_the_process_quietly() {
 // ---------------------------------------------------------------------------------------
 // Numeric options
 
+/// `line`'s words followed by `out`: a command line that ends with its output path.
+fn with_out<'a>(line: &'a str, out: &'a str) -> Vec<&'a str> {
+    line.split_whitespace().chain([out]).collect()
+}
+
 #[test]
 fn bad_numeric_options_are_refused_naming_option_value_and_range() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("out.ply");
     let o = out.to_str().unwrap();
-    let train = [
-        "train",
-        "--images",
-        "i",
-        "--labels",
-        "l",
-        "--cameras",
-        "c.json",
-    ];
-    let train: Vec<&str> = train
-        .into_iter()
-        .chain(["--init", "x.ply", "--out", o])
-        .collect();
-    let fuse = [
-        "fuse",
-        "--scene",
-        "s.ply",
-        "--cameras",
-        "c.json",
-        "--labels",
-        "l",
-        "--out",
+    let train = with_out(
+        "train --images i --labels l --cameras c.json --init x.ply --out",
         o,
-    ];
-    let render = [
-        "render",
-        "--scene",
-        "s.ply",
-        "--cameras",
-        "c.json",
-        "--out",
-        o,
-    ];
-    let sweep = ["sweep", "--noise", "salt", "--out", o];
-    let demo = ["demo", "--out", o];
+    );
+    let fuse = with_out("fuse --scene s.ply --cameras c.json --labels l --out", o);
+    let render = with_out("render --scene s.ply --cameras c.json --out", o);
+    let sweep = with_out("sweep --noise salt --out", o);
+    let demo = with_out("demo --out", o);
     // (command, option, bad value, words of the allowed range in the error)
     let cases: &[(&[&str], &str, &str, &str)] = &[
         (&train, "--lr-logits", "nan", "> 0"),
@@ -167,24 +146,36 @@ fn bad_numeric_options_are_refused_naming_option_value_and_range() {
         (&["bench", "sort"], "--n", "0", ">= 1"),
     ];
     for (command, option, value, range) in cases {
-        let mut args: Vec<String> = command.iter().map(|s| s.to_string()).collect();
-        // `--opt=value` so that negative numbers reach the option's own parser.
-        args.push(format!("{option}={value}"));
-        let run = semsplat(&args);
-        let err = stderr(&run);
-        assert!(!run.status.success(), "{args:?} succeeded");
-        for needle in [*option, *range] {
-            assert!(
-                err.contains(needle),
-                "{args:?}: error lacks '{needle}': {err}"
-            );
-        }
-        // The bad value itself, quoted (of a list, the element that is bad).
-        let quoted = value.split(',').any(|v| err.contains(&format!("'{v}'")));
-        assert!(quoted, "{args:?}: error does not quote the value: {err}");
-        assert!(!err.contains("panicked"), "{args:?}: {err}");
-        assert!(!out.exists(), "{args:?} wrote {o}");
+        assert_refused_naming_option_value_and_range(command, option, value, range, &out);
     }
+}
+
+/// `command` with `option=value` fails before writing `out`, with an error that names the
+/// option, quotes the value and states the allowed `range`.
+fn assert_refused_naming_option_value_and_range(
+    command: &[&str],
+    option: &str,
+    value: &str,
+    range: &str,
+    out: &Path,
+) {
+    let mut args = strings(command);
+    // `--opt=value` so that negative numbers reach the option's own parser.
+    args.push(format!("{option}={value}"));
+    let run = semsplat(&args);
+    let err = stderr(&run);
+    assert!(!run.status.success(), "{args:?} succeeded");
+    for needle in [option, range] {
+        assert!(
+            err.contains(needle),
+            "{args:?}: error lacks '{needle}': {err}"
+        );
+    }
+    // The bad value itself, quoted (of a list, the element that is bad).
+    let quoted = value.split(',').any(|v| err.contains(&format!("'{v}'")));
+    assert!(quoted, "{args:?}: error does not quote the value: {err}");
+    assert!(!err.contains("panicked"), "{args:?}: {err}");
+    assert!(!out.exists(), "{args:?} wrote {}", out.display());
 }
 
 // ---------------------------------------------------------------------------------------
@@ -198,10 +189,9 @@ fn camera_names_that_are_paths_are_refused_by_every_command() {
     let cameras: serde_json::Value =
         serde_json::from_slice(&std::fs::read(room.join("cameras.json")).unwrap()).unwrap();
     let escape = tmp.path().join("escaped");
-    let p = |f: &Path| f.to_str().unwrap().to_string();
     let bad_names = [
         "../../escaped".to_string(),
-        p(&escape),
+        escape.to_str().unwrap().to_string(),
         "..".to_string(),
         "a\0b".to_string(),
         String::new(),
@@ -212,64 +202,8 @@ fn camera_names_that_are_paths_are_refused_by_every_command() {
         cams["cameras"][0]["name"] = name.clone().into();
         let file = tmp.path().join(format!("bad{i}.json"));
         std::fs::write(&file, serde_json::to_vec(&cams).unwrap()).unwrap();
-        let r = |f: &str| p(&room.join(f));
-        let commands: Vec<Vec<String>> = vec![
-            vec![
-                "render".into(),
-                "--scene".into(),
-                r("scene.ply"),
-                "--cameras".into(),
-                p(&file),
-                "--out".into(),
-                p(&out),
-            ],
-            vec![
-                "render".into(),
-                "--raw".into(),
-                "--scene".into(),
-                r("scene.ply"),
-                "--cameras".into(),
-                p(&file),
-                "--out".into(),
-                p(&out),
-            ],
-            vec![
-                "fuse".into(),
-                "--scene".into(),
-                r("scene.ply"),
-                "--cameras".into(),
-                p(&file),
-                "--labels".into(),
-                r("labels"),
-                "--render-views".into(),
-                p(&out),
-                "--out".into(),
-                p(&out.join("f.ply")),
-            ],
-            vec![
-                "train".into(),
-                "--images".into(),
-                r("images"),
-                "--labels".into(),
-                r("labels"),
-                "--cameras".into(),
-                p(&file),
-                "--init".into(),
-                r("init.ply"),
-                "--iters".into(),
-                "2".into(),
-                "--out".into(),
-                p(&out.join("t.ply")),
-            ],
-        ];
-        for args in commands {
-            let run = semsplat(&args);
-            let err = stderr(&run);
-            assert!(!run.status.success(), "{name:?}: {args:?} succeeded");
-            assert!(
-                err.contains("camera name") && err.contains("file name"),
-                "{name:?}: {args:?}: {err}"
-            );
+        for args in commands_naming_files_by_camera(&room, &file, &out) {
+            assert_refused_as_camera_name(name, &args);
         }
     }
     assert!(!out.exists(), "a refused run wrote into --out");
@@ -279,6 +213,74 @@ fn camera_names_that_are_paths_are_refused_by_every_command() {
         .filter(|n| n.starts_with("escaped"))
         .collect();
     assert!(leaked.is_empty(), "wrote outside --out: {leaked:?}");
+}
+
+/// Every command that names files after cameras: on the synth `room`, with the camera file
+/// `cameras`, writing into `out`.
+fn commands_naming_files_by_camera(room: &Path, cameras: &Path, out: &Path) -> Vec<Vec<String>> {
+    let p = |f: &Path| f.to_str().unwrap().to_string();
+    let r = |f: &str| p(&room.join(f));
+    let (cameras, out_s) = (p(cameras), p(out));
+    vec![
+        strings(&[
+            "render",
+            "--scene",
+            &r("scene.ply"),
+            "--cameras",
+            &cameras,
+            "--out",
+            &out_s,
+        ]),
+        strings(&[
+            "render",
+            "--raw",
+            "--scene",
+            &r("scene.ply"),
+            "--cameras",
+            &cameras,
+            "--out",
+            &out_s,
+        ]),
+        strings(&[
+            "fuse",
+            "--scene",
+            &r("scene.ply"),
+            "--cameras",
+            &cameras,
+            "--labels",
+            &r("labels"),
+            "--render-views",
+            &out_s,
+            "--out",
+            &p(&out.join("f.ply")),
+        ]),
+        strings(&[
+            "train",
+            "--images",
+            &r("images"),
+            "--labels",
+            &r("labels"),
+            "--cameras",
+            &cameras,
+            "--init",
+            &r("init.ply"),
+            "--iters",
+            "2",
+            "--out",
+            &p(&out.join("t.ply")),
+        ]),
+    ]
+}
+
+/// `args`, run with a camera called `name`, fails saying the camera name is no file name.
+fn assert_refused_as_camera_name(name: &str, args: &[String]) {
+    let run = semsplat(args);
+    let err = stderr(&run);
+    assert!(!run.status.success(), "{name:?}: {args:?} succeeded");
+    assert!(
+        err.contains("camera name") && err.contains("file name"),
+        "{name:?}: {args:?}: {err}"
+    );
 }
 
 // ---------------------------------------------------------------------------------------
@@ -357,7 +359,6 @@ fn outputs_are_checked_writable_before_any_work() {
     let tmp = tempfile::tempdir().unwrap();
     let room = tmp.path().join("room");
     synth(&room);
-    let r = |f: &str| room.join(f).to_str().unwrap().to_string();
     let blocker = tmp.path().join("a_file");
     std::fs::write(&blocker, "x").unwrap();
     let under_file = blocker.join("x.ply").to_str().unwrap().to_string();
@@ -366,42 +367,10 @@ fn outputs_are_checked_writable_before_any_work() {
     let contrib = tmp.path().join("contrib.npy");
     let contrib_s = contrib.to_str().unwrap().to_string();
     let blocker_s = blocker.to_str().unwrap().to_string();
-    let fuse = |extra: &[&str]| -> Vec<String> {
-        let mut a: Vec<String> = [
-            "fuse",
-            "--scene",
-            &r("scene.ply"),
-            "--cameras",
-            &r("cameras.json"),
-        ]
-        .iter()
-        .map(|s| s.to_string())
-        .collect();
-        a.extend(["--labels".into(), r("labels")]);
-        a.extend(extra.iter().map(|s| s.to_string()));
-        a
-    };
-    let train: Vec<String> = [
-        "train",
-        "--images",
-        &r("images"),
-        "--labels",
-        &r("labels"),
-        "--cameras",
-        &r("cameras.json"),
-        "--init",
-        &r("init.ply"),
-        "--iters",
-        "100000",
-        "--out",
-        &under_file,
-    ]
-    .iter()
-    .map(|s| s.to_string())
-    .collect();
+    let fuse = |extra: &[&str]| fuse_on(&room, extra);
     let cases: Vec<(Vec<String>, &str)> = vec![
         // Would train 100000 iterations and then fail on --out without the check.
-        (train, "--out"),
+        (train_100000_iters(&room, &under_file), "--out"),
         // Side outputs would be written before --out fails.
         (
             fuse(&["--save-contrib", &contrib_s, "--out", &under_file]),
@@ -421,19 +390,61 @@ fn outputs_are_checked_writable_before_any_work() {
         ),
     ];
     for (args, option) in cases {
-        let run = semsplat(&args);
-        let err = stderr(&run);
-        assert!(!run.status.success(), "{args:?} succeeded");
-        assert!(
-            err.contains(option) && err.contains("a_file"),
-            "{args:?}: {err}"
-        );
-        assert!(!err.contains("training"), "{args:?} started work: {err}");
-        assert!(
-            !good.exists() && !contrib.exists(),
-            "{args:?} wrote an output"
-        );
+        assert_refused_before_work(&args, option, &good, &contrib);
     }
+}
+
+/// `fuse` on the synth `room`'s scene, cameras and labels, plus `extra`.
+fn fuse_on(room: &Path, extra: &[&str]) -> Vec<String> {
+    let r = |f: &str| room.join(f).to_str().unwrap().to_string();
+    let mut a = strings(&[
+        "fuse",
+        "--scene",
+        &r("scene.ply"),
+        "--cameras",
+        &r("cameras.json"),
+        "--labels",
+        &r("labels"),
+    ]);
+    a.extend(strings(extra));
+    a
+}
+
+/// `train` on the synth `room` for 100000 iterations, into `out`.
+fn train_100000_iters(room: &Path, out: &str) -> Vec<String> {
+    let r = |f: &str| room.join(f).to_str().unwrap().to_string();
+    strings(&[
+        "train",
+        "--images",
+        &r("images"),
+        "--labels",
+        &r("labels"),
+        "--cameras",
+        &r("cameras.json"),
+        "--init",
+        &r("init.ply"),
+        "--iters",
+        "100000",
+        "--out",
+        out,
+    ])
+}
+
+/// `args` fails on the output `option` (under the file a_file) before any training, and
+/// writes neither `good` nor `contrib`.
+fn assert_refused_before_work(args: &[String], option: &str, good: &Path, contrib: &Path) {
+    let run = semsplat(args);
+    let err = stderr(&run);
+    assert!(!run.status.success(), "{args:?} succeeded");
+    assert!(
+        err.contains(option) && err.contains("a_file"),
+        "{args:?}: {err}"
+    );
+    assert!(!err.contains("training"), "{args:?} started work: {err}");
+    assert!(
+        !good.exists() && !contrib.exists(),
+        "{args:?} wrote an output"
+    );
 }
 
 // ---------------------------------------------------------------------------------------

@@ -8,6 +8,7 @@ use std::path::Path;
 use std::process::Output;
 
 use semsplat::scene::ply::read_ply;
+use semsplat::scene::Gaussians;
 
 /// `train` on the room `d`, from its init, into `out`.
 fn train_args(d: &str, out: &str) -> Vec<String> {
@@ -19,14 +20,9 @@ fn run(args: &[String]) -> Output {
     semsplat(&refs)
 }
 
-#[test]
-fn train_writes_classes_logits_checkpoints_and_a_report() {
-    let tmp = tempfile::tempdir().unwrap();
-    let d = tmp.path().join("room");
-    synth_tiny(&d, 4, (48, 36));
-    let d = d.to_str().unwrap();
-    let out = tmp.path().join("trained.ply");
-    let report = tmp.path().join("train.json");
+/// Trains the tiny room `d` for 30 iterations (at most 8000 Gaussians, a checkpoint every
+/// 10) into `out`, with its report at `report`; asserts that it succeeded.
+fn train_30_iterations(d: &str, out: &Path, report: &Path) {
     let mut args = train_args(d, out.to_str().unwrap());
     args.extend(
         [
@@ -43,9 +39,11 @@ fn train_writes_classes_logits_checkpoints_and_a_report() {
     );
     let r = run(&args);
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
-    let g = read_ply(&out).unwrap();
-    let init = read_ply(Path::new(&format!("{d}/init.ply"))).unwrap();
-    assert!(g.len() <= 8000);
+}
+
+/// The trained scene `g` has logits, and every class it gives is one of the class table
+/// `dir/trained.classes.json`'s, with a confidence in [0, 1]; some Gaussian has a class.
+fn check_classes_against_the_table(g: &Gaussians, dir: &Path) {
     let sem = g.semantics.as_ref().expect("logits in the output");
     assert!(
         sem.channels >= 2 && sem.channels <= 6,
@@ -55,8 +53,7 @@ fn train_writes_classes_logits_checkpoints_and_a_report() {
     let classes = g.class_ids.as_ref().unwrap();
     let conf = g.class_conf.as_ref().unwrap();
     let table: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(tmp.path().join("trained.classes.json")).unwrap())
-            .unwrap();
+        serde_json::from_slice(&std::fs::read(dir.join("trained.classes.json")).unwrap()).unwrap();
     let ids: Vec<i64> = table["classes"]
         .as_array()
         .unwrap()
@@ -71,10 +68,10 @@ fn train_writes_classes_logits_checkpoints_and_a_report() {
         assert!((0.0..=1.0).contains(p));
     }
     assert!(classes.iter().any(|&c| c >= 0));
-    for it in [10, 20] {
-        assert!(tmp.path().join(format!("trained.iter{it}.ply")).is_file());
-    }
-    // `eval` scores the trained scene, RGB included.
+}
+
+/// `eval` scores the trained scene `out` on the room `d`, RGB included.
+fn check_eval_scores_the_trained_scene(d: &str, out: &Path) {
     let e = semsplat(&[
         "eval",
         "--scene",
@@ -91,7 +88,11 @@ fn train_writes_classes_logits_checkpoints_and_a_report() {
     assert!(e.status.success(), "{}", String::from_utf8_lossy(&e.stderr));
     let text = String::from_utf8_lossy(&e.stdout);
     assert!(text.contains("mIoU") && text.contains("PSNR"), "{text}");
-    let rep: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+}
+
+/// The training report counts the init's Gaussians, has a log and finite stage timings.
+fn check_train_report(report: &Path, init: &Gaussians) {
+    let rep: serde_json::Value = serde_json::from_slice(&std::fs::read(report).unwrap()).unwrap();
     assert_eq!(
         rep["initial_gaussians"].as_u64().unwrap() as usize,
         init.len()
@@ -101,6 +102,26 @@ fn train_writes_classes_logits_checkpoints_and_a_report() {
         let v = rep["stage_ms_per_iteration"][key].as_f64().unwrap();
         assert!(v.is_finite() && v >= 0.0, "{key}: {v}");
     }
+}
+
+#[test]
+fn train_writes_classes_logits_checkpoints_and_a_report() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path().join("room");
+    synth_tiny(&d, 4, (48, 36));
+    let d = d.to_str().unwrap();
+    let out = tmp.path().join("trained.ply");
+    let report = tmp.path().join("train.json");
+    train_30_iterations(d, &out, &report);
+    let g = read_ply(&out).unwrap();
+    let init = read_ply(Path::new(&format!("{d}/init.ply"))).unwrap();
+    assert!(g.len() <= 8000);
+    check_classes_against_the_table(&g, tmp.path());
+    for it in [10, 20] {
+        assert!(tmp.path().join(format!("trained.iter{it}.ply")).is_file());
+    }
+    check_eval_scores_the_trained_scene(d, &out);
+    check_train_report(&report, &init);
 }
 
 #[test]

@@ -838,73 +838,10 @@ fn diagnose_segments() {
     let labels = noisy_maps(&s, &classes);
     let scene = GpuScene::upload(gpu, &s.gaussians).unwrap();
     let params = ConsensusParams::default();
-    let (c, stats) = fuse_consensus(
-        &input(gpu, &scene, &s, &labels, classes.len()),
-        &FuseConfig::default(),
-        &params,
-    )
-    .unwrap();
-    let truth = s.gaussians.class_ids.clone().unwrap();
-    let inst = s.gaussians.instance_ids.clone().unwrap();
-    let n = truth.len();
-    let segs = c.segments.len();
-    let mut by_seg: Vec<Vec<usize>> = vec![Vec::new(); segs];
-    for g in 0..n {
-        by_seg[c.segment[g] as usize].push(g);
-    }
-    let mut impure_class = 0;
-    let mut impure_inst = 0;
-    let mut in_big = 0;
-    let mut seg_wrong = 0;
-    for (si, m) in by_seg.iter().enumerate() {
-        if m.len() < params.min_segment {
-            continue;
-        }
-        in_big += m.len();
-        let mut cc = std::collections::HashMap::new();
-        let mut ic = std::collections::HashMap::new();
-        for &g in m {
-            *cc.entry(truth[g]).or_insert(0) += 1;
-            *ic.entry(inst[g]).or_insert(0) += 1;
-        }
-        let (maj_class, mc) = cc
-            .iter()
-            .max_by_key(|e| *e.1)
-            .map(|(a, b)| (*a, *b))
-            .unwrap();
-        impure_class += m.len() - mc;
-        impure_inst += m.len() - ic.values().max().unwrap();
-        let sc = c.segments[si]
-            .class
-            .and_then(|k| classes.user_of(k))
-            .map(|u| u as i32);
-        if sc != Some(maj_class) {
-            seg_wrong += mc;
-        }
-        if m.len() > 200 {
-            eprintln!(
-                "seg {si}: {} g, {} views, classes {:?}, split {:?}",
-                m.len(),
-                c.segments[si].views,
-                cc,
-                c.segments[si]
-                    .split
-                    .iter()
-                    .map(|v| (v * 10.0).round() / 10.0)
-                    .collect::<Vec<_>>()
-            );
-        }
-    }
-    let right = (0..n)
-        .filter(|&g| {
-            c.assignment.class[g]
-                .and_then(|k| classes.user_of(k))
-                .map(|u| u as i32)
-                == Some(truth[g])
-        })
-        .count();
-    let unseen = (0..n).filter(|&g| c.assignment.class[g].is_none()).count();
-    eprintln!("n {n} segments {segs} in_big {in_big} impure_class {impure_class} impure_inst {impure_inst} seg_wrong(majority) {seg_wrong} from_segment {} acc {:.4} unseen {unseen} flagged {} wall {:.2}s", c.from_segment, right as f64 / n as f64, c.segments.iter().filter(|s| s.flagged).count(), stats.wall_s);
+    let consensus_input = input(gpu, &scene, &s, &labels, classes.len());
+    let (c, stats) = fuse_consensus(&consensus_input, &FuseConfig::default(), &params).unwrap();
+    print_segment_purity(&c, &s, &classes, params.min_segment);
+    eprintln!("segment consensus {:.2}s", stats.wall_s);
     let t = std::time::Instant::now();
     let cfg = FuseConfig {
         method: semsplat::fuse::Method::FlashSplat,
@@ -922,14 +859,72 @@ fn diagnose_segments() {
     .unwrap();
     eprintln!("flashsplat accumulate {:.2}s", t.elapsed().as_secs_f64());
     let t = std::time::Instant::now();
-    fuse_consensus(
-        &input(gpu, &scene, &s, &labels, classes.len()),
-        &FuseConfig::default(),
-        &params,
-    )
-    .unwrap();
+    fuse_consensus(&consensus_input, &FuseConfig::default(), &params).unwrap();
     eprintln!("segment consensus again {:.2}s", t.elapsed().as_secs_f64());
     check_validation(gpu);
+}
+
+/// [`diagnose_segments`]' report: per segment of at least `min_segment` Gaussians, how many
+/// of its members are not of its majority true class or instance, and how many of that
+/// majority it decided wrong; the largest segments' class mix and vote split.
+fn print_segment_purity(
+    c: &Consensus,
+    s: &SynthScene,
+    classes: &CompactClasses,
+    min_segment: usize,
+) {
+    let truth = s.gaussians.class_ids.clone().unwrap();
+    let inst = s.gaussians.instance_ids.clone().unwrap();
+    let n = truth.len();
+    let user_class = |k: Option<usize>| k.and_then(|k| classes.user_of(k)).map(|u| u as i32);
+    let mut by_seg: Vec<Vec<usize>> = vec![Vec::new(); c.segments.len()];
+    for g in 0..n {
+        by_seg[c.segment[g] as usize].push(g);
+    }
+    let (mut impure_class, mut impure_inst, mut in_big, mut seg_wrong) = (0, 0, 0, 0);
+    for (si, members) in by_seg
+        .iter()
+        .enumerate()
+        .filter(|(_, m)| m.len() >= min_segment)
+    {
+        in_big += members.len();
+        let mut class_count = HashMap::new();
+        let mut inst_count = HashMap::new();
+        for &g in members {
+            *class_count.entry(truth[g]).or_insert(0) += 1;
+            *inst_count.entry(inst[g]).or_insert(0) += 1;
+        }
+        let (&majority, &held) = class_count.iter().max_by_key(|e| *e.1).unwrap();
+        impure_class += members.len() - held;
+        impure_inst += members.len() - inst_count.values().max().unwrap();
+        if user_class(c.segments[si].class) != Some(majority) {
+            seg_wrong += held;
+        }
+        if members.len() > 200 {
+            let split: Vec<f64> = c.segments[si]
+                .split
+                .iter()
+                .map(|v| (v * 10.0).round() / 10.0)
+                .collect();
+            let views = c.segments[si].views;
+            eprintln!(
+                "seg {si}: {} g, {views} views, classes {class_count:?}, split {split:?}",
+                members.len()
+            );
+        }
+    }
+    let right = (0..n)
+        .filter(|&g| user_class(c.assignment.class[g]) == Some(truth[g]))
+        .count();
+    let unseen = c.assignment.class.iter().filter(|k| k.is_none()).count();
+    let flagged = c.segments.iter().filter(|s| s.flagged).count();
+    eprintln!(
+        "n {n} segments {} in_big {in_big} impure_class {impure_class} impure_inst {impure_inst} \
+         seg_wrong(majority) {seg_wrong} from_segment {} acc {:.4} unseen {unseen} flagged {flagged}",
+        c.segments.len(),
+        c.from_segment,
+        right as f64 / n as f64,
+    );
 }
 
 /// Two neighbours seen in one region in two views but on that region's edge in three more

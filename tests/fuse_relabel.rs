@@ -13,8 +13,8 @@ use semsplat::fuse::consensus_confusion::ConfusionRates;
 use semsplat::fuse::consensus_relabel::{edge_depth, relabel_view, RelabelRule, RelabeledViews};
 use semsplat::fuse::regions_gpu::{RegionFinder, MAX_GPU_REACH};
 use semsplat::fuse::{
-    accumulate, assign_semantic_near, lift_by_consensus, nearest_neighbours, ConsensusParams,
-    FuseConfig, LabelSource, Method, NO_LABEL,
+    accumulate, assign_semantic_near, lift_by_consensus, nearest_neighbours, Assignment,
+    ClassScores, ConsensusLift, ConsensusParams, FuseConfig, LabelSource, Method, NO_LABEL,
 };
 use semsplat::render::GpuScene;
 use semsplat::synth::{generate, RoomSource, SynthConfig, SynthScene};
@@ -73,46 +73,7 @@ fn relabel_by_hand(
         };
         let counted: Vec<(u32, u32, usize)> =
             in_region.into_iter().filter(|s| s.0 == deepest).collect();
-        let votes = |c: u32| counted.iter().filter(|s| s.1 == c).count();
-        let top = counted
-            .iter()
-            .map(|s| s.1)
-            .max_by_key(|&c| votes(c))
-            .unwrap();
-        let own = map[(0..map.len()).find(|&p| regions[p] == r).unwrap()];
-        // Seeds of another class than `own` lying near a pixel of their class.
-        let near = |c: u32, p: usize| {
-            (0..map.len()).any(|q| {
-                let distance = (p % w).abs_diff(q % w) + (p / w).abs_diff(q / w);
-                map[q] == c && distance <= rule.near as usize
-            })
-        };
-        let near_seeds = counted
-            .iter()
-            .filter(|s| s.1 != own && near(s.1, s.2))
-            .count();
-        let holds = |n: usize, share: f64| n as f64 >= share * counted.len() as f64;
-        let top_near = counted
-            .iter()
-            .filter(|s| s.1 == top && near(top, s.2))
-            .count();
-        let beside = top != own && top_near * 2 >= votes(top);
-        let look_alikes = counted
-            .iter()
-            .filter(|s| {
-                s.1 != own && rates.rate(s.1 as usize, own as usize) > rule.max_edge_confusion
-            })
-            .count();
-        let kept_by_own =
-            holds(votes(own), rule.keep_share) && holds(votes(own) + near_seeds, rule.min_share);
-        let kept_by_confusions = holds(counted.len() - look_alikes, rule.min_share);
-        let new = if holds(votes(top), rule.min_share) && !beside {
-            top
-        } else if kept_by_own || kept_by_confusions {
-            own
-        } else {
-            NO_LABEL
-        };
+        let new = region_class_by_hand(map, w, &regions, r, &counted, rule, rates);
         for p in 0..map.len() {
             if regions[p] == r {
                 out[p] = new;
@@ -120,6 +81,57 @@ fn relabel_by_hand(
         }
     }
     out
+}
+
+/// The class region `r` of `map` (`regions` its flood fill) takes by the rule, from its
+/// counted seeds (depth, class, pixel): the deepest ones.
+fn region_class_by_hand(
+    map: &[u32],
+    w: usize,
+    regions: &[u32],
+    r: u32,
+    counted: &[(u32, u32, usize)],
+    rule: &RelabelRule,
+    rates: &ConfusionRates,
+) -> u32 {
+    let votes = |c: u32| counted.iter().filter(|s| s.1 == c).count();
+    let top = counted
+        .iter()
+        .map(|s| s.1)
+        .max_by_key(|&c| votes(c))
+        .unwrap();
+    let own = map[(0..map.len()).find(|&p| regions[p] == r).unwrap()];
+    // Seeds of another class than `own` lying near a pixel of their class.
+    let near = |c: u32, p: usize| {
+        (0..map.len()).any(|q| {
+            let distance = (p % w).abs_diff(q % w) + (p / w).abs_diff(q / w);
+            map[q] == c && distance <= rule.near as usize
+        })
+    };
+    let near_seeds = counted
+        .iter()
+        .filter(|s| s.1 != own && near(s.1, s.2))
+        .count();
+    let holds = |n: usize, share: f64| n as f64 >= share * counted.len() as f64;
+    let top_near = counted
+        .iter()
+        .filter(|s| s.1 == top && near(top, s.2))
+        .count();
+    let beside = top != own && top_near * 2 >= votes(top);
+    let look_alikes = counted
+        .iter()
+        .filter(|s| s.1 != own && rates.rate(s.1 as usize, own as usize) > rule.max_edge_confusion)
+        .count();
+    let kept_by_own =
+        holds(votes(own), rule.keep_share) && holds(votes(own) + near_seeds, rule.min_share);
+    let kept_by_confusions = holds(counted.len() - look_alikes, rule.min_share);
+    if holds(votes(top), rule.min_share) && !beside {
+        top
+    } else if kept_by_own || kept_by_confusions {
+        own
+    } else {
+        NO_LABEL
+    }
 }
 
 /// A rule with the given shares, depth and near radius, which keeps no region by the
@@ -662,32 +674,18 @@ fn relabeled_views_undo_most_flicker() {
     check_validation(gpu());
 }
 
-/// The whole method twice gives the same classes, confidences and evidence; each class is
-/// the one FlashSplat gives over the relabeled views where the Gaussian's footprint there
-/// reaches `min_mass`, else the consensus class (the rule rebuilt here from its parts). The
-/// pixels the relabeling left undecided count for each Gaussian's consensus class: rebuilt
-/// from two plain accumulations, one over the relabeled views (undecided pixels unlabeled)
-/// and one over maps of the undecided pixels alone.
-#[test]
-fn relabel_is_deterministic_and_follows_its_rule() {
-    let Flickered {
-        s,
-        classes,
-        noisy,
-        scene,
-        run,
-    } = flickered_office(8, 3);
-    let gpu = gpu();
+/// Lifts the office by segment consensus with relabeling twice; asserts both lifts give the
+/// same classes, confidences, evidence and consensus, the consensus of `f.run`.
+fn lift_twice_alike(f: &Flickered, params: &ConsensusParams) -> ConsensusLift {
     let cfg = FuseConfig {
         method: Method::SegmentConsensusRelabel,
         ..Default::default()
     };
-    let params = ConsensusParams::default();
     let lift = || {
         lift_by_consensus(
-            &input(gpu, &scene, &s, &noisy, classes),
+            &input(gpu(), &f.scene, &f.s, &f.noisy, f.classes),
             &cfg,
-            &params,
+            params,
             &mut |_, _| {},
         )
         .unwrap()
@@ -696,22 +694,16 @@ fn relabel_is_deterministic_and_follows_its_rule() {
     assert_eq!(a.assignment, b.assignment);
     assert_eq!(a.evidence, b.evidence);
     assert_eq!(a.consensus, b.consensus);
+    assert_eq!(&a.consensus, &f.run.consensus);
+    a
+}
 
-    let cons = &run.consensus.assignment.class;
-    assert_eq!(&a.consensus, &run.consensus);
-    let relabeled = RelabeledViews {
-        inner: &noisy,
-        centers: &run.centers,
-        class: cons,
-        rule: params.relabel,
-        confusions: &run.consensus.confusions,
-        // The lift relabeled on the GPU: the host's relabeling must give its classes.
-        finder: None,
-        undecided: None,
-    };
+/// Per view, the pixels `relabeled` left undecided (labeled before, unlabeled after) as
+/// class 0 and every other pixel unlabeled.
+fn undecided_pixel_maps(f: &Flickered, relabeled: &RelabeledViews) -> Vec<Option<Vec<u32>>> {
     let mut undecided_only: Vec<Option<Vec<u32>>> = Vec::new();
-    for (v, cam) in s.cameras.iter().enumerate() {
-        let before = noisy[v].as_ref().unwrap();
+    for (v, cam) in f.s.cameras.iter().enumerate() {
+        let before = f.noisy[v].as_ref().unwrap();
         let after = relabeled.labels(v, cam).unwrap().unwrap();
         let only = (0..after.len()).map(|p| match before[p] != NO_LABEL && after[p] == NO_LABEL {
             true => 0,
@@ -719,17 +711,52 @@ fn relabel_is_deterministic_and_follows_its_rule() {
         });
         undecided_only.push(Some(only.collect()));
     }
-    let footprint = |labels: &dyn LabelSource, classes| {
-        let fs = FuseConfig::default();
-        accumulate(gpu, &scene, &s.cameras, labels, classes, &fs, |_, _| {})
-            .unwrap()
-            .0
-    };
-    let mut footprints = footprint(&relabeled, classes);
+    undecided_only
+}
+
+/// A plain accumulation (FlashSplat's footprints) of `labels` over the office's views.
+fn footprint(f: &Flickered, labels: &dyn LabelSource, classes: usize) -> ClassScores {
+    let fs = FuseConfig::default();
+    accumulate(
+        gpu(),
+        &f.scene,
+        &f.s.cameras,
+        labels,
+        classes,
+        &fs,
+        |_, _| {},
+    )
+    .unwrap()
+    .0
+}
+
+/// The relabel rule's FlashSplat side, rebuilt from two plain accumulations.
+struct RuleByHand {
+    /// The relabeled views' footprints, each Gaussian's undecided mass added to its
+    /// consensus class.
+    footprints: ClassScores,
+    /// FlashSplat's classes over `footprints`, neighbours breaking ties.
+    by_pixels: Assignment,
+    /// Gaussians that cover an undecided pixel.
+    undecided_gaussians: usize,
+    /// Gaussians whose class the undecided pixels change.
+    folding_decides: usize,
+}
+
+/// Accumulates the relabeled views (undecided pixels unlabeled) and the maps of the
+/// undecided pixels alone, and counts the latter for each Gaussian's consensus class `cons`.
+fn rule_by_hand(
+    f: &Flickered,
+    relabeled: &dyn LabelSource,
+    undecided_only: &dyn LabelSource,
+    cons: &[Option<usize>],
+    params: &ConsensusParams,
+) -> RuleByHand {
+    let mut footprints = footprint(f, relabeled, f.classes);
     let k = params.neighbours;
-    let knn = nearest_neighbours(&s.gaussians.means, k);
+    let knn = nearest_neighbours(&f.s.gaussians.means, k);
     let unfolded = assign_semantic_near(&footprints, Some((&knn, k)));
-    let undecided_mass = footprint(&undecided_only, 1);
+    let undecided_mass = footprint(f, undecided_only, 1);
     let mut undecided_gaussians = 0;
     for g in 0..footprints.n {
         if let Some(c) = cons[g] {
@@ -741,6 +768,28 @@ fn relabel_is_deterministic_and_follows_its_rule() {
     let folding_decides = (0..footprints.n)
         .filter(|&g| by_pixels.class[g] != unfolded.class[g])
         .count();
+    RuleByHand {
+        footprints,
+        by_pixels,
+        undecided_gaussians,
+        folding_decides,
+    }
+}
+
+/// Each of the lift's classes is FlashSplat's where the Gaussian's footprint reaches
+/// `min_mass`, else its consensus class; both happen to many Gaussians.
+fn check_classes_follow_the_rule(
+    lift: &ConsensusLift,
+    rule: &RuleByHand,
+    cons: &[Option<usize>],
+    classes: usize,
+    params: &ConsensusParams,
+) {
+    let RuleByHand {
+        footprints,
+        by_pixels,
+        ..
+    } = rule;
     let (mut moved, mut kept) = (0, 0);
     for g in 0..footprints.n {
         let mass: f64 = (0..classes).map(|c| footprints.get(c, g)).sum();
@@ -749,7 +798,7 @@ fn relabel_is_deterministic_and_follows_its_rule() {
             true => f,
             false => cons[g],
         };
-        assert_eq!(a.assignment.class[g], want, "Gaussian {g}");
+        assert_eq!(lift.assignment.class[g], want, "Gaussian {g}");
         if want != cons[g] {
             moved += 1;
         } else {
@@ -757,12 +806,40 @@ fn relabel_is_deterministic_and_follows_its_rule() {
         }
     }
     assert!(moved > 100 && kept > 1000, "{moved} moved, {kept} kept");
+}
+
+/// The whole method twice gives the same classes, confidences and evidence; each class is
+/// the one FlashSplat gives over the relabeled views where the Gaussian's footprint there
+/// reaches `min_mass`, else the consensus class (the rule rebuilt here from its parts). The
+/// pixels the relabeling left undecided count for each Gaussian's consensus class: rebuilt
+/// from two plain accumulations, one over the relabeled views (undecided pixels unlabeled)
+/// and one over maps of the undecided pixels alone.
+#[test]
+fn relabel_is_deterministic_and_follows_its_rule() {
+    let f = flickered_office(8, 3);
+    let params = ConsensusParams::default();
+    let a = lift_twice_alike(&f, &params);
+    let cons = &f.run.consensus.assignment.class;
+    let relabeled = RelabeledViews {
+        inner: &f.noisy,
+        centers: &f.run.centers,
+        class: cons,
+        rule: params.relabel,
+        confusions: &f.run.consensus.confusions,
+        // The lift relabeled on the GPU: the host's relabeling must give its classes.
+        finder: None,
+        undecided: None,
+    };
+    let undecided_only = undecided_pixel_maps(&f, &relabeled);
+    let rule = rule_by_hand(&f, &relabeled, &undecided_only, cons, &params);
+    check_classes_follow_the_rule(&a, &rule, cons, f.classes, &params);
+    let (undecided_gaussians, folding_decides) = (rule.undecided_gaussians, rule.folding_decides);
     assert!(
         undecided_gaussians > 100 && folding_decides > 0,
         "{undecided_gaussians} Gaussians cover an undecided pixel, \
          {folding_decides} take another class for it"
     );
-    check_validation(gpu);
+    check_validation(gpu());
 }
 
 /// `fuse --method segment-consensus [--relabel]` writes each Gaussian's entropy and segment

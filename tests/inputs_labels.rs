@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::cli::{ok, semsplat};
+use common::cli::{arg_in, ok, read_json, semsplat};
 
 use std::path::{Path, PathBuf};
 
@@ -533,17 +533,14 @@ fn palette_labels_and_jpegs(d: &Path) {
     }
 }
 
-#[test]
-fn palette_labels_and_jpeg_images_through_fuse_train_and_eval() {
-    let tmp = tempfile::tempdir().unwrap();
-    let d = tmp.path();
-    let s = |p: &str| d.join(p).to_str().unwrap().to_owned();
+/// The tiny synth room in `d`: four train views and one held-out view at 48x32.
+fn synth_four_view_room(d: &Path) {
     ok(&[
         "synth",
         "--preset",
         "tiny",
         "--out",
-        &s(""),
+        &arg_in(d, ""),
         "--views",
         "4",
         "--test-views",
@@ -553,37 +550,44 @@ fn palette_labels_and_jpeg_images_through_fuse_train_and_eval() {
         "--height",
         "32",
     ]);
-    palette_labels_and_jpegs(d);
+}
+
+/// `fuse` of the room's scene from the palette labels into `fused.ply`.
+fn fuse_palette_labels(d: &Path) {
     ok(&[
         "fuse",
         "--scene",
-        &s("scene.ply"),
+        &arg_in(d, "scene.ply"),
         "--cameras",
-        &s("cameras.json"),
+        &arg_in(d, "cameras.json"),
         "--labels",
-        &s("labels_pal"),
+        &arg_in(d, "labels_pal"),
         "--classes",
-        &s("classes.json"),
+        &arg_in(d, "classes.json"),
         "--out",
-        &s("fused.ply"),
+        &arg_in(d, "fused.ply"),
     ]);
+}
+
+/// eval of the fused scene against the palette labels and the JPEG images: good scores and
+/// the classes named from the table.
+fn check_eval_scores_jpegs_and_names_classes(d: &Path) {
     ok(&[
         "eval",
         "--scene",
-        &s("fused.ply"),
+        &arg_in(d, "fused.ply"),
         "--cameras",
-        &s("cameras.json"),
+        &arg_in(d, "cameras.json"),
         "--labels",
-        &s("labels_pal"),
+        &arg_in(d, "labels_pal"),
         "--views",
         "all",
         "--images",
-        &s("images_jpg"),
+        &arg_in(d, "images_jpg"),
         "--json",
-        &s("eval.json"),
+        &arg_in(d, "eval.json"),
     ]);
-    let eval: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(d.join("eval.json")).unwrap()).unwrap();
+    let eval = read_json(&d.join("eval.json"));
     let miou = eval["miou"].as_f64().unwrap();
     assert!(miou > 0.5, "{eval}");
     assert!(
@@ -600,8 +604,10 @@ fn palette_labels_and_jpeg_images_through_fuse_train_and_eval() {
         names.contains(&"floor") && names.contains(&"wall"),
         "{names:?}"
     );
+}
 
-    // The same classes shifted by 2^16: cut to 16 bits they would score exactly as before.
+/// The same classes shifted by 2^16: cut to 16 bits they would score exactly as before.
+fn check_class_ids_above_16_bits_are_not_cut(d: &Path) {
     let mut g = read_ply(&d.join("fused.ply")).unwrap();
     for c in g.class_ids.as_mut().unwrap() {
         if *c >= 0 {
@@ -612,34 +618,35 @@ fn palette_labels_and_jpeg_images_through_fuse_train_and_eval() {
     ok(&[
         "eval",
         "--scene",
-        &s("shifted.ply"),
+        &arg_in(d, "shifted.ply"),
         "--cameras",
-        &s("cameras.json"),
+        &arg_in(d, "cameras.json"),
         "--labels",
-        &s("labels_pal"),
+        &arg_in(d, "labels_pal"),
         "--views",
         "all",
         "--json",
-        &s("shifted.json"),
+        &arg_in(d, "shifted.json"),
     ]);
-    let shifted: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(d.join("shifted.json")).unwrap()).unwrap();
+    let shifted = read_json(&d.join("shifted.json"));
     assert_eq!(shifted["miou"].as_f64(), Some(0.0), "{shifted}");
     assert_eq!(shifted["pixel_accuracy"].as_f64(), Some(0.0), "{shifted}");
+}
 
-    // train reads the JPEG images (a couple of iterations: the format path, not quality).
+/// train reads the JPEG images (a couple of iterations: the format path, not quality).
+fn check_train_reads_jpegs(d: &Path) {
     ok(&[
         "train",
         "--images",
-        &s("images_jpg"),
+        &arg_in(d, "images_jpg"),
         "--labels",
-        &s("labels_pal"),
+        &arg_in(d, "labels_pal"),
         "--cameras",
-        &s("cameras.json"),
+        &arg_in(d, "cameras.json"),
         "--init",
-        &s("init.ply"),
+        &arg_in(d, "init.ply"),
         "--out",
-        &s("trained.ply"),
+        &arg_in(d, "trained.ply"),
         "--train-only",
         "--iters",
         "2",
@@ -650,4 +657,16 @@ fn palette_labels_and_jpeg_images_through_fuse_train_and_eval() {
         .unwrap()
         .class_ids
         .is_some());
+}
+
+#[test]
+fn palette_labels_and_jpeg_images_through_fuse_train_and_eval() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    synth_four_view_room(d);
+    palette_labels_and_jpegs(d);
+    fuse_palette_labels(d);
+    check_eval_scores_jpegs_and_names_classes(d);
+    check_class_ids_above_16_bits_are_not_cut(d);
+    check_train_reads_jpegs(d);
 }

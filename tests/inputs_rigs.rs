@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::cli::ok;
+use common::cli::{arg_in, ok, read_json};
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -96,21 +96,14 @@ fn files_under(dir: &Path) -> Vec<String> {
     found
 }
 
-/// Two views of the synth room as a two-sensor rig (`cam0/00001.jpg`, `cam1/00001.jpg`) and
-/// as plain names (`v0.jpg`, `v1.jpg`), same numbers: fusing the rig with mirrored label
-/// subfolders gives exactly the plain model's result, and swapping the two rig label files
-/// changes it, so each view took the labels under its own folder.
-#[test]
-fn colmap_rig_fuses_with_mirrored_label_subfolders() {
-    let tmp = tempfile::tempdir().unwrap();
-    let d = tmp.path();
-    let s = |p: &str| d.join(p).to_str().unwrap().to_owned();
+/// The tiny synth room with two train views and no held-out view, in `d/room`.
+fn synth_two_view_room(d: &Path) {
     ok(&[
         "synth",
         "--preset",
         "tiny",
         "--out",
-        &s("room"),
+        &arg_in(d, "room"),
         "--views",
         "2",
         "--test-views",
@@ -120,41 +113,47 @@ fn colmap_rig_fuses_with_mirrored_label_subfolders() {
         "--height",
         "32",
     ]);
-    let cams = load_cameras(&d.join("room/cameras.json")).unwrap();
+}
+
+/// The room's two views as a rig model (`rig`) and as plain names (`flat`), with label
+/// folders for each: `labels_flat`, `labels_rig` (mirrored subfolders) and `labels_swapped`
+/// (the rig's two label files exchanged).
+fn write_rig_and_flat_models(d: &Path, cams: &[Camera]) {
     let labels = |i: usize| d.join(format!("room/labels/{}.png", cams[i].name));
-    write_colmap_text(&d.join("rig"), &cams, &["cam0/00001.jpg", "cam1/00001.jpg"]);
-    write_colmap_text(&d.join("flat"), &cams, &["v0.jpg", "v1.jpg"]);
+    write_colmap_text(&d.join("rig"), cams, &["cam0/00001.jpg", "cam1/00001.jpg"]);
+    write_colmap_text(&d.join("flat"), cams, &["v0.jpg", "v1.jpg"]);
     copy(&labels(0), &d.join("labels_flat/v0.png"));
     copy(&labels(1), &d.join("labels_flat/v1.png"));
     copy(&labels(0), &d.join("labels_rig/cam0/00001.png"));
     copy(&labels(1), &d.join("labels_rig/cam1/00001.png"));
     copy(&labels(1), &d.join("labels_swapped/cam0/00001.png"));
     copy(&labels(0), &d.join("labels_swapped/cam1/00001.png"));
+}
 
-    let rig = read_colmap_model(&d.join("rig")).unwrap();
-    let names: Vec<&str> = rig.iter().map(|c| c.name.as_str()).collect();
-    assert_eq!(names, ["cam0/00001", "cam1/00001"]);
+/// `fuse` of the room's scene with the given cameras and labels, rendering its views.
+fn fuse_room(d: &Path, cameras: &str, labels: &str, out: &str, views: &str) {
+    ok(&[
+        "fuse",
+        "--scene",
+        &arg_in(d, "room/scene.ply"),
+        "--cameras",
+        &arg_in(d, cameras),
+        "--labels",
+        &arg_in(d, labels),
+        "--classes",
+        &arg_in(d, "room/classes.json"),
+        "--render-views",
+        &arg_in(d, views),
+        "--out",
+        &arg_in(d, out),
+    ]);
+}
 
-    let fuse = |cameras: &str, labels: &str, out: &str, views: &str| {
-        ok(&[
-            "fuse",
-            "--scene",
-            &s("room/scene.ply"),
-            "--cameras",
-            &s(cameras),
-            "--labels",
-            &s(labels),
-            "--classes",
-            &s("room/classes.json"),
-            "--render-views",
-            &s(views),
-            "--out",
-            &s(out),
-        ]);
-    };
-    fuse("flat", "labels_flat", "flat.ply", "views_flat");
-    fuse("rig", "labels_rig", "rig.ply", "views_rig");
-    fuse("rig", "labels_swapped", "swapped.ply", "views_swapped");
+/// Fuses flat, rig and swapped rig: the rig gives the flat result, the swap changes it.
+fn check_rig_fuses_like_flat_and_swap_changes_it(d: &Path) {
+    fuse_room(d, "flat", "labels_flat", "flat.ply", "views_flat");
+    fuse_room(d, "rig", "labels_rig", "rig.ply", "views_rig");
+    fuse_room(d, "rig", "labels_swapped", "swapped.ply", "views_swapped");
     let flat = class_ids(&d.join("flat.ply"));
     let rig_ids = class_ids(&d.join("rig.ply"));
     assert_eq!(
@@ -170,9 +169,11 @@ fn colmap_rig_fuses_with_mirrored_label_subfolders() {
         changed > 0,
         "swapping the rig's label files changed nothing"
     );
+}
 
-    // --render-views writes the rig views into subfolders of its folder, and they are the
-    // plain model's views.
+/// --render-views writes the rig views into subfolders of its folder, and they are the
+/// plain model's views.
+fn check_rig_render_views_match_flat(d: &Path) {
     assert_eq!(
         files_under(&d.join("views_rig")),
         [
@@ -187,8 +188,10 @@ fn colmap_rig_fuses_with_mirrored_label_subfolders() {
         let b = read_label_png(&d.join(format!("views_flat/{flat_view}.labels.png"))).unwrap();
         assert_eq!(a.labels, b.labels, "{rig_view}");
     }
+}
 
-    // eval reads labels and images by relative path (images/cam0/00001.png).
+/// eval reads labels and images by relative path (images/cam0/00001.png).
+fn check_rig_eval_reads_by_relative_path(d: &Path, cams: &[Camera]) {
     for (i, rig_view) in ["cam0/00001", "cam1/00001"].iter().enumerate() {
         let image = d.join(format!("room/images/{}.png", cams[i].name));
         copy(&image, &d.join(format!("images_rig/{rig_view}.png")));
@@ -196,39 +199,40 @@ fn colmap_rig_fuses_with_mirrored_label_subfolders() {
     ok(&[
         "eval",
         "--scene",
-        &s("rig.ply"),
+        &arg_in(d, "rig.ply"),
         "--cameras",
-        &s("rig"),
+        &arg_in(d, "rig"),
         "--labels",
-        &s("labels_rig"),
+        &arg_in(d, "labels_rig"),
         "--views",
         "all",
         "--images",
-        &s("images_rig"),
+        &arg_in(d, "images_rig"),
         "--json",
-        &s("eval.json"),
+        &arg_in(d, "eval.json"),
     ]);
-    let eval: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(d.join("eval.json")).unwrap()).unwrap();
+    let eval = read_json(&d.join("eval.json"));
     assert!(eval["miou"].as_f64().unwrap() > 0.5, "{eval}");
     assert!(
         eval["image_quality"]["psnr"].as_f64().unwrap() > 10.0,
         "{eval}"
     );
+}
 
-    // render (with --semantics, and --raw) of one rig view by its name lands inside --out.
+/// render (with --semantics, and --raw) of one rig view by its name lands inside --out.
+fn check_rig_view_renders_by_name_inside_out(d: &Path) {
     let render = |scene: &str, extra: &str| {
         ok(&[
             "render",
             "--scene",
-            &s(scene),
+            &arg_in(d, scene),
             "--cameras",
-            &s("rig"),
+            &arg_in(d, "rig"),
             "--views",
             "cam1/00001",
             extra,
             "--out",
-            &s("render_out"),
+            &arg_in(d, "render_out"),
         ])
     };
     render("rig.ply", "--semantics");
@@ -245,6 +249,28 @@ fn colmap_rig_fuses_with_mirrored_label_subfolders() {
         written.iter().all(|f| f.starts_with("cam1/00001.")),
         "{written:?}"
     );
+}
+
+/// Two views of the synth room as a two-sensor rig (`cam0/00001.jpg`, `cam1/00001.jpg`) and
+/// as plain names (`v0.jpg`, `v1.jpg`), same numbers: fusing the rig with mirrored label
+/// subfolders gives exactly the plain model's result, and swapping the two rig label files
+/// changes it, so each view took the labels under its own folder.
+#[test]
+fn colmap_rig_fuses_with_mirrored_label_subfolders() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    synth_two_view_room(d);
+    let cams = load_cameras(&d.join("room/cameras.json")).unwrap();
+    write_rig_and_flat_models(d, &cams);
+
+    let rig = read_colmap_model(&d.join("rig")).unwrap();
+    let names: Vec<&str> = rig.iter().map(|c| c.name.as_str()).collect();
+    assert_eq!(names, ["cam0/00001", "cam1/00001"]);
+
+    check_rig_fuses_like_flat_and_swap_changes_it(d);
+    check_rig_render_views_match_flat(d);
+    check_rig_eval_reads_by_relative_path(d, &cams);
+    check_rig_view_renders_by_name_inside_out(d);
 }
 
 /// Stems stay the names where unique; repeated stems take the relative path, without the

@@ -473,6 +473,20 @@ struct Case {
 /// one view; asserts the f64 twin equals the forward and the gradients are finite.
 fn check_case(case: &Case) -> FdStats {
     let start = Instant::now();
+    let (params, upstream, grads) = checked_forward_and_backward(case);
+    let mut stats = FdStats::default();
+    fd_check_stored_params(&mut stats, case, &params, &grads, &upstream);
+    let screen = ScreenSpace::new(&params, &case.cam, &case.settings);
+    fd_check_screen_space(&mut stats, case, &screen, &grads, &upstream);
+    print_case_summary(case, screen.projected.len(), &stats, start);
+    stats
+}
+
+/// The case's parameters in f64, its upstream gradients and its analytic gradients, after
+/// asserting that the f64 twin is bitwise the reference forward (so the FD differentiate
+/// the real forward), that both backward entry points agree, that the gradients are finite
+/// and that the objective is the in-order sum of the per-pixel terms the FD take apart.
+fn checked_forward_and_backward(case: &Case) -> (GaussianParams, PixelGrads, ParamGrads) {
     let Case {
         g, cam, settings, ..
     } = case;
@@ -493,19 +507,30 @@ fn check_case(case: &Case) -> FdStats {
     assert_eq!(l0, upstream.objective(&img));
     let terms = pixel_terms(&upstream, &img);
     assert_eq!(l0, terms.iter().fold(0.0, |acc, t| acc + t));
+    (params, upstream, grads)
+}
 
-    let mut stats = FdStats::default();
+/// FD-checks every component of every stored parameter of every Gaussian, rendering the
+/// moved parameters with the f64 twin.
+fn fd_check_stored_params(
+    stats: &mut FdStats,
+    case: &Case,
+    params: &GaussianParams,
+    grads: &ParamGrads,
+    upstream: &PixelGrads,
+) {
+    let Case { cam, settings, .. } = case;
     for which in PARAMS {
         for i in 0..params.len() {
-            for j in 0..components(&params, which) {
-                let h = fd_step(&params, cam, which, i);
+            for j in 0..components(params, which) {
+                let h = fd_step(params, cam, which, i);
                 let mut moved = params.clone();
                 let x0 = *entry(&mut moved, which, i, j);
                 stats.judge(
                     || format!("{} {which:?}[{i}][{j}]", case.name),
-                    analytic(&grads, &params, which, i, j),
+                    analytic(grads, params, which, i, j),
                     h,
-                    &upstream,
+                    upstream,
                     |offset| {
                         *entry(&mut moved, which, i, j) = x0 + offset;
                         render_params(&moved, cam, settings)
@@ -514,8 +539,18 @@ fn check_case(case: &Case) -> FdStats {
             }
         }
     }
+}
 
-    let screen = ScreenSpace::new(&params, cam, settings);
+/// FD-checks every visible Gaussian's screen-space values (mean2d, conic, opacity, color)
+/// by moving the projected Gaussian and compositing again.
+fn fd_check_screen_space(
+    stats: &mut FdStats,
+    case: &Case,
+    screen: &ScreenSpace,
+    grads: &ParamGrads,
+    upstream: &PixelGrads,
+) {
+    let Case { cam, settings, .. } = case;
     for (slot, p) in screen.projected.iter().enumerate() {
         let i = p.id as usize;
         // Conic steps relative to each entry's natural scale (B's is sqrt(AC) > |B|).
@@ -537,7 +572,7 @@ fn check_case(case: &Case) -> FdStats {
                 || format!("{} screen {which:?}[{i}][{j}]", case.name),
                 value,
                 h,
-                &upstream,
+                upstream,
                 |offset| {
                     let p = &mut moved.projected[slot];
                     let original = &screen.projected[slot];
@@ -552,15 +587,19 @@ fn check_case(case: &Case) -> FdStats {
             );
         }
     }
+}
 
-    let cov = coverage(g, cam, settings);
+/// Prints which non-smooth pieces of the forward the case reached and how its FD checks
+/// went (shown with --nocapture).
+fn print_case_summary(case: &Case, visible: usize, stats: &FdStats, start: Instant) {
+    let cov = coverage(&case.g, &case.cam, &case.settings);
     println!(
         "{}: {} Gaussians ({} visible; Jacobian-clamped {}, alpha-clamped pairs {}, \
          T-stopped pixels {}, color-clamped {}), {} FD-checked ({} nonzero), {} excluded as kinks \
          ({:.2}%), worst |err|/tol {:.3}, {:.1} s",
         case.name,
-        g.len(),
-        screen.projected.len(),
+        case.g.len(),
+        visible,
         cov.jacobian_clamped.len(),
         cov.alpha_clamped_pairs,
         cov.t_stopped_pixels,
@@ -572,7 +611,6 @@ fn check_case(case: &Case) -> FdStats {
         stats.worst_ratio,
         start.elapsed().as_secs_f64()
     );
-    stats
 }
 
 fn assert_finite(grads: &ParamGrads, name: &str) {

@@ -224,9 +224,9 @@ fn spec(n: usize, sh_degree: u32, channels: usize, seed: u64) -> RandomSceneSpec
 /// missing window) gives errors of 1e-1 and more.
 const TOLERANCE: f64 = 1e-3;
 
-#[test]
-fn gpu_backward_matches_the_reference_backward() {
-    let cam = camera(80, 56);
+/// Every SH degree with 0 to 17 channels, raw logits and softmax, on the default
+/// accumulation (float atomics, whole lists).
+fn channel_and_mode_cases(cam: &Camera) -> Vec<Case> {
     let mut cases = Vec::new();
     for (i, (sh, c, mode)) in [
         (0, 0, SemanticMode::RawLogits),
@@ -256,30 +256,43 @@ fn gpu_backward_matches_the_reference_backward() {
             semantics_only: false,
         });
     }
-    // Windows of 7 list entries: the per-pixel state is carried between backward dispatches.
-    cases.push(Case {
-        name: "windows of 7",
-        scene: random_scene(&spec(300, 1, 4, 40)),
-        cam: cam.clone(),
-        mode: SemanticMode::RawLogits,
-        background: [0.0; 3],
-        window: Some(7),
-        deterministic: false,
-        float_atomics: true,
-        semantics_only: false,
-    });
-    // The compare-and-swap path for devices without float atomics.
-    cases.push(Case {
-        name: "cas atomics",
-        scene: random_scene(&spec(300, 1, 4, 41)),
-        cam: cam.clone(),
-        mode: SemanticMode::RawLogits,
-        background: [0.0; 3],
-        window: None,
-        deterministic: false,
-        float_atomics: false,
-        semantics_only: false,
-    });
+    cases
+}
+
+/// Windows carried between dispatches and the compare-and-swap atomics.
+fn window_and_atomics_cases(cam: &Camera) -> Vec<Case> {
+    vec![
+        // Windows of 7 list entries: the per-pixel state is carried between backward
+        // dispatches.
+        Case {
+            name: "windows of 7",
+            scene: random_scene(&spec(300, 1, 4, 40)),
+            cam: cam.clone(),
+            mode: SemanticMode::RawLogits,
+            background: [0.0; 3],
+            window: Some(7),
+            deterministic: false,
+            float_atomics: true,
+            semantics_only: false,
+        },
+        // The compare-and-swap path for devices without float atomics.
+        Case {
+            name: "cas atomics",
+            scene: random_scene(&spec(300, 1, 4, 41)),
+            cam: cam.clone(),
+            mode: SemanticMode::RawLogits,
+            background: [0.0; 3],
+            window: None,
+            deterministic: false,
+            float_atomics: false,
+            semantics_only: false,
+        },
+    ]
+}
+
+/// The semantic-only kernels and the deterministic fixed-point sums.
+fn semantics_only_and_fixed_point_cases(cam: &Camera) -> Vec<Case> {
+    let mut cases = Vec::new();
     // Logits only (geometry frozen): the semantic-only kernels, both accumulations.
     for float_atomics in [true, false] {
         cases.push(Case {
@@ -312,6 +325,15 @@ fn gpu_backward_matches_the_reference_backward() {
             semantics_only,
         });
     }
+    cases
+}
+
+#[test]
+fn gpu_backward_matches_the_reference_backward() {
+    let cam = camera(80, 56);
+    let mut cases = channel_and_mode_cases(&cam);
+    cases.extend(window_and_atomics_cases(&cam));
+    cases.extend(semantics_only_and_fixed_point_cases(&cam));
     for case in &cases {
         let worst = compare(case);
         assert!(
@@ -369,18 +391,17 @@ fn gpu_backward_handles_the_forward_edge_cases() {
     common::check_validation(common::gpu());
 }
 
-/// An end-to-end check that does not go through the reference backward at all: central
-/// differences of the f64 reference forward, at the parameters where the objective is
-/// smooth at this step (the forward is piecewise: a pixel crossing alpha = 1/255 makes its
-/// normalized semantics (Gaussian Semantics Eq. 2) jump, so differences at h and h/2 must
-/// agree first).
-#[test]
-fn gpu_backward_matches_finite_differences() {
+/// The GPU's gradients (default variant) of the objective the f32 upstream gradients
+/// `rgb`, `alpha` and `sem` define on `g` seen by `cam`, over a grey background.
+fn gpu_gradients(
+    g: &Gaussians,
+    cam: &Camera,
+    rgb: &[f32],
+    alpha: &[f32],
+    sem: &[f32],
+) -> HostGrads {
     let gpu = common::gpu();
-    let cam = camera(48, 40);
-    let g = common::separate_depth_ties(&random_scene(&spec(25, 1, 3, 60)), &cam);
-    let (rgb, alpha, sem, host) = upstream(48 * 40, 3, 5);
-    let scene = GpuScene::upload(gpu, &g).unwrap();
+    let scene = GpuScene::upload(gpu, g).unwrap();
     let mut r = Rasterizer::new(gpu);
     let opts = RenderOptions {
         background: [0.3, 0.3, 0.3],
@@ -390,27 +411,40 @@ fn gpu_backward_matches_finite_differences() {
     let (_, grads) = r
         .render_backward(
             &scene,
-            &cam,
+            cam,
             &opts,
             &HostPixelGrads {
-                rgb: &rgb,
-                alpha: &alpha,
-                sem_norm: &sem,
+                rgb,
+                alpha,
+                sem_norm: sem,
             },
             BackwardVariant::default(),
         )
         .unwrap();
+    grads
+}
+
+/// Compares every stored parameter's GPU gradient with central differences of the f64
+/// reference forward's objective (`host`, same grey background), where differences at h and
+/// h/2 agree; returns how many were checked, how many skipped at a kink, and the worst
+/// error relative to max(|FD|, 1).
+fn compare_with_finite_differences(
+    g: &Gaussians,
+    cam: &Camera,
+    host: &PixelGrads,
+    grads: &HostGrads,
+) -> (usize, usize, f64) {
     let settings = RenderSettings {
         background: [0.3; 3],
         ..Default::default()
     };
-    let base = GaussianParams::from_gaussians(&g);
+    let base = GaussianParams::from_gaussians(g);
     let fd = |get: &dyn Fn(&mut GaussianParams) -> &mut f64, h: f64| {
         let mut a = base.clone();
         *get(&mut a) += h;
         let mut b = base.clone();
         *get(&mut b) -= h;
-        (objective(&a, &cam, &settings, &host) - objective(&b, &cam, &settings, &host)) / (2.0 * h)
+        (objective(&a, cam, &settings, host) - objective(&b, cam, &settings, host)) / (2.0 * h)
     };
     let (mut checked, mut skipped, mut worst) = (0, 0, 0.0f64);
     let mut check = |get: &dyn Fn(&mut GaussianParams) -> &mut f64, gpu_value: f32| {
@@ -445,6 +479,22 @@ fn gpu_backward_matches_finite_differences() {
             check(&|p| &mut p.logits[3 * i + k], grads.logits[3 * i + k]);
         }
     }
+    (checked, skipped, worst)
+}
+
+/// An end-to-end check that does not go through the reference backward at all: central
+/// differences of the f64 reference forward, at the parameters where the objective is
+/// smooth at this step (the forward is piecewise: a pixel crossing alpha = 1/255 makes its
+/// normalized semantics (Gaussian Semantics Eq. 2) jump, so differences at h and h/2 must
+/// agree first).
+#[test]
+fn gpu_backward_matches_finite_differences() {
+    let gpu = common::gpu();
+    let cam = camera(48, 40);
+    let g = common::separate_depth_ties(&random_scene(&spec(25, 1, 3, 60)), &cam);
+    let (rgb, alpha, sem, host) = upstream(48 * 40, 3, 5);
+    let grads = gpu_gradients(&g, &cam, &rgb, &alpha, &sem);
+    let (checked, skipped, worst) = compare_with_finite_differences(&g, &cam, &host, &grads);
     println!("finite differences: {checked} checked, {skipped} at a kink, worst error {worst:.2e}");
     assert!(
         checked >= 9 * (checked + skipped) / 10,

@@ -203,66 +203,61 @@ fn random_scenes_match_the_reference() {
     check_validation(gpu);
 }
 
-#[test]
-fn edge_cases_match_the_reference() {
-    let gpu = gpu();
-    let mut raster = Rasterizer::new(gpu);
-    let base = |seed| {
-        random_scene(&RandomSceneSpec {
-            n: 500,
-            channels: 3,
-            sh_degree: 1,
-            seed,
-            ..Default::default()
-        })
-    };
-    let cam = camera("c", DVec3::ZERO, DVec3::new(0.0, 0.0, 1.0), 53, 37);
+/// The 500-Gaussian random scene each edge case edits.
+fn edge_case_base(seed: u64) -> Gaussians {
+    random_scene(&RandomSceneSpec {
+        n: 500,
+        channels: 3,
+        sh_degree: 1,
+        seed,
+        ..Default::default()
+    })
+}
 
-    // N = 0: background everywhere.
+/// N = 0: background everywhere.
+fn check_empty_scene(raster: &mut Rasterizer, cam: &Camera) {
     let empty = Gaussians {
         semantics: None,
         ..Default::default()
     };
-    let f = compare(&mut raster, &empty, &cam, None, "empty scene");
+    let f = compare(raster, &empty, cam, None, "empty scene");
     assert!(f.alpha.iter().all(|&a| a == 0.0));
     assert!((f.rgb[0] - 0.2).abs() < 1e-6 && (f.rgb[2] - 0.6).abs() < 1e-6);
+}
 
-    // Every Gaussian behind the camera, or between the camera and the near plane.
-    let mut behind = base(1);
+/// Every Gaussian behind the camera, or between the camera and the near plane.
+fn check_behind_and_inside_near_plane(raster: &mut Rasterizer, cam: &Camera) {
+    let mut behind = edge_case_base(1);
     behind.means.iter_mut().for_each(|m| m[2] = -m[2]);
     let f = compare(
-        &mut raster,
+        raster,
         &behind,
-        &cam,
+        cam,
         Some(SemanticMode::RawLogits),
         "behind",
     );
     assert_eq!(f.visible, 0);
-    let mut near = base(2);
+    let mut near = edge_case_base(2);
     near.means.iter_mut().for_each(|m| m[2] *= 0.001);
     compare(
-        &mut raster,
+        raster,
         &near,
-        &cam,
+        cam,
         Some(SemanticMode::RawLogits),
         "inside near plane",
     );
+}
 
-    // Much larger than the image.
-    let mut huge = base(3);
+/// Scales much larger than the image, and tiny and degenerate ones (a zero-thickness disk,
+/// a needle, a point).
+fn check_extreme_scales(raster: &mut Rasterizer, cam: &Camera) {
+    let mut huge = edge_case_base(3);
     huge.log_scales
         .iter_mut()
         .for_each(|s| *s = [2.0, 1.5, 2.5]);
-    compare(
-        &mut raster,
-        &huge,
-        &cam,
-        Some(SemanticMode::Softmax),
-        "huge",
-    );
+    compare(raster, &huge, cam, Some(SemanticMode::Softmax), "huge");
 
-    // Tiny and degenerate scales (a zero-thickness disk, a needle, a point).
-    let mut tiny = base(4);
+    let mut tiny = edge_case_base(4);
     for (i, s) in tiny.log_scales.iter_mut().enumerate() {
         *s = match i % 3 {
             0 => [-20.0, -20.0, -20.0],
@@ -271,53 +266,69 @@ fn edge_cases_match_the_reference() {
         };
     }
     compare(
-        &mut raster,
+        raster,
         &tiny,
-        &cam,
+        cam,
         Some(SemanticMode::RawLogits),
         "tiny scales",
     );
+}
 
-    // Extreme opacities: saturating (alpha clamped to 0.999, T stop) and invisible.
-    let mut opaque = base(5);
+/// Extreme opacities (saturating: alpha clamped to 0.999, T stop; and invisible), and
+/// zero quaternions, which are culled on both sides.
+fn check_extreme_opacities_and_zero_quaternions(raster: &mut Rasterizer, cam: &Camera) {
+    let mut opaque = edge_case_base(5);
     for (i, o) in opaque.opacity_logits.iter_mut().enumerate() {
         *o = if i % 2 == 0 { 30.0 } else { -30.0 };
     }
     compare(
-        &mut raster,
+        raster,
         &opaque,
-        &cam,
+        cam,
         Some(SemanticMode::RawLogits),
         "extreme opacity",
     );
 
-    // Zero quaternions are culled on both sides.
-    let mut zero_q = base(6);
+    let mut zero_q = edge_case_base(6);
     zero_q
         .quats
         .iter_mut()
         .step_by(2)
         .for_each(|q| *q = [0.0; 4]);
     compare(
-        &mut raster,
+        raster,
         &zero_q,
-        &cam,
+        cam,
         Some(SemanticMode::RawLogits),
         "zero quaternions",
     );
+}
 
-    // Image sizes that are not multiples of 16, down to one pixel.
-    let g = base(7);
+/// Image sizes that are not multiples of 16, down to one pixel.
+fn check_odd_image_sizes(raster: &mut Rasterizer) {
+    let g = edge_case_base(7);
     for (w, h) in [(1, 1), (17, 15), (16, 33), (130, 7)] {
         let cam = camera("odd", DVec3::ZERO, DVec3::new(0.0, 0.0, 1.0), w, h);
         compare(
-            &mut raster,
+            raster,
             &g,
             &cam,
             Some(SemanticMode::Softmax),
             &format!("{w}x{h}"),
         );
     }
+}
+
+#[test]
+fn edge_cases_match_the_reference() {
+    let gpu = gpu();
+    let mut raster = Rasterizer::new(gpu);
+    let cam = camera("c", DVec3::ZERO, DVec3::new(0.0, 0.0, 1.0), 53, 37);
+    check_empty_scene(&mut raster, &cam);
+    check_behind_and_inside_near_plane(&mut raster, &cam);
+    check_extreme_scales(&mut raster, &cam);
+    check_extreme_opacities_and_zero_quaternions(&mut raster, &cam);
+    check_odd_image_sizes(&mut raster);
     check_validation(gpu);
 }
 

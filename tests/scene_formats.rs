@@ -816,13 +816,13 @@ fn inspect(args: &[&std::ffi::OsStr]) -> (bool, String, String) {
     (out.status.success(), text(out.stdout), text(out.stderr))
 }
 
-#[test]
-fn inspect_summarizes_files_and_fails_on_problems() {
-    let dir = tempfile::tempdir().unwrap();
-    let ply = dir.path().join("scene.ply");
-    let mut g = with_semantics(random_gaussians(20, 2, 5), 3);
-    write_ply(&ply, &g).unwrap();
-    write_classes_sidecar(&ply, &ClassTable::from_ids(0..6)).unwrap();
+/// A clean scene with semantics and a class table beside it: `inspect --json` counts its
+/// Gaussians, SH degree and classes, names them from the table, and finds no problem.
+/// Returns the scene written.
+fn check_inspect_summarizes_clean_scene(ply: &Path) -> Gaussians {
+    let g = with_semantics(random_gaussians(20, 2, 5), 3);
+    write_ply(ply, &g).unwrap();
+    write_classes_sidecar(ply, &ClassTable::from_ids(0..6)).unwrap();
     let (ok, stdout, stderr) = inspect(&[ply.as_os_str(), "--json".as_ref()]);
     assert!(ok, "{stderr}");
     let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
@@ -842,18 +842,23 @@ fn inspect_summarizes_files_and_fails_on_problems() {
         classes.iter().find(|c| c["id"] == 2).unwrap()["name"],
         "class_2"
     );
+    g
+}
 
+/// `g` with a zero quaternion at 4 and a NaN position at 7, written to `ply` as another
+/// tool's file would hold it: `inspect` fails and names both problems.
+fn check_inspect_fails_on_broken_scene(ply: &Path, mut g: Gaussians) {
     g.quats[4] = [0.0; 4];
     // The writer refuses NaN: write a marker and patch it into NaN, as another tool's file.
     g.means[7][0] = 12345.5;
-    write_ply(&ply, &g).unwrap();
-    let mut bytes = std::fs::read(&ply).unwrap();
+    write_ply(ply, &g).unwrap();
+    let mut bytes = std::fs::read(ply).unwrap();
     let at = bytes
         .windows(4)
         .position(|w| w == 12345.5f32.to_le_bytes())
         .unwrap();
     bytes[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
-    std::fs::write(&ply, bytes).unwrap();
+    std::fs::write(ply, bytes).unwrap();
     let (ok, stdout, stderr) = inspect(&[ply.as_os_str()]);
     assert!(!ok);
     assert!(
@@ -865,17 +870,20 @@ fn inspect_summarizes_files_and_fails_on_problems() {
         "{stdout}"
     );
     assert!(stderr.contains("2 problem(s)"), "{stderr}");
+}
 
-    // Cameras and a label folder checked against them.
+/// Cameras and a label folder checked against them: each summarizes alone, and together
+/// the camera without a label map is a problem.
+fn check_inspect_cameras_and_labels_against_them(dir: &Path) {
     let cams = vec![camera_named("a", 2, 1), camera_named("b", 2, 1)];
-    let cam_path = dir.path().join("cams.json");
+    let cam_path = dir.join("cams.json");
     write_semsplat_cameras(&cam_path, &cams).unwrap();
     let (ok, stdout, _) = inspect(&[cam_path.as_os_str()]);
     assert!(
         ok && stdout.contains("semsplat camera JSON") && stdout.contains("cameras: 2"),
         "{stdout}"
     );
-    let labels = dir.path().join("labels");
+    let labels = dir.join("labels");
     write_label_png(
         &labels.join("a.png"),
         &LabelMap::new(2, 1, vec![1, LabelMap::IGNORE]).unwrap(),
@@ -902,4 +910,13 @@ fn inspect_summarizes_files_and_fails_on_problems() {
         stdout.contains("1 of 2 cameras have no label map: b"),
         "{stdout}"
     );
+}
+
+#[test]
+fn inspect_summarizes_files_and_fails_on_problems() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = dir.path().join("scene.ply");
+    let g = check_inspect_summarizes_clean_scene(&ply);
+    check_inspect_fails_on_broken_scene(&ply, g);
+    check_inspect_cameras_and_labels_against_them(dir.path());
 }

@@ -43,6 +43,24 @@ enum Intent {
     Unseen,
 }
 
+/// An accumulated gradient and its count for a Gaussian meant to take `intent`: idle ones
+/// average below 0.00015, densified ones above 0.00025 (threshold 0.0002); some repeat an
+/// earlier pair of `pairs`, for exact ties.
+fn random_gradient(rng: &mut Rng, intent: Intent, pairs: &[(f32, f32)]) -> (f32, f32) {
+    if intent == Intent::Unseen {
+        (0.0, 0.0)
+    } else if !pairs.is_empty() && rng.bool(0.1) {
+        pairs[rng.below(pairs.len() as u64) as usize]
+    } else {
+        let count = 1 + rng.below(20) as u32;
+        let avg = match intent {
+            Intent::Idle => rng.range_f64(0.0, 0.00015),
+            _ => rng.range_f64(0.00025, 0.003),
+        };
+        ((avg * count as f64) as f32, count as f32)
+    }
+}
+
 fn random_model(n: usize, extent: f32, seed: u64) -> Model {
     let mut rng = Rng::new(seed);
     let mut m = Model {
@@ -96,20 +114,7 @@ fn random_model(n: usize, extent: f32, seed: u64) -> Model {
             m.logits.push(rng.range_f64(-3.0, 3.0) as f32);
         }
         m.opacity_v.push(rng.range_f64(0.0, 1.0) as f32);
-        // Gradients: idle ones average below 0.00015, densified ones above 0.00025
-        // (threshold 0.0002); some repeat an earlier pair, for exact ties.
-        let (accum, count) = if intent == Intent::Unseen {
-            (0.0, 0.0)
-        } else if !pairs.is_empty() && rng.bool(0.1) {
-            pairs[rng.below(pairs.len() as u64) as usize]
-        } else {
-            let count = 1 + rng.below(20) as u32;
-            let avg = match intent {
-                Intent::Idle => rng.range_f64(0.0, 0.00015),
-                _ => rng.range_f64(0.00025, 0.003),
-            };
-            ((avg * count as f64) as f32, count as f32)
-        };
+        let (accum, count) = random_gradient(&mut rng, intent, &pairs);
         pairs.push((accum, count));
         m.grad_accum.push(accum);
         m.grad_count.push(count);
@@ -347,10 +352,31 @@ fn row(v: &[f32], width: usize, i: usize) -> &[f32] {
     &v[i * width..(i + 1) * width]
 }
 
+/// The bit patterns of `v`, so that equality is bitwise (-0.0 must stay -0.0).
+fn bits(v: &[f32]) -> Vec<u32> {
+    v.iter().map(|x| x.to_bits()).collect()
+}
+
 /// Checks every tensor of the GPU's new model against the reference layout.
 fn check_against_reference(m: &Model, c: &DensifyConfig, plan: &DensifyPlan, out: &Model) {
     let e = reference(m, c);
     let ctx = format!("n = {}, config {c:?}", m.n);
+    check_plan_counts(m, c, plan, &e, &ctx);
+    for (j, &(i, kind)) in e.slots.iter().enumerate() {
+        let at = format!("slot {j} (source {i}, {kind:?}), {ctx}");
+        check_copied_and_scaled_rows(m, out, (j, i, kind), &at);
+        check_mean_row(m, c, out, (j, i, kind), &at);
+        check_moment_rows(m, out, (j, i, kind), &at);
+    }
+    assert!(out
+        .grad_accum
+        .iter()
+        .chain(&out.grad_count)
+        .all(|&x| x.to_bits() == 0));
+}
+
+/// The plan's counts and size are the reference's, within the cap.
+fn check_plan_counts(m: &Model, c: &DensifyConfig, plan: &DensifyPlan, e: &Expected, ctx: &str) {
     assert_eq!(
         (
             plan.n,
@@ -364,73 +390,89 @@ fn check_against_reference(m: &Model, c: &DensifyConfig, plan: &DensifyPlan, out
     );
     assert_eq!(plan.new_n as usize, e.slots.len(), "new n, {ctx}");
     assert!(plan.new_n <= c.max_gaussians, "over the cap, {ctx}");
+}
+
+/// Output slot `j` holds source `i` as `kind`: the copied tensors identify the source
+/// exactly, and the log-scales are the source's, shrunk by ln 1.6 in split children.
+fn check_copied_and_scaled_rows(
+    m: &Model,
+    out: &Model,
+    (j, i, kind): (usize, usize, Kind),
+    at: &str,
+) {
+    for (name, width, new, old) in [
+        ("quats", 4, &out.quats, &m.quats),
+        ("opacity", 1, &out.opacity_logits, &m.opacity_logits),
+        ("sh", SH_WIDTH, &out.sh, &m.sh),
+        ("logits", CHANNELS, &out.logits, &m.logits),
+    ] {
+        assert_eq!(
+            bits(row(new, width, j)),
+            bits(row(old, width, i)),
+            "{name} at {at}"
+        );
+    }
     let shrink = 1.6f64.ln() as f32;
-    for (j, &(i, kind)) in e.slots.iter().enumerate() {
-        let at = format!("slot {j} (source {i}, {kind:?}), {ctx}");
-        // Copied tensors identify the source exactly (bitwise: -0.0 must stay -0.0).
-        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-        for (name, width, new, old) in [
-            ("quats", 4, &out.quats, &m.quats),
-            ("opacity", 1, &out.opacity_logits, &m.opacity_logits),
-            ("sh", SH_WIDTH, &out.sh, &m.sh),
-            ("logits", CHANNELS, &out.logits, &m.logits),
-        ] {
+    let child = matches!(kind, Kind::Split0 | Kind::Split1);
+    let want_ls: Vec<f32> = row(&m.log_scales, 3, i)
+        .iter()
+        .map(|&x| if child { x - shrink } else { x })
+        .collect();
+    assert_eq!(
+        bits(row(&out.log_scales, 3, j)),
+        bits(&want_ls),
+        "log_scales at {at}"
+    );
+}
+
+/// A split child's mean is the source's moved by its f64 split offset; any other slot's
+/// is the source's, bitwise.
+fn check_mean_row(
+    m: &Model,
+    c: &DensifyConfig,
+    out: &Model,
+    (j, i, kind): (usize, usize, Kind),
+    at: &str,
+) {
+    if matches!(kind, Kind::Split0 | Kind::Split1) {
+        let offset = split_offset(m, i, u32::from(kind == Kind::Split1), c.seed);
+        for (a, d) in offset.iter().enumerate() {
+            let want = m.means[3 * i + a] as f64 + d;
+            let got = out.means[3 * j + a] as f64;
+            assert!(
+                (got - want).abs() <= 1e-5,
+                "mean[{a}] {got} vs {want} at {at}"
+            );
+        }
+    } else {
+        assert_eq!(
+            bits(row(&out.means, 3, j)),
+            bits(row(&m.means, 3, i)),
+            "mean at {at}"
+        );
+    }
+}
+
+/// Adam moments start at zero in new Gaussians (clones and split children) and are kept
+/// in the rest.
+fn check_moment_rows(m: &Model, out: &Model, (j, i, kind): (usize, usize, Kind), at: &str) {
+    let fresh = kind != Kind::Keep;
+    let moment = |new: &[f32], old: &[f32], width: usize| {
+        if fresh {
+            assert!(
+                row(new, width, j).iter().all(|&x| x.to_bits() == 0),
+                "moment at {at}"
+            );
+        } else {
             assert_eq!(
                 bits(row(new, width, j)),
                 bits(row(old, width, i)),
-                "{name} at {at}"
+                "moment at {at}"
             );
         }
-        let child = matches!(kind, Kind::Split0 | Kind::Split1);
-        let want_ls: Vec<f32> = row(&m.log_scales, 3, i)
-            .iter()
-            .map(|&x| if child { x - shrink } else { x })
-            .collect();
-        assert_eq!(
-            bits(row(&out.log_scales, 3, j)),
-            bits(&want_ls),
-            "log_scales at {at}"
-        );
-        if child {
-            let offset = split_offset(m, i, u32::from(kind == Kind::Split1), c.seed);
-            for (a, d) in offset.iter().enumerate() {
-                let want = m.means[3 * i + a] as f64 + d;
-                let got = out.means[3 * j + a] as f64;
-                assert!(
-                    (got - want).abs() <= 1e-5,
-                    "mean[{a}] {got} vs {want} at {at}"
-                );
-            }
-        } else {
-            assert_eq!(
-                bits(row(&out.means, 3, j)),
-                bits(row(&m.means, 3, i)),
-                "mean at {at}"
-            );
-        }
-        let fresh = kind != Kind::Keep;
-        let moment = |new: &[f32], old: &[f32], width: usize| {
-            if fresh {
-                assert!(
-                    row(new, width, j).iter().all(|&x| x.to_bits() == 0),
-                    "moment at {at}"
-                );
-            } else {
-                assert_eq!(
-                    bits(row(new, width, j)),
-                    bits(row(old, width, i)),
-                    "moment at {at}"
-                );
-            }
-        };
-        moment(&out.sh_m, &m.sh_m, SH_WIDTH);
-        moment(&out.opacity_v, &m.opacity_v, 1);
-    }
-    assert!(out
-        .grad_accum
-        .iter()
-        .chain(&out.grad_count)
-        .all(|&x| x.to_bits() == 0));
+    };
+    moment(&out.sh_m, &m.sh_m, SH_WIDTH);
+    moment(&out.opacity_v, &m.opacity_v, 1);
 }
 
 #[test]
@@ -500,10 +542,10 @@ fn one_gaussian_each_branch() {
     check_validation(gpu);
 }
 
-#[test]
-fn cap_keeps_the_largest_gradients() {
-    let gpu = gpu();
-    let mut densifier = Densifier::new(gpu);
+/// Densifies random models of 1 to 3000 Gaussians under caps from the input size to 2n - 1
+/// (bound or not), checking each against the reference and that the cap cuts the
+/// densified count exactly; returns how many caps left some candidates out.
+fn check_caps_on_random_models(gpu: &Gpu, densifier: &mut Densifier) -> usize {
     let mut partial = 0;
     for (k, &n) in [1usize, 2, 7, 50, 3000].iter().enumerate() {
         // About a sixth is pruned and half are candidates, so caps from n up bind.
@@ -531,7 +573,7 @@ fn cap_keeps_the_largest_gradients() {
                 continue;
             }
             let c = DensifyConfig { max_gaussians, ..c };
-            let (plan, out) = densify_on_gpu(gpu, &mut densifier, &m, &c);
+            let (plan, out) = densify_on_gpu(gpu, densifier, &m, &c);
             check_against_reference(&m, &c, &plan, &out);
             let want = densified.min(max_gaussians - survivors);
             assert_eq!(
@@ -545,12 +587,12 @@ fn cap_keeps_the_largest_gradients() {
             }
         }
     }
-    assert!(
-        partial >= 6,
-        "caps that left some candidates out: {partial}"
-    );
-    // Exact ties in the gradient at the cap: the lower indices win (and the tied top
-    // gradients beat the distinct lower ones).
+    partial
+}
+
+/// Exact ties in the gradient at the cap: the lower indices win (and the tied top
+/// gradients beat the distinct lower ones).
+fn check_ties_at_the_cap(gpu: &Gpu, densifier: &mut Densifier) {
     let mut m = random_model(400, 1.0, 31);
     for i in 0..m.n {
         m.opacity_logits[i] = 1.0;
@@ -566,12 +608,24 @@ fn cap_keeps_the_largest_gradients() {
         max_gaussians: m.n as u32 + ties / 2,
         ..DensifyConfig::default()
     };
-    let (plan, out) = densify_on_gpu(gpu, &mut densifier, &m, &c);
+    let (plan, out) = densify_on_gpu(gpu, densifier, &m, &c);
     check_against_reference(&m, &c, &plan, &out);
     assert_eq!(
         (plan.cloned + plan.split, plan.capped()),
         (ties / 2, 2 * ties - 1 - ties / 2)
     );
+}
+
+#[test]
+fn cap_keeps_the_largest_gradients() {
+    let gpu = gpu();
+    let mut densifier = Densifier::new(gpu);
+    let partial = check_caps_on_random_models(gpu, &mut densifier);
+    assert!(
+        partial >= 6,
+        "caps that left some candidates out: {partial}"
+    );
+    check_ties_at_the_cap(gpu, &mut densifier);
     check_validation(gpu);
 }
 

@@ -3,6 +3,22 @@
 use std::path::Path;
 use std::process::{Command, Output};
 
+/// `file` in `dir`, as a command-line argument.
+pub fn arg_in(dir: &Path, file: &str) -> String {
+    dir.join(file).to_str().unwrap().to_string()
+}
+
+/// `args` as owned strings, for argument lists that mix literals and paths.
+pub fn strings(args: &[&str]) -> Vec<String> {
+    args.iter().map(|s| s.to_string()).collect()
+}
+
+/// The JSON file at `path` (a report, a manifest), parsed.
+pub fn read_json(path: &Path) -> serde_json::Value {
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_slice(&bytes).unwrap()
+}
+
 /// Runs `semsplat args...` and returns what it did.
 pub fn semsplat(args: &[&str]) -> Output {
     semsplat_with_env(args, &[])
