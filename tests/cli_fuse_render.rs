@@ -135,27 +135,34 @@ fn check_eval_scores(d: &Path) {
     assert!(eval["gaussian_accuracy"].as_f64().unwrap() > 0.2);
 }
 
+/// `fuse` of the room's scene from the evidence saved in `A.npy` (no rendering of its own),
+/// with `extra` options.
+fn fuse_from_saved_evidence(d: &Path, extra: &[&str]) {
+    let (scene, contrib) = (arg_in(d, "scene.ply"), arg_in(d, "A.npy"));
+    let mut args = vec!["fuse", "--scene", &scene, "--contrib", &contrib];
+    args.extend_from_slice(extra);
+    ok(&args);
+}
+
 /// Label maps rendered from the fused scene, and the multi-instance membership of the
 /// scene's `gaussians` Gaussians (0 or 1, some 1).
 fn check_rendered_views_and_membership(d: &Path, gaussians: usize) {
     let p = |f: &str| arg_in(d, f);
-    ok(&[
-        "fuse",
-        "--scene",
-        &p("scene.ply"),
-        "--contrib",
-        &p("A.npy"),
-        "--cameras",
-        &p("cameras.json"),
-        "--render-views",
-        &p("views"),
-        "--save-membership",
-        &p("S.npy"),
-        "--gamma",
-        "0.1",
-        "--out",
-        &p("v.ply"),
-    ]);
+    fuse_from_saved_evidence(
+        d,
+        &[
+            "--cameras",
+            &p("cameras.json"),
+            "--render-views",
+            &p("views"),
+            "--save-membership",
+            &p("S.npy"),
+            "--gamma",
+            "0.1",
+            "--out",
+            &p("v.ply"),
+        ],
+    );
     let cams = semsplat::scene::cameras::load_cameras(&d.join("cameras.json")).unwrap();
     for c in &cams {
         assert!(d
@@ -177,16 +184,7 @@ fn check_rendered_views_and_membership(d: &Path, gaussians: usize) {
 /// Reassigning from the saved matrix gives the same classes as the fused scene `g`
 /// without rendering.
 fn check_reassigned_from_saved_evidence(d: &Path, g: &Gaussians) {
-    let p = |f: &str| arg_in(d, f);
-    ok(&[
-        "fuse",
-        "--scene",
-        &p("scene.ply"),
-        "--contrib",
-        &p("A.npy"),
-        "--out",
-        &p("again.ply"),
-    ]);
+    fuse_from_saved_evidence(d, &["--out", &arg_in(d, "again.ply")]);
     let again = read_scene(d, "again.ply");
     assert_eq!(again.class_ids, g.class_ids);
 }
@@ -197,17 +195,7 @@ fn check_extract_and_remove_add_up(d: &Path, gaussians: usize) {
     let table = semsplat::scene::classes::read_class_table(&d.join("A.classes.json")).unwrap();
     let name = &table.classes[0].name;
     for (what, out) in [("--extract", "only.ply"), ("--remove", "rest.ply")] {
-        ok(&[
-            "fuse",
-            "--scene",
-            &p("scene.ply"),
-            "--contrib",
-            &p("A.npy"),
-            what,
-            name,
-            "--out",
-            &p(out),
-        ]);
+        fuse_from_saved_evidence(d, &[what, name, "--out", &p(out)]);
     }
     let only = read_scene(d, "only.ply");
     let rest = read_scene(d, "rest.ply");

@@ -221,26 +221,16 @@ fn commands_naming_files_by_camera(room: &Path, cameras: &Path, out: &Path) -> V
     let p = |f: &Path| f.to_str().unwrap().to_string();
     let r = |f: &str| p(&room.join(f));
     let (cameras, out_s) = (p(cameras), p(out));
+    let render = |raw: &[&str]| {
+        let scene = r("scene.ply");
+        let mut args = strings(&["render", "--scene", &scene, "--cameras", &cameras]);
+        args.extend(strings(raw));
+        args.extend(strings(&["--out", &out_s]));
+        args
+    };
     vec![
-        strings(&[
-            "render",
-            "--scene",
-            &r("scene.ply"),
-            "--cameras",
-            &cameras,
-            "--out",
-            &out_s,
-        ]),
-        strings(&[
-            "render",
-            "--raw",
-            "--scene",
-            &r("scene.ply"),
-            "--cameras",
-            &cameras,
-            "--out",
-            &out_s,
-        ]),
+        render(&[]),
+        render(&["--raw"]),
         strings(&[
             "fuse",
             "--scene",
