@@ -13,6 +13,7 @@ use semsplat::fuse::consensus_cluster::{
     cluster_segments, cluster_segments_sweeping_from, cluster_segments_timed,
 };
 use semsplat::fuse::consensus_decide::{binomial_at_most, decide, Consensus};
+use semsplat::fuse::consensus_report::segment_report;
 use semsplat::fuse::consensus_segments::{co_occurrence, label_regions, Observations};
 use semsplat::fuse::{
     assign_semantic, assign_semantic_near, fuse_consensus, nearest_neighbours, ClassScores,
@@ -791,7 +792,59 @@ fn planted_object_is_flagged() {
             seg.views
         );
     }
+    let on_planted: Vec<usize> = flagged.into_iter().filter(|&k| on_object(k)).collect();
+    check_report_names_the_mislabeled_views(&c, &s, &classes, on_planted[0]);
     check_validation(gpu);
+}
+
+/// The report of the planted object's flagged segment `k` lists under the wrong class the
+/// views the synth mislabeled it in, and under its true class views it did not: what a user
+/// looks at to fix the labels. Its bounds hold its Gaussians' centers.
+fn check_report_names_the_mislabeled_views(
+    c: &Consensus,
+    s: &SynthScene,
+    classes: &CompactClasses,
+    k: usize,
+) {
+    let planted = &s.noisy.as_ref().unwrap().report.consistent[0];
+    let names: Vec<String> = (0..classes.len())
+        .map(|c| format!("class {}", classes.user_of(c).unwrap()))
+        .collect();
+    let cameras: Vec<String> = s.cameras.iter().map(|c| c.name.clone()).collect();
+    let report = segment_report(c, &names, &cameras, &s.gaussians.means, 1);
+    let split = report
+        .flagged
+        .iter()
+        .find(|f| f.segment == k as u32)
+        .unwrap();
+    let listed = |class: u32| {
+        let name = format!("class {class}");
+        let found = split.views_by_class.iter().find(|(c, _)| *c == name);
+        found.map(|(_, views)| views.clone()).unwrap_or_default()
+    };
+    let (wrong, right) = (listed(planted.wrong_class), listed(planted.true_class));
+    eprintln!(
+        "wrong in {:?}; listed wrong {wrong:?}, right {right:?}",
+        planted.wrong_views
+    );
+    assert!(
+        !wrong.is_empty() && !right.is_empty(),
+        "{:?}",
+        split.views_by_class
+    );
+    assert!(
+        wrong.iter().all(|v| planted.wrong_views.contains(v)),
+        "{wrong:?}"
+    );
+    assert!(
+        right.iter().all(|v| !planted.wrong_views.contains(v)),
+        "{right:?}"
+    );
+    let inside =
+        |m: &[f32; 3]| (0..3).all(|a| split.bounds[0][a] <= m[a] && m[a] <= split.bounds[1][a]);
+    let members = (0..c.segment.len()).filter(|&g| c.segment[g] as usize == k);
+    assert!(members.map(|g| &s.gaussians.means[g]).all(inside));
+    assert!(inside(&split.center));
 }
 
 /// The second-largest vote of a split.

@@ -842,6 +842,84 @@ fn relabel_is_deterministic_and_follows_its_rule() {
     check_validation(gpu());
 }
 
+/// `fuse --report` of a room whose plant `synth` labeled lamp in 11 of its 19 views: the
+/// flagged segment on the plant names, under lamp, the views `synth` records as mislabeled,
+/// and under plant only others; its bounds hold its center.
+#[test]
+fn fuse_report_names_the_views_of_a_consistently_mislabeled_object() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let p = |f: &str| common::cli::arg_in(d, f);
+    common::cli::ok(&[
+        "synth",
+        "--preset",
+        "office",
+        "--views",
+        "40",
+        "--test-views",
+        "0",
+        "--width",
+        "96",
+        "--height",
+        "72",
+        "--seed",
+        "5",
+        "--noise",
+        "consistent=0.6",
+        "--no-previews",
+        "--out",
+        &p(""),
+    ]);
+    common::cli::ok(&[
+        "fuse",
+        "--scene",
+        &p("scene.ply"),
+        "--cameras",
+        &p("cameras.json"),
+        "--labels",
+        &p("labels_noisy"),
+        "--classes",
+        &p("classes.json"),
+        "--method",
+        "segment-consensus",
+        "--out",
+        &p("fused.ply"),
+        "--report",
+        &p("report.json"),
+    ]);
+    let noise = common::cli::read_json(&d.join("labels_noisy/noise.json"));
+    let planted = &noise["consistent"][0];
+    let report = common::cli::read_json(&d.join("report.json"));
+    let flagged = report["segments"]["flagged"].as_array().unwrap();
+    let views_of = |f: &serde_json::Value, class: &serde_json::Value| {
+        let listed = f["views_by_class"].as_array().unwrap().iter();
+        let mut found = listed.filter(|e| e[0] == *class);
+        found.next().map(|e| e[1].clone()).unwrap_or_default()
+    };
+    let on_plant: Vec<_> = flagged
+        .iter()
+        .filter(|f| views_of(f, &planted["wrong_class_name"]) == planted["wrong_views"])
+        .collect();
+    assert_eq!(
+        on_plant.len(),
+        1,
+        "{flagged:?}; mislabeled in {}",
+        planted["wrong_views"]
+    );
+    let right = views_of(on_plant[0], &planted["true_class_name"]);
+    let wrong = planted["wrong_views"].as_array().unwrap();
+    assert!(!right.as_array().unwrap().is_empty());
+    assert!(
+        right.as_array().unwrap().iter().all(|v| !wrong.contains(v)),
+        "{right}"
+    );
+    let (center, bounds) = (&on_plant[0]["center"], &on_plant[0]["bounds"]);
+    for a in 0..3 {
+        let at = |v: &serde_json::Value| v.as_f64().unwrap();
+        assert!(at(&bounds[0][a]) <= at(&center[a]) && at(&center[a]) <= at(&bounds[1][a]));
+    }
+}
+
 /// `fuse --method segment-consensus [--relabel]` writes each Gaussian's entropy and segment
 /// beside its class, and the segments' vote splits in the report; the consensus methods
 /// refuse --shard (segments need every view at once).

@@ -150,7 +150,8 @@ pub struct OutputArgs {
     #[arg(long)]
     pub out: PathBuf,
     /// Write a JSON report: timings, views/s, peak device memory, per-class counts (segment
-    /// consensus: also the segments, their vote splits and the flagged ones).
+    /// consensus: also the segments, their vote splits and the flagged ones, each with where
+    /// it is and which views called it what).
     #[arg(long)]
     pub report: Option<PathBuf>,
     /// Write the evidence matrix A as float64 NumPy [classes, Gaussians], rows in the order

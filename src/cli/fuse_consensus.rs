@@ -75,10 +75,17 @@ pub(super) fn fuse_by_consensus(
     })?;
     bar.finish_and_clear();
     let names: Vec<String> = data.table.classes.iter().map(|c| c.name.clone()).collect();
+    let cameras: Vec<String> = data.cameras.iter().map(|c| c.name.clone()).collect();
     let outputs = ConsensusOutputs {
         entropy: lift.consensus.entropy.clone(),
         segment: lift.consensus.segment.iter().map(|&s| s as i32).collect(),
-        report: segment_report(&lift.consensus, &names, params.min_segment),
+        report: segment_report(
+            &lift.consensus,
+            &names,
+            &cameras,
+            &g.means,
+            params.min_segment,
+        ),
     };
     Ok(Evidence {
         assignment: lift.assignment,

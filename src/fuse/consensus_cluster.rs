@@ -202,9 +202,19 @@ const COUNT_BY_VIEW_FROM: usize = 4096;
 /// counted in runs. For small pieces (most), where a list per view would cost more, and for
 /// flagged segments (src/fuse/consensus_flags.rs), which may lie in many regions of a view.
 pub(crate) fn counts_sorted(obs: &Observations, members: &[u32]) -> Vec<(u32, u32, u32)> {
+    counts_sorted_of(obs, members, &obs.region)
+}
+
+/// [`counts_sorted`] of any per-observation value (`of`: `obs.region`, `obs.label`):
+/// (view, value, observations), sorted.
+pub(crate) fn counts_sorted_of(
+    obs: &Observations,
+    members: &[u32],
+    of: &[u32],
+) -> Vec<(u32, u32, u32)> {
     let rows = members.iter().map(|&g| obs.row(g as usize));
     let mut seen: Vec<(u32, u32)> = rows
-        .flat_map(|row| row.map(|i| (obs.view[i], obs.region[i])))
+        .flat_map(|row| row.map(|i| (obs.view[i], of[i])))
         .collect();
     seen.sort_unstable();
     let runs = seen.chunk_by(|a, b| a == b);

@@ -224,6 +224,7 @@ mod tests {
             class,
             near_tie: false,
             flagged: false,
+            view_classes: Vec::new(),
         }
     }
 

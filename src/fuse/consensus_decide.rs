@@ -12,7 +12,7 @@ use serde::Serialize;
 
 use super::assign::Assignment;
 use super::consensus_confusion::{decide_near_ties, ConfusionRates};
-use super::consensus_flags::unflag_slivers;
+use super::consensus_flags::{name_views_of_flagged, unflag_slivers};
 use super::consensus_relabel::RelabelRule;
 use super::consensus_segments::{Groups, Observations};
 use super::scores::SharedCounts;
@@ -182,6 +182,10 @@ pub struct SegmentVotes {
     /// likeliest (unchanged where they tie too).
     pub near_tie: bool,
     pub flagged: bool,
+    /// Flagged segments only (else empty): per view that observed it, the class that view
+    /// gave most of the segment's observations, as (view, class), by view; a view whose
+    /// top classes tie is listed with each. Which views to check (`fuse --report`).
+    pub view_classes: Vec<(u32, u32)>,
 }
 
 /// Segment consensus's result.
@@ -328,6 +332,7 @@ pub fn decide(
         .collect();
     let confusions = decide_near_ties(&mut segments, classes, p);
     unflag_slivers(obs, &members, &mut segments, p);
+    name_views_of_flagged(obs, &members, &mut segments);
     let n = obs.n;
     let mut class = vec![None; n];
     let (mut from_segment, mut from_neighbour_segments) = (0, 0);
@@ -619,6 +624,7 @@ fn segment_summary(
         flagged: gaussians >= p.flag_min_gaussians
             && runner_up >= p.flag_min_dissent
             && (class.is_none() || runner_up >= p.flag_share * total),
+        view_classes: Vec::new(),
     }
 }
 

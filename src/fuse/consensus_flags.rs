@@ -10,7 +10,7 @@
 //! views that call it by its own class (docs/robustness.md, "Flags on objects, not on
 //! slivers").
 
-use super::consensus_cluster::counts_sorted;
+use super::consensus_cluster::{counts_sorted, counts_sorted_of};
 use super::consensus_decide::{ConsensusParams, SegmentVotes};
 use super::consensus_segments::{Groups, Observations};
 use crate::util::parallel_map;
@@ -45,6 +45,33 @@ pub(crate) fn unflag_slivers(
         if as_object < p.flag_region_views {
             segments[s as usize].flagged = false;
         }
+    }
+}
+
+/// Sets each flagged segment's [`SegmentVotes::view_classes`]: per view, the class (compact
+/// id, the observations' labels) holding most of its observations there, each tied class
+/// listed. The segments on every core; the others keep theirs empty.
+pub(crate) fn name_views_of_flagged(
+    obs: &Observations,
+    members: &Groups,
+    segments: &mut [SegmentVotes],
+) {
+    let flagged: Vec<u32> = (0..segments.len() as u32)
+        .filter(|&s| segments[s as usize].flagged)
+        .collect();
+    let named = parallel_map(flagged.len(), |k| {
+        let counts = counts_sorted_of(obs, members.group(flagged[k] as usize), &obs.label);
+        let per_view = counts.chunk_by(|a, b| a.0 == b.0);
+        let top_of = |run: &[(u32, u32, u32)]| {
+            let most = run.iter().map(|e| e.2).max().unwrap_or(0);
+            let top = run.iter().filter(move |e| e.2 == most);
+            top.map(|&(view, class, _)| (view, class))
+                .collect::<Vec<_>>()
+        };
+        per_view.flat_map(top_of).collect::<Vec<_>>()
+    });
+    for (&s, views) in flagged.iter().zip(named) {
+        segments[s as usize].view_classes = views;
     }
 }
 
@@ -136,6 +163,7 @@ mod tests {
             class: Some(0),
             near_tie: false,
             flagged: true,
+            view_classes: Vec::new(),
         }
     }
 
@@ -227,5 +255,47 @@ mod tests {
                 .collect();
             assert_eq!(got, expected, "segment {s}");
         }
+    }
+
+    /// Each flagged segment's views under the class most of its observations there have
+    /// (every tied class), against a plain count; unflagged segments get none.
+    #[test]
+    fn flagged_views_are_named_by_their_most_observed_class() {
+        let mut rng = Rng::new(5);
+        let n = 300;
+        let per_view: Vec<Vec<ViewEntry>> = (0..6)
+            .map(|_| {
+                let seen = (0..n as u32)
+                    .filter(|_| rng.next_u32() % 4 > 0)
+                    .collect::<Vec<_>>();
+                seen.into_iter()
+                    .map(|g| (g, rng.next_u32() % 3, 0, false))
+                    .collect()
+            })
+            .collect();
+        let obs = Observations::from_views(n, &per_view);
+        let segment: Vec<u32> = (0..n).map(|_| rng.next_u32() % 40).collect();
+        let mut segments: Vec<SegmentVotes> = (0..40).map(|_| votes(n / 40)).collect();
+        segments
+            .iter_mut()
+            .step_by(3)
+            .for_each(|s| s.flagged = false);
+        name_views_of_flagged(&obs, &Groups::by_key(&segment, 40), &mut segments);
+        let mut tied_views = 0;
+        for (s, votes) in segments.iter().enumerate() {
+            let mut expected = Vec::new();
+            for (view, list) in per_view.iter().enumerate().filter(|_| votes.flagged) {
+                let mut count = [0u32; 3];
+                for &(_, class, ..) in list.iter().filter(|e| segment[e.0 as usize] == s as u32) {
+                    count[class as usize] += 1;
+                }
+                let most = *count.iter().max().unwrap();
+                let top = (0..3u32).filter(|&c| most > 0 && count[c as usize] == most);
+                tied_views += usize::from(top.clone().count() > 1);
+                expected.extend(top.map(|c| (view as u32, c)));
+            }
+            assert_eq!(votes.view_classes, expected, "segment {s}");
+        }
+        assert!(tied_views > 0, "the scene should hold ties");
     }
 }

@@ -25,6 +25,13 @@ pub struct SegmentSplit {
     /// the one the scene's class confusions make likeliest.
     pub near_tie: bool,
     pub votes: NamedVotes,
+    /// Where it is: the mean and the bounds (least and greatest x, y, z) of its Gaussians'
+    /// centers, in the scene's coordinates.
+    pub center: [f32; 3],
+    pub bounds: [[f32; 3]; 2],
+    /// Per class, the views (camera names) that gave it most of the segment's observations:
+    /// the frames to look at, most views first.
+    pub views_by_class: Vec<(String, Vec<String>)>,
 }
 
 /// The segments given one class, and what their views said.
@@ -56,11 +63,14 @@ pub struct SegmentReport {
     pub per_class: Vec<ClassSplit>,
 }
 
-/// The report of `consensus`; `names[c]` names compact class c, and segments of fewer than
-/// `min_segment` Gaussians are not counted.
+/// The report of `consensus`; `names[c]` names compact class c, `cameras[v]` view v, `means`
+/// are the Gaussians' centers, and segments of fewer than `min_segment` Gaussians are not
+/// counted.
 pub fn segment_report(
     consensus: &Consensus,
     names: &[String],
+    cameras: &[String],
+    means: &[[f32; 3]],
     min_segment: usize,
 ) -> SegmentReport {
     let named = |votes: &[f64]| -> NamedVotes {
@@ -74,9 +84,11 @@ pub fn segment_report(
         out.sort_by(|a, b| b.1.total_cmp(&a.1).then_with(|| a.0.cmp(&b.0)));
         out
     };
+    let places = flagged_places(consensus, means);
     let mut flagged: Vec<SegmentSplit> = (0..consensus.segments.len())
         .filter(|&s| consensus.segments[s].flagged)
-        .map(|s| {
+        .zip(places)
+        .map(|(s, (center, bounds))| {
             let seg = &consensus.segments[s];
             SegmentSplit {
                 segment: s as u32,
@@ -85,6 +97,9 @@ pub fn segment_report(
                 class: seg.class.map(|c| names[c].clone()),
                 near_tie: seg.near_tie,
                 votes: named(&seg.split),
+                center,
+                bounds,
+                views_by_class: views_by_class(&seg.view_classes, names, cameras),
             }
         })
         .collect();
@@ -126,4 +141,51 @@ pub fn segment_report(
             })
             .collect(),
     }
+}
+
+/// Per flagged segment, in id order: the mean and the bounds of its Gaussians' centers (one
+/// pass over the Gaussians).
+fn flagged_places(consensus: &Consensus, means: &[[f32; 3]]) -> Vec<([f32; 3], [[f32; 3]; 2])> {
+    let segments = &consensus.segments;
+    let mut slot = vec![usize::MAX; segments.len()];
+    let flagged = (0..segments.len()).filter(|&s| segments[s].flagged);
+    for (k, s) in flagged.enumerate() {
+        slot[s] = k;
+    }
+    let count = slot.iter().filter(|&&k| k != usize::MAX).count();
+    let mut sums = vec![([0.0f64; 3], [[f32::INFINITY; 3], [f32::NEG_INFINITY; 3]], 0); count];
+    for (&s, m) in consensus.segment.iter().zip(means) {
+        let Some((sum, bounds, n)) = sums.get_mut(slot[s as usize]) else {
+            continue;
+        };
+        for a in 0..3 {
+            sum[a] += m[a] as f64;
+            bounds[0][a] = bounds[0][a].min(m[a]);
+            bounds[1][a] = bounds[1][a].max(m[a]);
+        }
+        *n += 1;
+    }
+    let mean = |sum: [f64; 3], n: usize| sum.map(|x| (x / n.max(1) as f64) as f32);
+    sums.into_iter()
+        .map(|(sum, bounds, n)| (mean(sum, n), bounds))
+        .collect()
+}
+
+/// A flagged segment's (view, class) pairs as camera names per class name, the class with
+/// most views first (ties: by name).
+fn views_by_class(
+    view_classes: &[(u32, u32)],
+    names: &[String],
+    cameras: &[String],
+) -> Vec<(String, Vec<String>)> {
+    let mut by_class: Vec<(String, Vec<String>)> = Vec::new();
+    for &(view, class) in view_classes {
+        let (class, camera) = (&names[class as usize], &cameras[view as usize]);
+        match by_class.iter_mut().find(|(c, _)| c == class) {
+            Some((_, views)) => views.push(camera.clone()),
+            None => by_class.push((class.clone(), vec![camera.clone()])),
+        }
+    }
+    by_class.sort_by(|a, b| b.1.len().cmp(&a.1.len()).then_with(|| a.0.cmp(&b.0)));
+    by_class
 }
