@@ -850,43 +850,34 @@ fn fuse_report_names_the_views_of_a_consistently_mislabeled_object() {
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();
     let p = |f: &str| common::cli::arg_in(d, f);
-    common::cli::ok(&[
-        "synth",
-        "--preset",
-        "office",
-        "--views",
-        "40",
-        "--test-views",
-        "0",
-        "--width",
-        "96",
-        "--height",
-        "72",
-        "--seed",
-        "5",
-        "--noise",
-        "consistent=0.6",
-        "--no-previews",
-        "--out",
-        &p(""),
-    ]);
-    common::cli::ok(&[
-        "fuse",
-        "--scene",
-        &p("scene.ply"),
-        "--cameras",
-        &p("cameras.json"),
-        "--labels",
-        &p("labels_noisy"),
-        "--classes",
-        &p("classes.json"),
-        "--method",
-        "segment-consensus",
-        "--out",
-        &p("fused.ply"),
-        "--report",
-        &p("report.json"),
-    ]);
+    let words = |line: &str| {
+        line.split_whitespace()
+            .map(String::from)
+            .collect::<Vec<_>>()
+    };
+    let mut synth = words("synth --preset office --views 40 --test-views 0 --width 96");
+    synth.extend(words(
+        "--height 72 --seed 5 --noise consistent=0.6 --no-previews --out",
+    ));
+    synth.push(p(""));
+    common::cli::ok(&synth.iter().map(String::as_str).collect::<Vec<_>>());
+    let mut fuse = words("fuse --method segment-consensus");
+    for (option, file) in [
+        ("--scene", "scene.ply"),
+        ("--cameras", "cameras.json"),
+        ("--labels", "labels_noisy"),
+        ("--classes", "classes.json"),
+        ("--out", "fused.ply"),
+        ("--report", "report.json"),
+    ] {
+        fuse.extend([option.to_string(), p(file)]);
+    }
+    let said = common::cli::ok(&fuse.iter().map(String::as_str).collect::<Vec<_>>());
+    // The summary says a segment was flagged and where the report lists it.
+    assert!(
+        said.contains("1 segment(s) flagged") && said.contains("report.json"),
+        "{said}"
+    );
     let noise = common::cli::read_json(&d.join("labels_noisy/noise.json"));
     let planted = &noise["consistent"][0];
     let report = common::cli::read_json(&d.join("report.json"));

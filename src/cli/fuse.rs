@@ -708,6 +708,19 @@ fn write_report(args: &OutputArgs, report: &Report) -> Result<()> {
         report.total_s,
         args.out.display()
     );
+    // A flag is a finding the user acts on (an object the views disagree on, often one a
+    // segmenter mislabels in most of them): say so even without --report.
+    let flagged = report.segments.as_ref().map_or(0, |s| s.flagged.len());
+    if flagged > 0 {
+        let listed = match &args.report {
+            Some(path) => format!("listed in {} (`segments.flagged`)", path.display()),
+            None => "--report lists them".into(),
+        };
+        eprintln!(
+            "{flagged} segment(s) flagged: their views disagree on their class; {listed}, \
+             with the views that called each what"
+        );
+    }
     Ok(())
 }
 
