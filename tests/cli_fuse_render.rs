@@ -135,8 +135,8 @@ fn check_eval_scores(d: &Path) {
     assert!(eval["gaussian_accuracy"].as_f64().unwrap() > 0.2);
 }
 
-/// `fuse` of the room's scene from the evidence saved in `A.npy` (no rendering of its own),
-/// with `extra` options.
+/// `fuse` of the room's scene from the evidence saved in `A.npy` instead of rendering the
+/// views for it, with `extra` options.
 fn fuse_from_saved_evidence(d: &Path, extra: &[&str]) {
     let (scene, contrib) = (arg_in(d, "scene.ply"), arg_in(d, "A.npy"));
     let mut args = vec!["fuse", "--scene", &scene, "--contrib", &contrib];

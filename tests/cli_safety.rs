@@ -244,21 +244,7 @@ fn commands_naming_files_by_camera(room: &Path, cameras: &Path, out: &Path) -> V
             "--out",
             &p(&out.join("f.ply")),
         ]),
-        strings(&[
-            "train",
-            "--images",
-            &r("images"),
-            "--labels",
-            &r("labels"),
-            "--cameras",
-            &cameras,
-            "--init",
-            &r("init.ply"),
-            "--iters",
-            "2",
-            "--out",
-            &p(&out.join("t.ply")),
-        ]),
+        train_on(room, &cameras, "2", &p(&out.join("t.ply"))),
     ]
 }
 
@@ -402,19 +388,27 @@ fn fuse_on(room: &Path, extra: &[&str]) -> Vec<String> {
 
 /// `train` on the synth `room` for 100000 iterations, into `out`.
 fn train_100000_iters(room: &Path, out: &str) -> Vec<String> {
+    let cameras = room.join("cameras.json");
+    train_on(room, cameras.to_str().unwrap(), "100000", out)
+}
+
+/// `train` on the synth `room`'s images, labels and init cloud, with the camera file
+/// `cameras`, for `iters` iterations, into `out`.
+fn train_on(room: &Path, cameras: &str, iters: &str, out: &str) -> Vec<String> {
     let r = |f: &str| room.join(f).to_str().unwrap().to_string();
+    let (images, labels, init) = (r("images"), r("labels"), r("init.ply"));
     strings(&[
         "train",
         "--images",
-        &r("images"),
+        &images,
         "--labels",
-        &r("labels"),
+        &labels,
         "--cameras",
-        &r("cameras.json"),
+        cameras,
         "--init",
-        &r("init.ply"),
+        &init,
         "--iters",
-        "100000",
+        iters,
         "--out",
         out,
     ])

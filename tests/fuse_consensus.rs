@@ -832,19 +832,33 @@ fn check_report_names_the_mislabeled_views(
         "{:?}",
         split.views_by_class
     );
-    assert!(
-        wrong.iter().all(|v| planted.wrong_views.contains(v)),
-        "{wrong:?}"
+    assert_eq!(
+        wrong, planted.wrong_views,
+        "every mislabeled view, and only those"
     );
     assert!(
         right.iter().all(|v| !planted.wrong_views.contains(v)),
         "{right:?}"
     );
-    let inside =
-        |m: &[f32; 3]| (0..3).all(|a| split.bounds[0][a] <= m[a] && m[a] <= split.bounds[1][a]);
-    let members = (0..c.segment.len()).filter(|&g| c.segment[g] as usize == k);
-    assert!(members.map(|g| &s.gaussians.means[g]).all(inside));
-    assert!(inside(&split.center));
+    // Where it is, against a plain mean, least and greatest of its members' centers.
+    let members: Vec<[f32; 3]> = (0..c.segment.len())
+        .filter(|&g| c.segment[g] as usize == k)
+        .map(|g| s.gaussians.means[g])
+        .collect();
+    for a in 0..3 {
+        let along = members.iter().map(|m| m[a]);
+        let mean = along.clone().map(f64::from).sum::<f64>() / members.len() as f64;
+        assert!(
+            (split.center[a] as f64 - mean).abs() < 1e-5,
+            "{:?}",
+            split.center
+        );
+        assert_eq!(
+            split.bounds[0][a],
+            along.clone().fold(f32::INFINITY, f32::min)
+        );
+        assert_eq!(split.bounds[1][a], along.fold(f32::NEG_INFINITY, f32::max));
+    }
 }
 
 /// The second-largest vote of a split.

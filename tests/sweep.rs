@@ -81,6 +81,14 @@ fn sweep_charts_every_method_and_reports_how_mislabels_are_followed() {
             .is_some_and(|m| m.starts_with("segment-consensus"));
         let flags = (f["flagged"].is_boolean(), f["false_flags"].is_u64());
         assert_eq!(flags, (has_flags, has_flags), "{method}: {f}");
+        // The views a flag names are counted only where a flagged segment lies on the
+        // object (here none: every view agrees on the wrong class).
+        let named = (
+            f["wrong_views_named"].is_u64(),
+            f["other_views_named"].is_u64(),
+        );
+        let on_object = f["flagged"] == true;
+        assert_eq!(named, (on_object, on_object), "{method}: {f}");
     }
 }
 

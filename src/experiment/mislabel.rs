@@ -6,6 +6,7 @@ use serde::Serialize;
 use std::collections::HashMap;
 
 use super::MethodScore;
+use crate::dataset::CompactClasses;
 use crate::fuse::consensus_decide::SegmentVotes;
 use crate::synth::SynthScene;
 
@@ -28,6 +29,12 @@ pub struct MislabelFollow {
     /// mostly on no mislabeled object (false flags, scene-wide). None for the others.
     pub flagged: Option<bool>,
     pub false_flags: Option<usize>,
+    /// Methods that flag segments, where a flagged segment lies on the object: of the views
+    /// the report lists under the wrong class for those segments (`fuse --report`'s
+    /// `views_by_class`, the frames a user would check), how many did show the object with
+    /// the wrong class, and how many did not. None otherwise.
+    pub wrong_views_named: Option<usize>,
+    pub other_views_named: Option<usize>,
 }
 
 /// For every consistently mislabeled object of the scene's noise: what `score` assigned.
@@ -51,9 +58,10 @@ pub fn mislabel_follow(s: &SynthScene, score: &MethodScore) -> Vec<MislabelFollo
         .map(|(segments, of)| flagged_instances(segments, of, instances));
     let false_flags = flags.as_ref().map(|f| {
         f.iter()
-            .filter(|i| !i.is_some_and(|i| planted.contains(&i)))
+            .filter(|(_, i)| !i.is_some_and(|i| planted.contains(&i)))
             .count()
     });
+    let compact = CompactClasses::from_table(&s.room.classes).ok();
     noisy
         .report
         .consistent
@@ -72,6 +80,19 @@ pub fn mislabel_follow(s: &SynthScene, score: &MethodScore) -> Vec<MislabelFollo
                 .iter()
                 .filter(|&&i| score.classes[i] == m.wrong_class as i32)
                 .count();
+            let wrong_compact = compact.as_ref().and_then(|c| c.compact_of(m.wrong_class));
+            let named = match (&flags, &score.segments, wrong_compact) {
+                (Some(f), Some((segments, _)), Some(wrong)) => {
+                    let on_it: Vec<&SegmentVotes> = f
+                        .iter()
+                        .filter(|&&(_, i)| i == Some(m.instance as i32))
+                        .map(|&(seg, _)| &segments[seg as usize])
+                        .collect();
+                    let named = views_named(&on_it, wrong as u32, &m.wrong_views, s);
+                    (!on_it.is_empty()).then_some(named)
+                }
+                _ => None,
+            };
             MislabelFollow {
                 object: m.instance_name.clone(),
                 true_class: m.true_class_name.clone(),
@@ -80,20 +101,45 @@ pub fn mislabel_follow(s: &SynthScene, score: &MethodScore) -> Vec<MislabelFollo
                 assigned_wrong: wrong as f64 / members.len().max(1) as f64,
                 confidence_on_object: mean(&on_object),
                 confidence_elsewhere: mean(&|i| !on_object(i)),
-                flagged: flags.as_ref().map(|f| f.contains(&Some(m.instance as i32))),
+                flagged: flags
+                    .as_ref()
+                    .map(|f| f.iter().any(|&(_, i)| i == Some(m.instance as i32))),
                 false_flags,
+                wrong_views_named: named.map(|n| n.0),
+                other_views_named: named.map(|n| n.1),
             }
         })
         .collect()
 }
 
-/// Per flagged segment, the instance more than half of its Gaussians belong to (None: no
-/// such instance). `segment_of` gives each Gaussian's segment.
+/// Of the views `segments` list under compact class `wrong` ([`SegmentVotes::view_classes`],
+/// each view once): how many are among `wrong_views` (camera names), and how many are not.
+fn views_named(
+    segments: &[&SegmentVotes],
+    wrong: u32,
+    wrong_views: &[String],
+    s: &SynthScene,
+) -> (usize, usize) {
+    let mut views: Vec<u32> = segments
+        .iter()
+        .flat_map(|seg| seg.view_classes.iter())
+        .filter(|&&(_, class)| class == wrong)
+        .map(|&(view, _)| view)
+        .collect();
+    views.sort_unstable();
+    views.dedup();
+    let mislabeled = |v: &&u32| wrong_views.contains(&s.cameras[**v as usize].name);
+    let right = views.iter().filter(mislabeled).count();
+    (right, views.len() - right)
+}
+
+/// Per flagged segment, by id: the segment and the instance more than half of its Gaussians
+/// belong to (None: no such instance). `segment_of` gives each Gaussian's segment.
 fn flagged_instances(
     segments: &[SegmentVotes],
     segment_of: &[u32],
     instances: &[i32],
-) -> Vec<Option<i32>> {
+) -> Vec<(u32, Option<i32>)> {
     let mut members: HashMap<u32, HashMap<i32, usize>> = HashMap::new();
     for (g, &seg) in segment_of.iter().enumerate() {
         if segments[seg as usize].flagged {
@@ -116,5 +162,5 @@ fn flagged_instances(
         })
         .collect();
     flagged.sort_unstable();
-    flagged.into_iter().map(|(_, i)| i).collect()
+    flagged
 }

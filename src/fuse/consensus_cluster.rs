@@ -212,6 +212,7 @@ pub(crate) fn counts_sorted_of(
     members: &[u32],
     of: &[u32],
 ) -> Vec<(u32, u32, u32)> {
+    debug_assert_eq!(of.len(), obs.view.len(), "one value per observation");
     let rows = members.iter().map(|&g| obs.row(g as usize));
     let mut seen: Vec<(u32, u32)> = rows
         .flat_map(|row| row.map(|i| (obs.view[i], of[i])))

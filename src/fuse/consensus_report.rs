@@ -73,6 +73,11 @@ pub fn segment_report(
     means: &[[f32; 3]],
     min_segment: usize,
 ) -> SegmentReport {
+    assert_eq!(
+        means.len(),
+        consensus.segment.len(),
+        "a center per Gaussian"
+    );
     let named = |votes: &[f64]| -> NamedVotes {
         let mut out: NamedVotes = votes
             .iter()
@@ -144,20 +149,27 @@ pub fn segment_report(
 }
 
 /// Per flagged segment, in id order: the mean and the bounds of its Gaussians' centers (one
-/// pass over the Gaussians).
+/// pass over the Gaussians). A flagged segment has Gaussians (`flag_min_gaussians`); one
+/// without would read as the origin with bounds of +-infinity.
 fn flagged_places(consensus: &Consensus, means: &[[f32; 3]]) -> Vec<([f32; 3], [[f32; 3]; 2])> {
     let segments = &consensus.segments;
-    let mut slot = vec![usize::MAX; segments.len()];
+    // Each segment's slot among the flagged ones (None: not flagged).
+    let mut slot: Vec<Option<usize>> = vec![None; segments.len()];
     let flagged = (0..segments.len()).filter(|&s| segments[s].flagged);
-    for (k, s) in flagged.enumerate() {
-        slot[s] = k;
+    let mut count = 0;
+    for s in flagged {
+        slot[s] = Some(count);
+        count += 1;
     }
-    let count = slot.iter().filter(|&&k| k != usize::MAX).count();
-    let mut sums = vec![([0.0f64; 3], [[f32::INFINITY; 3], [f32::NEG_INFINITY; 3]], 0); count];
+    let empty = (
+        [0.0f64; 3],
+        [[f32::INFINITY; 3], [f32::NEG_INFINITY; 3]],
+        0usize,
+    );
+    let mut sums = vec![empty; count];
     for (&s, m) in consensus.segment.iter().zip(means) {
-        let Some((sum, bounds, n)) = sums.get_mut(slot[s as usize]) else {
-            continue;
-        };
+        let Some(k) = slot[s as usize] else { continue };
+        let (sum, bounds, n) = &mut sums[k];
         for a in 0..3 {
             sum[a] += m[a] as f64;
             bounds[0][a] = bounds[0][a].min(m[a]);
@@ -180,7 +192,10 @@ fn views_by_class(
 ) -> Vec<(String, Vec<String>)> {
     let mut by_class: Vec<(String, Vec<String>)> = Vec::new();
     for &(view, class) in view_classes {
-        let (class, camera) = (&names[class as usize], &cameras[view as usize]);
+        let camera = cameras
+            .get(view as usize)
+            .unwrap_or_else(|| panic!("view {view} of {} cameras named", cameras.len()));
+        let class = &names[class as usize];
         match by_class.iter_mut().find(|(c, _)| c == class) {
             Some((_, views)) => views.push(camera.clone()),
             None => by_class.push((class.clone(), vec![camera.clone()])),
