@@ -28,9 +28,7 @@ pub(crate) fn unflag_slivers(
     segments: &mut [SegmentVotes],
     p: &ConsensusParams,
 ) {
-    let flagged: Vec<u32> = (0..segments.len() as u32)
-        .filter(|&s| segments[s as usize].flagged)
-        .collect();
+    let flagged = flagged_ids(segments);
     if flagged.is_empty() {
         return;
     }
@@ -56,9 +54,7 @@ pub(crate) fn name_views_of_flagged(
     members: &Groups,
     segments: &mut [SegmentVotes],
 ) {
-    let flagged: Vec<u32> = (0..segments.len() as u32)
-        .filter(|&s| segments[s as usize].flagged)
-        .collect();
+    let flagged = flagged_ids(segments);
     let named = parallel_map(flagged.len(), |k| {
         let counts = counts_sorted_of(obs, members.group(flagged[k] as usize), &obs.label);
         let per_view = counts.chunk_by(|a, b| a.0 == b.0);
@@ -73,6 +69,13 @@ pub(crate) fn name_views_of_flagged(
     for (&s, views) in flagged.iter().zip(named) {
         segments[s as usize].view_classes = views;
     }
+}
+
+/// The ids of the flagged segments, ascending.
+pub(crate) fn flagged_ids(segments: &[SegmentVotes]) -> Vec<u32> {
+    (0..segments.len() as u32)
+        .filter(|&s| segments[s as usize].flagged)
+        .collect()
 }
 
 /// Per segment of `flagged` (in its order), per view that observes it, the region holding
@@ -213,21 +216,34 @@ mod tests {
         assert_eq!(flags, expected);
     }
 
+    /// `views` lists of observations of Gaussians 0..n: in each view a Gaussian is left out
+    /// where a draw is divisible by `left_out_one_in`, else observed with the (label,
+    /// region) `value` draws.
+    fn random_views(
+        rng: &mut Rng,
+        n: usize,
+        views: usize,
+        left_out_one_in: u32,
+        value: impl Fn(&mut Rng) -> (u32, u32),
+    ) -> Vec<Vec<ViewEntry>> {
+        let mut view = || {
+            let mut list = Vec::new();
+            for g in 0..n as u32 {
+                if rng.next_u32() % left_out_one_in > 0 {
+                    let (label, region) = value(rng);
+                    list.push((g, label, region, false));
+                }
+            }
+            list
+        };
+        (0..views).map(|_| view()).collect()
+    }
+
     #[test]
     fn dominant_regions_and_their_totals_match_a_plain_count() {
         let mut rng = Rng::new(3);
         let n = 400;
-        let per_view: Vec<Vec<ViewEntry>> = (0..7)
-            .map(|_| {
-                let mut list = Vec::new();
-                for g in 0..n as u32 {
-                    if rng.next_u32() % 3 > 0 {
-                        list.push((g, 0, rng.next_u32() % 5, false));
-                    }
-                }
-                list
-            })
-            .collect();
+        let per_view = random_views(&mut rng, n, 7, 3, |rng| (0, rng.next_u32() % 5));
         let obs = Observations::from_views(n, &per_view);
         let segment: Vec<u32> = (0..n).map(|_| rng.next_u32() % 9).collect();
         let flagged = [2u32, 5, 7];
@@ -263,16 +279,7 @@ mod tests {
     fn flagged_views_are_named_by_their_most_observed_class() {
         let mut rng = Rng::new(5);
         let n = 300;
-        let per_view: Vec<Vec<ViewEntry>> = (0..6)
-            .map(|_| {
-                let seen = (0..n as u32)
-                    .filter(|_| rng.next_u32() % 4 > 0)
-                    .collect::<Vec<_>>();
-                seen.into_iter()
-                    .map(|g| (g, rng.next_u32() % 3, 0, false))
-                    .collect()
-            })
-            .collect();
+        let per_view = random_views(&mut rng, n, 6, 4, |rng| (rng.next_u32() % 3, 0));
         let obs = Observations::from_views(n, &per_view);
         let segment: Vec<u32> = (0..n).map(|_| rng.next_u32() % 40).collect();
         let mut segments: Vec<SegmentVotes> = (0..40).map(|_| votes(n / 40)).collect();

@@ -6,6 +6,8 @@
 use serde::Serialize;
 
 use super::consensus_decide::Consensus;
+use super::consensus_flags::flagged_ids;
+use super::consensus_segments::Groups;
 
 /// The votes of some views over the classes, named, largest first (classes without votes
 /// left out).
@@ -90,13 +92,13 @@ pub fn segment_report(
         out
     };
     let places = flagged_places(consensus, means);
-    let mut flagged: Vec<SegmentSplit> = (0..consensus.segments.len())
-        .filter(|&s| consensus.segments[s].flagged)
+    let mut flagged: Vec<SegmentSplit> = flagged_ids(&consensus.segments)
+        .into_iter()
         .zip(places)
         .map(|(s, (center, bounds))| {
-            let seg = &consensus.segments[s];
+            let seg = &consensus.segments[s as usize];
             SegmentSplit {
-                segment: s as u32,
+                segment: s,
                 gaussians: seg.gaussians,
                 views: seg.views,
                 class: seg.class.map(|c| names[c].clone()),
@@ -148,38 +150,27 @@ pub fn segment_report(
     }
 }
 
-/// Per flagged segment, in id order: the mean and the bounds of its Gaussians' centers (one
-/// pass over the Gaussians). A flagged segment has Gaussians (`flag_min_gaussians`); one
-/// without would read as the origin with bounds of +-infinity.
+/// Per flagged segment, in id order: the mean and the bounds of its Gaussians' centers. A
+/// flagged segment has Gaussians (`flag_min_gaussians`); one without would read as the
+/// origin with bounds of +-infinity.
 fn flagged_places(consensus: &Consensus, means: &[[f32; 3]]) -> Vec<([f32; 3], [[f32; 3]; 2])> {
-    let segments = &consensus.segments;
-    // Each segment's slot among the flagged ones (None: not flagged).
-    let mut slot: Vec<Option<usize>> = vec![None; segments.len()];
-    let flagged = (0..segments.len()).filter(|&s| segments[s].flagged);
-    let mut count = 0;
-    for s in flagged {
-        slot[s] = Some(count);
-        count += 1;
-    }
-    let empty = (
-        [0.0f64; 3],
-        [[f32::INFINITY; 3], [f32::NEG_INFINITY; 3]],
-        0usize,
-    );
-    let mut sums = vec![empty; count];
-    for (&s, m) in consensus.segment.iter().zip(means) {
-        let Some(k) = slot[s as usize] else { continue };
-        let (sum, bounds, n) = &mut sums[k];
-        for a in 0..3 {
-            sum[a] += m[a] as f64;
-            bounds[0][a] = bounds[0][a].min(m[a]);
-            bounds[1][a] = bounds[1][a].max(m[a]);
+    let members = Groups::by_key(&consensus.segment, consensus.segments.len());
+    let place = |s: u32| {
+        let (mut sum, mut bounds) = ([0.0f64; 3], [[f32::INFINITY; 3], [f32::NEG_INFINITY; 3]]);
+        let centers = members.group(s as usize).iter().map(|&g| means[g as usize]);
+        for m in centers {
+            for a in 0..3 {
+                sum[a] += m[a] as f64;
+                bounds[0][a] = bounds[0][a].min(m[a]);
+                bounds[1][a] = bounds[1][a].max(m[a]);
+            }
         }
-        *n += 1;
-    }
-    let mean = |sum: [f64; 3], n: usize| sum.map(|x| (x / n.max(1) as f64) as f32);
-    sums.into_iter()
-        .map(|(sum, bounds, n)| (mean(sum, n), bounds))
+        let n = members.group(s as usize).len().max(1) as f64;
+        (sum.map(|x| (x / n) as f32), bounds)
+    };
+    flagged_ids(&consensus.segments)
+        .into_iter()
+        .map(place)
         .collect()
 }
 
