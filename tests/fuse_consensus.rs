@@ -8,7 +8,7 @@ use common::regions::{flood_regions, on_edge};
 use common::{check_validation, gpu};
 use semsplat::contract::NO_NEIGHBOUR;
 use semsplat::dataset::CompactClasses;
-use semsplat::fuse::consensus::observe;
+use semsplat::fuse::consensus::{observe, CenterPixels};
 use semsplat::fuse::consensus_cluster::{
     cluster_segments, cluster_segments_sweeping_from, cluster_segments_timed,
 };
@@ -76,20 +76,36 @@ fn observations_match_a_cpu_transcription() {
         scene,
     } = observed_office(gpu);
     let inp = input(gpu, &scene, &s, &labels, classes);
-    let (obs, centers, stats) =
-        observe(&inp, &FuseConfig::default(), false, &mut |_, _| {}).unwrap();
+    let (obs, centers, stats) = observe(
+        &inp,
+        &FuseConfig::default(),
+        false,
+        CenterPixels::Keep,
+        &mut |_, _| {},
+    )
+    .unwrap();
     // Two views in flight, each on its own lane; one at a time observes the same.
     assert_eq!(stats.views_in_flight, 2);
     let one_lane = FuseConfig {
         views_in_flight: 1,
         ..FuseConfig::default()
     };
-    let (obs_1, centers_1, stats_1) = observe(&inp, &one_lane, false, &mut |_, _| {}).unwrap();
+    let (obs_1, centers_1, stats_1) =
+        observe(&inp, &one_lane, false, CenterPixels::Keep, &mut |_, _| {}).unwrap();
     assert_eq!(stats_1.views_in_flight, 1);
     assert!(
         obs_1 == obs && centers_1 == centers,
         "the lanes changed the observations"
     );
+    // Without the pixels (plain segment consensus) the same observations, no pixel lists.
+    let (obs_drop, centers_drop, _) =
+        observe(&inp, &one_lane, false, CenterPixels::Drop, &mut |_, _| {}).unwrap();
+    assert!(
+        obs_drop == obs,
+        "dropping the pixels changed the observations"
+    );
+    assert!(centers_drop.iter().all(Vec::is_empty));
+    assert!(centers.iter().any(|c| !c.is_empty()));
     let (mut checked, mut skipped) = (0usize, 0usize);
     for (v, cam) in s.cameras.iter().enumerate() {
         let (c, k) = check_view_by_hand(v, cam, labels[v].as_ref().unwrap(), &s, &obs, &centers);
@@ -177,8 +193,8 @@ fn occluded_centers_are_not_observed() {
     } = observed_office(gpu);
     let cfg = FuseConfig::default();
     let inp = input(gpu, &scene, &s, &labels, classes);
-    let (_, all, _) = observe(&inp, &cfg, false, &mut |_, _| {}).unwrap();
-    let (_, visible, _) = observe(&inp, &cfg, true, &mut |_, _| {}).unwrap();
+    let (_, all, _) = observe(&inp, &cfg, false, CenterPixels::Keep, &mut |_, _| {}).unwrap();
+    let (_, visible, _) = observe(&inp, &cfg, true, CenterPixels::Keep, &mut |_, _| {}).unwrap();
     let tol = cfg.depth_tolerance as f64;
     let (mut hidden, mut seen, mut skipped) = (0usize, 0usize, 0usize);
     for (v, cam) in s.cameras.iter().enumerate() {

@@ -8,7 +8,7 @@ use common::consensus::{input, noisy_maps};
 use common::regions::{flood_regions, on_edge};
 use common::{check_validation, gpu};
 use semsplat::dataset::CompactClasses;
-use semsplat::fuse::consensus::{consensus_run, ConsensusRun};
+use semsplat::fuse::consensus::{consensus_run, CenterPixels, ConsensusRun};
 use semsplat::fuse::consensus_confusion::ConfusionRates;
 use semsplat::fuse::consensus_relabel::{edge_depth, relabel_view, RelabelRule, RelabeledViews};
 use semsplat::fuse::regions_gpu::{RegionFinder, MAX_GPU_REACH};
@@ -586,6 +586,7 @@ fn flickered_office(views: usize, seed: u64) -> Flickered {
         &input(gpu(), &scene, &s, &noisy, compact.len()),
         &FuseConfig::default(),
         &ConsensusParams::default(),
+        CenterPixels::Keep,
         &mut |_, _| {},
     )
     .unwrap();

@@ -14,7 +14,7 @@ use super::accumulate::{FuseConfig, FuseStats, LabelSource};
 use super::assign::Assignment;
 use super::consensus_cluster::cluster_segments_timed;
 use super::consensus_decide::{decide, Consensus, ConsensusParams};
-pub use super::consensus_observe::observe;
+pub use super::consensus_observe::{observe, CenterPixels};
 use super::consensus_relabel::fuse_relabeled;
 use super::consensus_segments::{nearest_neighbours, Observations};
 use super::method::Method;
@@ -41,7 +41,7 @@ pub fn fuse_consensus(
     cfg: &FuseConfig,
     params: &ConsensusParams,
 ) -> Result<(Consensus, FuseStats)> {
-    let run = consensus_run(input, cfg, params, &mut |_, _| {})?;
+    let run = consensus_run(input, cfg, params, CenterPixels::Drop, &mut |_, _| {})?;
     Ok((run.consensus, run.stats))
 }
 
@@ -49,19 +49,22 @@ pub fn fuse_consensus(
 pub struct ConsensusRun {
     pub consensus: Consensus,
     pub observations: Observations,
-    /// Per view, (Gaussian, pixel under its center) of every observation.
+    /// Per view, (Gaussian, pixel under its center) of every observation (empty lists with
+    /// [`CenterPixels::Drop`]).
     pub centers: Vec<Vec<(u32, u32)>>,
     /// [n][params.neighbours] nearest neighbours.
     pub knn: Vec<u32>,
     pub stats: FuseStats,
 }
 
-/// [`fuse_consensus`], keeping the observations and the neighbour graph; `progress` gets
-/// (views observed, views).
+/// [`fuse_consensus`], keeping the observations, the neighbour graph and, with
+/// [`CenterPixels::Keep`], the pixels under the observed centers; `progress` gets (views
+/// observed, views).
 pub fn consensus_run(
     input: &ConsensusInput,
     cfg: &FuseConfig,
     params: &ConsensusParams,
+    pixels: CenterPixels,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<ConsensusRun> {
     let start = std::time::Instant::now();
@@ -76,7 +79,7 @@ pub fn consensus_run(
     // waited for after them. `neighbours_s` is that wait.
     let (observed, knn) = std::thread::scope(|scope| {
         let search = scope.spawn(|| nearest_neighbours(input.means, params.neighbours));
-        let observed = observe(input, cfg, params.occlusion, progress);
+        let observed = observe(input, cfg, params.occlusion, pixels, progress);
         (observed, search.join())
     });
     let (observations, centers, mut stats) = observed?;
@@ -157,7 +160,7 @@ pub fn lift_by_consensus(
     if cfg.method == Method::SegmentConsensusRelabel {
         return fuse_relabeled(input, cfg, params, progress);
     }
-    let run = consensus_run(input, cfg, params, progress)?;
+    let run = consensus_run(input, cfg, params, CenterPixels::Drop, progress)?;
     let evidence = LiftEvidence::Consensus(Arc::clone(&run.consensus.evidence));
     Ok(ConsensusLift {
         assignment: run.consensus.assignment.clone(),

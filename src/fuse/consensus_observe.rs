@@ -31,15 +31,27 @@ use crate::render::{GpuScene, Rasterizer};
 use crate::scene::Camera;
 use crate::util::prefetch_ordered;
 
+/// Whether [`observe`] keeps, per view, the (Gaussian, pixel) of each observation: 8 bytes
+/// an observation, held to the end of the lift, that only `--relabel` reads (it relabels
+/// the regions under the centers). Plain segment consensus drops them: a third of what it
+/// holds per observation through the clustering (13 bytes against 21).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CenterPixels {
+    Keep,
+    Drop,
+}
+
 /// Every view's observations of every Gaussian: label and region under its center (with
 /// `occlusion`, only where the center is within the depth tolerance of the rendered median
-/// depth), and per view the (Gaussian, pixel) of each observation. `stats.observe` sums the
-/// lanes' host seconds (which overlap when two lanes run).
+/// depth), and per view the (Gaussian, pixel) of each observation (empty lists with
+/// [`CenterPixels::Drop`]). `stats.observe` sums the lanes' host seconds (which overlap
+/// when two lanes run).
 #[allow(clippy::type_complexity)]
 pub fn observe(
     input: &ConsensusInput,
     cfg: &FuseConfig,
     occlusion: bool,
+    pixels: CenterPixels,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<(Observations, Vec<Vec<(u32, u32)>>, FuseStats)> {
     let (gpu, cams, n) = (input.gpu, input.cams, input.scene.n as usize);
@@ -54,6 +66,7 @@ pub fn observe(
         input,
         cfg,
         occlusion,
+        pixels,
     };
     // Label maps are read (decoded) and checked on worker threads a few views ahead, as
     // the FlashSplat pass does, instead of in turn between the views' GPU work.
@@ -194,6 +207,7 @@ struct Pass<'a> {
     input: &'a ConsensusInput<'a>,
     cfg: &'a FuseConfig,
     occlusion: bool,
+    pixels: CenterPixels,
 }
 
 /// One view's observations, as a lane found them.
@@ -286,7 +300,7 @@ impl<'a> Lane<'a> {
             self.finder
                 .observations(map, cam.width, &self.centers, |observed| {
                     let gathering = Instant::now();
-                    let gathered = view_observations(observed);
+                    let gathered = view_observations(observed, pass.pixels);
                     times.gather_s = gathering.elapsed().as_secs_f64();
                     gathered
                 })?;
@@ -303,13 +317,19 @@ impl<'a> Lane<'a> {
 }
 
 /// One view's observations as the GPU compacted them ([`Observed`], in Gaussian order):
-/// (Gaussian, label, region, edge) and (Gaussian, pixel).
-fn view_observations(observed: &[Observed]) -> (Vec<ViewEntry>, Vec<(u32, u32)>) {
+/// (Gaussian, label, region, edge) and, where kept, (Gaussian, pixel).
+fn view_observations(
+    observed: &[Observed],
+    pixels: CenterPixels,
+) -> (Vec<ViewEntry>, Vec<(u32, u32)>) {
     let entry = |o: &Observed| {
         let (region, edge) = (o.region & !REGION_EDGE_BIT, o.region & REGION_EDGE_BIT != 0);
         (o.gaussian, o.label, region, edge)
     };
-    let seen = observed.iter().map(|o| (o.gaussian, o.pixel)).collect();
+    let seen = match pixels {
+        CenterPixels::Keep => observed.iter().map(|o| (o.gaussian, o.pixel)).collect(),
+        CenterPixels::Drop => Vec::new(),
+    };
     (observed.iter().map(entry).collect(), seen)
 }
 

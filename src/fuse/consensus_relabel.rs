@@ -25,7 +25,7 @@ use serde::Serialize;
 
 use super::accumulate::{accumulate, FuseConfig, LabelSource, NO_LABEL};
 use super::assign::{assign_semantic_near, Assignment};
-use super::consensus::{consensus_run, ConsensusInput, ConsensusLift, LiftEvidence};
+use super::consensus::{consensus_run, CenterPixels, ConsensusInput, ConsensusLift, LiftEvidence};
 use super::consensus_confusion::ConfusionRates;
 use super::consensus_decide::{posterior, ConsensusParams};
 use super::consensus_segments::{four_neighbours, label_regions, region_edges};
@@ -348,7 +348,8 @@ pub fn fuse_relabeled(
 ) -> Result<ConsensusLift> {
     let start = std::time::Instant::now();
     let views = input.cams.len();
-    let run = consensus_run(input, cfg, params, &mut |done, _| progress(done, 2 * views))?;
+    let observed = &mut |done, _| progress(done, 2 * views);
+    let run = consensus_run(input, cfg, params, CenterPixels::Keep, observed)?;
     let relabeled = RelabeledViews {
         inner: input.labels,
         centers: &run.centers,
