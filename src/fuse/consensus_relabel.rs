@@ -349,7 +349,10 @@ pub fn fuse_relabeled(
     let start = std::time::Instant::now();
     let views = input.cams.len();
     let observed = &mut |done, _| progress(done, 2 * views);
-    let run = consensus_run(input, cfg, params, CenterPixels::Keep, observed)?;
+    let mut run = consensus_run(input, cfg, params, CenterPixels::Keep, observed)?;
+    // The relabeling reads the centers and the classes, not the observations (13 bytes
+    // each): freed before the views' second visit, which allocates their room again.
+    drop(std::mem::take(&mut run.observations));
     let relabeled = RelabeledViews {
         inner: input.labels,
         centers: &run.centers,

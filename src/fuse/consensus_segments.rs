@@ -43,8 +43,8 @@ impl Observations {
     /// from its slice of every view's list (lists in Gaussian order, as `observe` writes
     /// them; any other is sorted first). Each row ends up sorted by view, a view's entries
     /// for one Gaussian in list order.
-    pub fn from_views(n: usize, per_view: &[Vec<ViewEntry>]) -> Observations {
-        let sorted: Vec<Cow<[ViewEntry]>> = per_view.iter().map(|l| in_gaussian_order(l)).collect();
+    pub fn from_views<E: ViewObservation>(n: usize, per_view: &[Vec<E>]) -> Observations {
+        let sorted: Vec<Cow<[E]>> = per_view.iter().map(|l| in_gaussian_order(l)).collect();
         let ranges: Vec<Range<usize>> = (0..n.div_ceil(GATHER_RANGE))
             .map(|r| r * GATHER_RANGE..n.min((r + 1) * GATHER_RANGE))
             .collect();
@@ -54,8 +54,8 @@ impl Observations {
         let counts = split_parts(&mut offsets[1..], range_lens());
         parallel_map(ranges.len(), |r| {
             let mut count = take_part(&counts[r]);
-            for &(g, ..) in range_parts(&sorted, &ranges[r]).flatten() {
-                count[g as usize - ranges[r].start] += 1;
+            for entry in range_parts(&sorted, &ranges[r]).flatten() {
+                count[entry.gaussian() as usize - ranges[r].start] += 1;
             }
         });
         drop(counts);
@@ -84,8 +84,9 @@ impl Observations {
             let (mut r_out, mut e_out) = (take_part(&regions[r]), take_part(&edges[r]));
             // Views in order, so every row ends up sorted by view.
             for (v, part) in range_parts(&sorted, &ranges[r]).enumerate() {
-                for &(g, l, rg, e) in part {
-                    let at = &mut next[g as usize - ranges[r].start];
+                for entry in part {
+                    let (l, rg, e) = entry.seen();
+                    let at = &mut next[entry.gaussian() as usize - ranges[r].start];
                     let i = *at - base;
                     (v_out[i], l_out[i], r_out[i], e_out[i]) = (v as u32, l, rg, e);
                     *at += 1;
@@ -113,29 +114,48 @@ impl Observations {
 /// One view's observation of a Gaussian: (Gaussian, label, region, edge).
 pub type ViewEntry = (u32, u32, u32, bool);
 
+/// A view's observation of a Gaussian as [`Observations::from_views`] reads it: a
+/// [`ViewEntry`], or the views' own compact form (src/fuse/consensus_observe.rs: 12 bytes
+/// where the tuple takes 16, held for every observation until the views are done).
+pub trait ViewObservation: Copy + Send + Sync {
+    fn gaussian(&self) -> u32;
+    /// (label, region, edge).
+    fn seen(&self) -> (u32, u32, bool);
+}
+
+impl ViewObservation for ViewEntry {
+    fn gaussian(&self) -> u32 {
+        self.0
+    }
+
+    fn seen(&self) -> (u32, u32, bool) {
+        (self.1, self.2, self.3)
+    }
+}
+
 /// Gaussians per range of [`Observations::from_views`]'s counting sort.
 const GATHER_RANGE: usize = 1 << 15;
 
 /// `list` in Gaussian order: as it is when it already is (stable, so a Gaussian's entries
 /// keep their order).
-fn in_gaussian_order(list: &[ViewEntry]) -> Cow<'_, [ViewEntry]> {
-    if list.is_sorted_by_key(|e| e.0) {
+fn in_gaussian_order<E: ViewObservation>(list: &[E]) -> Cow<'_, [E]> {
+    if list.is_sorted_by_key(|e| e.gaussian()) {
         Cow::Borrowed(list)
     } else {
         let mut sorted = list.to_vec();
-        sorted.sort_by_key(|e| e.0);
+        sorted.sort_by_key(|e| e.gaussian());
         Cow::Owned(sorted)
     }
 }
 
 /// Each list's entries of the Gaussians in `range`: one slice of each, found by binary search.
-fn range_parts<'a>(
-    lists: &'a [Cow<[ViewEntry]>],
+fn range_parts<'a, E: ViewObservation>(
+    lists: &'a [Cow<[E]>],
     range: &Range<usize>,
-) -> impl Iterator<Item = &'a [ViewEntry]> {
+) -> impl Iterator<Item = &'a [E]> {
     let (start, end) = (range.start, range.end);
     lists.iter().map(move |list| {
-        let at = |g: usize| list.partition_point(|e| (e.0 as usize) < g);
+        let at = |g: usize| list.partition_point(|e| (e.gaussian() as usize) < g);
         &list[at(start)..at(end)]
     })
 }
