@@ -136,6 +136,16 @@ impl SharedCounts {
         self.row_of.is_empty()
     }
 
+    /// Distinct row `row`'s counts (row 0: zeros).
+    pub fn row(&self, row: usize) -> &[f64] {
+        &self.counts[row * self.classes..(row + 1) * self.classes]
+    }
+
+    /// The distinct row Gaussian `g` holds.
+    pub fn row_index(&self, g: usize) -> usize {
+        self.row_of[g] as usize
+    }
+
     /// Gaussian `g`'s counts.
     pub fn get(&self, g: usize) -> &[f64] {
         let at = self.row_of[g] as usize * self.classes;
