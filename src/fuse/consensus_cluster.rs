@@ -206,21 +206,66 @@ pub(crate) fn counts_sorted(obs: &Observations, members: &[u32]) -> Vec<(u32, u3
 }
 
 /// [`counts_sorted`] of any per-observation value (`of`: `obs.region`, `obs.label`):
-/// (view, value, observations), sorted.
+/// (view, value, observations), sorted. From [`SORT_BY_VIEW_FROM`] observations (a flagged
+/// wall: millions) the values are first bucketed by view and each view's sorted on its
+/// own, on every core, where one sort of them all ran on one core.
 pub(crate) fn counts_sorted_of(
     obs: &Observations,
     members: &[u32],
     of: &[u32],
 ) -> Vec<(u32, u32, u32)> {
     debug_assert_eq!(of.len(), obs.view.len(), "one value per observation");
-    let rows = members.iter().map(|&g| obs.row(g as usize));
-    let mut seen: Vec<(u32, u32)> = rows
+    let rows = || members.iter().map(|&g| obs.row(g as usize));
+    if rows().map(|row| row.len()).sum::<usize>() >= SORT_BY_VIEW_FROM {
+        return counts_sorted_by_view(obs, members, of);
+    }
+    let mut seen: Vec<(u32, u32)> = rows()
         .flat_map(|row| row.map(|i| (obs.view[i], of[i])))
         .collect();
     seen.sort_unstable();
     let runs = seen.chunk_by(|a, b| a == b);
     runs.map(|run| (run[0].0, run[0].1, run.len() as u32))
         .collect()
+}
+
+/// From this many observations [`counts_sorted_of`] sorts view by view.
+pub(crate) const SORT_BY_VIEW_FROM: usize = 1 << 16;
+
+/// [`counts_sorted_of`] by a counting sort of the values by view, then each view's values
+/// sorted and counted in runs, blocks of views on every core.
+fn counts_sorted_by_view(obs: &Observations, members: &[u32], of: &[u32]) -> Vec<(u32, u32, u32)> {
+    let observations = || members.iter().flat_map(|&g| obs.row(g as usize));
+    let mut start: Vec<usize> = Vec::new(); // per view, its count, then where its values start
+    for i in observations() {
+        let view = obs.view[i] as usize;
+        if view + 1 >= start.len() {
+            start.resize(view + 2, 0);
+        }
+        start[view + 1] += 1;
+    }
+    for v in 1..start.len() {
+        start[v] += start[v - 1];
+    }
+    let mut next = start.clone();
+    let mut values = vec![0u32; *start.last().unwrap_or(&0)];
+    for i in observations() {
+        let at = &mut next[obs.view[i] as usize];
+        values[*at] = of[i];
+        *at += 1;
+    }
+    const VIEWS_PER_BLOCK: usize = 8;
+    let views = start.len().saturating_sub(1);
+    let blocks = parallel_map(views.div_ceil(VIEWS_PER_BLOCK), |b| {
+        let mut counts = Vec::new();
+        for view in b * VIEWS_PER_BLOCK..views.min((b + 1) * VIEWS_PER_BLOCK) {
+            let mut of_view = values[start[view]..start[view + 1]].to_vec();
+            of_view.sort_unstable();
+            let runs = of_view.chunk_by(|a, b| a == b);
+            counts.extend(runs.map(|run| (view as u32, run[0], run.len() as u32)));
+        }
+        counts
+    });
+    blocks.concat()
 }
 
 /// [`counts_sorted`], counted per view in a short list of (region, observations): a piece
@@ -716,6 +761,55 @@ mod tests {
             assert_eq!(by_view, counts_sorted(&obs, &members));
             let total: u32 = by_view.iter().map(|e| e.2).sum();
             assert!(total as usize >= COUNT_BY_VIEW_FROM, "{total}");
+        }
+    }
+
+    /// Counted view by view (past `SORT_BY_VIEW_FROM` observations) as a plain ordered map
+    /// counts them, regions and labels, views left out and numbered past the members'.
+    #[test]
+    fn counts_sorted_by_view_match_a_plain_count() {
+        let mut rng = Rng::new(9);
+        let n = 6000;
+        let mut offsets = vec![0];
+        let (mut view, mut region, mut label) = (Vec::new(), Vec::new(), Vec::new());
+        for _ in 0..n {
+            for v in 0..40u32 {
+                if v % 7 != 3 && rng.below(3) > 0 {
+                    view.push(v * 3);
+                    region.push(rng.below(200) as u32 * 11);
+                    label.push(rng.below(5) as u32);
+                }
+            }
+            offsets.push(view.len());
+        }
+        let m = view.len();
+        let obs = Observations {
+            n,
+            offsets,
+            view,
+            label,
+            region,
+            edge: vec![false; m],
+        };
+        let members: Vec<u32> = (0..n as u32).filter(|_| rng.below(3) > 0).collect();
+        for of in [&obs.region, &obs.label] {
+            let mut plain = std::collections::BTreeMap::new();
+            for &g in &members {
+                for i in obs.row(g as usize) {
+                    *plain.entry((obs.view[i], of[i])).or_insert(0u32) += 1;
+                }
+            }
+            let plain: Vec<(u32, u32, u32)> =
+                plain.into_iter().map(|((v, x), c)| (v, x, c)).collect();
+            let total: u32 = plain.iter().map(|e| e.2).sum();
+            assert!(total as usize >= SORT_BY_VIEW_FROM, "{total}");
+            assert_eq!(counts_sorted_of(&obs, &members, of), plain);
+            // Under the threshold counts_sorted_of sorts them all at once: the same counts.
+            let few = &members[..40];
+            assert_eq!(
+                counts_sorted_by_view(&obs, few, of),
+                counts_sorted_of(&obs, few, of)
+            );
         }
     }
 }

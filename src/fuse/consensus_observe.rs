@@ -33,7 +33,7 @@ use crate::util::prefetch_ordered;
 
 /// Whether [`observe`] keeps, per view, the (Gaussian, pixel) of each observation: 8 bytes
 /// an observation, held to the end of the lift, that only `--relabel` reads (it relabels
-/// the regions under the centers). Plain segment consensus drops them: a third of what it
+/// the regions under the centers). Plain segment consensus drops them: over a third of what it
 /// holds per observation through the clustering (13 bytes against 21).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum CenterPixels {
@@ -318,8 +318,8 @@ impl<'a> Lane<'a> {
 
 /// A view's observation of a Gaussian as the views keep it until they are done: the GPU's
 /// region word as it is (with [`REGION_EDGE_BIT`]), 12 bytes where a
-/// [`super::consensus_segments::ViewEntry`] takes 16 (a view observes a Gaussian in 12% of
-/// the views of a room, tens of millions of observations at 1080p).
+/// [`super::consensus_segments::ViewEntry`] takes 16 (a room's Gaussian is observed in
+/// about 12% of 200 views: tens of millions of observations for a million Gaussians).
 #[derive(Clone, Copy, Debug)]
 struct CompactEntry {
     gaussian: u32,

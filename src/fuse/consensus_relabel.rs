@@ -27,7 +27,7 @@ use super::accumulate::{accumulate, FuseConfig, LabelSource, NO_LABEL};
 use super::assign::{assign_semantic_near, Assignment};
 use super::consensus::{consensus_run, CenterPixels, ConsensusInput, ConsensusLift, LiftEvidence};
 use super::consensus_confusion::ConfusionRates;
-use super::consensus_decide::{posterior, ConsensusParams};
+use super::consensus_decide::{posteriors, ConsensusParams};
 use super::consensus_segments::{four_neighbours, label_regions, region_edges};
 use super::method::Method;
 use super::regions_gpu::RegionFinder;
@@ -348,10 +348,11 @@ pub fn fuse_relabeled(
 ) -> Result<ConsensusLift> {
     let start = std::time::Instant::now();
     let views = input.cams.len();
-    let observed = &mut |done, _| progress(done, 2 * views);
-    let mut run = consensus_run(input, cfg, params, CenterPixels::Keep, observed)?;
+    let first_visit = &mut |done, _| progress(done, 2 * views);
+    let mut run = consensus_run(input, cfg, params, CenterPixels::Keep, first_visit)?;
     // The relabeling reads the centers and the classes, not the observations (13 bytes
-    // each): freed before the views' second visit, which allocates their room again.
+    // each): freed before the views' second visit, so its FlashSplat pass reuses their
+    // memory instead of adding to the peak.
     drop(std::mem::take(&mut run.observations));
     let relabeled = RelabeledViews {
         inner: input.labels,
@@ -393,11 +394,7 @@ pub fn fuse_relabeled(
             }
         }
     }
-    let confidence = class
-        .iter()
-        .enumerate()
-        .map(|(g, &c)| posterior(&consensus.evidence[g], c, params.prior).0 as f32)
-        .collect();
+    let (confidence, _) = posteriors(&consensus.evidence, &class, params.prior);
     let mut stats = fs_stats;
     stats.gpu_ms += run.stats.gpu_ms + relabel_stats.gpu_ms;
     stats.view_s += run.stats.view_s; // the consensus's visit of the views
