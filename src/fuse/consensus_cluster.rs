@@ -232,7 +232,10 @@ pub(crate) fn counts_sorted_of(
 pub(crate) const SORT_BY_VIEW_FROM: usize = 1 << 16;
 
 /// [`counts_sorted_of`] by a counting sort of the values by view, then each view's values
-/// sorted and counted in runs, blocks of views on every core.
+/// sorted and counted in runs, blocks of views on every core. The values are scattered
+/// into their views' places directly: grouping the observations' indices by view with
+/// [`Groups`] and then reading each value through its index took 2-3x as long on a flagged
+/// wall of 4.6M observations (a random read per value, two more arrays).
 fn counts_sorted_by_view(obs: &Observations, members: &[u32], of: &[u32]) -> Vec<(u32, u32, u32)> {
     let observations = || members.iter().flat_map(|&g| obs.row(g as usize));
     let mut start: Vec<usize> = Vec::new(); // per view, its count, then where its values start

@@ -645,11 +645,12 @@ fn neighbour_votes(
     sum
 }
 
-/// Every Gaussian's [`posterior`] (confidence, entropy), on every core. The entropy (a
-/// logarithm per class) depends on the counts alone, so it is computed once per distinct
-/// row of counts (a segment's members share its split: 47k rows for the 911k Gaussians of
-/// a noisy office, 64k for a 978k room under random block labels, docs/robustness.md), the
-/// confidence per Gaussian; the same values as [`posterior`] per Gaussian.
+/// Every Gaussian's (confidence, entropy) of its class under a Dirichlet(prior + counts)
+/// ([`RowPosterior::posterior`]), on every core. The entropy (a logarithm per class)
+/// depends on the counts alone, so it is computed once per distinct row of counts (a
+/// segment's members share its split: 47k rows for the 911k Gaussians of a noisy office,
+/// 64k for a 978k room under random block labels, docs/robustness.md), the confidence per
+/// Gaussian.
 pub(crate) fn posteriors(
     evidence: &SharedCounts,
     class: &[Option<usize>],
@@ -702,7 +703,9 @@ impl RowPosterior {
         }
     }
 
-    /// [`posterior`] of `counts`, the row this was computed from.
+    /// Posterior mean of `class` under a Dirichlet(prior + counts), and the entropy (nats)
+    /// of the posterior mean; unseen or undecided: 0 and ln(classes). `counts`: the row this
+    /// was computed from.
     fn posterior(&self, counts: &[f64], class: Option<usize>, prior: f64) -> (f64, f64) {
         debug_assert_eq!(self.seen, counts.iter().sum::<f64>() > 0.0, "another row");
         match class {
@@ -710,12 +713,6 @@ impl RowPosterior {
             _ => (0.0, (counts.len() as f64).ln()),
         }
     }
-}
-
-/// Posterior mean of `class` under a Dirichlet(prior + counts), and the entropy (nats) of the
-/// posterior mean; unseen or undecided: 0 and ln(classes).
-pub fn posterior(counts: &[f64], class: Option<usize>, prior: f64) -> (f64, f64) {
-    RowPosterior::of(counts, prior).posterior(counts, class, prior)
 }
 
 #[cfg(test)]
