@@ -44,9 +44,7 @@ fn evidence(kind: EvidenceKind, seed: u64) -> (Vec<u64>, ClassScores) {
         }
     }
     let mut order: Vec<usize> = (0..N).collect();
-    for i in (1..N).rev() {
-        order.swap(i, rng.below(i as u64 + 1) as usize);
-    }
+    rng.shuffle(&mut order);
     for g in 0..N {
         raw[5 * N + g] = raw[4 * N + order[g]];
     }

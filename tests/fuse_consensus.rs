@@ -13,11 +13,12 @@ use semsplat::fuse::consensus_cluster::{
     cluster_segments, cluster_segments_sweeping_from, cluster_segments_timed,
 };
 use semsplat::fuse::consensus_decide::{binomial_at_most, decide, Consensus};
+use semsplat::fuse::consensus_order::SpatialOrder;
 use semsplat::fuse::consensus_report::segment_report;
 use semsplat::fuse::consensus_segments::{co_occurrence, label_regions, Observations};
 use semsplat::fuse::{
     assign_semantic, assign_semantic_near, fuse_consensus, nearest_neighbours, ClassScores,
-    ConsensusParams, FuseConfig, NO_LABEL,
+    ConsensusInput, ConsensusParams, FuseConfig, NO_LABEL,
 };
 use semsplat::gpu::Gpu;
 use semsplat::render::GpuScene;
@@ -81,6 +82,7 @@ fn observations_match_a_cpu_transcription() {
         &FuseConfig::default(),
         false,
         CenterPixels::Keep,
+        None,
         &mut |_, _| {},
     )
     .unwrap();
@@ -90,22 +92,37 @@ fn observations_match_a_cpu_transcription() {
         views_in_flight: 1,
         ..FuseConfig::default()
     };
-    let (obs_1, centers_1, stats_1) =
-        observe(&inp, &one_lane, false, CenterPixels::Keep, &mut |_, _| {}).unwrap();
+    let (obs_1, centers_1, stats_1) = observe(
+        &inp,
+        &one_lane,
+        false,
+        CenterPixels::Keep,
+        None,
+        &mut |_, _| {},
+    )
+    .unwrap();
     assert_eq!(stats_1.views_in_flight, 1);
     assert!(
         obs_1 == obs && centers_1 == centers,
         "the lanes changed the observations"
     );
     // Without the pixels (plain segment consensus) the same observations, no pixel lists.
-    let (obs_drop, centers_drop, _) =
-        observe(&inp, &one_lane, false, CenterPixels::Drop, &mut |_, _| {}).unwrap();
+    let (obs_drop, centers_drop, _) = observe(
+        &inp,
+        &one_lane,
+        false,
+        CenterPixels::Drop,
+        None,
+        &mut |_, _| {},
+    )
+    .unwrap();
     assert!(
         obs_drop == obs,
         "dropping the pixels changed the observations"
     );
     assert!(centers_drop.iter().all(Vec::is_empty));
     assert!(centers.iter().any(|c| !c.is_empty()));
+    check_numbered_in_space(&inp, &one_lane, &obs, &centers);
     let (mut checked, mut skipped) = (0usize, 0usize);
     for (v, cam) in s.cameras.iter().enumerate() {
         let (c, k) = check_view_by_hand(v, cam, labels[v].as_ref().unwrap(), &s, &obs, &centers);
@@ -116,6 +133,34 @@ fn observations_match_a_cpu_transcription() {
         "checked {checked}, skipped {skipped}"
     );
     check_validation(gpu);
+}
+
+/// Numbered in space (the GPU writes each center pixel at its Gaussian's number there),
+/// the observations are `obs`, each Gaussian's row at its number; the pixels' lists are
+/// `centers` (the scene's numbers), in another order.
+fn check_numbered_in_space(
+    inp: &ConsensusInput,
+    cfg: &FuseConfig,
+    obs: &Observations,
+    centers: &[Vec<(u32, u32)>],
+) {
+    let order = SpatialOrder::of(inp.means);
+    assert!((0..obs.n as u32).any(|g| order.spatial(g) != g));
+    let keep = CenterPixels::Keep;
+    let (spatial, spatial_centers, _) =
+        observe(inp, cfg, false, keep, Some(&order), &mut |_, _| {}).unwrap();
+    assert_eq!((spatial.n, spatial.view.len()), (obs.n, obs.view.len()));
+    for g in 0..obs.n {
+        let (a, b) = (obs.row(g), spatial.row(order.spatial(g as u32) as usize));
+        assert_eq!(obs.view[a.clone()], spatial.view[b.clone()], "Gaussian {g}");
+        assert_eq!(obs.label[a.clone()], spatial.label[b.clone()]);
+        assert_eq!(obs.region[a.clone()], spatial.region[b.clone()]);
+        assert_eq!(obs.edge[a], spatial.edge[b]);
+    }
+    for (scene_order, mut in_space) in centers.iter().zip(spatial_centers) {
+        in_space.sort_unstable();
+        assert_eq!(scene_order, &in_space);
+    }
 }
 
 /// The pixel (column, row; unrounded) under `mean`'s center in `cam`, where it is in front
@@ -193,8 +238,9 @@ fn occluded_centers_are_not_observed() {
     } = observed_office(gpu);
     let cfg = FuseConfig::default();
     let inp = input(gpu, &scene, &s, &labels, classes);
-    let (_, all, _) = observe(&inp, &cfg, false, CenterPixels::Keep, &mut |_, _| {}).unwrap();
-    let (_, visible, _) = observe(&inp, &cfg, true, CenterPixels::Keep, &mut |_, _| {}).unwrap();
+    let (_, all, _) = observe(&inp, &cfg, false, CenterPixels::Keep, None, &mut |_, _| {}).unwrap();
+    let (_, visible, _) =
+        observe(&inp, &cfg, true, CenterPixels::Keep, None, &mut |_, _| {}).unwrap();
     let tol = cfg.depth_tolerance as f64;
     let (mut hidden, mut seen, mut skipped) = (0usize, 0usize, 0usize);
     for (v, cam) in s.cameras.iter().enumerate() {
@@ -429,9 +475,10 @@ fn views_of(obs: &Observations, g: usize) -> BTreeMap<u32, (u32, bool)> {
 /// more, all of them putting it in one region with neither on its edge; then every step
 /// sums, from scratch, what the views said of every neighbour pair between two segments
 /// (together: one region, neither on its edge; apart: two regions; else on the edge),
-/// takes the best pair of segments not dropped at that same evidence (net evidence per
-/// pair, then views together, then the lowest labels), and joins it if the evidence and
-/// the segments' dominant regions allow, else drops it.
+/// takes the best pair of segments not dropped at that same evidence and size (net
+/// evidence per pair, then views together, then the smaller size class of the larger
+/// segment, then the lowest labels), and joins it if the evidence and the segments'
+/// dominant regions allow, else drops it.
 /// Also returns how many candidates the pairs' evidence refused, how many it allowed but
 /// the dominant regions refused, and how many Gaussians joined outright.
 fn cluster_by_hand(
@@ -452,7 +499,7 @@ fn cluster_by_hand(
         .collect();
     let mut label = premerged_by_hand(obs, &pairs, p);
     let outright = (0..n).filter(|&g| label[g] != g).count();
-    let mut dropped: HashMap<(usize, usize), [u32; 4]> = HashMap::new();
+    let mut dropped: HashMap<(usize, usize), ([u32; 4], u32)> = HashMap::new();
     let mut refused = [0; 2];
     loop {
         // [together, apart, on edge, pairs] per pair of segments.
@@ -481,11 +528,26 @@ fn cluster_by_hand(
             let net = e[0] as f64 - p.apart_weight * e[1] as f64;
             (net / e[3] as f64 * (1 << 20) as f64).round() as i64
         };
+        // The larger segment's size class: its Gaussians' count's binary digits.
+        let class_of = |&(lo, hi): &(usize, usize)| {
+            let size = |s| label.iter().filter(|&&l| l == s).count();
+            let larger = size(lo).max(size(hi));
+            usize::BITS - larger.leading_zeros()
+        };
         let best = sums
             .iter()
-            .filter(|(key, e)| dropped.get(key) != Some(e))
-            .max_by_key(|(key, e)| (priority(e), e[0], Reverse(key.0), Reverse(key.1)));
-        let Some((&(lo, hi), &e)) = best else {
+            .map(|(key, e)| (key, e, class_of(key)))
+            .filter(|(key, e, class)| dropped.get(key) != Some(&(**e, *class)))
+            .max_by_key(|(key, e, class)| {
+                (
+                    priority(e),
+                    e[0],
+                    Reverse(*class),
+                    Reverse(key.0),
+                    Reverse(key.1),
+                )
+            });
+        let Some((&(lo, hi), &e, class)) = best else {
             return (label, refused, outright);
         };
         let decided = (e[0] + e[1]) as f64;
@@ -496,7 +558,7 @@ fn cluster_by_hand(
         if allowed && differ as f64 <= p.region_max_disagree * (same + differ) as f64 {
             label.iter_mut().filter(|l| **l == hi).for_each(|l| *l = lo);
         } else {
-            dropped.insert((lo, hi), e);
+            dropped.insert((lo, hi), (e, class));
             refused[allowed as usize] += 1;
         }
     }
@@ -630,9 +692,7 @@ fn observations_from_views_are_a_plain_counting_sort() {
             if v % 3 == 2 {
                 let twice = list[list.len() / 2];
                 list.push((twice.0, 9, 1, false));
-                for i in (1..list.len()).rev() {
-                    list.swap(i, rng.below(i as u64 + 1) as usize);
-                }
+                rng.shuffle(&mut list);
             }
             list
         })
@@ -721,26 +781,54 @@ fn decisions_match_a_plain_transcription() {
     assert_eq!(c.evidence.rows(), 3);
 }
 
-/// Same input, same output: segments, classes, confidences, entropies.
+/// Same input, same output: segments, classes, confidences, entropies. And the scene's
+/// order of its Gaussians does not change the consensus (the host work numbers them in
+/// space, by position): the same scene with its Gaussians shuffled gives each Gaussian the
+/// same class, confidence, entropy, segment and evidence, and the same segments. Fails if
+/// the results are not given back in the scene's numbering.
 #[test]
-fn consensus_is_deterministic() {
+fn consensus_is_deterministic_whatever_the_scenes_order() {
     let s = small("flicker=0.3", 6, 4);
     let gpu = gpu();
     let classes = CompactClasses::from_table(&s.room.classes).unwrap();
     let labels = noisy_maps(&s, &classes);
-    let scene = GpuScene::upload(gpu, &s.gaussians).unwrap();
-    let run = || {
-        fuse_consensus(
-            &input(gpu, &scene, &s, &labels, classes.len()),
-            &FuseConfig::default(),
-            &ConsensusParams::default(),
-        )
-        .unwrap()
-        .0
+    let run = |s: &SynthScene| {
+        let scene = GpuScene::upload(gpu, &s.gaussians).unwrap();
+        let input = input(gpu, &scene, s, &labels, classes.len());
+        let params = ConsensusParams::default();
+        fuse_consensus(&input, &FuseConfig::default(), &params)
+            .unwrap()
+            .0
     };
-    let (a, b) = (run(), run());
-    assert!(a.from_segment > 0);
-    assert_eq!(a, b);
+    let a = run(&s);
+    assert!(a.from_segment > 0 && a.segments.len() > 10);
+    assert_eq!(a, run(&s));
+    let mut rng = Rng::new(17);
+    let mut order: Vec<u32> = (0..s.gaussians.len() as u32).collect();
+    rng.shuffle(&mut order);
+    let mut shuffled = s.clone();
+    shuffled.gaussians = s.gaussians.reordered(&order);
+    let b = run(&shuffled);
+    // The shuffled scene's Gaussian i is the scene's order[i].
+    let shuffling = SpatialOrder::from_scene_of_spatial(order.clone());
+    assert_eq!(
+        shuffling.to_spatial(&a.assignment.class),
+        b.assignment.class
+    );
+    assert_eq!(
+        shuffling.to_spatial(&a.assignment.confidence),
+        b.assignment.confidence
+    );
+    assert_eq!(shuffling.to_spatial(&a.entropy), b.entropy);
+    assert_eq!(shuffling.to_spatial(&a.segment), b.segment);
+    for (i, &g) in order.iter().enumerate() {
+        assert_eq!(
+            b.evidence.get(i),
+            a.evidence.get(g as usize),
+            "Gaussian {g}"
+        );
+    }
+    assert_eq!(a.segments, b.segments);
     check_validation(gpu);
 }
 

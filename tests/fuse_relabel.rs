@@ -814,10 +814,12 @@ fn check_classes_follow_the_rule(
 /// reaches `min_mass`, else the consensus class (the rule rebuilt here from its parts). The
 /// pixels the relabeling left undecided count for each Gaussian's consensus class: rebuilt
 /// from two plain accumulations, one over the relabeled views (undecided pixels unlabeled)
-/// and one over maps of the undecided pixels alone.
+/// and one over maps of the undecided pixels alone. Seed 1: its relabeling leaves pixels
+/// undecided, which seeds 2, 3 and 6 of this small office no longer do since the
+/// clustering's ties go by segment size.
 #[test]
 fn relabel_is_deterministic_and_follows_its_rule() {
-    let f = flickered_office(8, 3);
+    let f = flickered_office(8, 1);
     let params = ConsensusParams::default();
     let a = lift_twice_alike(&f, &params);
     let cons = &f.run.consensus.assignment.class;

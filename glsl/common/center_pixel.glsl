@@ -11,6 +11,8 @@ layout(push_constant) uniform CenterParams {
     uvec2 means_addr;        // the scene's means [n][3] (addressed_arrays.glsl)
     uvec2 out_addr;          // vote: the pass's vote rows [rows][n]; observations: each
                              // Gaussian's center pixel [n]
+    uvec2 spatial_addr;      // observations: each Gaussian's number in space [n], where its
+                             // pixel goes; 0: none, at its own index
     float fx;
     float fy;
     float cx;

@@ -12,10 +12,15 @@ layout(set = 0, binding = 1) readonly buffer DepthBuf { float data[]; } depth;
 
 #include "center_pixel.glsl"
 #define pixels UintArrayRW(pc.out_addr) // [n]
+#define spatial UintArray(pc.spatial_addr)
 
 void main() {
     uint i = gl_GlobalInvocationID.x;
     if (i < pc.n) {
-        pixels.data[i] = center_pixel(i);
+        // Numbered in space (src/fuse/consensus_order.rs), each Gaussian's entry goes at its
+        // number, so the observations compacted from the entries come in that order and
+        // carry that number, with no sort on the host. A device address is never 0.
+        bool numbered = any(notEqual(pc.spatial_addr, uvec2(0u)));
+        pixels.data[numbered ? spatial.data[i] : i] = center_pixel(i);
     }
 }

@@ -946,6 +946,7 @@ pub(crate) fn center_params(
         world_to_camera: camera_rows_f32(cam),
         means_addr: scene.params.means.address_words(12)?,
         out_addr,
+        spatial_addr: [0, 0], // at each Gaussian's own index
         fx: cam.fx as f32,
         fy: cam.fy as f32,
         cx: cam.cx as f32,

@@ -15,6 +15,7 @@ use super::assign::Assignment;
 use super::consensus_cluster::cluster_segments_timed;
 use super::consensus_decide::{decide, Consensus, ConsensusParams};
 pub use super::consensus_observe::{observe, CenterPixels};
+use super::consensus_order::SpatialOrder;
 use super::consensus_relabel::fuse_relabeled;
 use super::consensus_segments::{nearest_neighbours, Observations};
 use super::method::Method;
@@ -48,12 +49,17 @@ pub fn fuse_consensus(
 /// A segment consensus run and what it was decided from.
 pub struct ConsensusRun {
     pub consensus: Consensus,
+    /// The Gaussians' observations, numbered by `order`.
     pub observations: Observations,
     /// Per view, (Gaussian, pixel under its center) of every observation (empty lists with
     /// [`CenterPixels::Drop`]).
     pub centers: Vec<Vec<(u32, u32)>>,
-    /// [n][params.neighbours] nearest neighbours.
+    /// [n][params.neighbours] nearest neighbours, numbered by `order`
+    /// ([`SpatialOrder::neighbours_to_scene`] gives them in the scene's numbering).
     pub knn: Vec<u32>,
+    /// The numbering in space the Gaussians were observed, clustered and decided in;
+    /// `consensus` and `centers` are in the scene's.
+    pub order: SpatialOrder,
     pub stats: FuseStats,
 }
 
@@ -74,24 +80,31 @@ pub fn consensus_run(
         input.means.len(),
         input.scene.n
     );
+    // The host work numbers the Gaussians in space (consensus_order.rs): the observations
+    // and the neighbour graph by that number, the results given back in the scene's.
+    let order = SpatialOrder::of(input.means);
+    let order_s = start.elapsed().as_secs_f64();
+    let views_start = std::time::Instant::now();
     // The neighbour graph reads only the centers: searched on the host while the views
     // keep the GPU busy (a million Gaussians take 0.2 s on 16 cores, docs/gpu.md), and
     // waited for after them. `neighbours_s` is that wait.
     let (observed, knn) = std::thread::scope(|scope| {
-        let search = scope.spawn(|| nearest_neighbours(input.means, params.neighbours));
-        let observed = observe(input, cfg, params.occlusion, pixels, progress);
+        let search =
+            scope.spawn(|| nearest_neighbours(&order.to_spatial(input.means), params.neighbours));
+        let observed = observe(input, cfg, params.occlusion, pixels, Some(&order), progress);
         (observed, search.join())
     });
     let (observations, centers, mut stats) = observed?;
-    stats.view_s = start.elapsed().as_secs_f64();
+    stats.view_s = views_start.elapsed().as_secs_f64();
     let knn = knn.unwrap_or_else(|panic| std::panic::resume_unwind(panic));
-    let neighbours_s = start.elapsed().as_secs_f64() - stats.view_s;
+    let neighbours_s = views_start.elapsed().as_secs_f64() - stats.view_s;
     let segment;
     (segment, stats.clustering) = cluster_segments_timed(&observations, &knn, params);
-    stats.clustering.neighbours_s = neighbours_s;
-    stats.segments_s = start.elapsed().as_secs_f64() - stats.view_s;
+    (stats.clustering.order_s, stats.clustering.neighbours_s) = (order_s, neighbours_s);
+    stats.segments_s = views_start.elapsed().as_secs_f64() - stats.view_s;
     let decide_start = std::time::Instant::now();
     let consensus = decide(&observations, &knn, segment, input.classes, params);
+    let consensus = order.consensus_to_scene(consensus);
     stats.decide_s = decide_start.elapsed().as_secs_f64();
     stats.wall_s = start.elapsed().as_secs_f64();
     stats.views_per_s = stats.views as f64 / stats.wall_s.max(1e-9);
@@ -100,6 +113,7 @@ pub fn consensus_run(
         observations,
         centers,
         knn,
+        order,
         stats,
     })
 }

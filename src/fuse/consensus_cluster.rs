@@ -389,16 +389,18 @@ pub fn may_join(evidence: &PairEvidence, a: Dominant, b: Dominant, p: &Consensus
 }
 
 /// A candidate join in the queue: highest priority first, then most views together, then
-/// the lowest segment ids. Stale once the pair's evidence gives another (priority,
-/// together): a candidate whose evidence changed without changing those two stands where
-/// its requeued copy would, so taking it with the current evidence decides the same.
-type Candidate = (i64, u32, Reverse<u32>, Reverse<u32>);
+/// the smaller [`size_class`] of the larger segment, then the lowest segment ids. Stale
+/// once the pair's evidence gives another (priority, together) or a join another size
+/// class: a candidate whose evidence changed without changing those stands where its
+/// requeued copy would, so taking it with the current evidence decides the same.
+type Candidate = (i64, u32, Reverse<u32>, Reverse<u32>, Reverse<u32>);
 
 /// Segment id per Gaussian (numbered by first Gaussian). Every segment starts as one Gaussian
 /// and is named by its lowest Gaussian index. Candidates (adjacent segments with their summed
 /// [`PairEvidence`]) are taken in order of [`PairEvidence::priority`] (ties: more views
-/// together, then the lowest ids); one that [`may_join`] joins, any other is dropped until its
-/// evidence changes (a join adds pairs to it).
+/// together, then the smaller larger segment, then the lowest ids); one that [`may_join`]
+/// joins, any other is dropped until its evidence or that size class changes (a join adds
+/// pairs to it, or Gaussians to one of its segments).
 pub fn cluster_segments(obs: &Observations, knn: &[u32], p: &ConsensusParams) -> Vec<u32> {
     cluster_segments_timed(obs, knn, p).0
 }
@@ -416,6 +418,10 @@ pub fn cluster_segments_timed(
 /// of a scene's clustering needs first (`bench fuse --json` reports it).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct ClusterProfile {
+    /// Numbering the Gaussians in space, before the views (timed by the caller:
+    /// [`super::consensus_order::SpatialOrder::of`]; in the method's `wall_s`, not in its
+    /// `view_s` or `segments_s`).
+    pub order_s: f64,
     /// The wait, after the views, for each Gaussian's nearest neighbours, the graph
     /// clustered (timed by the caller, which searches them beside the views:
     /// [`super::consensus_segments::nearest_neighbours`]).
@@ -476,12 +482,12 @@ fn cluster(
     done.candidates = queue.sorted.len();
     let mut changed = Vec::new();
     while let Some(queued) = queue.pop() {
-        let (_, _, Reverse(a), Reverse(b)) = queued;
+        let (_, _, _, Reverse(a), Reverse(b)) = queued;
         if graph.parent[a as usize] != a || graph.parent[b as usize] != b {
             continue; // joined another segment (most stale candidates: no adjacency lookup needed)
         }
         let current = graph.edges[a as usize].get(b);
-        let Some(evidence) = current.filter(|&e| candidate(a, b, e, p) == queued) else {
+        let Some(evidence) = current.filter(|&e| graph.candidate(a, b, e, p) == queued) else {
             continue; // a segment joined another, or the evidence grew: queued again since
         };
         if may_join(&evidence, graph.dominant(a), graph.dominant(b), p) {
@@ -489,7 +495,7 @@ fn cluster(
             graph.join(a, b, &mut changed);
             for &(c, e) in changed.iter().filter(|(_, e)| e.allows_join(p)) {
                 let (lo, hi) = (a.min(c), a.max(c));
-                queue.heap.push(candidate(lo, hi, e, p));
+                queue.heap.push(graph.candidate(lo, hi, e, p));
             }
             queue.sweep_if_grown(&graph.parent);
         }
@@ -527,7 +533,7 @@ impl Queue {
                 edges
                     .iter()
                     .filter(|&(b, e)| a < b && e.allows_join(p))
-                    .map(|(b, e)| candidate(a, b, e, p)),
+                    .map(|(b, e)| graph.candidate(a, b, e, p)),
             );
         }
         sorted.sort_unstable();
@@ -551,7 +557,7 @@ impl Queue {
         }
         let root = |s: u32| parent[s as usize] == s;
         self.heap
-            .retain(|&(_, _, Reverse(a), Reverse(b))| root(a) && root(b));
+            .retain(|&(_, _, _, Reverse(a), Reverse(b))| root(a) && root(b));
         self.swept = self.heap.len();
     }
 
@@ -564,9 +570,17 @@ impl Queue {
     }
 }
 
-fn candidate(a: u32, b: u32, e: PairEvidence, p: &ConsensusParams) -> Candidate {
-    let key = e.priority(p.apart_weight);
-    (key, e.together, Reverse(a), Reverse(b))
+/// A segment of `size` Gaussians in the candidates' order: its size's binary digits. Among
+/// candidates of equal evidence, those whose larger segment is smaller join first, so a
+/// surface's single Gaussians join each other before a large neighbour takes them one by
+/// one. Which goes first in such ties otherwise went by the Gaussians' numbers: on the
+/// office of seed 3 under flicker 0.3, numbered in space, a wall took 41% of the ceiling,
+/// Gaussian by Gaussian through those seen only by views that called the ceiling wall
+/// (docs/robustness.md, "Ties by size"). Classes rather than sizes: a join changes a
+/// segment's class only when its size crosses a power of two, which is when its other
+/// candidates are queued again.
+fn size_class(size: u32) -> u32 {
+    32 - size.leading_zeros()
 }
 
 /// Every neighbour pair once, with what the views said of it (on every core: millions of
@@ -657,6 +671,8 @@ struct SegmentGraph<'a> {
     regions: Vec<RegionCounts>,
     /// Each Gaussian's segment at the time it joined (a lower index, or itself).
     parent: Vec<u32>,
+    /// Per segment (its lowest Gaussian), how many Gaussians it holds.
+    size: Vec<u32>,
 }
 
 impl<'a> SegmentGraph<'a> {
@@ -684,12 +700,29 @@ impl<'a> SegmentGraph<'a> {
             edges[a as usize].add(b, e);
             edges[b as usize].add(a, e);
         }
+        let mut size = vec![0u32; n];
+        for &root in &piece {
+            size[root as usize] += 1;
+        }
         SegmentGraph {
             obs,
             edges,
             regions: piece_regions(obs, &piece),
             parent: piece,
+            size,
         }
+    }
+
+    fn candidate(&self, a: u32, b: u32, e: PairEvidence, p: &ConsensusParams) -> Candidate {
+        let key = e.priority(p.apart_weight);
+        let larger = self.size[a as usize].max(self.size[b as usize]);
+        (
+            key,
+            e.together,
+            Reverse(size_class(larger)),
+            Reverse(a),
+            Reverse(b),
+        )
     }
 
     /// Segment `s`'s dominant regions.
@@ -698,10 +731,13 @@ impl<'a> SegmentGraph<'a> {
     }
 
     /// Joins segment `b` into `a` (a < b); `changed` gets the segments whose evidence with
-    /// `a` changed, with that evidence (a buffer reused over the joins).
+    /// `a` changed, and those whose candidate with `a` changed by its size class alone,
+    /// with that evidence (a buffer reused over the joins).
     fn join(&mut self, a: u32, b: u32, changed: &mut Vec<(u32, PairEvidence)>) {
         let (ai, bi) = (a as usize, b as usize);
         self.parent[bi] = a;
+        let size_before = self.size[ai];
+        self.size[ai] += self.size[bi];
         let taken = std::mem::take(&mut self.regions[bi]);
         self.regions[ai].absorb(ai, taken, bi, self.obs);
         let mut moved = std::mem::take(&mut self.edges[bi]);
@@ -712,6 +748,14 @@ impl<'a> SegmentGraph<'a> {
             let sum = self.edges[ai].add(c, e);
             self.edges[c as usize].rename(b, a, sum);
             changed.push((c, sum));
+        }
+        // The segments whose candidate with `a` changed only by `a`'s size class.
+        let class = |a_size: u32, c: u32| size_class(a_size.max(self.size[c as usize]));
+        if size_class(self.size[ai]) != size_class(size_before) {
+            let resized = (self.edges[ai].iter())
+                .filter(|&(c, _)| moved.get(c).is_none())
+                .filter(|&(c, _)| class(size_before, c) != class(self.size[ai], c));
+            changed.extend(resized);
         }
     }
 }

@@ -22,6 +22,7 @@ use super::accumulate::{
     LABELS_AHEAD, LABEL_THREADS, NO_LABEL,
 };
 use super::consensus::ConsensusInput;
+use super::consensus_order::SpatialOrder;
 use super::consensus_segments::{Observations, ViewObservation};
 use super::regions_gpu::{Observed, RegionFinder, RegionStats};
 use crate::contract::REGION_EDGE_BIT;
@@ -44,17 +45,26 @@ pub enum CenterPixels {
 /// Every view's observations of every Gaussian: label and region under its center (with
 /// `occlusion`, only where the center is within the depth tolerance of the rendered median
 /// depth), and per view the (Gaussian, pixel) of each observation (empty lists with
-/// [`CenterPixels::Drop`]). `stats.observe` sums the lanes' host seconds (which overlap
-/// when two lanes run).
+/// [`CenterPixels::Drop`]). With an `order`, the observations number the Gaussians by it
+/// (the pixels' lists keep the scene's numbers). `stats.observe` sums the lanes' host
+/// seconds (which overlap when two lanes run).
 #[allow(clippy::type_complexity)]
 pub fn observe(
     input: &ConsensusInput,
     cfg: &FuseConfig,
     occlusion: bool,
     pixels: CenterPixels,
+    order: Option<&SpatialOrder>,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<(Observations, Vec<Vec<(u32, u32)>>, FuseStats)> {
     let (gpu, cams, n) = (input.gpu, input.cams, input.scene.n as usize);
+    if let Some(order) = order {
+        ensure!(
+            order.len() == n,
+            "a numbering of {} Gaussians for a scene of {n}",
+            order.len()
+        );
+    }
     let mut stats = FuseStats {
         views: cams.len(),
         passes: 1,
@@ -67,6 +77,8 @@ pub fn observe(
         cfg,
         occlusion,
         pixels,
+        order,
+        spatial: order.map(|o| o.upload(gpu)).transpose()?,
     };
     // Label maps are read (decoded) and checked on worker threads a few views ahead, as
     // the FlashSplat pass does, instead of in turn between the views' GPU work.
@@ -208,6 +220,10 @@ struct Pass<'a> {
     cfg: &'a FuseConfig,
     occlusion: bool,
     pixels: CenterPixels,
+    order: Option<&'a SpatialOrder>,
+    /// `order`'s number of each Gaussian on the GPU, where the center pixels are written
+    /// ([n]).
+    spatial: Option<Buffer>,
 }
 
 /// One view's observations, as a lane found them.
@@ -300,7 +316,7 @@ impl<'a> Lane<'a> {
             self.finder
                 .observations(map, cam.width, &self.centers, |observed| {
                     let gathering = Instant::now();
-                    let gathered = view_observations(observed, pass.pixels);
+                    let gathered = view_observations(observed, pass.pixels, pass.order);
                     times.gather_s = gathering.elapsed().as_secs_f64();
                     gathered
                 })?;
@@ -344,19 +360,24 @@ impl ViewObservation for CompactEntry {
     }
 }
 
-/// One view's observations as the GPU compacted them ([`Observed`], in Gaussian order):
-/// (Gaussian, label, region with its edge bit) and, where kept, (Gaussian, pixel).
+/// One view's observations as the GPU compacted them ([`Observed`], in Gaussian order,
+/// the Gaussians numbered by `order` where one is given): (Gaussian, label, region with
+/// its edge bit) and, where kept, (Gaussian, pixel) with the scene's numbers.
 fn view_observations(
     observed: &[Observed],
     pixels: CenterPixels,
+    order: Option<&SpatialOrder>,
 ) -> (Vec<CompactEntry>, Vec<(u32, u32)>) {
     let entry = |o: &Observed| CompactEntry {
         gaussian: o.gaussian,
         label: o.label,
         region_and_edge: o.region,
     };
+    let scene_number = |g: u32| order.map_or(g, |order| order.scene(g));
     let seen = match pixels {
-        CenterPixels::Keep => observed.iter().map(|o| (o.gaussian, o.pixel)).collect(),
+        CenterPixels::Keep => (observed.iter())
+            .map(|o| (scene_number(o.gaussian), o.pixel))
+            .collect(),
         CenterPixels::Drop => Vec::new(),
     };
     (observed.iter().map(entry).collect(), seen)
@@ -374,7 +395,7 @@ fn center_pixels(
     if !pass.occlusion {
         let mut rec = Recorder::new(raster.gpu())?;
         let m0 = rec.mark();
-        dispatch_center_pixels(&mut rec, scene, cam, None, out, cfg)?;
+        dispatch_center_pixels(&mut rec, scene, cam, None, out, pass)?;
         let m1 = rec.mark();
         let t = rec.submit_and_wait()?;
         return Ok(t.between(m0, m1).unwrap_or(0.0) * 1e-6);
@@ -391,7 +412,7 @@ fn center_pixels(
             return Ok(());
         }
         rec.barrier();
-        dispatch_center_pixels(rec, scene, cam, Some(tiles.depth()), out, cfg)
+        dispatch_center_pixels(rec, scene, cam, Some(tiles.depth()), out, pass)
     })?;
     Ok(run.timings.total_ns() * 1e-6)
 }
@@ -402,17 +423,20 @@ fn dispatch_center_pixels(
     cam: &Camera,
     depth: Option<&Buffer>,
     out: &Buffer,
-    cfg: &FuseConfig,
+    pass: &Pass,
 ) -> Result<()> {
     // No class rows: the observations take every label.
-    let params = center_params(
+    let mut params = center_params(
         cam,
         scene,
-        cfg,
+        pass.cfg,
         depth.is_some(),
         (0, 0),
         out.address_words(4)?,
     )?;
+    if let Some(spatial) = &pass.spatial {
+        params.spatial_addr = spatial.address_words(4)?;
+    }
     rec.dispatch(
         ids::FUSE_CENTER_PIXEL,
         &[
@@ -434,7 +458,8 @@ mod tests {
 
     /// The views' packed lists give the rows the tuples give: the edge bit read off the
     /// region word, the region without it (regions up to the bit below it), with and
-    /// without the pixels.
+    /// without the pixels; the pixels' lists in the scene's numbering where the lists come
+    /// numbered in space.
     #[test]
     fn packed_lists_give_the_rows_tuples_give() {
         let (n, mut rng) = (300, Rng::new(5));
@@ -473,18 +498,29 @@ mod tests {
                 list.iter().map(entry).collect()
             })
             .collect();
-        for pixels in [CenterPixels::Keep, CenterPixels::Drop] {
+        // With a numbering in space the GPU's lists carry the Gaussians' numbers there
+        // (the rows are as they come), and the pixels' lists the scene's.
+        let mut shuffled: Vec<u32> = (0..n as u32).collect();
+        rng.shuffle(&mut shuffled);
+        let spatial = SpatialOrder::from_scene_of_spatial(shuffled);
+        for (pixels, order) in [CenterPixels::Keep, CenterPixels::Drop]
+            .into_iter()
+            .flat_map(|p| [(p, None), (p, Some(&spatial))])
+        {
             let views: Vec<_> = observed
                 .iter()
-                .map(|l| view_observations(l, pixels))
+                .map(|l| view_observations(l, pixels, order))
                 .collect();
             let packed: Vec<Vec<CompactEntry>> = views.iter().map(|v| v.0.clone()).collect();
             let rows = Observations::from_views(n, &packed);
             assert_eq!(rows, Observations::from_views(n, &tuples));
             assert!(rows.edge.iter().any(|&e| e) && rows.edge.iter().any(|&e| !e));
+            let scene_number = |g: u32| order.map_or(g, |o| o.scene(g));
             for ((_, seen), list) in views.iter().zip(&observed) {
                 let expected: Vec<(u32, u32)> = match pixels {
-                    CenterPixels::Keep => list.iter().map(|o| (o.gaussian, o.pixel)).collect(),
+                    CenterPixels::Keep => (list.iter())
+                        .map(|o| (scene_number(o.gaussian), o.pixel))
+                        .collect(),
                     CenterPixels::Drop => Vec::new(),
                 };
                 assert_eq!(seen, &expected);

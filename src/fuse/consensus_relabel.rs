@@ -382,7 +382,8 @@ pub fn fuse_relabeled(
     };
     let consensus = run.consensus;
     let footprints = fold_undecided(&footprints, &consensus.assignment.class);
-    let by_pixels = assign_semantic_near(&footprints, Some((&run.knn, params.neighbours)));
+    let knn = run.order.neighbours_to_scene(&run.knn, params.neighbours);
+    let by_pixels = assign_semantic_near(&footprints, Some((&knn, params.neighbours)));
     let mut evidence = consensus.evidence.to_scores();
     let mut class = consensus.assignment.class.clone();
     for (g, (own, &by_footprint)) in class.iter_mut().zip(&by_pixels.class).enumerate() {

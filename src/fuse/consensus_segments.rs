@@ -238,6 +238,13 @@ impl Groups {
     pub(crate) fn group(&self, k: usize) -> &[u32] {
         &self.members[self.starts[k] as usize..self.starts[k + 1] as usize]
     }
+
+    /// The groups, by key.
+    pub(crate) fn iter(&self) -> impl Iterator<Item = &[u32]> {
+        self.starts
+            .windows(2)
+            .map(|w| &self.members[w[0] as usize..w[1] as usize])
+    }
 }
 
 pub(crate) fn find(parent: &mut [u32], mut x: u32) -> u32 {
@@ -280,6 +287,15 @@ pub fn nearest_neighbours(means: &[[f32; 3]], k: usize) -> Vec<u32> {
         out
     });
     blocks.concat()
+}
+
+/// The Gaussians centered at `means` grouped by cell of [`nearest_neighbours`]'s grid,
+/// cells in scan order (x fastest), in index order within a cell.
+pub(crate) fn gaussians_by_cell(means: &[[f32; 3]]) -> Groups {
+    if means.is_empty() {
+        return Groups::default();
+    }
+    Grid::new(means).cells
 }
 
 /// Gaussians per work item of [`nearest_neighbours`].

@@ -11,6 +11,7 @@ pub mod consensus_confusion;
 pub mod consensus_decide;
 pub mod consensus_flags;
 pub mod consensus_observe;
+pub mod consensus_order;
 pub mod consensus_relabel;
 pub mod consensus_report;
 pub mod consensus_segments;

@@ -146,6 +146,15 @@ impl SharedCounts {
         self.row_of[g] as usize
     }
 
+    /// The counts with Gaussian `g` holding what Gaussian `held_by(g)` held (a
+    /// renumbering of the Gaussians: the rows are kept as they are).
+    pub fn reordered(self, held_by: impl Fn(usize) -> usize) -> SharedCounts {
+        let row_of = (0..self.row_of.len())
+            .map(|g| self.row_of[held_by(g)])
+            .collect();
+        SharedCounts { row_of, ..self }
+    }
+
     /// Gaussian `g`'s counts.
     pub fn get(&self, g: usize) -> &[f64] {
         let at = self.row_of[g] as usize * self.classes;

@@ -1,36 +1,57 @@
-//! Subsets of a scene's Gaussians (extracting or removing a class).
+//! Subsets of a scene's Gaussians (extracting or removing a class), and the scene in
+//! another order.
 
 use super::gaussians::{Gaussians, SemanticLogits};
 
-fn pick<T: Clone>(v: &[T], keep: &[bool], stride: usize) -> Vec<T> {
-    v.chunks(stride)
-        .zip(keep)
-        .filter(|(_, &k)| k)
-        .flat_map(|(c, _)| c.iter().cloned())
-        .collect()
+/// `v`'s items of `stride` values at `indices`, in that order.
+fn gather<T: Clone>(v: &[T], indices: &[u32], stride: usize) -> Vec<T> {
+    let item = |g: &u32| &v[*g as usize * stride..(*g as usize + 1) * stride];
+    indices.iter().flat_map(item).cloned().collect()
 }
 
 impl Gaussians {
     /// The Gaussians whose `keep` flag is set, every per-Gaussian field carried along.
     pub fn select(&self, keep: &[bool]) -> Gaussians {
         assert_eq!(keep.len(), self.len(), "one flag per Gaussian");
+        let kept: Vec<u32> = (0..self.len() as u32)
+            .filter(|&g| keep[g as usize])
+            .collect();
+        self.gathered(&kept)
+    }
+
+    /// The Gaussians in the order `order` lists them (a permutation of their indices),
+    /// every per-Gaussian field carried along: the same scene numbered otherwise.
+    pub fn reordered(&self, order: &[u32]) -> Gaussians {
+        assert_eq!(order.len(), self.len(), "one index per Gaussian");
+        let mut seen = vec![false; self.len()];
+        for &g in order {
+            assert!(
+                !std::mem::replace(&mut seen[g as usize], true),
+                "Gaussian {g} twice"
+            );
+        }
+        self.gathered(order)
+    }
+
+    /// The Gaussians at `indices`, in that order.
+    fn gathered(&self, indices: &[u32]) -> Gaussians {
         let k = self.sh_coeffs() * 3;
         Gaussians {
-            means: pick(&self.means, keep, 1),
-            log_scales: pick(&self.log_scales, keep, 1),
-            quats: pick(&self.quats, keep, 1),
-            opacity_logits: pick(&self.opacity_logits, keep, 1),
+            means: gather(&self.means, indices, 1),
+            log_scales: gather(&self.log_scales, indices, 1),
+            quats: gather(&self.quats, indices, 1),
+            opacity_logits: gather(&self.opacity_logits, indices, 1),
             sh_degree: self.sh_degree,
-            sh: pick(&self.sh, keep, k),
+            sh: gather(&self.sh, indices, k),
             semantics: self.semantics.as_ref().map(|s| SemanticLogits {
                 channels: s.channels,
-                logits: pick(&s.logits, keep, s.channels.max(1)),
+                logits: gather(&s.logits, indices, s.channels.max(1)),
             }),
-            class_ids: self.class_ids.as_ref().map(|v| pick(v, keep, 1)),
-            class_conf: self.class_conf.as_ref().map(|v| pick(v, keep, 1)),
-            instance_ids: self.instance_ids.as_ref().map(|v| pick(v, keep, 1)),
-            class_entropy: self.class_entropy.as_ref().map(|v| pick(v, keep, 1)),
-            segment_ids: self.segment_ids.as_ref().map(|v| pick(v, keep, 1)),
+            class_ids: self.class_ids.as_ref().map(|v| gather(v, indices, 1)),
+            class_conf: self.class_conf.as_ref().map(|v| gather(v, indices, 1)),
+            instance_ids: self.instance_ids.as_ref().map(|v| gather(v, indices, 1)),
+            class_entropy: self.class_entropy.as_ref().map(|v| gather(v, indices, 1)),
+            segment_ids: self.segment_ids.as_ref().map(|v| gather(v, indices, 1)),
         }
     }
 

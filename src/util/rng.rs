@@ -74,4 +74,11 @@ impl Rng {
     pub fn bool(&mut self, p: f64) -> bool {
         self.f64() < p
     }
+
+    /// `items` in a uniformly random order (Fisher-Yates).
+    pub fn shuffle<T>(&mut self, items: &mut [T]) {
+        for i in (1..items.len()).rev() {
+            items.swap(i, self.below(i as u64 + 1) as usize);
+        }
+    }
 }

@@ -1,0 +1,142 @@
+//! Segment consensus numbers the Gaussians in space for its host work, and gives its
+//! results back in the scene's numbering.
+//!
+//! Why: the clustering and the decision read each Gaussian's neighbours (their observation
+//! rows, segment ids, adjacency lists, region counts). A trained 3DGS scene lists its
+//! Gaussians in no spatial order (its SfM points, then each densification's clones and
+//! splits appended), so those reads miss the cache: with a room's Gaussians in random order
+//! the consensus's host work took twice as long (docs/robustness.md, "The Gaussians'
+//! order" and "The Gaussians numbered in space"). Numbered cell by cell of the neighbour search's grid, a Gaussian's neighbours
+//! have nearby numbers whatever the scene's order. Within a cell the Gaussians go by
+//! position, so the numbering, and with it every tie the consensus breaks by number, does
+//! not depend on the scene's order (except between Gaussians at the same position).
+
+use std::sync::Arc;
+
+use anyhow::Result;
+
+use super::assign::Assignment;
+use super::consensus_decide::Consensus;
+use super::consensus_segments::gaussians_by_cell;
+use crate::contract::NO_NEIGHBOUR;
+use crate::gpu::{Buffer, Gpu};
+
+/// A numbering of the scene's Gaussians in space, and its inverse.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct SpatialOrder {
+    /// Per Gaussian of the scene, its number in space.
+    spatial_of_scene: Vec<u32>,
+    /// Per number in space, the scene's Gaussian.
+    scene_of_spatial: Vec<u32>,
+}
+
+impl SpatialOrder {
+    /// The Gaussians centered at `means` numbered cell by cell of the neighbour search's
+    /// grid (cells in scan order), within a cell by position (x, then y, then z), then by
+    /// their index in the scene.
+    pub fn of(means: &[[f32; 3]]) -> SpatialOrder {
+        let mut scene_of_spatial = Vec::with_capacity(means.len());
+        let by_position = |&a: &u32, &b: &u32| {
+            let (pa, pb) = (means[a as usize], means[b as usize]);
+            (0..3)
+                .map(|i| pa[i].total_cmp(&pb[i]))
+                .fold(std::cmp::Ordering::Equal, std::cmp::Ordering::then)
+                .then(a.cmp(&b))
+        };
+        for cell in gaussians_by_cell(means).iter() {
+            let start = scene_of_spatial.len();
+            scene_of_spatial.extend_from_slice(cell);
+            scene_of_spatial[start..].sort_unstable_by(by_position);
+        }
+        SpatialOrder::from_scene_of_spatial(scene_of_spatial)
+    }
+
+    /// The numbering that lists `scene_of_spatial[i]` as number `i` (a permutation of
+    /// `0..n`).
+    pub fn from_scene_of_spatial(scene_of_spatial: Vec<u32>) -> SpatialOrder {
+        let mut spatial_of_scene = vec![u32::MAX; scene_of_spatial.len()];
+        for (spatial, &scene) in scene_of_spatial.iter().enumerate() {
+            assert_eq!(
+                spatial_of_scene[scene as usize],
+                u32::MAX,
+                "Gaussian {scene} numbered twice"
+            );
+            spatial_of_scene[scene as usize] = spatial as u32;
+        }
+        SpatialOrder {
+            spatial_of_scene,
+            scene_of_spatial,
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.scene_of_spatial.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.scene_of_spatial.is_empty()
+    }
+
+    /// The number in space of the scene's Gaussian `g`.
+    pub fn spatial(&self, g: u32) -> u32 {
+        self.spatial_of_scene[g as usize]
+    }
+
+    /// The scene's Gaussian numbered `s` in space.
+    pub fn scene(&self, s: u32) -> u32 {
+        self.scene_of_spatial[s as usize]
+    }
+
+    /// Each Gaussian's number in space on the GPU ([n] u32): where the observation pass
+    /// writes its center pixel, so the observations come numbered in space.
+    pub fn upload(&self, gpu: &Gpu) -> Result<Buffer> {
+        Ok(gpu.buffer_from("spatial-order", &self.spatial_of_scene)?)
+    }
+
+    /// Per-Gaussian values of the scene, listed in space.
+    pub fn to_spatial<T: Copy>(&self, scene: &[T]) -> Vec<T> {
+        gather(scene, &self.scene_of_spatial)
+    }
+
+    /// Per-Gaussian values listed in space, in the scene's order.
+    pub fn to_scene<T: Copy>(&self, spatial: &[T]) -> Vec<T> {
+        gather(spatial, &self.spatial_of_scene)
+    }
+
+    /// A neighbour graph ([n][k], neighbours by number in space) in the scene's numbering.
+    pub fn neighbours_to_scene(&self, knn: &[u32], k: usize) -> Vec<u32> {
+        assert_eq!(knn.len(), self.len() * k, "k neighbours per Gaussian");
+        let mut out = Vec::with_capacity(knn.len());
+        for &s in &self.spatial_of_scene {
+            let row = &knn[s as usize * k..(s as usize + 1) * k];
+            out.extend(row.iter().map(|&h| match h {
+                NO_NEIGHBOUR => NO_NEIGHBOUR,
+                h => self.scene_of_spatial[h as usize],
+            }));
+        }
+        out
+    }
+
+    /// A consensus decided on the Gaussians numbered in space, in the scene's numbering:
+    /// the per-Gaussian results reordered; the segments (numbered by their members in
+    /// space) and the totals as they are.
+    pub fn consensus_to_scene(&self, spatial: Consensus) -> Consensus {
+        let evidence = Arc::unwrap_or_clone(spatial.evidence);
+        Consensus {
+            assignment: Assignment {
+                class: self.to_scene(&spatial.assignment.class),
+                confidence: self.to_scene(&spatial.assignment.confidence),
+            },
+            entropy: self.to_scene(&spatial.entropy),
+            segment: self.to_scene(&spatial.segment),
+            evidence: Arc::new(evidence.reordered(|g| self.spatial(g as u32) as usize)),
+            ..spatial
+        }
+    }
+}
+
+/// `values[at[i]]` for each i: a value per Gaussian, renumbered.
+fn gather<T: Copy>(values: &[T], at: &[u32]) -> Vec<T> {
+    assert_eq!(values.len(), at.len(), "a value per Gaussian");
+    at.iter().map(|&g| values[g as usize]).collect()
+}
