@@ -528,15 +528,9 @@ fn cluster_by_hand(
             let net = e[0] as f64 - p.apart_weight * e[1] as f64;
             (net / e[3] as f64 * (1 << 20) as f64).round() as i64
         };
-        // The larger segment's size class: its Gaussians' count's binary digits.
-        let class_of = |&(lo, hi): &(usize, usize)| {
-            let size = |s| label.iter().filter(|&&l| l == s).count();
-            let larger = size(lo).max(size(hi));
-            usize::BITS - larger.leading_zeros()
-        };
         let best = sums
             .iter()
-            .map(|(key, e)| (key, e, class_of(key)))
+            .map(|(key, e)| (key, e, larger_size_class(&label, *key)))
             .filter(|(key, e, class)| dropped.get(key) != Some(&(**e, *class)))
             .max_by_key(|(key, e, class)| {
                 (
@@ -562,6 +556,14 @@ fn cluster_by_hand(
             refused[allowed as usize] += 1;
         }
     }
+}
+
+/// The size class of the larger of segments `lo` and `hi`: its Gaussians' count's binary
+/// digits.
+fn larger_size_class(label: &[usize], (lo, hi): (usize, usize)) -> u32 {
+    let size = |s| label.iter().filter(|&&l| l == s).count();
+    let larger = size(lo).max(size(hi));
+    usize::BITS - larger.leading_zeros()
 }
 
 /// The labels (lowest Gaussian of each) of the pieces joined outright: pairs seen by at

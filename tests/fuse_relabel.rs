@@ -13,8 +13,8 @@ use semsplat::fuse::consensus_confusion::ConfusionRates;
 use semsplat::fuse::consensus_relabel::{edge_depth, relabel_view, RelabelRule, RelabeledViews};
 use semsplat::fuse::regions_gpu::{RegionFinder, MAX_GPU_REACH};
 use semsplat::fuse::{
-    accumulate, assign_semantic_near, lift_by_consensus, nearest_neighbours, Assignment,
-    ClassScores, ConsensusLift, ConsensusParams, FuseConfig, LabelSource, Method, NO_LABEL,
+    accumulate, assign_semantic_near, lift_by_consensus, Assignment, ClassScores, ConsensusLift,
+    ConsensusParams, FuseConfig, LabelSource, Method, NO_LABEL,
 };
 use semsplat::render::GpuScene;
 use semsplat::synth::{generate, RoomSource, SynthConfig, SynthScene};
@@ -755,7 +755,9 @@ fn rule_by_hand(
 ) -> RuleByHand {
     let mut footprints = footprint(f, relabeled, f.classes);
     let k = params.neighbours;
-    let knn = nearest_neighbours(&f.s.gaussians.means, k);
+    // The consensus's graph (searched on the centers in space: ties between equally far
+    // neighbours go by that numbering), in the scene's numbering.
+    let knn = f.run.order.neighbours_to_scene(&f.run.knn, k);
     let unfolded = assign_semantic_near(&footprints, Some((&knn, k)));
     let undecided_mass = footprint(f, undecided_only, 1);
     let mut undecided_gaussians = 0;

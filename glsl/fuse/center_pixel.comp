@@ -20,7 +20,10 @@ void main() {
         // Numbered in space (src/fuse/consensus_order.rs), each Gaussian's entry goes at its
         // number, so the observations compacted from the entries come in that order and
         // carry that number, with no sort on the host. A device address is never 0.
-        bool numbered = any(notEqual(pc.spatial_addr, uvec2(0u)));
-        pixels.data[numbered ? spatial.data[i] : i] = center_pixel(i);
+        uint at = i;
+        if (any(notEqual(pc.spatial_addr, uvec2(0u)))) {
+            at = spatial.data[i];
+        }
+        pixels.data[at] = center_pixel(i);
     }
 }

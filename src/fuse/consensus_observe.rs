@@ -58,13 +58,6 @@ pub fn observe(
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<(Observations, Vec<Vec<(u32, u32)>>, FuseStats)> {
     let (gpu, cams, n) = (input.gpu, input.cams, input.scene.n as usize);
-    if let Some(order) = order {
-        ensure!(
-            order.len() == n,
-            "a numbering of {} Gaussians for a scene of {n}",
-            order.len()
-        );
-    }
     let mut stats = FuseStats {
         views: cams.len(),
         passes: 1,
@@ -72,14 +65,7 @@ pub fn observe(
         ..Default::default()
     };
     let mut views = ObservedViews::new(cams.len());
-    let pass = Pass {
-        input,
-        cfg,
-        occlusion,
-        pixels,
-        order,
-        spatial: order.map(|o| o.upload(gpu)).transpose()?,
-    };
+    let pass = Pass::new(input, cfg, occlusion, pixels, order)?;
     // Label maps are read (decoded) and checked on worker threads a few views ahead, as
     // the FlashSplat pass does, instead of in turn between the views' GPU work.
     let read = |view: usize| read_labels(input, view);
@@ -224,6 +210,37 @@ struct Pass<'a> {
     /// `order`'s number of each Gaussian on the GPU, where the center pixels are written
     /// ([n]).
     spatial: Option<Buffer>,
+}
+
+impl<'a> Pass<'a> {
+    fn new(
+        input: &'a ConsensusInput<'a>,
+        cfg: &'a FuseConfig,
+        occlusion: bool,
+        pixels: CenterPixels,
+        order: Option<&'a SpatialOrder>,
+    ) -> Result<Pass<'a>> {
+        let spatial = match order {
+            Some(order) => {
+                let n = input.scene.n as usize;
+                ensure!(
+                    order.len() == n,
+                    "a numbering of {} Gaussians for a scene of {n}",
+                    order.len()
+                );
+                Some(order.upload(input.gpu)?)
+            }
+            None => None,
+        };
+        Ok(Pass {
+            input,
+            cfg,
+            occlusion,
+            pixels,
+            order,
+            spatial,
+        })
+    }
 }
 
 /// One view's observations, as a lane found them.

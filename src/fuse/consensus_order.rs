@@ -6,10 +6,11 @@
 //! Gaussians in no spatial order (its SfM points, then each densification's clones and
 //! splits appended), so those reads miss the cache: with a room's Gaussians in random order
 //! the consensus's host work took twice as long (docs/robustness.md, "The Gaussians'
-//! order" and "The Gaussians numbered in space"). Numbered cell by cell of the neighbour search's grid, a Gaussian's neighbours
-//! have nearby numbers whatever the scene's order. Within a cell the Gaussians go by
-//! position, so the numbering, and with it every tie the consensus breaks by number, does
-//! not depend on the scene's order (except between Gaussians at the same position).
+//! order" and "The Gaussians numbered in space"). Numbered cell by cell of the neighbour
+//! search's grid, a Gaussian's neighbours have nearby numbers whatever the scene's order.
+//! Within a cell the Gaussians go by position, so the numbering, and with it every tie the
+//! consensus breaks by number, does not depend on the scene's order (except between
+//! Gaussians at the same position).
 
 use std::sync::Arc;
 
@@ -139,4 +140,51 @@ impl SpatialOrder {
 fn gather<T: Copy>(values: &[T], at: &[u32]) -> Vec<T> {
     assert_eq!(values.len(), at.len(), "a value per Gaussian");
     at.iter().map(|&g| values[g as usize]).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fuse::consensus_segments::nearest_neighbours;
+    use crate::util::Rng;
+
+    /// Random centers (distinct distances: no ties) and the same centers shuffled.
+    fn shuffled_centers(n: usize) -> (Vec<[f32; 3]>, Vec<u32>) {
+        let mut rng = Rng::new(11);
+        let means: Vec<[f32; 3]> = (0..n)
+            .map(|_| [0, 1, 2].map(|_| rng.range_f64(-2.0, 2.0) as f32))
+            .collect();
+        let mut shuffle: Vec<u32> = (0..n as u32).collect();
+        rng.shuffle(&mut shuffle);
+        (means, shuffle)
+    }
+
+    /// The numbering depends on the positions only: the same centers in another order are
+    /// listed in space at the same positions.
+    #[test]
+    fn the_numbering_follows_the_positions_not_the_order() {
+        let (means, shuffle) = shuffled_centers(5000);
+        let shuffled: Vec<[f32; 3]> = shuffle.iter().map(|&g| means[g as usize]).collect();
+        let (a, b) = (SpatialOrder::of(&means), SpatialOrder::of(&shuffled));
+        assert_eq!(a.to_spatial(&means), b.to_spatial(&shuffled));
+        assert_ne!(
+            a.to_spatial(&means),
+            means,
+            "the numbering is not the scene's"
+        );
+    }
+
+    /// The neighbours searched on the centers listed in space, given back in the scene's
+    /// numbering, are the neighbours searched on the scene's centers.
+    #[test]
+    fn neighbours_found_in_space_map_back_to_the_scenes() {
+        let (means, _) = shuffled_centers(3000);
+        let order = SpatialOrder::of(&means);
+        let k = 6;
+        let in_space = nearest_neighbours(&order.to_spatial(&means), k);
+        assert_eq!(
+            order.neighbours_to_scene(&in_space, k),
+            nearest_neighbours(&means, k)
+        );
+    }
 }
