@@ -574,9 +574,9 @@ impl Queue {
 /// candidates of equal evidence, those whose larger segment is smaller join first, so a
 /// surface's single Gaussians join each other before a large neighbour takes them one by
 /// one. Which goes first in such ties otherwise went by the Gaussians' numbers: on the
-/// office of seed 3 under flicker 0.3, numbered in space, a wall took 41% of the ceiling,
-/// Gaussian by Gaussian through those seen only by views that called the ceiling wall
-/// (docs/robustness.md, "Ties by size"). Classes rather than sizes: a join changes a
+/// office of seed 3 under flicker 0.3 (a dump of its observations), numbered in space, a
+/// wall took 41% of the ceiling, Gaussian by Gaussian through those seen only by views that
+/// called the ceiling wall (docs/robustness.md, "Ties by size"). Classes rather than sizes: a join changes a
 /// segment's class only when its size crosses a power of two, which is when its other
 /// candidates are queued again.
 fn size_class(size: u32) -> u32 {

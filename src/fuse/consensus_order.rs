@@ -21,6 +21,7 @@ use super::consensus_decide::Consensus;
 use super::consensus_segments::gaussians_by_cell;
 use crate::contract::NO_NEIGHBOUR;
 use crate::gpu::{Buffer, Gpu};
+use crate::util::gather;
 
 /// A numbering of the scene's Gaussians in space, and its inverse.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -96,12 +97,12 @@ impl SpatialOrder {
 
     /// Per-Gaussian values of the scene, listed in space.
     pub fn to_spatial<T: Copy>(&self, scene: &[T]) -> Vec<T> {
-        gather(scene, &self.scene_of_spatial)
+        renumbered(scene, &self.scene_of_spatial)
     }
 
     /// Per-Gaussian values listed in space, in the scene's order.
     pub fn to_scene<T: Copy>(&self, spatial: &[T]) -> Vec<T> {
-        gather(spatial, &self.spatial_of_scene)
+        renumbered(spatial, &self.spatial_of_scene)
     }
 
     /// A neighbour graph ([n][k], neighbours by number in space) in the scene's numbering.
@@ -137,9 +138,9 @@ impl SpatialOrder {
 }
 
 /// `values[at[i]]` for each i: a value per Gaussian, renumbered.
-fn gather<T: Copy>(values: &[T], at: &[u32]) -> Vec<T> {
+fn renumbered<T: Copy>(values: &[T], at: &[u32]) -> Vec<T> {
     assert_eq!(values.len(), at.len(), "a value per Gaussian");
-    at.iter().map(|&g| values[g as usize]).collect()
+    gather(values, at, 1)
 }
 
 #[cfg(test)]

@@ -2,15 +2,7 @@
 //! another order.
 
 use super::gaussians::{Gaussians, SemanticLogits};
-
-/// `v`'s items of `stride` values at `indices`, in that order.
-fn gather<T: Clone>(v: &[T], indices: &[u32], stride: usize) -> Vec<T> {
-    if v.is_empty() {
-        return Vec::new(); // semantics of no channels
-    }
-    let item = |g: &u32| &v[*g as usize * stride..(*g as usize + 1) * stride];
-    indices.iter().flat_map(item).cloned().collect()
-}
+use crate::util::gather;
 
 impl Gaussians {
     /// The Gaussians whose `keep` flag is set, every per-Gaussian field carried along.

@@ -14,3 +14,14 @@ pub use atomic_write::{
 };
 pub use parallel::{parallel_map, prefetch_ordered, split_parts, take_part};
 pub use rng::Rng;
+
+/// `values`' items of `stride` values at `indices`, in that order (a subset of a scene's
+/// per-Gaussian arrays, or all of them renumbered). No values (an attribute of no
+/// channels) gather to none.
+pub fn gather<T: Clone>(values: &[T], indices: &[u32], stride: usize) -> Vec<T> {
+    if values.is_empty() {
+        return Vec::new();
+    }
+    let item = |i: &u32| &values[*i as usize * stride..(*i as usize + 1) * stride];
+    indices.iter().flat_map(item).cloned().collect()
+}
