@@ -16,9 +16,10 @@ use semsplat::fuse::consensus_decide::{binomial_at_most, decide, Consensus};
 use semsplat::fuse::consensus_order::SpatialOrder;
 use semsplat::fuse::consensus_report::segment_report;
 use semsplat::fuse::consensus_segments::{co_occurrence, label_regions, Observations};
+use semsplat::fuse::consensus_surface::SurfaceNormals;
 use semsplat::fuse::{
     assign_semantic, assign_semantic_near, fuse_consensus, nearest_neighbours, ClassScores,
-    ConsensusInput, ConsensusParams, FuseConfig, NO_LABEL,
+    ConsensusInput, ConsensusParams, FuseConfig, GaussianShapes, NO_LABEL,
 };
 use semsplat::gpu::Gpu;
 use semsplat::render::GpuScene;
@@ -144,7 +145,7 @@ fn check_numbered_in_space(
     obs: &Observations,
     centers: &[Vec<(u32, u32)>],
 ) {
-    let order = SpatialOrder::of(inp.means);
+    let order = SpatialOrder::of(inp.shapes.means);
     assert!((0..obs.n as u32).any(|g| order.spatial(g) != g));
     let keep = CenterPixels::Keep;
     let (spatial, spatial_centers, _) =
@@ -403,7 +404,7 @@ fn assert_same_partition(segment: &[u32], label: &[usize]) {
 
 /// The clustering against its plain transcription where every rule decides something:
 /// candidates refused by the pairs' evidence and by the dominant regions, rarely seen
-/// Gaussians, stray regions; without the outright joins of unanimous pairs, from 4 views
+/// Gaussians, stray regions, pairs across creases (random normals); without the outright joins of unanimous pairs, from 4 views
 /// (looser than the default: more of them) and with the default. Twelve seeds (a few seconds): some rules decide only
 /// a few of them (a candidate order broken by the pairs summed instead of the views
 /// together passed seeds 1-3 and failed from seed 4).
@@ -420,8 +421,10 @@ fn clustering_matches_a_plain_transcription_under_heavy_noise() {
             ..default.clone()
         };
         let knn = nearest_neighbours(&means, p.neighbours);
-        let (label, refused, outright) = cluster_by_hand(&obs, &knn, &p);
-        let (segment, done) = cluster_segments_timed(&obs, &knn, &p);
+        let normals = random_normals(means.len(), seed);
+        let surfaces = SurfaceNormals::from_normals(normals.clone(), p.crease_degrees);
+        let (label, refused, outright) = cluster_by_hand(&obs, &knn, &normals, &p);
+        let (segment, done) = cluster_segments_timed(&obs, &knn, &surfaces, &p);
         assert_same_partition(&segment, &label);
         // What the clustering says it did, against the transcription's segments.
         // Without outright joins every Gaussian starts alone.
@@ -440,7 +443,7 @@ fn clustering_matches_a_plain_transcription_under_heavy_noise() {
         );
         // The heap swept of dead candidates at every growth (large scenes only reach the
         // default threshold): the same segments.
-        let swept = cluster_segments_sweeping_from(&obs, &knn, &p, 0);
+        let swept = cluster_segments_sweeping_from(&obs, &knn, &surfaces, &p, 0);
         assert_same_partition(&swept, &label);
         let segments = label.iter().collect::<BTreeSet<_>>().len();
         eprintln!("seed {seed}, outright from {premerge_views} views ({outright} Gaussians): {segments} segments, refused {refused:?}");
@@ -463,6 +466,39 @@ fn clustering_matches_a_plain_transcription_under_heavy_noise() {
     );
 }
 
+/// Whether Gaussians g and h lie along one surface: not both with a normal (a flat one; the
+/// zero vector: none) at more than `p.crease_degrees` from each other's line. No normals:
+/// every pair.
+fn along_by_hand(normals: &[[f32; 3]], g: usize, h: usize, p: &ConsensusParams) -> bool {
+    let (Some(a), Some(b)) = (normals.get(g), normals.get(h)) else {
+        return true;
+    };
+    let a = a.map(f64::from);
+    let b = b.map(f64::from);
+    let length = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    if length(a) == 0.0 || length(b) == 0.0 {
+        return true;
+    }
+    let cos = (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) / (length(a) * length(b));
+    let degrees = cos.abs().min(1.0).acos().to_degrees();
+    degrees <= p.crease_degrees
+}
+
+/// Per Gaussian, a flat Gaussian's normal along one of the axes or tilted 30 degrees off z
+/// (within the crease angle of z, beyond it of x and y), or none (not flat).
+fn random_normals(n: usize, seed: u64) -> Vec<[f32; 3]> {
+    let mut rng = Lcg(seed ^ 0x5eed);
+    let tilted = [0.0, 0.5, 0.75f32.sqrt()];
+    let choices = [
+        [1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [0.0, 0.0, 1.0],
+        tilted,
+        [0.0; 3],
+    ];
+    (0..n).map(|_| choices[rng.next() as usize % 5]).collect()
+}
+
 /// Per view of Gaussian g's observations: (region, on its edge).
 fn views_of(obs: &Observations, g: usize) -> BTreeMap<u32, (u32, bool)> {
     obs.row(g)
@@ -475,8 +511,8 @@ fn views_of(obs: &Observations, g: usize) -> BTreeMap<u32, (u32, bool)> {
 /// more, all of them putting it in one region with neither on its edge; then every step
 /// sums, from scratch, what the views said of every neighbour pair between two segments
 /// (together: one region, neither on its edge; apart: two regions; else on the edge),
-/// takes the best pair of segments not dropped at that same evidence and size (net
-/// evidence per pair, then views together, then the smaller size class of the larger
+/// takes the best pair of segments not dropped at that same evidence and size (any of its
+/// neighbour pairs along a surface, then net evidence per pair, then views together, then the smaller size class of the larger
 /// segment, then the lowest labels), and joins it if the evidence and the segments'
 /// dominant regions allow, else drops it.
 /// Also returns how many candidates the pairs' evidence refused, how many it allowed but
@@ -484,6 +520,7 @@ fn views_of(obs: &Observations, g: usize) -> BTreeMap<u32, (u32, bool)> {
 fn cluster_by_hand(
     obs: &Observations,
     knn: &[u32],
+    normals: &[[f32; 3]],
     p: &ConsensusParams,
 ) -> (Vec<usize>, [usize; 2], usize) {
     let n = obs.n;
@@ -499,11 +536,11 @@ fn cluster_by_hand(
         .collect();
     let mut label = premerged_by_hand(obs, &pairs, p);
     let outright = (0..n).filter(|&g| label[g] != g).count();
-    let mut dropped: HashMap<(usize, usize), ([u32; 4], u32)> = HashMap::new();
+    let mut dropped: HashMap<(usize, usize), ([u32; 5], u32)> = HashMap::new();
     let mut refused = [0; 2];
     loop {
-        // [together, apart, on edge, pairs] per pair of segments.
-        let mut sums: BTreeMap<(usize, usize), [u32; 4]> = BTreeMap::new();
+        // [together, apart, on edge, pairs, pairs along a surface] per pair of segments.
+        let mut sums: BTreeMap<(usize, usize), [u32; 5]> = BTreeMap::new();
         for &(g, h) in &pairs {
             let (lg, lh) = (label[g], label[h]);
             if lg == lh {
@@ -523,8 +560,9 @@ fn cluster_by_hand(
                 sum[slot] += 1;
             }
             sum[3] += 1;
+            sum[4] += along_by_hand(normals, g, h, p) as u32;
         }
-        let priority = |e: &[u32; 4]| {
+        let priority = |e: &[u32; 5]| {
             let net = e[0] as f64 - p.apart_weight * e[1] as f64;
             (net / e[3] as f64 * (1 << 20) as f64).round() as i64
         };
@@ -534,6 +572,7 @@ fn cluster_by_hand(
             .filter(|(key, e, class)| dropped.get(key) != Some(&(**e, *class)))
             .max_by_key(|(key, e, class)| {
                 (
+                    e[4] > 0,
                     priority(e),
                     e[0],
                     Reverse(*class),
@@ -741,8 +780,8 @@ fn decisions_match_a_plain_transcription() {
     let k = p.neighbours;
     assert_neighbours_are_the_nearest(&means, k);
     let knn = nearest_neighbours(&means, k);
-    let segment = cluster_segments(&obs, &knn, &p);
-    assert_same_partition(&segment, &cluster_by_hand(&obs, &knn, &p).0);
+    let segment = cluster_segments(&obs, &knn, &SurfaceNormals::none(), &p);
+    assert_same_partition(&segment, &cluster_by_hand(&obs, &knn, &[], &p).0);
     let c = decide(&obs, &knn, segment.clone(), 2, &p);
     for (s, votes) in c.segments.iter().enumerate() {
         let members: Vec<usize> = (0..means.len())
@@ -1129,7 +1168,7 @@ fn neighbours_seen_mostly_on_a_label_edge_do_not_join() {
     assert!(p.min_together <= 2, "the pair passes the count alone");
     let knn = nearest_neighbours(&means, p.neighbours);
     assert_neighbours_are_the_nearest(&means, p.neighbours);
-    let segment = cluster_segments(&obs, &knn, &p);
+    let segment = cluster_segments(&obs, &knn, &SurfaceNormals::none(), &p);
     assert_ne!(segment[0], segment[1], "joined through two of five views");
     assert_eq!(segment[1], segment[2]);
 }
@@ -1190,7 +1229,7 @@ fn an_edge_seen_only_in_relabeled_views_does_not_join_two_objects() {
         "the pair alone joins"
     );
     assert_two_objects(
-        &cluster_segments(&obs, &knn, &p),
+        &cluster_segments(&obs, &knn, &SurfaceNormals::none(), &p),
         "joined through the edge pairs",
     );
 }
@@ -1241,20 +1280,162 @@ fn a_pair_most_views_see_only_one_of_is_not_joined_outright() {
         "unanimous and seen enough"
     );
     assert_two_objects(
-        &cluster_segments(&obs, &knn, &p),
+        &cluster_segments(&obs, &knn, &SurfaceNormals::none(), &p),
         "joined outright through the edge pairs",
     );
     let all_at_once = ConsensusParams {
         premerge_common_share: 0.0,
         ..p.clone()
     };
-    let segment = cluster_segments(&obs, &knn, &all_at_once);
+    let segment = cluster_segments(&obs, &knn, &SurfaceNormals::none(), &all_at_once);
     assert_eq!(
         segment[0], segment[60],
         "without the share, the pair joins them"
     );
-    let segment = cluster_segments(&objects_seen_apart_only_alone(1), &knn, &p);
+    let segment = cluster_segments(
+        &objects_seen_apart_only_alone(1),
+        &knn,
+        &SurfaceNormals::none(),
+        &p,
+    );
     assert_eq!(segment[0], segment[60], "six of eight views is the share");
+}
+
+/// A wall (the plane x = 0, normals along x) under a ceiling (z = 0.9, normals along z),
+/// the ceiling's strip along the wall (x = 0.1 and 0.2) seen only by views 0-5, which
+/// called the ceiling wall (wall, strip and ceiling one region); view 5 saw the wall and
+/// the strip but not the rest of the ceiling, and views 6-11 the wall and the rest of the
+/// ceiling apart, not the strip.
+fn strip_seen_only_as_wall() -> Strip {
+    let (mut means, mut normals) = (Vec::new(), Vec::new());
+    for y in 0..10 {
+        for z in 0..9 {
+            means.push([0.0, y as f32 * 0.1, z as f32 * 0.1]);
+            normals.push([1.0, 0.0, 0.0]);
+        }
+    }
+    let wall = means.len();
+    for x in 1..10 {
+        for y in 0..10 {
+            means.push([x as f32 * 0.1, y as f32 * 0.1, 0.9]);
+            normals.push([0.0, 0.0, 1.0]);
+        }
+    }
+    let strip: Vec<usize> = (wall..means.len())
+        .filter(|&g| means[g][0] < 0.25)
+        .collect();
+    let per_view: Vec<Vec<(u32, u32, u32, bool)>> = (0..12u32)
+        .map(|v| {
+            let sees = |g: usize| match g {
+                g if g < wall => true,
+                g if strip.contains(&g) => v <= 5,
+                _ => v != 5,
+            };
+            let region = |g: usize| (v > 5 && g >= wall) as u32;
+            (0..means.len())
+                .filter(|&g| sees(g))
+                .map(|g| (g as u32, region(g), region(g), false))
+                .collect()
+        })
+        .collect();
+    let obs = Observations::from_views(means.len(), &per_view);
+    Strip {
+        means,
+        obs,
+        normals,
+        strip,
+    }
+}
+
+/// [`strip_seen_only_as_wall`]'s room: the centers, the observations, the normals, and the
+/// strip's Gaussians.
+struct Strip {
+    means: Vec<[f32; 3]>,
+    obs: Observations,
+    normals: Vec<[f32; 3]>,
+    strip: Vec<usize>,
+}
+
+/// The office's surfaces from its Gaussians' shapes: the floor's and the ceiling's normals
+/// vertical, the walls' horizontal, each listed at its number in space; nearly all of them
+/// flat (the room's Gaussians along a surface's edge shrink to fit it, some to round); a
+/// ceiling Gaussian and a wall Gaussian meet at a crease, two of the floor do not.
+#[test]
+fn a_rooms_normals_follow_its_floor_ceiling_and_walls() {
+    let s = small("flicker=0.3", 4, 3);
+    let g = &s.gaussians;
+    let p = ConsensusParams::default();
+    let order = SpatialOrder::of(&g.means);
+    let surfaces = SurfaceNormals::of(&GaussianShapes::of(g), &order, &p);
+    let class = g.class_ids.as_ref().unwrap();
+    let (floor, wall, ceiling) = (0, 1, 2); // the office's ids
+    let mut flat: HashMap<i32, Vec<usize>> = HashMap::new();
+    let mut structural = 0;
+    for (i, &c) in class.iter().enumerate() {
+        if ![floor, wall, ceiling].contains(&c) {
+            continue;
+        }
+        structural += 1;
+        let number = order.spatial(i as u32) as usize;
+        let Some(n) = surfaces.normal(number) else {
+            continue;
+        };
+        match c == wall {
+            true => assert!(n[2].abs() < 1e-3, "wall {i}: {n:?}"),
+            false => assert!(n[2].abs() > 0.999, "floor or ceiling {i}: {n:?}"),
+        }
+        flat.entry(c).or_default().push(number);
+    }
+    let flat_count: usize = flat.values().map(Vec::len).sum();
+    eprintln!("{flat_count} of {structural} flat");
+    assert!(
+        flat_count * 100 >= structural * 95,
+        "{flat_count} of {structural} flat"
+    );
+    assert!(surfaces.along(flat[&floor][0], flat[&floor][1]));
+    assert!(!surfaces.along(flat[&ceiling][0], flat[&wall][0]));
+}
+
+/// [`strip_seen_only_as_wall`]: every view that saw the strip and the wall put them in one
+/// region, more of them than saw the strip with the rest of the ceiling, so by evidence
+/// alone the strip joins the wall (and then the ceiling, apart from the wall in six views,
+/// cannot join them). The normals say the strip continues the ceiling and meets the wall at
+/// a crease: joins along a surface go first, the strip joins the ceiling, and the ceiling
+/// then stays apart from the wall.
+#[test]
+fn a_strip_only_merged_views_saw_joins_its_surface_first() {
+    let Strip {
+        means,
+        obs,
+        normals,
+        strip,
+    } = strip_seen_only_as_wall();
+    let p = ConsensusParams::default();
+    let knn = nearest_neighbours(&means, p.neighbours);
+    let ceiling = means.len() - 1;
+    // The strip's corner, its wall neighbour (0, 0, 0.8) and the ceiling beyond it (0.3, 0).
+    let (corner, wall_top) = (strip[0], 8);
+    assert_eq!(means[wall_top], [0.0, 0.0, 0.8]);
+    let with_wall = co_occurrence(&obs, corner, wall_top);
+    let with_ceiling = co_occurrence(&obs, corner + 10, corner + 20);
+    assert_eq!((with_wall.together, with_ceiling.together), (6, 5));
+    let by_evidence = cluster_segments(&obs, &knn, &SurfaceNormals::none(), &p);
+    assert!(
+        strip.iter().all(|&g| by_evidence[g] == by_evidence[0]),
+        "joined the wall"
+    );
+    assert_ne!(by_evidence[0], by_evidence[ceiling]);
+    assert_same_partition(&by_evidence, &cluster_by_hand(&obs, &knn, &[], &p).0);
+    let surfaces = SurfaceNormals::from_normals(normals.clone(), p.crease_degrees);
+    let along_first = cluster_segments(&obs, &knn, &surfaces, &p);
+    assert!(
+        strip
+            .iter()
+            .all(|&g| along_first[g] == along_first[ceiling]),
+        "joined the ceiling"
+    );
+    assert_ne!(along_first[0], along_first[ceiling]);
+    assert_same_partition(&along_first, &cluster_by_hand(&obs, &knn, &normals, &p).0);
 }
 
 /// `binomial_at_most` against the sum of the probabilities written out with factorials.
@@ -1527,7 +1708,7 @@ fn a_near_tie_goes_by_the_scenes_confusions() {
     let obs = Observations::from_views(180, &per_view);
     let p = ConsensusParams::default();
     let knn = nearest_neighbours(&means, p.neighbours);
-    let segment = cluster_segments(&obs, &knn, &p);
+    let segment = cluster_segments(&obs, &knn, &SurfaceNormals::none(), &p);
     let c = decide(&obs, &knn, segment.clone(), 3, &p);
     assert_eq!(c.segments.len(), 3, "one segment per object");
     let b = &c.segments[segment[60] as usize];

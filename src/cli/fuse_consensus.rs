@@ -10,7 +10,9 @@ use super::progress::{follow, views_bar};
 use super::Interruptible;
 use semsplat::dataset::Dataset;
 use semsplat::fuse::consensus_report::{segment_report, SegmentReport};
-use semsplat::fuse::{lift_by_consensus, ConsensusInput, ConsensusParams, FuseConfig, Method};
+use semsplat::fuse::{
+    lift_by_consensus, ConsensusInput, ConsensusParams, FuseConfig, GaussianShapes, Method,
+};
 use semsplat::gpu::Gpu;
 use semsplat::render::GpuScene;
 use semsplat::scene::Gaussians;
@@ -53,7 +55,7 @@ pub(super) fn fuse_by_consensus(
     let input = ConsensusInput {
         gpu: &gpu,
         scene: &scene,
-        means: &g.means,
+        shapes: GaussianShapes::of(g),
         cams: &data.cameras,
         labels: &Interruptible(&data),
         classes: data.classes.len(),

@@ -15,7 +15,7 @@ use crate::eval::label_render::LabelRenderer;
 use crate::eval::metrics::{gaussian_accuracy, ClassIou, Confusion, SegmentationScores};
 use crate::fuse::{
     accumulate_assigned, lift_by_consensus, nearest_neighbours, AssignOnGpu, ConsensusInput,
-    ConsensusParams, FuseConfig, Method, SegmentVotes, TIE_NEIGHBOURS,
+    ConsensusParams, FuseConfig, GaussianShapes, Method, SegmentVotes, TIE_NEIGHBOURS,
 };
 use crate::gpu::Gpu;
 use crate::render::GpuScene;
@@ -250,7 +250,7 @@ fn fuse_lifted(
         let input = ConsensusInput {
             gpu,
             scene: &scene,
-            means: &s.gaussians.means,
+            shapes: GaussianShapes::of(&s.gaussians),
             cams: &s.cameras,
             labels,
             classes: compact.len(),

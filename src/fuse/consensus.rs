@@ -18,19 +18,21 @@ pub use super::consensus_observe::{observe, CenterPixels};
 use super::consensus_order::SpatialOrder;
 use super::consensus_relabel::fuse_relabeled;
 use super::consensus_segments::{nearest_neighbours, Observations};
+use super::consensus_surface::{GaussianShapes, SurfaceNormals};
 use super::method::Method;
 use super::scores::{ClassScores, EvidenceRows, SharedCounts};
-use crate::gpu::Gpu;
+use crate::gpu::{Buffer, Gpu};
 use crate::render::GpuScene;
 use crate::scene::Camera;
 
-/// What a consensus method lifts: the scene on the GPU and its centers (the host builds the
-/// neighbour graph from them), the cameras and their label maps in compact class ids.
+/// What a consensus method lifts: the scene on the GPU and its shapes on the host (the
+/// neighbour graph is built from the centers, the surfaces from the scales and rotations),
+/// the cameras and their label maps in compact class ids.
 #[derive(Clone, Copy)]
 pub struct ConsensusInput<'a> {
     pub gpu: &'a Gpu,
     pub scene: &'a GpuScene,
-    pub means: &'a [[f32; 3]],
+    pub shapes: GaussianShapes<'a>,
     pub cams: &'a [Camera],
     pub labels: &'a dyn LabelSource,
     pub classes: usize,
@@ -74,32 +76,38 @@ pub fn consensus_run(
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<ConsensusRun> {
     let start = std::time::Instant::now();
+    let shapes = &input.shapes;
     ensure!(
-        input.means.len() == input.scene.n as usize,
-        "{} centers for a scene of {} Gaussians",
-        input.means.len(),
+        [shapes.log_scales.len(), shapes.quats.len()] == [shapes.len(); 2]
+            && shapes.len() == input.scene.n as usize,
+        "{} centers, {} scales and {} rotations for a scene of {} Gaussians",
+        shapes.len(),
+        shapes.log_scales.len(),
+        shapes.quats.len(),
         input.scene.n
     );
     // The host work numbers the Gaussians in space (consensus_order.rs): the observations
     // and the neighbour graph by that number, the results given back in the scene's.
-    let order = SpatialOrder::of(input.means);
+    let order = SpatialOrder::of(shapes.means);
     let order_s = start.elapsed().as_secs_f64();
     let views_start = std::time::Instant::now();
-    // The neighbour graph reads only the centers: searched on the host while the views
-    // keep the GPU busy (a million Gaussians take 0.2 s on 16 cores, docs/gpu.md), and
-    // waited for after them. `neighbours_s` is that wait.
-    let (observed, knn) = std::thread::scope(|scope| {
-        let search =
-            scope.spawn(|| nearest_neighbours(&order.to_spatial(input.means), params.neighbours));
+    // The neighbour graph and the surfaces read only the shapes: found on the host while
+    // the views keep the GPU busy (a million Gaussians' neighbours take 0.2 s on 16 cores,
+    // docs/gpu.md), and waited for after them. `neighbours_s` is that wait.
+    let (observed, found) = std::thread::scope(|scope| {
+        let search = scope.spawn(|| {
+            let knn = nearest_neighbours(&order.to_spatial(shapes.means), params.neighbours);
+            (knn, SurfaceNormals::of(shapes, &order, params))
+        });
         let observed = observe(input, cfg, params.occlusion, pixels, Some(&order), progress);
         (observed, search.join())
     });
     let (observations, centers, mut stats) = observed?;
     stats.view_s = views_start.elapsed().as_secs_f64();
-    let knn = knn.unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+    let (knn, surfaces) = found.unwrap_or_else(|panic| std::panic::resume_unwind(panic));
     let neighbours_s = views_start.elapsed().as_secs_f64() - stats.view_s;
     let segment;
-    (segment, stats.clustering) = cluster_segments_timed(&observations, &knn, params);
+    (segment, stats.clustering) = cluster_segments_timed(&observations, &knn, &surfaces, params);
     (stats.clustering.order_s, stats.clustering.neighbours_s) = (order_s, neighbours_s);
     stats.segments_s = views_start.elapsed().as_secs_f64() - stats.view_s;
     let decide_start = std::time::Instant::now();
@@ -196,17 +204,31 @@ pub fn consensus_evidence(
     cfg: &FuseConfig,
 ) -> Result<(ClassScores, FuseStats)> {
     let n = scene.n as usize;
-    let flat: Vec<f32> = gpu.download(&scene.params.means, 0, 3 * n)?;
-    let means: Vec<[f32; 3]> = flat.chunks_exact(3).map(|m| [m[0], m[1], m[2]]).collect();
+    let means: Vec<[f32; 3]> = download_rows(gpu, &scene.params.means, n)?;
+    let log_scales: Vec<[f32; 3]> = download_rows(gpu, &scene.params.log_scales, n)?;
+    let quats: Vec<[f32; 4]> = download_rows(gpu, &scene.params.quats, n)?;
     let params = ConsensusParams::default();
     let input = ConsensusInput {
         gpu,
         scene,
-        means: &means,
+        shapes: GaussianShapes {
+            means: &means,
+            log_scales: &log_scales,
+            quats: &quats,
+        },
         cams,
         labels,
         classes,
     };
     let lift = lift_by_consensus(&input, cfg, &params, &mut |_, _| {})?;
     Ok((lift.evidence.into_scores(), lift.stats))
+}
+
+/// `n` rows of `D` floats from a GPU buffer.
+fn download_rows<const D: usize>(gpu: &Gpu, buffer: &Buffer, n: usize) -> Result<Vec<[f32; D]>> {
+    let flat: Vec<f32> = gpu.download(buffer, 0, D * n)?;
+    Ok(flat
+        .chunks_exact(D)
+        .map(|r| r.try_into().unwrap())
+        .collect())
 }

@@ -14,8 +14,8 @@ use std::hash::{BuildHasherDefault, Hasher};
 
 use super::consensus_cluster::PairEvidence;
 
-/// The most adjacent segments kept in a list; past it, a hash map. 24 x 20 bytes: a search
-/// reads at most 8 cache lines, in order.
+/// The most adjacent segments kept in a list; past it, a hash map. 24 x 24 bytes: a search
+/// reads at most 9 cache lines, in order.
 pub const LIST_MAX: usize = 24;
 
 type Map = HashMap<u32, PairEvidence, BuildHasherDefault<IdHasher>>;
@@ -186,6 +186,7 @@ mod tests {
             apart: x % 3,
             on_edge: x % 5,
             pairs: 1,
+            along: 1,
         }
     }
 

@@ -19,6 +19,12 @@
 //! that joined a ceiling to its wall on one sweep run; from 6 (the default) the flicker
 //! sweep's means moved by at most 0.4 mIoU points (the office's segment consensus, up;
 //! docs/robustness.md, "Unanimous pairs joined outright").
+//!
+//! The order's first key is the geometry: a candidate with a neighbour pair along a surface
+//! goes before every candidate whose pairs all cross a crease (src/fuse/consensus_surface.rs).
+//! Where the views saw a strip of one surface only in one region with its neighbour across
+//! the crease, the evidence ties the two joins, and the surface the strip continues should
+//! take it (docs/robustness.md, "Joins along a surface first").
 
 use std::cmp::Reverse;
 use std::collections::HashMap;
@@ -29,6 +35,7 @@ use serde::Serialize;
 use super::consensus_adjacent::Adjacent;
 use super::consensus_decide::ConsensusParams;
 use super::consensus_segments::{co_occurrence, find, union, Groups, Observations};
+use super::consensus_surface::SurfaceNormals;
 use crate::contract::NO_NEIGHBOUR;
 use crate::util::parallel_map;
 use crate::util::quad_heap::QuadHeap;
@@ -42,6 +49,8 @@ pub struct PairEvidence {
     pub on_edge: u32,
     /// Neighbour pairs summed.
     pub pairs: u32,
+    /// Of those, the pairs along a surface (not across a crease: src/fuse/consensus_surface.rs).
+    pub along: u32,
 }
 
 impl PairEvidence {
@@ -50,6 +59,7 @@ impl PairEvidence {
         self.apart += other.apart;
         self.on_edge += other.on_edge;
         self.pairs += other.pairs;
+        self.along += other.along;
     }
 
     /// Merge order: net evidence per neighbour pair (a view putting a pair apart outweighs
@@ -59,6 +69,16 @@ impl PairEvidence {
     pub fn priority(&self, apart_weight: f64) -> i64 {
         let net = self.together as f64 - apart_weight * self.apart as f64;
         (net / self.pairs.max(1) as f64 * (1 << 20) as f64).round() as i64
+    }
+
+    /// The candidates' first key: those with a pair along a surface above every candidate
+    /// whose pairs all cross a crease, then by [`PairEvidence::priority`]. One integer
+    /// rather than a flag beside the priority: the queue's entries stay 24 bytes, not 32.
+    pub fn order(&self, apart_weight: f64) -> i64 {
+        // Above any priority: at most `apart_weight` times a pair's views (thousands at
+        // most) in fixed point (2^20), far under 2^50.
+        const ALONG: i64 = 1 << 50;
+        self.priority(apart_weight) + if self.along > 0 { ALONG } else { 0 }
     }
 
     /// Whether the pairs' evidence allows a join: enough views together, (nearly) none
@@ -388,30 +408,38 @@ pub fn may_join(evidence: &PairEvidence, a: Dominant, b: Dominant, p: &Consensus
     differ as f64 <= p.region_max_disagree * (same + differ) as f64
 }
 
-/// A candidate join in the queue: highest priority first, then most views together, then
-/// the smaller [`size_class`] of the larger segment, then the lowest segment ids. Stale
-/// once the pair's evidence gives another (priority, together) or a join another size
-/// class: a candidate whose evidence changed without changing those stands where its
-/// requeued copy would, so taking it with the current evidence decides the same.
+/// A candidate join in the queue: those with a neighbour pair along a surface first, then
+/// highest priority (both in [`PairEvidence::order`]), then most views together, then the
+/// smaller [`size_class`] of the larger segment, then the lowest segment ids. Stale once
+/// the pair's evidence gives another (order, together) or a join another size class: a
+/// candidate whose evidence changed without changing those stands where its requeued copy
+/// would, so taking it with the current evidence decides the same.
 type Candidate = (i64, u32, Reverse<u32>, Reverse<u32>, Reverse<u32>);
 
 /// Segment id per Gaussian (numbered by first Gaussian). Every segment starts as one Gaussian
 /// and is named by its lowest Gaussian index. Candidates (adjacent segments with their summed
-/// [`PairEvidence`]) are taken in order of [`PairEvidence::priority`] (ties: more views
-/// together, then the smaller larger segment, then the lowest ids); one that [`may_join`]
-/// joins, any other is dropped until its evidence or that size class changes (a join adds
-/// pairs to it, or Gaussians to one of its segments).
-pub fn cluster_segments(obs: &Observations, knn: &[u32], p: &ConsensusParams) -> Vec<u32> {
-    cluster_segments_timed(obs, knn, p).0
+/// [`PairEvidence`]) are taken those with a pair along a surface (`surfaces`) first, then
+/// in order of [`PairEvidence::priority`] (ties: more views together, then the smaller
+/// larger segment, then the lowest ids); one that [`may_join`] joins, any other is dropped
+/// until its evidence or that size class changes (a join adds pairs to it, or Gaussians to
+/// one of its segments).
+pub fn cluster_segments(
+    obs: &Observations,
+    knn: &[u32],
+    surfaces: &SurfaceNormals,
+    p: &ConsensusParams,
+) -> Vec<u32> {
+    cluster_segments_timed(obs, knn, surfaces, p).0
 }
 
 /// [`cluster_segments`], and where its time went.
 pub fn cluster_segments_timed(
     obs: &Observations,
     knn: &[u32],
+    surfaces: &SurfaceNormals,
     p: &ConsensusParams,
 ) -> (Vec<u32>, ClusterProfile) {
-    cluster(obs, knn, p, SWEEP_FROM)
+    cluster(obs, knn, surfaces, p, SWEEP_FROM)
 }
 
 /// Where the clustering's time went (host seconds) and how much it did: what a profile
@@ -452,16 +480,18 @@ const SWEEP_FROM: usize = 1 << 16;
 pub fn cluster_segments_sweeping_from(
     obs: &Observations,
     knn: &[u32],
+    surfaces: &SurfaceNormals,
     p: &ConsensusParams,
     sweep_from: usize,
 ) -> Vec<u32> {
-    cluster(obs, knn, p, sweep_from).0
+    cluster(obs, knn, surfaces, p, sweep_from).0
 }
 
 /// The clustering, its heap swept from `sweep_from` candidates on, and what it did.
 fn cluster(
     obs: &Observations,
     knn: &[u32],
+    surfaces: &SurfaceNormals,
     p: &ConsensusParams,
     sweep_from: usize,
 ) -> (Vec<u32>, ClusterProfile) {
@@ -473,7 +503,7 @@ fn cluster(
             .elapsed()
             .as_secs_f64()
     };
-    let pairs = neighbour_pairs(obs, knn, p.neighbours);
+    let pairs = neighbour_pairs(obs, knn, surfaces, p.neighbours);
     (done.pairs, done.pairs_s) = (pairs.len(), lap());
     let mut graph = SegmentGraph::new(obs, pairs, p);
     done.pieces_s = lap();
@@ -583,9 +613,15 @@ fn size_class(size: u32) -> u32 {
     32 - size.leading_zeros()
 }
 
-/// Every neighbour pair once, with what the views said of it (on every core: millions of
-/// Gaussians). A pair listed in both rows comes from the lower Gaussian's.
-fn neighbour_pairs(obs: &Observations, knn: &[u32], k: usize) -> Vec<(u32, u32, PairEvidence)> {
+/// Every neighbour pair once, with what the views said of it and whether it lies along a
+/// surface (on every core: millions of Gaussians). A pair listed in both rows comes from
+/// the lower Gaussian's.
+fn neighbour_pairs(
+    obs: &Observations,
+    knn: &[u32],
+    surfaces: &SurfaceNormals,
+    k: usize,
+) -> Vec<(u32, u32, PairEvidence)> {
     const BLOCK: usize = 4096;
     let lists = |g: usize| &knn[g * k..(g + 1) * k];
     let blocks = parallel_map(obs.n.div_ceil(BLOCK), |b| {
@@ -602,6 +638,7 @@ fn neighbour_pairs(obs: &Observations, knn: &[u32], k: usize) -> Vec<(u32, u32, 
                     apart: c.apart,
                     on_edge: c.on_edge,
                     pairs: 1,
+                    along: surfaces.along(g, h as usize) as u32,
                 };
                 out.push((g as u32, h, e));
             }
@@ -714,10 +751,9 @@ impl<'a> SegmentGraph<'a> {
     }
 
     fn candidate(&self, a: u32, b: u32, e: PairEvidence, p: &ConsensusParams) -> Candidate {
-        let key = e.priority(p.apart_weight);
         let larger = self.size[a as usize].max(self.size[b as usize]);
         (
-            key,
+            e.order(p.apart_weight),
             e.together,
             Reverse(size_class(larger)),
             Reverse(a),

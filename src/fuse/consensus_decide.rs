@@ -28,6 +28,13 @@ pub struct ConsensusParams {
     pub occlusion: bool,
     /// Nearest neighbours each Gaussian may join a segment through.
     pub neighbours: usize,
+    /// Two flat Gaussians whose normals are more than this many degrees apart lie across a
+    /// crease: the ordered joins take every candidate with a pair along a surface before
+    /// those whose pairs all cross a crease (src/fuse/consensus_surface.rs). 90 or more: off.
+    pub crease_degrees: f64,
+    /// A Gaussian is flat, and its shortest axis its surface's normal, where its middle
+    /// scale is at least this many times its shortest.
+    pub flat_ratio: f64,
     /// Before the joins in order of evidence, two neighbours join outright where at least
     /// this many views saw both and every one of them put them in one region, neither on its
     /// edge (0: none). The ordered joins then start from these pieces rather than from single
@@ -131,6 +138,8 @@ impl Default for ConsensusParams {
         ConsensusParams {
             occlusion: true,
             neighbours: 8,
+            crease_degrees: 60.0,
+            flat_ratio: 2.0,
             premerge_views: 6,
             premerge_common_share: 0.75,
             min_together: 2,

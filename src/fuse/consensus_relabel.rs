@@ -360,7 +360,10 @@ pub fn fuse_relabeled(
         class: &run.consensus.assignment.class,
         rule: params.relabel,
         confusions: &run.consensus.confusions,
-        finder: Some(Mutex::new(RegionFinder::new(input.gpu, input.means.len())?)),
+        finder: Some(Mutex::new(RegionFinder::new(
+            input.gpu,
+            input.shapes.len(),
+        )?)),
         undecided: Some(input.classes as u32),
     };
     let flashsplat = FuseConfig {

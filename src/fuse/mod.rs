@@ -15,6 +15,7 @@ pub mod consensus_order;
 pub mod consensus_relabel;
 pub mod consensus_report;
 pub mod consensus_segments;
+pub mod consensus_surface;
 pub mod method;
 pub mod partial;
 pub mod regions_gpu;
@@ -34,6 +35,7 @@ pub use consensus::{
 pub use consensus_cluster::ClusterProfile;
 pub use consensus_decide::{Consensus, ConsensusParams, SegmentVotes};
 pub use consensus_segments::nearest_neighbours;
+pub use consensus_surface::GaussianShapes;
 pub use method::{Method, SPELLINGS};
 pub use partial::{EvidenceKind, PartManifest, RawEvidence, Shard};
 pub use scores::{ClassScores, EvidenceRows, SharedCounts, SpilledRows};

@@ -1,7 +1,7 @@
 //! Inputs of the consensus methods built from a synthetic room.
 
 use semsplat::dataset::CompactClasses;
-use semsplat::fuse::{ConsensusInput, LabelSource};
+use semsplat::fuse::{ConsensusInput, GaussianShapes, LabelSource};
 use semsplat::gpu::Gpu;
 use semsplat::render::GpuScene;
 use semsplat::synth::SynthScene;
@@ -25,7 +25,7 @@ pub fn input<'a>(
     ConsensusInput {
         gpu,
         scene,
-        means: &s.gaussians.means,
+        shapes: GaussianShapes::of(&s.gaussians),
         cams: &s.cameras,
         labels,
         classes,
