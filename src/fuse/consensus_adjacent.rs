@@ -186,7 +186,7 @@ mod tests {
             apart: x % 3,
             on_edge: x % 5,
             pairs: 1,
-            along: 1,
+            pairs_along: 1,
         }
     }
 

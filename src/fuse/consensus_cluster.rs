@@ -50,7 +50,7 @@ pub struct PairEvidence {
     /// Neighbour pairs summed.
     pub pairs: u32,
     /// Of those, the pairs along a surface (not across a crease: src/fuse/consensus_surface.rs).
-    pub along: u32,
+    pub pairs_along: u32,
 }
 
 impl PairEvidence {
@@ -59,7 +59,7 @@ impl PairEvidence {
         self.apart += other.apart;
         self.on_edge += other.on_edge;
         self.pairs += other.pairs;
-        self.along += other.along;
+        self.pairs_along += other.pairs_along;
     }
 
     /// Merge order: net evidence per neighbour pair (a view putting a pair apart outweighs
@@ -74,11 +74,11 @@ impl PairEvidence {
     /// The candidates' first key: those with a pair along a surface above every candidate
     /// whose pairs all cross a crease, then by [`PairEvidence::priority`]. One integer
     /// rather than a flag beside the priority: the queue's entries stay 24 bytes, not 32.
-    pub fn order(&self, apart_weight: f64) -> i64 {
-        // Above any priority: at most `apart_weight` times a pair's views (thousands at
-        // most) in fixed point (2^20), far under 2^50.
+    pub fn queue_key(&self, apart_weight: f64) -> i64 {
+        // Above any priority: a pair's net views are at most its views (thousands at most)
+        // times max(1, apart_weight), in fixed point (2^20): far under 2^50.
         const ALONG: i64 = 1 << 50;
-        self.priority(apart_weight) + if self.along > 0 { ALONG } else { 0 }
+        self.priority(apart_weight) + if self.pairs_along > 0 { ALONG } else { 0 }
     }
 
     /// Whether the pairs' evidence allows a join: enough views together, (nearly) none
@@ -409,7 +409,7 @@ pub fn may_join(evidence: &PairEvidence, a: Dominant, b: Dominant, p: &Consensus
 }
 
 /// A candidate join in the queue: those with a neighbour pair along a surface first, then
-/// highest priority (both in [`PairEvidence::order`]), then most views together, then the
+/// highest priority (both in [`PairEvidence::queue_key`]), then most views together, then the
 /// smaller [`size_class`] of the larger segment, then the lowest segment ids. Stale once
 /// the pair's evidence gives another (order, together) or a join another size class: a
 /// candidate whose evidence changed without changing those stands where its requeued copy
@@ -638,7 +638,7 @@ fn neighbour_pairs(
                     apart: c.apart,
                     on_edge: c.on_edge,
                     pairs: 1,
-                    along: surfaces.along(g, h as usize) as u32,
+                    pairs_along: surfaces.along(g, h as usize) as u32,
                 };
                 out.push((g as u32, h, e));
             }
@@ -753,7 +753,7 @@ impl<'a> SegmentGraph<'a> {
     fn candidate(&self, a: u32, b: u32, e: PairEvidence, p: &ConsensusParams) -> Candidate {
         let larger = self.size[a as usize].max(self.size[b as usize]);
         (
-            e.order(p.apart_weight),
+            e.queue_key(p.apart_weight),
             e.together,
             Reverse(size_class(larger)),
             Reverse(a),
