@@ -21,7 +21,7 @@ use super::consensus_segments::{nearest_neighbours, Observations};
 use super::consensus_surface::{GaussianShapes, SurfaceNormals};
 use super::method::Method;
 use super::scores::{ClassScores, EvidenceRows, SharedCounts};
-use crate::gpu::{Buffer, Gpu};
+use crate::gpu::Gpu;
 use crate::render::GpuScene;
 use crate::scene::Camera;
 
@@ -204,9 +204,9 @@ pub fn consensus_evidence(
     cfg: &FuseConfig,
 ) -> Result<(ClassScores, FuseStats)> {
     let n = scene.n as usize;
-    let means: Vec<[f32; 3]> = download_rows(gpu, &scene.params.means, n)?;
-    let log_scales: Vec<[f32; 3]> = download_rows(gpu, &scene.params.log_scales, n)?;
-    let quats: Vec<[f32; 4]> = download_rows(gpu, &scene.params.quats, n)?;
+    let means: Vec<[f32; 3]> = gpu.download(&scene.params.means, 0, n)?;
+    let log_scales: Vec<[f32; 3]> = gpu.download(&scene.params.log_scales, 0, n)?;
+    let quats: Vec<[f32; 4]> = gpu.download(&scene.params.quats, 0, n)?;
     let params = ConsensusParams::default();
     let input = ConsensusInput {
         gpu,
@@ -222,13 +222,4 @@ pub fn consensus_evidence(
     };
     let lift = lift_by_consensus(&input, cfg, &params, &mut |_, _| {})?;
     Ok((lift.evidence.into_scores(), lift.stats))
-}
-
-/// `n` rows of `D` floats from a GPU buffer.
-fn download_rows<const D: usize>(gpu: &Gpu, buffer: &Buffer, n: usize) -> Result<Vec<[f32; D]>> {
-    let flat: Vec<f32> = gpu.download(buffer, 0, D * n)?;
-    Ok(flat
-        .chunks_exact(D)
-        .map(|r| r.try_into().unwrap())
-        .collect())
 }

@@ -12,6 +12,8 @@
 //! degrees at the wall. Joined to the ceiling first, the strip is then tested as part of
 //! the ceiling against the wall, on every view that saw both.
 
+use glam::{Quat, Vec3};
+
 use super::consensus_decide::ConsensusParams;
 use super::consensus_order::SpatialOrder;
 use crate::scene::Gaussians;
@@ -117,30 +119,14 @@ pub fn flat_normal(log_scales: [f32; 3], quat: [f32; 4], flat_ratio: f64) -> Opt
     if spread.is_nan() || spread < flat_ratio.ln() {
         return None;
     }
-    let norm = quat.iter().map(|q| q * q).sum::<f32>().sqrt();
-    if norm.is_nan() || norm <= 0.0 {
+    let [w, x, y, z] = quat;
+    let rotation = Quat::from_xyzw(x, y, z, w);
+    let length = rotation.length();
+    if length.is_nan() || length <= 0.0 {
         return None;
     }
-    let [w, x, y, z] = quat.map(|q| q / norm);
-    // Column `axes[0]` of the rotation matrix: that local axis in the world.
-    let normal = match axes[0] {
-        0 => [
-            1.0 - 2.0 * (y * y + z * z),
-            2.0 * (x * y + w * z),
-            2.0 * (x * z - w * y),
-        ],
-        1 => [
-            2.0 * (x * y - w * z),
-            1.0 - 2.0 * (x * x + z * z),
-            2.0 * (y * z + w * x),
-        ],
-        _ => [
-            2.0 * (x * z + w * y),
-            2.0 * (y * z - w * x),
-            1.0 - 2.0 * (x * x + y * y),
-        ],
-    };
-    Some(normal)
+    // That local axis in the world.
+    Some((rotation / length).mul_vec3(Vec3::AXES[axes[0]]).to_array())
 }
 
 #[cfg(test)]
