@@ -785,6 +785,36 @@ fn nearest_neighbours_in_a_volume_are_the_nearest() {
     assert_neighbours_are_the_nearest(&means, 8);
 }
 
+/// A scene of many scales, as a trained one is: a dense sphere of Gaussians (its subject),
+/// a few scattered up to a thousand times its radius out (its background), a lattice on a
+/// plane (many neighbours at equal distances) and 300 Gaussians at one position. The
+/// neighbours are the nearest at every distance, ties by index (a grid sized by the bounding
+/// box put the sphere in a few crowded cells and found no neighbour for far Gaussians).
+#[test]
+fn nearest_neighbours_at_many_scales_are_the_nearest() {
+    let mut rng = Rng::new(5);
+    let direction = |rng: &mut Rng| {
+        let d = [0, 1, 2].map(|_| rng.normal());
+        let len = d.iter().map(|x| x * x).sum::<f64>().sqrt();
+        d.map(|x| x / len)
+    };
+    let mut means: Vec<[f32; 3]> = (0..2_500)
+        .map(|_| direction(&mut rng).map(|x| x as f32))
+        .collect();
+    for _ in 0..100 {
+        let r = rng.range_f64(2.0, 1000.0);
+        means.push(direction(&mut rng).map(|x| (x * r) as f32));
+    }
+    for i in 0..20 {
+        for j in 0..20 {
+            means.push([3.0 + i as f32 * 0.125, 0.5, j as f32 * 0.125]);
+        }
+    }
+    means.extend([[0.25, 0.5, 0.75]; 300]);
+    rng.shuffle(&mut means);
+    assert_neighbours_are_the_nearest(&means, 8);
+}
+
 /// `nearest_neighbours` against brute force, and the segments and classes against a plain
 /// transcription: segments joined by the clustering rule recomputed from scratch at every
 /// step, views counted once.

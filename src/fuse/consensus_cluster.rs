@@ -452,7 +452,7 @@ pub struct ClusterProfile {
     pub order_s: f64,
     /// The wait, after the views, for each Gaussian's nearest neighbours, the graph
     /// clustered (timed by the caller, which searches them beside the views:
-    /// [`super::consensus_segments::nearest_neighbours`]).
+    /// [`super::neighbours::nearest_neighbours`]).
     pub neighbours_s: f64,
     /// What the views said of every neighbour pair ([`co_occurrence`], on every core).
     pub pairs_s: f64,

@@ -6,11 +6,11 @@
 //! Gaussians in no spatial order (its SfM points, then each densification's clones and
 //! splits appended), so those reads miss the cache: with a room's Gaussians in random order
 //! the consensus's host work took twice as long (docs/robustness.md, "The Gaussians'
-//! order" and "The Gaussians numbered in space"). Numbered cell by cell of the neighbour
-//! search's grid, a Gaussian's neighbours have nearby numbers whatever the scene's order.
-//! Within a cell the Gaussians go by position, so the numbering, and with it every tie the
-//! consensus breaks by number, does not depend on the scene's order (except between
-//! Gaussians at the same position).
+//! order" and "The Gaussians numbered in space"). Numbered leaf by leaf of the neighbour
+//! search's k-d tree (src/fuse/neighbours.rs), a Gaussian's neighbours have nearby numbers
+//! whatever the scene's order and at any density. The tree splits by position, so the
+//! numbering, and with it every tie the consensus breaks by number, does not depend on the
+//! scene's order (except between Gaussians at the same position).
 
 use std::sync::Arc;
 
@@ -18,7 +18,7 @@ use anyhow::Result;
 
 use super::assign::Assignment;
 use super::consensus_decide::Consensus;
-use super::consensus_segments::gaussians_by_cell;
+use super::neighbours::SpaceTree;
 use crate::contract::NO_NEIGHBOUR;
 use crate::gpu::{Buffer, Gpu};
 use crate::util::gather;
@@ -33,24 +33,15 @@ pub struct SpatialOrder {
 }
 
 impl SpatialOrder {
-    /// The Gaussians centered at `means` numbered cell by cell of the neighbour search's
-    /// grid (cells in scan order), within a cell by position (x, then y, then z), then by
-    /// their index in the scene.
+    /// The Gaussians centered at `means` numbered leaf by leaf of a k-d tree over them
+    /// ([`SpaceTree::order`]).
     pub fn of(means: &[[f32; 3]]) -> SpatialOrder {
-        let mut scene_of_spatial = Vec::with_capacity(means.len());
-        let by_position = |&a: &u32, &b: &u32| {
-            let (pa, pb) = (means[a as usize], means[b as usize]);
-            (0..3)
-                .map(|i| pa[i].total_cmp(&pb[i]))
-                .fold(std::cmp::Ordering::Equal, std::cmp::Ordering::then)
-                .then(a.cmp(&b))
-        };
-        for cell in gaussians_by_cell(means).iter() {
-            let start = scene_of_spatial.len();
-            scene_of_spatial.extend_from_slice(cell);
-            scene_of_spatial[start..].sort_unstable_by(by_position);
-        }
-        SpatialOrder::from_scene_of_spatial(scene_of_spatial)
+        SpatialOrder::of_tree(&SpaceTree::new(means))
+    }
+
+    /// The Gaussians numbered by their place in `tree`'s order.
+    pub(crate) fn of_tree(tree: &SpaceTree) -> SpatialOrder {
+        SpatialOrder::from_scene_of_spatial(tree.order().to_vec())
     }
 
     /// The numbering that lists `scene_of_spatial[i]` as number `i` (a permutation of
@@ -146,7 +137,7 @@ fn renumbered<T: Copy>(values: &[T], at: &[u32]) -> Vec<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fuse::consensus_segments::nearest_neighbours;
+    use crate::fuse::neighbours::{nearest_neighbours, Numbering};
     use crate::util::Rng;
 
     /// Random centers (distinct distances: no ties) and the same centers shuffled.
@@ -172,6 +163,47 @@ mod tests {
             a.to_spatial(&means),
             means,
             "the numbering is not the scene's"
+        );
+    }
+
+    /// A lattice on two walls, shuffled: the Gaussians share coordinates (every one of a
+    /// wall the same x or z, as the synthetic rooms' walls do), and each has several
+    /// neighbours at one distance.
+    fn lattice_shuffled() -> Vec<[f32; 3]> {
+        let mut means = vec![];
+        for i in 0..30 {
+            for j in 0..30 {
+                let (a, b) = (i as f32 * 0.125, j as f32 * 0.125);
+                means.extend([[0.0, a, b], [a, b, 4.0]]);
+            }
+        }
+        Rng::new(3).shuffle(&mut means);
+        means
+    }
+
+    /// Gaussians sharing coordinates are numbered by position too, not by their order.
+    #[test]
+    fn the_numbering_of_shared_coordinates_follows_the_positions() {
+        let means = lattice_shuffled();
+        let mut reversed = means.clone();
+        reversed.reverse();
+        assert_eq!(
+            SpatialOrder::of(&means).to_spatial(&means),
+            SpatialOrder::of(&reversed).to_spatial(&reversed)
+        );
+    }
+
+    /// The tree's neighbours numbered by the tree are those searched on the centers listed
+    /// in its order: ties (the lattice has many) go by the number in space.
+    #[test]
+    fn neighbours_numbered_by_the_tree_break_ties_by_that_number() {
+        let means = lattice_shuffled();
+        let tree = SpaceTree::new(&means);
+        let order = SpatialOrder::of_tree(&tree);
+        let k = 8;
+        assert_eq!(
+            tree.neighbours(k, Numbering::Tree),
+            nearest_neighbours(&order.to_spatial(&means), k)
         );
     }
 

@@ -10,7 +10,6 @@
 //! find region boundaries here; they vote once per view, per segment.
 
 use super::accumulate::NO_LABEL;
-use crate::contract::NO_NEIGHBOUR;
 use crate::util::{parallel_map, split_parts, take_part};
 use std::borrow::Cow;
 use std::ops::Range;
@@ -207,7 +206,7 @@ pub fn four_neighbours(p: usize, width: usize, pixels: usize) -> impl Iterator<I
 }
 
 /// Indices grouped by their key, in index order within a group (a counting sort): the
-/// Gaussians of each segment, piece or grid cell.
+/// Gaussians of each segment or piece.
 #[derive(Default)]
 pub(crate) struct Groups {
     /// Group `k` is `members[starts[k]..starts[k + 1]]`.
@@ -238,13 +237,6 @@ impl Groups {
     pub(crate) fn group(&self, k: usize) -> &[u32] {
         &self.members[self.starts[k] as usize..self.starts[k + 1] as usize]
     }
-
-    /// The groups, by key.
-    pub(crate) fn iter(&self) -> impl Iterator<Item = &[u32]> {
-        self.starts
-            .windows(2)
-            .map(|w| &self.members[w[0] as usize..w[1] as usize])
-    }
 }
 
 pub(crate) fn find(parent: &mut [u32], mut x: u32) -> u32 {
@@ -262,160 +254,6 @@ pub(crate) fn union(parent: &mut [u32], a: u32, b: u32) {
     if ra != rb {
         let (lo, hi) = (ra.min(rb), ra.max(rb));
         parent[hi as usize] = lo;
-    }
-}
-
-/// The `k` nearest other Gaussians of each (by center distance, ties by index), [n][k]
-/// row-major, `NO_NEIGHBOUR` where fewer exist. Uniform grid, searched in growing shells.
-pub fn nearest_neighbours(means: &[[f32; 3]], k: usize) -> Vec<u32> {
-    let n = means.len();
-    if n < 2 || k == 0 {
-        return vec![NO_NEIGHBOUR; n * k];
-    }
-    let grid = Grid::new(means);
-    // Blocks of Gaussians on every core (millions of Gaussians take tens of seconds on one).
-    let blocks = parallel_map(n.div_ceil(KNN_BLOCK), |b| {
-        let range = b * KNN_BLOCK..n.min((b + 1) * KNN_BLOCK);
-        let mut out = vec![NO_NEIGHBOUR; range.len() * k];
-        let mut best: Vec<(f64, u32)> = Vec::with_capacity(4 * k);
-        for (g, slots) in range.zip(out.chunks_mut(k)) {
-            grid.nearest(means, g, k, &mut best);
-            for (slot, &(_, h)) in slots.iter_mut().zip(&best) {
-                *slot = h;
-            }
-        }
-        out
-    });
-    blocks.concat()
-}
-
-/// The Gaussians centered at `means` grouped by cell of [`nearest_neighbours`]'s grid,
-/// cells in scan order (x fastest), in index order within a cell.
-pub(crate) fn gaussians_by_cell(means: &[[f32; 3]]) -> Groups {
-    if means.is_empty() {
-        return Groups::default();
-    }
-    Grid::new(means).cells
-}
-
-/// Gaussians per work item of [`nearest_neighbours`].
-const KNN_BLOCK: usize = 4096;
-
-fn dist2(a: [f32; 3], b: [f32; 3]) -> f64 {
-    (0..3).map(|i| (a[i] as f64 - b[i] as f64).powi(2)).sum()
-}
-
-/// Gaussians binned in cubic cells.
-struct Grid {
-    origin: [f64; 3],
-    cell: f64,
-    dims: [i64; 3],
-    /// The Gaussians of each cell.
-    cells: Groups,
-}
-
-impl Grid {
-    /// Shells searched at most: past it a Gaussian keeps the neighbours found.
-    const MAX_RING: i64 = 6;
-    /// Cells per Gaussian at most (each costs a 4-byte start).
-    const MAX_CELLS_PER_GAUSSIAN: f64 = 4.0;
-
-    fn new(means: &[[f32; 3]]) -> Grid {
-        let mut lo = [f64::MAX; 3];
-        let mut hi = [f64::MIN; 3];
-        for m in means {
-            for i in 0..3 {
-                lo[i] = lo[i].min(m[i] as f64);
-                hi[i] = hi[i].max(m[i] as f64);
-            }
-        }
-        // Surfaces dominate: about 4 Gaussians per occupied cell when spread over the
-        // bounding box's largest face. But at most `MAX_CELLS_PER_GAUSSIAN` cells per
-        // Gaussian: Gaussians filling a volume (a random scene) would otherwise get far
-        // more cells than Gaussians, mostly empty, each a 4-byte start and searched ring by
-        // ring for every neighbour (3M random Gaussians took 124 s without the cap).
-        let ext: Vec<f64> = (0..3).map(|i| (hi[i] - lo[i]).max(1e-6)).collect();
-        let mut faces = [ext[0] * ext[1], ext[1] * ext[2], ext[0] * ext[2]];
-        faces.sort_by(f64::total_cmp);
-        let n = means.len() as f64;
-        let surface_cell = (faces[2] * 4.0 / n).sqrt();
-        let volume_cell = (ext[0] * ext[1] * ext[2] / (n * Self::MAX_CELLS_PER_GAUSSIAN)).cbrt();
-        // Gaussians along a line (a flat box's extent is ~0 in two axes) would get cells far
-        // finer than their spacing, and find no neighbour within MAX_RING shells.
-        let line_cell = ext.iter().copied().fold(0.0, f64::max) * 4.0 / n;
-        let cell = surface_cell.max(volume_cell).max(line_cell).max(1e-6);
-        let dims = [0, 1, 2].map(|i| ((ext[i] / cell).floor() as i64 + 1).min(1 << 20));
-        let mut grid = Grid {
-            origin: lo,
-            cell,
-            dims,
-            cells: Groups::default(),
-        };
-        let cells: Vec<u32> = means
-            .iter()
-            .map(|&m| grid.index(grid.cell_of(m)) as u32)
-            .collect();
-        grid.cells = Groups::by_key(&cells, (dims[0] * dims[1] * dims[2]) as usize);
-        grid
-    }
-
-    /// The `k` nearest other Gaussians of `g` into `best` (distance, index), nearest
-    /// first, ties by index: shells of cells outward until no Gaussian outside the searched
-    /// cube can be nearer than the k-th found (or [`Grid::MAX_RING`]).
-    fn nearest(&self, means: &[[f32; 3]], g: usize, k: usize, best: &mut Vec<(f64, u32)>) {
-        best.clear();
-        let home = self.cell_of(means[g]);
-        for ring in 0..=Grid::MAX_RING {
-            self.for_shell(home, ring, |h| {
-                if h as usize != g {
-                    best.push((dist2(means[g], means[h as usize]), h));
-                }
-            });
-            // The k nearest first (a selection, then a sort of those k only): a shell
-            // holds about a hundred candidates, and sorting them all was most of the time.
-            let nearer = |a: &(f64, u32), b: &(f64, u32)| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1));
-            if best.len() > k {
-                best.select_nth_unstable_by(k - 1, nearer);
-                best.truncate(k);
-            }
-            best.sort_by(nearer);
-            // Every Gaussian outside the searched cube is farther than ring * cell.
-            let reach = ring as f64 * self.cell;
-            if best.len() == k && best[k - 1].0 <= reach * reach {
-                break;
-            }
-        }
-    }
-
-    fn cell_of(&self, m: [f32; 3]) -> [i64; 3] {
-        [0, 1, 2].map(|i| {
-            (((m[i] as f64 - self.origin[i]) / self.cell).floor() as i64).clamp(0, self.dims[i] - 1)
-        })
-    }
-
-    fn index(&self, c: [i64; 3]) -> usize {
-        ((c[2] * self.dims[1] + c[1]) * self.dims[0] + c[0]) as usize
-    }
-
-    /// Calls `f` on every Gaussian in the cells at Chebyshev distance exactly `ring`.
-    fn for_shell(&self, home: [i64; 3], ring: i64, mut f: impl FnMut(u32)) {
-        for dz in -ring..=ring {
-            for dy in -ring..=ring {
-                for dx in -ring..=ring {
-                    if dx.abs().max(dy.abs()).max(dz.abs()) != ring {
-                        continue;
-                    }
-                    let c = [home[0] + dx, home[1] + dy, home[2] + dz];
-                    if (0..3).any(|i| c[i] < 0 || c[i] >= self.dims[i]) {
-                        continue;
-                    }
-                    let i = self.index(c);
-                    for &g in self.cells.group(i) {
-                        f(g);
-                    }
-                }
-            }
-        }
     }
 }
 

@@ -17,6 +17,7 @@ pub mod consensus_report;
 pub mod consensus_segments;
 pub mod consensus_surface;
 pub mod method;
+pub mod neighbours;
 pub mod partial;
 pub mod regions_gpu;
 pub mod scores;
@@ -34,8 +35,8 @@ pub use consensus::{
 };
 pub use consensus_cluster::ClusterProfile;
 pub use consensus_decide::{Consensus, ConsensusParams, SegmentVotes};
-pub use consensus_segments::nearest_neighbours;
 pub use consensus_surface::GaussianShapes;
 pub use method::{Method, SPELLINGS};
+pub use neighbours::nearest_neighbours;
 pub use partial::{EvidenceKind, PartManifest, RawEvidence, Shard};
 pub use scores::{ClassScores, EvidenceRows, SharedCounts, SpilledRows};
