@@ -20,7 +20,7 @@ use super::consensus_relabel::fuse_relabeled;
 use super::consensus_segments::Observations;
 use super::consensus_surface::{GaussianShapes, SurfaceNormals};
 use super::method::Method;
-use super::neighbours::{Numbering, SpaceTree};
+use super::neighbours::nearest_neighbours;
 use super::scores::{ClassScores, EvidenceRows, SharedCounts};
 use crate::gpu::Gpu;
 use crate::render::GpuScene;
@@ -89,15 +89,14 @@ pub fn consensus_run(
     );
     // The host work numbers the Gaussians in space (consensus_order.rs): the observations
     // and the neighbour graph by that number, the results given back in the scene's.
-    let tree = SpaceTree::new(shapes.means);
-    let order = SpatialOrder::of_tree(&tree);
+    let order = SpatialOrder::of(shapes.means);
     let order_s = start.elapsed().as_secs_f64();
     let views_start = std::time::Instant::now();
     // The neighbour graph and the surfaces read only the shapes: found on the host while
     // the views keep the GPU busy, and waited for after them. `neighbours_s` is that wait.
     let (observed, found) = std::thread::scope(|scope| {
         let search = scope.spawn(|| {
-            let knn = tree.neighbours(params.neighbours, Numbering::Tree);
+            let knn = nearest_neighbours(&order.to_spatial(shapes.means), params.neighbours);
             (knn, SurfaceNormals::of(shapes, &order, params))
         });
         let observed = observe(input, cfg, params.occlusion, pixels, Some(&order), progress);

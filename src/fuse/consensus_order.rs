@@ -6,11 +6,13 @@
 //! Gaussians in no spatial order (its SfM points, then each densification's clones and
 //! splits appended), so those reads miss the cache: with a room's Gaussians in random order
 //! the consensus's host work took twice as long (docs/robustness.md, "The Gaussians'
-//! order" and "The Gaussians numbered in space"). Numbered leaf by leaf of the neighbour
-//! search's k-d tree (src/fuse/neighbours.rs), a Gaussian's neighbours have nearby numbers
-//! whatever the scene's order and at any density. The tree splits by position, so the
-//! numbering, and with it every tie the consensus breaks by number, does not depend on the
-//! scene's order (except between Gaussians at the same position).
+//! order" and "The Gaussians numbered in space"). Numbered cell by cell of a grid, a
+//! Gaussian's neighbours have nearby numbers whatever the scene's order. Within a cell the
+//! Gaussians go by position, so the numbering, and with it every tie the consensus breaks by
+//! number, does not depend on the scene's order (except between Gaussians at the same
+//! position). (The k-d tree of the neighbour search, src/fuse/neighbours.rs, would number
+//! them at any density, but a new numbering is a new set of ties: docs/robustness.md,
+//! "Neighbours in scenes of many scales".)
 
 use std::sync::Arc;
 
@@ -18,7 +20,7 @@ use anyhow::Result;
 
 use super::assign::Assignment;
 use super::consensus_decide::Consensus;
-use super::neighbours::SpaceTree;
+use super::consensus_segments::Groups;
 use crate::contract::NO_NEIGHBOUR;
 use crate::gpu::{Buffer, Gpu};
 use crate::util::gather;
@@ -33,15 +35,26 @@ pub struct SpatialOrder {
 }
 
 impl SpatialOrder {
-    /// The Gaussians centered at `means` numbered leaf by leaf of a k-d tree over them
-    /// ([`SpaceTree::order`]).
+    /// The Gaussians centered at `means` numbered cell by cell of a grid (cells in scan
+    /// order), within a cell by position (x, then y, then z), then by their index in the
+    /// scene.
     pub fn of(means: &[[f32; 3]]) -> SpatialOrder {
-        SpatialOrder::of_tree(&SpaceTree::new(means))
-    }
-
-    /// The Gaussians numbered by their place in `tree`'s order.
-    pub(crate) fn of_tree(tree: &SpaceTree) -> SpatialOrder {
-        SpatialOrder::from_scene_of_spatial(tree.order().to_vec())
+        let mut scene_of_spatial = Vec::with_capacity(means.len());
+        let by_position = |&a: &u32, &b: &u32| {
+            let (pa, pb) = (means[a as usize], means[b as usize]);
+            (0..3)
+                .map(|i| pa[i].total_cmp(&pb[i]))
+                .fold(std::cmp::Ordering::Equal, std::cmp::Ordering::then)
+                .then(a.cmp(&b))
+        };
+        if !means.is_empty() {
+            for cell in Grid::new(means).cells.iter() {
+                let start = scene_of_spatial.len();
+                scene_of_spatial.extend_from_slice(cell);
+                scene_of_spatial[start..].sort_unstable_by(by_position);
+            }
+        }
+        SpatialOrder::from_scene_of_spatial(scene_of_spatial)
     }
 
     /// The numbering that lists `scene_of_spatial[i]` as number `i` (a permutation of
@@ -134,10 +147,74 @@ fn renumbered<T: Copy>(values: &[T], at: &[u32]) -> Vec<T> {
     gather(values, at, 1)
 }
 
+/// Gaussians binned in cubic cells: the numbering's coarse order.
+struct Grid {
+    origin: [f64; 3],
+    cell: f64,
+    dims: [i64; 3],
+    /// The Gaussians of each cell.
+    cells: Groups,
+}
+
+impl Grid {
+    /// Cells per Gaussian at most (each costs a 4-byte start).
+    const MAX_CELLS_PER_GAUSSIAN: f64 = 4.0;
+
+    fn new(means: &[[f32; 3]]) -> Grid {
+        let mut lo = [f64::MAX; 3];
+        let mut hi = [f64::MIN; 3];
+        for m in means {
+            for i in 0..3 {
+                lo[i] = lo[i].min(m[i] as f64);
+                hi[i] = hi[i].max(m[i] as f64);
+            }
+        }
+        // The cell sizes the neighbour search's grid had (the numbering, and with it the
+        // consensus's ties, unchanged since the search moved to a k-d tree). Surfaces
+        // dominate: about 4 Gaussians per occupied cell when spread over the bounding box's
+        // largest face. But at most `MAX_CELLS_PER_GAUSSIAN` cells per Gaussian: Gaussians
+        // filling a volume (a random scene) would otherwise get far more cells than
+        // Gaussians, mostly empty, each a 4-byte start.
+        let ext: Vec<f64> = (0..3).map(|i| (hi[i] - lo[i]).max(1e-6)).collect();
+        let mut faces = [ext[0] * ext[1], ext[1] * ext[2], ext[0] * ext[2]];
+        faces.sort_by(f64::total_cmp);
+        let n = means.len() as f64;
+        let surface_cell = (faces[2] * 4.0 / n).sqrt();
+        let volume_cell = (ext[0] * ext[1] * ext[2] / (n * Self::MAX_CELLS_PER_GAUSSIAN)).cbrt();
+        // Gaussians along a line (a flat box's extent is ~0 in two axes) would get cells far
+        // finer than their spacing.
+        let line_cell = ext.iter().copied().fold(0.0, f64::max) * 4.0 / n;
+        let cell = surface_cell.max(volume_cell).max(line_cell).max(1e-6);
+        let dims = [0, 1, 2].map(|i| ((ext[i] / cell).floor() as i64 + 1).min(1 << 20));
+        let mut grid = Grid {
+            origin: lo,
+            cell,
+            dims,
+            cells: Groups::default(),
+        };
+        let cells: Vec<u32> = means
+            .iter()
+            .map(|&m| grid.index(grid.cell_of(m)) as u32)
+            .collect();
+        grid.cells = Groups::by_key(&cells, (dims[0] * dims[1] * dims[2]) as usize);
+        grid
+    }
+
+    fn cell_of(&self, m: [f32; 3]) -> [i64; 3] {
+        [0, 1, 2].map(|i| {
+            (((m[i] as f64 - self.origin[i]) / self.cell).floor() as i64).clamp(0, self.dims[i] - 1)
+        })
+    }
+
+    fn index(&self, c: [i64; 3]) -> usize {
+        ((c[2] * self.dims[1] + c[1]) * self.dims[0] + c[0]) as usize
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fuse::neighbours::{nearest_neighbours, Numbering};
+    use crate::fuse::neighbours::nearest_neighbours;
     use crate::util::Rng;
 
     /// Random centers (distinct distances: no ties) and the same centers shuffled.
@@ -190,20 +267,6 @@ mod tests {
         assert_eq!(
             SpatialOrder::of(&means).to_spatial(&means),
             SpatialOrder::of(&reversed).to_spatial(&reversed)
-        );
-    }
-
-    /// The tree's neighbours numbered by the tree are those searched on the centers listed
-    /// in its order: ties (the lattice has many) go by the number in space.
-    #[test]
-    fn neighbours_numbered_by_the_tree_break_ties_by_that_number() {
-        let means = lattice_shuffled();
-        let tree = SpaceTree::new(&means);
-        let order = SpatialOrder::of_tree(&tree);
-        let k = 8;
-        assert_eq!(
-            tree.neighbours(k, Numbering::Tree),
-            nearest_neighbours(&order.to_spatial(&means), k)
         );
     }
 

@@ -206,7 +206,7 @@ pub fn four_neighbours(p: usize, width: usize, pixels: usize) -> impl Iterator<I
 }
 
 /// Indices grouped by their key, in index order within a group (a counting sort): the
-/// Gaussians of each segment or piece.
+/// Gaussians of each segment, piece or grid cell.
 #[derive(Default)]
 pub(crate) struct Groups {
     /// Group `k` is `members[starts[k]..starts[k + 1]]`.
@@ -236,6 +236,13 @@ impl Groups {
     /// The indices of key `k`.
     pub(crate) fn group(&self, k: usize) -> &[u32] {
         &self.members[self.starts[k] as usize..self.starts[k + 1] as usize]
+    }
+
+    /// The groups, by key.
+    pub(crate) fn iter(&self) -> impl Iterator<Item = &[u32]> {
+        self.starts
+            .windows(2)
+            .map(|w| &self.members[w[0] as usize..w[1] as usize])
     }
 }
 

@@ -16,17 +16,7 @@ use crate::util::{parallel_map, split_parts, take_part};
 /// The `k` nearest other Gaussians of each (by center distance, ties by index), [n][k]
 /// row-major, `NO_NEIGHBOUR` where fewer exist.
 pub fn nearest_neighbours(means: &[[f32; 3]], k: usize) -> Vec<u32> {
-    SpaceTree::new(means).neighbours(k, Numbering::Scene)
-}
-
-/// How [`SpaceTree::neighbours`] numbers the Gaussians: its rows, its entries and the
-/// index its ties go by.
-#[derive(Clone, Copy, PartialEq, Eq)]
-pub(crate) enum Numbering {
-    /// As the scene lists them.
-    Scene,
-    /// By their place in [`SpaceTree::order`].
-    Tree,
+    SpaceTree::new(means).neighbours(k)
 }
 
 /// Gaussians per work item of [`SpaceTree::neighbours`].
@@ -75,9 +65,8 @@ impl Nearest {
 
 /// A k-d tree over the Gaussians' centers: each node a range of [`SpaceTree::order`], split
 /// at its median along its box's longest axis.
-pub(crate) struct SpaceTree {
-    /// The Gaussians, leaf by leaf: each node's a contiguous range, so Gaussians near each
-    /// other in space are near each other here, at any density.
+struct SpaceTree {
+    /// The Gaussians, leaf by leaf: each node's a contiguous range.
     order: Vec<u32>,
     /// Their centers in that order: a leaf's scan reads one run of memory.
     centers: Vec<[f32; 3]>,
@@ -99,7 +88,7 @@ struct Node {
 }
 
 impl SpaceTree {
-    pub(crate) fn new(means: &[[f32; 3]]) -> SpaceTree {
+    fn new(means: &[[f32; 3]]) -> SpaceTree {
         let n = means.len();
         let mut entries: Vec<Entry> = means.iter().copied().zip(0..n as u32).collect();
         let mut nodes = vec![Node::over(&entries, 0)];
@@ -142,14 +131,8 @@ impl SpaceTree {
         }
     }
 
-    /// The Gaussians in the tree's order.
-    pub(crate) fn order(&self) -> &[u32] {
-        &self.order
-    }
-
-    /// The `k` nearest other Gaussians of each (by center distance, ties by number), [n][k]
-    /// row-major, `NO_NEIGHBOUR` where fewer exist; rows and entries in `numbering`.
-    pub(crate) fn neighbours(&self, k: usize, numbering: Numbering) -> Vec<u32> {
+    /// [`nearest_neighbours`].
+    fn neighbours(&self, k: usize) -> Vec<u32> {
         let n = self.order.len();
         let mut knn = vec![NO_NEIGHBOUR; n * k];
         if n < 2 || k == 0 {
@@ -163,37 +146,29 @@ impl SpaceTree {
             let mut best = Nearest::new(k);
             for p in places {
                 best.found.clear();
-                self.search(0, p, numbering, &mut best);
+                self.search(0, p, &mut best);
                 rows.extend(best.found.iter().map(|&(_, h)| h));
                 rows.resize(rows.len() + k - best.found.len(), NO_NEIGHBOUR);
             }
             rows
         });
         for (p, row) in blocks.iter().flat_map(|rows| rows.chunks(k)).enumerate() {
-            let g = self.number(p, numbering) as usize;
+            let g = self.order[p] as usize;
             knn[g * k..(g + 1) * k].copy_from_slice(row);
         }
         knn
-    }
-
-    /// The Gaussian at place `p` of the order, in `numbering`.
-    fn number(&self, p: usize, numbering: Numbering) -> u32 {
-        match numbering {
-            Numbering::Scene => self.order[p],
-            Numbering::Tree => p as u32,
-        }
     }
 
     /// Offers `best` every Gaussian of node `i` (but the one at place `p` of the order) that
     /// may be among the nearest to the one at `p`: the nearer child first, a child skipped
     /// when neither its box's distance nor, at the k-th's distance, its least number lets
     /// it hold a nearer one (so many Gaussians at one position cost a few leaves, not all).
-    fn search(&self, i: usize, p: usize, numbering: Numbering, best: &mut Nearest) {
+    fn search(&self, i: usize, p: usize, best: &mut Nearest) {
         let (node, q) = (&self.nodes[i], self.centers[p]);
         if node.first == 0 {
             for h in node.start as usize..node.end as usize {
                 if h != p {
-                    best.offer(dist2(q, self.centers[h]), self.number(h, numbering));
+                    best.offer(dist2(q, self.centers[h]), self.order[h]);
                 }
             }
             return;
@@ -206,12 +181,8 @@ impl SpaceTree {
             [(b, db), (a, da)]
         };
         for (child, d) in nearer_first {
-            let least = match numbering {
-                Numbering::Scene => self.nodes[child].least,
-                Numbering::Tree => self.nodes[child].start,
-            };
-            if best.takes(d, least) {
-                self.search(child, p, numbering, best);
+            if best.takes(d, self.nodes[child].least) {
+                self.search(child, p, best);
             }
         }
     }
