@@ -12,7 +12,7 @@ use semsplat::fuse::assign_gpu::GpuAssigner;
 use semsplat::fuse::partial::FIXED_POINT_SCALE;
 use semsplat::fuse::{
     accumulate, accumulate_assigned, assign_semantic_near, AssignOnGpu, ClassScores, EvidenceKind,
-    FuseConfig, Method, NO_LABEL,
+    FuseConfig, Method, TieNeighbours, NO_LABEL,
 };
 use semsplat::render::GpuScene;
 use semsplat::scene::random_scene::{random_scene, RandomSceneSpec};
@@ -227,7 +227,7 @@ fn fusion_assigned_on_the_gpu_equals_the_host_assignment_of_its_rows() {
             Ok(())
         };
         let with = AssignOnGpu {
-            knn: Some((&knn, 8)),
+            knn: Some(TieNeighbours::Found(&knn, 8)),
             rows: Some(&mut sink),
         };
         let (got, stats) =
@@ -241,6 +241,19 @@ fn fusion_assigned_on_the_gpu_equals_the_host_assignment_of_its_rows() {
         let want = assign_semantic_near(&scores, Some((&knn, 8)));
         assert!(want.class.iter().filter(|c| c.is_some()).count() > 1_000);
         assert_eq!(got, want, "{}", method.name());
+        // The neighbours searched beside the views, as `fuse` does: the same assignment.
+        let with = AssignOnGpu {
+            knn: Some(TieNeighbours::Search(&g.means, 8)),
+            rows: None,
+        };
+        let (searched, _) =
+            accumulate_assigned(gpu, &scene, &cams, &labels, 4, &cfg, with, |_, _| {}).unwrap();
+        assert_eq!(
+            searched,
+            want,
+            "{}, searched beside the views",
+            method.name()
+        );
     }
     check_validation(gpu);
 }

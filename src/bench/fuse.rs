@@ -13,7 +13,7 @@ use super::median;
 use crate::dataset::{Dataset, DatasetPaths};
 use crate::fuse::{
     accumulate_assigned, nearest_neighbours, AssignOnGpu, ClusterProfile, FuseConfig, LabelSource,
-    Method, ObserveTimes, NO_LABEL, TIE_NEIGHBOURS,
+    Method, ObserveTimes, TieNeighbours, NO_LABEL, TIE_NEIGHBOURS,
 };
 use crate::gpu::timings::KernelTotal;
 use crate::gpu::Gpu;
@@ -438,7 +438,7 @@ impl Setup<'_> {
         mut progress: impl FnMut(usize),
     ) -> Result<crate::fuse::FuseStats> {
         let with = AssignOnGpu {
-            knn: Some((&self.knn, TIE_NEIGHBOURS)),
+            knn: Some(TieNeighbours::Found(&self.knn, TIE_NEIGHBOURS)),
             rows: None,
         };
         let (_, stats) = accumulate_assigned(

@@ -19,7 +19,7 @@ use semsplat::fuse::consensus_report::SegmentReport;
 use semsplat::fuse::{
     accumulate_assigned, assign_semantic_near, class_totals, nearest_neighbours, one_vs_rest_row,
     Accumulation, AssignOnGpu, Assignment, ClassScores, EvidenceRows, FuseConfig, FuseStats,
-    Method, Shard, SpilledRows, TIE_NEIGHBOURS,
+    Method, Shard, SpilledRows, TieNeighbours, TIE_NEIGHBOURS,
 };
 use semsplat::gpu::Gpu;
 use semsplat::render::GpuScene;
@@ -498,7 +498,6 @@ fn fuse_views(
     }
     let gpu = Gpu::new()?;
     let scene = GpuScene::upload_for(&gpu, g, method.scene_attributes())?;
-    let knn = nearest_neighbours(&g.means, TIE_NEIGHBOURS);
     let mut spill = match needs_rows(&args.output) {
         true => Some(SpilledRows::beside(
             &args.output.out,
@@ -513,7 +512,7 @@ fn fuse_views(
         None => Ok(()),
     };
     let with = AssignOnGpu {
-        knn: Some((&knn, TIE_NEIGHBOURS)),
+        knn: Some(TieNeighbours::Search(&g.means, TIE_NEIGHBOURS)),
         rows: keep_rows.then_some(&mut append as &mut dyn FnMut(usize, &[f64]) -> Result<()>),
     };
     let bar = views_bar(data.cameras.len());

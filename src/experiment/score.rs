@@ -14,8 +14,8 @@ use crate::eval::image_quality::{image_quality, ImageQuality};
 use crate::eval::label_render::LabelRenderer;
 use crate::eval::metrics::{gaussian_accuracy, ClassIou, Confusion, SegmentationScores};
 use crate::fuse::{
-    accumulate_assigned, lift_by_consensus, nearest_neighbours, AssignOnGpu, ConsensusInput,
-    ConsensusParams, FuseConfig, GaussianShapes, Method, SegmentVotes, TIE_NEIGHBOURS,
+    accumulate_assigned, lift_by_consensus, AssignOnGpu, ConsensusInput, ConsensusParams,
+    FuseConfig, GaussianShapes, Method, SegmentVotes, TieNeighbours, TIE_NEIGHBOURS,
 };
 use crate::gpu::Gpu;
 use crate::render::GpuScene;
@@ -265,9 +265,8 @@ fn fuse_lifted(
         });
     }
     // Ties go to the class the Gaussian's nearest neighbours hold most evidence for.
-    let knn = nearest_neighbours(&s.gaussians.means, TIE_NEIGHBOURS);
     let with = AssignOnGpu {
-        knn: Some((&knn, TIE_NEIGHBOURS)),
+        knn: Some(TieNeighbours::Search(&s.gaussians.means, TIE_NEIGHBOURS)),
         rows: None,
     };
     let (assignment, stats) = accumulate_assigned(

@@ -4,6 +4,7 @@
 //! the evidence matrix stays dense while it fits the memory budget, else the classes are
 //! processed in batches of rows (each batch walks every view again; results are the same).
 
+use std::borrow::Cow;
 use std::sync::Mutex;
 use std::time::Instant;
 
@@ -14,6 +15,7 @@ use super::assign::{assign_semantic_near, Assignment};
 use super::assign_gpu::GpuAssigner;
 use super::consensus_cluster::ClusterProfile;
 use super::method::Method;
+use super::neighbours::nearest_neighbours;
 use super::partial::{fixed_to_f64, EvidenceKind, RawEvidence};
 use super::scores::ClassScores;
 use crate::contract::params::{CenterParams, ContribParams};
@@ -531,11 +533,23 @@ pub type RowSink<'s> = &'s mut dyn FnMut(usize, &[f64]) -> Result<()>;
 /// What [`accumulate_assigned`] assigns with, and where the evidence rows go.
 #[derive(Default)]
 pub struct AssignOnGpu<'s> {
-    /// [n][k] nearest neighbours: ties go to the class the neighbours hold most evidence for.
-    pub knn: Option<(&'s [u32], usize)>,
+    /// Nearest neighbours: ties go to the class the neighbours hold most evidence for.
+    pub knn: Option<TieNeighbours<'s>>,
     /// Where every row goes, for outputs that need the evidence itself (none by default:
     /// then the rows never leave the device).
     pub rows: Option<RowSink<'s>>,
+}
+
+/// The nearest neighbours that break [`accumulate_assigned`]'s ties.
+#[derive(Clone, Copy)]
+pub enum TieNeighbours<'s> {
+    /// Found already: [n][k] (`bench fuse` searches once for every method it times).
+    Found(&'s [u32], usize),
+    /// The k nearest of these centers, searched for on a thread while the views keep the
+    /// GPU busy, and waited for when the first pass's evidence is assigned: they read only
+    /// the centers, and on a GPU the search of a million Gaussians takes about as long as
+    /// FlashSplat's views.
+    Search(&'s [[f32; 3]], usize),
 }
 
 /// [`accumulate`] followed by [`super::assign_semantic_near`]. Where [`gpu_assignable`]
@@ -551,23 +565,90 @@ pub fn accumulate_assigned(
     labels: &dyn LabelSource,
     classes: usize,
     cfg: &FuseConfig,
-    mut with: AssignOnGpu,
+    with: AssignOnGpu,
+    progress: impl FnMut(usize, usize),
+) -> Result<(Assignment, FuseStats)> {
+    let AssignOnGpu { knn, rows } = with;
+    match knn {
+        None => accumulate_assigned_with(
+            gpu,
+            scene,
+            cams,
+            labels,
+            classes,
+            cfg,
+            rows,
+            || None,
+            progress,
+        ),
+        Some(TieNeighbours::Found(knn, k)) => {
+            let neighbours = || Some((Cow::Borrowed(knn), k));
+            accumulate_assigned_with(
+                gpu, scene, cams, labels, classes, cfg, rows, neighbours, progress,
+            )
+        }
+        Some(TieNeighbours::Search(means, k)) => std::thread::scope(|scope| {
+            let search = scope.spawn(move || nearest_neighbours(means, k));
+            let neighbours = || {
+                let knn = search
+                    .join()
+                    .unwrap_or_else(|p| std::panic::resume_unwind(p));
+                Some((Cow::Owned(knn), k))
+            };
+            accumulate_assigned_with(
+                gpu, scene, cams, labels, classes, cfg, rows, neighbours, progress,
+            )
+        }),
+    }
+}
+
+/// Tie neighbours as [`assign_semantic_near`] and [`GpuAssigner::new`] take them.
+type Neighbours<'k> = Option<(Cow<'k, [u32]>, usize)>;
+
+fn borrowed<'a>(knn: &'a Neighbours) -> Option<(&'a [u32], usize)> {
+    knn.as_ref().map(|(knn, k)| (&**knn, *k))
+}
+
+/// [`accumulate_assigned`] with its tie neighbours from `neighbours`, called once, when the
+/// first evidence is assigned (after the first pass's views).
+#[allow(clippy::too_many_arguments)]
+fn accumulate_assigned_with<'k>(
+    gpu: &Gpu,
+    scene: &GpuScene,
+    cams: &[Camera],
+    labels: &dyn LabelSource,
+    classes: usize,
+    cfg: &FuseConfig,
+    mut rows: Option<RowSink>,
+    neighbours: impl FnOnce() -> Neighbours<'k>,
     progress: impl FnMut(usize, usize),
 ) -> Result<(Assignment, FuseStats)> {
     let Some(kind) = gpu_assignable(gpu, cfg) else {
         let (scores, stats) = accumulate(gpu, scene, cams, labels, classes, cfg, progress)?;
-        if let Some(sink) = with.rows.as_mut() {
+        if let Some(sink) = rows.as_mut() {
             for e in 0..classes {
                 sink(e, scores.row(e))?;
             }
         }
-        return Ok((assign_semantic_near(&scores, with.knn), stats));
+        return Ok((
+            assign_semantic_near(&scores, borrowed(&neighbours())),
+            stats,
+        ));
     };
     let n = scene.n as usize;
-    let mut assigner = GpuAssigner::new(gpu, n, classes, kind, with.knn)?;
+    let mut assigner = LazyAssigner {
+        gpu,
+        n,
+        classes,
+        kind,
+        neighbours: Some(neighbours),
+        made: None,
+    };
     let stats = accumulate_passes(gpu, scene, cams, labels, classes, cfg, progress, |pass| {
-        assigner.fold(&pass.evidence, pass.row_begin, pass.rows)?;
-        let Some(sink) = with.rows.as_mut() else {
+        assigner
+            .get()?
+            .fold(&pass.evidence, pass.row_begin, pass.rows)?;
+        let Some(sink) = rows.as_mut() else {
             return Ok(());
         };
         let mut row = vec![0.0; n];
@@ -578,6 +659,34 @@ pub fn accumulate_assigned(
         Ok(())
     })?;
     Ok((assigner.finish()?, stats))
+}
+
+/// A [`GpuAssigner`] made when first needed, with the neighbours `neighbours` gives then.
+struct LazyAssigner<'g, F> {
+    gpu: &'g Gpu,
+    n: usize,
+    classes: usize,
+    kind: EvidenceKind,
+    neighbours: Option<F>,
+    made: Option<GpuAssigner<'g>>,
+}
+
+impl<'g, 'k, F: FnOnce() -> Neighbours<'k>> LazyAssigner<'g, F> {
+    fn get(&mut self) -> Result<&mut GpuAssigner<'g>> {
+        if let Some(neighbours) = self.neighbours.take() {
+            let knn = neighbours();
+            let assigner =
+                GpuAssigner::new(self.gpu, self.n, self.classes, self.kind, borrowed(&knn))?;
+            self.made = Some(assigner);
+        }
+        Ok(self.made.as_mut().expect("made on the first call"))
+    }
+
+    /// Every Gaussian's class ([`GpuAssigner::finish`]), made now if no pass ran.
+    fn finish(mut self) -> Result<Assignment> {
+        self.get()?;
+        self.made.take().expect("made by get").finish()
+    }
 }
 
 /// The integer kind of `cfg`'s evidence when [`accumulate_assigned`] can assign it on
