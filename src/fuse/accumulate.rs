@@ -569,23 +569,18 @@ pub fn accumulate_assigned(
     progress: impl FnMut(usize, usize),
 ) -> Result<(Assignment, FuseStats)> {
     let AssignOnGpu { knn, rows } = with;
+    let run = FusionRun {
+        gpu,
+        scene,
+        cams,
+        labels,
+        classes,
+        cfg,
+    };
     match knn {
-        None => accumulate_assigned_with(
-            gpu,
-            scene,
-            cams,
-            labels,
-            classes,
-            cfg,
-            rows,
-            || None,
-            progress,
-        ),
+        None => run.assigned(rows, || None, progress),
         Some(TieNeighbours::Found(knn, k)) => {
-            let neighbours = || Some((Cow::Borrowed(knn), k));
-            accumulate_assigned_with(
-                gpu, scene, cams, labels, classes, cfg, rows, neighbours, progress,
-            )
+            run.assigned(rows, || Some((Cow::Borrowed(knn), k)), progress)
         }
         Some(TieNeighbours::Search(means, k)) => std::thread::scope(|scope| {
             let search = scope.spawn(move || nearest_neighbours(means, k));
@@ -595,9 +590,7 @@ pub fn accumulate_assigned(
                     .unwrap_or_else(|p| std::panic::resume_unwind(p));
                 Some((Cow::Owned(knn), k))
             };
-            accumulate_assigned_with(
-                gpu, scene, cams, labels, classes, cfg, rows, neighbours, progress,
-            )
+            run.assigned(rows, neighbours, progress)
         }),
     }
 }
@@ -609,56 +602,87 @@ fn borrowed<'a>(knn: &'a Neighbours) -> Option<(&'a [u32], usize)> {
     knn.as_ref().map(|(knn, k)| (&**knn, *k))
 }
 
-/// [`accumulate_assigned`] with its tie neighbours from `neighbours`, called once, when the
-/// first evidence is assigned (after the first pass's views).
-#[allow(clippy::too_many_arguments)]
-fn accumulate_assigned_with<'k>(
-    gpu: &Gpu,
-    scene: &GpuScene,
-    cams: &[Camera],
-    labels: &dyn LabelSource,
+/// The arguments of one [`accumulate_assigned`] call.
+struct FusionRun<'a> {
+    gpu: &'a Gpu,
+    scene: &'a GpuScene,
+    cams: &'a [Camera],
+    labels: &'a dyn LabelSource,
     classes: usize,
-    cfg: &FuseConfig,
-    mut rows: Option<RowSink>,
-    neighbours: impl FnOnce() -> Neighbours<'k>,
-    progress: impl FnMut(usize, usize),
-) -> Result<(Assignment, FuseStats)> {
-    let Some(kind) = gpu_assignable(gpu, cfg) else {
-        let (scores, stats) = accumulate(gpu, scene, cams, labels, classes, cfg, progress)?;
-        if let Some(sink) = rows.as_mut() {
-            for e in 0..classes {
-                sink(e, scores.row(e))?;
+    cfg: &'a FuseConfig,
+}
+
+impl FusionRun<'_> {
+    /// [`accumulate`]: the evidence matrix, for the host to assign.
+    fn accumulate(&self, progress: impl FnMut(usize, usize)) -> Result<(ClassScores, FuseStats)> {
+        let (gpu, scene, cams, labels) = (self.gpu, self.scene, self.cams, self.labels);
+        accumulate(gpu, scene, cams, labels, self.classes, self.cfg, progress)
+    }
+
+    /// [`accumulate_passes`]: each pass's rows to `on_pass`, on the device.
+    fn passes(
+        &self,
+        progress: impl FnMut(usize, usize),
+        on_pass: impl FnMut(&EvidencePass) -> Result<()>,
+    ) -> Result<FuseStats> {
+        let (gpu, scene, cams, labels) = (self.gpu, self.scene, self.cams, self.labels);
+        accumulate_passes(
+            gpu,
+            scene,
+            cams,
+            labels,
+            self.classes,
+            self.cfg,
+            progress,
+            on_pass,
+        )
+    }
+
+    /// [`accumulate_assigned`] with its tie neighbours from `neighbours`, called once, when
+    /// the first evidence is assigned (after the first pass's views).
+    fn assigned<'k>(
+        &self,
+        mut rows: Option<RowSink>,
+        neighbours: impl FnOnce() -> Neighbours<'k>,
+        progress: impl FnMut(usize, usize),
+    ) -> Result<(Assignment, FuseStats)> {
+        let (gpu, cfg, classes) = (self.gpu, self.cfg, self.classes);
+        let Some(kind) = gpu_assignable(gpu, cfg) else {
+            let (scores, stats) = self.accumulate(progress)?;
+            if let Some(sink) = rows.as_mut() {
+                for e in 0..classes {
+                    sink(e, scores.row(e))?;
+                }
             }
-        }
-        return Ok((
-            assign_semantic_near(&scores, borrowed(&neighbours())),
-            stats,
-        ));
-    };
-    let n = scene.n as usize;
-    let mut assigner = LazyAssigner {
-        gpu,
-        n,
-        classes,
-        kind,
-        neighbours: Some(neighbours),
-        made: None,
-    };
-    let stats = accumulate_passes(gpu, scene, cams, labels, classes, cfg, progress, |pass| {
-        assigner
-            .get()?
-            .fold(&pass.evidence, pass.row_begin, pass.rows)?;
-        let Some(sink) = rows.as_mut() else {
-            return Ok(());
+            let knn = neighbours();
+            return Ok((assign_semantic_near(&scores, borrowed(&knn)), stats));
         };
-        let mut row = vec![0.0; n];
-        for r in 0..pass.rows {
-            download_rows(gpu, pass, cfg, r..r + 1, &mut row)?;
-            sink(pass.row_begin + r, &row)?;
-        }
-        Ok(())
-    })?;
-    Ok((assigner.finish()?, stats))
+        let n = self.scene.n as usize;
+        let mut assigner = LazyAssigner {
+            gpu,
+            n,
+            classes,
+            kind,
+            neighbours: Some(neighbours),
+            made: None,
+        };
+        let on_pass = |pass: &EvidencePass| {
+            assigner
+                .get()?
+                .fold(&pass.evidence, pass.row_begin, pass.rows)?;
+            let Some(sink) = rows.as_mut() else {
+                return Ok(());
+            };
+            let mut row = vec![0.0; n];
+            for r in 0..pass.rows {
+                download_rows(gpu, pass, cfg, r..r + 1, &mut row)?;
+                sink(pass.row_begin + r, &row)?;
+            }
+            Ok(())
+        };
+        let stats = self.passes(progress, on_pass)?;
+        Ok((assigner.finish()?, stats))
+    }
 }
 
 /// A [`GpuAssigner`] made when first needed, with the neighbours `neighbours` gives then.
