@@ -9,7 +9,9 @@
 #   ours    semsplat's benchmarks: sort 2^25, forward and training at C = 0/16/32/64 on a
 #           1M random scene and an office room at ~1M Gaussians (spacing 0.0053, one view), fusion of 1M x 200 views
 #           of the random scene and of the room (~1M Gaussians seen from 200 views), and of
-#           the room over 190 views with its own noisy label maps (FlashSplat and consensus)
+#           the room over 190 views with its own noisy label maps (FlashSplat and consensus;
+#           then `semsplat fuse` itself on them, process wall, for FlashSplat, vote and
+#           segment consensus)
 #   peers   gsplat 1.5.3 and FlashSplat's rasterizer on the scenes `ours` exported
 #   lift    the scene packed with LIFT_SCENE fused by FlashSplat, segment consensus and
 #           --relabel (train views' noisy labels), each evaluated on the held-out views:
@@ -136,6 +138,36 @@ print(json.dumps(d))' "$case" "${build:-${BEFORE:+after}}" >>"$OUT/ours.jsonl"
   fi
 }
 
+# One `semsplat fuse` as a user runs it (the scene and the label PNGs read, the neighbours
+# searched, the PLY written): its process wall and its report appended to ours.jsonl, where
+# `bench fuse` times the views alone; with BEFORE, the build before too.
+cli() {
+  local case=$1; shift
+  [[ $case =~ ${CASES:-.} ]] || return 0
+  cli_with semsplat "" "$case" "$@"
+  [ -z "${BEFORE:-}" ] || cli_with /tmp/semsplat_before before "$case" "$@"
+}
+
+cli_with() {
+  local exe=$1 build=$2 case=$3; shift 3
+  [ "$(left)" -gt 20 ] || { say "skipped $case $build (budget)"; return; }
+  echo "=== $case ${build:+($build)}: semsplat $*" >>"$OUT/bench.log"
+  local limit; limit=$(left); [ "${CAP:-$limit}" -lt "$limit" ] && limit=$CAP
+  local t0; t0=$(date +%s%N)
+  if timeout "$limit" "$exe" "$@" --out /tmp/cli.ply --report /tmp/cli.json >>"$OUT/bench.log" 2>&1; then
+    python3 -c 'import json,sys; r=json.load(open("/tmp/cli.json")); s=r.get("stats") or {}
+d={"case": sys.argv[1], "process_wall_s": int(sys.argv[3]) / 1000, "total_s": r.get("total_s"),
+   "gaussians": r.get("gaussians"), "stats": {k: s.get(k) for k in ("wall_s", "label_wait_s",
+   "view_s", "evidence_s", "segments_s", "decide_s", "peak_host_bytes")}}
+if sys.argv[2]: d["build"]=sys.argv[2]
+print(json.dumps(d))' "$case" "${build:-${BEFORE:+after}}" "$(( ($(date +%s%N) - t0) / 1000000 ))" \
+      >>"$OUT/ours.jsonl"
+  else
+    say "FAILED $case $build (see bench.log)"
+  fi
+  rm -f /tmp/cli.ply /tmp/cli.json /tmp/cli.classes.json
+}
+
 run_ours() {
   local big=(--n "${N:-1000000}" --width "${W:-1920}" --height "${H:-1080}")
   b sort bench sort --n 33554432 --iters 10
@@ -177,7 +209,7 @@ run_ours() {
   # The same room with its own label maps (flicker 0.3): a segmenter's regions follow the
   # objects, where random blocks, drawn anew in every view, cut every surface somewhere (the
   # consensus's clustering's worst case). 190 views: synth holds at most 400M pixels.
-  if [[ "fuse office labels x 190" =~ ${CASES:-.} ]]; then
+  if [[ "fuse office labels x 190" =~ ${CASES:-.} || "fuse cli office labels x 190" =~ ${CASES:-.} ]]; then
     timeout 300 semsplat synth --preset office --spacing "${ROOM_FUSE_SPACING:-0.0115}" \
       --views 190 --test-views 0 --width "${W:-1920}" --height "${H:-1080}" \
       --noise flicker=0.3 --no-previews --out /tmp/office_labels >>"$OUT/bench.log" 2>&1 ||
@@ -186,6 +218,11 @@ run_ours() {
   CAP=120 b "fuse office labels x 190" bench fuse --scene /tmp/office_labels \
     --labels /tmp/office_labels/labels_noisy --views 190 \
     --methods flashsplat,segment-consensus,segment-consensus-relabel
+  for m in flashsplat vote segment-consensus; do
+    CAP=120 cli "fuse cli office labels x 190 $m" fuse --scene /tmp/office_labels/scene.ply \
+      --cameras /tmp/office_labels/cameras.json --labels /tmp/office_labels/labels_noisy \
+      --method $m
+  done
   # The sweep's size (issue 16's time goal, at most about 1.5x FlashSplat): the noisy
   # living room of the lift check, 60 views at 320x240, the median of 3 runs, with the
   # consensus's split (clustering, decision) where the whole process's wall does not say.
