@@ -115,20 +115,31 @@ run_tests() {
   say "tests: $(wc -l <"$logs/rc") binaries, $failed failed"
 }
 
-# One semsplat benchmark: its JSON (with "case") appended to ours.jsonl; with BEFORE, the
-# build before too.
-b() {
-  local case=$1; shift
+# Case $2 run by $1 (b_with, cli_with) with this build and, with BEFORE, the build before,
+# if CASES picks it.
+both() {
+  local run=$1 case=$2; shift 2
   [[ $case =~ ${CASES:-.} ]] || return 0
-  b_with semsplat "" "$case" "$@"
-  [ -z "${BEFORE:-}" ] || b_with /tmp/semsplat_before before "$case" "$@"
+  $run semsplat "" "$case" "$@"
+  [ -z "${BEFORE:-}" ] || $run /tmp/semsplat_before before "$case" "$@"
 }
+
+# The seconds a case may run (the budget left, CAP at most), its command logged; fails,
+# saying so, when too little is left. Usage: limit=$(case_limit CASE BUILD ARGS...)
+case_limit() {
+  local case=$1 build=$2; shift 2
+  [ "$(left)" -gt 20 ] || { say "skipped $case $build (budget)" >&2; return 1; }
+  echo "=== $case ${build:+($build)}: semsplat $*" >>"$OUT/bench.log"
+  local limit; limit=$(left); [ "${CAP:-$limit}" -lt "$limit" ] && limit=$CAP
+  echo "$limit"
+}
+
+# One semsplat benchmark: its JSON (with "case") appended to ours.jsonl.
+b() { both b_with "$@"; }
 
 b_with() {
   local exe=$1 build=$2 case=$3; shift 3
-  [ "$(left)" -gt 20 ] || { say "skipped $case $build (budget)"; return; }
-  echo "=== $case ${build:+($build)}: semsplat $*" >>"$OUT/bench.log"
-  local limit; limit=$(left); [ "${CAP:-$limit}" -lt "$limit" ] && limit=$CAP
+  local limit; limit=$(case_limit "$case" "$build" "$@") || return 0
   if timeout "$limit" "$exe" "$@" --json >/tmp/b.json 2>>"$OUT/bench.log"; then
     python3 -c 'import json,sys; d=json.load(open("/tmp/b.json")); d["case"]=sys.argv[1]
 if sys.argv[2]: d["build"]=sys.argv[2]
@@ -140,19 +151,12 @@ print(json.dumps(d))' "$case" "${build:-${BEFORE:+after}}" >>"$OUT/ours.jsonl"
 
 # One `semsplat fuse` as a user runs it (the scene and the label PNGs read, the neighbours
 # searched, the PLY written): its process wall and its report appended to ours.jsonl, where
-# `bench fuse` times the views alone; with BEFORE, the build before too.
-cli() {
-  local case=$1; shift
-  [[ $case =~ ${CASES:-.} ]] || return 0
-  cli_with semsplat "" "$case" "$@"
-  [ -z "${BEFORE:-}" ] || cli_with /tmp/semsplat_before before "$case" "$@"
-}
+# `bench fuse` times the views alone.
+cli() { both cli_with "$@"; }
 
 cli_with() {
   local exe=$1 build=$2 case=$3; shift 3
-  [ "$(left)" -gt 20 ] || { say "skipped $case $build (budget)"; return; }
-  echo "=== $case ${build:+($build)}: semsplat $*" >>"$OUT/bench.log"
-  local limit; limit=$(left); [ "${CAP:-$limit}" -lt "$limit" ] && limit=$CAP
+  local limit; limit=$(case_limit "$case" "$build" "$@") || return 0
   local t0; t0=$(date +%s%N)
   if timeout "$limit" "$exe" "$@" --out /tmp/cli.ply --report /tmp/cli.json >>"$OUT/bench.log" 2>&1; then
     python3 -c 'import json,sys; r=json.load(open("/tmp/cli.json")); s=r.get("stats") or {}
