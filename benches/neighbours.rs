@@ -10,13 +10,6 @@ use semsplat::util::Rng;
 
 const N: usize = 1 << 20;
 
-/// A unit vector in a random direction.
-fn direction(rng: &mut Rng) -> [f64; 3] {
-    let d = [0, 1, 2].map(|_| rng.normal());
-    let len = d.iter().map(|x| x * x).sum::<f64>().sqrt();
-    d.map(|x| x / len)
-}
-
 /// `n` centers on the unit sphere, the last `far` of them moved out to 2..100.
 fn centers(n: usize, far: usize) -> Vec<[f32; 3]> {
     let mut rng = Rng::new(1);
@@ -27,7 +20,7 @@ fn centers(n: usize, far: usize) -> Vec<[f32; 3]> {
             } else {
                 rng.range_f64(2.0, 100.0)
             };
-            direction(&mut rng).map(|x| (x * r) as f32)
+            rng.direction().map(|x| (x * r) as f32)
         })
         .collect()
 }

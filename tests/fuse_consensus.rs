@@ -793,17 +793,12 @@ fn nearest_neighbours_in_a_volume_are_the_nearest() {
 #[test]
 fn nearest_neighbours_at_many_scales_are_the_nearest() {
     let mut rng = Rng::new(5);
-    let direction = |rng: &mut Rng| {
-        let d = [0, 1, 2].map(|_| rng.normal());
-        let len = d.iter().map(|x| x * x).sum::<f64>().sqrt();
-        d.map(|x| x / len)
-    };
     let mut means: Vec<[f32; 3]> = (0..2_500)
-        .map(|_| direction(&mut rng).map(|x| x as f32))
+        .map(|_| rng.direction().map(|x| x as f32))
         .collect();
     for _ in 0..100 {
         let r = rng.range_f64(2.0, 1000.0);
-        means.push(direction(&mut rng).map(|x| (x * r) as f32));
+        means.push(rng.direction().map(|x| (x * r) as f32));
     }
     for i in 0..20 {
         for j in 0..20 {

@@ -547,8 +547,8 @@ pub enum TieNeighbours<'s> {
     Found(&'s [u32], usize),
     /// The k nearest of these centers, searched for on a thread while the views keep the
     /// GPU busy, and waited for when the first pass's evidence is assigned: they read only
-    /// the centers, and on a GPU the search of a million Gaussians takes about as long as
-    /// FlashSplat's views.
+    /// the centers, and on the H100 the search of the 978k room (the grid it had then) took
+    /// half as long as FlashSplat's 200 views of it (docs/fusion-speed.md).
     Search(&'s [[f32; 3]], usize),
 }
 

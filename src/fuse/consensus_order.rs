@@ -48,7 +48,7 @@ impl SpatialOrder {
                 .then(a.cmp(&b))
         };
         if !means.is_empty() {
-            for cell in Grid::new(means).cells.iter() {
+            for cell in gaussians_by_cell(means).iter() {
                 let start = scene_of_spatial.len();
                 scene_of_spatial.extend_from_slice(cell);
                 scene_of_spatial[start..].sort_unstable_by(by_position);
@@ -147,68 +147,43 @@ fn renumbered<T: Copy>(values: &[T], at: &[u32]) -> Vec<T> {
     gather(values, at, 1)
 }
 
-/// Gaussians binned in cubic cells: the numbering's coarse order.
-struct Grid {
-    origin: [f64; 3],
-    cell: f64,
-    dims: [i64; 3],
-    /// The Gaussians of each cell.
-    cells: Groups,
-}
+/// Cells per Gaussian at most in [`gaussians_by_cell`] (each costs a 4-byte start).
+const MAX_CELLS_PER_GAUSSIAN: f64 = 4.0;
 
-impl Grid {
-    /// Cells per Gaussian at most (each costs a 4-byte start).
-    const MAX_CELLS_PER_GAUSSIAN: f64 = 4.0;
-
-    fn new(means: &[[f32; 3]]) -> Grid {
-        let mut lo = [f64::MAX; 3];
-        let mut hi = [f64::MIN; 3];
-        for m in means {
-            for i in 0..3 {
-                lo[i] = lo[i].min(m[i] as f64);
-                hi[i] = hi[i].max(m[i] as f64);
-            }
+/// The Gaussians binned in cubic cells, cells in scan order: the numbering's coarse order.
+fn gaussians_by_cell(means: &[[f32; 3]]) -> Groups {
+    let mut lo = [f64::MAX; 3];
+    let mut hi = [f64::MIN; 3];
+    for m in means {
+        for i in 0..3 {
+            lo[i] = lo[i].min(m[i] as f64);
+            hi[i] = hi[i].max(m[i] as f64);
         }
-        // The cell sizes the neighbour search's grid had (the numbering, and with it the
-        // consensus's ties, unchanged since the search moved to a k-d tree). Surfaces
-        // dominate: about 4 Gaussians per occupied cell when spread over the bounding box's
-        // largest face. But at most `MAX_CELLS_PER_GAUSSIAN` cells per Gaussian: Gaussians
-        // filling a volume (a random scene) would otherwise get far more cells than
-        // Gaussians, mostly empty, each a 4-byte start.
-        let ext: Vec<f64> = (0..3).map(|i| (hi[i] - lo[i]).max(1e-6)).collect();
-        let mut faces = [ext[0] * ext[1], ext[1] * ext[2], ext[0] * ext[2]];
-        faces.sort_by(f64::total_cmp);
-        let n = means.len() as f64;
-        let surface_cell = (faces[2] * 4.0 / n).sqrt();
-        let volume_cell = (ext[0] * ext[1] * ext[2] / (n * Self::MAX_CELLS_PER_GAUSSIAN)).cbrt();
-        // Gaussians along a line (a flat box's extent is ~0 in two axes) would get cells far
-        // finer than their spacing.
-        let line_cell = ext.iter().copied().fold(0.0, f64::max) * 4.0 / n;
-        let cell = surface_cell.max(volume_cell).max(line_cell).max(1e-6);
-        let dims = [0, 1, 2].map(|i| ((ext[i] / cell).floor() as i64 + 1).min(1 << 20));
-        let mut grid = Grid {
-            origin: lo,
-            cell,
-            dims,
-            cells: Groups::default(),
-        };
-        let cells: Vec<u32> = means
-            .iter()
-            .map(|&m| grid.index(grid.cell_of(m)) as u32)
-            .collect();
-        grid.cells = Groups::by_key(&cells, (dims[0] * dims[1] * dims[2]) as usize);
-        grid
     }
-
-    fn cell_of(&self, m: [f32; 3]) -> [i64; 3] {
-        [0, 1, 2].map(|i| {
-            (((m[i] as f64 - self.origin[i]) / self.cell).floor() as i64).clamp(0, self.dims[i] - 1)
-        })
-    }
-
-    fn index(&self, c: [i64; 3]) -> usize {
-        ((c[2] * self.dims[1] + c[1]) * self.dims[0] + c[0]) as usize
-    }
+    // The cell sizes the neighbour search's grid had (the numbering, and with it the
+    // consensus's ties, unchanged since the search moved to a k-d tree). Surfaces
+    // dominate: about 4 Gaussians per occupied cell when spread over the bounding box's
+    // largest face. But at most `MAX_CELLS_PER_GAUSSIAN` cells per Gaussian: Gaussians
+    // filling a volume (a random scene) would otherwise get far more cells than
+    // Gaussians, mostly empty, each a 4-byte start.
+    let ext: Vec<f64> = (0..3).map(|i| (hi[i] - lo[i]).max(1e-6)).collect();
+    let mut faces = [ext[0] * ext[1], ext[1] * ext[2], ext[0] * ext[2]];
+    faces.sort_by(f64::total_cmp);
+    let n = means.len() as f64;
+    let surface_cell = (faces[2] * 4.0 / n).sqrt();
+    let volume_cell = (ext[0] * ext[1] * ext[2] / (n * MAX_CELLS_PER_GAUSSIAN)).cbrt();
+    // Gaussians along a line (a flat box's extent is ~0 in two axes) would get cells far
+    // finer than their spacing.
+    let line_cell = ext.iter().copied().fold(0.0, f64::max) * 4.0 / n;
+    let cell = surface_cell.max(volume_cell).max(line_cell).max(1e-6);
+    let dims = [0, 1, 2].map(|i| ((ext[i] / cell).floor() as i64 + 1).min(1 << 20));
+    let cell_of = |m: [f32; 3]| {
+        let c = [0, 1, 2]
+            .map(|i| (((m[i] as f64 - lo[i]) / cell).floor() as i64).clamp(0, dims[i] - 1));
+        ((c[2] * dims[1] + c[1]) * dims[0] + c[0]) as u32
+    };
+    let cells: Vec<u32> = means.iter().map(|&m| cell_of(m)).collect();
+    Groups::by_key(&cells, (dims[0] * dims[1] * dims[2]) as usize)
 }
 
 #[cfg(test)]

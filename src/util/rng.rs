@@ -71,6 +71,13 @@ impl Rng {
         (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
     }
 
+    /// A unit vector in a uniformly random direction (three normals, normalized).
+    pub fn direction(&mut self) -> [f64; 3] {
+        let d = [0, 1, 2].map(|_| self.normal());
+        let len = d.iter().map(|x| x * x).sum::<f64>().sqrt();
+        d.map(|x| x / len)
+    }
+
     pub fn bool(&mut self, p: f64) -> bool {
         self.f64() < p
     }
