@@ -137,6 +137,7 @@ fn bad_numeric_options_are_refused_naming_option_value_and_range() {
         (&render, "--background", "0,2,0", "[0, 1]"),
         (&sweep, "--levels", "0,nan", ">= 0"),
         (&sweep, "--levels", "-1", ">= 0"),
+        (&sweep, "--levels", "0,1.5", "[0, 1]"),
         (&sweep, "--views", "0", ">= 1"),
         (&demo, "--test-views", "0", ">= 1"),
         (&demo, "--width", "0", ">= 1"),

@@ -162,6 +162,72 @@ fn sweep_over_seeds_reports_spread_oracle_and_named_classes() {
     );
 }
 
+/// `sweep` on the tiny room (vote only, one seed) with `extra` arguments; its JSON report.
+fn tiny_vote_sweep(extra: &[&str]) -> serde_json::Value {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path();
+    let run = Command::new(env!("CARGO_BIN_EXE_semsplat"))
+        .arg("sweep")
+        .args(extra)
+        .args(["--preset", "tiny", "--seed", "4", "--methods", "vote"])
+        .args(["--views", "6", "--test-views", "2"])
+        .args(["--width", "64", "--height", "48", "--out"])
+        .arg(out)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let noise = extra[1];
+    serde_json::from_slice(&std::fs::read(out.join(format!("robustness_{noise}.json"))).unwrap())
+        .unwrap()
+}
+
+/// The run's figures (vote, then the oracle) at its only level.
+fn only_level_figures(report: &serde_json::Value) -> Vec<f64> {
+    let level = &report["runs"][0]["levels"][0];
+    [&level["methods"][0], &level["oracle"]]
+        .iter()
+        .flat_map(|m| {
+            [
+                m["miou"].as_f64().unwrap(),
+                m["gaussian_accuracy"].as_f64().unwrap(),
+            ]
+        })
+        .collect()
+}
+
+/// `--base-noise` is added to every level: flicker 0.5 swept over salt 0.3 labels the room
+/// as salt 0.3 swept over flicker 0.5 does (the same figures, vote's and the oracle's), and
+/// not as flicker alone; the report names it.
+#[test]
+fn base_noise_joins_the_swept_level() {
+    let flicker_on_salt = tiny_vote_sweep(&[
+        "--noise",
+        "flicker",
+        "--levels",
+        "0.5",
+        "--base-noise",
+        "salt=0.3",
+    ]);
+    let salt_on_flicker = tiny_vote_sweep(&[
+        "--noise",
+        "salt",
+        "--levels",
+        "0.3",
+        "--base-noise",
+        "flicker=0.5",
+    ]);
+    let flicker_alone = tiny_vote_sweep(&["--noise", "flicker", "--levels", "0.5"]);
+    assert_eq!(flicker_on_salt["base_noise"], "salt=0.3");
+    assert_eq!(flicker_alone["base_noise"], serde_json::Value::Null);
+    let figures = only_level_figures(&flicker_on_salt);
+    assert_eq!(figures, only_level_figures(&salt_on_flicker));
+    assert_ne!(figures, only_level_figures(&flicker_alone));
+}
+
 fn tiny_room(seed: u64, noise: &str) -> SynthScene {
     let mut cfg = SynthConfig::new(RoomSource::from_arg("tiny").unwrap());
     cfg.train_views = 8;

@@ -4,7 +4,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::Result;
+use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use serde::Serialize;
 
@@ -55,12 +55,41 @@ impl NoiseKind {
             NoiseKind::Missing => vec![0.0, 0.1, 0.3, 0.5],
         }
     }
+
+    /// The label noise of one level: `base` with this kind at `level` (boundary: pixels,
+    /// rounded). Checked as `--noise` would check it (a rate in [0, 1]), so every level is
+    /// refused before any runs rather than when the sweep reaches it.
+    fn at(self, base: &NoiseSpec, level: f64) -> Result<NoiseSpec> {
+        let item = if self == NoiseKind::Boundary {
+            format!("boundary={}", level.round() as u32)
+        } else {
+            format!("{}={level}", self.key())
+        };
+        let alone: NoiseSpec = item
+            .parse()
+            .with_context(|| format!("--levels '{level}' for --noise {}", self.key()))?;
+        let mut spec = base.clone();
+        match self {
+            NoiseKind::Flicker => spec.flicker = alone.flicker,
+            NoiseKind::Consistent => spec.consistent = alone.consistent,
+            NoiseKind::Boundary => spec.boundary = alone.boundary,
+            NoiseKind::Salt => spec.salt = alone.salt,
+            NoiseKind::Missing => spec.missing = alone.missing,
+        }
+        Ok(spec)
+    }
 }
 
 #[derive(Args)]
 pub struct SweepArgs {
     #[arg(long, value_enum)]
     noise: NoiseKind,
+    /// Other label noise at every level, beside the kind swept: a segmenter's errors come
+    /// together (e.g. --noise flicker --base-noise boundary=2,salt=0.01,missing=0.05). The
+    /// `--noise` grammar of `semsplat synth`; it may not set the swept kind. Level 0 is then
+    /// this noise alone, the reference the chart and `breaks_at` measure against.
+    #[arg(long, value_name = "SPEC")]
+    base_noise: Option<NoiseSpec>,
     /// Noise levels (default per kind, starting at 0: the clean reference).
     #[arg(long, value_delimiter = ',', num_args = 1.., value_parser = args::non_negative::<f64>)]
     levels: Vec<f64>,
@@ -92,6 +121,14 @@ pub struct SweepArgs {
     seeds: Vec<u64>,
     #[command(flatten)]
     methods: MethodArgs,
+}
+
+impl SweepArgs {
+    /// `--base-noise` as written in the report and chart; None without it (or with `none`).
+    fn base_text(&self) -> Option<String> {
+        let base = self.base_noise.as_ref()?;
+        (*base != NoiseSpec::default()).then(|| base.to_string())
+    }
 }
 
 /// One method's (or the oracle's) figures at one level of one run.
@@ -157,7 +194,8 @@ struct LevelSummary {
     methods: Vec<MethodSpread>,
 }
 
-/// The clean-label reference line: the method with the best mean mIoU at level 0.
+/// The reference line: the method with the best mean mIoU at level 0 (clean labels, or the
+/// base noise alone).
 #[derive(Serialize)]
 struct CleanReference {
     method: String,
@@ -167,13 +205,16 @@ struct CleanReference {
 #[derive(Serialize)]
 struct SweepReport {
     noise: &'static str,
+    /// `--base-noise`, at every level (None: the swept kind alone).
+    base_noise: Option<String>,
     presets: Vec<String>,
     seeds: Vec<u64>,
     /// Mean, min and max over the runs (every preset and seed).
     levels: Vec<LevelSummary>,
-    /// None when the levels do not include 0.
+    /// None when the levels do not include 0. With `base_noise`, level 0 is that noise alone
+    /// rather than clean labels.
     clean_reference: Option<CleanReference>,
-    /// method -> the lowest level where its mean mIoU fell below half of its clean mean
+    /// method -> the lowest level where its mean mIoU fell below half of its mean at level 0
     /// ([`breaks_at`]); None when the levels do not include 0.
     breaks_at: Option<Vec<(String, Option<f64>)>>,
     runs: Vec<RunResult>,
@@ -195,6 +236,10 @@ pub fn run(args: SweepArgs) -> Result<()> {
     } else {
         args.seeds.clone()
     };
+    let base = base_noise(&args)?;
+    let specs = (levels.iter())
+        .map(|&level| Ok((level, args.noise.at(&base, level)?)))
+        .collect::<Result<Vec<_>>>()?;
     check_outputs(&[], &[("--out", Some(&args.out))])?;
     let methods = args.methods.methods()?;
     let gpu = Gpu::new()?;
@@ -202,9 +247,8 @@ pub fn run(args: SweepArgs) -> Result<()> {
     for preset in &presets {
         for &seed in &seeds {
             eprintln!("{preset}, seed {seed}");
-            let levels = levels
-                .iter()
-                .map(|&level| {
+            let levels = (specs.iter())
+                .map(|level| {
                     interrupt::check()?;
                     run_level(&args, &gpu, &methods, (preset, seed), level)
                 })
@@ -228,6 +272,7 @@ pub fn run(args: SweepArgs) -> Result<()> {
     )?;
     let report = SweepReport {
         noise: key,
+        base_noise: args.base_text(),
         presets,
         seeds,
         breaks_at: breaks_at(&summary),
@@ -241,6 +286,17 @@ pub fn run(args: SweepArgs) -> Result<()> {
         serde_json::to_string_pretty(&report)?.as_bytes(),
     )?;
     Ok(())
+}
+
+/// `--base-noise`, refused where it sets the kind the levels sweep (the levels would
+/// silently replace it).
+fn base_noise(args: &SweepArgs) -> Result<NoiseSpec> {
+    let base = args.base_noise.clone().unwrap_or_default();
+    let key = args.noise.key();
+    if args.noise.at(&base, 0.0)? != base {
+        bail!("--base-noise {base} sets {key}, the noise --noise {key} sweeps: leave it out of --base-noise (--levels sets it)");
+    }
+    Ok(base)
 }
 
 fn print_summary(report: &SweepReport) {
@@ -258,24 +314,28 @@ fn print_summary(report: &SweepReport) {
         }
     }
     let Some(breaks) = &report.breaks_at else {
-        println!("no clean level among the levels: add 0 to --levels to see where each method falls below half of its clean mIoU");
+        println!("no level 0 among the levels: add 0 to --levels to see where each method falls below half of its mIoU there");
         return;
+    };
+    let reference = match &report.base_noise {
+        Some(base) => format!("its mIoU with {base} alone"),
+        None => "its clean mIoU".to_string(),
     };
     for (m, b) in breaks {
         match b {
-            Some(l) => println!("{m}: below half of its clean mIoU at {key}={l}"),
-            None => println!("{m}: never below half of its clean mIoU in this range"),
+            Some(l) => println!("{m}: below half of {reference} at {key}={l}"),
+            None => println!("{m}: never below half of {reference} in this range"),
         }
     }
 }
 
-/// Generates the room with `level` of the noise and scores every method and the oracle on it.
+/// Generates the room with `level` of the noise (`noise`, the base noise beside it) and scores every method and the oracle on it.
 fn run_level(
     args: &SweepArgs,
     gpu: &Gpu,
     methods: &[Lifter],
     (preset, seed): (&str, u64),
-    level: f64,
+    (level, noise): &(f64, NoiseSpec),
 ) -> Result<LevelResult> {
     let mut cfg = room_config(
         preset,
@@ -284,12 +344,8 @@ fn run_level(
         (args.width, args.height),
         seed,
     )?;
-    let spec = if args.noise == NoiseKind::Boundary {
-        format!("boundary={}", level.round() as u32)
-    } else {
-        format!("{}={level}", args.noise.key())
-    };
-    cfg.noise = Some(spec.parse::<NoiseSpec>()?);
+    let spec = noise.to_string();
+    cfg.noise = Some(noise.clone());
     eprintln!("{spec}");
     let s = generate(&cfg)?;
     let scores = score_methods(
@@ -314,7 +370,7 @@ fn run_level(
         per_class: r.per_class.clone(),
     };
     Ok(LevelResult {
-        level,
+        level: *level,
         methods: scores.iter().map(figures).collect(),
         oracle: figures(&oracle),
         mislabeled: scores
@@ -419,7 +475,10 @@ fn write_chart(
             },
         })
         .collect();
-    let clean_label = clean.map(|c| format!("clean labels: {} at level 0", c.method));
+    let clean_label = clean.map(|c| match args.base_text() {
+        Some(base) => format!("{base} alone: {} at level 0", c.method),
+        None => format!("clean labels: {} at level 0", c.method),
+    });
     let mut references = vec![Reference {
         label: "oracle bound (instance majority of the noisy labels)",
         points: curve(oracle),
@@ -435,11 +494,14 @@ fn write_chart(
         });
     }
     let key = args.noise.key();
-    let spread = if runs > 1 {
+    let mut spread = if runs > 1 {
         format!(", mean and min-max of {runs} runs")
     } else {
         String::new()
     };
+    if let Some(base) = args.base_text() {
+        spread += &format!(", with {base}");
+    }
     lines(
         &args.out.join(format!("robustness_{key}.png")),
         &format!("{}: mIoU as {key} noise grows{spread}", presets.join("+")),
