@@ -1,10 +1,14 @@
-//! `semsplat sweep` end to end on the tiny room (consistent mislabeling; several seeds), and
+//! `semsplat sweep` end to end on the tiny room (consistent mislabeling; several seeds; other
+//! noise beside the swept kind), and
 //! the instance-oracle bound against a direct computation.
 #![allow(clippy::needless_range_loop)] // index loops mirror the plain transcription
 
 use std::collections::BTreeMap;
-use std::process::Command;
+use std::path::Path;
 
+mod common;
+
+use common::cli::{ok, read_json};
 use semsplat::experiment::{instance_oracle_classes, ORACLE_NAME};
 use semsplat::scene::labels::LabelMap;
 use semsplat::scene::Split;
@@ -14,9 +18,8 @@ use semsplat::synth::{generate, RoomSource, SynthConfig, SynthScene};
 fn sweep_charts_every_method_and_reports_how_mislabels_are_followed() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path();
-    let run = Command::new(env!("CARGO_BIN_EXE_semsplat"))
-        .args([
-            "sweep",
+    let report = sweep(
+        &[
             "--noise",
             "consistent",
             "--levels",
@@ -25,8 +28,6 @@ fn sweep_charts_every_method_and_reports_how_mislabels_are_followed() {
             "tiny",
             "--views",
             "6",
-        ])
-        .args([
             "--test-views",
             "2",
             "--width",
@@ -37,24 +38,14 @@ fn sweep_charts_every_method_and_reports_how_mislabels_are_followed() {
             "25",
             "--joint-iters",
             "25",
-            "--out",
-        ])
-        .arg(out)
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
+        ],
+        out,
     );
     let chart = image::open(out.join("robustness_consistent.png")).unwrap();
     assert_eq!(
         (chart.width(), chart.height()),
         semsplat::eval::chart::CHART_SIZE
     );
-    let report: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out.join("robustness_consistent.json")).unwrap())
-            .unwrap();
     let levels = report["levels"].as_array().unwrap();
     assert_eq!(levels.len(), 2);
     // 9 methods and the oracle.
@@ -144,29 +135,24 @@ fn sweep_over_seeds_reports_spread_oracle_and_named_classes() {
     );
 }
 
-/// `sweep --noise KIND ...` (`args`, which start so) on the tiny room with vote alone: its
-/// JSON report, the chart checked written.
+/// `semsplat sweep --noise KIND ...` (`args`, which start so) writing into `out`: its JSON
+/// report.
+fn sweep(args: &[&str], out: &Path) -> serde_json::Value {
+    let out_arg = out.to_str().unwrap();
+    ok(&[&["sweep"], args, &["--out", out_arg]].concat());
+    read_json(&out.join(format!("robustness_{}.json", args[1])))
+}
+
+/// [`sweep`] on the tiny room with vote alone, the chart checked written.
 fn tiny_vote_sweep(args: &[&str]) -> serde_json::Value {
     let tmp = tempfile::tempdir().unwrap();
-    let out = tmp.path();
-    let run = Command::new(env!("CARGO_BIN_EXE_semsplat"))
-        .arg("sweep")
-        .args(args)
-        .args(["--preset", "tiny", "--methods", "vote"])
-        .args(["--views", "6", "--test-views", "2"])
-        .args(["--width", "64", "--height", "48", "--out"])
-        .arg(out)
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
-    let noise = args[1];
-    assert!(out.join(format!("robustness_{noise}.png")).exists());
-    serde_json::from_slice(&std::fs::read(out.join(format!("robustness_{noise}.json"))).unwrap())
-        .unwrap()
+    let tiny = ["--preset", "tiny", "--methods", "vote", "--views", "6"];
+    let small = ["--test-views", "2", "--width", "64", "--height", "48"];
+    let all: Vec<&str> = [args, &tiny, &small].concat();
+    let report = sweep(&all, tmp.path());
+    let chart = tmp.path().join(format!("robustness_{}.png", args[1]));
+    assert!(chart.exists());
+    report
 }
 
 /// The run's figures (vote, then the oracle) at its only level.
