@@ -1,6 +1,5 @@
 //! `semsplat sweep` end to end on the tiny room (consistent mislabeling; several seeds; other
-//! noise beside the swept kind), and
-//! the instance-oracle bound against a direct computation.
+//! noise beside the swept kind), and the instance-oracle bound against a direct computation.
 #![allow(clippy::needless_range_loop)] // index loops mirror the plain transcription
 
 use std::collections::BTreeMap;
