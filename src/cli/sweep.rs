@@ -329,7 +329,8 @@ fn print_summary(report: &SweepReport) {
     }
 }
 
-/// Generates the room with `level` of the noise (`noise`, the base noise beside it) and scores every method and the oracle on it.
+/// Generates the room with `level` of the swept noise (`noise`: it and the base noise) and
+/// scores every method and the oracle on it.
 fn run_level(
     args: &SweepArgs,
     gpu: &Gpu,
@@ -494,17 +495,17 @@ fn write_chart(
         });
     }
     let key = args.noise.key();
-    let mut spread = if runs > 1 {
+    let mut details = if runs > 1 {
         format!(", mean and min-max of {runs} runs")
     } else {
         String::new()
     };
     if let Some(base) = args.base_text() {
-        spread += &format!(", with {base}");
+        details += &format!(", with {base}");
     }
     lines(
         &args.out.join(format!("robustness_{key}.png")),
-        &format!("{}: mIoU as {key} noise grows{spread}", presets.join("+")),
+        &format!("{}: mIoU as {key} noise grows{details}", presets.join("+")),
         &format!("{key} level"),
         "mIoU on held-out views",
         &series,
