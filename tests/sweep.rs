@@ -145,9 +145,12 @@ fn sweep(args: &[&str], out: &Path) -> serde_json::Value {
 /// [`sweep`] on the tiny room with vote alone, the chart checked written.
 fn tiny_vote_sweep(args: &[&str]) -> serde_json::Value {
     let tmp = tempfile::tempdir().unwrap();
-    let tiny = ["--preset", "tiny", "--methods", "vote", "--views", "6"];
-    let small = ["--test-views", "2", "--width", "64", "--height", "48"];
-    let all: Vec<&str> = [args, &tiny, &small].concat();
+    let tiny = "--preset tiny --methods vote --views 6 --test-views 2 --width 64 --height 48";
+    let all: Vec<&str> = args
+        .iter()
+        .copied()
+        .chain(tiny.split_whitespace())
+        .collect();
     let report = sweep(&all, tmp.path());
     let chart = tmp.path().join(format!("robustness_{}.png", args[1]));
     assert!(chart.exists());
