@@ -14,7 +14,7 @@ use semsplat::fuse::consensus_cluster::{
 };
 use semsplat::fuse::consensus_decide::{binomial_at_most, decide, Consensus};
 use semsplat::fuse::consensus_order::SpatialOrder;
-use semsplat::fuse::consensus_report::segment_report;
+use semsplat::fuse::consensus_report::{segment_report, SegmentReport};
 use semsplat::fuse::consensus_segments::{co_occurrence, label_regions, Observations};
 use semsplat::fuse::consensus_surface::SurfaceNormals;
 use semsplat::fuse::{
@@ -1044,6 +1044,36 @@ fn check_report_names_the_mislabeled_views(
         );
         assert_eq!(split.bounds[1][a], along.fold(f32::NEG_INFINITY, f32::max));
     }
+    check_report_per_class(c, &report, &names);
+}
+
+/// The report's per-class lines against a plain count of the decided segments (of at
+/// least one Gaussian: the report above counts them all): how many, their Gaussians, and
+/// their summed votes' top class (a class is named for the votes its segments won).
+fn check_report_per_class(c: &Consensus, report: &SegmentReport, names: &[String]) {
+    let decided: Vec<_> = c.segments.iter().filter(|s| s.class.is_some()).collect();
+    let listed: usize = report.per_class.iter().map(|e| e.segments).sum();
+    assert_eq!(listed, decided.len(), "every decided segment in one line");
+    for line in &report.per_class {
+        let of_class: Vec<_> = (decided.iter())
+            .filter(|s| names[s.class.unwrap()] == line.class)
+            .collect();
+        assert_eq!(line.segments, of_class.len(), "{}", line.class);
+        let gaussians: usize = of_class.iter().map(|s| s.gaussians).sum();
+        assert_eq!(line.gaussians, gaussians, "{}", line.class);
+        let total: f64 = of_class.iter().flat_map(|s| s.split.iter()).sum();
+        let listed: f64 = line.votes.iter().map(|v| v.1).sum();
+        assert!(
+            (listed - total).abs() < 1e-3 * names.len() as f64,
+            "{}",
+            line.class
+        );
+    }
+    assert_eq!(
+        report.segments,
+        c.segments.len(),
+        "segments of at least one"
+    );
 }
 
 /// The second-largest vote of a split.

@@ -111,43 +111,46 @@ pub fn segment_report(
         })
         .collect();
     flagged.sort_by_key(|s| (std::cmp::Reverse(s.gaussians), s.segment));
-    let mut per_class: Vec<(usize, usize, Vec<f64>)> =
-        vec![(0, 0, vec![0.0; names.len()]); names.len()];
-    let sized = consensus
-        .segments
-        .iter()
-        .filter(|s| s.gaussians >= min_segment);
-    for seg in sized.clone() {
-        if let Some(c) = seg.class {
-            let entry = &mut per_class[c];
-            entry.0 += 1;
-            entry.1 += seg.gaussians;
-            entry
-                .2
-                .iter_mut()
-                .zip(&seg.split)
-                .for_each(|(t, v)| *t += v);
-        }
-    }
     SegmentReport {
-        segments: sized.count(),
+        segments: (consensus.segments.iter())
+            .filter(|s| s.gaussians >= min_segment)
+            .count(),
         from_segment: consensus.from_segment,
         from_neighbour_segments: consensus.from_neighbour_segments,
         from_neighbours: consensus.from_neighbours,
         smoothed: consensus.smoothed,
         flagged,
-        per_class: per_class
-            .iter()
-            .enumerate()
-            .filter(|(_, e)| e.0 > 0)
-            .map(|(c, e)| ClassSplit {
+        per_class: class_splits(consensus, names.len(), min_segment)
+            .map(|(c, segments, gaussians, votes)| ClassSplit {
                 class: names[c].clone(),
-                segments: e.0,
-                gaussians: e.1,
-                votes: named(&e.2),
+                segments,
+                gaussians,
+                votes: named(&votes),
             })
             .collect(),
     }
+}
+
+/// Per class decided for any segment of at least `min_segment` Gaussians: (class, those
+/// segments, their Gaussians, their votes summed), by class.
+fn class_splits(
+    consensus: &Consensus,
+    classes: usize,
+    min_segment: usize,
+) -> impl Iterator<Item = (usize, usize, usize, Vec<f64>)> {
+    let mut per_class = vec![(0, 0, vec![0.0; classes]); classes];
+    let sized = (consensus.segments.iter()).filter(|s| s.gaussians >= min_segment);
+    for seg in sized {
+        if let Some(c) = seg.class {
+            let (segments, gaussians, votes) = &mut per_class[c];
+            *segments += 1;
+            *gaussians += seg.gaussians;
+            votes.iter_mut().zip(&seg.split).for_each(|(t, v)| *t += v);
+        }
+    }
+    (per_class.into_iter().enumerate())
+        .filter(|(_, e)| e.0 > 0)
+        .map(|(c, (segments, gaussians, votes))| (c, segments, gaussians, votes))
 }
 
 /// Per flagged segment, in id order: the mean and the bounds of its Gaussians' centers. A
