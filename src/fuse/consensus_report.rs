@@ -121,7 +121,7 @@ pub fn segment_report(
         smoothed: consensus.smoothed,
         flagged,
         per_class: class_splits(consensus, names.len(), min_segment)
-            .map(|(c, segments, gaussians, votes)| ClassSplit {
+            .map(|(c, (segments, gaussians, votes))| ClassSplit {
                 class: names[c].clone(),
                 segments,
                 gaussians,
@@ -131,13 +131,13 @@ pub fn segment_report(
     }
 }
 
-/// Per class decided for any segment of at least `min_segment` Gaussians: (class, those
-/// segments, their Gaussians, their votes summed), by class.
+/// Per class decided for any segment of at least `min_segment` Gaussians: (class, (those
+/// segments, their Gaussians, their votes summed)), by class.
 fn class_splits(
     consensus: &Consensus,
     classes: usize,
     min_segment: usize,
-) -> impl Iterator<Item = (usize, usize, usize, Vec<f64>)> {
+) -> impl Iterator<Item = (usize, (usize, usize, Vec<f64>))> {
     let mut per_class = vec![(0, 0, vec![0.0; classes]); classes];
     let sized = (consensus.segments.iter()).filter(|s| s.gaussians >= min_segment);
     for seg in sized {
@@ -148,9 +148,7 @@ fn class_splits(
             votes.iter_mut().zip(&seg.split).for_each(|(t, v)| *t += v);
         }
     }
-    (per_class.into_iter().enumerate())
-        .filter(|(_, e)| e.0 > 0)
-        .map(|(c, (segments, gaussians, votes))| (c, segments, gaussians, votes))
+    (per_class.into_iter().enumerate()).filter(|(_, e)| e.0 > 0)
 }
 
 /// Per flagged segment, in id order: the mean and the bounds of its Gaussians' centers. A
