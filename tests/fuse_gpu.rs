@@ -10,6 +10,7 @@ use semsplat::fuse::{
     accumulate, assign_one_vs_rest, assign_semantic, Accumulation, ClassScores, FuseConfig,
     LabelSource, Method, NO_LABEL,
 };
+use semsplat::gpu::Gpu;
 use semsplat::render::rasterizer::SplitSizes;
 use semsplat::render::reference::{self, RenderSettings};
 use semsplat::render::GpuScene;
@@ -69,7 +70,16 @@ fn run(
     labels: &Vec<Option<Vec<u32>>>,
     cfg: &FuseConfig,
 ) -> ClassScores {
-    let gpu = gpu();
+    run_on(gpu(), g, cams, labels, cfg)
+}
+
+fn run_on(
+    gpu: &Gpu,
+    g: &Gaussians,
+    cams: &[Camera],
+    labels: &Vec<Option<Vec<u32>>>,
+    cfg: &FuseConfig,
+) -> ClassScores {
     let scene = GpuScene::upload(gpu, g).unwrap();
     accumulate(gpu, &scene, cams, labels, CLASSES, cfg, |_, _| {})
         .unwrap()
@@ -466,6 +476,60 @@ fn host_arithmetic_overflow_panics() {
         wrapped.is_err(),
         "overflow checks are off: u32::MAX + 1 did not panic"
     );
+}
+
+/// The per-tile kernels with one pixel an invocation (a GPU's form) and with several (a CPU
+/// driver's, `*_wide`) walk each pixel's list in the same order and sum the same
+/// fixed-point weights: the same evidence, bit for bit, in every method that walks the
+/// tiles (occlusion reads the forward render's depth), whole and in windows of 50 entries.
+#[test]
+fn both_tile_forms_give_the_same_evidence() {
+    let g = scene(2_000, 19);
+    let cams = cameras();
+    let labels = label_maps(&cams, 20);
+    let both_forms = |cfg: &FuseConfig| {
+        [false, true].map(|wide| run_on(common::gpu_with_wide_tiles(wide), &g, &cams, &labels, cfg))
+    };
+    for method in [
+        Method::VoteOcclusion,
+        Method::VoteWeighted,
+        Method::FlashSplat,
+        Method::FlashSplatPerView,
+    ] {
+        for window_len in [None, Some(50)] {
+            let cfg = FuseConfig {
+                method,
+                split: SplitSizes {
+                    window_len,
+                    ..Default::default()
+                },
+                ..Default::default()
+            };
+            let [one, several] = both_forms(&cfg);
+            assert!(one.data.iter().any(|&v| v > 0.0), "{method:?}: no evidence");
+            assert_eq!(
+                one.data, several.data,
+                "{method:?}, windows {window_len:?}: the tile forms differ"
+            );
+        }
+    }
+    // Float atomics sum in the order they land: the two forms agree to rounding.
+    let cfg = FuseConfig {
+        method: Method::FlashSplat,
+        accumulation: Accumulation::Float,
+        ..Default::default()
+    };
+    let [one, several] = both_forms(&cfg);
+    let top = one.data.iter().fold(0.0f64, |m, &v| m.max(v));
+    for (i, (a, b)) in one.data.iter().zip(&several.data).enumerate() {
+        assert!(
+            (a - b).abs() <= 1e-5 * top,
+            "float entry {i}: {a} against {b}"
+        );
+    }
+    for wide in [false, true] {
+        check_validation(common::gpu_with_wide_tiles(wide));
+    }
 }
 
 /// Every tiled method walks the tile lists in many small windows (per-pixel state carried

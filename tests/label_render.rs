@@ -90,13 +90,18 @@ fn label_renders_equal_the_argmax_of_one_hot_semantics() {
     let ids: Vec<i32> = (0..40).map(|k| 7 + 3 * k).collect();
     let classes = random_classes(g.len(), &ids, 43);
     let want = one_hot_labels(&g, &classes, &cam);
-    let got = LabelRenderer::new(gpu(), &g, &classes)
-        .unwrap()
-        .render_ids(&cam)
-        .unwrap();
     let labelled = want.iter().filter(|l| l.is_some()).count();
     assert!(labelled > want.len() / 2, "{labelled} labelled pixels");
-    assert_eq!(got, want);
+    // Both forms of the per-tile kernels: one pixel an invocation and several (`*_wide`).
+    for wide in [false, true] {
+        let gpu = common::gpu_with_wide_tiles(wide);
+        let got = LabelRenderer::new(gpu, &g, &classes)
+            .unwrap()
+            .render_ids(&cam)
+            .unwrap();
+        assert_eq!(got, want, "wide tiles {wide}");
+        check_validation(gpu);
+    }
     check_validation(gpu());
 }
 

@@ -735,6 +735,70 @@ fn large_images_and_many_classes_render_in_bands() {
 /// Median depth (the occlusion test of segment consensus): per pixel, the depth of the
 /// Gaussian that takes the transmittance below one half, against the f64 reference's
 /// contributions; in windows of 50 entries, so the state is carried between dispatches.
+/// Forward blending with one pixel an invocation (a GPU's form) and with several (a CPU
+/// driver's, `*_wide`): each pixel blends the same entries in the same order, so every
+/// output is the same bit for bit (RGB with 17 channels, whole and in windows of 50
+/// entries, and the median depth). The reference checks above run the device's default
+/// form; this carries them to the other.
+#[test]
+fn both_tile_forms_render_the_same_bytes() {
+    let g = random_scene(&RandomSceneSpec {
+        n: 3_000,
+        channels: 17,
+        sh_degree: 1,
+        seed: 41,
+        ..Default::default()
+    });
+    let opts = RenderOptions {
+        semantics: Some(SemanticMode::RawLogits),
+        ..Default::default()
+    };
+    for window_len in [None, Some(50)] {
+        for cam in poses(80, 50) {
+            let [one, several] = [false, true].map(|wide| {
+                let gpu = common::gpu_with_wide_tiles(wide);
+                let mut raster = Rasterizer::new(gpu);
+                if let Some(len) = window_len {
+                    raster.set_window_len(len);
+                }
+                let scene = GpuScene::upload(gpu, &g).unwrap();
+                let f = raster.render(&scene, &cam, &opts).unwrap();
+                raster
+                    .run_tiled_in_bands(&scene, &cam, &opts, |rec, tiles| {
+                        tiles.record_median_depth(rec)
+                    })
+                    .unwrap();
+                let n = (cam.width * cam.height) as usize;
+                let median: Vec<f32> = gpu.download(raster.depth(), 0, n).unwrap();
+                (
+                    f.rgb,
+                    f.alpha,
+                    f.depth,
+                    f.final_t,
+                    f.last,
+                    f.n_contrib,
+                    f.sem,
+                    f.sem_norm,
+                    median,
+                )
+            });
+            assert!(
+                one.1.iter().any(|&a| a > 0.5),
+                "{}: nothing rendered",
+                cam.name
+            );
+            assert!(
+                one == several,
+                "{} windows {window_len:?}: the tile forms differ",
+                cam.name
+            );
+        }
+    }
+    for wide in [false, true] {
+        check_validation(common::gpu_with_wide_tiles(wide));
+    }
+}
+
 #[test]
 fn median_depth_matches_the_reference() {
     let gpu = gpu();

@@ -11,7 +11,9 @@
 // center: the weighted vote. per_view divides each weight by the Gaussian's projected
 // footprint in this view, 2 pi opacity sqrt(det Sigma2d), so a view adds the share of the
 // Gaussian it sees under each label (at most about 1) instead of a number of pixels: near
-// views no longer outweigh far ones.
+// views no longer outweigh far ones. An invocation takes PIXELS of the tile's pixels
+// (tile_window.glsl: one on a GPU, more in the `*_wide` kernels for CPU drivers) and adds
+// their weights for one row together before the subgroup does.
 #extension GL_EXT_control_flow_attributes : require
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_vote : require
@@ -22,8 +24,6 @@
 #define BATCH TILE_PIXELS
 // The row a step adds to when it adds nothing: an unlabeled pixel, or a weight of 0.
 #define NO_ROW NO_LABEL
-
-layout(local_size_x = TILE_PIXELS) in;
 
 layout(push_constant) uniform ContribParams {
     // Addresses of the per-Gaussian arrays (addressed_arrays.glsl).
@@ -51,6 +51,7 @@ layout(push_constant) uniform ContribParams {
 
 layout(set = 0, binding = 0) readonly buffer RangesBuf { uvec2 data[]; } tile_ranges;
 #include "tile_window.glsl"
+layout(local_size_x = LANES) in;
 layout(set = 0, binding = 1) readonly buffer IdsBuf { uint data[]; } isect_ids;
 layout(set = 0, binding = 4) readonly buffer LabelsBuf { uint data[]; } labels; // compact class per pixel
 layout(set = 0, binding = 5) buffer CarryBuf { vec2 data[]; } carry;           // (T, done) between windows
@@ -64,90 +65,174 @@ shared vec4 s_conic[BATCH];
 shared uint s_id[BATCH];
 shared float s_scale[BATCH]; // per_view: 1 / footprint; else 1
 
-void accumulate(uint row, uint gaussian, float w);
+// The includer's evidence entry: `Amount` (a weight as the entries sum it), `amount_of(w)`
+// and `accumulate(row, gaussian, amount)` (from uniform control flow; NO_ROW adds nothing).
+Amount amount_of(float w);
+void accumulate(uint row, uint gaussian, Amount amount);
+
+// One pixel's walk: its row of the evidence, transmittance, and whether it is done.
+struct Pixel {
+    uint row;
+    bool labeled;
+    float T;
+    bool done;
+};
+
+Pixel pixel_start(TileWindow tw, uint window_start) {
+    // Rows of A this pass holds: labels outside [row_begin, row_begin + rows) wait for
+    // their own pass (unsigned wrap makes labels below row_begin fail the test too).
+    uint label = tw.inside ? labels.data[tw.pix] : NO_LABEL;
+    Pixel p;
+    p.row = label - pc.row_begin;
+    p.labeled = label != NO_LABEL && p.row < pc.rows;
+    p.T = 1.0;
+    p.done = !p.labeled;
+    if (window_start > 0 && p.labeled) {
+        vec2 c = carry.data[tw.pix];
+        p.T = c.x;
+        p.done = c.y != 0.0;
+    }
+    return p;
+}
+
+#if PIXELS > 1
+// The step's conic and fraction, read once for all the invocation's pixels (each read of
+// shared memory is a loop over the lanes on a CPU driver).
+vec3 step_conic;
+vec2 step_frac;
+#define STEP_CONIC step_conic
+#define STEP_FRAC step_frac
+#else
+// Read only where the pixel is not done.
+#define STEP_CONIC s_conic[j].xyz
+#define STEP_FRAC s_frac[j]
+#endif
+
+// The weight alpha * T pixel `p` at `pixel` gives batch slot `j` (0 where it takes none).
+float contrib_step(inout Pixel p, vec2 pixel, uint j, vec4 g) {
+    float w = 0.0;
+    if (!p.done) {
+        vec2 d = pixel_offset(g.xy, STEP_FRAC, pixel);
+        float sigma = conic_sigma(STEP_CONIC, d);
+        float alpha = sigma < 0.0 ? 0.0 : min(ALPHA_MAX, g.w * exp(-sigma));
+        if (alpha >= ALPHA_MIN) {
+            float next_t = p.T * (1.0 - alpha);
+            if (next_t <= T_MIN) {
+                p.done = true;
+            } else {
+                w = alpha * p.T;
+                p.T = next_t;
+            }
+        }
+    }
+    if (pc.center_only == 1 && g.xy != pixel) {
+        w = 0.0;
+    }
+    return w * s_scale[j];
+}
+
+bool all_done(Pixel px[PIXELS]) {
+    bool done = true;
+    [[unroll]] for (uint q = 0; q < PIXELS; q++) {
+        done = done && px[q].done;
+    }
+    return done;
+}
+
+// Loads entry `idx` of the tile's list into batch slot `slot`.
+void load_entry(uint idx, uint slot) {
+    uint g = isect_ids.data[idx];
+    s_id[slot] = g;
+    vec4 xy_depth_opacity_g = xy_depth_opacity.data[g];
+    vec4 con = conics.data[g];
+    s_xy_depth_opacity[slot] = xy_depth_opacity_g;
+    s_frac[slot] = xy_frac.data[g];
+    s_conic[slot] = con;
+    // The footprint is the Gaussian's, not the pixel's: once per entry, not per step.
+    // The conic is the inverse of Sigma2d: sqrt(det Sigma2d) = 1 / sqrt(det conic).
+    s_scale[slot] = pc.per_view == 1
+        ? sqrt(max(con.x * con.z - con.y * con.y, 0.0)) / (TWO_PI * xy_depth_opacity_g.w)
+        : 1.0;
+}
 
 void main() {
-    uint width = pc.width, height = pc.height, n = pc.n;
-    uint window_start = pc.window_start, window_len = pc.window_len, row_begin = pc.row_begin, rows = pc.rows;
+    uint width = pc.width, height = pc.height;
+    uint window_start = pc.window_start, window_len = pc.window_len;
     if (status.data[ST_OVERFLOW] != 0 || status.data[ST_ISECT_WRAPPED] != 0) {
         return;
     }
-    TileWindow tw = tile_window_in_band(width, height, pc.tiles_x, window_start, window_len, pc.tile_row_base);
-    uint t = tw.t, px = tw.px, py = tw.py, pix = tw.pix;
-    bool inside = tw.inside;
-    vec2 pixel = vec2(px, py);
-    if (window_start >= tw.len) {
+    uint lane = tile_lane();
+    TileWindow tw[PIXELS];
+    tile_windows(tw, width, height, pc.tiles_x, window_start, window_len, pc.tile_row_base);
+    if (window_start >= tw[0].len) {
         return;
     }
-    uint start = tw.start, end = tw.end;
-    bool last_window = tw.last;
-
-    // Rows of A this pass holds: labels outside [row_begin, row_begin + rows) wait for
-    // their own pass (unsigned wrap makes labels below row_begin fail the test too).
-    uint label = inside ? labels.data[pix] : NO_LABEL;
-    uint row = label - row_begin;
-    bool labeled = label != NO_LABEL && row < rows;
-    float T = 1.0;
-    bool done = !labeled;
-    if (window_start > 0 && labeled) {
-        vec2 c = carry.data[pix];
-        T = c.x;
-        done = c.y != 0.0;
+    uint start = tw[0].start, end = tw[0].end;
+    Pixel px[PIXELS];
+    [[unroll]] for (uint q = 0; q < PIXELS; q++) {
+        px[q] = pixel_start(tw[q], window_start);
     }
 
     for (uint b = start; b < end; b += BATCH) {
         // Stop the tile once every pixel is done.
-        if (workgroup_all_done(done)) {
+        if (workgroup_all_done(all_done(px))) {
             break;
         }
-        uint idx = b + t;
-        if (idx < end) {
-            uint g = isect_ids.data[idx];
-            s_id[t] = g;
-            s_xy_depth_opacity[t] = xy_depth_opacity.data[g];
-            s_frac[t] = xy_frac.data[g];
-            s_conic[t] = conics.data[g];
-            // The footprint is the Gaussian's, not the pixel's: once per entry, not per step.
-            // The conic is the inverse of Sigma2d: sqrt(det Sigma2d) = 1 / sqrt(det conic).
-            vec4 con = s_conic[t];
-            s_scale[t] = pc.per_view == 1
-                ? sqrt(max(con.x * con.z - con.y * con.y, 0.0)) / (TWO_PI * s_xy_depth_opacity[t].w)
-                : 1.0;
+        [[unroll]] for (uint q = 0; q < PIXELS; q++) {
+            uint slot = lane + q * LANES;
+            if (b + slot < end) {
+                load_entry(b + slot, slot);
+            }
         }
         barrier();
         uint count = min(BATCH, end - b);
         for (uint j = 0; j < count; j++) {
             // A subgroup-uniform exit, as blending's per-lane one: once every pixel of the
             // subgroup is saturated or unlabeled, the rest of the batch adds nothing.
-            if (subgroupAll(done)) {
+            if (subgroupAll(all_done(px))) {
                 break;
             }
-            float w = 0.0;
             vec4 g = s_xy_depth_opacity[j];
-            if (!done) {
-                vec3 con = s_conic[j].xyz;
-                vec2 d = pixel_offset(g.xy, s_frac[j], pixel);
-                float sigma = conic_sigma(con, d);
-                float alpha = sigma < 0.0 ? 0.0 : min(ALPHA_MAX, g.w * exp(-sigma));
-                if (alpha >= ALPHA_MIN) {
-                    float next_t = T * (1.0 - alpha);
-                    if (next_t <= T_MIN) {
-                        done = true;
-                    } else {
-                        w = alpha * T;
-                        T = next_t;
+            uint id = s_id[j];
+#if PIXELS == 1
+            float w = contrib_step(px[0], vec2(tw[0].px, tw[0].py), j, g);
+            accumulate(w > 0.0 ? px[0].row : NO_ROW, id, amount_of(w));
+#else
+            step_conic = s_conic[j].xyz;
+            step_frac = s_frac[j];
+            Amount amount[PIXELS];
+            bool pending = false;
+            [[unroll]] for (uint q = 0; q < PIXELS; q++) {
+                float w = contrib_step(px[q], vec2(tw[q].px, tw[q].py), j, g);
+                amount[q] = amount_of(w);
+                pending = pending || w > 0.0;
+            }
+            // The invocation's pixels by row, a row a round (mostly one: neighbouring
+            // pixels share their label), each summed in the subgroup by accumulate.
+            while (subgroupAny(pending)) {
+                uint row = NO_ROW;
+                Amount sum = amount_of(0.0);
+                [[unroll]] for (uint q = 0; q < PIXELS; q++) {
+                    bool takes = amount[q] != amount_of(0.0) && (row == NO_ROW || px[q].row == row);
+                    if (takes) {
+                        row = px[q].row;
+                        sum += amount[q];
+                        amount[q] = amount_of(0.0);
                     }
                 }
+                accumulate(row, id, sum);
+                pending = false;
+                [[unroll]] for (uint q = 0; q < PIXELS; q++) {
+                    pending = pending || amount[q] != amount_of(0.0);
+                }
             }
-            if (pc.center_only == 1 && g.xy != pixel) {
-                w = 0.0;
-            }
-            w *= s_scale[j];
-            accumulate(w > 0.0 ? row : NO_ROW, s_id[j], w);
+#endif
         }
         barrier();
     }
-    if (labeled && !last_window) {
-        carry.data[pix] = vec2(T, done ? 1.0 : 0.0);
+    [[unroll]] for (uint q = 0; q < PIXELS; q++) {
+        if (px[q].labeled && !tw[q].last) {
+            carry.data[tw[q].pix] = vec2(px[q].T, px[q].done ? 1.0 : 0.0);
+        }
     }
 }

@@ -945,8 +945,12 @@ fn record_contrib(
     cfg: &FuseConfig,
 ) -> Result<()> {
     let kernel = match cfg.accumulation {
-        Accumulation::FixedPoint => ids::FUSE_CONTRIB_FIXED,
-        Accumulation::Float => ids::FUSE_CONTRIB_FLOAT,
+        Accumulation::FixedPoint => {
+            ids::FUSE_CONTRIB_FIXED.for_tiles(ids::FUSE_CONTRIB_FIXED_WIDE, rec.gpu())
+        }
+        Accumulation::Float => {
+            ids::FUSE_CONTRIB_FLOAT.for_tiles(ids::FUSE_CONTRIB_FLOAT_WIDE, rec.gpu())
+        }
     };
     let f = &tiles.frame;
     let bands = f.bands(CONTRIB_CARRY_BYTES)?;

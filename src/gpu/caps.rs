@@ -54,6 +54,12 @@ pub struct DeviceCaps {
     /// cuts its loops short, where the driver has such a cap (see [`loop_iteration_cap`]).
     /// Kernels that walk long lists split the walk into dispatches that stay below it.
     pub loop_iteration_cap: Option<u32>,
+    /// Per-tile kernels take several pixels an invocation (the `*_wide` kernels,
+    /// glsl/common/tile_window.glsl): on by default on CPU devices, whose drivers read
+    /// shared and device memory one SIMD lane at a time, so an invocation per pixel reads
+    /// every step of a tile's list once per pixel (lavapipe's forward blending 4-6x
+    /// slower). See [`wide_tiles`].
+    pub wide_tiles: bool,
     pub heaps: Vec<Heap>,
     #[serde(skip)]
     pub compute_queue_family: Option<u32>,
@@ -134,6 +140,7 @@ pub fn probe_device(instance: &ash::Instance, pd: vk::PhysicalDevice) -> (Device
         device_type: base.device_type,
         vendor_id: base.vendor_id,
         loop_iteration_cap: loop_iteration_cap(&driver_name),
+        wide_tiles: base.device_type == vk::PhysicalDeviceType::CPU,
         driver_name,
         driver_info: cstr(&props.driver.driver_info),
         vulkan_version: format!(
@@ -177,6 +184,19 @@ pub(crate) fn binding_limit(device: u64, asked: Option<u64>) -> u64 {
             .and_then(|v| v.parse::<u64>().ok())
     });
     asked.map_or(device, |a| (a / 256 * 256).clamp(256, device))
+}
+
+/// Whether per-tile kernels take several pixels an invocation: `asked` (else
+/// `SEMSPLAT_WIDE_TILES`, 0 or 1), or the device's default (`device`, CPU devices). Tests
+/// set it to run both forms of every per-tile kernel on one device; see
+/// `GpuOptions::wide_tiles`.
+pub(crate) fn wide_tiles(device: bool, asked: Option<bool>) -> bool {
+    let asked = asked.or_else(|| match std::env::var("SEMSPLAT_WIDE_TILES").as_deref() {
+        Ok("0") => Some(false),
+        Ok("1") => Some(true),
+        _ => None,
+    });
+    asked.unwrap_or(device)
 }
 
 /// The properties of the `vkGetPhysicalDeviceProperties2` chain we read (`size_control`

@@ -9,7 +9,7 @@ use std::sync::{Arc, Mutex};
 use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 
-use super::caps::{binding_limit, probe_device, DeviceCaps};
+use super::caps::{binding_limit, probe_device, wide_tiles, DeviceCaps};
 use super::error::{GpuError, GpuResult, VkContext};
 use super::kernel::Pipeline;
 use super::recorder::RecorderParts;
@@ -29,6 +29,10 @@ pub struct GpuOptions {
     /// (defaults to `SEMSPLAT_MAX_BINDING`): tests set it so small scenes take the paths
     /// that split work across bindings, as scenes past the real limit do.
     pub max_binding: Option<u64>,
+    /// Per-tile kernels with several pixels an invocation, or one (defaults to
+    /// `SEMSPLAT_WIDE_TILES`, else on for CPU devices): both give the same results, and
+    /// tests run each form.
+    pub wide_tiles: Option<bool>,
 }
 
 pub(crate) struct Inner {
@@ -258,6 +262,7 @@ impl Gpu {
         let (physical, mut caps) = pick_physical(&instance, wanted.as_deref())?;
         caps.max_storage_buffer_range =
             binding_limit(caps.max_storage_buffer_range, opts.max_binding);
+        caps.wide_tiles = wide_tiles(caps.wide_tiles, opts.wide_tiles);
         let queue_family = caps
             .compute_queue_family
             .expect("usable device has a compute queue");

@@ -85,6 +85,20 @@ impl<P> Kernel<P> {
         self.id.info()
     }
 
+    /// This per-tile kernel, or its `*_wide` form (several pixels an invocation,
+    /// glsl/common/tile_window.glsl) where the device takes it (`DeviceCaps::wide_tiles`).
+    pub fn for_tiles(self, wide: Kernel<P>, gpu: &crate::gpu::Gpu) -> Kernel<P> {
+        debug_assert_eq!(
+            format!("{}_wide", self.info().name),
+            wide.info().name,
+            "the wide form of the same kernel"
+        );
+        match gpu.caps().wide_tiles {
+            true => wide,
+            false => self,
+        }
+    }
+
     /// Workgroups that give one invocation to each of `invocations` items along x, from the
     /// kernel's reflected workgroup size.
     pub fn groups_for(self, invocations: u32) -> [u32; 3] {

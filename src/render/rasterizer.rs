@@ -1257,20 +1257,21 @@ impl TileLists<'_> {
                         ("out_last", px(&b.last, 4)),
                         ("out_n_contrib", px(&b.n_contrib, 4)),
                     ]);
-                    let kernel = match (f.labels, f.semantics) {
+                    let (narrow, wide) = match (f.labels, f.semantics) {
                         (Some(_), _) => {
                             bindings.push(("label_best", px(&b.label_best, 8)));
-                            ids::RASTER_BLEND_LABEL
+                            (ids::RASTER_BLEND_LABEL, ids::RASTER_BLEND_LABEL_WIDE)
                         }
                         (None, Some(_)) => {
                             bindings.extend([
                                 ("out_sem", px(&b.sem, sem_bytes)),
                                 ("out_sem_norm", px(&b.sem_norm, sem_bytes)),
                             ]);
-                            ids::RASTER_BLEND_SEM
+                            (ids::RASTER_BLEND_SEM, ids::RASTER_BLEND_SEM_WIDE)
                         }
-                        (None, None) => ids::RASTER_BLEND_RGB,
+                        (None, None) => (ids::RASTER_BLEND_RGB, ids::RASTER_BLEND_RGB_WIDE),
                     };
+                    let kernel = narrow.for_tiles(wide, rec.gpu());
                     rec.dispatch_ranges(kernel, &bindings, &params, band.groups(f.tiles_x))?;
                 }
                 rec.barrier();
@@ -1294,7 +1295,8 @@ impl TileLists<'_> {
                 params.tile_row_base = band.first_tile_row;
                 let mut bindings = self.window_bindings(band, carry_bytes);
                 bindings.push(("out_depth", band.range(&self.bufs.depth, 4)));
-                let kernel = ids::RASTER_BLEND_MEDIAN_DEPTH;
+                let kernel = ids::RASTER_BLEND_MEDIAN_DEPTH
+                    .for_tiles(ids::RASTER_BLEND_MEDIAN_DEPTH_WIDE, rec.gpu());
                 rec.dispatch_ranges(kernel, &bindings, &params, band.groups(f.tiles_x))?;
             }
             rec.barrier();

@@ -26,6 +26,21 @@ pub fn gpu() -> &'static Gpu {
     })
 }
 
+/// A second and third device handle with the per-tile kernels in one form each (`wide`:
+/// several pixels an invocation, the default on CPU devices; else one, the default on
+/// GPUs), for tests that run both forms on one machine.
+pub fn gpu_with_wide_tiles(wide: bool) -> &'static Gpu {
+    static FORMS: [OnceLock<Gpu>; 2] = [OnceLock::new(), OnceLock::new()];
+    FORMS[wide as usize].get_or_init(|| {
+        Gpu::with_options(GpuOptions {
+            validation: true,
+            wide_tiles: Some(wide),
+            ..Default::default()
+        })
+        .unwrap_or_else(|e| panic!("tests need a Vulkan device with validation layers: {e}"))
+    })
+}
+
 pub fn check_validation(gpu: &Gpu) {
     assert!(
         gpu.validation_enabled(),

@@ -1,0 +1,7 @@
+#version 460
+// blend_label.comp for CPU drivers: 8 pixels an invocation (tile_window.glsl, PIXELS).
+#include "shared_constants.glsl"
+#define PIXELS 8
+#define CHUNK_CHANNELS SEM_CHUNK
+#define LABEL_ARGMAX
+#include "blend_body.glsl"
