@@ -532,6 +532,33 @@ fn both_tile_forms_give_the_same_evidence() {
     }
 }
 
+/// A tile list longer than lavapipe's loop cap (70,000 entries, one 16x16 tile) under a
+/// label map of four classes in bands of four pixel rows, so the wide form's invocations
+/// (a column of the tile each) hold four rows of the evidence at every step: the whole
+/// list is walked (the Gaussian last in depth order gets its share) and A matches the
+/// reference, in both forms.
+#[test]
+fn a_tile_longer_than_the_loop_cap_accumulates_whole() {
+    let n = 70_000;
+    let (g, cam) = common::long_tile(n);
+    let cams = vec![cam];
+    let labels = vec![Some(
+        (0..256u32).map(|p| (p / 16) / 4).collect::<Vec<u32>>(),
+    )];
+    let want = reference_contributions(&g, &cams, &labels, Weights::Every);
+    for wide in [false, true] {
+        let gpu = common::gpu_with_wide_tiles(wide);
+        let got = run_on(gpu, &g, &cams, &labels, &FuseConfig::default());
+        let last: f64 = (0..CLASSES).map(|e| got.get(e, n)).sum();
+        assert!(
+            last > 0.01,
+            "wide tiles {wide}: the last entry added {last}"
+        );
+        assert_close(&got, &want, &format!("70k-entry tile, wide tiles {wide}"));
+        check_validation(gpu);
+    }
+}
+
 /// Every tiled method walks the tile lists in many small windows (per-pixel state carried
 /// between dispatches) and gets exactly what one window per list gives. The occlusion vote
 /// once computed its window starts from a window length of u32::MAX / 2, which overflowed

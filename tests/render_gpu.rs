@@ -445,31 +445,8 @@ fn a_tile_longer_than_lavapipes_loop_cap_renders_whole() {
     // list (about 273 of them blend at each pixel, T stays near 0.25), so a blend cut off
     // after 65,535 iterations would miss the bright one.
     let gpu = gpu();
-    let cam = Camera::look_at("tile", DVec3::ZERO, DVec3::Z, -DVec3::Y, 16, 16, 60.0);
     let n = 70_000;
-    let mut rng = semsplat::util::Rng::new(5);
-    let mut g = Gaussians::default();
-    for i in 0..=n {
-        let (z, px, py, logit, scale) = if i < n {
-            (
-                2.0 + i as f64 * 1e-5,
-                rng.below(16) as f64 + 0.5,
-                rng.below(16) as f64 + 0.5,
-                -5.3,
-                1e-4,
-            )
-        } else {
-            (10.0, 8.0, 8.0, 3.0, 5.0)
-        };
-        let x = (px - cam.cx) / cam.fx * z;
-        let y = (py - cam.cy) / cam.fy * z;
-        g.means.push([x as f32, y as f32, z as f32]);
-        g.log_scales.push([(scale as f32).ln(); 3]);
-        g.quats.push([1.0, 0.0, 0.0, 0.0]);
-        g.opacity_logits.push(logit as f32);
-        let dc = if i < n { -1.0 } else { 3.0 };
-        g.sh.extend([dc, -1.0, -1.0]);
-    }
+    let (g, cam) = common::long_tile(n);
     let mut raster = Rasterizer::new(gpu);
     let f = compare(&mut raster, &g, &cam, None, "70k-entry tile");
     assert!(

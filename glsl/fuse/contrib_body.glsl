@@ -139,6 +139,31 @@ bool all_done(Pixel px[PIXELS]) {
     return done;
 }
 
+#if PIXELS > 1
+bool pending(Amount amount[PIXELS]) {
+    bool any = false;
+    [[unroll]] for (uint q = 0; q < PIXELS; q++) {
+        any = any || amount[q] != amount_of(0.0);
+    }
+    return any;
+}
+
+// The row of the first pixel with an amount left (NO_ROW: none), and the sum of the
+// amounts of its pixels of that row, which are then cleared.
+Amount take_row(inout Amount amount[PIXELS], Pixel px[PIXELS], out uint row) {
+    row = NO_ROW;
+    Amount sum = amount_of(0.0);
+    [[unroll]] for (uint q = 0; q < PIXELS; q++) {
+        if (amount[q] != amount_of(0.0) && (row == NO_ROW || px[q].row == row)) {
+            row = px[q].row;
+            sum += amount[q];
+            amount[q] = amount_of(0.0);
+        }
+    }
+    return sum;
+}
+#endif
+
 // Loads entry `idx` of the tile's list into batch slot `slot`.
 void load_entry(uint idx, uint slot) {
     uint g = isect_ids.data[idx];
@@ -201,29 +226,28 @@ void main() {
             step_conic = s_conic[j].xyz;
             step_frac = s_frac[j];
             Amount amount[PIXELS];
-            bool pending = false;
             [[unroll]] for (uint q = 0; q < PIXELS; q++) {
                 float w = contrib_step(px[q], vec2(tw[q].px, tw[q].py), j, g);
                 amount[q] = amount_of(w);
-                pending = pending || w > 0.0;
             }
-            // The invocation's pixels by row, a row a round (mostly one: neighbouring
-            // pixels share their label), each summed in the subgroup by accumulate.
-            while (subgroupAny(pending)) {
-                uint row = NO_ROW;
-                Amount sum = amount_of(0.0);
-                [[unroll]] for (uint q = 0; q < PIXELS; q++) {
-                    bool takes = amount[q] != amount_of(0.0) && (row == NO_ROW || px[q].row == row);
-                    if (takes) {
-                        row = px[q].row;
-                        sum += amount[q];
-                        amount[q] = amount_of(0.0);
-                    }
-                }
+            // The invocation's pixels by row (mostly one: neighbouring pixels share their
+            // label), each row's sum then summed in the subgroup by accumulate. No loop:
+            // lavapipe's loop cap counts every iteration, and the windows (32,768 entries)
+            // leave room for one a step; so a second row is a second call, and a lane
+            // whose pixels hold three or more rows adds the rest pixel by pixel.
+            if (subgroupAny(pending(amount))) {
+                uint row;
+                Amount sum = take_row(amount, px, row);
                 accumulate(row, id, sum);
-                pending = false;
-                [[unroll]] for (uint q = 0; q < PIXELS; q++) {
-                    pending = pending || amount[q] != amount_of(0.0);
+                if (subgroupAny(pending(amount))) {
+                    sum = take_row(amount, px, row);
+                    accumulate(row, id, sum);
+                    if (subgroupAny(pending(amount))) {
+                        [[unroll]] for (uint q = 0; q < PIXELS; q++) {
+                            bool adds = amount[q] != amount_of(0.0);
+                            accumulate(adds ? px[q].row : NO_ROW, id, amount[q]);
+                        }
+                    }
                 }
             }
 #endif

@@ -55,10 +55,10 @@ pub struct DeviceCaps {
     /// Kernels that walk long lists split the walk into dispatches that stay below it.
     pub loop_iteration_cap: Option<u32>,
     /// Per-tile kernels take several pixels an invocation (the `*_wide` kernels,
-    /// glsl/common/tile_window.glsl): on by default on CPU devices, whose drivers read
-    /// shared and device memory one SIMD lane at a time, so an invocation per pixel reads
-    /// every step of a tile's list once per pixel (lavapipe's forward blending 4-6x
-    /// slower). See [`wide_tiles`].
+    /// glsl/common/tile_window.glsl): on by default on CPU devices, whose drivers (lavapipe)
+    /// read shared memory and storage buffers one SIMD lane at a time, so an invocation per
+    /// pixel reads every step of a tile's list once per pixel (blending and fusion 4-5x
+    /// slower there). See [`wide_tiles`].
     pub wide_tiles: bool,
     pub heaps: Vec<Heap>,
     #[serde(skip)]

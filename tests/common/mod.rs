@@ -58,6 +58,37 @@ pub fn check_validation(gpu: &Gpu) {
     );
 }
 
+/// One 16x16 view whose single tile lists `n` faint Gaussians, each covering about one
+/// pixel, in front of one bright Gaussian (index `n`) that sits last in depth order: a
+/// per-tile walk cut off by lavapipe's loop cap (65,535 iterations) misses the bright one.
+pub fn long_tile(n: usize) -> (Gaussians, Camera) {
+    let cam = Camera::look_at("tile", DVec3::ZERO, DVec3::Z, -DVec3::Y, 16, 16, 60.0);
+    let mut rng = semsplat::util::Rng::new(5);
+    let mut g = Gaussians::default();
+    for i in 0..=n {
+        let (z, px, py, logit, scale) = if i < n {
+            (
+                2.0 + i as f64 * 1e-5,
+                rng.below(16) as f64 + 0.5,
+                rng.below(16) as f64 + 0.5,
+                -5.3,
+                1e-4,
+            )
+        } else {
+            (10.0, 8.0, 8.0, 3.0, 5.0)
+        };
+        let x = (px - cam.cx) / cam.fx * z;
+        let y = (py - cam.cy) / cam.fy * z;
+        g.means.push([x as f32, y as f32, z as f32]);
+        g.log_scales.push([(scale as f32).ln(); 3]);
+        g.quats.push([1.0, 0.0, 0.0, 0.0]);
+        g.opacity_logits.push(logit as f32);
+        let dc = if i < n { -1.0 } else { 3.0 };
+        g.sh.extend([dc, -1.0, -1.0]);
+    }
+    (g, cam)
+}
+
 /// Deterministic pseudo-random u32s.
 pub fn random_u32(n: usize, seed: u64) -> Vec<u32> {
     let mut rng = semsplat::util::Rng::new(seed);
