@@ -65,10 +65,12 @@ shared vec4 s_conic[BATCH];
 shared uint s_id[BATCH];
 shared float s_scale[BATCH]; // per_view: 1 / footprint; else 1
 
-// The includer's evidence entry: `Amount` (a weight as the entries sum it), `amount_of(w)`
-// and `accumulate(row, gaussian, amount)` (from uniform control flow; NO_ROW adds nothing).
+// The includer's evidence entry: `Amount` (a weight as the entries sum it), `amount_of(w)`,
+// `accumulate(row, gaussian, amount)` (from uniform control flow; NO_ROW adds nothing) and
+// `add_own(row, gaussian, amount)` (one invocation's amount, not summed in the subgroup).
 Amount amount_of(float w);
 void accumulate(uint row, uint gaussian, Amount amount);
+void add_own(uint row, uint gaussian, Amount amount);
 
 // One pixel's walk: its row of the evidence, transmittance, and whether it is done.
 struct Pixel {
@@ -230,23 +232,20 @@ void main() {
                 float w = contrib_step(px[q], vec2(tw[q].px, tw[q].py), j, g);
                 amount[q] = amount_of(w);
             }
-            // The invocation's pixels by row (mostly one: neighbouring pixels share their
-            // label), each row's sum then summed in the subgroup by accumulate. No loop:
-            // lavapipe's loop cap counts every iteration, and the windows (32,768 entries)
-            // leave room for one a step; so a second row is a second call, and a lane
-            // whose pixels hold three or more rows adds the rest pixel by pixel.
+            // The invocation's pixels by row: the first row's sum is summed in the subgroup
+            // by accumulate (mostly the only one: neighbouring pixels share their label),
+            // any other pixel's weight is added on its own. No loop and no call skipped:
+            // lavapipe's loop cap counts every iteration (the windows of 32,768 entries
+            // leave room for one a step) and it runs both sides of a branch under a mask,
+            // so the rest costs one plain atomic a pixel (a second accumulate call and one
+            // a pixel after it, always run, took FlashSplat 6.5 s where this takes 3.4 s).
             if (subgroupAny(pending(amount))) {
                 uint row;
                 Amount sum = take_row(amount, px, row);
                 accumulate(row, id, sum);
-                if (subgroupAny(pending(amount))) {
-                    sum = take_row(amount, px, row);
-                    accumulate(row, id, sum);
-                    if (subgroupAny(pending(amount))) {
-                        [[unroll]] for (uint q = 0; q < PIXELS; q++) {
-                            bool adds = amount[q] != amount_of(0.0);
-                            accumulate(adds ? px[q].row : NO_ROW, id, amount[q]);
-                        }
+                [[unroll]] for (uint q = 0; q < PIXELS; q++) {
+                    if (amount[q] != amount_of(0.0)) {
+                        add_own(px[q].row, id, amount[q]);
                     }
                 }
             }

@@ -33,3 +33,7 @@ void accumulate(uint row, uint gaussian, uint64_t amount) {
         atomicAdd(contrib.data[row * pc.n + gaussian], v);
     }
 }
+
+void add_own(uint row, uint gaussian, uint64_t amount) {
+    atomicAdd(contrib.data[row * pc.n + gaussian], amount);
+}

@@ -21,3 +21,7 @@ void accumulate(uint row, uint gaussian, float w) {
         atomicAdd(contrib.data[row * pc.n + gaussian], w);
     }
 }
+
+void add_own(uint row, uint gaussian, float amount) {
+    atomicAdd(contrib.data[row * pc.n + gaussian], amount);
+}
