@@ -8,7 +8,7 @@
 
 // Pixels an invocation takes. On a GPU one (the default): a tile is a workgroup of
 // TILE_PIXELS invocations. A CPU driver (lavapipe) runs a workgroup as SIMD vectors and
-// reads shared and device memory one lane at a time, so each step of a tile's list
+// reads shared memory and storage buffers one lane at a time, so each step of a tile's list
 // costs a read per lane; an invocation that takes PIXELS of the tile's pixels (pixel
 // lane + q * LANES for q < PIXELS) reads each step once for all of them: the `*_wide`
 // kernels, which the host picks on CPU devices (src/gpu/caps.rs, `wide_tiles`).

@@ -57,7 +57,7 @@ pub struct DeviceCaps {
     /// Per-tile kernels take several pixels an invocation (the `*_wide` kernels,
     /// glsl/common/tile_window.glsl): on by default on CPU devices, whose drivers (lavapipe)
     /// read shared memory and storage buffers one SIMD lane at a time, so an invocation per
-    /// pixel reads every step of a tile's list once per pixel (blending and fusion 4-5x
+    /// pixel reads every step of a tile's list once per pixel (blending and fusion about 4x
     /// slower there). See [`wide_tiles`].
     pub wide_tiles: bool,
     pub heaps: Vec<Heap>,
