@@ -236,9 +236,10 @@ void main() {
             // by accumulate (mostly the only one: neighbouring pixels share their label),
             // any other pixel's weight is added on its own. No loop and no call skipped:
             // lavapipe's loop cap counts every iteration (the windows of 32,768 entries
-            // leave room for one a step) and it runs both sides of a branch under a mask,
-            // so the rest costs one plain atomic a pixel (a second accumulate call and one
-            // a pixel after it, always run, took FlashSplat 6.5 s where this takes 3.4 s).
+            // leave room for one a step), and it seems to pay for calls under a branch no
+            // lane takes (inferred from times, not from its source: a second accumulate
+            // call and one a pixel after it, each under such a branch, took FlashSplat
+            // 6.5 s where this takes 3.4 s), so the rest costs one plain atomic a pixel.
             if (subgroupAny(pending(amount))) {
                 uint row;
                 Amount sum = take_row(amount, px, row);
