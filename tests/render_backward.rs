@@ -6,6 +6,7 @@
 mod common;
 
 use glam::DVec3;
+use semsplat::gpu::Gpu;
 use semsplat::render::backward::{BackwardVariant, HostGrads, HostPixelGrads};
 use semsplat::render::reference::backward::{
     backward, objective, GaussianParams, ParamGrads, PixelGrads,
@@ -132,10 +133,9 @@ struct Case {
     semantics_only: bool,
 }
 
-/// Runs the GPU backward and the reference backward on one case; returns the worst
-/// relative error over the tensors.
-fn compare(case: &Case) -> f64 {
-    let gpu = common::gpu();
+/// Runs the GPU backward on `gpu` and the reference backward on one case; returns the
+/// worst relative error over the tensors.
+fn compare(gpu: &Gpu, case: &Case) -> f64 {
     let g = common::separate_depth_ties(&case.scene, &case.cam);
     let channels = g.semantics.as_ref().map_or(0, |s| s.channels);
     let pixels = (case.cam.width * case.cam.height) as usize;
@@ -328,21 +328,27 @@ fn semantics_only_and_fixed_point_cases(cam: &Camera) -> Vec<Case> {
     cases
 }
 
+/// Both forms of the per-tile kernels (one pixel an invocation, and several: the default
+/// on CPU devices), each against the reference: the wide form sums a step's values over
+/// an invocation's pixels before the subgroup.
 #[test]
 fn gpu_backward_matches_the_reference_backward() {
     let cam = camera(80, 56);
     let mut cases = channel_and_mode_cases(&cam);
     cases.extend(window_and_atomics_cases(&cam));
     cases.extend(semantics_only_and_fixed_point_cases(&cam));
-    for case in &cases {
-        let worst = compare(case);
-        assert!(
-            worst < TOLERANCE,
-            "{}: relative error {worst:.2e}",
-            case.name
-        );
+    for wide in [false, true] {
+        let gpu = common::gpu_with_wide_tiles(wide);
+        for case in &cases {
+            let worst = compare(gpu, case);
+            assert!(
+                worst < TOLERANCE,
+                "{} (wide tiles: {wide}): relative error {worst:.2e}",
+                case.name
+            );
+        }
+        common::check_validation(gpu);
     }
-    common::check_validation(common::gpu());
 }
 
 #[test]
@@ -371,24 +377,31 @@ fn gpu_backward_handles_the_forward_edge_cases() {
         .append(&mut wide.semantics.unwrap().logits);
     g.log_scales[0] = [-6.0, 0.5, -6.0];
     g.means[1] = [0.01, 0.02, 0.05];
-    for deterministic in [false, true] {
-        let worst = compare(&Case {
-            name: "edge cases",
-            scene: g.clone(),
-            cam: cam.clone(),
-            mode: SemanticMode::RawLogits,
-            background: [1.0, 1.0, 1.0],
-            window: None,
-            deterministic,
-            float_atomics: true,
-            semantics_only: false,
-        });
-        assert!(
-            worst < TOLERANCE,
-            "edge cases (fixed point: {deterministic}): relative error {worst:.2e}"
-        );
+    // Both forms of the per-tile kernels: pixels of one invocation stop at different steps.
+    for wide in [false, true] {
+        let gpu = common::gpu_with_wide_tiles(wide);
+        for deterministic in [false, true] {
+            let worst = compare(
+                gpu,
+                &Case {
+                    name: "edge cases",
+                    scene: g.clone(),
+                    cam: cam.clone(),
+                    mode: SemanticMode::RawLogits,
+                    background: [1.0, 1.0, 1.0],
+                    window: None,
+                    deterministic,
+                    float_atomics: true,
+                    semantics_only: false,
+                },
+            );
+            assert!(
+                worst < TOLERANCE,
+                "edge cases (fixed point: {deterministic}, wide tiles: {wide}): relative error {worst:.2e}"
+            );
+        }
+        common::check_validation(gpu);
     }
-    common::check_validation(common::gpu());
 }
 
 /// The GPU's gradients (default variant) of the objective the f32 upstream gradients

@@ -18,6 +18,11 @@
 // behind (S_rgb, S_sem) per pixel. Semantic chunks: a dispatch handles SEM_CHUNK channels
 // (chunk_base); only chunk 0 adds the RGB and T_final terms and the color gradient. Every
 // chunk adds its channels' share of the alpha gradient, so the sum over chunks is exact.
+//
+// Each invocation takes PIXELS of the tile's pixels (tile_window.glsl: one on a GPU, more
+// in the `*_wide` kernels for CPU drivers). A step's values are summed over the
+// invocation's pixels first, then over the subgroup, so a CPU driver pays one
+// reduce-scatter and one read of the step's shared data for all of them.
 #extension GL_EXT_control_flow_attributes : require
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_vote : require
@@ -36,12 +41,19 @@
 // Carried per pixel between windows: T, S_rgb (3), S_sem (SEM_CHUNK).
 #define CARRY_STRIDE BACKWARD_CARRY_STRIDE
 
-layout(local_size_x = TILE_PIXELS) in;
-
 #include "blend_params.glsl"
 
 layout(set = 0, binding = 0) readonly buffer RangesBuf { uvec2 data[]; } tile_ranges;
+#ifdef WIDE
+// The `*_wide` kernels: 4 pixels an invocation. Measured on lavapipe (office scene,
+// 640x480, 12 channels): the backward 6.1 s narrow, 2.5 s at 4, 1.8 s at 8, 1.5 s at 16;
+// but compiling each variant (a cold shader cache, as on a fresh machine) took about 5 s
+// more at 4, 23 s at 8 and 70 s at 16 (some 40 floats of state a pixel): past 4, more
+// pixels an invocation cost a first run more in compiling than they save it.
+#define PIXELS 4
+#endif
 #include "tile_window.glsl"
+layout(local_size_x = LANES) in;
 layout(set = 0, binding = 1) readonly buffer IdsBuf { uint data[]; } isect_ids;
 layout(set = 0, binding = 7) readonly buffer FinalTBuf { float data[]; } final_t;
 layout(set = 0, binding = 8) readonly buffer LastBuf { uint data[]; } last_entry;
@@ -60,41 +72,58 @@ shared uint s_id[BATCH];
 shared float s_sem[BATCH * SEM_CHUNK];
 shared uint s_bound; // one past the furthest entry any pixel of the tile blended
 
-void main() {
-    uint width = pc.width, height = pc.height, channels = pc.channels;
-    uint window_start = pc.window_start, window_len = pc.window_len, chunk_base = pc.chunk_base;
-#ifdef SEM_ONLY
-    bool with_rgb = false; // only the semantic vectors' gradient (geometry frozen)
+#if PIXELS > 1
+// The step's color and channels, read once for all the invocation's pixels (each read
+// of shared memory is a loop over the lanes on a CPU driver).
+vec3 step_color;
+float step_sem[SEM_CHUNK];
+#define STEP_COLOR step_color
+#define STEP_SEM(k) step_sem[k]
 #else
-    bool with_rgb = chunk_base == 0;
+// Read only where the pixel takes the step.
+#define STEP_COLOR s_color[j].rgb
+#define STEP_SEM(k) s_sem[j * SEM_CHUNK + k]
 #endif
-    TileWindow tw = tile_window_in_band(width, height, pc.tiles_x, window_start, window_len,
-                                        pc.tile_row_base);
-    if (window_start > 0 && window_start >= tw.len) {
-        return; // this tile's list ends before the window
-    }
-    uint t = tw.t, pix = tw.pix;
-    bool inside = tw.inside;
-    vec2 pixel = vec2(tw.px, tw.py);
 
-    // What this pixel blended: list entries [tile start, bound).
-    uint bound = 0;
-    float t_final = 1.0;
-    vec3 v_col = vec3(0.0);
-    float v_tfinal = 0.0; // dL/dT_final from the outputs that read it directly
+// One pixel's state: what it blended, its upstream gradients, and the transmittance and
+// sums of what lies behind the step (carried between windows in `carry`).
+struct PixelGrad {
+    TileWindow tw;
+    vec2 pixel;
+    uint bound;      // one past the last list entry the pixel blended
+    float t_final;
+    vec3 v_col;
+    float v_tfinal;  // dL/dT_final from the outputs that read it directly
     float v_sem[SEM_CHUNK];
+    float T;
+    vec3 s_rgb;
+    float s_sem_acc[SEM_CHUNK];
+};
+
+// The pixel's upstream gradients, and its state from the last window of the list or
+// carried from the one after.
+PixelGrad pixel_grad_start(TileWindow tw, bool with_rgb, uint channels, uint chunk_base) {
+    PixelGrad p;
+    p.tw = tw;
+    p.pixel = vec2(tw.px, tw.py);
+    p.bound = 0;
+    p.t_final = 1.0;
+    p.v_col = vec3(0.0);
+    p.v_tfinal = 0.0;
     [[unroll]] for (uint k = 0; k < SEM_CHUNK; k++) {
-        v_sem[k] = 0.0;
+        p.v_sem[k] = 0.0;
+        p.s_sem_acc[k] = 0.0;
     }
-    if (inside && n_contrib.data[pix] > 0) {
-        bound = last_entry.data[pix] + 1;
-        t_final = final_t.data[pix];
-        float covered = 1.0 - t_final;
+    uint pix = tw.pix;
+    if (tw.inside && n_contrib.data[pix] > 0) {
+        p.bound = last_entry.data[pix] + 1;
+        p.t_final = final_t.data[pix];
+        float covered = 1.0 - p.t_final;
 #ifndef SEM_ONLY
         if (with_rgb) {
-            v_col = vec3(v_rgb.data[3 * pix], v_rgb.data[3 * pix + 1], v_rgb.data[3 * pix + 2]);
+            p.v_col = vec3(v_rgb.data[3 * pix], v_rgb.data[3 * pix + 1], v_rgb.data[3 * pix + 2]);
             // rgb = sum + T_final * background; accumulated alpha = 1 - T_final.
-            v_tfinal = dot(v_col, pc.background) - v_alpha.data[pix];
+            p.v_tfinal = dot(p.v_col, pc.background) - v_alpha.data[pix];
         }
 #endif
         // Gaussian Semantics Eq. 2: sem_norm = sem / (1 - T_final), so dL/dsem = v / (1 - T_final) and
@@ -103,165 +132,247 @@ void main() {
             uint c = chunk_base + k;
             if (c < channels && covered > 0.0) {
                 float v = v_sem_norm.data[pix * channels + c];
-                v_sem[k] = v / covered;
+                p.v_sem[k] = v / covered;
 #ifndef SEM_ONLY
-                v_tfinal += v * sem_norm.data[pix * channels + c] / covered;
+                p.v_tfinal += v * sem_norm.data[pix * channels + c] / covered;
 #endif
             }
         }
     }
-
-    // Per-pixel state, from the last window of the list or carried from the one after.
-    float T = t_final;
-    vec3 s_rgb = vec3(0.0);
-    float s_sem_acc[SEM_CHUNK];
-    [[unroll]] for (uint k = 0; k < SEM_CHUNK; k++) {
-        s_sem_acc[k] = 0.0;
-    }
+    p.T = p.t_final;
+    p.s_rgb = vec3(0.0);
     uint c0 = pix * CARRY_STRIDE;
-    if (!tw.last && inside) {
-        T = carry.data[c0];
-        s_rgb = vec3(carry.data[c0 + 1], carry.data[c0 + 2], carry.data[c0 + 3]);
+    if (!tw.last && tw.inside) {
+        p.T = carry.data[c0];
+        p.s_rgb = vec3(carry.data[c0 + 1], carry.data[c0 + 2], carry.data[c0 + 3]);
         [[unroll]] for (uint k = 0; k < SEM_CHUNK; k++) {
-            s_sem_acc[k] = carry.data[c0 + 4 + k];
+            p.s_sem_acc[k] = carry.data[c0 + 4 + k];
         }
     }
+    return p;
+}
 
-    if (t == 0) {
+// Loads entry `idx` of the tile's list into batch slot `slot`.
+void load_entry(uint idx, uint slot, uint channels, uint chunk_base) {
+    uint g = isect_ids.data[idx];
+    s_id[slot] = g;
+    s_xy_depth_opacity[slot] = xy_depth_opacity.data[g];
+    s_frac[slot] = xy_frac.data[g];
+    s_conic[slot] = conics.data[g];
+#ifndef SEM_ONLY
+    s_color[slot] = colors.data[g];
+    [[unroll]] for (uint k = 0; k < SEM_CHUNK; k++) {
+        uint c = chunk_base + k;
+        s_sem[slot * SEM_CHUNK + k] = c < channels ? sem_in.data[g * channels + c] : 0.0;
+    }
+#endif
+}
+
+// How a step's Gaussian falls on one pixel: whether the pixel blended it, and its alpha.
+struct StepHit {
+    bool live;
+    float alpha;
+    float gauss;
+    vec2 d;
+};
+
+StepHit step_hit(uint bound, vec2 pixel, uint entry, vec4 g, vec3 con, vec2 frac) {
+    StepHit h;
+    h.live = entry < bound;
+    h.alpha = 0.0;
+    h.gauss = 0.0;
+    h.d = vec2(0.0);
+    if (h.live) {
+        h.d = pixel_offset(g.xy, frac, pixel);
+        float sigma = conic_sigma(con, h.d);
+        h.gauss = exp(-sigma);
+        h.alpha = min(ALPHA_MAX, g.w * h.gauss);
+        h.live = sigma >= 0.0 && h.alpha >= ALPHA_MIN;
+    }
+    return h;
+}
+
+// Adds a live step's values at pixel `p` to `vals` and moves the pixel's state in front of
+// the step (batch slot `j`).
+void step_grads(inout PixelGrad p, StepHit h, uint j, vec4 g, vec3 con, bool with_rgb,
+                inout float vals[STEP_VALUES]) {
+    float one_minus = 1.0 - h.alpha;
+    float t_i = p.T / one_minus; // transmittance in front of this Gaussian
+    float w = h.alpha * t_i;
+#ifdef SEM_ONLY
+    [[unroll]] for (uint k = 0; k < SEM_CHUNK; k++) {
+        vals[GRAD2D_STRIDE + k] += w * p.v_sem[k];
+    }
+#else
+    // dL/dalpha: its own weight, the dimming of everything behind it, and T_final.
+    float v_a = -p.v_tfinal * p.t_final / one_minus;
+    if (with_rgb) {
+        vec3 c = STEP_COLOR;
+        v_a += dot(p.v_col, c * t_i - p.s_rgb / one_minus);
+        p.s_rgb += w * c;
+        vals[6] += w * p.v_col.r;
+        vals[7] += w * p.v_col.g;
+        vals[8] += w * p.v_col.b;
+    }
+    [[unroll]] for (uint k = 0; k < SEM_CHUNK; k++) {
+        float s = STEP_SEM(k);
+        v_a += p.v_sem[k] * (s * t_i - p.s_sem_acc[k] / one_minus);
+        p.s_sem_acc[k] += w * s;
+        vals[GRAD2D_STRIDE + k] += w * p.v_sem[k];
+    }
+    // alpha = min(0.999, o exp(-sigma)): no gradient through the clamp.
+    if (g.w * h.gauss <= ALPHA_MAX) {
+        vec2 d = h.d;
+        float v_sigma = -v_a * h.alpha;
+        vals[0] += v_sigma * (con.x * d.x + con.y * d.y);
+        vals[1] += v_sigma * (con.z * d.y + con.y * d.x);
+        vals[2] += v_sigma * 0.5 * d.x * d.x;
+        vals[3] += v_sigma * d.x * d.y;
+        vals[4] += v_sigma * 0.5 * d.y * d.y;
+        vals[5] += v_a * h.gauss;
+    }
+#endif
+    p.T = t_i;
+}
+
+// Sums a step's values over the subgroup and adds each sum to Gaussian `gid`'s gradients
+// by one atomic (subgroup-uniform control flow).
+void add_step(uint gid, float vals[STEP_VALUES], uint channels, uint chunk_base) {
+    uint lane = gl_SubgroupInvocationID;
+#ifndef SEM_ONLY
+    // Screen-space values (padded to 16): one reduce-scatter leaves each sum in one
+    // lane, which does its atomic.
+    float geo_sums[16];
+    [[unroll]] for (uint k = 0; k < 16; k++) {
+        geo_sums[k] = k < GRAD2D_STRIDE ? vals[k] : 0.0;
+    }
+    reduce_scatter16(geo_sums);
+    [[unroll]] for (uint i = 0; i < 4; i++) {
+        uint k = reduce_scatter_index(lane, i);
+        if (k < GRAD2D_STRIDE && geo_sums[i] != 0.0) {
+            grad_add(gid * GRAD2D_STRIDE + k, geo_sums[i]);
+        }
+    }
+#endif
+    // The chunk's channels: one reduce-scatter leaves each channel's sum in one
+    // lane, which does its atomic (16 shuffles at 32 lanes instead of 16 sums of 5).
+    if (chunk_base < channels) { // uniform: RGB-only frames have no channels
+        float sem_sums[SEM_CHUNK];
+        [[unroll]] for (uint k = 0; k < SEM_CHUNK; k++) {
+            sem_sums[k] = vals[GRAD2D_STRIDE + k];
+        }
+        reduce_scatter16(sem_sums);
+        [[unroll]] for (uint i = 0; i < 4; i++) {
+            uint k = reduce_scatter_index(lane, i);
+            uint c = chunk_base + k;
+            if (k < SEM_CHUNK && c < channels && sem_sums[i] != 0.0) {
+                sem_grad_add(gid * channels + c, sem_sums[i]);
+            }
+        }
+    }
+}
+
+// Writes a pixel's state for the window before this one.
+void pixel_grad_carry(PixelGrad p) {
+    uint c0 = p.tw.pix * CARRY_STRIDE;
+    carry.data[c0] = p.T;
+    carry.data[c0 + 1] = p.s_rgb.r;
+    carry.data[c0 + 2] = p.s_rgb.g;
+    carry.data[c0 + 3] = p.s_rgb.b;
+    [[unroll]] for (uint k = 0; k < SEM_CHUNK; k++) {
+        carry.data[c0 + 4 + k] = p.s_sem_acc[k];
+    }
+}
+
+// One past the furthest entry any pixel of the tile blended (every invocation calls it).
+uint tile_bound(PixelGrad px[PIXELS]) {
+    if (tile_lane() == 0) {
         s_bound = 0;
     }
     barrier();
+    uint bound = 0;
+    [[unroll]] for (uint q = 0; q < PIXELS; q++) {
+        bound = max(bound, px[q].bound);
+    }
     uint sg_bound = subgroupMax(bound);
     if (subgroupElect()) {
         atomicMax(s_bound, sg_bound);
     }
     barrier();
-    uint start = tw.start;
-    uint hi = min(tw.end, s_bound);
+    return s_bound;
+}
+
+void main() {
+    uint width = pc.width, height = pc.height, channels = pc.channels;
+    uint window_start = pc.window_start, window_len = pc.window_len, chunk_base = pc.chunk_base;
+#ifdef SEM_ONLY
+    bool with_rgb = false; // only the semantic vectors' gradient (geometry frozen)
+#else
+    bool with_rgb = chunk_base == 0;
+#endif
+    uint lane = tile_lane();
+    TileWindow tw[PIXELS];
+    tile_windows(tw, width, height, pc.tiles_x, window_start, window_len, pc.tile_row_base);
+    if (window_start > 0 && window_start >= tw[0].len) {
+        return; // this tile's list ends before the window
+    }
+    PixelGrad px[PIXELS];
+    [[unroll]] for (uint q = 0; q < PIXELS; q++) {
+        px[q] = pixel_grad_start(tw[q], with_rgb, channels, chunk_base);
+    }
+    uint start = tw[0].start;
+    uint hi = min(tw[0].end, tile_bound(px));
 
     // Batches back to front: [b0, b1) with b1 descending.
     for (uint b1 = hi; b1 > start; b1 -= min(BATCH, b1 - start)) {
         uint count = min(BATCH, b1 - start);
         uint b0 = b1 - count;
-        if (t < count) {
-            uint g = isect_ids.data[b0 + t];
-            s_id[t] = g;
-            s_xy_depth_opacity[t] = xy_depth_opacity.data[g];
-            s_frac[t] = xy_frac.data[g];
-            s_conic[t] = conics.data[g];
-#ifndef SEM_ONLY
-            s_color[t] = colors.data[g];
-            [[unroll]] for (uint k = 0; k < SEM_CHUNK; k++) {
-                uint c = chunk_base + k;
-                s_sem[t * SEM_CHUNK + k] = c < channels ? sem_in.data[g * channels + c] : 0.0;
+        [[unroll]] for (uint q = 0; q < PIXELS; q++) {
+            uint slot = lane + q * LANES;
+            if (slot < count) {
+                load_entry(b0 + slot, slot, channels, chunk_base);
             }
-#endif
         }
         barrier();
         for (uint jj = count; jj > 0; jj--) {
             uint j = jj - 1;
-            bool live = b0 + j < bound;
-            float alpha = 0.0;
-            float gauss = 0.0;
-            vec2 d = vec2(0.0);
             vec4 g = s_xy_depth_opacity[j];
             vec3 con = s_conic[j].xyz;
-            if (live) {
-                d = pixel_offset(g.xy, s_frac[j], pixel);
-                float sigma = conic_sigma(con, d);
-                gauss = exp(-sigma);
-                alpha = min(ALPHA_MAX, g.w * gauss);
-                live = sigma >= 0.0 && alpha >= ALPHA_MIN;
+            vec2 frac = s_frac[j];
+            StepHit hit[PIXELS];
+            bool any_live = false;
+            [[unroll]] for (uint q = 0; q < PIXELS; q++) {
+                hit[q] = step_hit(px[q].bound, px[q].pixel, b0 + j, g, con, frac);
+                any_live = any_live || hit[q].live;
             }
-            if (!subgroupAny(live)) {
+            if (!subgroupAny(any_live)) {
                 continue;
             }
+#if PIXELS > 1 && !defined(SEM_ONLY)
+            step_color = s_color[j].rgb;
+            [[unroll]] for (uint k = 0; k < SEM_CHUNK; k++) {
+                step_sem[k] = s_sem[j * SEM_CHUNK + k];
+            }
+#endif
             float vals[STEP_VALUES];
             [[unroll]] for (uint k = 0; k < STEP_VALUES; k++) {
                 vals[k] = 0.0;
             }
-            if (live) {
-                float one_minus = 1.0 - alpha;
-                float t_i = T / one_minus; // transmittance in front of this Gaussian
-                float w = alpha * t_i;
-#ifdef SEM_ONLY
-                [[unroll]] for (uint k = 0; k < SEM_CHUNK; k++) {
-                    vals[GRAD2D_STRIDE + k] = w * v_sem[k];
-                }
-#else
-                // dL/dalpha: its own weight, the dimming of everything behind it, and T_final.
-                float v_a = -v_tfinal * t_final / one_minus;
-                if (with_rgb) {
-                    vec3 c = s_color[j].rgb;
-                    v_a += dot(v_col, c * t_i - s_rgb / one_minus);
-                    s_rgb += w * c;
-                    vals[6] = w * v_col.r;
-                    vals[7] = w * v_col.g;
-                    vals[8] = w * v_col.b;
-                }
-                [[unroll]] for (uint k = 0; k < SEM_CHUNK; k++) {
-                    float s = s_sem[j * SEM_CHUNK + k];
-                    v_a += v_sem[k] * (s * t_i - s_sem_acc[k] / one_minus);
-                    s_sem_acc[k] += w * s;
-                    vals[GRAD2D_STRIDE + k] = w * v_sem[k];
-                }
-                // alpha = min(0.999, o exp(-sigma)): no gradient through the clamp.
-                if (g.w * gauss <= ALPHA_MAX) {
-                    float v_sigma = -v_a * alpha;
-                    vals[0] = v_sigma * (con.x * d.x + con.y * d.y);
-                    vals[1] = v_sigma * (con.z * d.y + con.y * d.x);
-                    vals[2] = v_sigma * 0.5 * d.x * d.x;
-                    vals[3] = v_sigma * d.x * d.y;
-                    vals[4] = v_sigma * 0.5 * d.y * d.y;
-                    vals[5] = v_a * gauss;
-                }
-#endif
-                T = t_i;
-            }
-            uint gid = s_id[j];
-            uint lane = gl_SubgroupInvocationID;
-#ifndef SEM_ONLY
-            // Screen-space values (padded to 16): one reduce-scatter leaves each sum in one
-            // lane, which does its atomic.
-            float geo_sums[16];
-            [[unroll]] for (uint k = 0; k < 16; k++) {
-                geo_sums[k] = k < GRAD2D_STRIDE ? vals[k] : 0.0;
-            }
-            reduce_scatter16(geo_sums);
-            [[unroll]] for (uint i = 0; i < 4; i++) {
-                uint k = reduce_scatter_index(lane, i);
-                if (k < GRAD2D_STRIDE && geo_sums[i] != 0.0) {
-                    grad_add(gid * GRAD2D_STRIDE + k, geo_sums[i]);
+            [[unroll]] for (uint q = 0; q < PIXELS; q++) {
+                if (hit[q].live) {
+                    step_grads(px[q], hit[q], j, g, con, with_rgb, vals);
                 }
             }
-#endif
-            // The chunk's channels: one reduce-scatter leaves each channel's sum in one
-            // lane, which does its atomic (16 shuffles at 32 lanes instead of 16 sums of 5).
-            if (chunk_base < channels) { // uniform: RGB-only frames have no channels
-                float sem_sums[SEM_CHUNK];
-                [[unroll]] for (uint k = 0; k < SEM_CHUNK; k++) {
-                    sem_sums[k] = vals[GRAD2D_STRIDE + k];
-                }
-                reduce_scatter16(sem_sums);
-                [[unroll]] for (uint i = 0; i < 4; i++) {
-                    uint k = reduce_scatter_index(lane, i);
-                    uint c = chunk_base + k;
-                    if (k < SEM_CHUNK && c < channels && sem_sums[i] != 0.0) {
-                        sem_grad_add(gid * channels + c, sem_sums[i]);
-                    }
-                }
-            }
+            add_step(s_id[j], vals, channels, chunk_base);
         }
         barrier(); // the next batch overwrites the shared arrays
     }
 
-    if (inside && window_start > 0) {
-        carry.data[c0] = T;
-        carry.data[c0 + 1] = s_rgb.r;
-        carry.data[c0 + 2] = s_rgb.g;
-        carry.data[c0 + 3] = s_rgb.b;
-        [[unroll]] for (uint k = 0; k < SEM_CHUNK; k++) {
-            carry.data[c0 + 4 + k] = s_sem_acc[k];
+    if (window_start > 0) {
+        [[unroll]] for (uint q = 0; q < PIXELS; q++) {
+            if (tw[q].inside) {
+                pixel_grad_carry(px[q]);
+            }
         }
     }
 }

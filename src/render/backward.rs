@@ -420,7 +420,7 @@ impl TileLists<'_> {
         } else {
             &grads.placeholder
         };
-        let kernel = backward_kernel(grads, rec.gpu().caps().int64_atomics);
+        let kernel = backward_kernel(grads, rec.gpu());
         // The fixed-point variants add into their integer buffers instead.
         let (screen_target, sem_target) = match grads.accumulation {
             Accumulation::FixedPoint => (&grads.screen_fixed, &grads.sem_fixed),
@@ -666,18 +666,42 @@ impl Rasterizer {
 }
 
 /// The blend-backward variant for `grads`' accumulation (fixed point with 64-bit atomics
-/// where the device has them) and parameters (all, or the semantic vectors only).
-fn backward_kernel(grads: &SceneGrads, int64_atomics: bool) -> Kernel<BlendParams> {
-    match (grads.semantics_only, grads.accumulation) {
-        (false, Accumulation::FloatAtomics) => ids::RASTER_BLEND_BACKWARD,
-        (false, Accumulation::CompareAndSwap) => ids::RASTER_BLEND_BACKWARD_CAS,
-        (false, Accumulation::FixedPoint) if int64_atomics => ids::RASTER_BLEND_BACKWARD_FIXED64,
-        (false, Accumulation::FixedPoint) => ids::RASTER_BLEND_BACKWARD_FIXED32X2,
-        (true, Accumulation::FloatAtomics) => ids::RASTER_BLEND_BACKWARD_SEM_ONLY,
-        (true, Accumulation::CompareAndSwap) => ids::RASTER_BLEND_BACKWARD_SEM_ONLY_CAS,
-        (true, Accumulation::FixedPoint) if int64_atomics => {
-            ids::RASTER_BLEND_BACKWARD_SEM_ONLY_FIXED64
+/// where the device has them) and parameters (all, or the semantic vectors only), in the
+/// device's per-tile form ([`Kernel::for_tiles`]).
+fn backward_kernel(grads: &SceneGrads, gpu: &Gpu) -> Kernel<BlendParams> {
+    let int64_atomics = gpu.caps().int64_atomics;
+    let (narrow, wide) = match (grads.semantics_only, grads.accumulation) {
+        (false, Accumulation::FloatAtomics) => {
+            (ids::RASTER_BLEND_BACKWARD, ids::RASTER_BLEND_BACKWARD_WIDE)
         }
-        (true, Accumulation::FixedPoint) => ids::RASTER_BLEND_BACKWARD_SEM_ONLY_FIXED32X2,
-    }
+        (false, Accumulation::CompareAndSwap) => (
+            ids::RASTER_BLEND_BACKWARD_CAS,
+            ids::RASTER_BLEND_BACKWARD_CAS_WIDE,
+        ),
+        (false, Accumulation::FixedPoint) if int64_atomics => (
+            ids::RASTER_BLEND_BACKWARD_FIXED64,
+            ids::RASTER_BLEND_BACKWARD_FIXED64_WIDE,
+        ),
+        (false, Accumulation::FixedPoint) => (
+            ids::RASTER_BLEND_BACKWARD_FIXED32X2,
+            ids::RASTER_BLEND_BACKWARD_FIXED32X2_WIDE,
+        ),
+        (true, Accumulation::FloatAtomics) => (
+            ids::RASTER_BLEND_BACKWARD_SEM_ONLY,
+            ids::RASTER_BLEND_BACKWARD_SEM_ONLY_WIDE,
+        ),
+        (true, Accumulation::CompareAndSwap) => (
+            ids::RASTER_BLEND_BACKWARD_SEM_ONLY_CAS,
+            ids::RASTER_BLEND_BACKWARD_SEM_ONLY_CAS_WIDE,
+        ),
+        (true, Accumulation::FixedPoint) if int64_atomics => (
+            ids::RASTER_BLEND_BACKWARD_SEM_ONLY_FIXED64,
+            ids::RASTER_BLEND_BACKWARD_SEM_ONLY_FIXED64_WIDE,
+        ),
+        (true, Accumulation::FixedPoint) => (
+            ids::RASTER_BLEND_BACKWARD_SEM_ONLY_FIXED32X2,
+            ids::RASTER_BLEND_BACKWARD_SEM_ONLY_FIXED32X2_WIDE,
+        ),
+    };
+    narrow.for_tiles(wide, gpu)
 }

@@ -1,0 +1,5 @@
+#version 460
+// blend_backward_fixed32x2.comp for CPU drivers: several pixels an invocation (blend_backward_body.glsl, WIDE).
+#define WIDE
+#include "grad_add_fixed32x2.glsl"
+#include "blend_backward_body.glsl"
