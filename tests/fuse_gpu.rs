@@ -731,3 +731,38 @@ fn views_in_flight_change_nothing_but_the_overlap() {
     assert_eq!(one.data, two.data);
     check_validation(gpu);
 }
+
+/// A device without 64-bit integer atomics: fixed-point fusion (the default) is refused
+/// with an error that names the way out, and float atomics fuse as on any device.
+#[test]
+fn fixed_point_without_int64_atomics_is_a_clear_error() {
+    let gpu = common::gpu_without_int64_atomics(true);
+    let g = scene(300, 23);
+    let cams = cameras();
+    let labels = label_maps(&cams, 24);
+    let scene = GpuScene::upload(gpu, &g).unwrap();
+    let cfg = FuseConfig {
+        method: Method::FlashSplat,
+        ..Default::default()
+    };
+    assert_eq!(cfg.accumulation, Accumulation::FixedPoint);
+    let err = accumulate(gpu, &scene, &cams, &labels, CLASSES, &cfg, |_, _| {})
+        .expect_err("fixed point needs 64-bit atomics")
+        .to_string();
+    assert!(
+        err.contains("64-bit integer atomics") && err.contains("float atomics"),
+        "{err}"
+    );
+    let cfg = FuseConfig {
+        accumulation: Accumulation::Float,
+        ..cfg
+    };
+    let float = run_on(gpu, &g, &cams, &labels, &cfg);
+    let want = run_on(common::gpu_with_wide_tiles(true), &g, &cams, &labels, &cfg);
+    let top = want.data.iter().fold(0.0f64, |m, &v| m.max(v));
+    assert!(top > 0.0, "no evidence");
+    for (i, (a, b)) in float.data.iter().zip(&want.data).enumerate() {
+        assert!((a - b).abs() <= 1e-5 * top, "entry {i}: {a} against {b}");
+    }
+    check_validation(gpu);
+}

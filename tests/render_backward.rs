@@ -351,6 +351,37 @@ fn gpu_backward_matches_the_reference_backward() {
     }
 }
 
+/// The deterministic sums on a device without 64-bit integer atomics: the `fixed32x2`
+/// variants (two 32-bit halves), full and semantic-only, in both forms against the
+/// reference. The device is opened without the feature, so a kernel that used 64-bit
+/// atomics there would also fail the validation check.
+#[test]
+fn fixed_point_without_int64_atomics_matches_the_reference() {
+    let cam = camera(80, 56);
+    let cases: Vec<Case> = semantics_only_and_fixed_point_cases(&cam)
+        .into_iter()
+        .filter(|case| case.deterministic)
+        .collect();
+    assert_eq!(
+        cases.len(),
+        2,
+        "the full and semantic-only fixed-point cases"
+    );
+    for wide in [false, true] {
+        let gpu = common::gpu_without_int64_atomics(wide);
+        assert!(!gpu.caps().int64_atomics);
+        for case in &cases {
+            let worst = compare(gpu, case);
+            assert!(
+                worst < TOLERANCE,
+                "{} (fixed32x2, wide tiles: {wide}): relative error {worst:.2e}",
+                case.name
+            );
+        }
+        common::check_validation(gpu);
+    }
+}
+
 #[test]
 fn gpu_backward_handles_the_forward_edge_cases() {
     let cam = camera(64, 48);

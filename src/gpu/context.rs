@@ -33,6 +33,10 @@ pub struct GpuOptions {
     /// `SEMSPLAT_WIDE_TILES`, else on for CPU devices): both give the same results, and
     /// tests run each form.
     pub wide_tiles: Option<bool>,
+    /// Leave 64-bit integer atomics off even where the device has them, as on a device
+    /// without them: the blend backward's fixed point then sums in two 32-bit halves
+    /// (`fixed32x2`), and fixed-point fusion is refused. For tests of those paths.
+    pub without_int64_atomics: bool,
 }
 
 pub(crate) struct Inner {
@@ -263,6 +267,7 @@ impl Gpu {
         caps.max_storage_buffer_range =
             binding_limit(caps.max_storage_buffer_range, opts.max_binding);
         caps.wide_tiles = wide_tiles(caps.wide_tiles, opts.wide_tiles);
+        caps.int64_atomics &= !opts.without_int64_atomics;
         let queue_family = caps
             .compute_queue_family
             .expect("usable device has a compute queue");

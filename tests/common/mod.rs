@@ -16,14 +16,7 @@ use semsplat::scene::{Camera, Gaussians};
 
 pub fn gpu() -> &'static Gpu {
     static GPU: OnceLock<Gpu> = OnceLock::new();
-    GPU.get_or_init(|| {
-        Gpu::with_options(GpuOptions {
-            validation: true,
-            device: None,
-            ..Default::default()
-        })
-        .unwrap_or_else(|e| panic!("tests need a Vulkan device with validation layers: {e}"))
-    })
+    GPU.get_or_init(|| open_validated(GpuOptions::default()))
 }
 
 /// A second and third device handle with the per-tile kernels in one form each (`wide`:
@@ -32,13 +25,33 @@ pub fn gpu() -> &'static Gpu {
 pub fn gpu_with_wide_tiles(wide: bool) -> &'static Gpu {
     static FORMS: [OnceLock<Gpu>; 2] = [OnceLock::new(), OnceLock::new()];
     FORMS[wide as usize].get_or_init(|| {
-        Gpu::with_options(GpuOptions {
-            validation: true,
+        open_validated(GpuOptions {
             wide_tiles: Some(wide),
             ..Default::default()
         })
-        .unwrap_or_else(|e| panic!("tests need a Vulkan device with validation layers: {e}"))
     })
+}
+
+/// Device handles with 64-bit integer atomics left off (`GpuOptions::without_int64_atomics`),
+/// in each form of the per-tile kernels, for the paths of devices without them.
+pub fn gpu_without_int64_atomics(wide: bool) -> &'static Gpu {
+    static FORMS: [OnceLock<Gpu>; 2] = [OnceLock::new(), OnceLock::new()];
+    FORMS[wide as usize].get_or_init(|| {
+        open_validated(GpuOptions {
+            wide_tiles: Some(wide),
+            without_int64_atomics: true,
+            ..Default::default()
+        })
+    })
+}
+
+/// The device `options` ask for, with the validation layer on.
+fn open_validated(options: GpuOptions) -> Gpu {
+    Gpu::with_options(GpuOptions {
+        validation: true,
+        ..options
+    })
+    .unwrap_or_else(|e| panic!("tests need a Vulkan device with validation layers: {e}"))
 }
 
 pub fn check_validation(gpu: &Gpu) {
