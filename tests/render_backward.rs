@@ -338,17 +338,24 @@ fn gpu_backward_matches_the_reference_backward() {
     cases.extend(window_and_atomics_cases(&cam));
     cases.extend(semantics_only_and_fixed_point_cases(&cam));
     for wide in [false, true] {
-        let gpu = common::gpu_with_wide_tiles(wide);
-        for case in &cases {
-            let worst = compare(gpu, case);
-            assert!(
-                worst < TOLERANCE,
-                "{} (wide tiles: {wide}): relative error {worst:.2e}",
-                case.name
-            );
-        }
-        common::check_validation(gpu);
+        assert_cases_match(common::gpu_with_wide_tiles(wide), &cases);
     }
+}
+
+/// Every case on `gpu` within the tolerance of the reference, and the validation silent.
+fn assert_cases_match(gpu: &Gpu, cases: &[Case]) {
+    let caps = gpu.caps();
+    for case in cases {
+        let worst = compare(gpu, case);
+        assert!(
+            worst < TOLERANCE,
+            "{} (wide tiles: {}, int64 atomics: {}): relative error {worst:.2e}",
+            case.name,
+            caps.wide_tiles,
+            caps.int64_atomics
+        );
+    }
+    common::check_validation(gpu);
 }
 
 /// The deterministic sums on a device without 64-bit integer atomics: the `fixed32x2`
@@ -370,15 +377,7 @@ fn fixed_point_without_int64_atomics_matches_the_reference() {
     for wide in [false, true] {
         let gpu = common::gpu_without_int64_atomics(wide);
         assert!(!gpu.caps().int64_atomics);
-        for case in &cases {
-            let worst = compare(gpu, case);
-            assert!(
-                worst < TOLERANCE,
-                "{} (fixed32x2, wide tiles: {wide}): relative error {worst:.2e}",
-                case.name
-            );
-        }
-        common::check_validation(gpu);
+        assert_cases_match(gpu, &cases);
     }
 }
 
