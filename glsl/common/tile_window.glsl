@@ -22,6 +22,12 @@ uint tile_lane() {
     return gl_SubgroupID * gl_SubgroupSize + gl_SubgroupInvocationID;
 }
 
+// The q-th (q < PIXELS) of the slots the invocation takes among TILE_PIXELS (the tile's
+// pixels, a batch's entries): its lane, then one workgroup's width further each time.
+uint invocation_slot(uint q) {
+    return tile_lane() + q * LANES;
+}
+
 struct TileWindow {
     uint t;     // lane-order index in the tile
     uint px;
@@ -62,14 +68,13 @@ TileWindow tile_window_in_band(uint width, uint height, uint tiles_x, uint windo
     return tile_window_of_pixel(width, height, tiles_x, window_start, window_len, tile_row_base, t);
 }
 
-// The windows of the invocation's PIXELS pixels, pixel lane + q * LANES for q < PIXELS
+// The windows of the invocation's PIXELS pixels, pixel invocation_slot(q) for q < PIXELS
 // (one window of the tile's list: every pixel's start, end and len are the same).
 void tile_windows(out TileWindow tw[PIXELS], uint width, uint height, uint tiles_x,
                   uint window_start, uint window_len, uint tile_row_base) {
-    uint lane = tile_lane();
     [[unroll]] for (uint q = 0; q < PIXELS; q++) {
         tw[q] = tile_window_of_pixel(width, height, tiles_x, window_start, window_len,
-                                     tile_row_base, lane + q * LANES);
+                                     tile_row_base, invocation_slot(q));
     }
 }
 

@@ -188,7 +188,6 @@ void main() {
     if (status.data[ST_OVERFLOW] != 0 || status.data[ST_ISECT_WRAPPED] != 0) {
         return;
     }
-    uint lane = tile_lane();
     TileWindow tw[PIXELS];
     tile_windows(tw, width, height, pc.tiles_x, window_start, window_len, pc.tile_row_base);
     if (window_start >= tw[0].len) {
@@ -206,7 +205,7 @@ void main() {
             break;
         }
         [[unroll]] for (uint q = 0; q < PIXELS; q++) {
-            uint slot = lane + q * LANES;
+            uint slot = invocation_slot(q);
             if (b + slot < end) {
                 load_entry(b + slot, slot);
             }

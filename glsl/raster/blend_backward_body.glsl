@@ -45,11 +45,10 @@
 
 layout(set = 0, binding = 0) readonly buffer RangesBuf { uvec2 data[]; } tile_ranges;
 #ifdef WIDE
-// The `*_wide` kernels: 4 pixels an invocation. Measured on lavapipe (office scene,
-// 640x480, 12 channels): the backward 6.1 s narrow, 2.5 s at 4, 1.8 s at 8, 1.5 s at 16;
-// but compiling each variant (a cold shader cache, as on a fresh machine) took about 5 s
-// more at 4, 23 s at 8 and 70 s at 16 (some 40 floats of state a pixel): past 4, more
-// pixels an invocation cost a first run more in compiling than they save it.
+// The `*_wide` kernels: 4 pixels an invocation. On lavapipe more pixels ran faster (the
+// office at 640x480, 12 channels: 6.1 s narrow, 2.5 s at 4, 1.7-2.0 s at 8, 1.3-1.6 s at
+// 16) but compiled far slower on a cold shader cache, as on a fresh machine (+5 s at 4,
+// +23 s at 8, +69 s at 16 for the float variant; docs/architecture.md).
 #define PIXELS 4
 #endif
 #include "tile_window.glsl"
@@ -310,7 +309,6 @@ void main() {
 #else
     bool with_rgb = chunk_base == 0;
 #endif
-    uint lane = tile_lane();
     TileWindow tw[PIXELS];
     tile_windows(tw, width, height, pc.tiles_x, window_start, window_len, pc.tile_row_base);
     if (window_start > 0 && window_start >= tw[0].len) {
@@ -328,7 +326,7 @@ void main() {
         uint count = min(BATCH, b1 - start);
         uint b0 = b1 - count;
         [[unroll]] for (uint q = 0; q < PIXELS; q++) {
-            uint slot = lane + q * LANES;
+            uint slot = invocation_slot(q);
             if (slot < count) {
                 load_entry(b0 + slot, slot, channels, chunk_base);
             }

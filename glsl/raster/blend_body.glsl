@@ -248,7 +248,6 @@ void main() {
     uint width = pc.width, height = pc.height, channels = pc.channels;
     uint window_start = pc.window_start, window_len = pc.window_len, chunk_base = pc.chunk_base;
     bool write_rgb = pc.write_rgb != 0;
-    uint lane = tile_lane();
     TileWindow tw[PIXELS];
     tile_windows(tw, width, height, pc.tiles_x, window_start, window_len, pc.tile_row_base);
     // Later windows only continue tiles that are longer; window 0 always writes (background).
@@ -267,7 +266,7 @@ void main() {
             break;
         }
         [[unroll]] for (uint q = 0; q < PIXELS; q++) {
-            uint slot = lane + q * LANES;
+            uint slot = invocation_slot(q);
             if (b + slot < end) {
                 load_entry(b + slot, slot, channels, chunk_base);
             }
