@@ -114,11 +114,9 @@ fn bench_sort_json_has_the_documented_fields() {
     let ratio = v["gpu_pairs_per_s"].as_f64().unwrap() / v["cpu_pairs_per_s"].as_f64().unwrap();
     assert!((ratio - v["ratio"].as_f64().unwrap()).abs() < 1e-9 * ratio);
     assert!(!v["device"].as_str().unwrap().is_empty());
-    assert!(v["kernels"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .any(|k| k["kernel"] == "sort/scatter"));
+    assert!(v["kernels"].as_array().unwrap().iter().any(|k| k["kernel"]
+        .as_str()
+        .is_some_and(|name| name.starts_with("sort/scatter"))));
 }
 
 #[test]

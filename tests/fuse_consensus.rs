@@ -68,9 +68,15 @@ fn observed_office(gpu: &Gpu) -> Observed {
 
 /// The GPU's observations (occlusion off) against a plain f64 projection of every center
 /// and flood-filled regions; centers within 1e-3 px of a pixel edge may land either side.
+/// Both forms: the regions found on the GPU, and on the host as CPU devices find them.
 #[test]
 fn observations_match_a_cpu_transcription() {
-    let gpu = gpu();
+    for cpu_forms in [false, true] {
+        observations_match_a_cpu_transcription_on(common::gpu_with_cpu_forms(cpu_forms));
+    }
+}
+
+fn observations_match_a_cpu_transcription_on(gpu: &Gpu) {
     let Observed {
         s,
         labels,

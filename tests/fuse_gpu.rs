@@ -488,7 +488,7 @@ fn both_tile_forms_give_the_same_evidence() {
     let cams = cameras();
     let labels = label_maps(&cams, 20);
     let both_forms = |cfg: &FuseConfig| {
-        [false, true].map(|wide| run_on(common::gpu_with_wide_tiles(wide), &g, &cams, &labels, cfg))
+        [false, true].map(|wide| run_on(common::gpu_with_cpu_forms(wide), &g, &cams, &labels, cfg))
     };
     for method in [
         Method::VoteOcclusion,
@@ -528,7 +528,7 @@ fn both_tile_forms_give_the_same_evidence() {
         );
     }
     for wide in [false, true] {
-        check_validation(common::gpu_with_wide_tiles(wide));
+        check_validation(common::gpu_with_cpu_forms(wide));
     }
 }
 
@@ -547,7 +547,7 @@ fn a_tile_longer_than_the_loop_cap_accumulates_whole() {
     )];
     let want = reference_contributions(&g, &cams, &labels, Weights::Every);
     for wide in [false, true] {
-        let gpu = common::gpu_with_wide_tiles(wide);
+        let gpu = common::gpu_with_cpu_forms(wide);
         let got = run_on(gpu, &g, &cams, &labels, &FuseConfig::default());
         let last: f64 = (0..CLASSES).map(|e| got.get(e, n)).sum();
         assert!(
@@ -758,7 +758,7 @@ fn fixed_point_without_int64_atomics_is_a_clear_error() {
         ..cfg
     };
     let float = run_on(gpu, &g, &cams, &labels, &cfg);
-    let want = run_on(common::gpu_with_wide_tiles(true), &g, &cams, &labels, &cfg);
+    let want = run_on(common::gpu_with_cpu_forms(true), &g, &cams, &labels, &cfg);
     let top = want.data.iter().fold(0.0f64, |m, &v| m.max(v));
     assert!(top > 0.0, "no evidence");
     for (i, (a, b)) in float.data.iter().zip(&want.data).enumerate() {

@@ -2,13 +2,15 @@
 
 mod common;
 
-use common::{check_validation, gpu, random_u32};
+use common::{check_validation, gpu, gpu_with_cpu_forms, random_u32};
 use semsplat::gpu::kernel_table::KERNELS;
 use semsplat::gpu::scan::exclusive_scan;
 use semsplat::gpu::sort::{plan_passes, sort_pairs};
 use semsplat::gpu::{GpuCount, KernelId, RadixSort, Recorder};
 
-const SIZES: [usize; 6] = [0, 1, 7, 255, 4096, 1_000_003];
+// One block of the sort is 4,096 keys, a run of its wide form 256 (glsl/sort/wide_runs.glsl):
+// sizes below, at and past both, and a last block cut inside a run.
+const SIZES: [usize; 8] = [0, 1, 7, 255, 257, 4096, 4096 + 300, 1_000_003];
 
 #[derive(Clone, Copy, Debug)]
 enum Keys {
@@ -60,9 +62,18 @@ fn cpu_sort(keys: &[u32], bits: u32) -> (Vec<u32>, Vec<u32>) {
     pairs.into_iter().unzip()
 }
 
+/// Both forms of the sort's passes (the GPU's ballots, the CPU drivers' runs of keys).
+const FORMS: [bool; 2] = [false, true];
+
 #[test]
 fn sort_matches_cpu_stable_sort() {
-    let gpu = gpu();
+    for wide in FORMS {
+        sort_matches_cpu_stable_sort_on(gpu_with_cpu_forms(wide));
+    }
+}
+
+fn sort_matches_cpu_stable_sort_on(gpu: &semsplat::gpu::Gpu) {
+    let wide = gpu.caps().cpu_forms;
     for &n in &SIZES {
         for kind in [Keys::Random, Keys::AllEqual, Keys::Sorted, Keys::Reversed] {
             for bits in [1, 8, 13, 32] {
@@ -80,7 +91,7 @@ fn sort_matches_cpu_stable_sort() {
                 if gk != ck || gv != cv {
                     let first = (0..n).find(|&i| gk[i] != ck[i] || gv[i] != cv[i]).unwrap();
                     panic!(
-                        "n={n} {kind:?} bits={bits}: first mismatch at {first}: gpu ({}, {}) cpu ({}, {})",
+                        "wide={wide} n={n} {kind:?} bits={bits}: first mismatch at {first}: gpu ({}, {}) cpu ({}, {})",
                         gk[first], gv[first], ck[first], cv[first]
                     );
                 }
@@ -92,8 +103,13 @@ fn sort_matches_cpu_stable_sort() {
 
 #[test]
 fn sort_reads_count_from_gpu_and_leaves_the_tail_alone() {
+    for wide in FORMS {
+        sort_reads_count_and_leaves_the_tail_alone_on(gpu_with_cpu_forms(wide));
+    }
+}
+
+fn sort_reads_count_and_leaves_the_tail_alone_on(gpu: &semsplat::gpu::Gpu) {
     // Capacity 10_000 but the GPU-side count says 5_000: only the prefix is sorted.
-    let gpu = gpu();
     let keys = random_u32(10_000, 7);
     let values: Vec<u32> = (0..10_000).collect();
     let sorter = RadixSort::new(gpu, 10_000).unwrap();
@@ -117,7 +133,12 @@ fn sort_reads_count_from_gpu_and_leaves_the_tail_alone() {
 
 #[test]
 fn sort_clamps_a_count_above_capacity() {
-    let gpu = gpu();
+    for wide in FORMS {
+        sort_clamps_a_count_above_capacity_on(gpu_with_cpu_forms(wide));
+    }
+}
+
+fn sort_clamps_a_count_above_capacity_on(gpu: &semsplat::gpu::Gpu) {
     let keys = random_u32(5_000, 8);
     let values: Vec<u32> = (0..5_000).collect();
     let sorter = RadixSort::new(gpu, 5_000).unwrap();

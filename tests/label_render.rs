@@ -94,7 +94,7 @@ fn label_renders_equal_the_argmax_of_one_hot_semantics() {
     assert!(labelled > want.len() / 2, "{labelled} labelled pixels");
     // Both forms of the per-tile kernels: one pixel an invocation and several (`*_wide`).
     for wide in [false, true] {
-        let gpu = common::gpu_with_wide_tiles(wide);
+        let gpu = common::gpu_with_cpu_forms(wide);
         let got = LabelRenderer::new(gpu, &g, &classes)
             .unwrap()
             .render_ids(&cam)

@@ -338,7 +338,7 @@ fn gpu_backward_matches_the_reference_backward() {
     cases.extend(window_and_atomics_cases(&cam));
     cases.extend(semantics_only_and_fixed_point_cases(&cam));
     for wide in [false, true] {
-        assert_cases_match(common::gpu_with_wide_tiles(wide), &cases);
+        assert_cases_match(common::gpu_with_cpu_forms(wide), &cases);
     }
 }
 
@@ -351,7 +351,7 @@ fn assert_cases_match(gpu: &Gpu, cases: &[Case]) {
             worst < TOLERANCE,
             "{} (wide tiles: {}, int64 atomics: {}): relative error {worst:.2e}",
             case.name,
-            caps.wide_tiles,
+            caps.cpu_forms,
             caps.int64_atomics
         );
     }
@@ -409,7 +409,7 @@ fn gpu_backward_handles_the_forward_edge_cases() {
     g.means[1] = [0.01, 0.02, 0.05];
     // Both forms of the per-tile kernels: pixels of one invocation stop at different steps.
     for wide in [false, true] {
-        let gpu = common::gpu_with_wide_tiles(wide);
+        let gpu = common::gpu_with_cpu_forms(wide);
         for deterministic in [false, true] {
             let worst = compare(
                 gpu,

@@ -733,7 +733,7 @@ fn both_tile_forms_render_the_same_bytes() {
     for window_len in [None, Some(50)] {
         for cam in poses(80, 50) {
             let [one, several] = [false, true].map(|wide| {
-                let gpu = common::gpu_with_wide_tiles(wide);
+                let gpu = common::gpu_with_cpu_forms(wide);
                 let mut raster = Rasterizer::new(gpu);
                 if let Some(len) = window_len {
                     raster.set_window_len(len);
@@ -772,7 +772,7 @@ fn both_tile_forms_render_the_same_bytes() {
         }
     }
     for wide in [false, true] {
-        check_validation(common::gpu_with_wide_tiles(wide));
+        check_validation(common::gpu_with_cpu_forms(wide));
     }
 }
 

@@ -11,7 +11,7 @@
 // reads shared memory and storage buffers one lane at a time, so each step of a tile's list
 // costs a read per lane; an invocation that takes PIXELS of the tile's pixels (pixel
 // lane + q * LANES for q < PIXELS) reads each step once for all of them: the `*_wide`
-// kernels, which the host picks on CPU devices (src/gpu/caps.rs, `wide_tiles`).
+// kernels, which the host picks on CPU devices (src/gpu/caps.rs, `cpu_forms`).
 #ifndef PIXELS
 #define PIXELS 1
 #endif

@@ -946,18 +946,19 @@ fn record_contrib(
 ) -> Result<()> {
     let kernel = match cfg.accumulation {
         Accumulation::FixedPoint => {
-            ids::FUSE_CONTRIB_FIXED.for_tiles(ids::FUSE_CONTRIB_FIXED_WIDE, rec.gpu())
+            ids::FUSE_CONTRIB_FIXED.for_device(ids::FUSE_CONTRIB_FIXED_WIDE, rec.gpu())
         }
         Accumulation::Float => {
-            ids::FUSE_CONTRIB_FLOAT.for_tiles(ids::FUSE_CONTRIB_FLOAT_WIDE, rec.gpu())
+            ids::FUSE_CONTRIB_FLOAT.for_device(ids::FUSE_CONTRIB_FLOAT_WIDE, rec.gpu())
         }
     };
     let f = &tiles.frame;
     let bands = f.bands(CONTRIB_CARRY_BYTES)?;
     let projected = tiles.projected_addrs()?;
     let contrib_addr = pass.evidence.address_words(4)?;
-    for start in f.window_starts() {
-        for band in &bands {
+    let windows = tiles.pass_windows(rec, &bands)?;
+    for (window, start) in f.window_starts() {
+        for (band_index, band) in bands.iter().enumerate() {
             let params = ContribParams {
                 xy_depth_opacity_addr: projected.xy_depth_opacity,
                 xy_frac_addr: projected.xy_frac,
@@ -975,18 +976,14 @@ fn record_contrib(
                 per_view: u32::from(cfg.method == Method::FlashSplatPerView),
                 tile_row_base: band.first_tile_row,
             };
-            rec.dispatch_ranges(
-                kernel,
-                &[
-                    ("tile_ranges", BufferRange::whole(tiles.ranges())),
-                    ("isect_ids", BufferRange::whole(tiles.isect_ids())),
-                    ("labels", band.range(labels, 4)),
-                    ("carry", band.range(carry, CONTRIB_CARRY_BYTES)),
-                    ("status", tiles.status()),
-                ],
-                &params,
-                band.groups(f.tiles_x),
-            )?;
+            let bindings = [
+                ("tile_ranges", BufferRange::whole(tiles.ranges())),
+                ("isect_ids", BufferRange::whole(tiles.isect_ids())),
+                ("labels", band.range(labels, 4)),
+                ("carry", band.range(carry, CONTRIB_CARRY_BYTES)),
+                ("status", tiles.status()),
+            ];
+            windows.dispatch(rec, kernel, &bindings, &params, (window, band_index))?;
         }
         rec.barrier();
     }

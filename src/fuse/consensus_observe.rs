@@ -296,7 +296,7 @@ impl<'a> Lane<'a> {
         Ok(Lane {
             raster,
             centers: gpu.buffer("center-pixels", (n.max(1) * 4) as u64)?,
-            finder: RegionFinder::new(gpu, n)?,
+            finder: RegionFinder::for_device(gpu, n)?,
         })
     }
 

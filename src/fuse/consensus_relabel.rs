@@ -360,10 +360,12 @@ pub fn fuse_relabeled(
         class: &run.consensus.assignment.class,
         rule: params.relabel,
         confusions: &run.consensus.confusions,
-        finder: Some(Mutex::new(RegionFinder::new(
-            input.gpu,
-            input.shapes.len(),
-        )?)),
+        // On a CPU device the host relabels (as `RegionFinder::for_device` observes), each
+        // of the label source's threads its own view, without the finder's lock.
+        finder: (!input.gpu.caps().cpu_forms)
+            .then(|| RegionFinder::new(input.gpu, input.shapes.len()))
+            .transpose()?
+            .map(Mutex::new),
         undecided: Some(input.classes as u32),
     };
     let flashsplat = FuseConfig {

@@ -54,12 +54,17 @@ pub struct DeviceCaps {
     /// cuts its loops short, where the driver has such a cap (see [`loop_iteration_cap`]).
     /// Kernels that walk long lists split the walk into dispatches that stay below it.
     pub loop_iteration_cap: Option<u32>,
-    /// Per-tile kernels take several pixels an invocation (the `*_wide` kernels,
-    /// glsl/common/tile_window.glsl): on by default on CPU devices, whose drivers (lavapipe)
-    /// read shared memory and storage buffers one SIMD lane at a time, so an invocation per
-    /// pixel reads every step of a tile's list once per pixel (blending and fusion about 4x
-    /// slower there). See [`wide_tiles`].
-    pub wide_tiles: bool,
+    /// The forms of the work written for CPU drivers stand in for the GPU forms: on by
+    /// default on CPU devices, whose drivers (lavapipe) run a workgroup as SIMD vectors but
+    /// read shared memory and storage buffers, and emulate ballots and atomics, one lane at a
+    /// time. The per-tile kernels take several pixels an invocation (the `*_wide` kernels,
+    /// glsl/common/tile_window.glsl: one pixel an invocation reads every step of a tile's
+    /// list once per pixel, blending and fusion about 4x slower there), the radix sort's
+    /// passes walk runs of keys one after another (glsl/sort/wide_runs.glsl: about 4.5x
+    /// faster there), and segment consensus finds each view's label regions on the host,
+    /// the same cores, without the union-find's atomics (src/fuse/regions_gpu.rs). See
+    /// [`cpu_forms`].
+    pub cpu_forms: bool,
     pub heaps: Vec<Heap>,
     #[serde(skip)]
     pub compute_queue_family: Option<u32>,
@@ -140,7 +145,7 @@ pub fn probe_device(instance: &ash::Instance, pd: vk::PhysicalDevice) -> (Device
         device_type: base.device_type,
         vendor_id: base.vendor_id,
         loop_iteration_cap: loop_iteration_cap(&driver_name),
-        wide_tiles: base.device_type == vk::PhysicalDeviceType::CPU,
+        cpu_forms: base.device_type == vk::PhysicalDeviceType::CPU,
         driver_name,
         driver_info: cstr(&props.driver.driver_info),
         vulkan_version: format!(
@@ -186,12 +191,12 @@ pub(crate) fn binding_limit(device: u64, asked: Option<u64>) -> u64 {
     asked.map_or(device, |a| (a / 256 * 256).clamp(256, device))
 }
 
-/// Whether per-tile kernels take several pixels an invocation: `asked` (else
-/// `SEMSPLAT_WIDE_TILES`, 0 or 1), or the device's default (`device`, CPU devices). Tests
-/// set it to run both forms of every per-tile kernel on one device; see
-/// `GpuOptions::wide_tiles`.
-pub(crate) fn wide_tiles(device: bool, asked: Option<bool>) -> bool {
-    let asked = asked.or_else(|| match std::env::var("SEMSPLAT_WIDE_TILES").as_deref() {
+/// Whether the CPU drivers' forms of the work stand in for the GPU forms
+/// (`DeviceCaps::cpu_forms`): `asked` (else `SEMSPLAT_CPU_FORMS`, 0 or 1), or the device's
+/// default (`device`, CPU devices). Tests set it to run both forms on one device; see
+/// `GpuOptions::cpu_forms`.
+pub(crate) fn cpu_forms(device: bool, asked: Option<bool>) -> bool {
+    let asked = asked.or_else(|| match std::env::var("SEMSPLAT_CPU_FORMS").as_deref() {
         Ok("0") => Some(false),
         Ok("1") => Some(true),
         _ => None,

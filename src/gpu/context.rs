@@ -9,7 +9,7 @@ use std::sync::{Arc, Mutex};
 use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 
-use super::caps::{binding_limit, probe_device, wide_tiles, DeviceCaps};
+use super::caps::{binding_limit, cpu_forms, probe_device, DeviceCaps};
 use super::error::{GpuError, GpuResult, VkContext};
 use super::kernel::Pipeline;
 use super::recorder::RecorderParts;
@@ -29,10 +29,10 @@ pub struct GpuOptions {
     /// (defaults to `SEMSPLAT_MAX_BINDING`): tests set it so small scenes take the paths
     /// that split work across bindings, as scenes past the real limit do.
     pub max_binding: Option<u64>,
-    /// Per-tile kernels with several pixels an invocation, or one (defaults to
-    /// `SEMSPLAT_WIDE_TILES`, else on for CPU devices): both give the same results, and
-    /// tests run each form.
-    pub wide_tiles: Option<bool>,
+    /// The CPU drivers' forms of the work (`DeviceCaps::cpu_forms`: the `*_wide` kernels,
+    /// label regions on the host), or the GPU forms (defaults to `SEMSPLAT_CPU_FORMS`, else
+    /// the CPU forms on CPU devices): both give the same results, and tests run each form.
+    pub cpu_forms: Option<bool>,
     /// Leave 64-bit integer atomics off even where the device has them, as on a device
     /// without them: the blend backward's fixed point then sums in two 32-bit halves
     /// (`fixed32x2`), and fixed-point fusion is refused. For tests of those paths.
@@ -266,7 +266,7 @@ impl Gpu {
         let (physical, mut caps) = pick_physical(&instance, wanted.as_deref())?;
         caps.max_storage_buffer_range =
             binding_limit(caps.max_storage_buffer_range, opts.max_binding);
-        caps.wide_tiles = wide_tiles(caps.wide_tiles, opts.wide_tiles);
+        caps.cpu_forms = cpu_forms(caps.cpu_forms, opts.cpu_forms);
         caps.int64_atomics &= !opts.without_int64_atomics;
         let queue_family = caps
             .compute_queue_family

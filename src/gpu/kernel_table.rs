@@ -85,15 +85,16 @@ impl<P> Kernel<P> {
         self.id.info()
     }
 
-    /// This per-tile kernel, or its `*_wide` form (several pixels an invocation,
-    /// glsl/common/tile_window.glsl) where the device takes it (`DeviceCaps::wide_tiles`).
-    pub fn for_tiles(self, wide: Kernel<P>, gpu: &crate::gpu::Gpu) -> Kernel<P> {
+    /// This kernel (the GPU form), or its `*_wide` form for CPU drivers (several pixels an
+    /// invocation, glsl/common/tile_window.glsl; runs of keys, glsl/sort/wide_runs.glsl)
+    /// where the device takes the CPU drivers' forms (`DeviceCaps::cpu_forms`).
+    pub fn for_device(self, wide: Kernel<P>, gpu: &crate::gpu::Gpu) -> Kernel<P> {
         debug_assert_eq!(
             format!("{}_wide", self.info().name),
             wide.info().name,
             "the wide form of the same kernel"
         );
-        match gpu.caps().wide_tiles {
+        match gpu.caps().cpu_forms {
             true => wide,
             false => self,
         }

@@ -284,13 +284,7 @@ impl Recorder {
         params: &P,
         groups: [u32; 3],
     ) -> GpuResult<()> {
-        let used = kernel.info().bindings;
-        let mut all = bindings.to_vec();
-        all.extend(
-            optional
-                .iter()
-                .filter(|(name, _)| used.iter().any(|b| b.name == *name)),
-        );
+        let all = with_optional(kernel, bindings, optional);
         self.dispatch_ranges(kernel, &all, params, groups)
     }
 
@@ -643,4 +637,21 @@ fn buffer_infos(
                 })])
         })
         .collect()
+}
+
+/// `bindings`, and those of `optional` that `kernel` uses (the optimizer drops bindings a
+/// variant never reads; binding one it lacks is an error).
+pub fn with_optional<'a, P>(
+    kernel: Kernel<P>,
+    bindings: &[(&'a str, BufferRange<'a>)],
+    optional: &[(&'a str, BufferRange<'a>)],
+) -> Vec<(&'a str, BufferRange<'a>)> {
+    let used = kernel.info().bindings;
+    let mut all = bindings.to_vec();
+    all.extend(
+        optional
+            .iter()
+            .filter(|(name, _)| used.iter().any(|b| b.name == *name)),
+    );
+    all
 }

@@ -2,7 +2,9 @@
 //! element count read from a GPU buffer. Each pass is count (per-block digit histogram),
 //! an exclusive scan of the digit-major histogram, and a stable scatter: reduce-then-scan,
 //! no workgroup waits on another, and every invocation's loops stay far below lavapipe's
-//! 65,535-iteration cap.
+//! 65,535-iteration cap. On CPU devices the count and scatter take their `*_wide` forms
+//! (glsl/sort/wide_runs.glsl: each invocation walks a run of a block's keys in order, with
+//! no ballots; `DeviceCaps::cpu_forms`): the same blocks, histogram, scan and result.
 
 use super::buffer::Buffer;
 use super::context::Gpu;
@@ -134,7 +136,7 @@ impl RadixSort {
                 bits: width,
             };
             rec.dispatch_indirect(
-                ids::SORT_COUNT,
+                ids::SORT_COUNT.for_device(ids::SORT_COUNT_WIDE, rec.gpu()),
                 &[("state", &self.state), ("counts", &self.counts)],
                 &params,
                 &self.state,
@@ -143,7 +145,7 @@ impl RadixSort {
             rec.barrier();
             self.scan.record_scan(rec, &self.counts, &self.counts)?;
             rec.dispatch_indirect(
-                ids::SORT_SCATTER,
+                ids::SORT_SCATTER.for_device(ids::SORT_SCATTER_WIDE, rec.gpu()),
                 &[("state", &self.state), ("offsets", &self.counts)],
                 &params,
                 &self.state,

@@ -21,6 +21,7 @@ use crate::contract::{
     FS_WORDS, SEM_CHUNK, TILE_SIZE,
 };
 use crate::gpu::kernel_table::{ids, Kernel};
+use crate::gpu::recorder::with_optional;
 use crate::gpu::{Buffer, BufferRange, Gpu, Recorder};
 use crate::scene::Camera;
 
@@ -433,14 +434,15 @@ impl TileLists<'_> {
         // the carried state, the semantic channels or RGB).
         let (sem_bytes, carry_bytes) = (f.channels as u64 * 4, carry_bytes_per_pixel(f.windows));
         let bands = f.bands(RGB_BYTES.max(sem_bytes).max(carry_bytes))?;
+        let windows = self.pass_windows(rec, &bands)?;
         for chunk in 0..f.sem_chunks() {
-            for start in f.window_starts().rev() {
+            for (window, start) in f.window_starts().rev() {
                 let params = BlendParams {
                     grad2d_addr,
                     grad_sem_addr,
                     ..self.blend_params(start, chunk, false)?
                 };
-                for band in &bands {
+                for (band_index, band) in bands.iter().enumerate() {
                     let params = BlendParams {
                         tile_row_base: band.first_tile_row,
                         ..params
@@ -464,8 +466,8 @@ impl TileLists<'_> {
                         ("fixed_params", BufferRange::whole(&grads.fixed.params)),
                         ("fixed_status", BufferRange::whole(&grads.fixed.status)),
                     ];
-                    let groups = band.groups(f.tiles_x);
-                    rec.dispatch_with_optional(kernel, &bindings, &optional, &params, groups)?;
+                    let bindings = with_optional(kernel, &bindings, &optional);
+                    windows.dispatch(rec, kernel, &bindings, &params, (window, band_index))?;
                 }
                 rec.barrier();
             }
@@ -667,7 +669,7 @@ impl Rasterizer {
 
 /// The blend-backward variant for `grads`' accumulation (fixed point with 64-bit atomics
 /// where the device has them) and parameters (all, or the semantic vectors only), in the
-/// device's per-tile form ([`Kernel::for_tiles`]).
+/// device's per-tile form ([`Kernel::for_device`]).
 fn backward_kernel(grads: &SceneGrads, gpu: &Gpu) -> Kernel<BlendParams> {
     let int64_atomics = gpu.caps().int64_atomics;
     let (narrow, wide) = match (grads.semantics_only, grads.accumulation) {
@@ -703,5 +705,5 @@ fn backward_kernel(grads: &SceneGrads, gpu: &Gpu) -> Kernel<BlendParams> {
             ids::RASTER_BLEND_BACKWARD_SEM_ONLY_FIXED32X2_WIDE,
         ),
     };
-    narrow.for_tiles(wide, gpu)
+    narrow.for_device(wide, gpu)
 }

@@ -6,6 +6,7 @@ pub mod frame;
 pub mod gpu_scene;
 pub mod rasterizer;
 pub mod reference;
+pub mod windows;
 
 pub use frame::RenderedFrame;
 pub use gpu_scene::GpuScene;

@@ -10,6 +10,7 @@ use anyhow::{ensure, Result};
 use super::chunks::{bands, chunk_len, chunks, part_of, row_step, Band, BandLimits, CHUNK_GRANULE};
 use super::frame::RenderedFrame;
 use super::gpu_scene::{GpuScene, ParamTensor, SceneAttributes};
+use super::windows::{window_args_bytes, PassWindows};
 use super::{project_params, RenderOptions, SemanticMode, StageTimes};
 use crate::contract::params::{BlendParams, CompactParams, EmitParams, GatherTouchedParams};
 use crate::contract::{
@@ -36,6 +37,7 @@ struct Buffers {
     sem_cap: u64,
     best_cap: u64,
     carry_cap: u64,
+    window_args_cap: u64,
     tiles_cap: u32,
     isect_cap: u32,
     xy: Buffer,
@@ -53,6 +55,8 @@ struct Buffers {
     isect_keys: Buffer,
     isect_ids: Buffer,
     ranges: Buffer,
+    /// Indirect arguments of the per-tile passes' later windows (src/render/windows.rs).
+    window_args: Buffer,
     carry: Buffer,
     rgb: Buffer,
     alpha: Buffer,
@@ -184,6 +188,8 @@ struct Need {
     /// Pixels of the label argmax (0 unless rendering labels).
     best: u64,
     carry: u64,
+    /// Bytes of indirect arguments: one (x, y, z) per later window and band of tile rows.
+    window_args: u64,
     isect: u32,
 }
 
@@ -212,6 +218,7 @@ impl Buffers {
             sem_cap: need.sem,
             best_cap: need.best,
             carry_cap: need.carry,
+            window_args_cap: need.window_args,
             tiles_cap: need.tiles,
             isect_cap: isect as u32,
             xy: b("xy_depth_opacity", n * 16)?,
@@ -229,6 +236,7 @@ impl Buffers {
             isect_keys: b("isect_keys", isect * 4)?,
             isect_ids: b("isect_ids", isect * 4)?,
             ranges: b("tile_ranges", need.tiles as u64 * 8)?,
+            window_args: b("window_args", need.window_args.max(12))?,
             carry: b("carry", need.carry * 4)?,
             rgb: b("rgb", p * 12)?,
             alpha: b("alpha", p * 4)?,
@@ -255,6 +263,7 @@ impl Buffers {
             && need.sem <= self.sem_cap
             && need.best <= self.best_cap
             && need.carry <= self.carry_cap
+            && need.window_args <= self.window_args_cap
             && need.tiles <= self.tiles_cap
             && need.isect <= self.isect_cap
     }
@@ -381,6 +390,7 @@ impl Rasterizer {
                     sem: grow(b.sem_cap, need.sem),
                     best: grow(b.best_cap, need.best),
                     carry: grow(b.carry_cap, need.carry),
+                    window_args: grow(b.window_args_cap, need.window_args),
                     // Growth past a need never exceeds what one list may hold.
                     isect: grow(b.isect_cap as u64, need.isect as u64)
                         .min(self.list_capacity() as u64)
@@ -745,6 +755,7 @@ impl Rasterizer {
             },
             best: if frame.labels.is_some() { pixels } else { 0 },
             carry: (pixels * frame.blend_carry_floats()).max(1),
+            window_args: window_args_bytes(frame),
             isect: self
                 .bufs
                 .as_ref()
@@ -1054,10 +1065,10 @@ pub struct FrameSpec<'a> {
 }
 
 impl FrameSpec<'_> {
-    /// First list entry of each window, in walking order (front to back).
-    pub fn window_starts(&self) -> impl DoubleEndedIterator<Item = u32> + '_ {
+    /// Each window's number and first list entry, in walking order (front to back).
+    pub fn window_starts(&self) -> impl DoubleEndedIterator<Item = (u32, u32)> + '_ {
         // windows = ceil(n / window_len), so every start is below n: no u32 overflow.
-        (0..self.windows).map(|w| w * self.window_len)
+        (0..self.windows).map(|w| (w, w * self.window_len))
     }
 
     /// Dispatches that cover the semantic channels, SEM_CHUNK at a time (1 for RGB only).
@@ -1115,6 +1126,18 @@ pub struct TiledRun {
 }
 
 impl TileLists<'_> {
+    /// How a pass over `bands` of these lists dispatches each window: records the later
+    /// windows' indirect arguments ([`PassWindows`]) where the frame has several.
+    pub fn pass_windows(&self, rec: &mut Recorder, bands: &[Band]) -> Result<PassWindows<'_>> {
+        PassWindows::record(
+            rec,
+            &self.frame,
+            bands,
+            &self.bufs.ranges,
+            &self.bufs.window_args,
+        )
+    }
+
     /// Which band of tile rows of the view these lists hold (0 when binned whole, and for
     /// the first band).
     pub fn band(&self) -> u32 {
@@ -1242,9 +1265,10 @@ impl TileLists<'_> {
             .max()
             .unwrap_or(4);
         let bands = f.bands(widest)?;
+        let windows = self.pass_windows(rec, &bands)?;
         for chunk in 0..f.sem_chunks() {
-            for start in f.window_starts() {
-                for band in &bands {
+            for (window, start) in f.window_starts() {
+                for (band_index, band) in bands.iter().enumerate() {
                     let mut params = self.blend_params(start, chunk, chunk == 0)?;
                     params.tile_row_base = band.first_tile_row;
                     let px = |buf, bytes| band.range(buf, bytes);
@@ -1271,8 +1295,8 @@ impl TileLists<'_> {
                         }
                         (None, None) => (ids::RASTER_BLEND_RGB, ids::RASTER_BLEND_RGB_WIDE),
                     };
-                    let kernel = narrow.for_tiles(wide, rec.gpu());
-                    rec.dispatch_ranges(kernel, &bindings, &params, band.groups(f.tiles_x))?;
+                    let kernel = narrow.for_device(wide, rec.gpu());
+                    windows.dispatch(rec, kernel, &bindings, &params, (window, band_index))?;
                 }
                 rec.barrier();
             }
@@ -1289,15 +1313,16 @@ impl TileLists<'_> {
         // The kernel carries no semantic channels, whatever the frame blends.
         let carry_bytes = f.blend_carry_floats().min(BLEND_CARRY_BASE as u64) * 4;
         let bands = f.bands(carry_bytes.max(4))?;
-        for start in f.window_starts() {
-            for band in &bands {
+        let windows = self.pass_windows(rec, &bands)?;
+        for (window, start) in f.window_starts() {
+            for (band_index, band) in bands.iter().enumerate() {
                 let mut params = self.blend_params(start, 0, false)?;
                 params.tile_row_base = band.first_tile_row;
                 let mut bindings = self.window_bindings(band, carry_bytes);
                 bindings.push(("out_depth", band.range(&self.bufs.depth, 4)));
                 let kernel = ids::RASTER_BLEND_MEDIAN_DEPTH
-                    .for_tiles(ids::RASTER_BLEND_MEDIAN_DEPTH_WIDE, rec.gpu());
-                rec.dispatch_ranges(kernel, &bindings, &params, band.groups(f.tiles_x))?;
+                    .for_device(ids::RASTER_BLEND_MEDIAN_DEPTH_WIDE, rec.gpu());
+                windows.dispatch(rec, kernel, &bindings, &params, (window, band_index))?;
             }
             rec.barrier();
         }

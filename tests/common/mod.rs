@@ -19,26 +19,27 @@ pub fn gpu() -> &'static Gpu {
     GPU.get_or_init(|| open_validated(GpuOptions::default()))
 }
 
-/// A second and third device handle with the per-tile kernels in one form each (`wide`:
-/// several pixels an invocation, the default on CPU devices; else one, the default on
-/// GPUs), for tests that run both forms on one machine.
-pub fn gpu_with_wide_tiles(wide: bool) -> &'static Gpu {
+/// A second and third device handle with the work that has a CPU drivers' form in one form
+/// each (`wide`: the CPU forms, `DeviceCaps::cpu_forms`, the default on CPU devices: the
+/// `*_wide` kernels, the sort's runs of keys, label regions on the host; else the GPU
+/// forms), for tests that run both forms on one machine.
+pub fn gpu_with_cpu_forms(wide: bool) -> &'static Gpu {
     static FORMS: [OnceLock<Gpu>; 2] = [OnceLock::new(), OnceLock::new()];
     FORMS[wide as usize].get_or_init(|| {
         open_validated(GpuOptions {
-            wide_tiles: Some(wide),
+            cpu_forms: Some(wide),
             ..Default::default()
         })
     })
 }
 
 /// Device handles with 64-bit integer atomics left off (`GpuOptions::without_int64_atomics`),
-/// in each form of the per-tile kernels, for the paths of devices without them.
+/// in each form (`gpu_with_cpu_forms`), for the paths of devices without them.
 pub fn gpu_without_int64_atomics(wide: bool) -> &'static Gpu {
     static FORMS: [OnceLock<Gpu>; 2] = [OnceLock::new(), OnceLock::new()];
     FORMS[wide as usize].get_or_init(|| {
         open_validated(GpuOptions {
-            wide_tiles: Some(wide),
+            cpu_forms: Some(wide),
             without_int64_atomics: true,
             ..Default::default()
         })

@@ -1,0 +1,47 @@
+// The sort passes' CPU-driver forms (count_wide.comp, scatter_wide.comp), which the host
+// picks where it picks every `*_wide` kernel (src/gpu/caps.rs, `cpu_forms`). A CPU
+// driver (lavapipe) runs a workgroup as SIMD vectors and emulates shared memory, ballots
+// and barriers one lane at a time, so the GPU forms' per-key ballots and shared-memory
+// sorting cost it about a microsecond a key and a pass. Here a workgroup of SORT_WIDE_LANES
+// invocations takes the same block of SORT_BLOCK keys (the same block count, histogram and
+// scan as the GPU forms), each invocation a run of SORT_RUN consecutive keys, which it
+// walks one after another with a private histogram: keys in order, no ballot, two barriers
+// a block. The results are the GPU forms' to the bit (a stable sort has one result).
+#ifndef SORT_WIDE_RUNS_GLSL
+#define SORT_WIDE_RUNS_GLSL
+
+#include "sort_layout.glsl"
+
+#define SORT_RUN (SORT_BLOCK / SORT_WIDE_LANES)
+
+layout(local_size_x = SORT_WIDE_LANES) in;
+
+// Per (digit, lane): the keys of that digit in the lane's run (then, in scatter_wide, the
+// run's first output slot for the digit).
+shared uint run_digits[RADIX * SORT_WIDE_LANES];
+
+// The keys [begin, end) of the invocation's run: up to SORT_RUN from its start, none past n.
+uvec2 run_range(uint n) {
+    uint begin = gl_WorkGroupID.x * SORT_BLOCK + gl_LocalInvocationIndex * SORT_RUN;
+    return uvec2(begin, max(begin, min(begin + SORT_RUN, n)));
+}
+
+uint key_digit(uint key) {
+    return bitfieldExtract(key, int(pc.shift), int(pc.bits));
+}
+
+// Counts the digits of the keys in `run` into `hist` and run_digits.
+void count_run(uvec2 run, out uint hist[RADIX]) {
+    [[unroll]] for (uint d = 0; d < RADIX; d++) {
+        hist[d] = 0;
+    }
+    for (uint i = run.x; i < run.y; i++) {
+        hist[key_digit(keys_in.data[i])]++;
+    }
+    uint lane = gl_LocalInvocationIndex;
+    [[unroll]] for (uint d = 0; d < RADIX; d++) {
+        run_digits[d * SORT_WIDE_LANES + lane] = hist[d];
+    }
+}
+
+#endif
