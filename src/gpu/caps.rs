@@ -56,13 +56,13 @@ pub struct DeviceCaps {
     pub loop_iteration_cap: Option<u32>,
     /// The forms of the work written for CPU drivers stand in for the GPU forms: on by
     /// default on CPU devices, whose drivers (lavapipe) run a workgroup as SIMD vectors but
-    /// read shared memory and storage buffers, and emulate ballots and atomics, one lane at a
-    /// time. The per-tile kernels take several pixels an invocation (the `*_wide` kernels,
+    /// read shared memory and storage buffers one lane at a time. The per-tile kernels
+    /// take several pixels an invocation (the `*_wide` kernels,
     /// glsl/common/tile_window.glsl: one pixel an invocation reads every step of a tile's
     /// list once per pixel, blending and fusion about 4x slower there), the radix sort's
     /// passes walk runs of keys one after another (glsl/sort/wide_runs.glsl: about 4.5x
     /// faster there), and segment consensus finds each view's label regions on the host,
-    /// the same cores, without the union-find's atomics (src/fuse/regions_gpu.rs). See
+    /// on the same cores (src/fuse/regions_gpu.rs: about 19x faster there). See
     /// [`cpu_forms`].
     pub cpu_forms: bool,
     pub heaps: Vec<Heap>,
