@@ -360,9 +360,9 @@ pub fn fuse_relabeled(
         class: &run.consensus.assignment.class,
         rule: params.relabel,
         confusions: &run.consensus.confusions,
-        // On a CPU device the host relabels (as `RegionFinder::for_device` observes), each
-        // of the label source's threads its own view, without the finder's lock.
-        finder: (!input.gpu.caps().cpu_forms)
+        // Where the host finds regions (a CPU device), it relabels too, each of the label
+        // source's threads its own view, without the finder's lock.
+        finder: (!RegionFinder::on_host_for(input.gpu))
             .then(|| RegionFinder::new(input.gpu, input.shapes.len()))
             .transpose()?
             .map(Mutex::new),

@@ -125,13 +125,19 @@ impl<'a> RegionFinder<'a> {
         })
     }
 
-    /// A finder for lookups of `n` Gaussians in the device's form: on the host where the
-    /// device takes the CPU drivers' forms (`DeviceCaps::cpu_forms`), else on the GPU.
+    /// A finder for lookups of `n` Gaussians in the device's form: on the host where
+    /// [`RegionFinder::on_host_for`] says so, else on the GPU.
     pub fn for_device(gpu: &'a Gpu, n: usize) -> Result<RegionFinder<'a>> {
         Ok(RegionFinder {
-            on_host: gpu.caps().cpu_forms,
+            on_host: Self::on_host_for(gpu),
             ..RegionFinder::new(gpu, n)?
         })
+    }
+
+    /// Whether the host finds (and relabels) the regions on `gpu`: where the device takes
+    /// the CPU drivers' forms (`DeviceCaps::cpu_forms`).
+    pub fn on_host_for(gpu: &Gpu) -> bool {
+        gpu.caps().cpu_forms
     }
 
     /// `read` given the view's observations, in Gaussian order: each Gaussian whose center

@@ -274,20 +274,6 @@ impl Recorder {
         Ok(())
     }
 
-    /// [`Recorder::dispatch_ranges`] where the ranges in `optional` are bound only if the
-    /// kernel uses them (the optimizer drops bindings a variant never reads).
-    pub fn dispatch_with_optional<P: bytemuck::Pod>(
-        &mut self,
-        kernel: Kernel<P>,
-        bindings: &[(&str, BufferRange)],
-        optional: &[(&str, BufferRange)],
-        params: &P,
-        groups: [u32; 3],
-    ) -> GpuResult<()> {
-        let all = with_optional(kernel, bindings, optional);
-        self.dispatch_ranges(kernel, &all, params, groups)
-    }
-
     /// Dispatches with the workgroup count read from `args` at byte `offset`
     /// (three u32: x, y, z), so counts computed on the GPU need no readback.
     pub fn dispatch_indirect<P: bytemuck::Pod>(
