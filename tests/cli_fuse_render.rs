@@ -423,7 +423,7 @@ fn bench_fuse_times_a_scene_folder_on_its_cameras() {
             "--scene",
             d.to_str().unwrap(),
             "--methods",
-            "vote,flashsplat",
+            "vote,flashsplat,segment-consensus,segment-consensus-relabel",
         ];
         args.extend_from_slice(extra);
         std::process::Command::new(env!("CARGO_BIN_EXE_semsplat"))
@@ -450,14 +450,28 @@ fn bench_fuse_times_a_scene_folder_on_its_cameras() {
             .iter()
             .map(|k| k["kernel"].as_str().unwrap())
             .collect();
-        let want = if m["key"] == "vote" {
-            "fuse/vote"
-        } else {
-            "fuse/contrib_fixed"
+        // The consensus's observation pass renders the median depth and looks up the
+        // centers; `--relabel` then walks the relabeled views as FlashSplat does.
+        let wanted: &[&str] = match m["key"].as_str().unwrap() {
+            "vote" => &["fuse/vote"],
+            "flashsplat" => &["fuse/contrib_fixed"],
+            "segment-consensus" => &["raster/blend_median_depth", "fuse/center_pixel"],
+            "segment-consensus-relabel" => &[
+                "raster/blend_median_depth",
+                "fuse/center_pixel",
+                "fuse/contrib_fixed",
+            ],
+            key => panic!("method {key} not asked for"),
         };
-        // Either form of the kernel (its `_wide` one on CPU devices).
-        let wide = format!("{want}_wide");
-        assert!(names.iter().any(|&n| n == want || n == wide), "{names:?}");
+        for want in wanted {
+            // Either form of the kernel (its `_wide` one on CPU devices).
+            let wide = format!("{want}_wide");
+            assert!(
+                names.iter().any(|n| n == want || *n == wide),
+                "{}: {want} not in {names:?}",
+                m["key"]
+            );
+        }
         // Each kernel's time ends at its own timestamp: together at most the views' time.
         let sum: f64 = kernels.iter().map(|k| k["ns"].as_f64().unwrap()).sum();
         let gpu_ms = m["gpu_ms"].as_f64().unwrap();

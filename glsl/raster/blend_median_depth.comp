@@ -5,5 +5,4 @@
 // walks a fraction of the lists full blending does.
 #define CHUNK_CHANNELS 0
 #define MEDIAN_DEPTH
-#define MEDIAN_T 0.5
 #include "blend_body.glsl"

@@ -4,5 +4,4 @@
 #define PIXELS 16
 #define CHUNK_CHANNELS 0
 #define MEDIAN_DEPTH
-#define MEDIAN_T 0.5
 #include "blend_body.glsl"

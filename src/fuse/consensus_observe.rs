@@ -27,7 +27,8 @@ use super::consensus_segments::{Observations, ViewObservation};
 use super::regions_gpu::{Observed, RegionFinder, RegionStats};
 use crate::contract::REGION_EDGE_BIT;
 use crate::gpu::kernel_table::ids;
-use crate::gpu::{Buffer, Gpu, Recorder};
+use crate::gpu::timings::KernelTotal;
+use crate::gpu::{Buffer, Gpu, Recorder, Timings};
 use crate::render::{GpuScene, Rasterizer};
 use crate::scene::Camera;
 use crate::util::prefetch_ordered;
@@ -250,6 +251,7 @@ struct ObservedView {
     /// (Gaussian, pixel under its center) of each observation.
     seen: Vec<(u32, u32)>,
     gpu_ms: f64,
+    kernels: Vec<KernelTotal>,
     times: ObserveTimes,
     device_bytes: u64,
 }
@@ -273,6 +275,7 @@ impl ObservedViews {
         self.observed[view.view] = view.observed;
         self.pixels[view.view] = view.seen;
         stats.gpu_ms += view.gpu_ms;
+        KernelTotal::add_all(&mut stats.kernels, view.kernels);
         stats.peak_device_bytes = stats.peak_device_bytes.max(view.device_bytes);
         stats.observe.render_s += view.times.render_s;
         stats.observe.regions_s += view.times.regions_s;
@@ -325,7 +328,7 @@ impl<'a> Lane<'a> {
         let cam = &pass.input.cams[view];
         let mut times = ObserveTimes::default();
         let rendering = Instant::now();
-        let gpu_ms = center_pixels(&mut self.raster, scene, cam, &self.centers, pass)?;
+        let timings = center_pixels(&mut self.raster, scene, cam, &self.centers, pass)?;
         let device_bytes = gpu.memory_reserved();
         times.render_s = rendering.elapsed().as_secs_f64();
         let finding = Instant::now();
@@ -342,7 +345,8 @@ impl<'a> Lane<'a> {
             view,
             observed,
             seen,
-            gpu_ms,
+            gpu_ms: timings.total_ns() * 1e-6,
+            kernels: timings.by_kernel(),
             times,
             device_bytes,
         })
@@ -400,22 +404,20 @@ fn view_observations(
     (observed.iter().map(entry).collect(), seen)
 }
 
-/// Writes the pixel under every Gaussian's visible center into `out`; returns GPU ms.
+/// Writes the pixel under every Gaussian's visible center into `out`; returns the GPU's
+/// timestamps.
 fn center_pixels(
     raster: &mut Rasterizer,
     scene: &GpuScene,
     cam: &Camera,
     out: &Buffer,
     pass: &Pass,
-) -> Result<f64> {
+) -> Result<Timings> {
     let cfg = pass.cfg;
     if !pass.occlusion {
         let mut rec = Recorder::new(raster.gpu())?;
-        let m0 = rec.mark();
         dispatch_center_pixels(&mut rec, scene, cam, None, out, pass)?;
-        let m1 = rec.mark();
-        let t = rec.submit_and_wait()?;
-        return Ok(t.between(m0, m1).unwrap_or(0.0) * 1e-6);
+        return Ok(rec.submit_and_wait()?);
     }
     // The centers are looked up once the whole view's depth is rendered (every Gaussian's
     // entry is written, so a binning that overflowed and runs again leaves nothing behind).
@@ -431,7 +433,7 @@ fn center_pixels(
         rec.barrier();
         dispatch_center_pixels(rec, scene, cam, Some(tiles.depth()), out, pass)
     })?;
-    Ok(run.timings.total_ns() * 1e-6)
+    Ok(run.timings)
 }
 
 fn dispatch_center_pixels(

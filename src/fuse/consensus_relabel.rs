@@ -33,6 +33,7 @@ use super::method::Method;
 use super::regions_gpu::RegionFinder;
 use super::scores::ClassScores;
 use crate::contract::RELABEL_KEEP;
+use crate::gpu::timings::KernelTotal;
 use crate::scene::Camera;
 
 /// How a view's label regions take the consensus classes.
@@ -403,6 +404,9 @@ pub fn fuse_relabeled(
     let (confidence, _) = posteriors(&consensus.evidence, &class, params.prior);
     let mut stats = fs_stats;
     stats.gpu_ms += run.stats.gpu_ms + relabel_stats.gpu_ms;
+    // The kernels of both visits, the observation pass's first.
+    let second_visit = std::mem::replace(&mut stats.kernels, run.stats.kernels);
+    KernelTotal::add_all(&mut stats.kernels, second_visit);
     stats.view_s += run.stats.view_s; // the consensus's visit of the views
     (stats.segments_s, stats.decide_s) = (run.stats.segments_s, run.stats.decide_s);
     stats.observe = run.stats.observe;
