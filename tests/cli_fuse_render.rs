@@ -451,16 +451,13 @@ fn bench_fuse_times_a_scene_folder_on_its_cameras() {
             .map(|k| k["kernel"].as_str().unwrap())
             .collect();
         // The consensus's observation pass renders the median depth and looks up the
-        // centers; `--relabel` then walks the relabeled views as FlashSplat does.
+        // centers; `--relabel`'s walks each view as FlashSplat does, keeping each
+        // Gaussian's weights per label region and writing the median depth.
         let wanted: &[&str] = match m["key"].as_str().unwrap() {
             "vote" => &["fuse/vote"],
             "flashsplat" => &["fuse/contrib_fixed"],
             "segment-consensus" => &["raster/blend_median_depth", "fuse/center_pixel"],
-            "segment-consensus-relabel" => &[
-                "raster/blend_median_depth",
-                "fuse/center_pixel",
-                "fuse/contrib_fixed",
-            ],
+            "segment-consensus-relabel" => &["fuse/region_footprint", "fuse/center_pixel"],
             key => panic!("method {key} not asked for"),
         };
         for want in wanted {

@@ -8,7 +8,7 @@ use common::regions::{flood_regions, on_edge};
 use common::{check_validation, gpu};
 use semsplat::contract::NO_NEIGHBOUR;
 use semsplat::dataset::CompactClasses;
-use semsplat::fuse::consensus::{observe, CenterPixels};
+use semsplat::fuse::consensus::{observe, Kept, ViewsObserved};
 use semsplat::fuse::consensus_cluster::{
     cluster_segments, cluster_segments_sweeping_from, cluster_segments_timed,
 };
@@ -27,6 +27,29 @@ use semsplat::scene::Camera;
 use semsplat::synth::{generate, RoomSource, SynthConfig, SynthScene};
 use semsplat::util::Rng;
 use std::cmp::Reverse;
+
+/// [`observe`]'s observations, center pixels and stats.
+#[allow(clippy::type_complexity)]
+fn observed(
+    inp: &ConsensusInput,
+    cfg: &FuseConfig,
+    occlusion: bool,
+    kept: Kept,
+    order: Option<&SpatialOrder>,
+    progress: &mut dyn FnMut(usize, usize),
+) -> anyhow::Result<(
+    Observations,
+    Vec<Vec<(u32, u32)>>,
+    semsplat::fuse::FuseStats,
+)> {
+    let ViewsObserved {
+        observations,
+        centers,
+        stats,
+        ..
+    } = observe(inp, cfg, occlusion, kept, order, progress)?;
+    Ok((observations, centers, stats))
+}
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 
 fn room(preset: &str, views: usize, size: (u32, u32), seed: u64, noise: &str) -> SynthScene {
@@ -84,11 +107,11 @@ fn observations_match_a_cpu_transcription_on(gpu: &Gpu) {
         scene,
     } = observed_office(gpu);
     let inp = input(gpu, &scene, &s, &labels, classes);
-    let (obs, centers, stats) = observe(
+    let (obs, centers, stats) = observed(
         &inp,
         &FuseConfig::default(),
         false,
-        CenterPixels::Keep,
+        Kept::CenterPixels,
         None,
         &mut |_, _| {},
     )
@@ -99,11 +122,11 @@ fn observations_match_a_cpu_transcription_on(gpu: &Gpu) {
         views_in_flight: 1,
         ..FuseConfig::default()
     };
-    let (obs_1, centers_1, stats_1) = observe(
+    let (obs_1, centers_1, stats_1) = observed(
         &inp,
         &one_lane,
         false,
-        CenterPixels::Keep,
+        Kept::CenterPixels,
         None,
         &mut |_, _| {},
     )
@@ -114,11 +137,11 @@ fn observations_match_a_cpu_transcription_on(gpu: &Gpu) {
         "the lanes changed the observations"
     );
     // Without the pixels (plain segment consensus) the same observations, no pixel lists.
-    let (obs_drop, centers_drop, _) = observe(
+    let (obs_drop, centers_drop, _) = observed(
         &inp,
         &one_lane,
         false,
-        CenterPixels::Drop,
+        Kept::Observations,
         None,
         &mut |_, _| {},
     )
@@ -153,9 +176,9 @@ fn check_numbered_in_space(
 ) {
     let order = SpatialOrder::of(inp.shapes.means);
     assert!((0..obs.n as u32).any(|g| order.spatial(g) != g));
-    let keep = CenterPixels::Keep;
+    let keep = Kept::CenterPixels;
     let (spatial, spatial_centers, _) =
-        observe(inp, cfg, false, keep, Some(&order), &mut |_, _| {}).unwrap();
+        observed(inp, cfg, false, keep, Some(&order), &mut |_, _| {}).unwrap();
     assert_eq!((spatial.n, spatial.view.len()), (obs.n, obs.view.len()));
     for g in 0..obs.n {
         let (a, b) = (obs.row(g), spatial.row(order.spatial(g as u32) as usize));
@@ -245,9 +268,10 @@ fn occluded_centers_are_not_observed() {
     } = observed_office(gpu);
     let cfg = FuseConfig::default();
     let inp = input(gpu, &scene, &s, &labels, classes);
-    let (_, all, _) = observe(&inp, &cfg, false, CenterPixels::Keep, None, &mut |_, _| {}).unwrap();
+    let (_, all, _) =
+        observed(&inp, &cfg, false, Kept::CenterPixels, None, &mut |_, _| {}).unwrap();
     let (_, visible, _) =
-        observe(&inp, &cfg, true, CenterPixels::Keep, None, &mut |_, _| {}).unwrap();
+        observed(&inp, &cfg, true, Kept::CenterPixels, None, &mut |_, _| {}).unwrap();
     let tol = cfg.depth_tolerance as f64;
     let (mut hidden, mut seen, mut skipped) = (0usize, 0usize, 0usize);
     for (v, cam) in s.cameras.iter().enumerate() {

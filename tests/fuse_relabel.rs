@@ -8,14 +8,17 @@ use common::consensus::{input, noisy_maps};
 use common::regions::{flood_regions, on_edge};
 use common::{check_validation, gpu};
 use semsplat::dataset::CompactClasses;
-use semsplat::fuse::consensus::{consensus_run, CenterPixels, ConsensusRun};
+use semsplat::fuse::consensus::{consensus_run, ConsensusRun, Kept};
 use semsplat::fuse::consensus_confusion::ConfusionRates;
-use semsplat::fuse::consensus_relabel::{edge_depth, relabel_view, RelabelRule, RelabeledViews};
+use semsplat::fuse::consensus_relabel::{
+    edge_depth, fuse_relabeled_by, relabel_view, RelabelRule, RelabeledSums, RelabeledViews,
+};
 use semsplat::fuse::regions_gpu::{RegionFinder, MAX_GPU_REACH};
 use semsplat::fuse::{
     accumulate, assign_semantic_near, lift_by_consensus, Assignment, ClassScores, ConsensusLift,
     ConsensusParams, FuseConfig, LabelSource, Method, NO_LABEL,
 };
+use semsplat::render::rasterizer::SplitSizes;
 use semsplat::render::GpuScene;
 use semsplat::synth::{generate, RoomSource, SynthConfig, SynthScene};
 use semsplat::util::Rng;
@@ -586,7 +589,7 @@ fn flickered_office(views: usize, seed: u64) -> Flickered {
         &input(gpu(), &scene, &s, &noisy, compact.len()),
         &FuseConfig::default(),
         &ConsensusParams::default(),
-        CenterPixels::Keep,
+        Kept::CenterPixels,
         &mut |_, _| {},
     )
     .unwrap();
@@ -845,6 +848,67 @@ fn relabel_is_deterministic_and_follows_its_rule() {
          {folding_decides} take another class for it"
     );
     check_validation(gpu());
+}
+
+/// `--relabel`'s sums from the footprints its observation pass keeps per label region are
+/// FlashSplat's over the relabeled views, bit for bit: the same consensus (the walk's median
+/// depth gives the observations the median depth's own kernel does), classes, confidences
+/// and evidence as walking the relabeled views again, in both forms of the kernels (the CPU
+/// drivers' and the GPUs'), with windows of 50 entries and a tile row a dispatch, and with
+/// lists of 20,000 pairs (the views past it binned in bands of tile rows, whose lists reuse
+/// one buffer: each walked again instead; a tile row holds up to 10,562).
+#[test]
+fn footprints_give_the_relabeled_views_sums() {
+    let f = flickered_office(8, 1);
+    let params = ConsensusParams::default();
+    let windows = SplitSizes {
+        window_len: Some(50),
+        band_rows: Some(1),
+        ..Default::default()
+    };
+    let lists = SplitSizes {
+        list_capacity: Some(20_000),
+        ..Default::default()
+    };
+    // The banded lists only in the CPU drivers' form (the other adds time, not a path).
+    let cases = [
+        (false, SplitSizes::default()),
+        (false, windows),
+        (true, SplitSizes::default()),
+        (true, windows),
+        (true, lists),
+    ];
+    for (cpu_forms, split) in cases {
+        let gpu = common::gpu_with_cpu_forms(cpu_forms);
+        let scene = GpuScene::upload(gpu, &f.s.gaussians).unwrap();
+        let inp = input(gpu, &scene, &f.s, &f.noisy, f.classes);
+        let cfg = FuseConfig {
+            method: Method::SegmentConsensusRelabel,
+            split,
+            ..Default::default()
+        };
+        let lift = |sums| fuse_relabeled_by(&inp, &cfg, &params, sums, &mut |_, _| {});
+        let kept = lift(RelabeledSums::FromFootprints).unwrap();
+        let again = lift(RelabeledSums::WalkAgain).unwrap();
+        let case = format!("cpu forms {cpu_forms}, {split:?}");
+        let (walked_again, banded) = (kept.stats.walked_again, split.list_capacity.is_some());
+        assert!(
+            banded == (walked_again > 0),
+            "{case}: {walked_again} walked again"
+        );
+        assert_eq!(again.stats.walked_again, 0, "{case}");
+        assert!(
+            kept.assignment == again.assignment,
+            "{case}: classes differ"
+        );
+        assert!(kept.evidence == again.evidence, "{case}: evidence differs");
+        // The walk's median depth is the median depth kernel's: the same observations.
+        assert!(
+            kept.consensus == again.consensus,
+            "{case}: the consensus differs"
+        );
+        check_validation(gpu);
+    }
 }
 
 /// `fuse --report` of a room whose plant `synth` labeled lamp in 11 of its 19 views: the

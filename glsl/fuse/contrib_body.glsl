@@ -13,7 +13,10 @@
 // Gaussian it sees under each label (at most about 1) instead of a number of pixels: near
 // views no longer outweigh far ones. An invocation takes PIXELS of the tile's pixels
 // (tile_window.glsl: one on a GPU, more in the `*_wide` kernels for CPU drivers) and adds
-// their weights for one row together before the subgroup does.
+// their weights for one row together before the subgroup does. fuse/region_footprint.glsl
+// sets MEDIAN_DEPTH_OUT (the walk also writes each labeled pixel's median depth, as
+// raster/blend_median_depth.comp finds it from the same steps) and ENTRY_TARGETS (the sums
+// go per list entry instead of per Gaussian).
 #extension GL_EXT_control_flow_attributes : require
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_vote : require
@@ -58,12 +61,25 @@ layout(set = 0, binding = 5) buffer CarryBuf { vec2 data[]; } carry;           /
 // The binning's status words: a binning whose lists overflowed (or wrapped) is recorded
 // again with larger lists, so its accumulation must add nothing (A is a running sum).
 layout(set = 0, binding = 8) readonly buffer StatusBuf { uint data[]; } status;
+#if defined(MEDIAN_DEPTH_OUT)
+// Per pixel, the depth of the Gaussian that takes its transmittance below MEDIAN_T; left as
+// it was (the caller zeroes it) where it never falls that far or the pixel is unlabeled.
+layout(set = 0, binding = 9) writeonly buffer DepthBuf { float data[]; } out_depth;
+#endif
 
 shared vec4 s_xy_depth_opacity[BATCH]; // floor(mean2d) depth opacity
 shared vec2 s_frac[BATCH];
 shared vec4 s_conic[BATCH];
 shared uint s_id[BATCH];
 shared float s_scale[BATCH]; // per_view: 1 / footprint; else 1
+
+#if defined(ENTRY_TARGETS)
+// The includer adds per entry of the tile's list (the tile's own: no other workgroup walks
+// it), not per Gaussian.
+#define STEP_TARGET (b + j)
+#else
+#define STEP_TARGET s_id[j]
+#endif
 
 // The includer's evidence entry: `Amount` (a weight as the entries sum it), `amount_of(w)`,
 // `accumulate(row, gaussian, amount)` (from uniform control flow; NO_ROW adds nothing) and
@@ -110,15 +126,20 @@ vec2 step_frac;
 #define STEP_FRAC s_frac[j]
 #endif
 
-// The weight alpha * T pixel `p` at `pixel` gives batch slot `j` (0 where it takes none).
-float contrib_step(inout Pixel p, vec2 pixel, uint j, vec4 g) {
+// The weight alpha * T pixel `p` (`tw`) gives batch slot `j` (0 where it takes none).
+float contrib_step(inout Pixel p, TileWindow tw, uint j, vec4 g) {
     float w = 0.0;
     if (!p.done) {
-        vec2 d = pixel_offset(g.xy, STEP_FRAC, pixel);
+        vec2 d = pixel_offset(g.xy, STEP_FRAC, vec2(tw.px, tw.py));
         float sigma = conic_sigma(STEP_CONIC, d);
         float alpha = sigma < 0.0 ? 0.0 : min(ALPHA_MAX, g.w * exp(-sigma));
         if (alpha >= ALPHA_MIN) {
             float next_t = p.T * (1.0 - alpha);
+#if defined(MEDIAN_DEPTH_OUT)
+            if (p.T >= MEDIAN_T && next_t < MEDIAN_T) {
+                out_depth.data[tw.pix] = g.z;
+            }
+#endif
             if (next_t <= T_MIN) {
                 p.done = true;
             } else {
@@ -127,7 +148,7 @@ float contrib_step(inout Pixel p, vec2 pixel, uint j, vec4 g) {
             }
         }
     }
-    if (pc.center_only == 1 && g.xy != pixel) {
+    if (pc.center_only == 1 && g.xy != vec2(tw.px, tw.py)) {
         w = 0.0;
     }
     return w * s_scale[j];
@@ -219,16 +240,16 @@ void main() {
                 break;
             }
             vec4 g = s_xy_depth_opacity[j];
-            uint id = s_id[j];
+            uint id = STEP_TARGET;
 #if PIXELS == 1
-            float w = contrib_step(px[0], vec2(tw[0].px, tw[0].py), j, g);
+            float w = contrib_step(px[0], tw[0], j, g);
             accumulate(w > 0.0 ? px[0].row : NO_ROW, id, amount_of(w));
 #else
             step_conic = s_conic[j].xyz;
             step_frac = s_frac[j];
             Amount amount[PIXELS];
             [[unroll]] for (uint q = 0; q < PIXELS; q++) {
-                float w = contrib_step(px[q], vec2(tw[q].px, tw[q].py), j, g);
+                float w = contrib_step(px[q], tw[q], j, g);
                 amount[q] = amount_of(w);
             }
             // The invocation's pixels by row: the first row's sum is summed in the subgroup

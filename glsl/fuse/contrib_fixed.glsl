@@ -1,39 +1,8 @@
-// Contributions as 64-bit fixed point (weight * 2^32): integer sums do not depend on the
-// order of the atomics, so A is bit-identical from run to run.
-#extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
-#extension GL_EXT_shader_atomic_int64 : require
-#define Amount uint64_t
-#include "contrib_body.glsl"
+// Contributions as 64-bit fixed point (fuse/fixed_amounts.glsl) into the pass's evidence rows.
+#include "fixed_amounts.glsl"
 
-layout(buffer_reference, std430, buffer_reference_align = 8) buffer U64ArrayRW { uint64_t data[]; };
 #define contrib U64ArrayRW(pc.contrib_addr) // [rows][n]
 
-// A weight w < 1 of one pixel as fixed point: it fits 32 bits.
-uint64_t amount_of(float w) {
-    return uint64_t(uint(min(w * 4294967296.0, 4294967295.0)));
-}
-
-void accumulate(uint row, uint gaussian, uint64_t amount) {
-    // An invocation's amount sums PIXELS pixels' (32 + log2(PIXELS) bits); summing its
-    // 16-bit parts keeps the subgroup sums exact for up to 65,536 lanes.
-    uint64_t v = row == NO_ROW ? 0ul : amount;
-    if (subgroupAllEqual(row)) {
-        if (row != NO_ROW) {
-            uint lo = subgroupAdd(uint(v) & 0xFFFFu);
-            uint hi = subgroupAdd(uint(v) >> 16);
-            uint64_t sum = (uint64_t(hi) << 16) + uint64_t(lo);
-#if PIXELS > 1
-            sum += uint64_t(subgroupAdd(uint(v >> 32))) << 32;
-#endif
-            if (subgroupElect()) {
-                atomicAdd(contrib.data[row * pc.n + gaussian], sum);
-            }
-        }
-    } else if (row != NO_ROW) {
-        atomicAdd(contrib.data[row * pc.n + gaussian], v);
-    }
-}
-
-void add_own(uint row, uint gaussian, uint64_t amount) {
+void add_fixed(uint row, uint gaussian, uint64_t amount) {
     atomicAdd(contrib.data[row * pc.n + gaussian], amount);
 }

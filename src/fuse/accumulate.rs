@@ -20,6 +20,7 @@ use super::partial::{fixed_to_f64, EvidenceKind, RawEvidence};
 use super::scores::ClassScores;
 use crate::contract::params::{CenterParams, ContribParams};
 use crate::gpu::kernel_table::ids;
+use crate::gpu::kernel_table::Kernel;
 use crate::gpu::staging::grown;
 use crate::gpu::timings::KernelTotal;
 use crate::gpu::{Buffer, BufferRange, Gpu, Recorder, Timings};
@@ -145,6 +146,9 @@ pub struct FuseStats {
     /// driver's loop cap), found again on the host (src/fuse/regions_gpu.rs); with
     /// `--relabel`, also the views it relabeled on the host.
     pub region_host_fallbacks: usize,
+    /// `--relabel`: views whose footprints the observation pass did not keep
+    /// (src/fuse/consensus_footprints.rs), walked again by FlashSplat's pass.
+    pub walked_again: usize,
 }
 
 /// Segment consensus's observation pass, split (host seconds, GPU waits included, summed
@@ -502,7 +506,7 @@ pub(crate) const LABEL_THREADS: usize = 4;
 pub(crate) const LABELS_AHEAD: usize = 8;
 
 /// Bytes per pixel of the weighted methods' carried state between windows: (T, done).
-const CONTRIB_CARRY_BYTES: u64 = 8;
+pub(crate) const CONTRIB_CARRY_BYTES: u64 = 8;
 
 /// Runs `cfg.method` over every view and returns the evidence [classes][n].
 pub fn accumulate(
@@ -952,10 +956,48 @@ fn record_contrib(
             ids::FUSE_CONTRIB_FLOAT.for_device(ids::FUSE_CONTRIB_FLOAT_WIDE, rec.gpu())
         }
     };
+    let walk = ContribWalk {
+        kernel,
+        labels,
+        carry,
+        contrib_addr: pass.evidence.address_words(4)?,
+        rows: (pass.row_begin as u32, pass.rows as u32),
+        center_only: cfg.method == Method::VoteWeighted,
+        per_view: cfg.method == Method::FlashSplatPerView,
+        depth: None,
+    };
+    record_contrib_walk(rec, tiles, n, &walk)
+}
+
+/// One walk of a binned view's tile lists by a kernel of fuse/contrib_body.glsl: what it
+/// reads per pixel, where it adds, and how.
+pub(crate) struct ContribWalk<'a> {
+    pub kernel: Kernel<ContribParams>,
+    /// Per pixel, the row its weights add to (NO_LABEL: none).
+    pub labels: &'a Buffer,
+    /// Per pixel, [`CONTRIB_CARRY_BYTES`] carried between windows.
+    pub carry: &'a Buffer,
+    /// Where the kernel adds (its includer's layout).
+    pub contrib_addr: [u32; 2],
+    /// (first row, rows) of the labels it adds; others wait for another pass.
+    pub rows: (u32, u32),
+    pub center_only: bool,
+    pub per_view: bool,
+    /// Per pixel, the median depth the kernel writes (only fuse/region_footprint.comp).
+    pub depth: Option<&'a Buffer>,
+}
+
+/// Records `walk` over every window of the binned view's tile lists, band by band of the
+/// per-pixel buffers.
+pub(crate) fn record_contrib_walk(
+    rec: &mut Recorder,
+    tiles: &TileLists,
+    n: u32,
+    walk: &ContribWalk,
+) -> Result<()> {
     let f = &tiles.frame;
     let bands = f.bands(CONTRIB_CARRY_BYTES)?;
     let projected = tiles.projected_addrs()?;
-    let contrib_addr = pass.evidence.address_words(4)?;
     let windows = tiles.pass_windows(rec, &bands)?;
     for (window, start) in f.window_starts() {
         for (band_index, band) in bands.iter().enumerate() {
@@ -963,27 +1005,30 @@ fn record_contrib(
                 xy_depth_opacity_addr: projected.xy_depth_opacity,
                 xy_frac_addr: projected.xy_frac,
                 conics_addr: projected.conics,
-                contrib_addr,
+                contrib_addr: walk.contrib_addr,
                 width: f.cam.width,
                 height: f.cam.height,
                 tiles_x: f.tiles_x,
                 n,
                 window_start: start,
                 window_len: f.window_len,
-                row_begin: pass.row_begin as u32,
-                rows: pass.rows as u32,
-                center_only: u32::from(cfg.method == Method::VoteWeighted),
-                per_view: u32::from(cfg.method == Method::FlashSplatPerView),
+                row_begin: walk.rows.0,
+                rows: walk.rows.1,
+                center_only: u32::from(walk.center_only),
+                per_view: u32::from(walk.per_view),
                 tile_row_base: band.first_tile_row,
             };
-            let bindings = [
+            let mut bindings = vec![
                 ("tile_ranges", BufferRange::whole(tiles.ranges())),
                 ("isect_ids", BufferRange::whole(tiles.isect_ids())),
-                ("labels", band.range(labels, 4)),
-                ("carry", band.range(carry, CONTRIB_CARRY_BYTES)),
+                ("labels", band.range(walk.labels, 4)),
+                ("carry", band.range(walk.carry, CONTRIB_CARRY_BYTES)),
                 ("status", tiles.status()),
             ];
-            windows.dispatch(rec, kernel, &bindings, &params, (window, band_index))?;
+            if let Some(depth) = walk.depth {
+                bindings.push(("out_depth", band.range(depth, 4)));
+            }
+            windows.dispatch(rec, walk.kernel, &bindings, &params, (window, band_index))?;
         }
         rec.barrier();
     }

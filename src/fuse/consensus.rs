@@ -14,7 +14,8 @@ use super::accumulate::{FuseConfig, FuseStats, LabelSource};
 use super::assign::Assignment;
 use super::consensus_cluster::cluster_segments_timed;
 use super::consensus_decide::{decide, Consensus, ConsensusParams};
-pub use super::consensus_observe::{observe, CenterPixels};
+use super::consensus_footprints::ViewFootprints;
+pub use super::consensus_observe::{observe, Kept, ViewsObserved};
 use super::consensus_order::SpatialOrder;
 use super::consensus_relabel::fuse_relabeled;
 use super::consensus_segments::Observations;
@@ -45,7 +46,7 @@ pub fn fuse_consensus(
     cfg: &FuseConfig,
     params: &ConsensusParams,
 ) -> Result<(Consensus, FuseStats)> {
-    let run = consensus_run(input, cfg, params, CenterPixels::Drop, &mut |_, _| {})?;
+    let run = consensus_run(input, cfg, params, Kept::Observations, &mut |_, _| {})?;
     Ok((run.consensus, run.stats))
 }
 
@@ -55,8 +56,10 @@ pub struct ConsensusRun {
     /// The Gaussians' observations, numbered by `order`.
     pub observations: Observations,
     /// Per view, (Gaussian, pixel under its center) of every observation (empty lists with
-    /// [`CenterPixels::Drop`]).
+    /// [`Kept::Observations`]).
     pub centers: Vec<Vec<(u32, u32)>>,
+    /// Per view, the footprints per label region with [`Kept::Footprints`] (else empty).
+    pub footprints: Vec<ViewFootprints>,
     /// [n][params.neighbours] nearest neighbours, numbered by `order`
     /// ([`SpatialOrder::neighbours_to_scene`] gives them in the scene's numbering).
     pub knn: Vec<u32>,
@@ -66,14 +69,13 @@ pub struct ConsensusRun {
     pub stats: FuseStats,
 }
 
-/// [`fuse_consensus`], keeping the observations, the neighbour graph and, with
-/// [`CenterPixels::Keep`], the pixels under the observed centers; `progress` gets (views
-/// observed, views).
+/// [`fuse_consensus`], keeping the observations, the neighbour graph and what `kept` asks
+/// for; `progress` gets (views observed, views).
 pub fn consensus_run(
     input: &ConsensusInput,
     cfg: &FuseConfig,
     params: &ConsensusParams,
-    pixels: CenterPixels,
+    kept: Kept,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<ConsensusRun> {
     let start = std::time::Instant::now();
@@ -99,10 +101,15 @@ pub fn consensus_run(
             let knn = nearest_neighbours(&order.to_spatial(shapes.means), params.neighbours);
             (knn, SurfaceNormals::of(shapes, &order, params))
         });
-        let observed = observe(input, cfg, params.occlusion, pixels, Some(&order), progress);
+        let observed = observe(input, cfg, params.occlusion, kept, Some(&order), progress);
         (observed, search.join())
     });
-    let (observations, centers, mut stats) = observed?;
+    let ViewsObserved {
+        observations,
+        centers,
+        footprints,
+        mut stats,
+    } = observed?;
     stats.view_s = views_start.elapsed().as_secs_f64();
     let (knn, surfaces) = found.unwrap_or_else(|panic| std::panic::resume_unwind(panic));
     let neighbours_s = views_start.elapsed().as_secs_f64() - stats.view_s;
@@ -120,6 +127,7 @@ pub fn consensus_run(
         consensus,
         observations,
         centers,
+        footprints,
         knn,
         order,
         stats,
@@ -182,7 +190,7 @@ pub fn lift_by_consensus(
     if cfg.method == Method::SegmentConsensusRelabel {
         return fuse_relabeled(input, cfg, params, progress);
     }
-    let run = consensus_run(input, cfg, params, CenterPixels::Drop, progress)?;
+    let run = consensus_run(input, cfg, params, Kept::Observations, progress)?;
     let evidence = LiftEvidence::Consensus(Arc::clone(&run.consensus.evidence));
     Ok(ConsensusLift {
         assignment: run.consensus.assignment.clone(),

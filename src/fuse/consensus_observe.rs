@@ -22,8 +22,11 @@ use super::accumulate::{
     LABELS_AHEAD, LABEL_THREADS, NO_LABEL,
 };
 use super::consensus::ConsensusInput;
+use super::consensus_footprints::{
+    FootprintTable, TileRegions, ViewFootprints, FOOTPRINT_BYTES_MAX,
+};
 use super::consensus_order::SpatialOrder;
-use super::consensus_segments::{Observations, ViewObservation};
+use super::consensus_segments::{label_regions, Observations, ViewObservation};
 use super::regions_gpu::{Observed, RegionFinder, RegionStats};
 use crate::contract::REGION_EDGE_BIT;
 use crate::gpu::kernel_table::ids;
@@ -33,31 +36,44 @@ use crate::render::{GpuScene, Rasterizer};
 use crate::scene::Camera;
 use crate::util::prefetch_ordered;
 
-/// Whether [`observe`] keeps, per view, the (Gaussian, pixel) of each observation: 8 bytes
-/// an observation, held to the end of the lift, that only `--relabel` reads (it relabels
-/// the regions under the centers). Plain segment consensus drops them: over a third of what it
-/// holds per observation through the clustering (13 bytes against 21).
+/// What [`observe`] keeps besides the observations. Per view the (Gaussian, pixel) of each
+/// observation: 8 bytes an observation, held to the end of the lift, that only `--relabel`
+/// reads (it relabels the regions under the centers); plain segment consensus drops them:
+/// over a third of what it holds per observation through the clustering (13 bytes against
+/// 21). And for `--relabel`, each view's footprints per label region
+/// (src/fuse/consensus_footprints.rs), which spare it a second walk of the views.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum CenterPixels {
-    Keep,
-    Drop,
+pub enum Kept {
+    Observations,
+    CenterPixels,
+    /// The center pixels and the footprints (the walk of every labeled pixel, which gives
+    /// the median depth too, instead of the median depth's own walk).
+    Footprints,
+}
+
+/// What [`observe`] found.
+pub struct ViewsObserved {
+    pub observations: Observations,
+    /// Per view, the (Gaussian, pixel) of each observation (empty lists unless kept).
+    pub centers: Vec<Vec<(u32, u32)>>,
+    /// Per view, with [`Kept::Footprints`] (else empty).
+    pub footprints: Vec<ViewFootprints>,
+    pub stats: FuseStats,
 }
 
 /// Every view's observations of every Gaussian: label and region under its center (with
 /// `occlusion`, only where the center is within the depth tolerance of the rendered median
-/// depth), and per view the (Gaussian, pixel) of each observation (empty lists with
-/// [`CenterPixels::Drop`]). With an `order`, the observations number the Gaussians by it
-/// (the pixels' lists keep the scene's numbers). `stats.observe` sums the lanes' host
-/// seconds (which overlap when two lanes run).
-#[allow(clippy::type_complexity)]
+/// depth), and what `kept` asks for. With an `order`, the observations number the
+/// Gaussians by it (the pixels' lists and the footprints keep the scene's numbers).
+/// `stats.observe` sums the lanes' host seconds (which overlap when two lanes run).
 pub fn observe(
     input: &ConsensusInput,
     cfg: &FuseConfig,
     occlusion: bool,
-    pixels: CenterPixels,
+    kept: Kept,
     order: Option<&SpatialOrder>,
     progress: &mut dyn FnMut(usize, usize),
-) -> Result<(Observations, Vec<Vec<(u32, u32)>>, FuseStats)> {
+) -> Result<ViewsObserved> {
     let (gpu, cams, n) = (input.gpu, input.cams, input.scene.n as usize);
     let mut stats = FuseStats {
         views: cams.len(),
@@ -65,12 +81,12 @@ pub fn observe(
         rows_per_pass: input.classes,
         ..Default::default()
     };
-    let mut views = ObservedViews::new(cams.len());
-    let pass = Pass::new(input, cfg, occlusion, pixels, order)?;
+    let mut views = ObservedViews::new(cams.len(), kept);
+    let pass = Pass::new(input, cfg, occlusion, kept, order)?;
     // Label maps are read (decoded) and checked on worker threads a few views ahead, as
     // the FlashSplat pass does, instead of in turn between the views' GPU work.
-    let read = |view: usize| read_labels(input, view);
-    let mut first = Some(Lane::new(gpu, n, cfg)?);
+    let read = |view: usize| read_labels(input, view, kept);
+    let mut first = Some(Lane::new(gpu, n, cfg, kept)?);
     std::thread::scope(|scope| -> Result<()> {
         let (done, finished) = mpsc::channel::<Result<ObservedView>>();
         let mut running = Running::default();
@@ -123,28 +139,44 @@ pub fn observe(
     let gathering = Instant::now();
     let observations = Observations::from_views(n, &views.observed);
     stats.observe.gather_s += gathering.elapsed().as_secs_f64();
-    Ok((observations, views.pixels, stats))
+    Ok(ViewsObserved {
+        observations,
+        centers: views.pixels,
+        footprints: views.footprints,
+        stats,
+    })
 }
 
-/// View `view`'s label map (None: no labels), checked against its camera and the classes.
-fn read_labels(input: &ConsensusInput, view: usize) -> Result<Option<Vec<u32>>> {
+/// A view's label map and, where the footprints are kept, its connected label regions
+/// tile by tile.
+struct LabeledView {
+    map: Vec<u32>,
+    regions: Option<TileRegions>,
+}
+
+/// View `view`'s label map (None: no labels), checked against its camera and the classes,
+/// with its regions where `kept` asks for footprints (found here, on the reading threads).
+fn read_labels(input: &ConsensusInput, view: usize, kept: Kept) -> Result<Option<LabeledView>> {
     let (cam, classes) = (&input.cams[view], input.classes);
-    let map = input.labels.labels(view, cam)?;
-    if let Some(map) = &map {
-        check_map_size(cam, map)?;
-        ensure!(
-            map.iter().all(|&l| l == NO_LABEL || (l as usize) < classes),
-            "labels of view {} hold a class outside the {classes} classes",
-            cam.name
-        );
-    }
-    Ok(map)
+    let Some(map) = input.labels.labels(view, cam)? else {
+        return Ok(None);
+    };
+    check_map_size(cam, &map)?;
+    ensure!(
+        map.iter().all(|&l| l == NO_LABEL || (l as usize) < classes),
+        "labels of view {} hold a class outside the {classes} classes",
+        cam.name
+    );
+    let width = cam.width as usize;
+    let regions =
+        (kept == Kept::Footprints).then(|| TileRegions::of(&label_regions(&map, width), width));
+    Ok(Some(LabeledView { map, regions }))
 }
 
 /// The lanes' threads, each fed its views through a channel of its own.
 #[derive(Default)]
 struct Running<'scope> {
-    feeds: Vec<mpsc::SyncSender<(usize, Vec<u32>)>>,
+    feeds: Vec<mpsc::SyncSender<(usize, LabeledView)>>,
     threads: Vec<std::thread::ScopedJoinHandle<'scope, RegionStats>>,
 }
 
@@ -161,7 +193,7 @@ impl<'scope> Running<'scope> {
     ) -> Result<()> {
         let (gpu, n) = (pass.input.gpu, pass.input.scene.n as usize);
         let more = (1..lanes_that_fit(gpu, pass.cfg, lane_bytes))
-            .map(|_| Lane::new(gpu, n, pass.cfg))
+            .map(|_| Lane::new(gpu, n, pass.cfg, pass.kept))
             .collect::<Result<Vec<_>>>()?;
         for lane in std::iter::once(first).chain(more) {
             self.spawn(scope, lane, pass, done.clone());
@@ -184,7 +216,7 @@ impl<'scope> Running<'scope> {
     }
 
     /// Hands view `view` (labeled `map`) to lane `view % lanes`, once it has room.
-    fn feed(&self, view: usize, map: Vec<u32>) -> Result<()> {
+    fn feed(&self, view: usize, map: LabeledView) -> Result<()> {
         let lane = &self.feeds[view % self.feeds.len()];
         lane.send((view, map))
             .map_err(|_| anyhow!("an observation lane stopped"))
@@ -206,7 +238,7 @@ struct Pass<'a> {
     input: &'a ConsensusInput<'a>,
     cfg: &'a FuseConfig,
     occlusion: bool,
-    pixels: CenterPixels,
+    kept: Kept,
     order: Option<&'a SpatialOrder>,
     /// `order`'s number of each Gaussian on the GPU, where the center pixels are written
     /// ([n]).
@@ -218,7 +250,7 @@ impl<'a> Pass<'a> {
         input: &'a ConsensusInput<'a>,
         cfg: &'a FuseConfig,
         occlusion: bool,
-        pixels: CenterPixels,
+        kept: Kept,
         order: Option<&'a SpatialOrder>,
     ) -> Result<Pass<'a>> {
         let spatial = match order {
@@ -237,7 +269,7 @@ impl<'a> Pass<'a> {
             input,
             cfg,
             occlusion,
-            pixels,
+            kept,
             order,
             spatial,
         })
@@ -250,6 +282,8 @@ struct ObservedView {
     observed: Vec<CompactEntry>,
     /// (Gaussian, pixel under its center) of each observation.
     seen: Vec<(u32, u32)>,
+    /// With [`Kept::Footprints`].
+    footprints: Option<ViewFootprints>,
     gpu_ms: f64,
     kernels: Vec<KernelTotal>,
     times: ObserveTimes,
@@ -261,19 +295,39 @@ struct ObservedView {
 struct ObservedViews {
     observed: Vec<Vec<CompactEntry>>,
     pixels: Vec<Vec<(u32, u32)>>,
+    footprints: Vec<ViewFootprints>,
+    /// Bytes the kept footprints take ([`FOOTPRINT_BYTES_MAX`] at most).
+    footprint_bytes: usize,
 }
 
 impl ObservedViews {
-    fn new(views: usize) -> ObservedViews {
+    fn new(views: usize, kept: Kept) -> ObservedViews {
+        let footprints = match kept {
+            Kept::Footprints => vec![ViewFootprints::Kept(Vec::new()); views],
+            _ => Vec::new(),
+        };
         ObservedViews {
             observed: vec![Vec::new(); views],
             pixels: vec![Vec::new(); views],
+            footprints,
+            footprint_bytes: 0,
         }
     }
 
     fn store(&mut self, view: ObservedView, stats: &mut FuseStats) {
         self.observed[view.view] = view.observed;
         self.pixels[view.view] = view.seen;
+        if let Some(mut footprints) = view.footprints {
+            if let ViewFootprints::Kept(kept) = &footprints {
+                let bytes = std::mem::size_of_val(kept.as_slice());
+                if self.footprint_bytes + bytes > FOOTPRINT_BYTES_MAX {
+                    footprints = ViewFootprints::WalkAgain;
+                } else {
+                    self.footprint_bytes += bytes;
+                }
+            }
+            self.footprints[view.view] = footprints;
+        }
         stats.gpu_ms += view.gpu_ms;
         KernelTotal::add_all(&mut stats.kernels, view.kernels);
         stats.peak_device_bytes = stats.peak_device_bytes.max(view.device_bytes);
@@ -290,16 +344,20 @@ struct Lane<'a> {
     /// The pixel under each Gaussian's visible center ([n]).
     centers: Buffer,
     finder: RegionFinder<'a>,
+    /// With [`Kept::Footprints`].
+    footprints: Option<FootprintTable>,
 }
 
 impl<'a> Lane<'a> {
-    fn new(gpu: &'a Gpu, n: usize, cfg: &FuseConfig) -> Result<Lane<'a>> {
+    fn new(gpu: &'a Gpu, n: usize, cfg: &FuseConfig, kept: Kept) -> Result<Lane<'a>> {
         let mut raster = Rasterizer::new(gpu);
         raster.set_split_sizes(cfg.split);
+        let footprints = (kept == Kept::Footprints).then(FootprintTable::default);
         Ok(Lane {
             raster,
             centers: gpu.buffer("center-pixels", (n.max(1) * 4) as u64)?,
             finder: RegionFinder::for_device(gpu, n)?,
+            footprints,
         })
     }
 
@@ -308,7 +366,7 @@ impl<'a> Lane<'a> {
     fn run(
         mut self,
         pass: &Pass,
-        feed: mpsc::Receiver<(usize, Vec<u32>)>,
+        feed: mpsc::Receiver<(usize, LabeledView)>,
         done: mpsc::Sender<Result<ObservedView>>,
     ) -> RegionStats {
         for (view, map) in feed {
@@ -323,20 +381,32 @@ impl<'a> Lane<'a> {
 
     /// View `view` labeled `map`: its centers' pixels rendered, their regions found, and
     /// its observations gathered straight from the readback (not copied first).
-    fn observe(&mut self, pass: &Pass, view: usize, map: &[u32]) -> Result<ObservedView> {
+    fn observe(&mut self, pass: &Pass, view: usize, labeled: &LabeledView) -> Result<ObservedView> {
         let (gpu, scene) = (pass.input.gpu, pass.input.scene);
         let cam = &pass.input.cams[view];
         let mut times = ObserveTimes::default();
         let rendering = Instant::now();
-        let timings = center_pixels(&mut self.raster, scene, cam, &self.centers, pass)?;
+        let mut walk = match (&mut self.footprints, &labeled.regions) {
+            (Some(table), Some(regions)) => {
+                table.upload_regions(gpu, regions)?;
+                Some((table, regions))
+            }
+            _ => None,
+        };
+        let table = walk.as_mut().map(|(table, _)| &mut **table);
+        let timings = center_pixels(&mut self.raster, scene, cam, &self.centers, table, pass)?;
         let device_bytes = gpu.memory_reserved();
+        let footprints = walk
+            .map(|(table, regions)| table.read(&self.raster, regions))
+            .transpose()?;
         times.render_s = rendering.elapsed().as_secs_f64();
         let finding = Instant::now();
+        let keep_pixels = pass.kept != Kept::Observations;
         let (observed, seen) =
             self.finder
-                .observations(map, cam.width, &self.centers, |observed| {
+                .observations(&labeled.map, cam.width, &self.centers, |observed| {
                     let gathering = Instant::now();
-                    let gathered = view_observations(observed, pass.pixels, pass.order);
+                    let gathered = view_observations(observed, keep_pixels, pass.order);
                     times.gather_s = gathering.elapsed().as_secs_f64();
                     gathered
                 })?;
@@ -345,6 +415,7 @@ impl<'a> Lane<'a> {
             view,
             observed,
             seen,
+            footprints,
             gpu_ms: timings.total_ns() * 1e-6,
             kernels: timings.by_kernel(),
             times,
@@ -386,7 +457,7 @@ impl ViewObservation for CompactEntry {
 /// its edge bit) and, where kept, (Gaussian, pixel) with the scene's numbers.
 fn view_observations(
     observed: &[Observed],
-    pixels: CenterPixels,
+    keep_pixels: bool,
     order: Option<&SpatialOrder>,
 ) -> (Vec<CompactEntry>, Vec<(u32, u32)>) {
     let entry = |o: &Observed| CompactEntry {
@@ -395,26 +466,28 @@ fn view_observations(
         region_and_edge: o.region,
     };
     let scene_number = |g: u32| order.map_or(g, |order| order.scene(g));
-    let seen = match pixels {
-        CenterPixels::Keep => (observed.iter())
+    let seen = match keep_pixels {
+        true => (observed.iter())
             .map(|o| (scene_number(o.gaussian), o.pixel))
             .collect(),
-        CenterPixels::Drop => Vec::new(),
+        false => Vec::new(),
     };
     (observed.iter().map(entry).collect(), seen)
 }
 
 /// Writes the pixel under every Gaussian's visible center into `out`; returns the GPU's
-/// timestamps.
+/// timestamps. With `footprints`, the median depth comes from their walk (the view's
+/// regions uploaded), else from its own.
 fn center_pixels(
     raster: &mut Rasterizer,
     scene: &GpuScene,
     cam: &Camera,
     out: &Buffer,
+    mut footprints: Option<&mut FootprintTable>,
     pass: &Pass,
 ) -> Result<Timings> {
     let cfg = pass.cfg;
-    if !pass.occlusion {
+    if !pass.occlusion && footprints.is_none() {
         let mut rec = Recorder::new(raster.gpu())?;
         dispatch_center_pixels(&mut rec, scene, cam, None, out, pass)?;
         return Ok(rec.submit_and_wait()?);
@@ -426,12 +499,16 @@ fn center_pixels(
     // time on lavapipe), and on an object's silhouette it is the depth of one of the two
     // surfaces, not a blend that matches neither.
     let run = raster.run_tiled_in_bands(scene, cam, &cfg.render_options(), |rec, tiles| {
-        tiles.record_median_depth(rec)?;
+        match footprints.as_deref_mut() {
+            Some(table) => table.record_walk(rec, tiles, tiles.depth())?,
+            None => tiles.record_median_depth(rec)?,
+        }
         if !tiles.is_last_band() {
             return Ok(());
         }
         rec.barrier();
-        dispatch_center_pixels(rec, scene, cam, Some(tiles.depth()), out, pass)
+        let depth = pass.occlusion.then(|| tiles.depth());
+        dispatch_center_pixels(rec, scene, cam, depth, out, pass)
     })?;
     Ok(run.timings)
 }
@@ -522,13 +599,13 @@ mod tests {
         let mut shuffled: Vec<u32> = (0..n as u32).collect();
         rng.shuffle(&mut shuffled);
         let spatial = SpatialOrder::from_scene_of_spatial(shuffled);
-        for (pixels, order) in [CenterPixels::Keep, CenterPixels::Drop]
+        for (keep_pixels, order) in [true, false]
             .into_iter()
             .flat_map(|p| [(p, None), (p, Some(&spatial))])
         {
             let views: Vec<_> = observed
                 .iter()
-                .map(|l| view_observations(l, pixels, order))
+                .map(|l| view_observations(l, keep_pixels, order))
                 .collect();
             let packed: Vec<Vec<CompactEntry>> = views.iter().map(|v| v.0.clone()).collect();
             let rows = Observations::from_views(n, &packed);
@@ -536,11 +613,11 @@ mod tests {
             assert!(rows.edge.iter().any(|&e| e) && rows.edge.iter().any(|&e| !e));
             let scene_number = |g: u32| order.map_or(g, |o| o.scene(g));
             for ((_, seen), list) in views.iter().zip(&observed) {
-                let expected: Vec<(u32, u32)> = match pixels {
-                    CenterPixels::Keep => (list.iter())
+                let expected: Vec<(u32, u32)> = match keep_pixels {
+                    true => (list.iter())
                         .map(|o| (scene_number(o.gaussian), o.pixel))
                         .collect(),
-                    CenterPixels::Drop => Vec::new(),
+                    false => Vec::new(),
                 };
                 assert_eq!(seen, &expected);
             }

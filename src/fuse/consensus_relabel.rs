@@ -25,9 +25,10 @@ use serde::Serialize;
 
 use super::accumulate::{accumulate, FuseConfig, LabelSource, NO_LABEL};
 use super::assign::{assign_semantic_near, Assignment};
-use super::consensus::{consensus_run, CenterPixels, ConsensusInput, ConsensusLift, LiftEvidence};
+use super::consensus::{consensus_run, ConsensusInput, ConsensusLift, Kept, LiftEvidence};
 use super::consensus_confusion::ConfusionRates;
 use super::consensus_decide::{posteriors, ConsensusParams};
+use super::consensus_footprints::{footprints_for, relabeled_footprints};
 use super::consensus_segments::{four_neighbours, label_regions, region_edges};
 use super::method::Method;
 use super::regions_gpu::RegionFinder;
@@ -340,17 +341,47 @@ pub fn fold_undecided(footprints: &ClassScores, class: &[Option<usize>]) -> Clas
 /// it undecided or its footprint there sums to less than `params.relabel.min_mass` pixels
 /// (too little of it is seen for its pixels to say where an edge runs, and it renders
 /// nowhere anyway). `progress` gets (views done, twice the views): every view is visited
-/// twice.
+/// twice (the second time only its labels, where its footprints were kept:
+/// [`RelabeledSums`]).
 pub fn fuse_relabeled(
     input: &ConsensusInput,
     cfg: &FuseConfig,
     params: &ConsensusParams,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<ConsensusLift> {
+    let sums = match footprints_for(cfg) {
+        true => RelabeledSums::FromFootprints,
+        false => RelabeledSums::WalkAgain,
+    };
+    fuse_relabeled_by(input, cfg, params, sums, progress)
+}
+
+/// How [`fuse_relabeled`] sums FlashSplat's weights over the relabeled views: from the
+/// footprints the consensus's observation pass keeps per label region
+/// (src/fuse/consensus_footprints.rs: no second walk of the views; with fixed-point
+/// accumulation), or by FlashSplat's pass over the relabeled views. The same sums.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RelabeledSums {
+    FromFootprints,
+    WalkAgain,
+}
+
+/// [`fuse_relabeled`], its sums over the relabeled views found as `sums` says.
+pub fn fuse_relabeled_by(
+    input: &ConsensusInput,
+    cfg: &FuseConfig,
+    params: &ConsensusParams,
+    sums: RelabeledSums,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<ConsensusLift> {
     let start = std::time::Instant::now();
     let views = input.cams.len();
     let first_visit = &mut |done, _| progress(done, 2 * views);
-    let mut run = consensus_run(input, cfg, params, CenterPixels::Keep, first_visit)?;
+    let kept = match sums {
+        RelabeledSums::FromFootprints => Kept::Footprints,
+        RelabeledSums::WalkAgain => Kept::CenterPixels,
+    };
+    let mut run = consensus_run(input, cfg, params, kept, first_visit)?;
     // The relabeling reads the centers and the classes, not the observations (13 bytes
     // each): freed before the views' second visit, so its FlashSplat pass reuses their
     // memory instead of adding to the peak.
@@ -369,19 +400,37 @@ pub fn fuse_relabeled(
             .map(Mutex::new),
         undecided: Some(input.classes as u32),
     };
-    let flashsplat = FuseConfig {
-        method: Method::FlashSplat,
-        ..cfg.clone()
+    let second_visit = |done, _| progress(views + done, 2 * views);
+    let (footprints, fs_stats) = match sums {
+        RelabeledSums::FromFootprints => {
+            let kept = std::mem::take(&mut run.footprints);
+            relabeled_footprints(
+                input,
+                cfg,
+                &relabeled,
+                input.classes + 1,
+                &kept,
+                second_visit,
+            )?
+        }
+        RelabeledSums::WalkAgain => {
+            let flashsplat = FuseConfig {
+                method: Method::FlashSplat,
+                ..cfg.clone()
+            };
+            let (gpu, scene, cams) = (input.gpu, input.scene, input.cams);
+            let rows = input.classes + 1;
+            accumulate(
+                gpu,
+                scene,
+                cams,
+                &relabeled,
+                rows,
+                &flashsplat,
+                second_visit,
+            )?
+        }
     };
-    let (footprints, fs_stats) = accumulate(
-        input.gpu,
-        input.scene,
-        input.cams,
-        &relabeled,
-        input.classes + 1,
-        &flashsplat,
-        |done, _| progress(views + done, 2 * views),
-    )?;
     let relabel_stats = match relabeled.finder {
         Some(finder) => finder.into_inner().unwrap_or_else(|e| e.into_inner()).stats,
         None => Default::default(),
@@ -408,6 +457,8 @@ pub fn fuse_relabeled(
     let second_visit = std::mem::replace(&mut stats.kernels, run.stats.kernels);
     KernelTotal::add_all(&mut stats.kernels, second_visit);
     stats.view_s += run.stats.view_s; // the consensus's visit of the views
+    stats.views_in_flight = stats.views_in_flight.max(run.stats.views_in_flight);
+    stats.views_with_labels = run.stats.views_with_labels;
     (stats.segments_s, stats.decide_s) = (run.stats.segments_s, run.stats.decide_s);
     stats.observe = run.stats.observe;
     stats.clustering = run.stats.clustering;

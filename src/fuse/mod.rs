@@ -10,6 +10,7 @@ pub mod consensus_cluster;
 pub mod consensus_confusion;
 pub mod consensus_decide;
 pub mod consensus_flags;
+pub mod consensus_footprints;
 pub mod consensus_observe;
 pub mod consensus_order;
 pub mod consensus_relabel;

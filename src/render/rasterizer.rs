@@ -811,6 +811,16 @@ impl Rasterizer {
         &self.bufs.as_ref().expect("a frame was rendered").depth
     }
 
+    /// The last frame's tile lists (its last band's, where it was binned in bands): each
+    /// tile's (start, end) in them, and the Gaussian of each entry.
+    ///
+    /// # Panics
+    /// Before the first frame.
+    pub fn last_tile_lists(&self) -> (&Buffer, &Buffer) {
+        let b = self.bufs.as_ref().expect("a frame was rendered");
+        (&b.ranges, &b.isect_ids)
+    }
+
     /// Per Gaussian of the last frame: 1 where it was projected into the view.
     pub fn last_visible_flags(&self, n: u32) -> Result<Vec<u32>> {
         let Some(b) = &self.bufs else {

@@ -1,0 +1,2 @@
+#version 460
+#include "region_footprint.glsl"
