@@ -94,6 +94,12 @@ struct Pixel {
     bool labeled;
     float T;
     bool done;
+#if defined(MEDIAN_DEPTH_OUT)
+    // The depth of the Gaussian that took T below MEDIAN_T in this window (0: none did),
+    // written once at the window's end: a store in the walk's steps, even one no pixel
+    // takes, cost lavapipe's footprint walk 7.7 s against 5.3 s (60 views of 320x240).
+    float median;
+#endif
 };
 
 Pixel pixel_start(TileWindow tw, uint window_start) {
@@ -105,6 +111,9 @@ Pixel pixel_start(TileWindow tw, uint window_start) {
     p.labeled = label != NO_LABEL && p.row < pc.rows;
     p.T = 1.0;
     p.done = !p.labeled;
+#if defined(MEDIAN_DEPTH_OUT)
+    p.median = 0.0;
+#endif
     if (window_start > 0 && p.labeled) {
         vec2 c = carry.data[tw.pix];
         p.T = c.x;
@@ -136,9 +145,7 @@ float contrib_step(inout Pixel p, TileWindow tw, uint j, vec4 g) {
         if (alpha >= ALPHA_MIN) {
             float next_t = p.T * (1.0 - alpha);
 #if defined(MEDIAN_DEPTH_OUT)
-            if (p.T >= MEDIAN_T && next_t < MEDIAN_T) {
-                out_depth.data[tw.pix] = g.z;
-            }
+            p.median = p.T >= MEDIAN_T && next_t < MEDIAN_T ? g.z : p.median;
 #endif
             if (next_t <= T_MIN) {
                 p.done = true;
@@ -278,5 +285,11 @@ void main() {
         if (px[q].labeled && !tw[q].last) {
             carry.data[tw[q].pix] = vec2(px[q].T, px[q].done ? 1.0 : 0.0);
         }
+#if defined(MEDIAN_DEPTH_OUT)
+        // A depth is in front of the camera: never 0.
+        if (px[q].median != 0.0) {
+            out_depth.data[tw[q].pix] = px[q].median;
+        }
+#endif
     }
 }
