@@ -44,7 +44,8 @@ pub(super) fn fuse_by_consensus(
     let gpu = Gpu::new()?;
     let scene = GpuScene::upload_for(&gpu, g, cfg.method.scene_attributes())?;
     let params = ConsensusParams::default();
-    // The relabeled method visits every view twice: the bar counts visits.
+    // The relabeled method visits every view twice (the second time its labels, or a walk
+    // where its footprints were not kept): the bar counts visits.
     let visits = if cfg.method == Method::SegmentConsensusRelabel {
         2
     } else {
