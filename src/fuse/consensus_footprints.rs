@@ -265,6 +265,8 @@ fn merged(footprints: &mut [Footprint]) -> Vec<Footprint> {
             _ => out.push(*f),
         }
     }
+    // Held until the consensus has decided: not at the unmerged length.
+    out.shrink_to_fit();
     out
 }
 

@@ -23,15 +23,15 @@ use std::sync::Mutex;
 use anyhow::Result;
 use serde::Serialize;
 
-use super::accumulate::{accumulate, FuseConfig, LabelSource, NO_LABEL};
+use super::accumulate::{accumulate, FuseConfig, FuseStats, LabelSource, NO_LABEL};
 use super::assign::{assign_semantic_near, Assignment};
 use super::consensus::{consensus_run, ConsensusInput, ConsensusLift, Kept, LiftEvidence};
 use super::consensus_confusion::ConfusionRates;
 use super::consensus_decide::{posteriors, ConsensusParams};
-use super::consensus_footprints::{footprints_for, relabeled_footprints};
+use super::consensus_footprints::{footprints_for, relabeled_footprints, ViewFootprints};
 use super::consensus_segments::{four_neighbours, label_regions, region_edges};
 use super::method::Method;
-use super::regions_gpu::RegionFinder;
+use super::regions_gpu::{RegionFinder, RegionStats};
 use super::scores::ClassScores;
 use crate::contract::RELABEL_KEEP;
 use crate::gpu::timings::KernelTotal;
@@ -401,36 +401,9 @@ pub fn fuse_relabeled_by(
         undecided: Some(input.classes as u32),
     };
     let second_visit = |done, _| progress(views + done, 2 * views);
-    let (footprints, fs_stats) = match sums {
-        RelabeledSums::FromFootprints => {
-            let kept = std::mem::take(&mut run.footprints);
-            relabeled_footprints(
-                input,
-                cfg,
-                &relabeled,
-                input.classes + 1,
-                &kept,
-                second_visit,
-            )?
-        }
-        RelabeledSums::WalkAgain => {
-            let flashsplat = FuseConfig {
-                method: Method::FlashSplat,
-                ..cfg.clone()
-            };
-            let (gpu, scene, cams) = (input.gpu, input.scene, input.cams);
-            let rows = input.classes + 1;
-            accumulate(
-                gpu,
-                scene,
-                cams,
-                &relabeled,
-                rows,
-                &flashsplat,
-                second_visit,
-            )?
-        }
-    };
+    let kept = std::mem::take(&mut run.footprints);
+    let (footprints, fs_stats) = relabeled_sums(input, cfg, &relabeled, sums, &kept, second_visit)?;
+    drop(kept);
     let relabel_stats = match relabeled.finder {
         Some(finder) => finder.into_inner().unwrap_or_else(|e| e.into_inner()).stats,
         None => Default::default(),
@@ -451,19 +424,7 @@ pub fn fuse_relabeled_by(
         }
     }
     let (confidence, _) = posteriors(&consensus.evidence, &class, params.prior);
-    let mut stats = fs_stats;
-    stats.gpu_ms += run.stats.gpu_ms + relabel_stats.gpu_ms;
-    // The kernels of both visits, the observation pass's first.
-    let second_visit = std::mem::replace(&mut stats.kernels, run.stats.kernels);
-    KernelTotal::add_all(&mut stats.kernels, second_visit);
-    stats.view_s += run.stats.view_s; // the consensus's visit of the views
-    stats.views_in_flight = stats.views_in_flight.max(run.stats.views_in_flight);
-    stats.views_with_labels = run.stats.views_with_labels;
-    (stats.segments_s, stats.decide_s) = (run.stats.segments_s, run.stats.decide_s);
-    stats.observe = run.stats.observe;
-    stats.clustering = run.stats.clustering;
-    stats.peak_device_bytes = stats.peak_device_bytes.max(run.stats.peak_device_bytes);
-    stats.region_host_fallbacks = run.stats.region_host_fallbacks + relabel_stats.host_fallbacks;
+    let mut stats = both_visits(run.stats, fs_stats, relabel_stats);
     stats.wall_s = start.elapsed().as_secs_f64();
     stats.views_per_s = stats.views as f64 / stats.wall_s.max(1e-9);
     Ok(ConsensusLift {
@@ -472,4 +433,51 @@ pub fn fuse_relabeled_by(
         evidence: LiftEvidence::Relabeled(evidence),
         stats,
     })
+}
+
+/// The second visit's sums over the `relabeled` views (the classes and the undecided
+/// channel), as `sums` says: from the footprints `kept` by the first, or by FlashSplat's
+/// pass.
+fn relabeled_sums(
+    input: &ConsensusInput,
+    cfg: &FuseConfig,
+    relabeled: &RelabeledViews,
+    sums: RelabeledSums,
+    kept: &[ViewFootprints],
+    progress: impl FnMut(usize, usize),
+) -> Result<(ClassScores, FuseStats)> {
+    let rows = input.classes + 1;
+    match sums {
+        RelabeledSums::FromFootprints => {
+            relabeled_footprints(input, cfg, relabeled, rows, kept, progress)
+        }
+        RelabeledSums::WalkAgain => {
+            let flashsplat = FuseConfig {
+                method: Method::FlashSplat,
+                ..cfg.clone()
+            };
+            let (gpu, scene, cams) = (input.gpu, input.scene, input.cams);
+            accumulate(gpu, scene, cams, relabeled, rows, &flashsplat, progress)
+        }
+    }
+}
+
+/// The stats of `--relabel`'s two visits of the views: the consensus's `first`, the
+/// `second` (its sums), and the GPU relabeling's `relabel` (times and counts added, the
+/// consensus's own parts taken from the first).
+fn both_visits(first: FuseStats, second: FuseStats, relabel: RegionStats) -> FuseStats {
+    let mut stats = second;
+    stats.gpu_ms += first.gpu_ms + relabel.gpu_ms;
+    // The kernels of both visits, the observation pass's first.
+    let second_kernels = std::mem::replace(&mut stats.kernels, first.kernels);
+    KernelTotal::add_all(&mut stats.kernels, second_kernels);
+    stats.view_s += first.view_s; // the consensus's visit of the views
+    stats.views_in_flight = stats.views_in_flight.max(first.views_in_flight);
+    stats.views_with_labels = first.views_with_labels;
+    (stats.segments_s, stats.decide_s) = (first.segments_s, first.decide_s);
+    stats.observe = first.observe;
+    stats.clustering = first.clustering;
+    stats.peak_device_bytes = stats.peak_device_bytes.max(first.peak_device_bytes);
+    stats.region_host_fallbacks = first.region_host_fallbacks + relabel.host_fallbacks;
+    stats
 }
