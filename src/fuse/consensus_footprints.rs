@@ -31,6 +31,7 @@ use super::partial::fixed_to_f64;
 use super::scores::ClassScores;
 use crate::contract::TILE_SIZE;
 use crate::gpu::kernel_table::ids;
+use crate::gpu::staging::grown;
 use crate::gpu::{Buffer, Gpu, Recorder};
 use crate::render::rasterizer::TileLists;
 use crate::render::Rasterizer;
@@ -131,9 +132,13 @@ pub struct FootprintTable {
     /// view instead of all of it (the lists' capacity is many times what a view uses).
     /// None: unknown (a new buffer), zeroed whole.
     dirty: Option<(u64, u64)>,
-    /// Per pixel, the index of its region among its tile's, and the walk's carried state.
+    /// Per pixel, the index of its region among its tile's (staged on the host, copied in
+    /// the view's own submission), and the walk's carried state.
+    staged: Option<Buffer>,
     local: Option<Buffer>,
     carry: Option<Buffer>,
+    /// Bytes of the view's staged indices.
+    local_bytes: u64,
     /// The view's most regions in a tile, and whether its walk keeps sums the host can read
     /// (one band of tile rows, within [`FOOTPRINT_DEVICE_MAX`]).
     rows: u32,
@@ -141,18 +146,17 @@ pub struct FootprintTable {
 }
 
 impl FootprintTable {
-    /// Uploads the view's tile-local region indices for its walk.
-    pub fn upload_regions(&mut self, gpu: &Gpu, tiles: &TileRegions) -> Result<()> {
+    /// Stages the view's tile-local region indices for its walk (copied to the device by
+    /// [`FootprintTable::record_walk`], in the view's submission: no upload of its own).
+    pub fn stage_regions(&mut self, gpu: &Gpu, tiles: &TileRegions) -> Result<()> {
         let pixels = tiles.local.len().max(1) as u64;
         if self.local.as_ref().is_none_or(|b| b.size() < pixels * 4) {
             self.local = Some(gpu.buffer("footprint-regions", pixels * 4)?);
             self.carry = Some(gpu.buffer("footprint-carry", pixels * CONTRIB_CARRY_BYTES)?);
         }
-        gpu.upload(
-            self.local.as_ref().expect("allocated above"),
-            0,
-            &tiles.local,
-        )?;
+        self.local_bytes = std::mem::size_of_val(tiles.local.as_slice()) as u64;
+        grown(&mut self.staged, gpu, self.local_bytes, Gpu::staging_buffer)?
+            .write_mapped(&tiles.local);
         self.rows = tiles.rows;
         Ok(())
     }
@@ -168,10 +172,13 @@ impl FootprintTable {
         tiles: &TileLists,
         depth: &Buffer,
     ) -> Result<()> {
-        let (Some(local), Some(carry)) = (&self.local, &self.carry) else {
-            anyhow::bail!("a footprint walk without the view's regions uploaded");
+        let (Some(staged), Some(local), Some(carry)) = (&self.staged, &self.local, &self.carry)
+        else {
+            anyhow::bail!("a footprint walk without the view's regions staged");
         };
         if tiles.band() == 0 {
+            // Every band reads the whole view's indices.
+            rec.copy(staged, 0, local, 0, self.local_bytes);
             let capacity = tiles.isect_ids().size() / 4;
             let bytes = self.rows as u64 * capacity * 8;
             self.kept = tiles.is_last_band() && bytes <= FOOTPRINT_DEVICE_MAX;
@@ -213,7 +220,7 @@ impl FootprintTable {
     }
 
     /// The view's footprints once its walk ran over `raster`'s lists, by Gaussian and
-    /// region (`regions`: the view's, as uploaded), or [`ViewFootprints::WalkAgain`] where
+    /// region (`regions`: the view's, as staged), or [`ViewFootprints::WalkAgain`] where
     /// its sums were not kept.
     pub fn read(&mut self, raster: &Rasterizer, regions: &TileRegions) -> Result<ViewFootprints> {
         let Some(sums) = self.sums.as_ref().filter(|_| self.kept) else {

@@ -388,7 +388,7 @@ impl<'a> Lane<'a> {
         let rendering = Instant::now();
         let mut walk = match (&mut self.footprints, &labeled.regions) {
             (Some(table), Some(regions)) => {
-                table.upload_regions(gpu, regions)?;
+                table.stage_regions(gpu, regions)?;
                 Some((table, regions))
             }
             _ => None,
@@ -477,7 +477,7 @@ fn view_observations(
 
 /// Writes the pixel under every Gaussian's visible center into `out`; returns the GPU's
 /// timestamps. With `footprints`, the median depth comes from their walk (the view's
-/// regions uploaded), else from its own.
+/// regions staged), else from its own.
 fn center_pixels(
     raster: &mut Rasterizer,
     scene: &GpuScene,
