@@ -82,9 +82,11 @@ pub struct FuseArgs {
     /// segment-consensus: then relabel every view's connected label regions with the
     /// consensus classes of the Gaussians seen in them and run FlashSplat on the relabeled
     /// views, so object edges fall where the pixels put them (the best held-out mIoU under
-    /// flicker; walks every view once, as FlashSplat does, keeping each Gaussian's weights
-    /// per label region until the regions' classes are known, then reads each view's labels
-    /// again to relabel them: about 1.25x FlashSplat's time on lavapipe). A region whose
+    /// flicker; on a CPU device such as lavapipe it walks every view once, as FlashSplat
+    /// does, keeping each Gaussian's weights per label region until the regions' classes are
+    /// known, then reads each view's labels again to relabel them: about 1.25x FlashSplat's
+    /// time there; on a GPU it walks the relabeled views again, cheaper there than reading
+    /// the kept weights back). A region whose
     /// Gaussians' classes are mixed is
     /// left undecided (its pixels count for the consensus class of each Gaussian that
     /// renders there), unless its own class holds a quarter of them and, with those of

@@ -13,7 +13,9 @@
 //! integers FlashSplat's fixed-point accumulation over the relabeled views gives, bit for
 //! bit. A view binned in several bands of tile rows (whose lists reuse one buffer), whose
 //! sums would pass [`FOOTPRINT_DEVICE_MAX`], or past the host's budget for footprints
-//! ([`FOOTPRINT_BYTES_MAX`]) is walked again on its relabeled labels instead.
+//! ([`FOOTPRINT_BYTES_MAX`]) is walked again on its relabeled labels instead. Kept only on
+//! devices that take the CPU drivers' forms ([`footprints_for`]): on a GPU walking again is
+//! the cheaper.
 //!
 //! Tried first, and measured slower on lavapipe: per-Gaussian slots claimed by
 //! compare-and-swap on the region id (docs/robustness.md). Addressed by list entry, a sum
@@ -277,10 +279,15 @@ fn merged(footprints: &mut [Footprint]) -> Vec<Footprint> {
     out
 }
 
-/// Whether `--relabel` keeps footprints with `cfg`: the footprints are fixed-point sums,
-/// FlashSplat's only where it sums in fixed point too.
-pub fn footprints_for(cfg: &FuseConfig) -> bool {
-    cfg.accumulation == Accumulation::FixedPoint
+/// Whether `--relabel` keeps footprints with `cfg` on `gpu`: the footprints are fixed-point
+/// sums, FlashSplat's only where it sums in fixed point too; and only where the device takes
+/// the CPU drivers' forms (`DeviceCaps::cpu_forms`). There a walk of the lists is most of a
+/// view's time and a download is a copy in the same memory. On a GPU a second binning and
+/// walk costs what FlashSplat's pass does a view (2.2-2.7 ms at 1080p for the million-
+/// Gaussian room on an H100), less than reading the sums over the bus (8 bytes an entry
+/// and region row: tens of MB a view there) and folding them on one host thread.
+pub fn footprints_for(cfg: &FuseConfig, gpu: &Gpu) -> bool {
+    cfg.accumulation == Accumulation::FixedPoint && gpu.caps().cpu_forms
 }
 
 /// FlashSplat's footprints over the relabeled views `relabeled` ([classes][n]; the rows

@@ -349,7 +349,7 @@ pub fn fuse_relabeled(
     params: &ConsensusParams,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<ConsensusLift> {
-    let sums = match footprints_for(cfg) {
+    let sums = match footprints_for(cfg, input.gpu) {
         true => RelabeledSums::FromFootprints,
         false => RelabeledSums::WalkAgain,
     };
