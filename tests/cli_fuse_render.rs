@@ -451,13 +451,23 @@ fn bench_fuse_times_a_scene_folder_on_its_cameras() {
             .map(|k| k["kernel"].as_str().unwrap())
             .collect();
         // The consensus's observation pass renders the median depth and looks up the
-        // centers; `--relabel`'s walks each view as FlashSplat does, keeping each
-        // Gaussian's weights per label region and writing the median depth.
+        // centers; `--relabel`'s, where the device takes the CPU drivers' forms (as the CLI
+        // opens it), walks each view as FlashSplat does, keeping each Gaussian's weights
+        // per label region and writing the median depth; on a GPU it walks the relabeled
+        // views again by FlashSplat's pass.
+        let relabel: &[&str] = match common::gpu().caps().cpu_forms {
+            true => &["fuse/region_footprint", "fuse/center_pixel"],
+            false => &[
+                "raster/blend_median_depth",
+                "fuse/center_pixel",
+                "fuse/contrib_fixed",
+            ],
+        };
         let wanted: &[&str] = match m["key"].as_str().unwrap() {
             "vote" => &["fuse/vote"],
             "flashsplat" => &["fuse/contrib_fixed"],
             "segment-consensus" => &["raster/blend_median_depth", "fuse/center_pixel"],
-            "segment-consensus-relabel" => &["fuse/region_footprint", "fuse/center_pixel"],
+            "segment-consensus-relabel" => relabel,
             key => panic!("method {key} not asked for"),
         };
         for want in wanted {

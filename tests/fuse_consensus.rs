@@ -27,6 +27,7 @@ use semsplat::scene::Camera;
 use semsplat::synth::{generate, RoomSource, SynthConfig, SynthScene};
 use semsplat::util::Rng;
 use std::cmp::Reverse;
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 
 /// [`observe`]'s observations, center pixels and stats.
 #[allow(clippy::type_complexity)]
@@ -50,7 +51,6 @@ fn observed(
     } = observe(inp, cfg, occlusion, kept, order, progress)?;
     Ok((observations, centers, stats))
 }
-use std::collections::{BTreeMap, BTreeSet, HashMap};
 
 fn room(preset: &str, views: usize, size: (u32, u32), seed: u64, noise: &str) -> SynthScene {
     let mut cfg = SynthConfig::new(RoomSource::from_arg(preset).unwrap());

@@ -86,9 +86,8 @@ pub struct FuseArgs {
     /// does, keeping each Gaussian's weights per label region until the regions' classes are
     /// known, then reads each view's labels again to relabel them: about 1.25x FlashSplat's
     /// time there; on a GPU it walks the relabeled views again, cheaper there than reading
-    /// the kept weights back). A region whose
-    /// Gaussians' classes are mixed is
-    /// left undecided (its pixels count for the consensus class of each Gaussian that
+    /// the kept weights back). A region whose Gaussians' classes are mixed is left
+    /// undecided (its pixels count for the consensus class of each Gaussian that
     /// renders there), unless its own class holds a quarter of them and, with those of
     /// other classes lying within 8 pixels of their own class's label (a label edge drawn a
     /// few pixels off), 85%. Nor does a region take a class the view labels within 8 pixels

@@ -336,12 +336,7 @@ pub fn relabeled_footprints(
     let (mut scores, mut stats) = match kept.contains(&ViewFootprints::WalkAgain) {
         true => {
             let again = WalkedAgain { relabeled, kept };
-            let flashsplat = FuseConfig {
-                method: Method::FlashSplat,
-                ..cfg.clone()
-            };
-            let (gpu, scene, cams) = (input.gpu, input.scene, input.cams);
-            accumulate(gpu, scene, cams, &again, classes, &flashsplat, |_, _| {})?
+            flashsplat_pass(input, cfg, &again, classes, |_, _| {})?
         }
         // One pass of every row, over no view.
         false => (
@@ -366,6 +361,23 @@ pub fn relabeled_footprints(
     }
     progress(views, views);
     Ok((scores, stats))
+}
+
+/// FlashSplat's accumulation of `labels` over the input's views ([rows][n]), with `cfg`'s
+/// other settings: the relabeled views walked again.
+pub(crate) fn flashsplat_pass(
+    input: &ConsensusInput,
+    cfg: &FuseConfig,
+    labels: &dyn LabelSource,
+    rows: usize,
+    progress: impl FnMut(usize, usize),
+) -> Result<(ClassScores, FuseStats)> {
+    let flashsplat = FuseConfig {
+        method: Method::FlashSplat,
+        ..cfg.clone()
+    };
+    let (gpu, scene, cams) = (input.gpu, input.scene, input.cams);
+    accumulate(gpu, scene, cams, labels, rows, &flashsplat, progress)
 }
 
 /// The relabeled views whose footprints were not kept; the others without labels.

@@ -23,14 +23,15 @@ use std::sync::Mutex;
 use anyhow::Result;
 use serde::Serialize;
 
-use super::accumulate::{accumulate, FuseConfig, FuseStats, LabelSource, NO_LABEL};
+use super::accumulate::{FuseConfig, FuseStats, LabelSource, NO_LABEL};
 use super::assign::{assign_semantic_near, Assignment};
 use super::consensus::{consensus_run, ConsensusInput, ConsensusLift, Kept, LiftEvidence};
 use super::consensus_confusion::ConfusionRates;
 use super::consensus_decide::{posteriors, ConsensusParams};
-use super::consensus_footprints::{footprints_for, relabeled_footprints, ViewFootprints};
+use super::consensus_footprints::{
+    flashsplat_pass, footprints_for, relabeled_footprints, ViewFootprints,
+};
 use super::consensus_segments::{four_neighbours, label_regions, region_edges};
-use super::method::Method;
 use super::regions_gpu::{RegionFinder, RegionStats};
 use super::scores::ClassScores;
 use crate::contract::RELABEL_KEEP;
@@ -451,14 +452,7 @@ fn relabeled_sums(
         RelabeledSums::FromFootprints => {
             relabeled_footprints(input, cfg, relabeled, rows, kept, progress)
         }
-        RelabeledSums::WalkAgain => {
-            let flashsplat = FuseConfig {
-                method: Method::FlashSplat,
-                ..cfg.clone()
-            };
-            let (gpu, scene, cams) = (input.gpu, input.scene, input.cams);
-            accumulate(gpu, scene, cams, relabeled, rows, &flashsplat, progress)
-        }
+        RelabeledSums::WalkAgain => flashsplat_pass(input, cfg, relabeled, rows, progress),
     }
 }
 
