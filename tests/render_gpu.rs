@@ -5,6 +5,7 @@ mod common;
 
 use common::{check_validation, gpu, separate_depth_ties};
 use glam::DVec3;
+use semsplat::contract::{MEDIAN_T, OPAQUE_T};
 use semsplat::render::reference::{self, RenderSettings};
 use semsplat::render::{GpuScene, Rasterizer, RenderOptions, RenderedFrame, SemanticMode};
 use semsplat::scene::random_scene::{random_scene, RandomSceneSpec};
@@ -776,6 +777,8 @@ fn both_tile_forms_render_the_same_bytes() {
     }
 }
 
+/// The median-depth kernel's two depths, each against the f64 reference's contributions:
+/// the median (transmittance below one half) and the opaque depth (below `OPAQUE_T`).
 #[test]
 fn median_depth_matches_the_reference() {
     let gpu = gpu();
@@ -797,35 +800,40 @@ fn median_depth_matches_the_reference() {
                 tiles.record_median_depth(rec)
             })
             .unwrap();
-        let got: Vec<f32> = gpu
-            .download(raster.depth(), 0, (cam.width * cam.height) as usize)
-            .unwrap();
-        let want = common::reference_median_depth(&g, &cam);
-        let (mut surface, mut empty) = (0, 0);
-        for (i, (&got, want)) in got.iter().zip(&want).enumerate() {
-            let Some(want) = *want else { continue };
-            let d = (got as f64 - want).abs();
-            assert!(
-                d <= TOL * want.max(1.0),
-                "{}: pixel {i}: gpu {got} cpu {want}",
-                cam.name
-            );
-            match want > 0.0 {
-                true => surface += 1,
-                false => empty += 1,
-            }
+        let pixels = (cam.width * cam.height) as usize;
+        let depths = raster.occlusion_depths();
+        for (buffer, threshold) in [(depths.median, MEDIAN_T), (depths.opaque, OPAQUE_T)] {
+            let got: Vec<f32> = gpu.download(buffer, 0, pixels).unwrap();
+            let want = common::reference_depth_below(&g, &cam, threshold as f64);
+            check_depths(&got, &want, &format!("{} below {threshold}", cam.name));
         }
-        // Both kinds of pixel are checked, most of them.
-        assert!(
-            surface > 500 && empty > 0,
-            "{}: {surface} surface, {empty} empty",
-            cam.name
-        );
-        assert!(
-            surface + empty > want.len() * 9 / 10,
-            "{}: too few pixels checked",
-            cam.name
-        );
     }
     check_validation(gpu);
+}
+
+/// `got` within the tolerance of `want` wherever the reference decides, most pixels
+/// decided, pixels of both kinds (a surface, none) among them.
+fn check_depths(got: &[f32], want: &[Option<f64>], what: &str) {
+    let (mut surface, mut empty) = (0, 0);
+    for (i, (&got, want)) in got.iter().zip(want).enumerate() {
+        let Some(want) = *want else { continue };
+        let d = (got as f64 - want).abs();
+        assert!(
+            d <= TOL * want.max(1.0),
+            "{what}: pixel {i}: gpu {got} cpu {want}"
+        );
+        match want > 0.0 {
+            true => surface += 1,
+            false => empty += 1,
+        }
+    }
+    assert!(
+        surface > 500 && empty > 0,
+        "{what}: {surface} surface, {empty} empty"
+    );
+    assert!(
+        surface + empty > want.len() * 9 / 10,
+        "{what}: too few pixels checked: {surface} {empty} of {}",
+        want.len()
+    );
 }

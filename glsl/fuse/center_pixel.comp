@@ -2,13 +2,16 @@
 // Where each Gaussian is observed in one view, for the segment consensus (src/fuse/consensus.rs):
 // the pixel under its projected center, or NO_LABEL where the center is behind the camera,
 // outside the image or (with occlusion on) not within a tolerance of the rendered depth
-// there (the consensus renders the median depth: raster/blend_median_depth.comp). The host
-// reads that pixel's label and connected label region. One invocation per Gaussian writes
-// its own entry, so no atomics are needed.
+// there or behind what the pixel shows (the consensus renders the median and opaque
+// depths: raster/blend_median_depth.comp). The host reads that pixel's label and connected
+// label region. One invocation per Gaussian writes its own entry, so no atomics are needed.
 
 layout(local_size_x = 256) in;
 
 layout(set = 0, binding = 1) readonly buffer DepthBuf { float data[]; } depth;
+layout(set = 0, binding = 2) readonly buffer OpaqueDepthBuf { float data[]; } opaque_depth;
+
+#define OPAQUE_DEPTH_TEST
 
 #include "center_pixel.glsl"
 #define pixels UintArrayRW(pc.out_addr) // [n]

@@ -1,10 +1,10 @@
 // `--relabel`'s footprints (src/fuse/consensus_footprints.rs): FlashSplat's walk of one view
 // with each labeled pixel's weight added per (entry of its tile's list, the pixel's label
-// region), and each labeled pixel's median depth written on the way, so the consensus's
-// observation pass needs no walk of its own for its occlusion test. Once the consensus has
-// decided, the host adds each entry's sum for a region to the entry's Gaussian's row of the
-// class that region was relabeled to: the integers FlashSplat's accumulation over the
-// relabeled views sums, without walking the views again.
+// region), and each labeled pixel's median and opaque depths written on the way, so the
+// consensus's observation pass needs no walk of its own for its occlusion test. Once the
+// consensus has decided, the host adds each entry's sum for a region to the entry's
+// Gaussian's row of the class that region was relabeled to: the integers FlashSplat's
+// accumulation over the relabeled views sums, without walking the views again.
 //
 // The labels binding holds, per pixel, the index of its region among its tile's regions
 // (NO_LABEL: unlabeled), pc.rows the most regions a tile of the view holds. A tile's list

@@ -1,6 +1,6 @@
 // Forward blending of one 16x16 tile per workgroup (included by blend_rgb.comp with
 // CHUNK_CHANNELS 0, blend_sem.comp with CHUNK_CHANNELS 16, blend_label.comp, and
-// blend_median_depth.comp with MEDIAN_DEPTH: only each pixel's median depth; each also
+// blend_median_depth.comp with MEDIAN_DEPTH: only each pixel's median and opaque depths; each also
 // as a `*_wide` kernel with PIXELS set).
 //
 // Each workgroup loads its tile's Gaussians into shared memory in batches; a pixel stops at
@@ -29,7 +29,11 @@ layout(local_size_x = LANES) in;
 layout(set = 0, binding = 1) readonly buffer IdsBuf { uint data[]; } isect_ids;
 layout(set = 0, binding = 5) buffer CarryBuf { float data[]; } carry;
 layout(set = 0, binding = 6) writeonly buffer RgbBuf { float data[]; } out_rgb;
+#if defined(MEDIAN_DEPTH)
+layout(set = 0, binding = 7) writeonly buffer OpaqueDepthBuf { float data[]; } out_opaque_depth;
+#else
 layout(set = 0, binding = 7) writeonly buffer AlphaBuf { float data[]; } out_alpha;
+#endif
 layout(set = 0, binding = 8) writeonly buffer DepthBuf { float data[]; } out_depth;
 layout(set = 0, binding = 9) writeonly buffer FinalTBuf { float data[]; } out_final_t;
 layout(set = 0, binding = 10) writeonly buffer LastBuf { uint data[]; } out_last;
@@ -148,14 +152,19 @@ void blend_step(inout Pixel p, vec2 pixel, uint j, uint entry, vec4 g, vec3 con,
     float next_t = p.T * (1.0 - alpha);
 #if defined(MEDIAN_DEPTH)
     // The Gaussian that takes the pixel's transmittance below one half: its depth is the
-    // pixel's (held in depth_sum, the carried state's depth slot); nothing behind it is
+    // pixel's median depth (held in depth_sum, the carried state's depth slot). Then the
+    // one that takes it below OPAQUE_T: its depth is the opaque depth (held in rgb.r, the
+    // carried red slot), behind which the pixel hides everything; nothing further is
     // needed.
-    if (next_t < MEDIAN_T) {
+    if (p.T >= MEDIAN_T && next_t < MEDIAN_T) {
         p.depth_sum = g.z;
-        p.T = next_t;
-        p.done = true;
-        return;
     }
+    p.T = next_t;
+    if (next_t < OPAQUE_T) {
+        p.rgb.r = g.z;
+        p.done = true;
+    }
+    return;
 #endif
     if (next_t <= T_MIN) {
         p.done = true;
@@ -205,10 +214,11 @@ void pixel_finish(Pixel p, TileWindow tw, bool write_rgb, uint channels, uint ch
         return;
     }
 #if defined(MEDIAN_DEPTH)
-    // 0 where the transmittance never fell below one half (no surface to test against).
+    // 0 where the transmittance never fell below one half (no surface to test against),
+    // or below OPAQUE_T (nothing hidden).
     out_depth.data[pix] = p.T < MEDIAN_T ? p.depth_sum : 0.0;
-    return;
-#endif
+    out_opaque_depth.data[pix] = p.T < OPAQUE_T ? p.rgb.r : 0.0;
+#else
     float acc_alpha = 1.0 - p.T;
     if (write_rgb) {
         vec3 c = p.rgb + p.T * pc.background;
@@ -242,6 +252,7 @@ void pixel_finish(Pixel p, TileWindow tw, bool write_rgb, uint channels, uint ch
         }
     }
 #endif
+#endif // MEDIAN_DEPTH
 }
 
 void main() {

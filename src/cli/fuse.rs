@@ -100,12 +100,18 @@ pub struct FuseArgs {
     relabel: bool,
     /// Relative depth tolerance of the visibility test (> 0): vote --occlusion's, against the
     /// expected depth, and segment consensus's, against the median depth (the depth of the
-    /// Gaussian that takes a pixel's transmittance below one half). The consensus methods
-    /// count a Gaussian just behind an object, within the tolerance, as seen on the object:
-    /// where objects stand a few centimetres in front of walls or floors, 0.02 keeps those
-    /// walls and floors apart (better on most synthetic sweeps, not all: the default stays).
+    /// Gaussian that takes a pixel's transmittance below one half).
     #[arg(long, default_value_t = 0.05, value_parser = args::positive::<f32>)]
     depth_tol: f32,
+    /// The consensus methods' visibility test also hides a Gaussian whose center lies
+    /// behind the surface its pixel shows: more than this fraction of the median depth
+    /// behind the opaque depth (the depth of the Gaussian that takes the transmittance below
+    /// 5%), the farthest of its pixel's and the eight neighbours' (a surface seen at a slant
+    /// changes depth across a pixel). A wall or floor a few centimetres behind an object
+    /// standing in front of it passes --depth-tol there, and would count as seen on the
+    /// object. A pixel that never turns opaque hides nothing; 1e9 turns the test off.
+    #[arg(long, default_value_t = 0.01, value_parser = args::non_negative::<f32>)]
+    behind_tol: f32,
     /// Class table (JSON: id, name, color). Default: classes.json beside or inside the label
     /// folder, else the ids found in the label maps.
     #[arg(long)]
@@ -579,6 +585,7 @@ fn fuse_config(args: &FuseArgs, method: Method, accumulation: Accumulation) -> F
         accumulation,
         mem_budget: args.mem_budget,
         depth_tolerance: args.depth_tol,
+        behind_tolerance: args.behind_tol,
         ..Default::default()
     }
 }

@@ -24,7 +24,7 @@ use crate::gpu::kernel_table::Kernel;
 use crate::gpu::staging::grown;
 use crate::gpu::timings::KernelTotal;
 use crate::gpu::{Buffer, BufferRange, Gpu, Recorder, Timings};
-use crate::render::rasterizer::{SplitSizes, TileLists};
+use crate::render::rasterizer::{OcclusionDepths, SplitSizes, TileLists};
 use crate::render::{camera_rows_f32, GpuScene, Rasterizer, RenderOptions};
 use crate::scene::Camera;
 use crate::util::prefetch_ordered;
@@ -50,8 +50,13 @@ pub struct FuseConfig {
     /// Bytes the evidence matrix may take on the device; None: a quarter of the
     /// device-local memory, capped by the largest buffer a kernel can bind.
     pub mem_budget: Option<u64>,
-    /// Relative depth tolerance of `VoteOcclusion`.
+    /// Relative depth tolerance of the visibility tests: `VoteOcclusion`'s against the
+    /// expected depth, the consensus's against the median depth.
     pub depth_tolerance: f32,
+    /// The consensus's visibility test also hides a center that lies behind the pixel's
+    /// opaque depth (where its transmittance falls below `OPAQUE_T`) by more than this
+    /// fraction of the median depth.
+    pub behind_tolerance: f32,
     pub near: f32,
     pub far: f32,
     /// How finely views are split (windows of the tile lists, bands of tile rows); the
@@ -69,6 +74,7 @@ impl Default for FuseConfig {
             accumulation: Accumulation::FixedPoint,
             mem_budget: None,
             depth_tolerance: 0.05,
+            behind_tolerance: 0.01,
             near: 0.01,
             far: 1e10,
             split: SplitSizes::default(),
@@ -964,7 +970,7 @@ fn record_contrib(
         rows: (pass.row_begin as u32, pass.rows as u32),
         center_only: cfg.method == Method::VoteWeighted,
         per_view: cfg.method == Method::FlashSplatPerView,
-        depth: None,
+        depths: None,
     };
     record_contrib_walk(rec, tiles, n, &walk)
 }
@@ -983,8 +989,9 @@ pub(crate) struct ContribWalk<'a> {
     pub rows: (u32, u32),
     pub center_only: bool,
     pub per_view: bool,
-    /// Per pixel, the median depth the kernel writes (only fuse/region_footprint.comp).
-    pub depth: Option<&'a Buffer>,
+    /// Per pixel, the median and opaque depths the kernel writes (only
+    /// fuse/region_footprint.comp).
+    pub depths: Option<OcclusionDepths<'a>>,
 }
 
 /// Records `walk` over every window of the binned view's tile lists, band by band of the
@@ -1025,8 +1032,9 @@ pub(crate) fn record_contrib_walk(
                 ("carry", band.range(walk.carry, CONTRIB_CARRY_BYTES)),
                 ("status", tiles.status()),
             ];
-            if let Some(depth) = walk.depth {
-                bindings.push(("out_depth", band.range(depth, 4)));
+            if let Some(depths) = &walk.depths {
+                bindings.push(("out_depth", band.range(depths.median, 4)));
+                bindings.push(("out_opaque_depth", band.range(depths.opaque, 4)));
             }
             windows.dispatch(rec, walk.kernel, &bindings, &params, (window, band_index))?;
         }
@@ -1133,6 +1141,7 @@ pub(crate) fn center_params(
         near: cfg.near,
         far: cfg.far,
         depth_tolerance: cfg.depth_tolerance,
+        behind_tolerance: cfg.behind_tolerance,
         occlusion: u32::from(occlusion),
         width: cam.width,
         height: cam.height,

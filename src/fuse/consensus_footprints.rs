@@ -35,7 +35,7 @@ use crate::contract::TILE_SIZE;
 use crate::gpu::kernel_table::ids;
 use crate::gpu::staging::grown;
 use crate::gpu::{Buffer, Gpu, Recorder};
-use crate::render::rasterizer::TileLists;
+use crate::render::rasterizer::{OcclusionDepths, TileLists};
 use crate::render::Rasterizer;
 use crate::scene::Camera;
 use crate::util::prefetch_ordered;
@@ -172,7 +172,7 @@ impl FootprintTable {
         &mut self,
         rec: &mut Recorder,
         tiles: &TileLists,
-        depth: &Buffer,
+        depths: OcclusionDepths,
     ) -> Result<()> {
         let (Some(staged), Some(local), Some(carry)) = (&self.staged, &self.local, &self.carry)
         else {
@@ -198,7 +198,9 @@ impl FootprintTable {
                 }
                 self.dirty = Some((0, 0));
             }
-            rec.fill(depth, 0, depth.size(), 0);
+            for depth in [depths.median, depths.opaque] {
+                rec.fill(depth, 0, depth.size(), 0);
+            }
             rec.barrier();
         }
         let Some(sums) = self.sums.as_ref().filter(|_| self.kept) else {
@@ -215,7 +217,7 @@ impl FootprintTable {
             rows: (0, self.rows),
             center_only: false,
             per_view: false,
-            depth: Some(depth),
+            depths: Some(depths),
         };
         // The kernel's `n` is the rows' stride.
         record_contrib_walk(rec, tiles, self.stride as u32, &walk)

@@ -32,6 +32,7 @@ use crate::contract::REGION_EDGE_BIT;
 use crate::gpu::kernel_table::ids;
 use crate::gpu::timings::KernelTotal;
 use crate::gpu::{Buffer, Gpu, Recorder, Timings};
+use crate::render::rasterizer::OcclusionDepths;
 use crate::render::{GpuScene, Rasterizer};
 use crate::scene::Camera;
 use crate::util::prefetch_ordered;
@@ -500,15 +501,15 @@ fn center_pixels(
     // surfaces, not a blend that matches neither.
     let run = raster.run_tiled_in_bands(scene, cam, &cfg.render_options(), |rec, tiles| {
         match footprints.as_deref_mut() {
-            Some(table) => table.record_walk(rec, tiles, tiles.depth())?,
+            Some(table) => table.record_walk(rec, tiles, tiles.occlusion_depths())?,
             None => tiles.record_median_depth(rec)?,
         }
         if !tiles.is_last_band() {
             return Ok(());
         }
         rec.barrier();
-        let depth = pass.occlusion.then(|| tiles.depth());
-        dispatch_center_pixels(rec, scene, cam, depth, out, pass)
+        let depths = pass.occlusion.then(|| tiles.occlusion_depths());
+        dispatch_center_pixels(rec, scene, cam, depths, out, pass)
     })?;
     Ok(run.timings)
 }
@@ -517,7 +518,7 @@ fn dispatch_center_pixels(
     rec: &mut Recorder,
     scene: &GpuScene,
     cam: &Camera,
-    depth: Option<&Buffer>,
+    depths: Option<OcclusionDepths>,
     out: &Buffer,
     pass: &Pass,
 ) -> Result<()> {
@@ -526,7 +527,7 @@ fn dispatch_center_pixels(
         cam,
         scene,
         pass.cfg,
-        depth.is_some(),
+        depths.is_some(),
         (0, 0),
         out.address_words(4)?,
     )?;
@@ -537,7 +538,11 @@ fn dispatch_center_pixels(
         ids::FUSE_CENTER_PIXEL,
         &[
             // Never read without occlusion: any readable buffer fills the binding.
-            ("depth", depth.unwrap_or(&scene.params.means)),
+            ("depth", depths.map_or(&scene.params.means, |d| d.median)),
+            (
+                "opaque_depth",
+                depths.map_or(&scene.params.means, |d| d.opaque),
+            ),
         ],
         &params,
         ids::FUSE_CENTER_PIXEL.groups_for(scene.n),

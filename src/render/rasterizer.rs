@@ -61,6 +61,9 @@ struct Buffers {
     rgb: Buffer,
     alpha: Buffer,
     depth: Buffer,
+    /// Per pixel, the depth where the transmittance falls below `OPAQUE_T` (median-depth
+    /// frames only).
+    opaque_depth: Buffer,
     final_t: Buffer,
     last: Buffer,
     n_contrib: Buffer,
@@ -241,6 +244,7 @@ impl Buffers {
             rgb: b("rgb", p * 12)?,
             alpha: b("alpha", p * 4)?,
             depth: b("depth", p * 4)?,
+            opaque_depth: b("opaque_depth", p * 4)?,
             final_t: b("final_t", p * 4)?,
             last: b("last", p * 4)?,
             n_contrib: b("n_contrib", p * 4)?,
@@ -811,6 +815,19 @@ impl Rasterizer {
         &self.bufs.as_ref().expect("a frame was rendered").depth
     }
 
+    /// The median and opaque depths per pixel of the last frame recorded with
+    /// [`TileLists::record_median_depth`].
+    ///
+    /// # Panics
+    /// Before the first frame.
+    pub fn occlusion_depths(&self) -> OcclusionDepths<'_> {
+        let bufs = self.bufs.as_ref().expect("a frame was rendered");
+        OcclusionDepths {
+            median: &bufs.depth,
+            opaque: &bufs.opaque_depth,
+        }
+    }
+
     /// The last frame's tile lists (its last band's, where it was binned in bands): each
     /// tile's (start, end) in them, and the Gaussian of each entry.
     ///
@@ -1183,6 +1200,14 @@ impl TileLists<'_> {
         &self.bufs.depth
     }
 
+    /// The per-pixel depths [`Self::record_median_depth`] writes.
+    pub fn occlusion_depths(&self) -> OcclusionDepths<'_> {
+        OcclusionDepths {
+            median: &self.bufs.depth,
+            opaque: &self.bufs.opaque_depth,
+        }
+    }
+
     /// Per Gaussian: 1 where this view projected it (its tile lists may hold it).
     pub fn visible_flags(&self) -> &Buffer {
         &self.bufs.flags
@@ -1315,9 +1340,10 @@ impl TileLists<'_> {
     }
 
     /// Records each pixel's median depth into the depth image (the depth of the Gaussian
-    /// that takes its transmittance below one half; 0 where none does) and nothing else: a
-    /// pixel stops there, not at saturation. For occlusion tests, which need only the
-    /// nearest surface (src/fuse/consensus.rs).
+    /// that takes its transmittance below one half; 0 where none does) and its opaque depth
+    /// (below `OPAQUE_T`; [`Self::occlusion_depths`]) and nothing else: a pixel stops there,
+    /// not at saturation. For occlusion tests, which need only the nearest surface
+    /// (src/fuse/consensus.rs).
     pub fn record_median_depth(&self, rec: &mut Recorder) -> Result<()> {
         let f = &self.frame;
         // The kernel carries no semantic channels, whatever the frame blends.
@@ -1330,6 +1356,7 @@ impl TileLists<'_> {
                 params.tile_row_base = band.first_tile_row;
                 let mut bindings = self.window_bindings(band, carry_bytes);
                 bindings.push(("out_depth", band.range(&self.bufs.depth, 4)));
+                bindings.push(("out_opaque_depth", band.range(&self.bufs.opaque_depth, 4)));
                 let kernel = ids::RASTER_BLEND_MEDIAN_DEPTH
                     .for_device(ids::RASTER_BLEND_MEDIAN_DEPTH_WIDE, rec.gpu());
                 windows.dispatch(rec, kernel, &bindings, &params, (window, band_index))?;
@@ -1352,6 +1379,15 @@ impl TileLists<'_> {
             ("carry", band.range_or_whole(&b.carry, carry_bytes)),
         ]
     }
+}
+
+/// Per pixel, the depths the occlusion tests of Gaussian centers read: the median depth
+/// (of the Gaussian that takes the transmittance below `MEDIAN_T`) and the opaque depth
+/// (below `OPAQUE_T`), each 0 where the transmittance never falls that far.
+#[derive(Clone, Copy)]
+pub struct OcclusionDepths<'a> {
+    pub median: &'a Buffer,
+    pub opaque: &'a Buffer,
 }
 
 /// Device addresses of the projected per-Gaussian arrays ([`TileLists::projected_addrs`]).

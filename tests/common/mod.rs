@@ -145,25 +145,32 @@ pub fn separate_depth_ties(g: &Gaussians, cam: &Camera) -> Gaussians {
 /// transmittance below one half, 0 where none does. None where a step lands within 1e-5 of
 /// one half, where float32 may take the neighbouring Gaussian.
 pub fn reference_median_depth(g: &Gaussians, cam: &Camera) -> Vec<Option<f64>> {
-    use semsplat::render::reference::{for_each_contribution, RenderSettings};
+    reference_depth_below(g, cam, 0.5)
+}
+
+/// Per pixel of `cam`, the camera-space depth of the Gaussian that takes the pixel's
+/// transmittance below `threshold`, written plainly from the f64 reference's steps (a
+/// Gaussian that saturates the pixel counts), 0 where none does; None where a step lands
+/// within 1e-5 of the threshold, where float32 may take the neighbouring Gaussian.
+pub fn reference_depth_below(g: &Gaussians, cam: &Camera, threshold: f64) -> Vec<Option<f64>> {
+    use semsplat::render::reference::{for_each_step, RenderSettings};
     let pixels = (cam.width * cam.height) as usize;
-    let (mut t, mut found) = (vec![1.0f64; pixels], vec![false; pixels]);
+    let mut found = vec![false; pixels];
     let mut depth = vec![Some(0.0); pixels];
     let settings = RenderSettings {
         semantics: false,
         ..Default::default()
     };
-    for_each_contribution(g, cam, &settings, |px, py, id, weight| {
+    for_each_step(g, cam, &settings, |px, py, id, t, alpha| {
         let i = (py * cam.width + px) as usize;
         if found[i] {
             return;
         }
-        // weight = alpha T: the transmittance after this Gaussian is T - weight.
-        let next = t[i] - weight;
-        if (next - 0.5).abs() < 1e-5 {
+        let next = t * (1.0 - alpha);
+        if (next - threshold).abs() < 1e-5 {
             depth[i] = None;
         }
-        if next < 0.5 {
+        if next < threshold {
             found[i] = true;
             let m = g.means[id as usize];
             let z = cam
@@ -171,7 +178,6 @@ pub fn reference_median_depth(g: &Gaussians, cam: &Camera) -> Vec<Option<f64>> {
                 .z;
             depth[i] = depth[i].map(|_| z);
         }
-        t[i] = next;
     });
     depth
 }

@@ -307,6 +307,33 @@ pub fn render(g: &Gaussians, cam: &Camera, settings: &RenderSettings) -> Referen
     img
 }
 
+/// Visits, front to back, every Gaussian a pixel meets as `f(px, py, gaussian_id, t, alpha)`
+/// (`t` the transmittance in front of it), up to and including the one that saturates the
+/// pixel, which blending stops at without blending it: the occlusion tests' depths (the
+/// Gaussian that takes the transmittance below a threshold) count it, as it hides what lies
+/// behind it. Panics when the scene's arrays are inconsistent.
+pub fn for_each_step(
+    g: &Gaussians,
+    cam: &Camera,
+    settings: &RenderSettings,
+    mut f: impl FnMut(u32, u32, u32, f64, f64),
+) {
+    let frame = Frame::new(g, cam, settings);
+    frame.for_each_pixel(cam, |px, py, tile| {
+        let mut t = 1.0f64;
+        for p in frame.tile_list(tile) {
+            let Some(alpha) = eval_alpha(p, px, py) else {
+                continue;
+            };
+            f(px, py, p.id, t, alpha);
+            t *= 1.0 - alpha;
+            if t <= T_STOP {
+                break;
+            }
+        }
+    });
+}
+
 /// Visits every blended (pixel, Gaussian) pair as `f(px, py, gaussian_id, weight)` with
 /// `weight = alpha * T`, pixels tile by tile and, within a pixel, front to back: the CPU
 /// reference for FlashSplat's contribution matrix. Panics when the scene's arrays are
