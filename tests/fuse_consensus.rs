@@ -285,24 +285,33 @@ fn occluded_centers_are_not_observed() {
             let z = cam
                 .world_to_camera(glam::DVec3::new(m[0] as f64, m[1] as f64, m[2] as f64))
                 .z;
-            let farthest = farthest_opaque(&opaque, cam, pixel);
-            let (Some(d), Some(o)) = (median[pixel as usize], farthest) else {
+            let Some(d) = median[pixel as usize] else {
                 skipped += 1;
                 continue;
             };
             let near_edge = |x: f64| x.abs() < 1e-5 * d;
-            if near_edge((z - d).abs() - tol * d) || near_edge(z - o - behind_tol * d) {
+            if near_edge((z - d).abs() - tol * d) {
                 skipped += 1;
                 continue;
             }
             let within = d > 0.0 && (z - d).abs() <= tol * d;
-            let hidden_behind = o > 0.0 && z > o + behind_tol * d;
+            // The opaque depths decide only a center within the median's tolerance.
+            let hidden_behind = match (within, farthest_opaque(&opaque, cam, pixel)) {
+                (false, _) => false,
+                (true, Some(o)) if !near_edge(z - o - behind_tol * d) => {
+                    o > 0.0 && z > o + behind_tol * d
+                }
+                _ => {
+                    skipped += 1;
+                    continue;
+                }
+            };
             let expect = within && !hidden_behind;
             let got = visible.get(&g);
             assert_eq!(
                 got.is_some(),
                 expect,
-                "view {v}, Gaussian {g}: z {z}, median {d}, opaque {o}"
+                "view {v}, Gaussian {g}: z {z}, median {d}, hidden behind {hidden_behind}"
             );
             if let Some(&p) = got {
                 assert_eq!(p, pixel, "view {v}, Gaussian {g}");
@@ -313,10 +322,9 @@ fn occluded_centers_are_not_observed() {
         }
     }
     // Both outcomes occur, the opaque depth hides some the median depth alone would not,
-    // and few centers are left undecided (under 2%: a center reads nine pixels' opaque
-    // depths, each of which float32 may take from another Gaussian).
+    // and few centers are left undecided.
     assert!(
-        hidden > 1000 && seen > 1000 && behind > 100 && skipped * 50 < hidden + seen,
+        hidden > 1000 && seen > 1000 && behind > 100 && skipped * 100 < hidden + seen,
         "hidden {hidden}, seen {seen}, behind {behind}, skipped {skipped}"
     );
     check_validation(gpu);

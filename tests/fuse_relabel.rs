@@ -903,7 +903,8 @@ fn footprints_give_the_relabeled_views_sums() {
             "{case}: classes differ"
         );
         assert!(kept.evidence == again.evidence, "{case}: evidence differs");
-        // The walk's median depth is the median depth kernel's: the same observations.
+        // The walk's median and opaque depths are the median depth kernel's (every pixel of
+        // this room is labeled; the walk leaves unlabeled ones at 0): the same observations.
         assert!(
             kept.consensus == again.consensus,
             "{case}: the consensus differs"

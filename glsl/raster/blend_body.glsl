@@ -1,7 +1,7 @@
 // Forward blending of one 16x16 tile per workgroup (included by blend_rgb.comp with
 // CHUNK_CHANNELS 0, blend_sem.comp with CHUNK_CHANNELS 16, blend_label.comp, and
-// blend_median_depth.comp with MEDIAN_DEPTH: only each pixel's median and opaque depths; each also
-// as a `*_wide` kernel with PIXELS set).
+// blend_median_depth.comp with MEDIAN_DEPTH: only each pixel's median and opaque depths;
+// each also as a `*_wide` kernel with PIXELS set).
 //
 // Each workgroup loads its tile's Gaussians into shared memory in batches; a pixel stops at
 // the transmittance threshold, and the tile stops once every pixel is done (subgroup vote,

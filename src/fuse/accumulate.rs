@@ -53,9 +53,9 @@ pub struct FuseConfig {
     /// Relative depth tolerance of the visibility tests: `VoteOcclusion`'s against the
     /// expected depth, the consensus's against the median depth.
     pub depth_tolerance: f32,
-    /// The consensus's visibility test also hides a center that lies behind the pixel's
-    /// opaque depth (where its transmittance falls below `OPAQUE_T`) by more than this
-    /// fraction of the median depth.
+    /// The consensus's visibility test also hides a center that lies behind the farthest
+    /// opaque depth (where the transmittance falls below `OPAQUE_T`) of its pixel and the
+    /// pixel's eight neighbours by more than this fraction of the median depth.
     pub behind_tolerance: f32,
     pub near: f32,
     pub far: f32,
