@@ -1645,32 +1645,45 @@ fn decide_on_a_line(
     segment: Vec<u32>,
     p: &ConsensusParams,
 ) -> (Consensus, Vec<u32>) {
+    decide_on_a_line_of(2, per_view, segment, p)
+}
+
+/// [`decide_on_a_line`] with `classes` classes.
+fn decide_on_a_line_of(
+    classes: usize,
+    per_view: &[Vec<(u32, u32, u32, bool)>],
+    segment: Vec<u32>,
+    p: &ConsensusParams,
+) -> (Consensus, Vec<u32>) {
     let n = segment.len();
     let obs = Observations::from_views(n, per_view);
     let means: Vec<[f32; 3]> = (0..n).map(|g| [g as f32, 0.0, 0.0]).collect();
     let knn = nearest_neighbours(&means, p.neighbours);
-    (decide(&obs, &knn, segment, 2, p), knn)
+    (decide(&obs, &knn, segment, classes, p), knn)
 }
 
 /// A Gaussian in a segment under `min_segment` (here alone) takes the class most of its
 /// neighbours in decided segments hold, where at least `min_segment_neighbours` are and one
-/// class holds more than half of them; else its own views decide.
+/// class holds more than half of them (or `few_segment_neighbours` are and its own views
+/// do not contradict that class); else its own views decide.
 #[test]
 fn small_segments_take_their_neighbours_segments_class() {
     // Gaussians 0..n_a: segment 0, class 0 in every view; n_a..8: segment 1, class 1;
-    // Gaussian 8 alone (segment 2), its own three views saying class 1.
-    let decide_with = |n_a: u32, min_segment_neighbours: usize| {
-        let per_view: Vec<Vec<(u32, u32, u32, bool)>> = (0..3)
-            .map(|_| {
+    // Gaussian 8 alone (segment 2), its own views (the first `views_of_8`) saying class 1.
+    let decide_with_few = |n_a: u32, min_segment_neighbours: usize, few: usize, views_of_8: u32| {
+        let per_view: Vec<Vec<(u32, u32, u32, bool)>> = (0..views_of_8.max(3))
+            .map(|v| {
                 let mut list: Vec<_> = (0..8u32)
+                    .filter(|_| v < 3)
                     .map(|g| (g, u32::from(g >= n_a), u32::from(g >= n_a), false))
                     .collect();
-                list.push((8, 1, 2, false));
+                list.extend((v < views_of_8).then_some((8, 1, 2, false)));
                 list
             })
             .collect();
         let p = ConsensusParams {
             min_segment_neighbours,
+            few_segment_neighbours: few,
             smooth_rounds: 0, // this rule alone (the next test: what follows it)
             ..Default::default()
         };
@@ -1679,6 +1692,8 @@ fn small_segments_take_their_neighbours_segments_class() {
             .collect();
         decide_on_a_line(&per_view, segment, &p).0
     };
+    let decide_with =
+        |n_a, min_segment_neighbours| decide_with_few(n_a, min_segment_neighbours, 0, 3);
     // Eight segments of one: every neighbour of 8 in segment 0 (8 Gaussians, class 0).
     let c = decide_with(8, 3);
     assert_eq!(c.assignment.class[8], Some(0), "its 8 neighbours' segment");
@@ -1689,6 +1704,25 @@ fn small_segments_take_their_neighbours_segments_class() {
         c.assignment.class[8],
         Some(1),
         "too few neighbours: own views"
+    );
+    // Fewer than `min_segment_neighbours` but `few_segment_neighbours`: its three views say
+    // class 1, too few to contradict (`min_own_views`); six views all saying class 1, where
+    // segment 0's views give class 0 always, do.
+    let c = decide_with_few(8, 9, 1, 3);
+    assert_eq!(
+        c.assignment.class[8],
+        Some(0),
+        "three views do not contradict"
+    );
+    assert_eq!(c.evidence[8], [8.0, 0.0]);
+    let c = decide_with_few(8, 9, 1, 6);
+    assert_eq!(c.assignment.class[8], Some(1), "six views contradict");
+    assert_eq!(c.evidence[8], [0.0, 6.0]);
+    let c = decide_with_few(8, 9, 9, 3);
+    assert_eq!(
+        c.assignment.class[8],
+        Some(1),
+        "fewer than `few_segment_neighbours`"
     );
     // Segments of 4 and 4: a tie among the neighbours, so its own views decide.
     let c = decide_with(4, 3);
@@ -1729,6 +1763,7 @@ fn small_segments_are_smoothed_by_their_neighbours_classes() {
         let p = ConsensusParams {
             neighbours: 4,
             smooth_rounds,
+            few_segment_neighbours: 0, // 8 decided on its own view first
             ..Default::default()
         };
         let segment: Vec<u32> = (0..19u32)
@@ -1768,6 +1803,123 @@ fn small_segments_are_smoothed_by_their_neighbours_classes() {
     assert_eq!(c.assignment.class[8], Some(1));
     assert_eq!(c.evidence[8], [0.0, 4.0]);
     assert_eq!(c.smoothed, 0);
+}
+
+/// A Gaussian its segment does not decide reads its views through their label regions:
+/// a view votes the class the clearly decided segments observed in its region hold (85%),
+/// where the views take that class for the region's label (a flickered object); its label
+/// where they hardly ever do (an edge drawn a few pixels off). Segment 0 (Gaussians 0..16,
+/// class 0) is seen by 20 views; Gaussian 16 alone only by views 16..20, in one region with
+/// segment 0's Gaussian 0 there, labeled `label`: in the flicker case every Gaussian of
+/// segment 0 lies there and those views call the whole segment class 1; in the edge case
+/// only Gaussian 0 does, so class 0 is taken for class 2 in 4 / 16 of a view each (its rate
+/// under `max_edge_confusion`).
+#[test]
+fn small_segments_read_their_views_regions() {
+    let decide_with = |flicker: bool, region_votes: bool| {
+        let label = if flicker { 1 } else { 2 };
+        let per_view: Vec<Vec<(u32, u32, u32, bool)>> = (0..20u32)
+            .map(|v| {
+                let late = v >= 16;
+                let mut list: Vec<(u32, u32, u32, bool)> = (0..16u32)
+                    .map(|g| match late && (flicker || g == 0) {
+                        true => (g, label, 1, false),
+                        false => (g, 0, 0, false),
+                    })
+                    .collect();
+                list.extend(late.then_some((16, label, 1, false)));
+                list
+            })
+            .collect();
+        let p = ConsensusParams {
+            region_votes: ConsensusParams::default()
+                .region_votes
+                .filter(|_| region_votes),
+            // Its own views alone: no neighbours' segments, no smoothing.
+            min_segment_neighbours: 99,
+            few_segment_neighbours: 0,
+            smooth_rounds: 0,
+            ..Default::default()
+        };
+        let segment: Vec<u32> = (0..17).map(|g| u32::from(g == 16)).collect();
+        decide_on_a_line_of(3, &per_view, segment, &p).0
+    };
+    let c = decide_with(true, true);
+    assert_eq!(c.segments[0].class, Some(0));
+    let rule = ConsensusParams::default()
+        .region_votes
+        .expect("on by default");
+    assert!(c.confusions.rate(0, 1) > rule.max_confusion);
+    assert_eq!(
+        c.assignment.class[16],
+        Some(0),
+        "flickered views: their region's class"
+    );
+    assert_eq!(c.evidence[16], [4.0, 0.0, 0.0]);
+    let c = decide_with(true, false);
+    assert_eq!(c.assignment.class[16], Some(1), "by its labels");
+    let c = decide_with(false, true);
+    assert_eq!(c.segments[0].class, Some(0));
+    assert!(c.confusions.rate(0, 2) < rule.max_confusion);
+    assert_eq!(
+        c.assignment.class[16],
+        Some(2),
+        "an edge drawn off: its label"
+    );
+    assert_eq!(c.evidence[16], [0.0, 0.0, 4.0]);
+}
+
+/// A region speaks for a class only where that class's clear segments make up at least
+/// `min_share_of_all` of all its observations. Segment 0 (Gaussians 0..16, class 0; views
+/// 10..16 call it class 1, so the views take class 0 for class 1) and, in views 16..20, a
+/// region labeled 1 holding its Gaussian 0 and three Gaussians alone (16, 17, 18): one
+/// clear observation of four, as where boundary noise shifted a neighbour's edge into a
+/// small object's region.
+#[test]
+fn a_region_mostly_undecided_keeps_its_label() {
+    let decide_with = |min_share_of_all: f64| {
+        let per_view: Vec<Vec<(u32, u32, u32, bool)>> = (0..20u32)
+            .map(|v| {
+                let flickered = (10..16).contains(&v);
+                let mut list: Vec<(u32, u32, u32, bool)> = (0..16u32)
+                    .map(|g| match (v >= 16 && g == 0, flickered) {
+                        (true, _) => (g, 1, 1, false),
+                        (false, true) => (g, 1, 0, false),
+                        (false, false) => (g, 0, 0, false),
+                    })
+                    .collect();
+                list.extend((16..19).filter(|_| v >= 16).map(|g| (g, 1, 1, false)));
+                list
+            })
+            .collect();
+        let mut rule = ConsensusParams::default()
+            .region_votes
+            .expect("on by default");
+        rule.min_share_of_all = min_share_of_all;
+        let p = ConsensusParams {
+            region_votes: Some(rule),
+            min_segment_neighbours: 99,
+            few_segment_neighbours: 0,
+            smooth_rounds: 0,
+            ..Default::default()
+        };
+        let segment: Vec<u32> = (0..19).map(|g| g.max(15) - 15).collect();
+        decide_on_a_line(&per_view, segment, &p).0
+    };
+    let c = decide_with(0.5);
+    assert_eq!(c.segments[0].class, Some(0));
+    assert!(c.confusions.rate(0, 1) > 0.1);
+    for g in 16..19 {
+        assert_eq!(c.assignment.class[g], Some(1), "one of four: its label");
+    }
+    let c = decide_with(0.2);
+    for g in 16..19 {
+        assert_eq!(
+            c.assignment.class[g],
+            Some(0),
+            "a share of all of 0.2: the class"
+        );
+    }
 }
 
 /// Gaussians no view observed take their decided neighbours' majority, outward in rounds; a

@@ -25,25 +25,23 @@ struct Confusions {
     prior: Vec<Vec<f64>>,
 }
 
+/// A class the views take for a label more often than this is one the label may be the
+/// flicker of (under flicker 0.3 a look-alike is called so in 5-27% of the views, other
+/// classes in under 2%): `--relabel`'s regions and a small segment's region votes relabel
+/// a region only to such a class, or leave it its label (docs/robustness.md).
+pub const LOOK_ALIKE_RATE: f64 = 0.03;
+
 /// Spread over the other classes and added to every rate at which one class's views call
 /// another (`mirrored_prior`), so a confusion no clear segment showed is unlikely, not
 /// impossible; also the least share of a row's prior the other classes get.
 const UNSEEN_CONFUSION: f64 = 0.01;
 
 impl Confusions {
-    /// From the segments decided clearly: at least `min_segment` Gaussians, at least
-    /// `confusion_min_views` views, the class holding at least `confusion_min_share` of the
-    /// votes, and not a near tie.
+    /// From the segments decided clearly ([`clear_class`]).
     fn estimate(segments: &[SegmentVotes], classes: usize, p: &ConsensusParams) -> Self {
         let mut votes = vec![vec![0.0; classes]; classes];
         for s in segments {
-            let Some(k) = s.class else { continue };
-            let total: f64 = s.split.iter().sum();
-            let clear = s.gaussians >= p.min_segment
-                && s.views >= p.confusion_min_views
-                && s.split[k] >= p.confusion_min_share * total
-                && tied_classes(s, p).len() < 2;
-            if clear {
+            if let Some(k) = clear_class(s, p) {
                 votes[k].iter_mut().zip(&s.split).for_each(|(t, v)| *t += v);
             }
         }
@@ -167,6 +165,20 @@ fn mirrored_prior(votes: &[Vec<f64>]) -> Vec<Vec<f64>> {
 /// least `large_tie_gaussians` also within `large_tie_z` sqrt(top + theirs), the standard
 /// deviation of the difference a fair coin would give over those votes (none where nothing
 /// was voted).
+/// A segment's class where its votes decide it clearly: at least `min_segment` Gaussians,
+/// at least `confusion_min_views` views, the class holding at least `confusion_min_share` of
+/// the votes, and not a near tie. What the confusions are estimated from, and what a label
+/// region says of the small segments in it (src/fuse/consensus_region_votes.rs).
+pub(crate) fn clear_class(s: &SegmentVotes, p: &ConsensusParams) -> Option<usize> {
+    let k = s.class?;
+    let total: f64 = s.split.iter().sum();
+    let clear = s.gaussians >= p.min_segment
+        && s.views >= p.confusion_min_views
+        && s.split[k] >= p.confusion_min_share * total
+        && tied_classes(s, p).len() < 2;
+    clear.then_some(k)
+}
+
 fn tied_classes(s: &SegmentVotes, p: &ConsensusParams) -> Vec<usize> {
     let split = &s.split;
     let top = split.iter().cloned().fold(0.0f64, f64::max);

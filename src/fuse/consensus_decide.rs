@@ -2,7 +2,8 @@
 //! knobs, each segment's class with every view counted once (near ties by the scene's class
 //! confusions: src/fuse/consensus_confusion.rs), each Gaussian's class from its
 //! segment (in a small segment its neighbours' segments, else its own views, as where its
-//! own views contradict its segment; its neighbours' classes where no view observed it), a
+//! own views contradict its segment, each view read through its label region:
+//! src/fuse/consensus_region_votes.rs; its neighbours' classes where no view observed it), a
 //! posterior per Gaussian, and the segments whose vote split is close (flagged, where they
 //! are objects in their views rather than slivers at an edge: src/fuse/consensus_flags.rs).
 
@@ -11,8 +12,9 @@ use std::sync::Arc;
 use serde::Serialize;
 
 use super::assign::Assignment;
-use super::consensus_confusion::{decide_near_ties, ConfusionRates};
+use super::consensus_confusion::{decide_near_ties, ConfusionRates, LOOK_ALIKE_RATE};
 use super::consensus_flags::{name_views_of_flagged, unflag_slivers};
+use super::consensus_region_votes::{RegionVoteRule, RegionVotes};
 use super::consensus_relabel::RelabelRule;
 use super::consensus_segments::{Groups, Observations};
 use super::scores::SharedCounts;
@@ -76,8 +78,14 @@ pub struct ConsensusParams {
     /// decided segments of at least `min_segment` hold, where at least this many are.
     /// Segments stay that small where the views give no joining evidence (center pixels on
     /// label edges: thin parts such as a table's legs, rims); a Gaussian's own few views
-    /// there flicker, its neighbours' segments pool many views.
+    /// there flicker, its neighbours' segments pool many views...
     pub min_segment_neighbours: usize,
+    /// ...or, where fewer are but at least this many, where its own views do not contradict
+    /// their class (`min_own_views`, `contradiction_p`: the test a segment's members are
+    /// held to, at the rate their segments' views give the class): a table's
+    /// rim has two or three neighbours in the top's segment and the rest along the rim, and
+    /// its own views are the few on its side. 0: off.
+    pub few_segment_neighbours: usize,
     /// Then, in this many rounds, every observed Gaussian of a segment under `min_segment`
     /// is decided again from its own views plus one vote per neighbour for the neighbour's
     /// class (each round from the classes at its start). Its few views flicker together,
@@ -91,6 +99,12 @@ pub struct ConsensusParams {
     /// ...that is, where so few of them give the segment's class that a view of the segment
     /// (giving it with the segment's rate) would give as few with at most this probability.
     pub contradiction_p: f64,
+    /// A Gaussian its segment does not decide counts its own views through their label
+    /// regions: a view votes the class that the clearly decided segments observed in its
+    /// region hold, where the views take that class for the region's label (a flickered
+    /// object); else its label, or nothing where they split (a flicker merge); where no view
+    /// votes, its labels (src/fuse/consensus_region_votes.rs). None: each view its label.
+    pub region_votes: Option<RegionVoteRule>,
     /// A segment whose top classes are within this many views' votes is a near tie,
     /// decided by the scene's confusions (src/fuse/consensus_confusion.rs)...
     pub tie_margin: f64,
@@ -149,9 +163,15 @@ impl Default for ConsensusParams {
             apart_weight: 4.0,
             min_segment: 4,
             min_segment_neighbours: 3,
+            few_segment_neighbours: 1,
             smooth_rounds: 3,
             min_own_views: 4,
             contradiction_p: 0.01,
+            region_votes: Some(RegionVoteRule {
+                min_share: 0.85,
+                min_share_of_all: 0.5,
+                max_confusion: LOOK_ALIKE_RATE,
+            }),
             tie_margin: 1.0,
             large_tie_gaussians: 1000,
             large_tie_z: 1.0,
@@ -170,7 +190,7 @@ impl Default for ConsensusParams {
                 keep_share: 0.25,
                 near: 8,
                 min_mass: 1.0,
-                max_edge_confusion: 0.03,
+                max_edge_confusion: LOOK_ALIKE_RATE,
             },
         }
     }
@@ -350,7 +370,20 @@ pub fn decide(
     // its members (too small, or contradicted) is never stored.
     let mut split_row: Vec<Option<u32>> = vec![None; count];
     let kept = segment_classes_kept(obs, &segment, &segments, classes, p);
-    let mut own = vec![0.0; classes];
+    let regions = p.region_votes.map(|rule| {
+        // Those their segment does not decide read their regions.
+        let reads: Vec<bool> = kept.iter().map(Option::is_none).collect();
+        RegionVotes::of(obs, (&segment, &segments), &reads, &rule, &confusions, p)
+    });
+    let alone = Alone {
+        obs,
+        knn,
+        segment: &segment,
+        segments: &segments,
+        classes,
+        p,
+        regions,
+    };
     for g in 0..n {
         let s = segment[g] as usize;
         match kept[g] {
@@ -362,28 +395,16 @@ pub fn decide(
                 evidence.share(g, row);
             }
             None => {
-                let near = match segments[s].gaussians < p.min_segment {
-                    true => neighbour_segments(g, knn, &segment, &segments, classes, p),
-                    false => None,
-                };
-                if let Some((c, counts)) = near {
-                    class[g] = Some(c);
-                    // Unobserved ones are counted where their neighbours decide them below.
-                    from_neighbour_segments += usize::from(!obs.row(g).is_empty());
-                    evidence.set(g, &counts);
-                } else {
-                    own.fill(0.0);
-                    add_own_votes(obs, g, &mut own);
-                    let tie_break = neighbour_votes(obs, knn, p.neighbours, g, classes);
-                    class[g] = decisive_argmax(&own, &tie_break);
-                    evidence.set(g, &own);
-                }
+                let (c, counts, by_neighbours) = alone.decide(g);
+                class[g] = c;
+                evidence.set(g, &counts);
+                // Unobserved ones are counted where their neighbours decide them below.
+                from_neighbour_segments += usize::from(by_neighbours && !obs.row(g).is_empty());
             }
         }
     }
     let from_neighbours = fill_unobserved(&mut class, &mut evidence, obs, knn, p.neighbours);
-    let smoothed =
-        smooth_small_segments(&mut class, &mut evidence, obs, knn, &segment, &segments, p);
+    let smoothed = smooth_small_segments(&mut class, &mut evidence, &alone);
     let (confidence, entropy) = posteriors(&evidence, &class, p.prior);
     Consensus {
         assignment: Assignment { class, confidence },
@@ -431,30 +452,82 @@ fn deciding_class(votes: &SegmentVotes, p: &ConsensusParams) -> Option<usize> {
     votes.class.filter(|_| votes.gaussians >= p.min_segment)
 }
 
-/// The class more than half of Gaussian `g`'s neighbours in decided segments of at least
-/// `min_segment` Gaussians hold, where at least `min_segment_neighbours` are, with the
-/// count of those neighbours per class ([`ConsensusParams::min_segment_neighbours`]).
-fn neighbour_segments(
-    g: usize,
-    knn: &[u32],
-    segment: &[u32],
-    segments: &[SegmentVotes],
+/// What decides a Gaussian its segment does not: the inputs of [`decide`], and what its
+/// views' label regions say ([`ConsensusParams::region_votes`]).
+struct Alone<'a> {
+    obs: &'a Observations,
+    knn: &'a [u32],
+    segment: &'a [u32],
+    segments: &'a [SegmentVotes],
     classes: usize,
-    p: &ConsensusParams,
-) -> Option<(usize, Vec<f64>)> {
-    let k = p.neighbours;
-    let mut counts = vec![0.0; classes];
-    for &h in knn[g * k..(g + 1) * k]
-        .iter()
-        .filter(|&&h| h != NO_NEIGHBOUR)
-    {
-        if let Some(c) = deciding_class(&segments[segment[h as usize] as usize], p) {
-            counts[c] += 1.0;
+    p: &'a ConsensusParams,
+    regions: Option<RegionVotes>,
+}
+
+impl Alone<'_> {
+    /// Gaussian `g`'s class, the counts it was decided from, and whether those are its
+    /// neighbours' segments: theirs where they decide it ([`Alone::neighbour_segments`]),
+    /// else its own views' (a tie broken by its neighbours' views, then undecided).
+    fn decide(&self, g: usize) -> (Option<usize>, Vec<f64>, bool) {
+        let small = self.segments[self.segment[g] as usize].gaussians < self.p.min_segment;
+        if let Some((c, counts)) = small.then(|| self.neighbour_segments(g)).flatten() {
+            return (Some(c), counts, true);
+        }
+        let mut own = vec![0.0; self.classes];
+        self.add_votes_through_regions(g, &mut own);
+        let tie_break = neighbour_votes(self.obs, self.knn, self.p.neighbours, g, self.classes);
+        (decisive_argmax(&own, &tie_break), own, false)
+    }
+
+    /// Adds Gaussian `g`'s own views' votes: through their label regions where those are
+    /// read, its labels where they are not or where no view's region votes.
+    fn add_votes_through_regions(&self, g: usize, votes: &mut [f64]) {
+        let before: f64 = votes.iter().sum();
+        if let Some(regions) = &self.regions {
+            regions.add_votes(self.obs, g, votes);
+        }
+        if votes.iter().sum::<f64>() == before {
+            add_own_votes(self.obs, g, votes);
         }
     }
-    let total: f64 = counts.iter().sum();
-    let top = (0..classes).find(|&c| 2.0 * counts[c] > total)?;
-    (total >= p.min_segment_neighbours as f64).then_some((top, counts))
+
+    /// The class more than half of Gaussian `g`'s neighbours in decided segments of at
+    /// least `min_segment` Gaussians hold, where at least `min_segment_neighbours` are, or
+    /// `few_segment_neighbours` whose class its own views (labels) do not contradict; with
+    /// the count of those neighbours per class ([`ConsensusParams::min_segment_neighbours`]).
+    fn neighbour_segments(&self, g: usize) -> Option<(usize, Vec<f64>)> {
+        let (k, p) = (self.p.neighbours, self.p);
+        let mut counts = vec![0.0; self.classes];
+        let near = self.knn[g * k..(g + 1) * k].iter();
+        let decided: Vec<&SegmentVotes> = near
+            .filter(|&&h| h != NO_NEIGHBOUR)
+            .map(|&h| &self.segments[self.segment[h as usize] as usize])
+            .filter(|votes| deciding_class(votes, p).is_some())
+            .collect();
+        for votes in &decided {
+            counts[deciding_class(votes, p).expect("decided")] += 1.0;
+        }
+        let total: f64 = counts.iter().sum();
+        let top = (0..self.classes).find(|&c| 2.0 * counts[c] > total)?;
+        if total >= p.min_segment_neighbours as f64 {
+            return Some((top, counts));
+        }
+        if p.few_segment_neighbours == 0 || total < p.few_segment_neighbours as f64 {
+            return None;
+        }
+        // The rate at which the views of the neighbours' segments give `top`: their splits,
+        // each scaled to one.
+        let mut rate = vec![0.0; self.classes];
+        for votes in decided.iter().filter(|v| deciding_class(v, p) == Some(top)) {
+            let views: f64 = votes.split.iter().sum();
+            rate.iter_mut()
+                .zip(&votes.split)
+                .for_each(|(r, v)| *r += v / views);
+        }
+        let mut own = vec![0.0; self.classes];
+        add_own_votes(self.obs, g, &mut own);
+        (!contradicts(&own, top, &rate, p)).then_some((top, counts))
+    }
 }
 
 /// Whether a Gaussian's own view counts `own` contradict its segment's class `c`: it has at
@@ -534,23 +607,21 @@ fn fill_unobserved(
 }
 
 /// [`ConsensusParams::smooth_rounds`]: each round decides every observed Gaussian of a
-/// segment under `min_segment` from its own view votes plus a vote per neighbour's class, as
-/// the classes stood at the round's start; a tie keeps its class. The votes it takes its
+/// segment under `min_segment` from its own views' votes
+/// ([`Alone::add_votes_through_regions`]) plus a vote per neighbour's class, as the classes
+/// stood at the round's start; a tie keeps its class. The votes it takes its
 /// class from become its evidence, in its own row (such a Gaussian's evidence was set for
 /// it alone: a small segment's split is never shared). Returns how many ended with another
 /// class than they started with.
 fn smooth_small_segments(
     class: &mut [Option<usize>],
     evidence: &mut SharedCounts,
-    obs: &Observations,
-    knn: &[u32],
-    segment: &[u32],
-    segments: &[SegmentVotes],
-    p: &ConsensusParams,
+    alone: &Alone,
 ) -> usize {
+    let (obs, p) = (alone.obs, alone.p);
     let k = p.neighbours;
     let small: Vec<usize> = (0..obs.n)
-        .filter(|&g| segments[segment[g] as usize].gaussians < p.min_segment)
+        .filter(|&g| alone.segments[alone.segment[g] as usize].gaussians < p.min_segment)
         .filter(|&g| !obs.row(g).is_empty())
         .collect();
     let first: Vec<Option<usize>> = small.iter().map(|&g| class[g]).collect();
@@ -559,8 +630,8 @@ fn smooth_small_segments(
     for _ in 0..p.smooth_rounds {
         for &g in &small {
             votes.fill(0.0);
-            add_own_votes(obs, g, &mut votes);
-            add_neighbour_classes(class, knn, k, g, &mut votes);
+            alone.add_votes_through_regions(g, &mut votes);
+            add_neighbour_classes(class, alone.knn, k, g, &mut votes);
             let c = decisive_argmax(&votes, &votes);
             if c.is_some() {
                 evidence.replace_own(g, &votes); // the rounds read classes, not evidence

@@ -12,7 +12,7 @@
 
 use super::consensus_cluster::{counts_sorted, counts_sorted_of};
 use super::consensus_decide::{ConsensusParams, SegmentVotes};
-use super::consensus_segments::{Groups, Observations};
+use super::consensus_segments::{Groups, Observations, RegionSlots};
 use crate::util::parallel_map;
 
 /// (view, region, observations): where a segment lies in one view.
@@ -108,43 +108,25 @@ pub(crate) fn dominant_regions(
 /// pass over the observations, on every core).
 pub(crate) fn region_totals(obs: &Observations, placements: &[Vec<Placement>]) -> Vec<Vec<u32>> {
     const BLOCK: usize = 1 << 20;
-    let views = placements
-        .iter()
-        .flatten()
-        .map(|p| p.0 as usize + 1)
-        .max()
-        .unwrap_or(0);
-    // Per view, the regions asked for, sorted, and where the view's counts start.
-    let mut wanted: Vec<Vec<u32>> = vec![Vec::new(); views];
-    for &(view, region, _) in placements.iter().flatten() {
-        wanted[view as usize].push(region);
-    }
-    let mut start = vec![0usize; views + 1];
-    for (v, regions) in wanted.iter_mut().enumerate() {
-        regions.sort_unstable();
-        regions.dedup();
-        start[v + 1] = start[v] + regions.len();
-    }
-    let slot = |view: u32, region: u32| {
-        let regions = wanted.get(view as usize)?;
-        Some(start[view as usize] + regions.binary_search(&region).ok()?)
-    };
+    let slots = RegionSlots::of(placements.iter().flatten().map(|p| (p.0, p.1)));
     let total = obs.view.len();
     let blocks = parallel_map(total.div_ceil(BLOCK), |b| {
-        let mut counts = vec![0u32; start[views]];
+        let mut counts = vec![0u32; slots.len()];
         for i in b * BLOCK..total.min((b + 1) * BLOCK) {
-            if let Some(at) = slot(obs.view[i], obs.region[i]) {
+            if let Some(at) = slots.slot(obs.view[i], obs.region[i]) {
                 counts[at] += 1;
             }
         }
         counts
     });
-    let mut counts = vec![0u32; start[views]];
+    let mut counts = vec![0u32; slots.len()];
     for block in blocks {
         counts.iter_mut().zip(block).for_each(|(sum, c)| *sum += c);
     }
     let total_of = |&(view, region, _): &Placement| {
-        counts[slot(view, region).expect("every placement's region is asked for")]
+        counts[slots
+            .slot(view, region)
+            .expect("every placement's region is asked for")]
     };
     placements
         .iter()

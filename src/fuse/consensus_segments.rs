@@ -113,6 +113,44 @@ impl Observations {
 /// One view's observation of a Gaussian: (Gaussian, label, region, edge).
 pub type ViewEntry = (u32, u32, u32, bool);
 
+/// A set of (view, region) pairs, each numbered (its slot): per view its regions sorted, so
+/// a pair is found by a binary search. Regions are numbered within their view, and a view
+/// of salt noise holds hundreds of thousands: too many for a table per view.
+pub(crate) struct RegionSlots {
+    regions: Vec<Vec<u32>>,
+    /// Slot of each view's first region; the last entry: how many slots in all.
+    start: Vec<usize>,
+}
+
+impl RegionSlots {
+    pub(crate) fn of(pairs: impl Iterator<Item = (u32, u32)>) -> RegionSlots {
+        let mut regions: Vec<Vec<u32>> = Vec::new();
+        for (view, region) in pairs {
+            if regions.len() <= view as usize {
+                regions.resize_with(view as usize + 1, Vec::new);
+            }
+            regions[view as usize].push(region);
+        }
+        let mut start = vec![0usize; regions.len() + 1];
+        for (v, list) in regions.iter_mut().enumerate() {
+            list.sort_unstable();
+            list.dedup();
+            start[v + 1] = start[v] + list.len();
+        }
+        RegionSlots { regions, start }
+    }
+
+    pub(crate) fn len(&self) -> usize {
+        *self.start.last().unwrap_or(&0)
+    }
+
+    /// The slot of (view, region), if it is in the set.
+    pub(crate) fn slot(&self, view: u32, region: u32) -> Option<usize> {
+        let regions = self.regions.get(view as usize)?;
+        Some(self.start[view as usize] + regions.binary_search(&region).ok()?)
+    }
+}
+
 /// A view's observation of a Gaussian as [`Observations::from_views`] reads it: a
 /// [`ViewEntry`], or the views' own compact form (src/fuse/consensus_observe.rs: 12 bytes
 /// where the tuple takes 16, held for every observation until the views are done).

@@ -13,6 +13,7 @@ pub mod consensus_flags;
 pub mod consensus_footprints;
 pub mod consensus_observe;
 pub mod consensus_order;
+pub mod consensus_region_votes;
 pub mod consensus_relabel;
 pub mod consensus_report;
 pub mod consensus_segments;
