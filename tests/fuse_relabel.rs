@@ -575,12 +575,17 @@ struct Flickered {
 }
 
 fn flickered_office(views: usize, seed: u64) -> Flickered {
+    noisy_office(views, seed, "flicker=0.3")
+}
+
+/// [`flickered_office`] with other noise.
+fn noisy_office(views: usize, seed: u64, noise: &str) -> Flickered {
     let mut cfg = SynthConfig::new(RoomSource::from_arg("office").unwrap());
     cfg.train_views = views;
     cfg.test_views = 0;
     (cfg.width, cfg.height) = (96, 72);
     cfg.seed = seed;
-    cfg.noise = Some("flicker=0.3".parse().unwrap());
+    cfg.noise = Some(noise.parse().unwrap());
     let s = generate(&cfg).unwrap();
     let compact = CompactClasses::from_table(&s.room.classes).unwrap();
     let noisy = noisy_maps(&s, &compact);
@@ -861,6 +866,8 @@ fn relabel_is_deterministic_and_follows_its_rule() {
 #[test]
 fn footprints_give_the_relabeled_views_sums() {
     let f = flickered_office(8, 1);
+    // With holes in the label maps: the walk writes the depths of unlabeled pixels too.
+    let holed = noisy_office(8, 1, "flicker=0.3,missing=0.2");
     let params = ConsensusParams::default();
     let windows = SplitSizes {
         window_len: Some(50),
@@ -874,12 +881,14 @@ fn footprints_give_the_relabeled_views_sums() {
     // The windows and banded lists only in the CPU drivers' form (a GPU walks a list in one
     // window; the other form would add time, not a path).
     let cases = [
-        (false, SplitSizes::default()),
-        (true, SplitSizes::default()),
-        (true, windows),
-        (true, lists),
+        (&f, false, SplitSizes::default()),
+        (&f, true, SplitSizes::default()),
+        (&f, true, windows),
+        (&f, true, lists),
+        (&holed, true, SplitSizes::default()),
+        (&holed, true, windows),
     ];
-    for (cpu_forms, split) in cases {
+    for (f, cpu_forms, split) in cases {
         let gpu = common::gpu_with_cpu_forms(cpu_forms);
         let scene = GpuScene::upload(gpu, &f.s.gaussians).unwrap();
         let inp = input(gpu, &scene, &f.s, &f.noisy, f.classes);
@@ -891,7 +900,8 @@ fn footprints_give_the_relabeled_views_sums() {
         let lift = |sums| fuse_relabeled_by(&inp, &cfg, &params, sums, &mut |_, _| {});
         let kept = lift(RelabeledSums::FromFootprints).unwrap();
         let again = lift(RelabeledSums::WalkAgain).unwrap();
-        let case = format!("cpu forms {cpu_forms}, {split:?}");
+        let holes = std::ptr::eq(f, &holed);
+        let case = format!("holes {holes}, cpu forms {cpu_forms}, {split:?}");
         let (walked_again, banded) = (kept.stats.walked_again, split.list_capacity.is_some());
         assert!(
             banded == (walked_again > 0),
@@ -903,8 +913,9 @@ fn footprints_give_the_relabeled_views_sums() {
             "{case}: classes differ"
         );
         assert!(kept.evidence == again.evidence, "{case}: evidence differs");
-        // The walk's median and opaque depths are the median depth kernel's (every pixel of
-        // this room is labeled; the walk leaves unlabeled ones at 0): the same observations.
+        // The walk's median and opaque depths are the median depth kernel's, of unlabeled
+        // pixels too (the visibility test reads a center's 3x3 pixels): the same
+        // observations.
         assert!(
             kept.consensus == again.consensus,
             "{case}: the consensus differs"

@@ -14,8 +14,9 @@
 // views no longer outweigh far ones. An invocation takes PIXELS of the tile's pixels
 // (tile_window.glsl: one on a GPU, more in the `*_wide` kernels for CPU drivers) and adds
 // their weights for one row together before the subgroup does. fuse/region_footprint.glsl
-// sets MEDIAN_DEPTH_OUT (the walk also writes each labeled pixel's median and opaque
-// depths, as raster/blend_median_depth.comp finds them from the same steps) and
+// sets MEDIAN_DEPTH_OUT (the walk also writes each pixel's median and opaque depths, as
+// raster/blend_median_depth.comp finds them from the same steps; an unlabeled pixel is
+// walked for them alone, adding nothing, until it turns opaque) and
 // ENTRY_TARGETS (the sums go per list entry instead of per Gaussian).
 #extension GL_EXT_control_flow_attributes : require
 #extension GL_KHR_shader_subgroup_basic : require
@@ -64,7 +65,9 @@ layout(set = 0, binding = 8) readonly buffer StatusBuf { uint data[]; } status;
 #if defined(MEDIAN_DEPTH_OUT)
 // Per pixel, the depth of the Gaussian that takes its transmittance below MEDIAN_T (the
 // median depth), and below OPAQUE_T (the opaque depth); each left as it was (the caller
-// zeroes them) where it never falls that far or the pixel is unlabeled.
+// zeroes them) where it never falls that far. Unlabeled pixels too: the consensus's
+// visibility test reads a center's 3x3 neighbourhood, labeled or not, as the median depth
+// pass writes it for a GPU.
 layout(set = 0, binding = 9) writeonly buffer DepthBuf { float data[]; } out_depth;
 layout(set = 0, binding = 10) writeonly buffer OpaqueDepthBuf { float data[]; } out_opaque_depth;
 #endif
@@ -97,6 +100,8 @@ struct Pixel {
     float T;
     bool done;
 #if defined(MEDIAN_DEPTH_OUT)
+    // Unlabeled: walked for its depths alone, to its opaque depth.
+    bool depth_only;
     // The depth of the Gaussian that took T below MEDIAN_T in this window (0: none did),
     // written once at the window's end: a store in the walk's steps, even one no pixel
     // takes, cost lavapipe's footprint walk 7.7 s against 5.3 s (60 views of 320x240).
@@ -104,6 +109,15 @@ struct Pixel {
     float opaque; // the same for OPAQUE_T: the opaque depth
 #endif
 };
+
+// Whether the walk steps through pixel `p`'s Gaussians.
+bool walked(Pixel p) {
+#if defined(MEDIAN_DEPTH_OUT)
+    return p.labeled || p.depth_only;
+#else
+    return p.labeled;
+#endif
+}
 
 Pixel pixel_start(TileWindow tw, uint window_start) {
     // Rows of A this pass holds: labels outside [row_begin, row_begin + rows) wait for
@@ -115,10 +129,13 @@ Pixel pixel_start(TileWindow tw, uint window_start) {
     p.T = 1.0;
     p.done = !p.labeled;
 #if defined(MEDIAN_DEPTH_OUT)
+    p.depth_only = tw.inside && label == NO_LABEL;
+    p.row = p.depth_only ? NO_ROW : p.row;
+    p.done = p.done && !p.depth_only;
     p.median = 0.0;
     p.opaque = 0.0;
 #endif
-    if (window_start > 0 && p.labeled) {
+    if (window_start > 0 && walked(p)) {
         vec2 c = carry.data[tw.pix];
         p.T = c.x;
         p.done = c.y != 0.0;
@@ -151,6 +168,13 @@ float contrib_step(inout Pixel p, TileWindow tw, uint j, vec4 g) {
 #if defined(MEDIAN_DEPTH_OUT)
             p.median = p.T >= MEDIAN_T && next_t < MEDIAN_T ? g.z : p.median;
             p.opaque = p.T >= OPAQUE_T && next_t < OPAQUE_T ? g.z : p.opaque;
+            // Its weights count for no row (and a weight of 0 keeps the rows' sums of
+            // several pixels an invocation to the labeled ones).
+            if (p.depth_only) {
+                p.done = next_t < OPAQUE_T;
+                p.T = next_t;
+                return 0.0;
+            }
 #endif
             if (next_t <= T_MIN) {
                 p.done = true;
@@ -287,7 +311,7 @@ void main() {
         barrier();
     }
     [[unroll]] for (uint q = 0; q < PIXELS; q++) {
-        if (px[q].labeled && !tw[q].last) {
+        if (walked(px[q]) && !tw[q].last) {
             carry.data[tw[q].pix] = vec2(px[q].T, px[q].done ? 1.0 : 0.0);
         }
 #if defined(MEDIAN_DEPTH_OUT)
