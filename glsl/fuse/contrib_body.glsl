@@ -104,7 +104,6 @@ struct Pixel {
     // Unlabeled: walked for its depths alone (to saturation, as a labeled pixel: stopping
     // at the opaque depth would take a branch in the step).
     bool depth_only;
-    float weight; // 0 where depth_only, else 1
     // The depth of the Gaussian that took T below MEDIAN_T in this window (0: none did),
     // written once at the window's end: a store in the walk's steps, even one no pixel
     // takes, cost lavapipe's footprint walk 7.7 s against 5.3 s (60 views of 320x240).
@@ -162,7 +161,6 @@ Pixel pixel_start(TileWindow tw, uint window_start) {
     p.depth_only = tw.inside && label == NO_LABEL && beside_labeled(tw);
     p.row = p.depth_only ? NO_ROW : p.row;
     p.done = p.done && !p.depth_only;
-    p.weight = p.depth_only ? 0.0 : 1.0;
     p.median = 0.0;
     p.opaque = 0.0;
 #endif
@@ -215,7 +213,7 @@ float contrib_step(inout Pixel p, TileWindow tw, uint j, vec4 g) {
     // A pixel walked for its depths adds nothing (a weight of 0 also keeps the sums of
     // several pixels an invocation to the labeled ones'). A factor, not a branch: a branch
     // here cost lavapipe's footprint walk 8.6 s against 5.2 s (60 views of 320x240).
-    w *= p.weight;
+    w *= p.depth_only ? 0.0 : 1.0;
 #endif
     return w * s_scale[j];
 }

@@ -482,11 +482,8 @@ impl Alone<'_> {
     /// Adds Gaussian `g`'s own views' votes: through their label regions where those are
     /// read, its labels where they are not or where no view's region votes.
     fn add_votes_through_regions(&self, g: usize, votes: &mut [f64]) {
-        let before: f64 = votes.iter().sum();
-        if let Some(regions) = &self.regions {
-            regions.add_votes(self.obs, g, votes);
-        }
-        if votes.iter().sum::<f64>() == before {
+        let voted = (self.regions.as_ref()).is_some_and(|r| r.add_votes(self.obs, g, votes));
+        if !voted {
             add_own_votes(self.obs, g, votes);
         }
     }
@@ -499,13 +496,14 @@ impl Alone<'_> {
         let (k, p) = (self.p.neighbours, self.p);
         let mut counts = vec![0.0; self.classes];
         let near = self.knn[g * k..(g + 1) * k].iter();
-        let decided: Vec<&SegmentVotes> = near
+        // (class, segment) of each neighbour in a decided segment.
+        let decided: Vec<(usize, &SegmentVotes)> = near
             .filter(|&&h| h != NO_NEIGHBOUR)
             .map(|&h| &self.segments[self.segment[h as usize] as usize])
-            .filter(|votes| deciding_class(votes, p).is_some())
+            .filter_map(|votes| Some((deciding_class(votes, p)?, votes)))
             .collect();
-        for votes in &decided {
-            counts[deciding_class(votes, p).expect("decided")] += 1.0;
+        for &(c, _) in &decided {
+            counts[c] += 1.0;
         }
         let total: f64 = counts.iter().sum();
         let top = (0..self.classes).find(|&c| 2.0 * counts[c] > total)?;
@@ -518,7 +516,7 @@ impl Alone<'_> {
         // The rate at which the views of the neighbours' segments give `top`: their splits,
         // each scaled to one.
         let mut rate = vec![0.0; self.classes];
-        for votes in decided.iter().filter(|v| deciding_class(v, p) == Some(top)) {
+        for (_, votes) in decided.iter().filter(|&&(c, _)| c == top) {
             let views: f64 = votes.split.iter().sum();
             rate.iter_mut()
                 .zip(&votes.split)

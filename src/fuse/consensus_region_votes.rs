@@ -142,17 +142,21 @@ impl RegionVotes {
     }
 
     /// Adds Gaussian `g`'s views' votes to `votes`, one per observation: the class its
-    /// region says, or its label, or none ([`RegionSays`]). `g` must be one of those the
-    /// regions were found for.
-    pub(crate) fn add_votes(&self, obs: &Observations, g: usize, votes: &mut [f64]) {
+    /// region says, or its label, or none ([`RegionSays`]); whether any view voted. `g`
+    /// must be one of those the regions were found for.
+    pub(crate) fn add_votes(&self, obs: &Observations, g: usize, votes: &mut [f64]) -> bool {
+        let mut voted = false;
         for i in obs.row(g) {
             let at = self.slots.slot(obs.view[i], obs.region[i]);
-            match self.says[at.expect("g reads its regions")] {
-                RegionSays::Label => votes[obs.label[i] as usize] += 1.0,
-                RegionSays::Class(c) => votes[c as usize] += 1.0,
-                RegionSays::Nothing => {}
-            }
+            let class = match self.says[at.expect("g reads its regions")] {
+                RegionSays::Label => obs.label[i],
+                RegionSays::Class(c) => c,
+                RegionSays::Nothing => continue,
+            };
+            votes[class as usize] += 1.0;
+            voted = true;
         }
+        voted
     }
 }
 
