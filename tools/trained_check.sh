@@ -22,6 +22,7 @@ say() { printf '[trained_check] %s\n' "$*"; }
 die() { printf '[trained_check] ERROR: %s\n' "$*" >&2; exit 1; }
 
 [ $# -eq 1 ] || die "usage: bash tools/trained_check.sh OUT_DIR"
+command -v python3 >/dev/null || die "python3 is needed for the summary table"
 out=$(mkdir -p "$1" && cd "$1" && pwd)
 repo=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 bin=${SEMSPLAT:-$repo/target/release/semsplat}
