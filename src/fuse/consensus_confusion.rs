@@ -161,10 +161,6 @@ fn mirrored_prior(votes: &[Vec<f64>]) -> Vec<Vec<f64>> {
         .collect()
 }
 
-/// The classes near a segment's top: within `tie_margin` votes of it, and in a segment of at
-/// least `large_tie_gaussians` also within `large_tie_z` sqrt(top + theirs), the standard
-/// deviation of the difference a fair coin would give over those votes (none where nothing
-/// was voted).
 /// A segment's class where its votes decide it clearly: at least `min_segment` Gaussians,
 /// at least `confusion_min_views` views, the class holding at least `confusion_min_share` of
 /// the votes, and not a near tie. What the confusions are estimated from, and what a label
@@ -179,6 +175,10 @@ pub(crate) fn clear_class(s: &SegmentVotes, p: &ConsensusParams) -> Option<usize
     clear.then_some(k)
 }
 
+/// The classes near a segment's top: within `tie_margin` votes of it, and in a segment of at
+/// least `large_tie_gaussians` also within `large_tie_z` sqrt(top + theirs), the standard
+/// deviation of the difference a fair coin would give over those votes (none where nothing
+/// was voted).
 fn tied_classes(s: &SegmentVotes, p: &ConsensusParams) -> Vec<usize> {
     let split = &s.split;
     let top = split.iter().cloned().fold(0.0f64, f64::max);
