@@ -714,7 +714,7 @@ fn write_report(args: &OutputArgs, report: &Report) -> Result<()> {
         .find(|c| c.id == -1)
         .map_or(0, |c| c.gaussians);
     eprintln!(
-        "fused {} Gaussians into {} classes ({} unseen) in {:.2} s -> {}",
+        "fused {} Gaussians into {} classes ({} Gaussians left without a class) in {:.2} s -> {}",
         report.gaussians,
         report.classes,
         unseen,
