@@ -10,6 +10,9 @@
 # usage: bash tools/trained_check.sh OUT_DIR
 # env:   PRESET (living), SEED (3), NOISE (flicker=0.3), VIEWS (60), TEST_VIEWS (8),
 #        WIDTH (320), HEIGHT (240), ITERS (1000), MAX_GAUSSIANS (100000),
+#        DETERMINISTIC (0; 1: `train --deterministic`, the same trained scene on every
+#        run with the same device and driver, its backward slower; without it two
+#        trainings differ and a trained scene's figures can move by a point),
 #        METHODS ("flashsplat|segment-consensus|segment-consensus --relabel|vote --occlusion"),
 #        SEMSPLAT (the binary; default target/release/semsplat, built if missing)
 # Reruns reuse OUT_DIR's room and trained scene (delete them to redo). Training takes about
@@ -23,6 +26,12 @@ die() { printf '[trained_check] ERROR: %s\n' "$*" >&2; exit 1; }
 
 [ $# -eq 1 ] || die "usage: bash tools/trained_check.sh OUT_DIR"
 command -v python3 >/dev/null || die "python3 is needed for the summary table"
+deterministic=()
+case ${DETERMINISTIC:-0} in
+    0) ;;
+    1) deterministic=(--deterministic) ;;
+    *) die "DETERMINISTIC must be 0 or 1, not '$DETERMINISTIC'" ;;
+esac
 out=$(mkdir -p "$1" && cd "$1" && pwd)
 repo=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 bin=${SEMSPLAT:-$repo/target/release/semsplat}
@@ -45,7 +54,8 @@ if [ ! -f "$trained" ]; then
     say "training ${ITERS:-1000} iterations from init.ply (geometry and colour only)"
     "$bin" train --images "$room/images" --labels "$room/labels" --cameras "$room/cameras.json" \
         --init "$room/init.ply" --out "$trained" --iters "${ITERS:-1000}" --lambda-sem 0 \
-        --train-only --max-gaussians "${MAX_GAUSSIANS:-100000}" --report "$out/train.json"
+        --train-only --max-gaussians "${MAX_GAUSSIANS:-100000}" --report "$out/train.json" \
+        "${deterministic[@]}"
 fi
 
 # fuse_and_score SCENE_TAG SCENE_PLY LABELS METHOD...: one fusion, scored; its eval JSON path.
