@@ -15,7 +15,8 @@
 #        trainings differ and a trained scene's figures can move by a point),
 #        METHODS ("flashsplat|segment-consensus|segment-consensus --relabel|vote --occlusion"),
 #        SEMSPLAT (the binary; default target/release/semsplat, built if missing)
-# Reruns reuse OUT_DIR's room and trained scene (delete them to redo). Training takes about
+# Reruns reuse OUT_DIR's room and trained scene when asked for the same settings (and stop
+# when asked for others; delete them to redo). Training takes about
 # 25 minutes on lavapipe with two cores at the defaults; each fusion seconds.
 # Writes OUT_DIR/summary.json and prints a table: held-out mIoU and pixel accuracy per
 # method and labels, on the room's own Gaussians and on the trained ones, and each scene's
@@ -42,20 +43,35 @@ fi
 preset=${PRESET:-living} seed=${SEED:-3} noise=${NOISE:-flicker=0.3}
 IFS='|' read -r -a methods <<<"${METHODS:-flashsplat|segment-consensus|segment-consensus --relabel|vote --occlusion}"
 
+# What made the room and the trained scene: a rerun reuses them only if asked for the same
+# (another SEED into the same OUT_DIR would otherwise be scored as if it were that seed).
+room_settings="preset=$preset seed=$seed noise=$noise views=${VIEWS:-60} test_views=${TEST_VIEWS:-8} size=${WIDTH:-320}x${HEIGHT:-240}"
+train_settings="$room_settings iters=${ITERS:-1000} max_gaussians=${MAX_GAUSSIANS:-100000} deterministic=${DETERMINISTIC:-0}"
+# reuse_or_not FILE SETTINGS RECORD: true if RECORD exists and holds SETTINGS; stops if it
+# holds others.
+reuse_or_not() {
+    [ -f "$1" ] && [ -f "$3" ] || return 1
+    [ "$(cat "$3")" = "$2" ] && return 0
+    die "$1 was made with '$(cat "$3")', not '$2': use another OUT_DIR, or delete it"
+}
+
 room=$out/room
-if [ ! -f "$room/scene.ply" ]; then
+if ! reuse_or_not "$room/scene.ply" "$room_settings" "$out/room.settings"; then
     say "synth $preset seed $seed, $noise"
+    rm -f "$out/room.settings" "$out/trained.settings"
     "$bin" synth --preset "$preset" --seed "$seed" --noise "$noise" --views "${VIEWS:-60}" \
         --test-views "${TEST_VIEWS:-8}" --width "${WIDTH:-320}" --height "${HEIGHT:-240}" \
         --out "$room" --no-previews --force
+    printf '%s\n' "$room_settings" >"$out/room.settings"
 fi
 trained=$out/trained.ply
-if [ ! -f "$trained" ]; then
+if ! reuse_or_not "$trained" "$train_settings" "$out/trained.settings"; then
     say "training ${ITERS:-1000} iterations from init.ply (geometry and colour only)"
     "$bin" train --images "$room/images" --labels "$room/labels" --cameras "$room/cameras.json" \
         --init "$room/init.ply" --out "$trained" --iters "${ITERS:-1000}" --lambda-sem 0 \
         --train-only --max-gaussians "${MAX_GAUSSIANS:-100000}" --report "$out/train.json" \
         "${deterministic[@]}"
+    printf '%s\n' "$train_settings" >"$out/trained.settings"
 fi
 
 # fuse_and_score SCENE_TAG SCENE_PLY LABELS METHOD...: one fusion, scored; its eval JSON path.
@@ -88,9 +104,9 @@ for tag in room trained; do
     done
 done
 
-python3 - "$out" <<'EOF'
+python3 - "$out" "$train_settings" <<'EOF'
 import json, sys
-out = sys.argv[1]
+out, settings = sys.argv[1], sys.argv[2]
 runs = []
 for line in open(f"{out}/runs.tsv"):
     tag, labels, method, path = line.rstrip("\n").split("\t")
@@ -99,7 +115,7 @@ for line in open(f"{out}/runs.tsv"):
                  "pixel_accuracy": e["pixel_accuracy"],
                  "psnr": (e.get("image_quality") or {}).get("psnr"),
                  "per_class": e["per_class"]})
-json.dump({"runs": runs}, open(f"{out}/summary.json", "w"), indent=1)
+json.dump({"settings": settings, "runs": runs}, open(f"{out}/summary.json", "w"), indent=1)
 print(f"{'scene':8} {'labels':13} {'method':30} {'mIoU':>7} {'pixel':>7} {'PSNR':>6}")
 for r in runs:
     print(f"{r['scene']:8} {r['labels']:13} {r['method']:30} {r['miou']:7.4f} "

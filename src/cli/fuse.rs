@@ -708,7 +708,8 @@ fn write_report(args: &OutputArgs, report: &Report) -> Result<()> {
     if let Some(path) = &args.report {
         write_bytes_atomic(path, serde_json::to_string_pretty(report)?.as_bytes())?;
     }
-    let unseen = report
+    // Class -1: Gaussians no view decided (unobserved, or tied).
+    let without_class = report
         .per_class
         .iter()
         .find(|c| c.id == -1)
@@ -717,7 +718,7 @@ fn write_report(args: &OutputArgs, report: &Report) -> Result<()> {
         "fused {} Gaussians into {} classes ({} Gaussians left without a class) in {:.2} s -> {}",
         report.gaussians,
         report.classes,
-        unseen,
+        without_class,
         report.total_s,
         args.out.display()
     );
