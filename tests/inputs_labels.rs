@@ -176,6 +176,24 @@ fn colour_coded_maps_read_through_the_class_table() {
     let map = read_label_png_as(&gray, &format, Some(&table)).unwrap();
     assert_eq!(map.labels, [7, 7]);
 
+    // Runs of one colour (looked up once a run), across rows and around a transparent pixel.
+    let runs = dir.path().join("runs.png");
+    #[rustfmt::skip]
+    let rgba = [
+        128, 64, 128, 255,  128, 64, 128, 255,  0, 0, 142, 255,
+        0, 0, 142, 255,     0, 0, 142, 0,       0, 0, 142, 255,
+    ];
+    write_png(
+        &runs,
+        (3, 2),
+        png::ColorType::Rgba,
+        png::BitDepth::Eight,
+        None,
+        &rgba,
+    );
+    let map = read_label_png_as(&runs, &format, Some(&table)).unwrap();
+    assert_eq!(map.labels, [0, 0, 1, 1, IGN, 1]);
+
     // An unknown colour names itself, the pixel and the file.
     let bad = dir.path().join("bad.png");
     write_png(
@@ -246,6 +264,19 @@ fn dataset_dir(root: &Path, cams: &[Camera]) -> (PathBuf, PathBuf) {
     (cameras, labels)
 }
 
+/// `labels/NAME.png`: a 4x3 8-bit gray map of `px`.
+fn write_gray_4x3(labels: &Path, name: &str, px: &[u8]) {
+    let p = labels.join(format!("{name}.png"));
+    write_png(
+        &p,
+        (4, 3),
+        png::ColorType::Grayscale,
+        png::BitDepth::Eight,
+        None,
+        px,
+    );
+}
+
 fn open(cameras: &Path, labels: &Path, ignore_id: Option<u16>) -> anyhow::Result<Dataset> {
     Dataset::open(&DatasetPaths {
         cameras,
@@ -265,15 +296,7 @@ fn binary_masks_warn_and_ignore_id_keeps_the_object() {
     for (name, object) in [("a", 1usize), ("b", 6)] {
         let mut px = vec![0u8; 12];
         px[object] = 255;
-        let p = labels.join(format!("{name}.png"));
-        write_png(
-            &p,
-            (4, 3),
-            png::ColorType::Grayscale,
-            png::BitDepth::Eight,
-            None,
-            &px,
-        );
+        write_gray_4x3(&labels, name, &px);
     }
     let d = open(&cameras, &labels, None).unwrap();
     assert_eq!(d.classes.user_ids(), [0]);
@@ -669,4 +692,27 @@ fn palette_labels_and_jpeg_images_through_fuse_train_and_eval() {
     check_eval_scores_jpegs_and_names_classes(d);
     check_class_ids_above_16_bits_are_not_cut(d);
     check_train_reads_jpegs(d);
+}
+
+/// The maps are read on every core to find the classes present; a failure is the first
+/// failing map in the folder's order, as one at a time would report it.
+#[test]
+fn the_first_bad_map_in_order_is_the_one_reported() {
+    let dir = tempfile::tempdir().unwrap();
+    let names = ["a", "b", "c", "d", "e", "f", "g", "h"];
+    let cams: Vec<Camera> = names.iter().map(|n| camera(n, (4, 3))).collect();
+    let (cameras, labels) = dataset_dir(dir.path(), &cams);
+    write_class_table(&labels.join("classes.json"), &ClassTable::from_ids([0, 1])).unwrap();
+    for (i, name) in names.iter().enumerate() {
+        // Maps c and f hold id 9, which the class table does not have.
+        let id = if i == 2 || i == 5 { 9 } else { 1 };
+        write_gray_4x3(&labels, name, &[0u8, id, 1, 0, 0, 0, 1, 1, 0, 0, 0, 0]);
+    }
+    for _ in 0..3 {
+        let e = err(open(&cameras, &labels, None));
+        assert!(
+            e.contains("c.png") && !e.contains("f.png") && e.contains("9"),
+            "{e}"
+        );
+    }
 }

@@ -506,10 +506,17 @@ impl ViewLabels<'_> {
     }
 }
 
-/// Worker threads reading label maps ahead of the GPU, and how many views they may run
-/// ahead (each a label map in memory).
-pub(crate) const LABEL_THREADS: usize = 4;
+/// How many views the workers reading label maps may run ahead of the GPU (each a label
+/// map in memory and a staging buffer).
 pub(crate) const LABELS_AHEAD: usize = 8;
+
+/// Worker threads reading label maps ahead of the GPU: one a core, at least 4 and at most
+/// [`LABELS_AHEAD`] (more could not run). On a GPU the views are a few milliseconds each,
+/// about what reading a 1080p map takes, so 4 workers on a 16-core machine kept the GPU
+/// waiting (an H200: 1.5 s of FlashSplat's 1.9 s over 190 views).
+pub(crate) fn label_threads() -> usize {
+    std::thread::available_parallelism().map_or(4, |n| n.get().clamp(4, LABELS_AHEAD))
+}
 
 /// Bytes per pixel of the weighted methods' carried state between windows: (T, done).
 pub(crate) const CONTRIB_CARRY_BYTES: u64 = 8;
@@ -814,7 +821,7 @@ fn run_pass(
     let mut waited_since = Instant::now();
     let produced = prefetch_ordered(
         cams.len(),
-        LABEL_THREADS,
+        label_threads(),
         LABELS_AHEAD,
         produce,
         |view, staged| {

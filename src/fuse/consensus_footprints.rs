@@ -24,8 +24,8 @@
 use anyhow::{ensure, Result};
 
 use super::accumulate::{
-    accumulate, record_contrib_walk, Accumulation, ContribWalk, FuseConfig, FuseStats, LabelSource,
-    CONTRIB_CARRY_BYTES, LABELS_AHEAD, LABEL_THREADS, NO_LABEL,
+    accumulate, label_threads, record_contrib_walk, Accumulation, ContribWalk, FuseConfig,
+    FuseStats, LabelSource, CONTRIB_CARRY_BYTES, LABELS_AHEAD, NO_LABEL,
 };
 use super::consensus::ConsensusInput;
 use super::method::Method;
@@ -318,23 +318,29 @@ pub fn relabeled_footprints(
         ViewFootprints::Kept(f) if !f.is_empty() => relabeled.labels(view, &input.cams[view]),
         _ => Ok(None),
     };
-    prefetch_ordered(views, LABEL_THREADS, LABELS_AHEAD, kept_map, |view, map| {
-        progress(view, views);
-        let (Some(map), ViewFootprints::Kept(footprints)) = (map, &kept[view]) else {
-            return Ok(());
-        };
-        for f in footprints {
-            let class = map.get(f.region as usize).copied().unwrap_or(u32::MAX) as usize;
-            ensure!(
-                class < classes,
-                "view {}: region {} relabeled to {class}, past the {classes} rows",
-                input.cams[view].name,
-                f.region
-            );
-            sums[class * n + f.gaussian as usize] += f.amount;
-        }
-        Ok(())
-    })?;
+    prefetch_ordered(
+        views,
+        label_threads(),
+        LABELS_AHEAD,
+        kept_map,
+        |view, map| {
+            progress(view, views);
+            let (Some(map), ViewFootprints::Kept(footprints)) = (map, &kept[view]) else {
+                return Ok(());
+            };
+            for f in footprints {
+                let class = map.get(f.region as usize).copied().unwrap_or(u32::MAX) as usize;
+                ensure!(
+                    class < classes,
+                    "view {}: region {} relabeled to {class}, past the {classes} rows",
+                    input.cams[view].name,
+                    f.region
+                );
+                sums[class * n + f.gaussian as usize] += f.amount;
+            }
+            Ok(())
+        },
+    )?;
     let (mut scores, mut stats) = match kept.contains(&ViewFootprints::WalkAgain) {
         true => {
             let again = WalkedAgain { relabeled, kept };

@@ -18,8 +18,8 @@ use std::time::Instant;
 use anyhow::{anyhow, ensure, Result};
 
 use super::accumulate::{
-    center_params, check_map_size, lanes_that_fit, FuseConfig, FuseStats, ObserveTimes,
-    LABELS_AHEAD, LABEL_THREADS, NO_LABEL,
+    center_params, check_map_size, label_threads, lanes_that_fit, FuseConfig, FuseStats,
+    ObserveTimes, LABELS_AHEAD, NO_LABEL,
 };
 use super::consensus::ConsensusInput;
 use super::consensus_footprints::{
@@ -94,7 +94,7 @@ pub fn observe(
         let mut waited_since = Instant::now();
         let fed = prefetch_ordered(
             cams.len(),
-            LABEL_THREADS,
+            label_threads(),
             LABELS_AHEAD,
             read,
             |view, map| {

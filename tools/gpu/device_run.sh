@@ -13,6 +13,8 @@
 #           then `semsplat fuse` itself on them, process wall, for FlashSplat, vote and
 #           segment consensus)
 #   peers   gsplat 1.5.3 and FlashSplat's rasterizer on the scenes `ours` exported
+#   none    nothing after the setup (unpacking, the loader, the device check): what
+#           tools/gpu/builds_run.sh starts with
 #   lift    the scene packed with LIFT_SCENE fused by FlashSplat, segment consensus and
 #           --relabel (train views' noisy labels), each evaluated on the held-out views:
 #           lift.tar (classes, eval JSON, seconds) for tools/gpu/lift_check.py compare

@@ -11,6 +11,8 @@
 #        GSPLAT_VERSION  default 1.5.3
 #        BEFORE_BIN      another build's semsplat binary, for device_run.sh's BEFORE (a change
 #                        timed against the build before it in the same run)
+#        BUILDS          "NAME=PATH ..." further semsplat binaries for tools/gpu/builds_run.sh
+#                        (several builds timed in interleaved rounds; NAME: letters, digits, _)
 #        LIFT_SCENE      a `synth` folder (scene.ply, cameras.json, labels, labels_noisy) for
 #                        device_run.sh's `lift` stage: fused there and here by
 #                        tools/gpu/lift_run.sh, compared by tools/gpu/lift_check.py compare
@@ -80,6 +82,14 @@ if [ -n "${BEFORE_BIN:-}" ]; then
   say "packing the build before: $BEFORE_BIN"
   strip -o "$out/before" "$BEFORE_BIN" && xz -9 -T0 "$out/before" || die "cannot pack $BEFORE_BIN"
 fi
+
+for build in ${BUILDS:-}; do
+  name=${build%%=*} path=${build#*=}
+  [[ $name =~ ^[A-Za-z0-9_]+$ && $name != "$build" ]] || die "BUILDS entries are NAME=PATH, got $build"
+  say "packing build $name: $path"
+  mkdir -p "$out/builds"
+  strip -o "$out/builds/$name" "$path" && xz -9 -T0 "$out/builds/$name" || die "cannot pack $path"
+done
 
 if [ -n "${LIFT_SCENE:-}" ]; then
   say "packing the lift scene $LIFT_SCENE"
