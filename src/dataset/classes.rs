@@ -9,7 +9,7 @@ use anyhow::{bail, Result};
 
 use crate::scene::classes::{ClassInfo, ClassTable, IGNORE_U16};
 use crate::scene::labels::{LabelDir, LabelMap};
-use crate::util::parallel::parallel_map;
+use crate::util::parallel::parallel_map_on;
 
 /// A pixel without a label, as a compact class index (fusion's label maps and training's
 /// label buffers; the kernels read the same value from shared_constants.txt). It differs
@@ -134,6 +134,13 @@ pub fn user_classes(
         .collect()
 }
 
+/// What reading one label map takes at most a pixel: its decoded samples (16-bit RGBA: 8
+/// bytes) and its ids (2).
+const READ_BYTES_PER_PIXEL: u64 = 10;
+
+/// What the maps that [`classes_in_labels`] reads at once may take together.
+const CLASS_PASS_BYTES: u64 = 1 << 30;
+
 /// The compact classes present in `dir`'s label maps, their table (names and colors from
 /// `given`, defaults otherwise) and the number of ignored pixels. Reads every map once.
 pub fn classes_in_labels(
@@ -141,10 +148,17 @@ pub fn classes_in_labels(
     given: Option<&ClassTable>,
 ) -> Result<(CompactClasses, ClassTable, u64)> {
     // Every map read once, on every core (hundreds of 1080p maps are seconds on one), each
-    // thread's map dropped once counted. After a map fails, later ones are skipped and the
-    // first failure in the folder's order is reported, as a loop's would be.
+    // thread's map dropped once counted, and no more maps at once than fit in
+    // CLASS_PASS_BYTES. After a map fails, later ones are skipped and the first failure in
+    // the folder's order is reported, as a loop's would be.
+    let largest = (0..dir.len())
+        .filter_map(|i| dir.size(i))
+        .map(|(w, h)| u64::from(w) * u64::from(h) * READ_BYTES_PER_PIXEL)
+        .max()
+        .unwrap_or(1);
+    let at_once = (CLASS_PASS_BYTES / largest.max(1)).max(1) as usize;
     let failed_at = AtomicUsize::new(usize::MAX);
-    let per_map = parallel_map(dir.len(), |i| {
+    let per_map = parallel_map_on(at_once, dir.len(), |i| {
         if i > failed_at.load(Ordering::Relaxed) {
             return None;
         }

@@ -12,7 +12,7 @@ pub use atomic_write::{
     check_output_file, check_output_folder, stage_atomic, write_atomic, write_bytes_atomic,
     StagedFile,
 };
-pub use parallel::{parallel_map, prefetch_ordered, split_parts, take_part};
+pub use parallel::{parallel_map, parallel_map_on, prefetch_ordered, split_parts, take_part};
 pub use rng::Rng;
 
 /// `values`' items of `stride` values at `indices`, in that order (a subset of a scene's

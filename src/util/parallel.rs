@@ -6,10 +6,21 @@ use std::sync::{Mutex, MutexGuard};
 
 /// `f(0), ..., f(count - 1)`, computed on up to all cores, in index order.
 pub fn parallel_map<T: Send>(count: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
+    parallel_map_on(usize::MAX, count, f)
+}
+
+/// [`parallel_map`] on at most `threads` threads: items that each hold much memory while
+/// they are computed (a large label map decoded) bound how many run at once.
+pub fn parallel_map_on<T: Send>(
+    threads: usize,
+    count: usize,
+    f: impl Fn(usize) -> T + Sync,
+) -> Vec<T> {
     let results: Mutex<Vec<Option<T>>> = Mutex::new((0..count).map(|_| None).collect());
     let next = AtomicUsize::new(0);
     let threads = std::thread::available_parallelism()
         .map_or(1, |n| n.get())
+        .min(threads)
         .min(count)
         .max(1);
     std::thread::scope(|scope| {
@@ -140,5 +151,29 @@ mod tests {
         });
         drop(parts);
         assert_eq!(data, [1, 1, 1, 3, 3, 3, 3, 4, 4, 0]);
+    }
+
+    /// At most `threads` items are computed at once, whatever the cores, and every result
+    /// comes back in index order.
+    #[test]
+    fn parallel_map_on_runs_at_most_its_threads_at_once() {
+        let (running, most) = (AtomicUsize::new(0), AtomicUsize::new(0));
+        let out = parallel_map_on(2, 24, |i| {
+            let now = running.fetch_add(1, Ordering::SeqCst) + 1;
+            most.fetch_max(now, Ordering::SeqCst);
+            std::thread::sleep(std::time::Duration::from_millis(2));
+            running.fetch_sub(1, Ordering::SeqCst);
+            i * 3
+        });
+        assert_eq!(out, (0..24).map(|i| i * 3).collect::<Vec<_>>());
+        assert!(most.load(Ordering::SeqCst) <= 2);
+        let most_one = AtomicUsize::new(0);
+        parallel_map_on(1, 8, |_| {
+            let now = running.fetch_add(1, Ordering::SeqCst) + 1;
+            most_one.fetch_max(now, Ordering::SeqCst);
+            std::thread::sleep(std::time::Duration::from_millis(2));
+            running.fetch_sub(1, Ordering::SeqCst);
+        });
+        assert_eq!(most_one.load(Ordering::SeqCst), 1);
     }
 }

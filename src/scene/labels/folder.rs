@@ -271,6 +271,11 @@ impl LabelDir {
         self.entries.get(i).map(|e| e.camera)
     }
 
+    /// The size (width, height) of the `i`-th map, from its header.
+    pub fn size(&self, i: usize) -> Option<(u32, u32)> {
+        self.entries.get(i).map(|e| e.size)
+    }
+
     /// The file of the `i`-th map.
     pub fn path(&self, i: usize) -> Option<&Path> {
         self.entries.get(i).map(|e| e.path.as_path())
