@@ -251,7 +251,7 @@ fn read_inner(path: &Path, format: &LabelFormat, table: Option<&ClassTable>) -> 
 /// The ids of a map of ids (gray or palette), row by row: no division a pixel, and a map of
 /// 8- or 16-bit ids alone (the common case) read straight from its bytes. A 1080p map of
 /// 8-bit ids read and made compact took 20.4 ms a pixel at a time (and through an ordered
-/// map of ids), 1.7-2.1 ms so (`cargo bench --bench label_maps`).
+/// map of ids), 1.7-2.3 ms so (`cargo bench --bench label_maps`).
 fn labels_by_id<'a>(
     rows: impl Iterator<Item = &'a [u8]>,
     h: &PngHeader,
@@ -286,15 +286,20 @@ fn labels_by_colour<'a>(
     let width = h.width as usize;
     let mut labels = Vec::with_capacity(width * h.height as usize);
     let mut last: Option<([u8; 3], Option<u16>)> = None;
+    // 8-bit RGB, the common form (no alpha): its bytes are the colours.
+    let rgb8 = h.color_type == 2 && h.bit_depth == 8;
     for (y, row) in rows.enumerate() {
         for x in 0..width {
-            let color = match raw_in_row(row, x, h) {
-                RawPixel::Transparent => {
-                    labels.push(LabelMap::IGNORE);
-                    continue;
-                }
-                RawPixel::Id(v) => [v as u8; 3],
-                RawPixel::Color(c) => c,
+            let color = match rgb8 {
+                true => [row[3 * x], row[3 * x + 1], row[3 * x + 2]],
+                false => match raw_in_row(row, x, h) {
+                    RawPixel::Transparent => {
+                        labels.push(LabelMap::IGNORE);
+                        continue;
+                    }
+                    RawPixel::Id(v) => [v as u8; 3],
+                    RawPixel::Color(c) => c,
+                },
             };
             let id = match last {
                 Some((c, id)) if c == color => id,
