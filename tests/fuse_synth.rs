@@ -9,7 +9,7 @@ mod common;
 
 use common::{check_validation, gpu};
 use semsplat::dataset::CompactClasses;
-use semsplat::fuse::{accumulate, assign_semantic, ClassScores, FuseConfig, Method, NO_LABEL};
+use semsplat::fuse::{accumulate, assign_semantic, ClassScores, FuseConfig, Method};
 use semsplat::gpu::Gpu;
 use semsplat::render::GpuScene;
 use semsplat::synth::{generate, SynthConfig, SynthScene};
@@ -25,13 +25,7 @@ fn office() -> SynthScene {
 
 fn compact_maps(maps: &[&[u16]], classes: &CompactClasses) -> Vec<Option<Vec<u32>>> {
     maps.iter()
-        .map(|m| {
-            Some(
-                m.iter()
-                    .map(|&l| classes.compact_of(l as u32).map_or(NO_LABEL, u32::from))
-                    .collect(),
-            )
-        })
+        .map(|m| Some(classes.compact_labels(m)))
         .collect()
 }
 

@@ -8,7 +8,7 @@ use semsplat::dataset::CompactClasses;
 use semsplat::eval::label_render::LabelRenderer;
 use semsplat::eval::metrics::Confusion;
 use semsplat::experiment::{synth_train_views, TrainLabels};
-use semsplat::fuse::{accumulate, assign_semantic, FuseConfig, Method, NO_LABEL};
+use semsplat::fuse::{accumulate, assign_semantic, FuseConfig, Method};
 use semsplat::render::{GpuScene, Rasterizer, RenderOptions};
 use semsplat::scene::labels::LabelMap;
 use semsplat::scene::{Gaussians, Split};
@@ -151,14 +151,7 @@ fn semantics_only_is_comparable_to_flashsplat() {
         .cameras
         .iter()
         .zip(&s.views)
-        .map(|(cam, v)| {
-            (cam.split == Split::Train).then(|| {
-                v.labels
-                    .iter()
-                    .map(|&l| compact.compact_of(l as u32).map_or(NO_LABEL, u32::from))
-                    .collect()
-            })
-        })
+        .map(|(cam, v)| (cam.split == Split::Train).then(|| compact.compact_labels(&v.labels)))
         .collect();
     let scene = GpuScene::upload(gpu, &s.gaussians).unwrap();
     let cfg = FuseConfig {

@@ -32,16 +32,23 @@ for f in "$gpu"/builds/*.xz; do
 done
 log=$OUT/builds.log
 semsplat=${exe[this]}
-$semsplat synth --preset office --spacing "${SPACING:-0.0053}" --views 1 --test-views 0 --width "${W:-1920}" \
-  --height "${H:-1080}" --out /tmp/room >>"$log" 2>&1 || echo "synth room failed" >>"$OUT/summary.txt"
-$semsplat synth --preset office --spacing "${ROOM_FUSE_SPACING:-0.0115}" --views "${VIEWS:-200}" --test-views 0 --width 96 \
-  --height 54 --no-previews --out /tmp/room_fuse >>"$log" 2>&1 ||
-  echo "synth room_fuse failed" >>"$OUT/summary.txt"
+# The rooms only where a case CASES selects reads them (each takes seconds to minutes).
+wanted() { [[ $1 =~ ${CASES:-.} ]]; }
+if wanted "render room C=0" || wanted "render room C=16" || wanted "render room C=64"; then
+  $semsplat synth --preset office --spacing "${SPACING:-0.0053}" --views 1 --test-views 0 \
+    --width "${W:-1920}" --height "${H:-1080}" --out /tmp/room >>"$log" 2>&1 ||
+    echo "synth room failed" >>"$OUT/summary.txt"
+fi
+if wanted "fuse room x ${VIEWS:-200}"; then
+  $semsplat synth --preset office --spacing "${ROOM_FUSE_SPACING:-0.0115}" --views "${VIEWS:-200}" \
+    --test-views 0 --width 96 --height 54 --no-previews --out /tmp/room_fuse >>"$log" 2>&1 ||
+    echo "synth room_fuse failed" >>"$OUT/summary.txt"
+fi
 
 # One case with one build: its JSON line, marked, appended to builds.jsonl.
 one() {
   local build=$1 round=$2 case=$3; shift 3
-  [[ $case =~ ${CASES:-.} ]] || return 0
+  wanted "$case" || return 0
   echo "=== $case ($build, round $round): semsplat $*" >>"$log"
   if "${exe[$build]}" "$@" --json >/tmp/case.json 2>>"$log"; then
     python3 -c 'import json,sys; d=json.load(open("/tmp/case.json"))
