@@ -279,7 +279,7 @@ fn segment_votes(
         (b * BLOCK..segments.min((b + 1) * BLOCK))
             .map(|s| {
                 let rows = || members.group(s).iter().map(|&g| obs.row(g as usize));
-                if rows().map(|row| row.len()).sum::<usize>() >= COUNT_BY_VIEW_FROM {
+                if rows().map(|row| row.len()).sum::<usize>() >= VOTES_BY_VIEW_FROM {
                     return votes_counted_by_view(obs, members.group(s), classes);
                 }
                 sorted.clear();
@@ -304,7 +304,7 @@ fn segment_votes(
 /// classes ([`votes_counted_by_view`]) rather than from its keys sorted ([`votes_of`]): a
 /// wall's millions of observations took most of the votes' time sorted, and a list of keys
 /// as long on each thread.
-const COUNT_BY_VIEW_FROM: usize = 4096;
+const VOTES_BY_VIEW_FROM: usize = 4096;
 
 /// [`votes_of`] of the observations of `members`, counted per (view, class) first: the same
 /// sums, added in the same order (views ascending, within a view classes ascending, a
