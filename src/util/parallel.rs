@@ -157,23 +157,22 @@ mod tests {
     /// comes back in index order.
     #[test]
     fn parallel_map_on_runs_at_most_its_threads_at_once() {
-        let (running, most) = (AtomicUsize::new(0), AtomicUsize::new(0));
-        let out = parallel_map_on(2, 24, |i| {
-            let now = running.fetch_add(1, Ordering::SeqCst) + 1;
-            most.fetch_max(now, Ordering::SeqCst);
-            std::thread::sleep(std::time::Duration::from_millis(2));
-            running.fetch_sub(1, Ordering::SeqCst);
-            i * 3
-        });
+        // The results of `parallel_map_on(threads, count, i -> 3i)` and the most items that
+        // ran at once.
+        let run = |threads: usize, count: usize| {
+            let (running, most) = (AtomicUsize::new(0), AtomicUsize::new(0));
+            let out = parallel_map_on(threads, count, |i| {
+                let now = running.fetch_add(1, Ordering::SeqCst) + 1;
+                most.fetch_max(now, Ordering::SeqCst);
+                std::thread::sleep(std::time::Duration::from_millis(2));
+                running.fetch_sub(1, Ordering::SeqCst);
+                i * 3
+            });
+            (out, most.load(Ordering::SeqCst))
+        };
+        let (out, most) = run(2, 24);
         assert_eq!(out, (0..24).map(|i| i * 3).collect::<Vec<_>>());
-        assert!(most.load(Ordering::SeqCst) <= 2);
-        let most_one = AtomicUsize::new(0);
-        parallel_map_on(1, 8, |_| {
-            let now = running.fetch_add(1, Ordering::SeqCst) + 1;
-            most_one.fetch_max(now, Ordering::SeqCst);
-            std::thread::sleep(std::time::Duration::from_millis(2));
-            running.fetch_sub(1, Ordering::SeqCst);
-        });
-        assert_eq!(most_one.load(Ordering::SeqCst), 1);
+        assert!(most <= 2);
+        assert_eq!(run(1, 8).1, 1);
     }
 }
