@@ -162,6 +162,7 @@ fn bench_fuse_json_times_every_method_against_the_forward_render() {
     assert_eq!(v["views"], 3);
     assert_eq!(v["n"], 3000);
     assert_eq!(v["goal_ratio"], 1.3);
+    assert!(v["host_threads"].as_u64().is_some_and(|t| t >= 1), "{v}");
     let positive = |x: &serde_json::Value, key: &str| {
         let t = x[key]
             .as_f64()
@@ -216,7 +217,25 @@ fn bench_fuse_json_times_every_method_against_the_forward_render() {
             };
             assert_eq!(count("pieces") - count("joins"), count("segments"), "{m}");
             assert!(count("segments") > 0 && count("pieces") <= 3000, "{m}");
-            positive(m, "decide_s");
+            let pieces = ["outright_s", "adjacency_s", "piece_regions_s"].map(|k| positive(c, k));
+            assert!(pieces.iter().sum::<f64>() <= positive(c, "pieces_s"), "{m}");
+            // Every join was tested, every test popped from the queue.
+            let queue = ["joins", "tested", "popped"].map(count);
+            assert!(queue[0] <= queue[1] && queue[1] <= queue[2], "{m}");
+            // The decision's steps lie within decide_s.
+            let d = &m["decision"];
+            let steps = [
+                "votes_s",
+                "segments_s",
+                "kept_s",
+                "region_votes_s",
+                "gaussians_s",
+                "fill_s",
+                "smooth_s",
+                "posteriors_s",
+            ];
+            let steps = steps.map(|k| positive(d, k));
+            assert!(steps.iter().sum::<f64>() <= positive(m, "decide_s"), "{m}");
         }
     }
 }

@@ -12,7 +12,9 @@ use semsplat::fuse::consensus::{observe, Kept, ViewsObserved};
 use semsplat::fuse::consensus_cluster::{
     cluster_segments, cluster_segments_sweeping_from, cluster_segments_timed,
 };
-use semsplat::fuse::consensus_decide::{binomial_at_most, decide, Consensus};
+use semsplat::fuse::consensus_decide::{
+    at_least_the_mean_plus_one, binomial_at_most, decide, Consensus,
+};
 use semsplat::fuse::consensus_order::SpatialOrder;
 use semsplat::fuse::consensus_report::{segment_report, SegmentReport};
 use semsplat::fuse::consensus_segments::{co_occurrence, label_regions, Observations};
@@ -1595,6 +1597,32 @@ fn binomial_tail_matches_the_direct_sum() {
     }
     assert_eq!(binomial_at_most(0, 5, 0.0), 1.0);
     assert_eq!(binomial_at_most(4, 5, 1.0), 0.0);
+}
+
+/// The contradiction test skips the tail's sum from one over the mean on: there the tail is
+/// at least a half (a binomial's median is its mean rounded), against the direct sum, on
+/// every count of up to 60 views and of 100, 150 and 200, at rates across (0, 1). Below the
+/// mean the tail does fall under a half: the bound is what holds it up.
+#[test]
+fn binomial_tail_is_at_least_a_half_from_one_over_the_mean() {
+    let mut under_a_half_below_the_mean = 0;
+    for n in (1..=60u64).chain([100, 150, 200]) {
+        for step in 1..100 {
+            let rate = step as f64 / 100.0;
+            for k in 0..=n {
+                let tail = binomial_at_most(k, n, rate);
+                if at_least_the_mean_plus_one(k, n, rate) {
+                    assert!(tail >= 0.5, "n {n} k {k} rate {rate}: {tail}");
+                } else if (k as f64) < n as f64 * rate && tail < 0.5 {
+                    under_a_half_below_the_mean += 1;
+                }
+            }
+        }
+    }
+    assert!(
+        under_a_half_below_the_mean > 1000,
+        "{under_a_half_below_the_mean}"
+    );
 }
 
 /// A Gaussian's own views overrule its segment only when they are unlikely for a member:

@@ -12,8 +12,8 @@ use super::export::{export_inputs, ExportLabels};
 use super::median;
 use crate::dataset::{Dataset, DatasetPaths};
 use crate::fuse::{
-    accumulate_assigned, nearest_neighbours, AssignOnGpu, ClusterProfile, FuseConfig, LabelSource,
-    Method, ObserveTimes, TieNeighbours, NO_LABEL, TIE_NEIGHBOURS,
+    accumulate_assigned, nearest_neighbours, AssignOnGpu, ClusterProfile, DecideProfile,
+    FuseConfig, LabelSource, Method, ObserveTimes, TieNeighbours, NO_LABEL, TIE_NEIGHBOURS,
 };
 use crate::gpu::timings::KernelTotal;
 use crate::gpu::Gpu;
@@ -100,6 +100,8 @@ pub struct MethodBench {
     /// Consensus methods: `segments_s` split, with what the clustering did
     /// (`FuseStats::clustering`).
     pub clustering: ClusterProfile,
+    /// Consensus methods: `decide_s` split (`FuseStats::decision`).
+    pub decision: DecideProfile,
     /// Passes over the views (the evidence matrix split into class-row batches).
     pub passes: usize,
     pub rows_per_pass: usize,
@@ -129,6 +131,8 @@ pub struct FuseBench {
     pub methods: Vec<MethodBench>,
     /// Peak resident memory of the whole benchmark process (scene generation included).
     pub peak_host_bytes: Option<u64>,
+    /// Threads the host's parallel passes run on (the cores this process may use).
+    pub host_threads: usize,
     /// The host's search for every Gaussian's nearest neighbours (the assignment's
     /// tie-break), once per scene.
     pub neighbours_s: f64,
@@ -306,6 +310,7 @@ pub fn bench_fuse(
         forward,
         methods: results,
         peak_host_bytes: crate::util::memory::peak_host_bytes(),
+        host_threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
         neighbours_s,
     })
 }
@@ -490,6 +495,7 @@ impl Setup<'_> {
                     decide_s: stats.decide_s,
                     observe: stats.observe,
                     clustering: stats.clustering,
+                    decision: stats.decision,
                     kernels: stats.kernels,
                     peak_device_bytes: stats.peak_device_bytes,
                     passes: stats.passes,
@@ -540,6 +546,7 @@ fn method_bench(
         decide_s: m.decide_s,
         observe: m.observe,
         clustering: m.clustering,
+        decision: m.decision,
         views_per_s: (views * m.passes) as f64 / m.wall_s,
         passes: m.passes,
         rows_per_pass: m.rows_per_pass,
@@ -567,6 +574,7 @@ struct RunTotal {
     decide_s: f64,
     observe: ObserveTimes,
     clustering: ClusterProfile,
+    decision: DecideProfile,
     kernels: Vec<KernelTotal>,
     peak_device_bytes: u64,
     passes: usize,

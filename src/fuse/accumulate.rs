@@ -14,6 +14,7 @@ use serde::Serialize;
 use super::assign::{assign_semantic_near, Assignment};
 use super::assign_gpu::GpuAssigner;
 use super::consensus_cluster::ClusterProfile;
+use super::consensus_decide::DecideProfile;
 use super::method::Method;
 use super::neighbours::nearest_neighbours;
 use super::partial::{fixed_to_f64, EvidenceKind, RawEvidence};
@@ -142,6 +143,8 @@ pub struct FuseStats {
     pub observe: ObserveTimes,
     /// Consensus methods: `segments_s` split, with what the clustering did.
     pub clustering: ClusterProfile,
+    /// Consensus methods: `decide_s` split.
+    pub decision: DecideProfile,
     pub views_per_s: f64,
     pub peak_device_bytes: u64,
     /// Device memory of the scene as this method uploaded it (only what it reads).

@@ -13,7 +13,7 @@ use anyhow::{ensure, Result};
 use super::accumulate::{FuseConfig, FuseStats, LabelSource};
 use super::assign::Assignment;
 use super::consensus_cluster::cluster_segments_timed;
-use super::consensus_decide::{decide, Consensus, ConsensusParams};
+use super::consensus_decide::{decide_timed, Consensus, ConsensusParams};
 use super::consensus_footprints::ViewFootprints;
 pub use super::consensus_observe::{observe, Kept, ViewsObserved};
 use super::consensus_order::SpatialOrder;
@@ -118,7 +118,8 @@ pub fn consensus_run(
     (stats.clustering.order_s, stats.clustering.neighbours_s) = (order_s, neighbours_s);
     stats.segments_s = views_start.elapsed().as_secs_f64() - stats.view_s;
     let decide_start = std::time::Instant::now();
-    let consensus = decide(&observations, &knn, segment, input.classes, params);
+    let consensus;
+    (consensus, stats.decision) = decide_timed(&observations, &knn, segment, input.classes, params);
     let consensus = order.consensus_to_scene(consensus);
     stats.decide_s = decide_start.elapsed().as_secs_f64();
     stats.wall_s = start.elapsed().as_secs_f64();

@@ -28,7 +28,6 @@
 
 use std::cmp::Reverse;
 use std::collections::HashMap;
-use std::time::Instant;
 
 use serde::Serialize;
 
@@ -37,8 +36,8 @@ use super::consensus_decide::ConsensusParams;
 use super::consensus_segments::{co_occurrence, find, union, Groups, Observations};
 use super::consensus_surface::SurfaceNormals;
 use crate::contract::NO_NEIGHBOUR;
-use crate::util::parallel_map;
 use crate::util::quad_heap::QuadHeap;
+use crate::util::{parallel_map, split_parts, take_part, Laps};
 
 /// What the views said of the neighbour pairs between two segments, summed over the pairs
 /// ([`co_occurrence`] per pair).
@@ -456,8 +455,12 @@ pub struct ClusterProfile {
     pub neighbours_s: f64,
     /// What the views said of every neighbour pair ([`co_occurrence`], on every core).
     pub pairs_s: f64,
-    /// The outright joins ([`premerge`]), the pieces' region counts and adjacency.
+    /// The outright joins ([`premerge`]), the pieces' region counts and adjacency...
     pub pieces_s: f64,
+    /// ...split: the outright joins, the adjacency, the region counts.
+    pub outright_s: f64,
+    pub adjacency_s: f64,
+    pub piece_regions_s: f64,
     /// The ordered joins: the candidates sorted, then taken one at a time.
     pub joins_s: f64,
     /// Neighbour pairs, the segments the ordered joins start from (pieces and single
@@ -468,6 +471,12 @@ pub struct ClusterProfile {
     pub candidates: usize,
     pub joins: usize,
     pub segments: usize,
+    /// The ordered joins' queue: candidates taken from it (most of them stale: a segment
+    /// joined another since, or the evidence changed), those tested ([`may_join`]), and
+    /// those a join queued again.
+    pub popped: usize,
+    pub tested: usize,
+    pub requeued: usize,
 }
 
 /// A heap of requeued candidates smaller than this is not swept ([`Queue::sweep_if_grown`]):
@@ -497,21 +506,17 @@ fn cluster(
 ) -> (Vec<u32>, ClusterProfile) {
     let n = obs.n;
     let mut done = ClusterProfile::default();
-    let mut clock = Instant::now();
-    let mut lap = || {
-        std::mem::replace(&mut clock, Instant::now())
-            .elapsed()
-            .as_secs_f64()
-    };
+    let mut laps = Laps::start();
     let pairs = neighbour_pairs(obs, knn, surfaces, p.neighbours);
-    (done.pairs, done.pairs_s) = (pairs.len(), lap());
-    let mut graph = SegmentGraph::new(obs, pairs, p);
-    done.pieces_s = lap();
+    (done.pairs, done.pairs_s) = (pairs.len(), laps.lap());
+    let mut graph = SegmentGraph::new(obs, pairs, p, &mut done);
+    done.pieces_s = laps.lap();
     done.pieces = (0..n).filter(|&g| graph.parent[g] as usize == g).count();
     let mut queue = Queue::new(&graph, p, sweep_from);
     done.candidates = queue.sorted.len();
     let mut changed = Vec::new();
     while let Some(queued) = queue.pop() {
+        done.popped += 1;
         let (_, _, _, Reverse(a), Reverse(b)) = queued;
         if graph.parent[a as usize] != a || graph.parent[b as usize] != b {
             continue; // joined another segment (most stale candidates: no adjacency lookup needed)
@@ -520,12 +525,14 @@ fn cluster(
         let Some(evidence) = current.filter(|&e| graph.candidate(a, b, e, p) == queued) else {
             continue; // a segment joined another, or the evidence grew: queued again since
         };
+        done.tested += 1;
         if may_join(&evidence, graph.dominant(a), graph.dominant(b), p) {
             done.joins += 1;
             graph.join(a, b, &mut changed);
             for &(c, e) in changed.iter().filter(|(_, e)| e.allows_join(p)) {
                 let (lo, hi) = (a.min(c), a.max(c));
                 queue.heap.push(graph.candidate(lo, hi, e, p));
+                done.requeued += 1;
             }
             queue.sweep_if_grown(&graph.parent);
         }
@@ -534,7 +541,7 @@ fn cluster(
     for g in 0..n {
         roots[g] = roots[graph.parent[g] as usize]; // parents have lower indices
     }
-    done.joins_s = lap();
+    done.joins_s = laps.lap();
     done.segments = done.pieces - done.joins;
     (renumber(&roots), done)
 }
@@ -678,9 +685,11 @@ fn premerge(
 }
 
 /// The region counts of every piece of more than one Gaussian ([`premerge`]), on every
-/// core; a single Gaussian's stay empty (read in place).
+/// core; a single Gaussian's stay empty (read in place). The pieces go to the threads in
+/// runs of about [`PIECE_RUN`] Gaussians: a segmenter's scene holds a few hundred pieces,
+/// a handful of them walls of a hundred thousand Gaussians and more, and runs of a fixed
+/// number of pieces put them all on one thread.
 fn piece_regions(obs: &Observations, piece: &[u32]) -> Vec<RegionCounts> {
-    const BLOCK: usize = 1024;
     let n = obs.n;
     let mut regions = vec![RegionCounts::default(); n];
     // Pieces are named by their lowest member.
@@ -688,9 +697,9 @@ fn piece_regions(obs: &Observations, piece: &[u32]) -> Vec<RegionCounts> {
     let pieces: Vec<u32> = (0..n as u32)
         .filter(|&s| members.group(s as usize).len() > 1)
         .collect();
-    let built = parallel_map(pieces.len().div_ceil(BLOCK), |b| {
-        pieces[b * BLOCK..pieces.len().min((b + 1) * BLOCK)]
-            .iter()
+    let runs = runs_of_weight(&pieces, |&s| members.group(s as usize).len(), PIECE_RUN);
+    let built = parallel_map(runs.len(), |r| {
+        (runs[r].iter())
             .map(|&s| RegionCounts::of_gaussians(obs, members.group(s as usize)))
             .collect::<Vec<_>>()
     });
@@ -698,6 +707,69 @@ fn piece_regions(obs: &Observations, piece: &[u32]) -> Vec<RegionCounts> {
         regions[s as usize] = counts;
     }
     regions
+}
+
+/// Gaussians per run of pieces whose region counts one thread builds ([`piece_regions`]).
+const PIECE_RUN: usize = 16_384;
+
+/// `items` cut into consecutive runs of about `target` total weight: each run closes at
+/// the item that brings it to `target` or past it (an item heavier than `target`: a run
+/// of its own, or the end of one).
+fn runs_of_weight<T>(items: &[T], weight: impl Fn(&T) -> usize, target: usize) -> Vec<&[T]> {
+    let (mut runs, mut start, mut held) = (Vec::new(), 0, 0);
+    for (i, item) in items.iter().enumerate() {
+        held += weight(item);
+        if held >= target {
+            runs.push(&items[start..=i]);
+            (start, held) = (i + 1, 0);
+        }
+    }
+    if start < items.len() {
+        runs.push(&items[start..]);
+    }
+    runs
+}
+
+/// Per segment after the outright joins (`piece`: each Gaussian's piece, by its lowest
+/// member), the adjacent segments with the evidence of the pairs between them.
+fn piece_adjacency(pairs: &[(u32, u32, PairEvidence)], piece: &[u32]) -> Vec<Adjacent> {
+    let between = |&(g, h, _): &(u32, u32, PairEvidence)| piece[g as usize] != piece[h as usize];
+    let mut degree = vec![0usize; piece.len()];
+    for &(g, h, _) in pairs.iter().filter(|e| between(e)) {
+        degree[piece[g as usize] as usize] += 1;
+        degree[piece[h as usize] as usize] += 1;
+    }
+    // Sized once rather than grown pair by pair (a million lists and maps), here, on one
+    // thread: under the one malloc arena (src/util/memory.rs) the threads below would wait
+    // on each other's allocations. A piece's degree counts its pairs, so it may get room
+    // for more segments than it meets.
+    let mut edges: Vec<Adjacent> = degree.iter().map(|&d| Adjacent::with_capacity(d)).collect();
+    // Filled on every core: each thread a range of segments of about equal degree, for
+    // which it reads every pair (a pass over them is a small part of the additions).
+    let threads = std::thread::available_parallelism().map_or(1, |t| t.get());
+    let ranges = runs_of_weight(&degree, |&d| d, degree.iter().sum::<usize>() / threads + 1);
+    let firsts: Vec<usize> = (ranges.iter())
+        .scan(0, |first, r| {
+            Some(std::mem::replace(first, *first + r.len()))
+        })
+        .collect();
+    let parts = split_parts(&mut edges, ranges.iter().map(|r| r.len()));
+    parallel_map(parts.len(), |r| {
+        let (mut part, first) = (take_part(&parts[r]), firsts[r]);
+        let mut add = |a: u32, b: u32, e: PairEvidence| {
+            let at = (a as usize).checked_sub(first);
+            if let Some(adjacent) = at.and_then(|i| part.get_mut(i)) {
+                adjacent.add(b, e);
+            }
+        };
+        for &(g, h, e) in pairs.iter().filter(|e| between(e)) {
+            let (a, b) = (piece[g as usize], piece[h as usize]);
+            add(a, b, e);
+            add(b, a, e);
+        }
+    });
+    drop(parts);
+    edges
 }
 
 /// The segments while they join: per segment (by its lowest Gaussian) the adjacent segments
@@ -719,32 +791,24 @@ impl<'a> SegmentGraph<'a> {
         obs: &'a Observations,
         pairs: Vec<(u32, u32, PairEvidence)>,
         p: &ConsensusParams,
+        done: &mut ClusterProfile,
     ) -> SegmentGraph<'a> {
         let n = obs.n;
+        let mut laps = Laps::start();
         let piece = premerge(obs, &pairs, p);
-        let between =
-            |&(g, h, _): &(u32, u32, PairEvidence)| piece[g as usize] != piece[h as usize];
-        let mut degree = vec![0usize; n];
-        for &(g, h, _) in pairs.iter().filter(|e| between(e)) {
-            degree[piece[g as usize] as usize] += 1;
-            degree[piece[h as usize] as usize] += 1;
-        }
-        // Sized once rather than grown pair by pair (a million lists and maps); a piece's
-        // degree counts its pairs, so it may get room for more segments than it meets.
-        let mut edges: Vec<Adjacent> = degree.iter().map(|&d| Adjacent::with_capacity(d)).collect();
-        for (g, h, e) in pairs.into_iter().filter(between) {
-            let (a, b) = (piece[g as usize], piece[h as usize]);
-            edges[a as usize].add(b, e);
-            edges[b as usize].add(a, e);
-        }
+        done.outright_s = laps.lap();
+        let edges = piece_adjacency(&pairs, &piece);
         let mut size = vec![0u32; n];
         for &root in &piece {
             size[root as usize] += 1;
         }
+        done.adjacency_s = laps.lap();
+        let regions = piece_regions(obs, &piece);
+        done.piece_regions_s = laps.lap();
         SegmentGraph {
             obs,
             edges,
-            regions: piece_regions(obs, &piece),
+            regions,
             parent: piece,
             size,
         }
@@ -810,7 +874,73 @@ pub(crate) fn renumber(keys: &[u32]) -> Vec<u32> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::fuse::consensus_adjacent::LIST_MAX;
     use crate::util::Rng;
+
+    /// The adjacency built on every core holds for each segment what a plain map, summed
+    /// pair by pair, holds: pieces of random sizes (a few past the lists' length, so maps
+    /// too), random pairs, some within a piece.
+    #[test]
+    fn piece_adjacency_sums_every_pair_between_pieces() {
+        let mut rng = Rng::new(9);
+        let n = 4000;
+        let mut piece = vec![0u32; n];
+        let mut first = 0;
+        for (g, p) in piece.iter_mut().enumerate() {
+            if g < 100 || rng.below(50) == 0 {
+                first = g; // 100 single Gaussians, then pieces of about 50
+            }
+            *p = first as u32;
+        }
+        let mut draw = |most: u64| rng.below(most) as u32;
+        let pairs: Vec<(u32, u32, PairEvidence)> = (0..30_000)
+            .map(|_| {
+                let (g, h) = (draw(n as u64), draw(n as u64));
+                let e = PairEvidence {
+                    together: draw(9),
+                    apart: draw(3),
+                    on_edge: draw(3),
+                    pairs: 1,
+                    pairs_along: draw(2),
+                };
+                (g.min(h), g.max(h), e)
+            })
+            .collect();
+        let built = piece_adjacency(&pairs, &piece);
+        let mut plain: Vec<HashMap<u32, PairEvidence>> = vec![HashMap::new(); n];
+        for &(g, h, e) in &pairs {
+            let (a, b) = (piece[g as usize], piece[h as usize]);
+            if a != b {
+                plain[a as usize].entry(b).or_default().add(e);
+                plain[b as usize].entry(a).or_default().add(e);
+            }
+        }
+        assert!(plain.iter().any(|m| m.len() > LIST_MAX), "a map among them");
+        for (s, expected) in plain.iter().enumerate() {
+            let got: HashMap<u32, PairEvidence> = built[s].iter().collect();
+            assert_eq!(&got, expected, "segment {s}");
+        }
+    }
+
+    /// Runs keep the items in order, each but the last reaching the target, none past it
+    /// by more than its last item.
+    #[test]
+    fn runs_of_weight_cover_the_items_in_order() {
+        let mut rng = Rng::new(3);
+        let items: Vec<usize> = (0..2000).map(|_| 1 + rng.below(3000) as usize).collect();
+        for target in [1, 500, 4096, 1 << 30] {
+            let runs = runs_of_weight(&items, |&w| w, target);
+            assert_eq!(runs.concat(), items, "target {target}");
+            for (r, run) in runs.iter().enumerate() {
+                let held: usize = run.iter().sum();
+                let before_last = held - run.last().unwrap();
+                assert!(before_last < target, "target {target}, run {r}");
+                let last = r + 1 == runs.len();
+                assert!(last || held >= target, "target {target}, run {r}");
+            }
+        }
+        assert!(runs_of_weight(&[] as &[usize], |&w| w, 10).is_empty());
+    }
 
     /// Both ways of counting a piece's observations agree, on pieces of one region per
     /// view and of many (each view's regions in no order).

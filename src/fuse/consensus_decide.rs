@@ -19,7 +19,7 @@ use super::consensus_relabel::RelabelRule;
 use super::consensus_segments::{Groups, Observations};
 use super::scores::SharedCounts;
 use crate::contract::NO_NEIGHBOUR;
-use crate::util::parallel_map;
+use crate::util::{parallel_map, Laps};
 
 /// The knobs of segment consensus (defaults: docs/robustness.md).
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -393,11 +393,45 @@ pub fn decide(
     classes: usize,
     p: &ConsensusParams,
 ) -> Consensus {
+    decide_timed(obs, knn, segment, classes, p).0
+}
+
+/// Where the decision's time went (host seconds), step by step: what `bench fuse --json`
+/// reports, so that a machine's profile says which step to take on next.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct DecideProfile {
+    /// Each segment's votes, from its members' observations (on every core).
+    pub votes_s: f64,
+    /// The segments' summaries, near ties, flags and the flagged ones' view classes.
+    pub segments_s: f64,
+    /// Per Gaussian, whether its segment's class stands (on every core).
+    pub kept_s: f64,
+    /// What the label regions say for the Gaussians their segment does not decide.
+    pub region_votes_s: f64,
+    /// Each Gaussian's class and evidence, in turn.
+    pub gaussians_s: f64,
+    /// The unobserved ones filled from their neighbours, the small segments smoothed, and
+    /// the posteriors (on every core).
+    pub fill_s: f64,
+    pub smooth_s: f64,
+    pub posteriors_s: f64,
+}
+
+/// [`decide`], and where its time went.
+pub fn decide_timed(
+    obs: &Observations,
+    knn: &[u32],
+    segment: Vec<u32>,
+    classes: usize,
+    p: &ConsensusParams,
+) -> (Consensus, DecideProfile) {
     assert_eq!(segment.len(), obs.n, "one segment per Gaussian");
+    let (mut took, mut laps) = (DecideProfile::default(), Laps::start());
     let count = segment.iter().map(|&s| s as usize + 1).max().unwrap_or(0);
     // Each segment's Gaussians: its size, its votes and, if flagged, its regions.
     let members = Groups::by_key(&segment, count);
     let (split, mass, views) = segment_votes(obs, &members, count, classes);
+    took.votes_s = laps.lap();
     let sizes: Vec<usize> = (0..count).map(|s| members.group(s).len()).collect();
     // Each split moves into its segment's summary (a scene of fragments holds as many
     // segments as Gaussians); the masses only break its ties.
@@ -407,19 +441,15 @@ pub fn decide(
     let confusions = decide_near_ties(&mut segments, classes, p);
     unflag_slivers(obs, &members, &mut segments, p);
     name_views_of_flagged(obs, &members, &mut segments);
-    let n = obs.n;
-    let mut class = vec![None; n];
-    let (mut from_segment, mut from_neighbour_segments) = (0, 0);
-    let mut evidence = SharedCounts::zeros(classes, n);
-    // A segment's split is stored when a member first takes it: one that decides none of
-    // its members (too small, or contradicted) is never stored.
-    let mut split_row: Vec<Option<u32>> = vec![None; count];
+    took.segments_s = laps.lap();
     let kept = segment_classes_kept(obs, &segment, &segments, classes, p);
+    took.kept_s = laps.lap();
     let regions = p.region_votes.map(|rule| {
         // Those their segment does not decide read their regions.
         let reads: Vec<bool> = kept.iter().map(Option::is_none).collect();
         RegionVotes::of(obs, (&segment, &segments), &reads, &rule, &confusions, p)
     });
+    took.region_votes_s = laps.lap();
     let alone = Alone {
         obs,
         knn,
@@ -429,40 +459,81 @@ pub fn decide(
         p,
         regions,
     };
-    for g in 0..n {
-        let s = segment[g] as usize;
-        match kept[g] {
+    let mut decided = each_gaussian(&alone, &kept, count);
+    took.gaussians_s = laps.lap();
+    let from_neighbours = fill_unobserved(
+        &mut decided.class,
+        &mut decided.evidence,
+        obs,
+        knn,
+        p.neighbours,
+    );
+    took.fill_s = laps.lap();
+    let smoothed = smooth_small_segments(&mut decided.class, &mut decided.evidence, &alone);
+    took.smooth_s = laps.lap();
+    let (confidence, entropy) = posteriors(&decided.evidence, &decided.class, p.prior);
+    took.posteriors_s = laps.lap();
+    let consensus = Consensus {
+        assignment: Assignment {
+            class: decided.class,
+            confidence,
+        },
+        entropy,
+        segment,
+        segments,
+        from_segment: decided.from_segment,
+        from_neighbour_segments: decided.from_neighbour_segments,
+        from_neighbours,
+        smoothed,
+        evidence: Arc::new(decided.evidence),
+        confusions,
+    };
+    (consensus, took)
+}
+
+/// Each Gaussian's class and evidence as [`each_gaussian`] decides them, and how many took
+/// which way.
+struct Decided {
+    class: Vec<Option<usize>>,
+    evidence: SharedCounts,
+    from_segment: usize,
+    from_neighbour_segments: usize,
+}
+
+/// Each Gaussian's class and evidence: its segment's where `kept` (the split stored once
+/// per segment, when a member first takes it: one that decides none of its members is
+/// never stored), else as [`Alone::decide`] decides it.
+fn each_gaussian(alone: &Alone, kept: &[Option<usize>], segments: usize) -> Decided {
+    let (obs, n) = (alone.obs, alone.obs.n);
+    let mut decided = Decided {
+        class: vec![None; n],
+        evidence: SharedCounts::zeros(alone.classes, n),
+        from_segment: 0,
+        from_neighbour_segments: 0,
+    };
+    let mut split_row: Vec<Option<u32>> = vec![None; segments];
+    for (g, &segment_class) in kept.iter().enumerate() {
+        let s = alone.segment[g] as usize;
+        match segment_class {
             Some(c) => {
-                class[g] = Some(c);
-                from_segment += 1;
-                let split = &segments[s].split;
+                decided.class[g] = Some(c);
+                decided.from_segment += 1;
+                let split = &alone.segments[s].split;
+                let evidence = &mut decided.evidence;
                 let row = *split_row[s].get_or_insert_with(|| evidence.add_row(split));
                 evidence.share(g, row);
             }
             None => {
                 let (c, counts, by_neighbours) = alone.decide(g);
-                class[g] = c;
-                evidence.set(g, &counts);
+                decided.class[g] = c;
+                decided.evidence.set(g, &counts);
                 // Unobserved ones are counted where their neighbours decide them below.
-                from_neighbour_segments += usize::from(by_neighbours && !obs.row(g).is_empty());
+                decided.from_neighbour_segments +=
+                    usize::from(by_neighbours && !obs.row(g).is_empty());
             }
         }
     }
-    let from_neighbours = fill_unobserved(&mut class, &mut evidence, obs, knn, p.neighbours);
-    let smoothed = smooth_small_segments(&mut class, &mut evidence, &alone);
-    let (confidence, entropy) = posteriors(&evidence, &class, p.prior);
-    Consensus {
-        assignment: Assignment { class, confidence },
-        entropy,
-        segment,
-        segments,
-        from_segment,
-        from_neighbour_segments,
-        from_neighbours,
-        smoothed,
-        evidence: Arc::new(evidence),
-        confusions,
-    }
+    decided
 }
 
 /// Per Gaussian, its segment's class where the segment decides its members and the
@@ -582,9 +653,24 @@ impl Alone<'_> {
 fn contradicts(own: &[f64], c: usize, split: &[f64], p: &ConsensusParams) -> bool {
     let views = own.iter().sum::<f64>().round() as u64;
     let total: f64 = split.iter().sum();
-    views >= p.min_own_views as u64
-        && total > 0.0
-        && binomial_at_most(own[c].round() as u64, views, split[c] / total) < p.contradiction_p
+    if views < p.min_own_views as u64 || total <= 0.0 {
+        return false;
+    }
+    let (gave_c, rate) = (own[c].round() as u64, split[c] / total);
+    // Most members give their segment's class at its rate or more: their tail is at least a
+    // half ([`at_least_the_mean_plus_one`]), never under a test's `contradiction_p`, so its
+    // sum (a logarithm and an exponential a term, over most of the scene) is skipped.
+    if p.contradiction_p <= 0.5 && at_least_the_mean_plus_one(gave_c, views, rate) {
+        return false;
+    }
+    binomial_at_most(gave_c, views, rate) < p.contradiction_p
+}
+
+/// Whether `k` is at least one over the mean of a Binomial(n, rate): then P(X <= k) is at
+/// least a half, since a binomial's median is its mean rounded down or up (Kaas and
+/// Buhrman, 1980), so at most `k`. The one covers the mean's rounding in f64.
+pub fn at_least_the_mean_plus_one(k: u64, n: u64, rate: f64) -> bool {
+    k as f64 >= n as f64 * rate + 1.0
 }
 
 /// P(X <= k) for X ~ Binomial(n, rate), summed in log space (terms far below f64's range

@@ -15,6 +15,23 @@ pub use atomic_write::{
 pub use parallel::{parallel_map, parallel_map_on, prefetch_ordered, split_parts, take_part};
 pub use rng::Rng;
 
+/// Host seconds since the last lap (or the start): the split of a step's wall time that
+/// a profile reports.
+pub struct Laps(std::time::Instant);
+
+impl Laps {
+    pub fn start() -> Laps {
+        Laps(std::time::Instant::now())
+    }
+
+    /// Seconds since the last call (or the start); the next lap starts now.
+    pub fn lap(&mut self) -> f64 {
+        std::mem::replace(&mut self.0, std::time::Instant::now())
+            .elapsed()
+            .as_secs_f64()
+    }
+}
+
 /// `values`' items of `stride` values at `indices`, in that order (a subset of a scene's
 /// per-Gaussian arrays, or all of them renumbered). No values (an attribute of no
 /// channels) gather to none.

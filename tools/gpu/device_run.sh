@@ -66,7 +66,11 @@ setup() {
     xz -dc "$gpu/before.xz" >/tmp/semsplat_before && chmod +x /tmp/semsplat_before ||
       { say "BEFORE set but no .gpu/before.xz: pack with BEFORE_BIN"; exit 2; }
   fi
-  { nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv; semsplat info; } \
+  # The host too: its cores and any CPU quota bound the host's parallel passes (`bench
+  # fuse` reports the threads they ran on as `host_threads`).
+  { nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv; semsplat info
+    echo "nproc $(nproc); cpu.max $(cat /sys/fs/cgroup/cpu.max 2>/dev/null || echo none)"
+    lscpu | grep -E 'Model name|^CPU\(s\)|Thread|MHz|L3' || true; } \
     >"$OUT/info.txt" 2>&1 || {
     # No device: what the loader saw, for the next try.
     { ls -l "$icd"; cat "$icd"; ldconfig -p | grep -i 'vulkan\|GLX\|GLdispatch';
@@ -215,7 +219,8 @@ run_ours() {
   # The same room with its own label maps (flicker 0.3): a segmenter's regions follow the
   # objects, where random blocks, drawn anew in every view, cut every surface somewhere (the
   # consensus's clustering's worst case). 190 views: synth holds at most 400M pixels.
-  if [[ "fuse office labels x 190" =~ ${CASES:-.} || "fuse cli office labels x 190" =~ ${CASES:-.} ]]; then
+  if [[ "fuse office labels x 190" =~ ${CASES:-.} || "fuse cli office labels x 190" =~ ${CASES:-.} ||
+    "fuse office labels x 190 heap" =~ ${CASES:-.} ]]; then
     timeout 300 semsplat synth --preset office --spacing "${ROOM_FUSE_SPACING:-0.0115}" \
       --views 190 --test-views 0 --width "${W:-1920}" --height "${H:-1080}" \
       --noise flicker=0.3 --no-previews --out /tmp/office_labels >>"$OUT/bench.log" 2>&1 ||
@@ -232,7 +237,8 @@ run_ours() {
   # The sweep's size (issue 16's time goal, at most about 1.5x FlashSplat): the noisy
   # living room of the lift check, 60 views at 320x240, the median of 3 runs, with the
   # consensus's split (clustering, decision) where the whole process's wall does not say.
-  if [[ "fuse living labels x 60" =~ ${CASES:-.} ]]; then
+  if [[ "fuse living labels x 60" =~ ${CASES:-.} || "fuse living labels x 60 heap" =~ ${CASES:-.} ||
+    "fuse living labels x 60 thp" =~ ${CASES:-.} ]]; then
     timeout 120 semsplat synth --preset living --seed 3 --noise flicker=0.3 --views 60 \
       --test-views 0 --width 320 --height 240 --no-previews --out /tmp/living_labels \
       >>"$OUT/bench.log" 2>&1 || say "synth living_labels failed"
@@ -240,6 +246,21 @@ run_ours() {
   CAP=120 b "fuse living labels x 60" bench fuse --scene /tmp/living_labels \
     --labels /tmp/living_labels/labels_noisy --views 60 --iters 3 \
     --methods flashsplat,segment-consensus,segment-consensus-relabel
+  # Segment consensus again with glibc's large blocks kept in its heap: by default a block
+  # over 32 MiB gets a mapping of its own, unmapped when freed (which interrupts every core
+  # the process runs on to flush its TLB) and faulted in again when the next is allocated.
+  # On the development VM's two cores no different; on sixteen, the decision's parallel
+  # passes were no faster than there (docs/robustness.md, "The host's parallel passes").
+  MALLOC_MMAP_THRESHOLD_=4294967296 MALLOC_TRIM_THRESHOLD_=17179869184 CAP=120 \
+    b "fuse living labels x 60 heap" bench fuse --scene /tmp/living_labels \
+    --labels /tmp/living_labels/labels_noisy --views 60 --iters 3 --methods segment-consensus
+  # And with its heap in transparent huge pages (a fault per 2 MiB, not per 4 KiB).
+  GLIBC_TUNABLES=glibc.malloc.hugetlb=1 CAP=120 \
+    b "fuse living labels x 60 thp" bench fuse --scene /tmp/living_labels \
+    --labels /tmp/living_labels/labels_noisy --views 60 --iters 3 --methods segment-consensus
+  MALLOC_MMAP_THRESHOLD_=4294967296 MALLOC_TRIM_THRESHOLD_=17179869184 CAP=120 \
+    b "fuse office labels x 190 heap" bench fuse --scene /tmp/office_labels \
+    --labels /tmp/office_labels/labels_noisy --views 190 --methods segment-consensus
   # Real size (#14): 6M Gaussians, as Mip-NeRF 360's garden.
   b "render random 6M C=16" bench render --n 6000000 --width "${W:-1920}" --height "${H:-1080}" \
     --channels 16 --iters 5
