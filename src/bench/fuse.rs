@@ -92,6 +92,10 @@ pub struct MethodBench {
     pub label_wait_s: f64,
     pub view_s: f64,
     pub evidence_s: f64,
+    /// The label maps' readers' busy time, summed over their threads
+    /// (`FuseStats::label_read_s`, `label_stage_s`).
+    pub label_read_s: f64,
+    pub label_stage_s: f64,
     /// Consensus methods: the host's neighbour search and clustering, and the decision.
     pub segments_s: f64,
     pub decide_s: f64,
@@ -489,6 +493,8 @@ impl Setup<'_> {
                     gpu_ms: stats.gpu_ms,
                     wall_s: stats.wall_s,
                     label_wait_s: stats.label_wait_s,
+                    label_read_s: stats.label_read_s,
+                    label_stage_s: stats.label_stage_s,
                     view_s: stats.view_s,
                     evidence_s: stats.evidence_s,
                     segments_s: stats.segments_s,
@@ -540,6 +546,8 @@ fn method_bench(
         wall_s: m.wall_s,
         gpu_ms: m.gpu_ms,
         label_wait_s: m.label_wait_s,
+        label_read_s: m.label_read_s,
+        label_stage_s: m.label_stage_s,
         view_s: m.view_s,
         evidence_s: m.evidence_s,
         segments_s: m.segments_s,
@@ -568,6 +576,8 @@ struct RunTotal {
     /// Host seconds waiting for label maps and running the views (methods only; the last
     /// run's).
     label_wait_s: f64,
+    label_read_s: f64,
+    label_stage_s: f64,
     view_s: f64,
     evidence_s: f64,
     segments_s: f64,

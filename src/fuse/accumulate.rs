@@ -28,7 +28,7 @@ use crate::gpu::{Buffer, BufferRange, Gpu, Recorder, Timings};
 use crate::render::rasterizer::{OcclusionDepths, SplitSizes, TileLists};
 use crate::render::{camera_rows_f32, GpuScene, Rasterizer, RenderOptions};
 use crate::scene::Camera;
-use crate::util::prefetch_ordered;
+use crate::util::{prefetch_ordered, BusyTime};
 
 /// Marks a pixel without a label (or with a class outside the table).
 pub use crate::dataset::NO_LABEL;
@@ -131,6 +131,11 @@ pub struct FuseStats {
     /// submitting and waiting for its GPU work).
     pub label_wait_s: f64,
     pub view_s: f64,
+    /// The worker threads' time reading (decoding and checking) the label maps, and, for
+    /// the tiled methods, copying them into their staging buffers, summed over the
+    /// threads: what `label_wait_s` waited for, where it is not the room ahead.
+    pub label_read_s: f64,
+    pub label_stage_s: f64,
     /// Setting up the evidence and, after each pass, assigning it on the GPU (or
     /// downloading and widening it for the host), streaming rows where asked.
     pub evidence_s: f64,
@@ -813,12 +818,13 @@ fn run_pass(
 ) -> Result<()> {
     let (cams, gpu) = (ctx.cams, ctx.gpu);
     let first_pass = ctx.pass.row_begin == 0;
+    let (read, staged) = (BusyTime::default(), BusyTime::default());
     let produce = |view: usize| -> Result<Option<u64>> {
-        let Some(map) = labels.labels(view, &cams[view])? else {
+        let Some(map) = read.time(|| labels.labels(view, &cams[view]))? else {
             return Ok(None);
         };
         check_map_size(&cams[view], &map)?;
-        staging.stage(gpu, view, &map)?;
+        staged.time(|| staging.stage(gpu, view, &map))?;
         Ok(Some(map.len() as u64))
     };
     let mut waited_since = Instant::now();
@@ -848,6 +854,8 @@ fn run_pass(
     // next.
     let finish_start = Instant::now();
     let finished: Vec<Result<ViewGpu>> = lanes.lanes.iter_mut().map(|l| l.finish(ctx)).collect();
+    stats.label_read_s += read.seconds();
+    stats.label_stage_s += staged.seconds();
     produced?;
     for work in finished {
         stats.add_gpu(work?);

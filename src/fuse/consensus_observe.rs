@@ -35,7 +35,7 @@ use crate::gpu::{Buffer, Gpu, Recorder, Timings};
 use crate::render::rasterizer::OcclusionDepths;
 use crate::render::{GpuScene, Rasterizer};
 use crate::scene::Camera;
-use crate::util::prefetch_ordered;
+use crate::util::{prefetch_ordered, BusyTime};
 
 /// What [`observe`] keeps besides the observations. Per view the (Gaussian, pixel) of each
 /// observation: 8 bytes an observation, held to the end of the lift, that only `--relabel`
@@ -86,7 +86,8 @@ pub fn observe(
     let pass = Pass::new(input, cfg, occlusion, kept, order)?;
     // Label maps are read (decoded) and checked on worker threads a few views ahead, as
     // the FlashSplat pass does, instead of in turn between the views' GPU work.
-    let read = |view: usize| read_labels(input, view, kept);
+    let read_time = BusyTime::default();
+    let read = |view: usize| read_time.time(|| read_labels(input, view, kept));
     let mut first = Some(Lane::new(gpu, n, cfg, kept)?);
     std::thread::scope(|scope| -> Result<()> {
         let (done, finished) = mpsc::channel::<Result<ObservedView>>();
@@ -136,6 +137,7 @@ pub fn observe(
         });
         failed.map_or(fed, Err)
     })?;
+    stats.label_read_s += read_time.seconds();
     progress(cams.len(), cams.len());
     let gathering = Instant::now();
     let observations = Observations::from_views(n, &views.observed);

@@ -466,6 +466,8 @@ fn both_visits(first: FuseStats, second: FuseStats, relabel: RegionStats) -> Fus
     let second_kernels = std::mem::replace(&mut stats.kernels, first.kernels);
     KernelTotal::add_all(&mut stats.kernels, second_kernels);
     stats.view_s += first.view_s; // the consensus's visit of the views
+    stats.label_wait_s += first.label_wait_s;
+    stats.label_read_s += first.label_read_s;
     stats.views_in_flight = stats.views_in_flight.max(first.views_in_flight);
     stats.views_with_labels = first.views_with_labels;
     (stats.segments_s, stats.decide_s) = (first.segments_s, first.decide_s);

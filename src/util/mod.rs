@@ -12,7 +12,9 @@ pub use atomic_write::{
     check_output_file, check_output_folder, stage_atomic, write_atomic, write_bytes_atomic,
     StagedFile,
 };
-pub use parallel::{parallel_map, parallel_map_on, prefetch_ordered, split_parts, take_part};
+pub use parallel::{
+    parallel_map, parallel_map_on, prefetch_ordered, split_parts, take_part, BusyTime,
+};
 pub use rng::Rng;
 
 /// Host seconds since the last lap (or the start): the split of a step's wall time that

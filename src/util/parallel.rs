@@ -1,7 +1,7 @@
 //! A parallel map over indices on every core, for CPU work whose items differ in cost
 //! (threads take the next index as they finish, so slow items do not stall a fixed split).
 
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Mutex, MutexGuard};
 
 /// `f(0), ..., f(count - 1)`, computed on up to all cores, in index order.
@@ -41,6 +41,26 @@ pub fn parallel_map_on<T: Send>(
         .into_iter()
         .map(|v| v.expect("every index was computed"))
         .collect()
+}
+
+/// Seconds spent in a closure, summed over the threads that ran it (a worker pool's busy
+/// time, beside the wall time its consumer waited).
+#[derive(Default)]
+pub struct BusyTime(AtomicU64);
+
+impl BusyTime {
+    /// Runs `f`, adding its time.
+    pub fn time<T>(&self, f: impl FnOnce() -> T) -> T {
+        let start = std::time::Instant::now();
+        let out = f();
+        self.0
+            .fetch_add(start.elapsed().as_nanos() as u64, Ordering::Relaxed);
+        out
+    }
+
+    pub fn seconds(&self) -> f64 {
+        self.0.load(Ordering::Relaxed) as f64 * 1e-9
+    }
 }
 
 /// `data` cut into consecutive parts of `lens` (summing to at most its length), each behind
