@@ -620,6 +620,9 @@ fn size_class(size: u32) -> u32 {
     32 - size.leading_zeros()
 }
 
+/// A neighbour pair of Gaussians (the lower first) and what the views said of it.
+type Pair = (u32, u32, PairEvidence);
+
 /// Every neighbour pair once, with what the views said of it and whether it lies along a
 /// surface (on every core: millions of Gaussians). A pair listed in both rows comes from
 /// the lower Gaussian's.
@@ -628,17 +631,31 @@ fn neighbour_pairs(
     knn: &[u32],
     surfaces: &SurfaceNormals,
     k: usize,
-) -> Vec<(u32, u32, PairEvidence)> {
+) -> Vec<Pair> {
     const BLOCK: usize = 4096;
     let lists = |g: usize| &knn[g * k..(g + 1) * k];
-    let blocks = parallel_map(obs.n.div_ceil(BLOCK), |b| {
-        let mut out = Vec::new();
-        for g in b * BLOCK..obs.n.min((b + 1) * BLOCK) {
-            for &h in lists(g) {
-                let from_h = (h as usize) < g && lists(h as usize).contains(&(g as u32));
-                if h == NO_NEIGHBOUR || h as usize == g || from_h {
-                    continue;
-                }
+    let from_g = |g: usize, h: u32| {
+        let from_h = (h as usize) < g && lists(h as usize).contains(&(g as u32));
+        h != NO_NEIGHBOUR && h as usize != g && !from_h
+    };
+    let (blocks, block) = (obs.n.div_ceil(BLOCK), |b: usize| {
+        b * BLOCK..obs.n.min((b + 1) * BLOCK)
+    });
+    let counts = parallel_map(blocks, |b| {
+        let of_g = |g| lists(g).iter().filter(|&&h| from_g(g, h)).count();
+        block(b).map(of_g).sum::<usize>()
+    });
+    let total = counts.iter().sum();
+    // Counted first, so each block writes its part of one list in place, on its thread:
+    // the blocks' lists copied together wrote it all again on one (110 MB at a million
+    // Gaussians, each page faulted in anew).
+    let mut pairs: Vec<Pair> = Vec::with_capacity(total);
+    let parts = split_parts(&mut pairs.spare_capacity_mut()[..total], counts);
+    parallel_map(blocks, |b| {
+        let mut part = take_part(&parts[b]);
+        let mut slots = part.iter_mut();
+        for g in block(b) {
+            for &h in lists(g).iter().filter(|&&h| from_g(g, h)) {
                 let c = co_occurrence(obs, g, h as usize);
                 let e = PairEvidence {
                     together: c.together,
@@ -647,12 +664,19 @@ fn neighbour_pairs(
                     pairs: 1,
                     pairs_along: surfaces.along(g, h as usize) as u32,
                 };
-                out.push((g as u32, h, e));
+                slots
+                    .next()
+                    .expect("a counted pair")
+                    .write((g as u32, h, e));
             }
         }
-        out
+        assert!(slots.next().is_none(), "every counted pair written");
     });
-    blocks.concat()
+    drop(parts);
+    // SAFETY: the parts cover the first `total` slots and each block wrote every slot of
+    // its part (both asserted on its thread, whose panic would have stopped us above).
+    unsafe { pairs.set_len(total) };
+    pairs
 }
 
 /// Each Gaussian's piece (its lowest Gaussian) after the outright joins: neighbour pairs
@@ -662,18 +686,14 @@ fn neighbour_pairs(
 /// a pair would pass every test of [`may_join`] as two single Gaussians, and most of an
 /// object's interior is such pairs; the ordered joins, one at a time, are left the rest.
 /// Union-find under the lowest index, so the pieces do not depend on the pairs' order.
-fn premerge(
-    obs: &Observations,
-    pairs: &[(u32, u32, PairEvidence)],
-    p: &ConsensusParams,
-) -> Vec<u32> {
+fn premerge(obs: &Observations, pairs: &[Pair], p: &ConsensusParams) -> Vec<u32> {
     let n = obs.n;
     let mut parent: Vec<u32> = (0..n as u32).collect();
     if p.premerge_views == 0 {
         return parent;
     }
     let seen_by = |g: u32| obs.row(g as usize).len() as f64;
-    for &(g, h, e) in pairs {
+    for &(g, h, e) in pairs.iter() {
         let unanimous = e.together >= p.premerge_views && e.apart == 0 && e.on_edge == 0;
         // Views that saw either: each Gaussian's, less the `together` that saw both.
         let either = seen_by(g) + seen_by(h) - e.together as f64;
@@ -732,10 +752,10 @@ fn runs_of_weight<T>(items: &[T], weight: impl Fn(&T) -> usize, target: usize) -
 
 /// Per segment after the outright joins (`piece`: each Gaussian's piece, by its lowest
 /// member), the adjacent segments with the evidence of the pairs between them.
-fn piece_adjacency(pairs: &[(u32, u32, PairEvidence)], piece: &[u32]) -> Vec<Adjacent> {
-    let between = |&(g, h, _): &(u32, u32, PairEvidence)| piece[g as usize] != piece[h as usize];
+fn piece_adjacency(pairs: &[Pair], piece: &[u32]) -> Vec<Adjacent> {
+    let between = |&&(g, h, _): &&Pair| piece[g as usize] != piece[h as usize];
     let mut degree = vec![0usize; piece.len()];
-    for &(g, h, _) in pairs.iter().filter(|e| between(e)) {
+    for &(g, h, _) in pairs.iter().filter(between) {
         degree[piece[g as usize] as usize] += 1;
         degree[piece[h as usize] as usize] += 1;
     }
@@ -762,7 +782,7 @@ fn piece_adjacency(pairs: &[(u32, u32, PairEvidence)], piece: &[u32]) -> Vec<Adj
                 adjacent.add(b, e);
             }
         };
-        for &(g, h, e) in pairs.iter().filter(|e| between(e)) {
+        for &(g, h, e) in pairs.iter().filter(between) {
             let (a, b) = (piece[g as usize], piece[h as usize]);
             add(a, b, e);
             add(b, a, e);
@@ -789,7 +809,7 @@ impl<'a> SegmentGraph<'a> {
     /// the remaining Gaussians, adjacent through the neighbour pairs between them.
     fn new(
         obs: &'a Observations,
-        pairs: Vec<(u32, u32, PairEvidence)>,
+        pairs: Vec<Pair>,
         p: &ConsensusParams,
         done: &mut ClusterProfile,
     ) -> SegmentGraph<'a> {
