@@ -117,8 +117,15 @@ impl RegionVotes {
         };
         let look_alike =
             |c: u32, l: u32| c != l && confusions.rate(c as usize, l as usize) > rule.max_confusion;
-        let candidate = majority_candidates(obs.n, slots.len(), &in_slots);
-        let counts = slot_counts(obs.n, &candidate, &label, &in_slots, &look_alike);
+        let classes = clear.iter().flatten().max().map_or(0, |&c| c as usize + 1);
+        let (candidate, counts) = match slots.len() * (classes + 1) <= ONE_PASS_MAX {
+            true => counted_by_class(obs.n, classes, &label, &in_slots, &look_alike),
+            false => {
+                let candidate = majority_candidates(obs.n, slots.len(), &in_slots);
+                let counts = slot_counts(obs.n, &candidate, &label, &in_slots, &look_alike);
+                (candidate, counts)
+            }
+        };
         let holds = |n: u64, all: u64| n as f64 >= rule.min_share * all as f64;
         let says = (0..slots.len())
             .map(|at| {
@@ -158,6 +165,64 @@ impl RegionVotes {
         }
         voted
     }
+}
+
+/// Counters per block up to which [`counted_by_class`] counts every slot's classes in one
+/// pass over the observations (a segmenter's scene: a few thousand slots of a few dozen
+/// classes), where two passes find the majority first ([`majority_candidates`]: a scene
+/// of salt noise reads hundreds of thousands of regions).
+const ONE_PASS_MAX: usize = 1 << 18;
+
+/// Per slot (`label`: each slot's label), its most frequent class with its count (the
+/// majority where one holds more than half: what [`majority_candidates`] finds) and its
+/// [`SlotCounts`] with that class held, from one pass counting every (slot, class) of
+/// `votes` on every core; `classes` bounds the classes voted.
+fn counted_by_class<I: Iterator<Item = (usize, Option<u32>)>>(
+    n: usize,
+    classes: usize,
+    label: &[u32],
+    votes: &(impl Fn(usize) -> I + Sync),
+    look_alike: &(impl Fn(u32, u32) -> bool + Sync),
+) -> (Vec<(u32, u64)>, Vec<SlotCounts>) {
+    // Per slot, a count per class and last the observations of no clear class.
+    let row = classes + 1;
+    let blocks = parallel_map(n.div_ceil(BLOCK), |b| {
+        let mut counts = vec![0u32; label.len() * row];
+        for g in b * BLOCK..n.min((b + 1) * BLOCK) {
+            for (at, c) in votes(g) {
+                counts[at * row + c.map_or(classes, |c| c as usize)] += 1;
+            }
+        }
+        counts
+    });
+    let mut counts = vec![0u64; label.len() * row];
+    for block in blocks {
+        counts
+            .iter_mut()
+            .zip(block)
+            .for_each(|(sum, c)| *sum += u64::from(c));
+    }
+    let summaries = counts.chunks_exact(row).zip(label).map(|(of_slot, &l)| {
+        let by_class = &of_slot[..classes];
+        let (top, &held) = (by_class.iter().enumerate())
+            .max_by_key(|&(c, &count)| (count, std::cmp::Reverse(c)))
+            .unwrap_or((0, &0));
+        let total: u64 = by_class.iter().sum();
+        let sum_where = |keep: &dyn Fn(u32) -> bool| {
+            (0..classes as u32)
+                .filter(|&c| keep(c))
+                .map(|c| by_class[c as usize])
+                .sum()
+        };
+        let counted = SlotCounts {
+            observed: total + of_slot[classes],
+            total,
+            held,
+            look_alike: sum_where(&|c| look_alike(c, l)),
+        };
+        ((top as u32, held), counted)
+    });
+    summaries.unzip()
 }
 
 /// Per slot, the one class that can hold more than half of its votes (the majority vote of
@@ -238,6 +303,45 @@ fn slot_counts<I: Iterator<Item = (usize, Option<u32>)>>(
 mod tests {
     use super::*;
     use crate::util::rng::Rng;
+
+    /// Counting every class in one pass agrees with the two passes: the same counts, and
+    /// the same class and count held wherever a class holds more than half of a slot.
+    #[test]
+    fn one_pass_by_class_agrees_with_the_majority_passes() {
+        let mut rng = Rng::new(8);
+        let (n, slots, classes) = (2 * BLOCK + 99, 60, 5u32);
+        // Slot s favours class s % 5 at a rate growing with s; None: no clear class.
+        let class_of: Vec<Option<u32>> = (0..n)
+            .map(|g| {
+                let s = g % slots;
+                let c = match rng.f64() < s as f64 / slots as f64 {
+                    true => (s % 5) as u32,
+                    false => rng.below(6) as u32,
+                };
+                Some(c).filter(|&c| c < classes)
+            })
+            .collect();
+        let votes = |g: usize| std::iter::once((g % slots, class_of[g]));
+        let label: Vec<u32> = (0..slots).map(|s| (s % 3) as u32).collect();
+        let look_alike = |c: u32, l: u32| c != l && (c + l) % 2 == 1;
+        let candidate = majority_candidates(n, slots, &votes);
+        let two = slot_counts(n, &candidate, &label, &votes, &look_alike);
+        let (top, one) = counted_by_class(n, classes as usize, &label, &votes, &look_alike);
+        let mut majorities = 0;
+        for s in 0..slots {
+            let (a, b) = (&one[s], &two[s]);
+            assert_eq!(
+                (a.observed, a.total, a.look_alike),
+                (b.observed, b.total, b.look_alike),
+                "slot {s}"
+            );
+            if 2 * a.held > a.total {
+                majorities += 1;
+                assert_eq!((top[s].0, a.held), (candidate[s].0, b.held), "slot {s}");
+            }
+        }
+        assert!((10..slots).contains(&majorities), "{majorities} majorities");
+    }
 
     /// The majority candidate and the counts against a plain count per slot, for random
     /// votes in random blocks; a class holding more than half is always found.
