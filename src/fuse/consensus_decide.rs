@@ -703,13 +703,13 @@ fn fill_unobserved(
     knn: &[u32],
     k: usize,
 ) -> usize {
-    let pending: Vec<bool> = (0..obs.n).map(|g| obs.row(g).is_empty()).collect();
-    // Who lists g among its neighbours: the Gaussians a decision at g may decide next round
-    // (only they can change; a scene seen by few views has most Gaussians pending and needs
-    // many rounds).
-    let listed_by = reverse_neighbours(knn, k, obs.n);
-    let mut pending = pending;
+    let mut pending: Vec<bool> = (0..obs.n).map(|g| obs.row(g).is_empty()).collect();
     let mut frontier: Vec<usize> = (0..obs.n).filter(|&g| pending[g]).collect();
+    // Which of those list g among their neighbours: the Gaussians a decision at g may
+    // decide next round (only they can change; a scene seen by few views has most
+    // Gaussians pending and needs many rounds). Only the pending ones' lists are read: a
+    // scene seen well has few.
+    let listed_by = reverse_neighbours(knn, k, obs.n, &frontier);
     let mut decided = 0;
     while !frontier.is_empty() {
         // Decided from the classes as they stood at the round's start.
@@ -791,9 +791,17 @@ impl ReverseNeighbours {
     }
 }
 
-fn reverse_neighbours(knn: &[u32], k: usize, n: usize) -> ReverseNeighbours {
+/// The reverse of the rows `rows` (ascending) of a [n][k] neighbour table: per Gaussian,
+/// which of those rows list it, ascending.
+fn reverse_neighbours(knn: &[u32], k: usize, n: usize, rows: &[usize]) -> ReverseNeighbours {
+    let listed = || {
+        let row = |&f: &usize| knn[f * k..(f + 1) * k].iter().map(move |&h| (h, f));
+        rows.iter()
+            .flat_map(row)
+            .filter(|&(h, _)| h != NO_NEIGHBOUR)
+    };
     let mut offsets = vec![0u32; n + 1];
-    for &h in knn.iter().filter(|&&h| h != NO_NEIGHBOUR) {
+    for (h, _) in listed() {
         offsets[h as usize + 1] += 1;
     }
     for g in 0..n {
@@ -801,11 +809,9 @@ fn reverse_neighbours(knn: &[u32], k: usize, n: usize) -> ReverseNeighbours {
     }
     let mut next = offsets.clone();
     let mut from = vec![0u32; offsets[n] as usize];
-    for (i, &h) in knn.iter().enumerate() {
-        if h != NO_NEIGHBOUR {
-            from[next[h as usize] as usize] = (i / k.max(1)) as u32;
-            next[h as usize] += 1;
-        }
+    for (h, f) in listed() {
+        from[next[h as usize] as usize] = f as u32;
+        next[h as usize] += 1;
     }
     ReverseNeighbours { offsets, from }
 }
@@ -929,6 +935,30 @@ mod tests {
     use super::*;
     use crate::fuse::consensus_segments::ViewEntry;
     use crate::util::Rng;
+
+    /// The reverse of some rows of a neighbour table lists, per Gaussian, exactly those of
+    /// the rows that list it, ascending (gaps included).
+    #[test]
+    fn reverse_neighbours_of_some_rows_list_their_listers() {
+        let mut rng = Rng::new(4);
+        let (n, k) = (500, 6);
+        let knn: Vec<u32> = (0..n * k)
+            .map(|_| match rng.below(10) {
+                0 => NO_NEIGHBOUR,
+                _ => rng.below(n as u64) as u32,
+            })
+            .collect();
+        let rows: Vec<usize> = (0..n).filter(|_| rng.below(3) == 0).collect();
+        let reverse = reverse_neighbours(&knn, k, n, &rows);
+        for g in 0..n {
+            let listers: Vec<usize> = (rows.iter().copied())
+                .flat_map(|f| knn[f * k..(f + 1) * k].iter().map(move |&h| (f, h)))
+                .filter(|&(_, h)| h == g as u32)
+                .map(|(f, _)| f)
+                .collect();
+            assert_eq!(reverse.row(g).collect::<Vec<_>>(), listers, "Gaussian {g}");
+        }
+    }
 
     /// A segment's votes counted per view and class equal those from its keys sorted, bit
     /// for bit (the decision's ties read them), on random segments: views none of its
