@@ -33,7 +33,9 @@ use serde::Serialize;
 
 use super::consensus_adjacent::Adjacent;
 use super::consensus_decide::ConsensusParams;
-use super::consensus_segments::{co_occurrence, find, union, Groups, Observations};
+use super::consensus_segments::{
+    co_occurrence, find, union, Groups, Observations, GAUSSIANS_PER_RUN,
+};
 use super::consensus_surface::SurfaceNormals;
 use crate::contract::NO_NEIGHBOUR;
 use crate::util::quad_heap::QuadHeap;
@@ -254,7 +256,9 @@ pub(crate) const SORT_BY_VIEW_FROM: usize = 1 << 16;
 /// sorted and counted in runs, blocks of views on every core. The values are scattered
 /// into their views' places directly: grouping the observations' indices by view with
 /// [`Groups`] and then reading each value through its index took 2-3x as long on a flagged
-/// wall of 4.6M observations (a random read per value, two more arrays).
+/// wall of 4.6M observations (a random read per value, two more arrays). Bucketing runs of
+/// the members on every core, each view then gathering its values from every run, was no
+/// faster on two cores (docs/robustness.md, "The host's passes at a capture's size").
 fn counts_sorted_by_view(obs: &Observations, members: &[u32], of: &[u32]) -> Vec<(u32, u32, u32)> {
     let observations = || members.iter().flat_map(|&g| obs.row(g as usize));
     let mut start: Vec<usize> = Vec::new(); // per view, its count, then where its values start
@@ -706,7 +710,7 @@ fn premerge(obs: &Observations, pairs: &[Pair], p: &ConsensusParams) -> Vec<u32>
 
 /// The region counts of every piece of more than one Gaussian ([`premerge`]), on every
 /// core; a single Gaussian's stay empty (read in place). The pieces go to the threads in
-/// runs of about [`PIECE_RUN`] Gaussians: a segmenter's scene holds a few hundred pieces,
+/// runs of about [`GAUSSIANS_PER_RUN`] Gaussians: a segmenter's scene holds a few hundred pieces,
 /// a handful of them walls of a hundred thousand Gaussians and more, and runs of a fixed
 /// number of pieces put them all on one thread.
 fn piece_regions(obs: &Observations, piece: &[u32]) -> Vec<RegionCounts> {
@@ -717,7 +721,11 @@ fn piece_regions(obs: &Observations, piece: &[u32]) -> Vec<RegionCounts> {
     let pieces: Vec<u32> = (0..n as u32)
         .filter(|&s| members.group(s as usize).len() > 1)
         .collect();
-    let runs = runs_of_weight(&pieces, |&s| members.group(s as usize).len(), PIECE_RUN);
+    let runs = runs_of_weight(
+        &pieces,
+        |&s| members.group(s as usize).len(),
+        GAUSSIANS_PER_RUN,
+    );
     let built = parallel_map(runs.len(), |r| {
         (runs[r].iter())
             .map(|&s| RegionCounts::of_gaussians(obs, members.group(s as usize)))
@@ -728,9 +736,6 @@ fn piece_regions(obs: &Observations, piece: &[u32]) -> Vec<RegionCounts> {
     }
     regions
 }
-
-/// Gaussians per run of pieces whose region counts one thread builds ([`piece_regions`]).
-const PIECE_RUN: usize = 16_384;
 
 /// `items` cut into consecutive runs of about `target` total weight: each run closes at
 /// the item that brings it to `target` or past it (an item heavier than `target`: a run
@@ -998,15 +1003,17 @@ mod tests {
     }
 
     /// Counted view by view (past `SORT_BY_VIEW_FROM` observations) as a plain ordered map
-    /// counts them, regions and labels, views left out and numbered past the members'.
+    /// counts them, regions and labels, views left out and numbered past the members', the
+    /// later Gaussians seeing fewer views.
     #[test]
     fn counts_sorted_by_view_match_a_plain_count() {
         let mut rng = Rng::new(9);
-        let n = 6000;
+        let n = 2 * GAUSSIANS_PER_RUN + 3000;
         let mut offsets = vec![0];
         let (mut view, mut region, mut label) = (Vec::new(), Vec::new(), Vec::new());
-        for _ in 0..n {
-            for v in 0..40u32 {
+        for g in 0..n {
+            let views = if g < 2 * n / 3 { 40 } else { 30 };
+            for v in 0..views {
                 if v % 7 != 3 && rng.below(3) > 0 {
                     view.push(v * 3);
                     region.push(rng.below(200) as u32 * 11);

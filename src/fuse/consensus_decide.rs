@@ -16,7 +16,7 @@ use super::consensus_confusion::{decide_near_ties, ConfusionRates, LOOK_ALIKE_RA
 use super::consensus_flags::{name_views_of_flagged, unflag_slivers};
 use super::consensus_region_votes::{RegionVoteRule, RegionVotes};
 use super::consensus_relabel::RelabelRule;
-use super::consensus_segments::{Groups, Observations};
+use super::consensus_segments::{Groups, Observations, GAUSSIANS_PER_RUN};
 use super::scores::SharedCounts;
 use crate::contract::NO_NEIGHBOUR;
 use crate::util::{parallel_map, Laps};
@@ -314,14 +314,23 @@ fn votes_counted_by_view(
     members: &[u32],
     classes: usize,
 ) -> (Vec<f64>, Vec<f64>, usize) {
-    let observations = || members.iter().flat_map(|&g| obs.row(g as usize));
-    let views = observations()
-        .map(|i| obs.view[i] as usize + 1)
-        .max()
-        .unwrap_or(0);
-    let mut counts = vec![0u32; views * classes];
-    for i in observations() {
-        counts[obs.view[i] as usize * classes + obs.label[i] as usize] += 1;
+    // Counted in runs of members on every core (a wall of a million observations is one
+    // segment), each run's table as long as its last view asks, then summed.
+    let tables = parallel_map(members.len().div_ceil(GAUSSIANS_PER_RUN), |r| {
+        let run = &members[r * GAUSSIANS_PER_RUN..members.len().min((r + 1) * GAUSSIANS_PER_RUN)];
+        let mut counts: Vec<u32> = Vec::new();
+        for i in run.iter().flat_map(|&g| obs.row(g as usize)) {
+            let view = obs.view[i] as usize;
+            if (view + 1) * classes > counts.len() {
+                counts.resize((view + 1) * classes, 0);
+            }
+            counts[view * classes + obs.label[i] as usize] += 1;
+        }
+        counts
+    });
+    let mut counts = vec![0u32; tables.iter().map(Vec::len).max().unwrap_or(0)];
+    for table in tables {
+        counts.iter_mut().zip(table).for_each(|(sum, c)| *sum += c);
     }
     let (mut split, mut mass) = (vec![0.0; classes], vec![0.0; classes]);
     let mut seen_by = 0;
@@ -962,10 +971,11 @@ mod tests {
 
     /// A segment's votes counted per view and class equal those from its keys sorted, bit
     /// for bit (the decision's ties read them), on random segments: views none of its
-    /// Gaussians saw, a view that saw one Gaussian, classes no view gave.
+    /// Gaussians saw, a view that saw one Gaussian, classes no view gave, and a segment
+    /// of several runs of members (counted on several threads).
     #[test]
     fn votes_counted_by_view_are_the_sorted_keys_votes() {
-        let (views, classes, n) = (23, 7, 400);
+        let (views, classes, n) = (23, 7, 2 * GAUSSIANS_PER_RUN + 400);
         let mut rng = Rng::new(5);
         let per_view: Vec<Vec<ViewEntry>> = (0..views)
             .map(|v| {
@@ -979,7 +989,8 @@ mod tests {
             })
             .collect();
         let obs = Observations::from_views(n, &per_view);
-        for members in [vec![0], vec![3, 9, 10], (0..n as u32).step_by(3).collect()] {
+        let some = (0..n as u32).step_by(3).collect();
+        for members in [vec![0], vec![3, 9, 10], some, (0..n as u32).collect()] {
             let mut keys: Vec<u64> = (members.iter())
                 .flat_map(|&g| obs.row(g as usize))
                 .map(|i| (obs.view[i] as u64) << 32 | obs.label[i] as u64)

@@ -243,6 +243,11 @@ pub fn four_neighbours(p: usize, width: usize, pixels: usize) -> impl Iterator<I
     .flatten()
 }
 
+/// Gaussians one thread takes at a time where a pass over a large set of them is split
+/// among the threads (the pieces' region counts, a wall's votes): a segmenter's scene
+/// holds a few segments of hundreds of thousands.
+pub(crate) const GAUSSIANS_PER_RUN: usize = 16_384;
+
 /// Indices grouped by their key, in index order within a group (a counting sort): the
 /// Gaussians of each segment, piece or grid cell.
 #[derive(Default)]
