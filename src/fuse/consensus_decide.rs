@@ -763,20 +763,36 @@ fn smooth_small_segments(
         .filter(|&g| !obs.row(g).is_empty())
         .collect();
     let first: Vec<Option<usize>> = small.iter().map(|&g| class[g]).collect();
-    let mut votes = vec![0.0; evidence.classes()];
-    let mut decided = Vec::with_capacity(small.len());
+    let (classes, width) = (evidence.classes(), evidence.classes().max(1));
+    const BLOCK: usize = 4096;
     for _ in 0..p.smooth_rounds {
-        for &g in &small {
-            votes.fill(0.0);
-            alone.add_votes_through_regions(g, &mut votes);
-            add_neighbour_classes(class, alone.knn, k, g, &mut votes);
-            let c = decisive_argmax(&votes, &votes);
+        // Each block's votes on every core, then stored in the Gaussians' order.
+        let now: &[Option<usize>] = class;
+        let blocks = parallel_map(small.len().div_ceil(BLOCK), |b| {
+            let block = &small[b * BLOCK..small.len().min((b + 1) * BLOCK)];
+            let mut votes = vec![0.0; block.len() * width];
+            let rows = votes.chunks_exact_mut(width).map(|row| &mut row[..classes]);
+            let decided: Vec<Option<usize>> = (block.iter().zip(rows))
+                .map(|(&g, votes)| {
+                    alone.add_votes_through_regions(g, votes);
+                    add_neighbour_classes(now, alone.knn, k, g, votes);
+                    decisive_argmax(votes, votes)
+                })
+                .collect();
+            (decided, votes)
+        });
+        let decided: Vec<Option<usize>> = (blocks.iter().flat_map(|(decided, _)| decided))
+            .copied()
+            .collect();
+        let votes = blocks
+            .iter()
+            .flat_map(|(_, votes)| votes.chunks_exact(width));
+        for ((&g, c), votes) in small.iter().zip(&decided).zip(votes) {
             if c.is_some() {
-                evidence.replace_own(g, &votes); // the rounds read classes, not evidence
+                evidence.replace_own(g, &votes[..classes]); // the rounds read classes, not evidence
             }
-            decided.push(c);
         }
-        for (&g, c) in small.iter().zip(decided.drain(..)) {
+        for (&g, c) in small.iter().zip(decided) {
             class[g] = c.or(class[g]);
         }
     }
