@@ -314,7 +314,7 @@ pub fn bench_fuse(
         forward,
         methods: results,
         peak_host_bytes: crate::util::memory::peak_host_bytes(),
-        host_threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
+        host_threads: crate::util::cores(),
         neighbours_s,
     })
 }

@@ -1091,7 +1091,7 @@ fn le<const N: usize>(b: &[u8]) -> [u8; N] {
 /// `dst[i] = widen(entry i of bytes)` on every core: the evidence of millions of
 /// Gaussians times the classes is hundreds of MB (6M x 16 fixed-point entries: 768 MB).
 fn widen_in_parallel(bytes: &[u8], entry: usize, dst: &mut [f64], widen: fn(&[u8]) -> f64) {
-    let threads = std::thread::available_parallelism().map_or(1, |t| t.get());
+    let threads = crate::util::cores();
     let per_thread = dst.len().div_ceil(threads).max(1);
     std::thread::scope(|scope| {
         for (out, raw) in dst

@@ -28,6 +28,7 @@
 
 use std::cmp::Reverse;
 use std::collections::HashMap;
+use std::ops::Range;
 
 use serde::Serialize;
 
@@ -39,7 +40,7 @@ use super::consensus_segments::{
 use super::consensus_surface::SurfaceNormals;
 use crate::contract::NO_NEIGHBOUR;
 use crate::util::quad_heap::QuadHeap;
-use crate::util::{parallel_map, split_parts, take_part, Laps};
+use crate::util::{cores, parallel_map, split_parts, take_part, Laps};
 
 /// What the views said of the neighbour pairs between two segments, summed over the pairs
 /// ([`co_occurrence`] per pair).
@@ -697,7 +698,7 @@ fn premerge(obs: &Observations, pairs: &[Pair], p: &ConsensusParams) -> Vec<u32>
         return parent;
     }
     let seen_by = |g: u32| obs.row(g as usize).len() as f64;
-    for &(g, h, e) in pairs.iter() {
+    for &(g, h, e) in pairs {
         let unanimous = e.together >= p.premerge_views && e.apart == 0 && e.on_edge == 0;
         // Views that saw either: each Gaussian's, less the `together` that saw both.
         let either = seen_by(g) + seen_by(h) - e.together as f64;
@@ -727,7 +728,7 @@ fn piece_regions(obs: &Observations, piece: &[u32]) -> Vec<RegionCounts> {
         GAUSSIANS_PER_RUN,
     );
     let built = parallel_map(runs.len(), |r| {
-        (runs[r].iter())
+        (pieces[runs[r].clone()].iter())
             .map(|&s| RegionCounts::of_gaussians(obs, members.group(s as usize)))
             .collect::<Vec<_>>()
     });
@@ -737,20 +738,24 @@ fn piece_regions(obs: &Observations, piece: &[u32]) -> Vec<RegionCounts> {
     regions
 }
 
-/// `items` cut into consecutive runs of about `target` total weight: each run closes at
-/// the item that brings it to `target` or past it (an item heavier than `target`: a run
-/// of its own, or the end of one).
-fn runs_of_weight<T>(items: &[T], weight: impl Fn(&T) -> usize, target: usize) -> Vec<&[T]> {
+/// `items` cut into consecutive runs of about `target` total weight, as index ranges: each
+/// run closes at the item that brings it to `target` or past it (an item heavier than
+/// `target`: a run of its own, or the end of one).
+fn runs_of_weight<T>(
+    items: &[T],
+    weight: impl Fn(&T) -> usize,
+    target: usize,
+) -> Vec<Range<usize>> {
     let (mut runs, mut start, mut held) = (Vec::new(), 0, 0);
     for (i, item) in items.iter().enumerate() {
         held += weight(item);
         if held >= target {
-            runs.push(&items[start..=i]);
+            runs.push(start..i + 1);
             (start, held) = (i + 1, 0);
         }
     }
     if start < items.len() {
-        runs.push(&items[start..]);
+        runs.push(start..items.len());
     }
     runs
 }
@@ -771,16 +776,10 @@ fn piece_adjacency(pairs: &[Pair], piece: &[u32]) -> Vec<Adjacent> {
     let mut edges: Vec<Adjacent> = degree.iter().map(|&d| Adjacent::with_capacity(d)).collect();
     // Filled on every core: each thread a range of segments of about equal degree, for
     // which it reads every pair (a pass over them is a small part of the additions).
-    let threads = std::thread::available_parallelism().map_or(1, |t| t.get());
-    let ranges = runs_of_weight(&degree, |&d| d, degree.iter().sum::<usize>() / threads + 1);
-    let firsts: Vec<usize> = (ranges.iter())
-        .scan(0, |first, r| {
-            Some(std::mem::replace(first, *first + r.len()))
-        })
-        .collect();
+    let ranges = runs_of_weight(&degree, |&d| d, degree.iter().sum::<usize>() / cores() + 1);
     let parts = split_parts(&mut edges, ranges.iter().map(|r| r.len()));
     parallel_map(parts.len(), |r| {
-        let (mut part, first) = (take_part(&parts[r]), firsts[r]);
+        let (mut part, first) = (take_part(&parts[r]), ranges[r].start);
         let mut add = |a: u32, b: u32, e: PairEvidence| {
             let at = (a as usize).checked_sub(first);
             if let Some(adjacent) = at.and_then(|i| part.get_mut(i)) {
@@ -954,7 +953,8 @@ mod tests {
         let mut rng = Rng::new(3);
         let items: Vec<usize> = (0..2000).map(|_| 1 + rng.below(3000) as usize).collect();
         for target in [1, 500, 4096, 1 << 30] {
-            let runs = runs_of_weight(&items, |&w| w, target);
+            let ranges = runs_of_weight(&items, |&w| w, target);
+            let runs: Vec<&[usize]> = ranges.into_iter().map(|r| &items[r]).collect();
             assert_eq!(runs.concat(), items, "target {target}");
             for (r, run) in runs.iter().enumerate() {
                 let held: usize = run.iter().sum();

@@ -316,10 +316,10 @@ fn votes_counted_by_view(
 ) -> (Vec<f64>, Vec<f64>, usize) {
     // Counted in runs of members on every core (a wall of a million observations is one
     // segment), each run's table as long as its last view asks, then summed.
-    let tables = parallel_map(members.len().div_ceil(GAUSSIANS_PER_RUN), |r| {
-        let run = &members[r * GAUSSIANS_PER_RUN..members.len().min((r + 1) * GAUSSIANS_PER_RUN)];
+    let runs: Vec<&[u32]> = members.chunks(GAUSSIANS_PER_RUN).collect();
+    let tables = parallel_map(runs.len(), |r| {
         let mut counts: Vec<u32> = Vec::new();
-        for i in run.iter().flat_map(|&g| obs.row(g as usize)) {
+        for i in runs[r].iter().flat_map(|&g| obs.row(g as usize)) {
             let view = obs.view[i] as usize;
             if (view + 1) * classes > counts.len() {
                 counts.resize((view + 1) * classes, 0);
@@ -419,8 +419,8 @@ pub struct DecideProfile {
     pub region_votes_s: f64,
     /// Each Gaussian's class and evidence, in turn.
     pub gaussians_s: f64,
-    /// The unobserved ones filled from their neighbours, the small segments smoothed, and
-    /// the posteriors (on every core).
+    /// The unobserved ones filled from their neighbours, the small segments smoothed and
+    /// the posteriors (the last two on every core).
     pub fill_s: f64,
     pub smooth_s: f64,
     pub posteriors_s: f64,
@@ -764,12 +764,12 @@ fn smooth_small_segments(
         .collect();
     let first: Vec<Option<usize>> = small.iter().map(|&g| class[g]).collect();
     let (classes, width) = (evidence.classes(), evidence.classes().max(1));
-    const BLOCK: usize = 4096;
+    let blocks: Vec<&[usize]> = small.chunks(4096).collect();
     for _ in 0..p.smooth_rounds {
         // Each block's votes on every core, then stored in the Gaussians' order.
         let now: &[Option<usize>] = class;
-        let blocks = parallel_map(small.len().div_ceil(BLOCK), |b| {
-            let block = &small[b * BLOCK..small.len().min((b + 1) * BLOCK)];
+        let voted = parallel_map(blocks.len(), |b| {
+            let block = blocks[b];
             let mut votes = vec![0.0; block.len() * width];
             let rows = votes.chunks_exact_mut(width).map(|row| &mut row[..classes]);
             let decided: Vec<Option<usize>> = (block.iter().zip(rows))
@@ -781,10 +781,10 @@ fn smooth_small_segments(
                 .collect();
             (decided, votes)
         });
-        let decided: Vec<Option<usize>> = (blocks.iter().flat_map(|(decided, _)| decided))
+        let decided: Vec<Option<usize>> = (voted.iter().flat_map(|(decided, _)| decided))
             .copied()
             .collect();
-        let votes = blocks
+        let votes = voted
             .iter()
             .flat_map(|(_, votes)| votes.chunks_exact(width));
         for ((&g, c), votes) in small.iter().zip(&decided).zip(votes) {

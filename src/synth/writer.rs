@@ -115,10 +115,7 @@ pub fn write_synth_with_progress(dir: &Path, scene: &SynthScene, progress: Progr
     // Counted under a lock so the calls see `done` rising, whichever thread finishes first.
     let done = Mutex::new(0);
     let first_error: Mutex<Option<anyhow::Error>> = Mutex::new(None);
-    let threads = std::thread::available_parallelism()
-        .map_or(1, |n| n.get())
-        .min(scene.views.len())
-        .max(1);
+    let threads = crate::util::cores().min(scene.views.len()).max(1);
     std::thread::scope(|s| {
         for _ in 0..threads {
             s.spawn(|| loop {

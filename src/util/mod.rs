@@ -13,7 +13,7 @@ pub use atomic_write::{
     StagedFile,
 };
 pub use parallel::{
-    parallel_map, parallel_map_on, prefetch_ordered, split_parts, take_part, BusyTime,
+    cores, parallel_map, parallel_map_on, prefetch_ordered, split_parts, take_part, BusyTime,
 };
 pub use rng::Rng;
 
