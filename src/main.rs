@@ -70,7 +70,7 @@ impl Command {
 }
 
 fn main() -> ExitCode {
-    semsplat::util::memory::use_one_malloc_arena();
+    semsplat::util::memory::configure_malloc();
     interrupt::end_quietly_on_closed_stdout();
     let cli = Cli::parse();
     if let Err(e) = interrupt::install_handler(cli.command.polls_for_interrupt()) {

@@ -246,9 +246,11 @@ run_ours() {
   CAP=120 b "fuse living labels x 60" bench fuse --scene /tmp/living_labels \
     --labels /tmp/living_labels/labels_noisy --views 60 --iters 3 \
     --methods flashsplat,segment-consensus,segment-consensus-relabel
-  # Segment consensus again with glibc's large blocks kept in its heap: by default a block
-  # over 32 MiB gets a mapping of its own, unmapped when freed (which interrupts every core
-  # the process runs on to flush its TLB) and faulted in again when the next is allocated.
+  # Segment consensus again with glibc's large blocks kept in its heap: the CLI maps each
+  # block from 16 MiB on its own (util::memory::configure_malloc), unmapped when freed
+  # (which interrupts every core the process runs on to flush its TLB) and faulted in
+  # again when the next is allocated; these cases' thresholds (from the environment) keep
+  # every block in the heap.
   # On the development VM's two cores: the clustering 0.1 s faster on the office of 911k,
   # peak memory an eighth higher; on sixteen the decision's parallel passes were no
   # faster than there on two (docs/robustness.md, "The host's passes at a capture's size").
