@@ -126,6 +126,15 @@ impl Adjacent {
         }
     }
 
+    /// Prefetches the first cache line of the list (a map: nothing).
+    pub fn prefetch(&self) {
+        if let Adjacent::List(list) = self {
+            if let Some(first) = list.first() {
+                crate::util::prefetch(first);
+            }
+        }
+    }
+
     pub fn iter(&self) -> Iter<'_> {
         match self {
             Adjacent::List(list) => Iter::List(list.iter()),

@@ -26,7 +26,6 @@
 //! the crease, the evidence ties the two joins, and the surface the strip continues should
 //! take it (docs/robustness.md, "Joins along a surface first").
 
-use std::cmp::Reverse;
 use std::collections::HashMap;
 use std::ops::Range;
 
@@ -40,7 +39,7 @@ use super::consensus_segments::{
 use super::consensus_surface::SurfaceNormals;
 use crate::contract::NO_NEIGHBOUR;
 use crate::util::quad_heap::QuadHeap;
-use crate::util::{cores, parallel_map, split_parts, take_part, Laps};
+use crate::util::{cores, merge_sorted_runs, parallel_map, prefetch, split_parts, take_part, Laps};
 
 /// What the views said of the neighbour pairs between two segments, summed over the pairs
 /// ([`co_occurrence`] per pair).
@@ -418,7 +417,35 @@ pub fn may_join(evidence: &PairEvidence, a: Dominant, b: Dominant, p: &Consensus
 /// the pair's evidence gives another (order, together) or a join another size class: a
 /// candidate whose evidence changed without changing those stands where its requeued copy
 /// would, so taking it with the current evidence decides the same.
-type Candidate = (i64, u32, Reverse<u32>, Reverse<u32>, Reverse<u32>);
+///
+/// Packed in three words compared as unsigned integers, greatest first: a comparison is
+/// three integer compares rather than five of mixed types, and the queue's compares are a
+/// large part of the ordered joins (0.47 -> 0.45 s on a noisy 1080p office, 2 cores).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+struct Candidate {
+    /// [`PairEvidence::queue_key`] with its sign bit flipped (so unsigned order is signed
+    /// order).
+    key: u64,
+    /// Views together (high half), then the size class, smaller greater (low half).
+    together_class: u64,
+    /// The two segments, lower ids greater: `!a` (high half), `!b` (low half).
+    ids: u64,
+}
+
+impl Candidate {
+    fn new(key: i64, together: u32, size_class: u32, a: u32, b: u32) -> Candidate {
+        Candidate {
+            key: key as u64 ^ (1 << 63),
+            together_class: (together as u64) << 32 | !size_class as u64,
+            ids: (!a as u64) << 32 | !b as u64,
+        }
+    }
+
+    /// The two segments (the lower first).
+    fn segments(&self) -> (u32, u32) {
+        (!(self.ids >> 32) as u32, !self.ids as u32)
+    }
+}
 
 /// Segment id per Gaussian (numbered by first Gaussian). Every segment starts as one Gaussian
 /// and is named by its lowest Gaussian index. Candidates (adjacent segments with their summed
@@ -522,7 +549,7 @@ fn cluster(
     let mut changed = Vec::new();
     while let Some(queued) = queue.pop() {
         done.popped += 1;
-        let (_, _, _, Reverse(a), Reverse(b)) = queued;
+        let (a, b) = queued.segments();
         if graph.parent[a as usize] != a || graph.parent[b as usize] != b {
             continue; // joined another segment (most stale candidates: no adjacency lookup needed)
         }
@@ -567,18 +594,25 @@ struct Queue {
 }
 
 impl Queue {
+    /// Every candidate whose evidence allows a join, sorted: ranges of segments listed
+    /// and sorted on every core, then merged (a candidate is one pair of segments, so the
+    /// order of equal items never arises).
     fn new(graph: &SegmentGraph, p: &ConsensusParams, sweep_from: usize) -> Queue {
-        let mut sorted: Vec<Candidate> = Vec::new();
-        for (a, edges) in graph.edges.iter().enumerate() {
-            let a = a as u32;
-            sorted.extend(
-                edges
-                    .iter()
-                    .filter(|&(b, e)| a < b && e.allows_join(p))
-                    .map(|(b, e)| graph.candidate(a, b, e, p)),
-            );
-        }
-        sorted.sort_unstable();
+        let ranges = runs_of_weight(&graph.edges, Adjacent::len, 1 << 16);
+        let runs = parallel_map(ranges.len(), |r| {
+            let mut run = Vec::new();
+            for a in ranges[r].clone() {
+                let a = a as u32;
+                run.extend(
+                    (graph.edges[a as usize].iter())
+                        .filter(|&(b, e)| a < b && e.allows_join(p))
+                        .map(|(b, e)| graph.candidate(a, b, e, p)),
+                );
+            }
+            run.sort_unstable();
+            run
+        });
+        let sorted = merge_sorted_runs(runs);
         Queue {
             sorted,
             heap: QuadHeap::new(),
@@ -598,8 +632,10 @@ impl Queue {
             return;
         }
         let root = |s: u32| parent[s as usize] == s;
-        self.heap
-            .retain(|&(_, _, _, Reverse(a), Reverse(b))| root(a) && root(b));
+        self.heap.retain(|c| {
+            let (a, b) = c.segments();
+            root(a) && root(b)
+        });
         self.swept = self.heap.len();
     }
 
@@ -840,12 +876,12 @@ impl<'a> SegmentGraph<'a> {
 
     fn candidate(&self, a: u32, b: u32, e: PairEvidence, p: &ConsensusParams) -> Candidate {
         let larger = self.size[a as usize].max(self.size[b as usize]);
-        (
+        Candidate::new(
             e.queue_key(p.apart_weight),
             e.together,
-            Reverse(size_class(larger)),
-            Reverse(a),
-            Reverse(b),
+            size_class(larger),
+            a,
+            b,
         )
     }
 
@@ -868,6 +904,14 @@ impl<'a> SegmentGraph<'a> {
         moved.remove(a);
         self.edges[ai].remove(b);
         changed.clear();
+        // Each adjacent segment's list is a cache miss: asked for all at once, they overlap.
+        for (c, _) in moved.iter() {
+            prefetch(&self.edges[c as usize]);
+            prefetch(&self.size[c as usize]);
+        }
+        for (c, _) in moved.iter() {
+            self.edges[c as usize].prefetch();
+        }
         for (c, e) in moved.iter() {
             let sum = self.edges[ai].add(c, e);
             self.edges[c as usize].rename(b, a, sum);
@@ -943,6 +987,34 @@ mod tests {
         for (s, expected) in plain.iter().enumerate() {
             let got: HashMap<u32, PairEvidence> = built[s].iter().collect();
             assert_eq!(&got, expected, "segment {s}");
+        }
+    }
+
+    /// The packed candidates order as the tuple they pack: first key (signed), views
+    /// together, the smaller size class, the lower first id, the lower second id.
+    #[test]
+    fn candidates_order_as_their_fields() {
+        use std::cmp::Reverse;
+        let mut rng = Rng::new(4);
+        let mut pick = |values: &[i64]| values[rng.below(values.len() as u64) as usize];
+        let keys = [i64::MIN, -(1 << 40), -3, -1, 0, 1, 7, 1 << 50, i64::MAX];
+        let small = [0, 1, 2, 31, 32, u32::MAX as i64];
+        type Fields = (i64, u32, Reverse<u32>, Reverse<u32>, Reverse<u32>);
+        let drawn: Vec<(Candidate, Fields)> = (0..400)
+            .map(|_| {
+                let (key, together, class) =
+                    (pick(&keys), pick(&small) as u32, pick(&small) as u32);
+                let (a, b) = (pick(&small) as u32, pick(&small) as u32);
+                let tuple = (key, together, Reverse(class), Reverse(a), Reverse(b));
+                let packed = Candidate::new(key, together, class, a, b);
+                assert_eq!(packed.segments(), (a, b));
+                (packed, tuple)
+            })
+            .collect();
+        for (x, tx) in &drawn {
+            for (y, ty) in &drawn {
+                assert_eq!(x.cmp(y), tx.cmp(ty), "{tx:?} against {ty:?}");
+            }
         }
     }
 

@@ -155,9 +155,67 @@ pub fn prefetch_ordered<T: Send>(
     })
 }
 
+/// Sorted runs merged into one sorted list, pairs of runs merged on every core, round by
+/// round (the last merge, of two halves, on one). With the runs sorted on every core too,
+/// a sort of millions of items whose one-core sort was a serial step of its own.
+pub fn merge_sorted_runs<T: Ord + Copy + Send + Sync>(mut runs: Vec<Vec<T>>) -> Vec<T> {
+    while runs.len() > 1 {
+        let pairs = runs.len().div_ceil(2);
+        let merged = parallel_map(pairs, |i| match runs.get(2 * i + 1) {
+            Some(second) => merge_two(&runs[2 * i], second),
+            None => runs[2 * i].clone(),
+        });
+        runs = merged;
+    }
+    runs.pop().unwrap_or_default()
+}
+
+/// Two sorted lists merged (equal items: the first list's first).
+fn merge_two<T: Ord + Copy>(first: &[T], second: &[T]) -> Vec<T> {
+    let mut out = Vec::with_capacity(first.len() + second.len());
+    let (mut i, mut j) = (0, 0);
+    while i < first.len() && j < second.len() {
+        if second[j] < first[i] {
+            out.push(second[j]);
+            j += 1;
+        } else {
+            out.push(first[i]);
+            i += 1;
+        }
+    }
+    out.extend_from_slice(&first[i..]);
+    out.extend_from_slice(&second[j..]);
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Runs of every length (none, one, odd counts of runs, empty runs among them) merge
+    /// to what one sort of all their items gives.
+    #[test]
+    fn sorted_runs_merge_to_one_sort() {
+        let mut rng = crate::util::Rng::new(5);
+        for count in [0, 1, 2, 3, 7, 16] {
+            let mut runs: Vec<Vec<u32>> = (0..count)
+                .map(|r| {
+                    let len = if r % 3 == 1 {
+                        0
+                    } else {
+                        rng.below(500) as usize
+                    };
+                    let mut run: Vec<u32> = (0..len).map(|_| rng.below(300) as u32).collect();
+                    run.sort_unstable();
+                    run
+                })
+                .collect();
+            let mut expected = runs.concat();
+            expected.sort_unstable();
+            runs.rotate_left(count / 2);
+            assert_eq!(merge_sorted_runs(runs), expected, "{count} runs");
+        }
+    }
 
     /// Each index fills its own part: the parts cover the data in order, of the lengths asked.
     #[test]
