@@ -52,8 +52,9 @@ pub fn configure_malloc() {
         ),
     ] {
         if std::env::var_os(variable).is_none() {
-            // SAFETY: mallopt only sets an allocator parameter; called before any thread
-            // starts.
+            // SAFETY: mallopt only sets an allocator parameter (under the allocator's own
+            // lock); the CLI calls this before any thread starts, so every allocation
+            // follows it.
             unsafe {
                 libc::mallopt(parameter, value);
             }

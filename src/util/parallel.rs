@@ -156,8 +156,9 @@ pub fn prefetch_ordered<T: Send>(
 }
 
 /// Sorted runs merged into one sorted list, pairs of runs merged on every core, round by
-/// round (the last merge, of two halves, on one). With the runs sorted on every core too,
-/// a sort of millions of items whose one-core sort was a serial step of its own.
+/// round (the last merge, of two halves, on one). Runs sorted on every core and merged so
+/// sort millions of items (the ordered joins' first candidates) where one core sorted them
+/// all.
 pub fn merge_sorted_runs<T: Ord + Copy + Send + Sync>(mut runs: Vec<Vec<T>>) -> Vec<T> {
     while runs.len() > 1 {
         let pairs = runs.len().div_ceil(2);
