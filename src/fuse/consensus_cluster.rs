@@ -34,7 +34,7 @@ use serde::Serialize;
 use super::consensus_adjacent::Adjacent;
 use super::consensus_decide::ConsensusParams;
 use super::consensus_segments::{
-    co_occurrence, find, union, Groups, Observations, GAUSSIANS_PER_RUN,
+    co_occurrence, Groups, Observations, SharedSets, GAUSSIANS_PER_RUN,
 };
 use super::consensus_surface::SurfaceNormals;
 use crate::contract::NO_NEIGHBOUR;
@@ -726,23 +726,28 @@ fn neighbour_pairs(
 /// saw either Gaussian ([`ConsensusParams::premerge_views`]; 0: every Gaussian alone). Such
 /// a pair would pass every test of [`may_join`] as two single Gaussians, and most of an
 /// object's interior is such pairs; the ordered joins, one at a time, are left the rest.
-/// Union-find under the lowest index, so the pieces do not depend on the pairs' order.
+/// Union-find under the lowest index, so the pieces do not depend on the pairs' order;
+/// the pairs tested and joined on every core ([`SharedSets`]).
 fn premerge(obs: &Observations, pairs: &[Pair], p: &ConsensusParams) -> Vec<u32> {
     let n = obs.n;
-    let mut parent: Vec<u32> = (0..n as u32).collect();
     if p.premerge_views == 0 {
-        return parent;
+        return (0..n as u32).collect();
     }
     let seen_by = |g: u32| obs.row(g as usize).len() as f64;
-    for &(g, h, e) in pairs {
+    let outright = |&(g, h, e): &Pair| {
         let unanimous = e.together >= p.premerge_views && e.apart == 0 && e.on_edge == 0;
         // Views that saw either: each Gaussian's, less the `together` that saw both.
         let either = seen_by(g) + seen_by(h) - e.together as f64;
-        if unanimous && e.together as f64 >= p.premerge_common_share * either {
-            union(&mut parent, g, h);
+        unanimous && e.together as f64 >= p.premerge_common_share * either
+    };
+    let sets = SharedSets::new(n);
+    let blocks: Vec<&[Pair]> = pairs.chunks(1 << 16).collect();
+    parallel_map(blocks.len(), |b| {
+        for &(g, h, _) in blocks[b].iter().filter(|pair| outright(pair)) {
+            sets.union(g, h);
         }
-    }
-    (0..n as u32).map(|g| find(&mut parent, g)).collect()
+    });
+    sets.roots()
 }
 
 /// The region counts of every piece of more than one Gaussian ([`premerge`]), on every

@@ -13,6 +13,7 @@ use super::accumulate::NO_LABEL;
 use crate::util::{parallel_map, split_parts, take_part};
 use std::borrow::Cow;
 use std::ops::Range;
+use std::sync::atomic::{AtomicU32, Ordering};
 
 /// Per Gaussian, the views that observed it (center visible on a labeled pixel), in
 /// compressed rows sorted by view: what a view says about a Gaussian.
@@ -307,6 +308,70 @@ pub(crate) fn union(parent: &mut [u32], a: u32, b: u32) {
     }
 }
 
+/// Disjoint sets joined from several threads at once: union-find on atomic parents, each
+/// join linking the higher root under the lower (a compare-and-swap that fails, and is
+/// retried, where another thread linked that root first). A set's root is then its lowest
+/// member whatever the joins' order or threads, so the sets and their names are those of
+/// [`union`] in one thread.
+pub(crate) struct SharedSets(Vec<AtomicU32>);
+
+impl SharedSets {
+    /// `n` sets of one member each.
+    pub(crate) fn new(n: usize) -> SharedSets {
+        SharedSets((0..n as u32).map(AtomicU32::new).collect())
+    }
+
+    /// The root of `x`'s set, halving its path on the way (each step points a member at
+    /// its grandparent, which is an ancestor whatever other threads link meanwhile).
+    fn find(&self, mut x: u32) -> u32 {
+        let parent = |x: u32| self.0[x as usize].load(Ordering::Relaxed);
+        loop {
+            let up = parent(x);
+            if up == x {
+                return x;
+            }
+            let grand = parent(up);
+            if grand != up {
+                let _ = self.0[x as usize].compare_exchange(
+                    up,
+                    grand,
+                    Ordering::Relaxed,
+                    Ordering::Relaxed,
+                );
+            }
+            x = grand;
+        }
+    }
+
+    /// Joins the sets of `a` and `b` under the lower root.
+    pub(crate) fn union(&self, a: u32, b: u32) {
+        loop {
+            let (ra, rb) = (self.find(a), self.find(b));
+            if ra == rb {
+                return;
+            }
+            let (lo, hi) = (ra.min(rb), ra.max(rb));
+            let link =
+                self.0[hi as usize].compare_exchange(hi, lo, Ordering::Relaxed, Ordering::Relaxed);
+            if link.is_ok() {
+                return;
+            }
+        }
+    }
+
+    /// Each member's root (its set's lowest member), on every core; after every join.
+    pub(crate) fn roots(&self) -> Vec<u32> {
+        const BLOCK: usize = 1 << 16;
+        let n = self.0.len();
+        let blocks = parallel_map(n.div_ceil(BLOCK), |b| {
+            (b * BLOCK..n.min((b + 1) * BLOCK))
+                .map(|x| self.find(x as u32))
+                .collect::<Vec<_>>()
+        });
+        blocks.concat()
+    }
+}
+
 /// Of the views that observed both rows: how many put them in the same region (both away
 /// from its edge), how many in different ones, and how many in one region on its edge (no
 /// evidence either way). Rows are sorted by view.
@@ -350,5 +415,39 @@ impl CoOccurrence {
     /// Views that observed both.
     pub fn views(&self) -> u32 {
         self.together + self.apart + self.on_edge
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::util::Rng;
+
+    /// Joined on every core in any order, the sets and their roots are those of one thread
+    /// joining the same pairs in order: chains (long paths to halve) and random pairs, some
+    /// joining a set with itself.
+    #[test]
+    fn shared_sets_join_as_one_thread_does() {
+        let mut rng = Rng::new(13);
+        let n = 50_000u32;
+        let mut pairs: Vec<(u32, u32)> = (1..n).step_by(3).map(|g| (g, g - 1)).collect();
+        pairs.extend((0..40_000).map(|_| (rng.below(n as u64) as u32, rng.below(n as u64) as u32)));
+        let mut parent: Vec<u32> = (0..n).collect();
+        for &(a, b) in &pairs {
+            union(&mut parent, a, b);
+        }
+        let serial: Vec<u32> = (0..n).map(|g| find(&mut parent, g)).collect();
+        rng.shuffle(&mut pairs);
+        let sets = SharedSets::new(n as usize);
+        let blocks: Vec<&[(u32, u32)]> = pairs.chunks(997).collect();
+        parallel_map(blocks.len(), |b| {
+            for &(a, b) in blocks[b] {
+                sets.union(a, b);
+            }
+        });
+        let shared = sets.roots();
+        assert_eq!(shared, serial);
+        let roots = (0..n).filter(|&g| serial[g as usize] == g).count();
+        assert!(roots > 100 && roots < 20_000, "{roots} sets");
     }
 }
