@@ -1,6 +1,8 @@
 //! The allocator's setup (`configure_malloc`, which the CLI calls first): threads taking
 //! turns allocating and freeing blocks of megabytes, as the label readers do with their
 //! maps, get their memory back from the heap rather than faulting it in anew each time.
+//! glibc only: elsewhere `configure_malloc` sets nothing.
+#![cfg(all(target_os = "linux", target_env = "gnu"))]
 
 use std::sync::Barrier;
 
