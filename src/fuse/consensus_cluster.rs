@@ -38,7 +38,10 @@ use super::consensus_segments::{
 use super::consensus_surface::SurfaceNormals;
 use crate::contract::NO_NEIGHBOUR;
 use crate::util::quad_heap::QuadHeap;
-use crate::util::{cores, merge_sorted_runs, parallel_map, prefetch, split_parts, take_part, Laps};
+use crate::util::{
+    cores, merge_sorted_into, merge_sorted_runs, parallel_map, prefetch, split_parts, take_part,
+    Laps,
+};
 
 /// What the views said of the neighbour pairs between two segments, summed over the pairs
 /// ([`co_occurrence`] per pair).
@@ -168,7 +171,7 @@ impl RegionCounts {
                 Err(_) => fresh.push((view, region, count)),
             }
         }
-        merge_into(&mut self.counts, &fresh);
+        merge_sorted_into(&mut self.counts, &fresh);
         let mut new_views = Vec::new();
         for &(view, ..) in other.table() {
             let d = self.dominant_in(view);
@@ -177,7 +180,7 @@ impl RegionCounts {
                 Err(_) => new_views.push(d),
             }
         }
-        merge_into(&mut self.dominant, &new_views);
+        merge_sorted_into(&mut self.dominant, &new_views);
     }
 
     /// (view, dominant region, observations) of one view, from the counts.
@@ -378,23 +381,6 @@ impl Dominant<'_> {
             }
         }
         (same, differ)
-    }
-}
-
-/// Merges `fresh` (sorted, no element equal to one of `into`) into the sorted `into`, from
-/// the back, in place.
-fn merge_into<T: Ord + Copy + Default>(into: &mut Vec<T>, fresh: &[T]) {
-    let (mut i, mut j) = (into.len(), fresh.len());
-    into.resize(i + j, T::default());
-    while j > 0 {
-        let at = i + j - 1;
-        if i > 0 && into[i - 1] > fresh[j - 1] {
-            into[at] = into[i - 1];
-            i -= 1;
-        } else {
-            into[at] = fresh[j - 1];
-            j -= 1;
-        }
     }
 }
 

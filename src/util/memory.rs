@@ -31,8 +31,8 @@ pub fn peak_host_bytes() -> Option<u64> {
 /// threads each decoding a map of megabytes every few milliseconds: one freeing its map at
 /// the top of the heap while another's lay below left more free than the threshold, so the
 /// heap was trimmed and grown again map after map, each time faulting its pages in anew
-/// (two readers on two cores: 0.67-0.70 s and 370,000 faults for a capture's 190 1080p
-/// maps; 0.36 s and 4,600 faults with these thresholds). A higher trim threshold holds
+/// (two readers on two cores: 0.67-0.78 s and 360,000-380,000 faults for a capture's 190
+/// 1080p maps; 0.36-0.38 s and 3,500-4,600 faults with these thresholds). A higher trim threshold holds
 /// more at the peak: a consensus run of that capture peaked at 1.23 GB with 128 MiB, at
 /// 1.0-1.22 GB with 64 MiB and 1.03-1.13 GB with glibc's own, runs moving by 0.1 GB
 /// (docs/robustness.md, "The label readers' pages").

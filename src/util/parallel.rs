@@ -174,19 +174,27 @@ pub fn merge_sorted_runs<T: Ord + Copy + Send + Sync>(mut runs: Vec<Vec<T>>) -> 
 /// Two sorted lists merged (equal items: the first list's first).
 fn merge_two<T: Ord + Copy>(first: &[T], second: &[T]) -> Vec<T> {
     let mut out = Vec::with_capacity(first.len() + second.len());
-    let (mut i, mut j) = (0, 0);
-    while i < first.len() && j < second.len() {
-        if second[j] < first[i] {
-            out.push(second[j]);
-            j += 1;
+    out.extend_from_slice(first);
+    merge_sorted_into(&mut out, second);
+    out
+}
+
+/// Merges the sorted `fresh` into the sorted `into`, from the back, in place (equal items:
+/// `into`'s first).
+pub fn merge_sorted_into<T: Ord + Copy>(into: &mut Vec<T>, fresh: &[T]) {
+    let (mut i, mut j) = (into.len(), fresh.len());
+    // The new slots are all written below; `fresh` only fills them first.
+    into.extend_from_slice(fresh);
+    while j > 0 {
+        let at = i + j - 1;
+        if i > 0 && into[i - 1] > fresh[j - 1] {
+            into[at] = into[i - 1];
+            i -= 1;
         } else {
-            out.push(first[i]);
-            i += 1;
+            into[at] = fresh[j - 1];
+            j -= 1;
         }
     }
-    out.extend_from_slice(&first[i..]);
-    out.extend_from_slice(&second[j..]);
-    out
 }
 
 #[cfg(test)]
