@@ -65,6 +65,19 @@ fn serpentine(width: usize, height: usize) -> Vec<u32> {
     map
 }
 
+/// A segmenter's map: a few regions each spanning hundreds of pixels a row (a wall, a
+/// floor), split by a slanted edge and columns, where a GPU's unions chain whole rows and the
+/// finds' halving (glsl/fuse/label_regions.glsl) does most of its work.
+fn wide_regions(width: usize, height: usize) -> Vec<u32> {
+    (0..width * height)
+        .map(|p| {
+            let (x, y) = (p % width, p / width);
+            let below_slant = y * width > x * height / 2 + width * height / 3;
+            (x * 3 / width) as u32 + if below_slant { 3 } else { 0 }
+        })
+        .collect()
+}
+
 /// Every map's observations from the GPU, for every pixel as a center plus a Gaussian with
 /// none, then for random centers; the host fallback's regions too.
 fn check_maps(maps: &[(String, Vec<u32>, usize)]) -> usize {
@@ -148,6 +161,7 @@ fn gpu_regions_match_a_flood_fill_on_random_maps() {
         ));
     }
     maps.push(("one label".into(), vec![3; 50 * 40], 50));
+    maps.push(("wide regions".into(), wide_regions(640, 360), 640));
     maps.push(("unlabeled".into(), vec![NO_LABEL; 30 * 20], 30));
     let checker: Vec<u32> = (0..33 * 17)
         .map(|p| ((p % 33) + (p / 33)) as u32 % 2)

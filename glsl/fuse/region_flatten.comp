@@ -1,6 +1,7 @@
 #version 460
 // Each pixel's region id: the root of its tree (label_regions.glsl). Written to a separate
-// array, so no invocation changes the links another is walking.
+// array: relabeling reuses the links as its per-region table once the ids are flat. The
+// walks still move links (find_root's halving), only ever to a grandparent: the same root.
 
 layout(local_size_x = 256) in;
 

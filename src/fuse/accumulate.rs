@@ -178,6 +178,11 @@ pub struct ObserveTimes {
     pub render_s: f64,
     pub regions_s: f64,
     pub gather_s: f64,
+    /// GPU time of the label regions' kernels (the regions, each center's lookup and the
+    /// observations' compaction; with `--relabel` also its relabeling's), in `gpu_ms`:
+    /// the renderer's kernels are listed by name, these are not. 0 where the host finds
+    /// the regions (a CPU device).
+    pub regions_gpu_ms: f64,
 }
 
 fn bytes_per_entry(method: Method, acc: Accumulation) -> u64 {

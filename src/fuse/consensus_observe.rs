@@ -125,6 +125,7 @@ pub fn observe(
         drop(done);
         for regions in running.finish() {
             stats.gpu_ms += regions.gpu_ms;
+            stats.observe.regions_gpu_ms += regions.gpu_ms;
             stats.region_host_fallbacks += regions.host_fallbacks;
         }
         // A lane's own error stands before the feed's (which may be only that it stopped).

@@ -472,6 +472,7 @@ fn both_visits(first: FuseStats, second: FuseStats, relabel: RegionStats) -> Fus
     stats.views_with_labels = first.views_with_labels;
     (stats.segments_s, stats.decide_s) = (first.segments_s, first.decide_s);
     stats.observe = first.observe;
+    stats.observe.regions_gpu_ms += relabel.gpu_ms;
     (stats.clustering, stats.decision) = (first.clustering, first.decision);
     stats.peak_device_bytes = stats.peak_device_bytes.max(first.peak_device_bytes);
     stats.region_host_fallbacks = first.region_host_fallbacks + relabel.host_fallbacks;
