@@ -173,13 +173,17 @@ void blend_alpha(inout Pixel p, uint j, uint entry, vec4 g, float alpha, bool wr
 }
 
 // Blends batch slot `j` (list entry `entry`) into pixel `p` at `pixel`, unless it is done;
-// returns whether it is done after the step. Written with one exit, the batch's loop
-// leaving once every pixel is done: with an early return for each skip (which glslang
-// inlines as a switch) and the loop asking every pixel's state before each step, the same
-// blend rendered a room 8-14% slower on an H200 (docs/gpu.md, 2026-11-30).
+// returns whether it is done after the step. Written with one exit: with an early return
+// for each skip (which glslang inlines as a switch) and the loop asking every pixel's
+// state before each step, the same blend rendered a room 8-14% slower on an H200
+// (docs/gpu.md, 2026-11-30). With one pixel an invocation the batch's loop has stopped
+// before a done pixel's step, so the test is left to the kernels of several.
 bool blend_step(inout Pixel p, vec2 pixel, uint j, uint entry, vec4 g, vec3 con, vec2 frac,
                 bool write_rgb) {
-    if (!p.done) {
+#if PIXELS > 1
+    if (!p.done)
+#endif
+    {
         vec2 d = pixel_offset(g.xy, frac, pixel);
         float sigma = conic_sigma(con, d);
         if (sigma >= 0.0) {
@@ -276,11 +280,17 @@ void main() {
     [[unroll]] for (uint q = 0; q < PIXELS; q++) {
         px[q] = pixel_start(tw[q], window_start);
     }
+    // Converted once, not at every step.
+    vec2 pixel[PIXELS];
+    [[unroll]] for (uint q = 0; q < PIXELS; q++) {
+        pixel[q] = vec2(tw[q].px, tw[q].py);
+    }
     uint start = tw[0].start, end = tw[0].end;
 
     for (uint b = start; b < end; b += BATCH) {
         // Stop the tile once every pixel is done.
-        if (workgroup_all_done(all_done(px))) {
+        bool done = all_done(px);
+        if (workgroup_all_done(done)) {
             break;
         }
         [[unroll]] for (uint q = 0; q < PIXELS; q++) {
@@ -290,8 +300,10 @@ void main() {
             }
         }
         barrier();
-        uint count = all_done(px) ? 0 : min(BATCH, end - b);
-        for (uint j = 0; j < count; j++) {
+        // The loop is left by its condition, as the kernel before the per-pixel form was
+        // (docs/gpu.md, 2026-11-30: that form blended faster on an H200).
+        uint count = min(BATCH, end - b);
+        for (uint j = 0; j < count && !done; j++) {
             vec4 g = s_xy_depth_opacity[j];
             vec3 con = s_conic[j].xyz;
             vec2 frac = s_frac[j];
@@ -303,13 +315,9 @@ void main() {
                 step_sem[k] = s_sem[j * CHUNK_CHANNELS + k];
             }
 #endif
-            bool done = true;
+            done = true;
             [[unroll]] for (uint q = 0; q < PIXELS; q++) {
-                vec2 pixel = vec2(tw[q].px, tw[q].py);
-                done = blend_step(px[q], pixel, j, b + j, g, con, frac, write_rgb) && done;
-            }
-            if (done) {
-                break;
+                done = blend_step(px[q], pixel[q], j, b + j, g, con, frac, write_rgb) && done;
             }
         }
         barrier(); // the next batch overwrites the shared arrays
