@@ -247,18 +247,20 @@ pub struct Consensus {
 }
 
 /// The class with the most `votes`; ties go to the most `mass`; still tied: None.
+/// Allocates nothing: it runs for most Gaussians, on every core, and under the CLI's one
+/// malloc arena each allocation of a worker thread takes the arena's lock.
 fn decisive_argmax(votes: &[f64], mass: &[f64]) -> Option<usize> {
     let top = votes.iter().cloned().fold(0.0f64, f64::max);
     if top <= 0.0 {
         return None;
     }
-    let tied: Vec<usize> = (0..votes.len()).filter(|&c| votes[c] == top).collect();
-    if tied.len() == 1 {
-        return Some(tied[0]);
+    let tied = || (0..votes.len()).filter(move |&c| votes[c] == top);
+    let best = tied().map(|c| mass[c]).fold(f64::MIN, f64::max);
+    let mut by_mass = tied().filter(|&c| mass[c] == best);
+    match (by_mass.next(), by_mass.next()) {
+        (Some(c), None) => Some(c),
+        _ => None,
     }
-    let best = tied.iter().map(|&c| mass[c]).fold(f64::MIN, f64::max);
-    let by_mass: Vec<usize> = tied.into_iter().filter(|&c| mass[c] == best).collect();
-    (by_mass.len() == 1).then(|| by_mass[0])
 }
 
 /// Per segment: the views' votes (each view once) and the raw observation counts, and how
@@ -274,28 +276,40 @@ fn segment_votes(
     classes: usize,
 ) -> (Vec<Vec<f64>>, Vec<Vec<f64>>, Vec<usize>) {
     const BLOCK: usize = 1024;
+    // Each block's votes in one flat table, cut into the segments' vectors on this thread:
+    // under the CLI's one malloc arena every allocation of a worker thread (a fresh thread
+    // has no cache of freed blocks) takes the arena's lock, and there are tens of thousands
+    // of segments.
     let blocks = parallel_map(segments.div_ceil(BLOCK), |b| {
+        let in_block = b * BLOCK..segments.min((b + 1) * BLOCK);
+        let cells = in_block.len() * classes;
+        let (mut split, mut mass) = (vec![0.0; cells], vec![0.0; cells]);
+        let mut views = Vec::with_capacity(in_block.len());
         let mut sorted = Vec::new();
-        (b * BLOCK..segments.min((b + 1) * BLOCK))
-            .map(|s| {
-                let rows = || members.group(s).iter().map(|&g| obs.row(g as usize));
-                if rows().map(|row| row.len()).sum::<usize>() >= VOTES_BY_VIEW_FROM {
-                    return votes_counted_by_view(obs, members.group(s), classes);
-                }
-                sorted.clear();
-                for row in rows() {
-                    sorted.extend(row.map(|i| (obs.view[i] as u64) << 32 | obs.label[i] as u64));
-                }
-                sorted.sort_unstable();
-                votes_of(&sorted, classes)
-            })
-            .collect::<Vec<_>>()
+        for (i, s) in in_block.enumerate() {
+            let at = i * classes..(i + 1) * classes;
+            let (split, mass) = (&mut split[at.clone()], &mut mass[at]);
+            let rows = || members.group(s).iter().map(|&g| obs.row(g as usize));
+            if rows().map(|row| row.len()).sum::<usize>() >= VOTES_BY_VIEW_FROM {
+                views.push(votes_counted_by_view(obs, members.group(s), split, mass));
+                continue;
+            }
+            sorted.clear();
+            for row in rows() {
+                sorted.extend(row.map(|i| (obs.view[i] as u64) << 32 | obs.label[i] as u64));
+            }
+            sorted.sort_unstable();
+            views.push(votes_of(&sorted, split, mass));
+        }
+        (split, mass, views)
     });
     let (mut split, mut mass, mut views) = (Vec::new(), Vec::new(), Vec::new());
-    for (s, m, v) in blocks.into_iter().flatten() {
-        split.push(s);
-        mass.push(m);
-        views.push(v);
+    for (block_split, block_mass, block_views) in blocks {
+        for i in 0..block_views.len() {
+            split.push(block_split[i * classes..(i + 1) * classes].to_vec());
+            mass.push(block_mass[i * classes..(i + 1) * classes].to_vec());
+        }
+        views.extend(block_views);
     }
     (split, mass, views)
 }
@@ -312,8 +326,10 @@ const VOTES_BY_VIEW_FROM: usize = 4096;
 fn votes_counted_by_view(
     obs: &Observations,
     members: &[u32],
-    classes: usize,
-) -> (Vec<f64>, Vec<f64>, usize) {
+    split: &mut [f64],
+    mass: &mut [f64],
+) -> usize {
+    let classes = split.len();
     // Counted in runs of members on every core (a wall of a million observations is one
     // segment), each run's table as long as its last view asks, then summed.
     let runs: Vec<&[u32]> = members.chunks(GAUSSIANS_PER_RUN).collect();
@@ -332,7 +348,6 @@ fn votes_counted_by_view(
     for table in tables {
         counts.iter_mut().zip(table).for_each(|(sum, c)| *sum += c);
     }
-    let (mut split, mut mass) = (vec![0.0; classes], vec![0.0; classes]);
     let mut seen_by = 0;
     for of_view in counts.chunks_exact(classes.max(1)) {
         let total: u32 = of_view.iter().sum();
@@ -348,14 +363,14 @@ fn votes_counted_by_view(
         }
         seen_by += 1;
     }
-    (split, mass, seen_by)
+    seen_by
 }
 
-/// One segment's votes from its observation keys sorted (by view, then label): every view
-/// adds the share of the segment's observations it gives each class, and each observation
-/// one to its class's mass; and the views counted.
-fn votes_of(sorted: &[u64], classes: usize) -> (Vec<f64>, Vec<f64>, usize) {
-    let (mut split, mut mass) = (vec![0.0; classes], vec![0.0; classes]);
+/// One segment's votes from its observation keys sorted (by view, then label), added to
+/// `split` and `mass` (zeros, one per class): every view adds the share of the segment's
+/// observations it gives each class, and each observation one to its class's mass; and
+/// the views counted.
+fn votes_of(sorted: &[u64], split: &mut [f64], mass: &mut [f64]) -> usize {
     let mut views = 0;
     for group in sorted.chunk_by(|a, b| a >> 32 == b >> 32) {
         let share = 1.0 / group.len() as f64;
@@ -366,7 +381,7 @@ fn votes_of(sorted: &[u64], classes: usize) -> (Vec<f64>, Vec<f64>, usize) {
         }
         views += 1;
     }
-    (split, mass, views)
+    views
 }
 
 /// Adds how many of Gaussian `g`'s views gave each class to `votes`. Counted as each
@@ -961,6 +976,18 @@ mod tests {
     use crate::fuse::consensus_segments::ViewEntry;
     use crate::util::Rng;
 
+    /// The most votes wins; a tie goes to the most mass; a tie in both, or no vote, to none.
+    #[test]
+    fn decisive_argmax_breaks_ties_by_mass_or_not_at_all() {
+        assert_eq!(decisive_argmax(&[1.0, 3.0, 2.0], &[9.0, 0.0, 9.0]), Some(1));
+        assert_eq!(decisive_argmax(&[3.0, 1.0, 3.0], &[2.0, 9.0, 5.0]), Some(2));
+        assert_eq!(decisive_argmax(&[3.0, 1.0, 3.0], &[5.0, 9.0, 5.0]), None);
+        assert_eq!(decisive_argmax(&[3.0, 3.0, 3.0], &[5.0, 6.0, 6.0]), None);
+        assert_eq!(decisive_argmax(&[0.0, 0.0], &[1.0, 2.0]), None);
+        assert_eq!(decisive_argmax(&[], &[]), None);
+        assert_eq!(decisive_argmax(&[0.0, 0.5], &[0.0, 0.0]), Some(1));
+    }
+
     /// The reverse of some rows of a neighbour table lists, per Gaussian, exactly those of
     /// the rows that list it, ascending (gaps included).
     #[test]
@@ -1012,12 +1039,20 @@ mod tests {
                 .map(|i| (obs.view[i] as u64) << 32 | obs.label[i] as u64)
                 .collect();
             keys.sort_unstable();
-            let (split, mass, seen_by) = votes_of(&keys, classes);
-            let counted = votes_counted_by_view(&obs, &members, classes);
+            let (mut split, mut mass) = (vec![0.0; classes], vec![0.0; classes]);
+            let seen_by = votes_of(&keys, &mut split, &mut mass);
+            let (mut counted_split, mut counted_mass) = (vec![0.0; classes], vec![0.0; classes]);
+            let counted =
+                votes_counted_by_view(&obs, &members, &mut counted_split, &mut counted_mass);
             let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-            assert_eq!(bits(&counted.0), bits(&split), "members {}", members.len());
-            assert_eq!(bits(&counted.1), bits(&mass));
-            assert_eq!(counted.2, seen_by);
+            assert_eq!(
+                bits(&counted_split),
+                bits(&split),
+                "members {}",
+                members.len()
+            );
+            assert_eq!(bits(&counted_mass), bits(&mass));
+            assert_eq!(counted, seen_by);
             assert!(seen_by > 0 && split[classes - 1] == 0.0);
         }
     }
