@@ -230,3 +230,144 @@ fn region_check_flags_incomplete_regions() {
         .unwrap());
     check_validation(gpu);
 }
+
+/// The GPU's union-find as an algorithm, under the concurrency lavapipe does not give (its
+/// invocations run nearly in scan order, each left neighbour already joined): region_merge's
+/// unions and find_root's path halving (glsl/fuse/label_regions.glsl) transcribed as tasks,
+/// one per pixel, each pausing before every memory step; a scheduler resumes a task drawn
+/// at random from those resident (started in pixel order, as a GPU starts its workgroups),
+/// so the steps of hundreds of tasks interleave, deterministically for a seed. Every
+/// interleaving must give the flood fill's ids: a link only ever moves to a smaller pixel of
+/// its region, and a union whose root was linked meanwhile goes on from there.
+mod concurrent_model {
+    use super::*;
+    use std::cell::Cell;
+    use std::future::Future;
+    use std::pin::Pin;
+    use std::task::{Context, Poll, Waker};
+
+    /// Where a task stops so the scheduler can run another: once, before a memory step.
+    struct Pause(bool);
+
+    impl Future for Pause {
+        type Output = ();
+        fn poll(mut self: Pin<&mut Self>, _: &mut Context) -> Poll<()> {
+            match std::mem::replace(&mut self.0, true) {
+                true => Poll::Ready(()),
+                false => Poll::Pending,
+            }
+        }
+    }
+
+    struct Links(Vec<Cell<u32>>);
+
+    impl Links {
+        async fn read(&self, p: u32) -> u32 {
+            Pause(false).await;
+            self.0[p as usize].get()
+        }
+
+        /// atomicMin: the link before.
+        async fn lower(&self, p: u32, to: u32) -> u32 {
+            Pause(false).await;
+            let was = self.0[p as usize].get();
+            self.0[p as usize].set(was.min(to));
+            was
+        }
+
+        async fn find_root(&self, mut p: u32) -> u32 {
+            let mut up = self.read(p).await;
+            while up != p {
+                let upup = self.read(up).await;
+                if upup != up {
+                    self.lower(p, upup).await;
+                }
+                p = upup;
+                up = self.read(p).await;
+            }
+            p
+        }
+
+        async fn join(&self, mut a: u32, mut b: u32) {
+            loop {
+                a = self.find_root(a).await;
+                b = self.find_root(b).await;
+                if a == b {
+                    return;
+                }
+                let (hi, lo) = (a.max(b), a.min(b));
+                let was = self.lower(hi, lo).await;
+                if was == hi {
+                    return;
+                }
+                (a, b) = (was, lo);
+            }
+        }
+    }
+
+    type Task<'a> = Pin<Box<dyn Future<Output = ()> + 'a>>;
+
+    /// Runs `tasks` to the end, `resident` at a time, one step of a random one at a time.
+    fn run(tasks: Vec<Task>, resident: usize, rng: &mut Rng) {
+        let mut cx = Context::from_waker(Waker::noop());
+        let (mut waiting, mut live) = (tasks.into_iter(), Vec::new());
+        loop {
+            live.extend(waiting.by_ref().take(resident - live.len()));
+            if live.is_empty() {
+                return;
+            }
+            let i = rng.below(live.len() as u64) as usize;
+            if live[i].as_mut().poll(&mut cx).is_ready() {
+                drop(live.swap_remove(i));
+            }
+        }
+    }
+
+    fn regions(map: &[u32], width: usize, resident: usize, seed: u64) -> Vec<u32> {
+        let links = Links(
+            map.iter()
+                .enumerate()
+                .map(|(p, &l)| Cell::new(if l == NO_LABEL { NO_LABEL } else { p as u32 }))
+                .collect(),
+        );
+        let labeled = || (0..map.len()).filter(|&p| map[p] != NO_LABEL);
+        let mut rng = Rng::new(seed);
+        let links = &links;
+        let merges = labeled().map(|p| -> Task {
+            Box::pin(async move {
+                if p % width > 0 && map[p - 1] == map[p] {
+                    links.join(p as u32, p as u32 - 1).await;
+                }
+                if p >= width && map[p - width] == map[p] {
+                    links.join(p as u32, (p - width) as u32).await;
+                }
+            })
+        });
+        run(merges.collect(), resident, &mut rng);
+        let region: Vec<Cell<u32>> = map.iter().map(|_| Cell::new(NO_LABEL)).collect();
+        let region = &region;
+        let flattens = labeled().map(|p| -> Task {
+            Box::pin(async move { region[p].set(links.find_root(p as u32).await) })
+        });
+        run(flattens.collect(), resident, &mut rng);
+        region.iter().map(Cell::get).collect()
+    }
+
+    #[test]
+    fn unions_with_halving_give_the_flood_fills_ids_in_any_interleaving() {
+        let mut rng = Rng::new(23);
+        let maps = [
+            ("wide regions", wide_regions(120, 60), 120),
+            ("serpentine", serpentine(32, 24), 32),
+            ("blocks", blocks(&mut rng, 48, 36, 3), 48),
+            ("one label", vec![2; 60 * 20], 60),
+        ];
+        for (name, map, width) in &maps {
+            let want = flood_regions(map, *width);
+            for (resident, seed) in [(32, 1), (512, 2), (4096, 3)] {
+                let got = regions(map, *width, resident, seed);
+                assert!(got == want, "{name}: {resident} resident, seed {seed}");
+            }
+        }
+    }
+}
