@@ -239,12 +239,14 @@ pub(crate) fn counts_sorted_of(
 ) -> Vec<(u32, u32, u32)> {
     debug_assert_eq!(of.len(), obs.view.len(), "one value per observation");
     let rows = || members.iter().map(|&g| obs.row(g as usize));
-    if rows().map(|row| row.len()).sum::<usize>() >= SORT_BY_VIEW_FROM {
+    let observations = rows().map(|row| row.len()).sum::<usize>();
+    if observations >= SORT_BY_VIEW_FROM {
         return counts_sorted_by_view(obs, members, of);
     }
-    let mut seen: Vec<(u32, u32)> = rows()
-        .flat_map(|row| row.map(|i| (obs.view[i], of[i])))
-        .collect();
+    // Sized once, not grown by doubling: fewer allocations on the worker threads, each of
+    // which takes the one malloc arena's lock (src/util/memory.rs).
+    let mut seen: Vec<(u32, u32)> = Vec::with_capacity(observations);
+    seen.extend(rows().flat_map(|row| row.map(|i| (obs.view[i], of[i]))));
     seen.sort_unstable();
     let runs = seen.chunk_by(|a, b| a == b);
     runs.map(|run| (run[0].0, run[0].1, run.len() as u32))
