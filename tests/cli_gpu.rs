@@ -206,6 +206,12 @@ fn bench_fuse_json_times_every_method_against_the_forward_render() {
             // on each of its lanes (summed over them: they overlap).
             let o = &m["observe"];
             let parts = ["render_s", "regions_s", "gather_s"].map(|k| positive(o, k));
+            // The regions' GPU time is part of the method's (0 where the host finds them).
+            let regions_gpu_ms = o["regions_gpu_ms"].as_f64().expect("regions_gpu_ms");
+            assert!(
+                (0.0..=positive(m, "gpu_ms")).contains(&regions_gpu_ms),
+                "{m}"
+            );
             let lanes = positive(m, "views_in_flight");
             assert!((1.0..=2.0).contains(&lanes), "{m}");
             assert!(

@@ -138,6 +138,24 @@ fn observations_match_a_cpu_transcription_on(gpu: &Gpu) {
         obs_1 == obs && centers_1 == centers,
         "the lanes changed the observations"
     );
+    let most_lanes = FuseConfig {
+        views_in_flight: semsplat::fuse::MAX_LANES,
+        ..FuseConfig::default()
+    };
+    let (obs_4, centers_4, stats_4) = observed(
+        &inp,
+        &most_lanes,
+        false,
+        Kept::CenterPixels,
+        None,
+        &mut |_, _| {},
+    )
+    .unwrap();
+    assert_eq!(stats_4.views_in_flight, 4);
+    assert!(
+        obs_4 == obs && centers_4 == centers,
+        "four lanes changed the observations"
+    );
     // Without the pixels (plain segment consensus) the same observations, no pixel lists.
     let (obs_drop, centers_drop, _) = observed(
         &inp,

@@ -710,8 +710,8 @@ fn an_error_with_views_in_flight_is_returned_and_changes_nothing_after() {
     check_validation(gpu);
 }
 
-/// One view in flight or two (the default, where the device has room): the same evidence,
-/// and the run says how many it kept.
+/// One view in flight, two (the default, where the device has room) or the most: the same
+/// evidence, and the run says how many it kept.
 #[test]
 fn views_in_flight_change_nothing_but_the_overlap() {
     let gpu = gpu();
@@ -725,10 +725,13 @@ fn views_in_flight_change_nothing_but_the_overlap() {
     };
     let (one, one_stats) = run(1);
     let (two, two_stats) = run(semsplat::fuse::LANES);
+    let (most, most_stats) = run(semsplat::fuse::MAX_LANES);
     assert_eq!(one_stats.views_in_flight, 1);
     assert_eq!(two_stats.views_in_flight, 2, "lavapipe has room for two");
+    assert_eq!(most_stats.views_in_flight, 4, "and for four");
     assert!(one.data.iter().any(|&v| v > 0.0));
     assert_eq!(one.data, two.data);
+    assert_eq!(one.data, most.data);
     check_validation(gpu);
 }
 

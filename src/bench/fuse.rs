@@ -53,6 +53,9 @@ pub struct FuseBenchSpec {
     /// Write the scene, cameras and label maps here first (see [`super::export`]).
     #[serde(skip)]
     pub export: Option<PathBuf>,
+    /// Views each method keeps in flight at most ([`FuseConfig::views_in_flight`]; what it
+    /// kept is each method's `views_in_flight`).
+    pub views_in_flight: usize,
 }
 
 /// The forward render of every view.
@@ -292,6 +295,7 @@ pub fn bench_fuse(
             .iter()
             .map(|&method| FuseConfig {
                 method,
+                views_in_flight: spec.views_in_flight,
                 ..Default::default()
             })
             .collect(),

@@ -88,6 +88,13 @@ pub struct FuseArgs {
     /// Seed of the scene and the label maps.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Views each tiled method keeps in flight at most, each on its own lane (rasterizer
+    /// buffers, and for segment consensus its own region finder): more hide more of each
+    /// view's host work behind the GPU's. Fewer are kept where the device has no room.
+    #[arg(long, default_value_t = semsplat::fuse::LANES,
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new()
+              .range(1..=semsplat::fuse::MAX_LANES as u64))]
+    views_in_flight: usize,
     /// Also write the scene (PLY), the cameras (JSON), every view's label map (one uint16
     /// `labels.npy`, 65535 where unlabeled) and a `bench.json` into DIR, so other tools can
     /// be timed on the same bytes.
@@ -401,6 +408,7 @@ fn run_fuse(gpu: &Gpu, a: FuseArgs) -> Result<()> {
         scene: a.scene,
         labels: a.labels,
         export: a.export,
+        views_in_flight: a.views_in_flight,
     };
     let bar = views_bar(0);
     let r = bench_fuse(gpu, &spec, &methods, |phase, done, total| {

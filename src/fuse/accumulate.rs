@@ -63,8 +63,9 @@ pub struct FuseConfig {
     /// How finely views are split (windows of the tile lists, bands of tile rows); the
     /// device's sizes by default, small ones in tests so small scenes walk the split paths.
     pub split: SplitSizes,
-    /// Views the tiled methods keep in flight at most (1..=[`LANES`]); fewer where the
-    /// device has no room for another view's buffers (see [`Lanes`]).
+    /// Views the tiled methods keep in flight at most (1..=[`MAX_LANES`], [`LANES`] by
+    /// default); fewer where the device has no room for another view's buffers (see
+    /// [`Lanes`]).
     pub views_in_flight: usize,
 }
 
@@ -297,7 +298,7 @@ impl ViewInputs {
 }
 
 /// A rasterizer and the device inputs of the views it runs. The tiled methods keep up to
-/// [`LANES`] of them and give view `v` to lane `v % lanes`: the host records and submits a
+/// `views_in_flight` of them ([`LANES`] by default) and give view `v` to lane `v % lanes`: the host records and submits a
 /// view while the GPU still runs the previous ones, instead of leaving the GPU idle while it
 /// records (about 3 ms a view at 1080p).
 struct Lane {
@@ -308,8 +309,14 @@ struct Lane {
     view: Option<usize>,
 }
 
-/// Views in flight at once at most (each with its own rasterizer buffers).
+/// Views in flight at once by default (each with its own rasterizer buffers).
 pub const LANES: usize = 2;
+
+/// Views in flight at once at most ([`FuseConfig::views_in_flight`]): more lanes hide more
+/// of each view's host work (recording, the label upload, the gathering) where the GPU's own
+/// work per view is short; whether they pay on a GPU is measured with `bench fuse
+/// --views-in-flight` (docs/gpu.md), so the default stays at [`LANES`].
+pub const MAX_LANES: usize = 4;
 
 /// Share of the device-local memory the lanes may fill before no further lane is added.
 const LANE_MEMORY_SHARE: f64 = 0.8;
@@ -357,13 +364,13 @@ impl Lanes {
     }
 }
 
-/// How many lanes to keep (1..=`cfg.views_in_flight`, at most [`LANES`]) when one took
+/// How many lanes to keep (1..=`cfg.views_in_flight`, at most [`MAX_LANES`]) when one took
 /// `lane_bytes` of device memory for its first view: more only while the device-local
 /// memory has room for their buffers too.
 pub(crate) fn lanes_that_fit(gpu: &Gpu, cfg: &FuseConfig, lane_bytes: u64) -> usize {
     let budget = gpu.caps().device_local_bytes() as f64 * LANE_MEMORY_SHARE;
     let mut lanes = 1;
-    while lanes < cfg.views_in_flight.clamp(1, LANES)
+    while lanes < cfg.views_in_flight.clamp(1, MAX_LANES)
         && (gpu.memory_reserved() + lanes as u64 * lane_bytes) as f64 <= budget
     {
         lanes += 1;
@@ -476,7 +483,7 @@ impl FuseStats {
 /// Host buffers the label maps are staged in by the worker threads that read them: one
 /// slot per view in flight (view `v` uses slot `v % slots`). A slot is written again only
 /// once the GPU has run its view: workers run at most [`LABELS_AHEAD`] views ahead of the
-/// view being recorded, the GPU at most [`LANES`] views behind it, and there are more slots
+/// view being recorded, the GPU at most [`MAX_LANES`] views behind it, and there are more slots
 /// than both together.
 struct LabelStaging {
     slots: Vec<Mutex<Option<Buffer>>>,
@@ -485,7 +492,7 @@ struct LabelStaging {
 impl LabelStaging {
     fn new() -> LabelStaging {
         LabelStaging {
-            slots: (0..LABELS_AHEAD + LANES + 1)
+            slots: (0..LABELS_AHEAD + MAX_LANES + 1)
                 .map(|_| Mutex::new(None))
                 .collect(),
         }

@@ -26,7 +26,8 @@ pub mod scores;
 
 pub use accumulate::{
     accumulate, accumulate_assigned, accumulate_raw, gpu_assignable, Accumulation, AssignOnGpu,
-    FuseConfig, FuseStats, LabelSource, ObserveTimes, RowSink, TieNeighbours, LANES, NO_LABEL,
+    FuseConfig, FuseStats, LabelSource, ObserveTimes, RowSink, TieNeighbours, LANES, MAX_LANES,
+    NO_LABEL,
 };
 pub use assign::{
     assign_one_vs_rest, assign_semantic, assign_semantic_near, class_totals, one_vs_rest_row,

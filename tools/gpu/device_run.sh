@@ -221,7 +221,8 @@ run_ours() {
   # consensus's clustering's worst case). 190 views: synth holds at most 400M pixels.
   if [[ "fuse office labels x 190" =~ ${CASES:-.} || "fuse cli office labels x 190" =~ ${CASES:-.} ||
     "fuse office labels x 190 heap" =~ ${CASES:-.} ||
-    "fuse office labels x 190 two cores" =~ ${CASES:-.} ]]; then
+    "fuse office labels x 190 two cores" =~ ${CASES:-.} ||
+    "fuse office labels x 190 lanes 4" =~ ${CASES:-.} ]]; then
     timeout 300 semsplat synth --preset office --spacing "${ROOM_FUSE_SPACING:-0.0115}" \
       --views 190 --test-views 0 --width "${W:-1920}" --height "${H:-1080}" \
       --noise flicker=0.3 --no-previews --out /tmp/office_labels >>"$OUT/bench.log" 2>&1 ||
@@ -230,6 +231,14 @@ run_ours() {
   CAP=120 b "fuse office labels x 190" bench fuse --scene /tmp/office_labels \
     --labels /tmp/office_labels/labels_noisy --views 190 \
     --methods flashsplat,segment-consensus,segment-consensus-relabel
+  # Four views in flight instead of two (this build only: the flag is new in it); the
+  # consensus's lanes were host-bound on a GPU (docs/gpu.md), each view's host work hidden
+  # behind the others' GPU work.
+  if [[ "fuse office labels x 190 lanes 4" =~ ${CASES:-.} ]]; then
+    CAP=120 b_with semsplat "${BEFORE:+after}" "fuse office labels x 190 lanes 4" bench fuse \
+      --scene /tmp/office_labels --labels /tmp/office_labels/labels_noisy --views 190 \
+      --views-in-flight 4 --methods flashsplat,segment-consensus,segment-consensus-relabel
+  fi
   for m in flashsplat vote segment-consensus; do
     CAP=120 cli "fuse cli office labels x 190 $m" fuse --scene /tmp/office_labels/scene.ply \
       --cameras /tmp/office_labels/cameras.json --labels /tmp/office_labels/labels_noisy \
