@@ -109,53 +109,26 @@ fn observations_match_a_cpu_transcription_on(gpu: &Gpu) {
         scene,
     } = observed_office(gpu);
     let inp = input(gpu, &scene, &s, &labels, classes);
-    let (obs, centers, stats) = observed(
-        &inp,
-        &FuseConfig::default(),
-        false,
-        Kept::CenterPixels,
-        None,
-        &mut |_, _| {},
-    )
-    .unwrap();
-    // Two views in flight, each on its own lane; one at a time observes the same.
+    let lanes = |views_in_flight: usize| FuseConfig {
+        views_in_flight,
+        ..FuseConfig::default()
+    };
+    let with_pixels = |cfg: &FuseConfig| {
+        observed(&inp, cfg, false, Kept::CenterPixels, None, &mut |_, _| {}).unwrap()
+    };
+    let (obs, centers, stats) = with_pixels(&FuseConfig::default());
+    // Two views in flight by default, each on its own lane; one at a time, or the most,
+    // observe the same.
     assert_eq!(stats.views_in_flight, 2);
-    let one_lane = FuseConfig {
-        views_in_flight: 1,
-        ..FuseConfig::default()
-    };
-    let (obs_1, centers_1, stats_1) = observed(
-        &inp,
-        &one_lane,
-        false,
-        Kept::CenterPixels,
-        None,
-        &mut |_, _| {},
-    )
-    .unwrap();
-    assert_eq!(stats_1.views_in_flight, 1);
-    assert!(
-        obs_1 == obs && centers_1 == centers,
-        "the lanes changed the observations"
-    );
-    let most_lanes = FuseConfig {
-        views_in_flight: semsplat::fuse::MAX_LANES,
-        ..FuseConfig::default()
-    };
-    let (obs_4, centers_4, stats_4) = observed(
-        &inp,
-        &most_lanes,
-        false,
-        Kept::CenterPixels,
-        None,
-        &mut |_, _| {},
-    )
-    .unwrap();
-    assert_eq!(stats_4.views_in_flight, 4);
-    assert!(
-        obs_4 == obs && centers_4 == centers,
-        "four lanes changed the observations"
-    );
+    for views_in_flight in [1, semsplat::fuse::MAX_LANES] {
+        let (obs_n, centers_n, stats_n) = with_pixels(&lanes(views_in_flight));
+        assert_eq!(stats_n.views_in_flight, views_in_flight);
+        assert!(
+            obs_n == obs && centers_n == centers,
+            "{views_in_flight} lanes changed the observations"
+        );
+    }
+    let one_lane = lanes(1);
     // Without the pixels (plain segment consensus) the same observations, no pixel lists.
     let (obs_drop, centers_drop, _) = observed(
         &inp,
