@@ -281,13 +281,6 @@ impl Groups {
     pub(crate) fn group(&self, k: usize) -> &[u32] {
         &self.members[self.starts[k] as usize..self.starts[k + 1] as usize]
     }
-
-    /// The groups, by key.
-    pub(crate) fn iter(&self) -> impl Iterator<Item = &[u32]> {
-        self.starts
-            .windows(2)
-            .map(|w| &self.members[w[0] as usize..w[1] as usize])
-    }
 }
 
 pub(crate) fn find(parent: &mut [u32], mut x: u32) -> u32 {
