@@ -298,9 +298,9 @@ impl ViewInputs {
 }
 
 /// A rasterizer and the device inputs of the views it runs. The tiled methods keep up to
-/// `views_in_flight` of them ([`LANES`] by default) and give view `v` to lane `v % lanes`: the host records and submits a
-/// view while the GPU still runs the previous ones, instead of leaving the GPU idle while it
-/// records (about 3 ms a view at 1080p).
+/// `views_in_flight` of them ([`LANES`] by default) and give view `v` to lane `v % lanes`:
+/// the host records and submits a view while the GPU still runs the previous ones, instead
+/// of leaving the GPU idle while it records (about 3 ms a view at 1080p).
 struct Lane {
     /// The first field: a dropped lane waits for its view before its inputs are freed.
     raster: Rasterizer,
@@ -483,8 +483,8 @@ impl FuseStats {
 /// Host buffers the label maps are staged in by the worker threads that read them: one
 /// slot per view in flight (view `v` uses slot `v % slots`). A slot is written again only
 /// once the GPU has run its view: workers run at most [`LABELS_AHEAD`] views ahead of the
-/// view being recorded, the GPU at most [`MAX_LANES`] views behind it, and there are more slots
-/// than both together.
+/// view being recorded, the GPU at most [`MAX_LANES`] views behind it, and there are more
+/// slots than both together.
 struct LabelStaging {
     slots: Vec<Mutex<Option<Buffer>>>,
 }

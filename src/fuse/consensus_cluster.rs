@@ -941,6 +941,7 @@ pub(crate) fn renumber(keys: &[u32]) -> Vec<u32> {
 mod tests {
     use super::*;
     use crate::fuse::consensus_adjacent::LIST_MAX;
+    use crate::util::Rng;
     use std::collections::HashMap;
 
     /// Ids by first appearance, as a map from key to the next id numbers them.
@@ -959,7 +960,6 @@ mod tests {
         assert_eq!(renumber(&keys), expected);
         assert!(id.len() > 100, "{} distinct keys", id.len());
     }
-    use crate::util::Rng;
 
     /// The adjacency built on every core holds for each segment what a plain map, summed
     /// pair by pair, holds: pieces of random sizes (a few past the lists' length, so maps

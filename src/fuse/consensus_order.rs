@@ -22,7 +22,7 @@ use super::assign::Assignment;
 use super::consensus_decide::Consensus;
 use crate::contract::NO_NEIGHBOUR;
 use crate::gpu::{Buffer, Gpu};
-use crate::util::{gather, merge_sorted_runs, parallel_map};
+use crate::util::{gather, map_in_blocks, merge_sorted_runs, parallel_map};
 
 /// A numbering of the scene's Gaussians in space, and its inverse.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -214,11 +214,7 @@ fn cells(means: &[[f32; 3]]) -> Vec<u32> {
             .map(|i| (((m[i] as f64 - lo[i]) / cell).floor() as i64).clamp(0, dims[i] - 1));
         ((c[2] * dims[1] + c[1]) * dims[0] + c[0]) as u32
     };
-    let blocks = parallel_map(means.len().div_ceil(BLOCK), |b| {
-        let block = &means[b * BLOCK..means.len().min((b + 1) * BLOCK)];
-        block.iter().map(|&m| cell_of(m)).collect::<Vec<u32>>()
-    });
-    blocks.concat()
+    map_in_blocks(means.len(), BLOCK, |g| cell_of(means[g]))
 }
 
 #[cfg(test)]

@@ -10,7 +10,7 @@
 //! find region boundaries here; they vote once per view, per segment.
 
 use super::accumulate::NO_LABEL;
-use crate::util::{parallel_map, split_parts, take_part};
+use crate::util::{map_in_blocks, parallel_map, split_parts, take_part};
 use std::borrow::Cow;
 use std::ops::Range;
 use std::sync::atomic::{AtomicU32, Ordering};
@@ -354,14 +354,7 @@ impl SharedSets {
 
     /// Each member's root (its set's lowest member), on every core; after every join.
     pub(crate) fn roots(&self) -> Vec<u32> {
-        const BLOCK: usize = 1 << 16;
-        let n = self.0.len();
-        let blocks = parallel_map(n.div_ceil(BLOCK), |b| {
-            (b * BLOCK..n.min((b + 1) * BLOCK))
-                .map(|x| self.find(x as u32))
-                .collect::<Vec<_>>()
-        });
-        blocks.concat()
+        map_in_blocks(self.0.len(), 1 << 16, |x| self.find(x as u32))
     }
 }
 

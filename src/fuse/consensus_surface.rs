@@ -17,7 +17,7 @@ use glam::{Quat, Vec3};
 use super::consensus_decide::ConsensusParams;
 use super::consensus_order::SpatialOrder;
 use crate::scene::Gaussians;
-use crate::util::parallel_map;
+use crate::util::map_in_blocks;
 
 /// The Gaussians' shapes, as the scene lists them: what the consensus reads of the
 /// geometry (centers for the neighbour graph, scales and rotations for the surfaces).
@@ -67,16 +67,11 @@ impl SurfaceNormals {
     pub fn of(shapes: &GaussianShapes, order: &SpatialOrder, p: &ConsensusParams) -> Self {
         assert_eq!(order.len(), shapes.len(), "a number per Gaussian");
         const BLOCK: usize = 1 << 14;
-        let blocks = parallel_map(shapes.len().div_ceil(BLOCK), |b| {
-            (b * BLOCK..shapes.len().min((b + 1) * BLOCK))
-                .map(|s| {
-                    let g = order.scene(s as u32) as usize;
-                    flat_normal(shapes.log_scales[g], shapes.quats[g], p.flat_ratio)
-                        .unwrap_or([0.0; 3])
-                })
-                .collect::<Vec<_>>()
+        let normals = map_in_blocks(shapes.len(), BLOCK, |s| {
+            let g = order.scene(s as u32) as usize;
+            flat_normal(shapes.log_scales[g], shapes.quats[g], p.flat_ratio).unwrap_or([0.0; 3])
         });
-        SurfaceNormals::from_normals(blocks.concat(), p.crease_degrees)
+        SurfaceNormals::from_normals(normals, p.crease_degrees)
     }
 
     /// From unit normals ([0, 0, 0]: not flat) by number; a crease angle of 90 degrees or

@@ -9,7 +9,7 @@ use glam::DVec3;
 use super::room::Room;
 use super::surface_sampling::SurfaceSample;
 use crate::scene::Camera;
-use crate::util::parallel_map;
+use crate::util::map_in_blocks;
 
 /// Nearest depth a camera sees (meters).
 const NEAR: f64 = 0.01;
@@ -22,15 +22,9 @@ const CHUNK: usize = 1024;
 /// For each sample: whether some camera sees its center or a point one standard deviation
 /// out along either in-plane axis (so a Gaussian half hidden behind an occluder stays).
 pub fn seen_by_any(room: &Room, cameras: &[Camera], samples: &[SurfaceSample]) -> Vec<bool> {
-    // Chunks are the work items (a lock per sample would cost more than its check).
-    let chunks: Vec<&[SurfaceSample]> = samples.chunks(CHUNK).collect();
-    parallel_map(chunks.len(), |k| {
-        chunks[k]
-            .iter()
-            .map(|s| sample_seen(room, cameras, s))
-            .collect::<Vec<bool>>()
+    map_in_blocks(samples.len(), CHUNK, |i| {
+        sample_seen(room, cameras, &samples[i])
     })
-    .concat()
 }
 
 fn sample_seen(room: &Room, cameras: &[Camera], s: &SurfaceSample) -> bool {

@@ -13,8 +13,8 @@ pub use atomic_write::{
     StagedFile,
 };
 pub use parallel::{
-    cores, merge_sorted_into, merge_sorted_runs, parallel_map, parallel_map_on, prefetch_ordered,
-    split_parts, take_part, BusyTime,
+    cores, map_in_blocks, merge_sorted_into, merge_sorted_runs, parallel_map, parallel_map_on,
+    prefetch_ordered, split_parts, take_part, BusyTime,
 };
 pub use rng::Rng;
 

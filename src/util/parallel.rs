@@ -14,6 +14,20 @@ pub fn parallel_map<T: Send>(count: usize, f: impl Fn(usize) -> T + Sync) -> Vec
     parallel_map_on(usize::MAX, count, f)
 }
 
+/// `f(0), ..., f(count - 1)` computed on every core in blocks of `block` indices (each
+/// block one work item: a lock per index would cost more than most items), in index order.
+pub fn map_in_blocks<T: Send>(count: usize, block: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
+    let block = block.max(1);
+    let blocks = parallel_map(count.div_ceil(block), |b| {
+        (b * block..count.min((b + 1) * block))
+            .map(&f)
+            .collect::<Vec<T>>()
+    });
+    let mut out = Vec::with_capacity(count);
+    blocks.into_iter().for_each(|block| out.extend(block));
+    out
+}
+
 /// [`parallel_map`] on at most `threads` threads: items that each hold much memory while
 /// they are computed (a large label map decoded) bound how many run at once.
 pub fn parallel_map_on<T: Send>(
@@ -156,9 +170,9 @@ pub fn prefetch_ordered<T: Send>(
 }
 
 /// Sorted runs merged into one sorted list, pairs of runs merged on every core, round by
-/// round (the last merge, of two halves, on one). Runs sorted on every core and merged so
-/// sort millions of items (the ordered joins' first candidates) where one core sorted them
-/// all.
+/// round (the last merge, of two halves, on one): runs sorted on every core and merged so
+/// sort millions of items (the ordered joins' first candidates, the Gaussians by grid
+/// cell) where one sort ran on one core.
 pub fn merge_sorted_runs<T: Ord + Copy + Send + Sync>(mut runs: Vec<Vec<T>>) -> Vec<T> {
     while runs.len() > 1 {
         let pairs = runs.len().div_ceil(2);
@@ -200,6 +214,16 @@ pub fn merge_sorted_into<T: Ord + Copy>(into: &mut Vec<T>, fresh: &[T]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Blocks of any size, the last one short, give the items of one map in order.
+    #[test]
+    fn map_in_blocks_is_a_map_in_order() {
+        for (count, block) in [(0, 4), (1, 4), (10, 3), (12, 4), (1000, 7), (5, 0)] {
+            let expected: Vec<String> = (0..count).map(|i| format!("{}", i * i)).collect();
+            let got = map_in_blocks(count, block, |i| format!("{}", i * i));
+            assert_eq!(got, expected, "{count} in blocks of {block}");
+        }
+    }
 
     /// Runs of every length (none, one, odd counts of runs, empty runs among them) merge
     /// to what one sort of all their items gives.

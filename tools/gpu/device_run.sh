@@ -235,7 +235,7 @@ run_ours() {
   # consensus's lanes were host-bound on a GPU (docs/gpu.md), each view's host work hidden
   # behind the others' GPU work.
   if [[ "fuse office labels x 190 lanes 4" =~ ${CASES:-.} ]]; then
-    CAP=120 b_with semsplat "${BEFORE:+after}" "fuse office labels x 190 lanes 4" bench fuse \
+    CAP=120 b_with semsplat "" "fuse office labels x 190 lanes 4" bench fuse \
       --scene /tmp/office_labels --labels /tmp/office_labels/labels_noisy --views 190 \
       --views-in-flight 4 --methods flashsplat,segment-consensus,segment-consensus-relabel
   fi
