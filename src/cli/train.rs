@@ -24,7 +24,7 @@ use semsplat::train::trainer::{
     Trainer,
 };
 use semsplat::train::views::TrainView;
-use semsplat::util::{interrupt, parallel_map, write_bytes_atomic};
+use semsplat::util::{interrupt, parallel_map_on, write_bytes_atomic};
 
 #[derive(Args)]
 pub struct TrainArgs {
@@ -278,7 +278,10 @@ fn train_views(args: &TrainArgs, data: &Dataset) -> Result<Vec<TrainView>> {
             labels: data.compact_labels(i)?.unwrap_or_default(),
         })
     };
-    parallel_map(data.cameras.len(), view).into_iter().collect()
+    // On threads of the call's own: each keeps its decoder's buffer of samples until it ends.
+    parallel_map_on(usize::MAX, data.cameras.len(), view)
+        .into_iter()
+        .collect()
 }
 
 /// The schedule and weights the flags ask for, checked against the initial scene's size.

@@ -5,6 +5,7 @@ pub mod interrupt;
 pub mod memory;
 pub mod npy;
 pub mod parallel;
+mod pool;
 pub mod quad_heap;
 pub mod rng;
 

@@ -4,14 +4,20 @@
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Mutex, MutexGuard};
 
+use super::pool::run_with_helpers;
+
 /// The cores this process may run on (1 where the system does not say).
 pub fn cores() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get())
 }
 
-/// `f(0), ..., f(count - 1)`, computed on up to all cores, in index order.
+/// `f(0), ..., f(count - 1)`, computed on up to all cores, in index order: on the calling
+/// thread and the process's kept worker threads (src/util/pool.rs).
 pub fn parallel_map<T: Send>(count: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
-    parallel_map_on(usize::MAX, count, f)
+    let items = Items::new(count);
+    let helpers = cores().min(count).saturating_sub(1);
+    run_with_helpers(helpers, &|| items.compute(&f));
+    items.into_results()
 }
 
 /// `f(0), ..., f(count - 1)` computed on every core in blocks of `block` indices (each
@@ -28,34 +34,60 @@ pub fn map_in_blocks<T: Send>(count: usize, block: usize, f: impl Fn(usize) -> T
     out
 }
 
-/// [`parallel_map`] on at most `threads` threads: items that each hold much memory while
-/// they are computed (a large label map decoded) bound how many run at once.
+/// [`parallel_map`] on at most `threads` threads, started for the call and ended after
+/// it: for items that each hold much memory while they are computed (a large label map
+/// decoded), so that their number bounds how many run at once, and whatever a thread keeps
+/// for its next item (the decoder's buffer of samples) goes with the call.
 pub fn parallel_map_on<T: Send>(
     threads: usize,
     count: usize,
     f: impl Fn(usize) -> T + Sync,
 ) -> Vec<T> {
-    let results: Mutex<Vec<Option<T>>> = Mutex::new((0..count).map(|_| None).collect());
-    let next = AtomicUsize::new(0);
+    let items = Items::new(count);
     let threads = cores().min(threads).min(count).max(1);
     std::thread::scope(|scope| {
         for _ in 0..threads {
-            scope.spawn(|| loop {
-                let i = next.fetch_add(1, Ordering::Relaxed);
-                if i >= count {
-                    break;
-                }
-                let value = f(i);
-                results.lock().unwrap_or_else(|e| e.into_inner())[i] = Some(value);
-            });
+            scope.spawn(|| items.compute(&f));
         }
     });
-    results
-        .into_inner()
-        .unwrap_or_else(|e| e.into_inner())
-        .into_iter()
-        .map(|v| v.expect("every index was computed"))
-        .collect()
+    items.into_results()
+}
+
+/// The items of a parallel map: each thread takes the next index as it finishes one, so
+/// slow items do not stall a fixed split.
+struct Items<T> {
+    results: Mutex<Vec<Option<T>>>,
+    next: AtomicUsize,
+    count: usize,
+}
+
+impl<T> Items<T> {
+    fn new(count: usize) -> Items<T> {
+        Items {
+            results: Mutex::new((0..count).map(|_| None).collect()),
+            next: AtomicUsize::new(0),
+            count,
+        }
+    }
+
+    /// Computes items until none is left to take.
+    fn compute(&self, f: &impl Fn(usize) -> T) {
+        loop {
+            let i = self.next.fetch_add(1, Ordering::Relaxed);
+            if i >= self.count {
+                return;
+            }
+            let value = f(i);
+            self.results.lock().unwrap_or_else(|e| e.into_inner())[i] = Some(value);
+        }
+    }
+
+    fn into_results(self) -> Vec<T> {
+        (self.results.into_inner().unwrap_or_else(|e| e.into_inner()))
+            .into_iter()
+            .map(|v| v.expect("every index was computed"))
+            .collect()
+    }
 }
 
 /// Seconds spent in a closure, summed over the threads that ran it (a worker pool's busy
