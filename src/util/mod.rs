@@ -15,7 +15,7 @@ pub use atomic_write::{
 };
 pub use parallel::{
     cores, map_in_blocks, merge_sorted_into, merge_sorted_runs, parallel_map, parallel_map_on,
-    prefetch_ordered, split_parts, take_part, BusyTime,
+    partition_point_near, prefetch_ordered, split_parts, take_part, BusyTime,
 };
 pub use rng::Rng;
 

@@ -243,6 +243,22 @@ pub fn merge_sorted_into<T: Ord + Copy>(into: &mut Vec<T>, fresh: &[T]) {
     }
 }
 
+/// The partition point of `items` under `below` (true on a prefix, false after), found by
+/// steps doubling from the start and then a binary search of the last step: its cost grows
+/// with the log of the answer, not of the length. For a sorted list searched in order for
+/// ascending keys, each search starting where the last ended (a segment's views looked up
+/// in a larger segment's: the answers are near).
+pub fn partition_point_near<T>(items: &[T], below: impl Fn(&T) -> bool) -> usize {
+    let (mut passed, mut step) = (0, 1);
+    while passed + step <= items.len() && below(&items[passed + step - 1]) {
+        passed += step;
+        step *= 2;
+    }
+    // Every item before `passed` is below; the one at `passed + step - 1` (if any) is not.
+    let end = (passed + step - 1).min(items.len());
+    passed + items[passed..end].partition_point(below)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -279,6 +295,25 @@ mod tests {
             expected.sort_unstable();
             runs.rotate_left(count / 2);
             assert_eq!(merge_sorted_runs(runs), expected, "{count} runs");
+        }
+    }
+
+    /// The doubling search finds what a binary search of the whole list finds, for every
+    /// key of sorted lists of every short length and some long ones, duplicates included.
+    #[test]
+    fn partition_point_near_is_the_partition_point() {
+        let mut rng = crate::util::Rng::new(11);
+        for len in (0..40).chain([100, 1000, 4097]) {
+            let mut items: Vec<u32> = (0..len).map(|_| rng.below(60) as u32).collect();
+            items.sort_unstable();
+            for key in 0..62 {
+                let expected = items.partition_point(|&x| x < key);
+                assert_eq!(
+                    partition_point_near(&items, |&x| x < key),
+                    expected,
+                    "{len} {key}"
+                );
+            }
         }
     }
 
