@@ -173,12 +173,12 @@ impl RegionCounts {
             }
         }
         merge_sorted_into(&mut self.counts, &fresh);
-        let (mut new_views, mut run, mut at) = (Vec::new(), 0, 0);
+        let (mut new_views, mut run, mut entry) = (Vec::new(), 0, 0);
         for &(view, ..) in other.table() {
             run += partition_point_near(&self.counts[run..], |e| e.0 < view);
             let d = self.dominant_from(run, view);
-            at += partition_point_near(&self.dominant[at..], |e| e.0 < view);
-            match self.dominant.get_mut(at) {
+            entry += partition_point_near(&self.dominant[entry..], |e| e.0 < view);
+            match self.dominant.get_mut(entry) {
                 Some(e) if e.0 == view => *e = d,
                 _ => new_views.push(d),
             }
@@ -818,7 +818,8 @@ fn piece_regions(obs: &Observations, piece: &[u32]) -> SegmentRegions {
 /// The region counts of the segments that hold them, by segment (its lowest Gaussian): a
 /// slot per Gaussian and the counts in a list, where a [`RegionCounts`] for every Gaussian
 /// took 48 bytes each, defaults written on the one core the ordered joins run on (17-22 ms
-/// of a capture's 977k Gaussians), though at most one segment in four ever holds counts.
+/// of a capture's 977k Gaussians), though only the pieces and the segments joins make ever
+/// hold counts.
 struct SegmentRegions {
     /// Per segment, its counts' index in `held`, or [`SegmentRegions::NONE`].
     slot: Vec<u32>,

@@ -1,11 +1,11 @@
 //! The worker threads [`super::parallel_map`] runs on: started once and kept for the
 //! process, rather than spawned for each call.
 //!
-//! A segment consensus makes about eighty parallel passes, most of them milliseconds long.
-//! Spawned per call, each pass started a thread per core and ended them again: every
-//! thread's stack mapped and unmapped (an unmap interrupts every core the process runs on
-//! to flush its TLB, dear in a virtual machine of sixteen cores), and each new thread's
-//! allocations met an empty cache of its own and went to the one malloc arena
+//! A segment consensus clusters and decides in about seventy parallel passes, most of them
+//! milliseconds long. Spawned per call, each pass started a thread per core and ended them
+//! again: every thread's stack mapped and unmapped (an unmap interrupts every core the
+//! process runs on to flush its TLB, dear in a virtual machine of sixteen cores), and each
+//! new thread's allocations met an empty cache of its own and went to the one malloc arena
 //! (src/util/memory.rs). Kept threads pay that once.
 //!
 //! A call posts a job and works on it itself, as one of its threads; idle workers join
