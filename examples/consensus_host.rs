@@ -1,0 +1,222 @@
+//! The segment consensus's host passes (clustering and decision) run again and again on one
+//! run's observations, for profiling them (`perf record`, `perf stat`, `taskset`) without
+//! the views between: the office at 1080p spends about a minute on lavapipe's views and
+//! a second in these passes.
+//!
+//! ```sh
+//! cargo build --release --example consensus_host
+//! target/release/examples/consensus_host --scene OFFICE --labels OFFICE/labels_noisy \
+//!     --cache /tmp/office.observations --repeats 5 --profile
+//! ```
+//!
+//! The first call runs the views (as `semsplat fuse --method segment-consensus` does) and
+//! writes the observations and neighbours to `--cache`; later calls read them from there.
+//! Each repetition prints the clustering's and the decision's seconds and a hash of the
+//! segments, classes, confidences and entropies, which must not change between
+//! repetitions, and changes between builds only when their outputs do. The process's
+//! allocator is set as the CLI's (one arena, fixed thresholds) unless `--glibc-defaults`.
+
+use std::hash::{Hash, Hasher};
+use std::io::{BufReader, BufWriter, Read, Write};
+use std::path::{Path, PathBuf};
+
+use anyhow::{ensure, Context, Result};
+use clap::Parser;
+use semsplat::dataset::{Dataset, DatasetPaths};
+use semsplat::fuse::consensus::{consensus_run, ConsensusInput, Kept};
+use semsplat::fuse::consensus_cluster::cluster_segments_timed;
+use semsplat::fuse::consensus_decide::{decide_timed, Consensus};
+use semsplat::fuse::consensus_order::SpatialOrder;
+use semsplat::fuse::consensus_segments::Observations;
+use semsplat::fuse::consensus_surface::SurfaceNormals;
+use semsplat::fuse::{ConsensusParams, FuseConfig, GaussianShapes, Method};
+use semsplat::scene::labels::LabelFormat;
+use semsplat::scene::Gaussians;
+
+#[derive(Parser)]
+struct Args {
+    /// Scene folder (scene.ply, cameras.json).
+    #[arg(long)]
+    scene: PathBuf,
+    /// Label maps of the scene's cameras (read only when the cache does not exist).
+    #[arg(long)]
+    labels: PathBuf,
+    /// Observations and neighbours of one run: read if the file exists, else written.
+    #[arg(long)]
+    cache: PathBuf,
+    /// Clusterings and decisions to run.
+    #[arg(long, default_value_t = 3)]
+    repeats: usize,
+    /// Print each repetition's step times (the clustering's and decision's profiles).
+    #[arg(long)]
+    profile: bool,
+    /// Leave glibc's allocator as it starts (the CLI sets one arena and fixed thresholds).
+    #[arg(long)]
+    glibc_defaults: bool,
+}
+
+fn main() -> Result<()> {
+    let args = Args::parse();
+    if !args.glibc_defaults {
+        semsplat::util::memory::configure_malloc();
+    }
+    let (g, _) = semsplat::bench::read_scene_folder(&args.scene)?;
+    let shapes = GaussianShapes::of(&g);
+    let params = ConsensusParams::default();
+    let run = match args.cache.exists() {
+        true => read_cache(&args.cache)?,
+        false => {
+            let run = observe_views(&args, &g, &params)?;
+            write_cache(&args.cache, &run)?;
+            run
+        }
+    };
+    ensure!(
+        run.observations.n == g.len(),
+        "{} holds {} Gaussians' observations, the scene {}",
+        args.cache.display(),
+        run.observations.n,
+        g.len()
+    );
+    let order = SpatialOrder::of(shapes.means);
+    let surfaces = SurfaceNormals::of(&shapes, &order, &params);
+    for _ in 0..args.repeats {
+        let start = std::time::Instant::now();
+        let (segment, clustering) =
+            cluster_segments_timed(&run.observations, &run.knn, &surfaces, &params);
+        let cluster_s = start.elapsed().as_secs_f64();
+        let start = std::time::Instant::now();
+        let (consensus, decision) =
+            decide_timed(&run.observations, &run.knn, segment, run.classes, &params);
+        let decide_s = start.elapsed().as_secs_f64();
+        println!(
+            "clustering {cluster_s:.3} s, decision {decide_s:.3} s, outputs {:016x}",
+            outputs_hash(&consensus)
+        );
+        if args.profile {
+            println!("  {clustering:?}\n  {decision:?}");
+        }
+    }
+    Ok(())
+}
+
+/// What the host passes read: the observations and neighbours (both numbered in space) and
+/// the classes the labels hold.
+struct Observed {
+    observations: Observations,
+    knn: Vec<u32>,
+    classes: usize,
+}
+
+/// The views of one segment consensus run, as `fuse` runs them.
+fn observe_views(args: &Args, g: &Gaussians, params: &ConsensusParams) -> Result<Observed> {
+    let dataset = Dataset::open(&DatasetPaths {
+        cameras: &args.scene.join("cameras.json"),
+        labels: &args.labels,
+        class_table: None,
+        train_only: false,
+        format: LabelFormat::default(),
+    })?;
+    let gpu = semsplat::gpu::Gpu::new()?;
+    let scene = semsplat::render::GpuScene::upload(&gpu, g)?;
+    let input = ConsensusInput {
+        gpu: &gpu,
+        scene: &scene,
+        shapes: GaussianShapes::of(g),
+        cams: &dataset.cameras,
+        labels: &dataset,
+        classes: dataset.classes.len(),
+    };
+    let cfg = FuseConfig {
+        method: Method::SegmentConsensus,
+        ..Default::default()
+    };
+    let run = consensus_run(&input, &cfg, params, Kept::Observations, &mut |_, _| {})?;
+    Ok(Observed {
+        observations: run.observations,
+        knn: run.knn,
+        classes: dataset.classes.len(),
+    })
+}
+
+/// A hash of what the decision gives every Gaussian (and its segments).
+fn outputs_hash(consensus: &Consensus) -> u64 {
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    consensus.segment.hash(&mut h);
+    consensus.assignment.class.hash(&mut h);
+    let floats = consensus
+        .assignment
+        .confidence
+        .iter()
+        .chain(&consensus.entropy);
+    floats.for_each(|x| x.to_bits().hash(&mut h));
+    h.finish()
+}
+
+fn write_cache(path: &Path, run: &Observed) -> Result<()> {
+    let o = &run.observations;
+    let mut f = BufWriter::new(std::fs::File::create(path).context("cannot create the cache")?);
+    write_words(&mut f, &[o.n as u64, run.classes as u64])?;
+    write_words(
+        &mut f,
+        &o.offsets.iter().map(|&x| x as u64).collect::<Vec<_>>(),
+    )?;
+    write_words(&mut f, &o.view)?;
+    write_words(&mut f, &o.label)?;
+    write_words(&mut f, &o.region)?;
+    write_words(&mut f, &o.edge.iter().map(|&e| e as u8).collect::<Vec<_>>())?;
+    write_words(&mut f, &run.knn)?;
+    f.flush().context("cannot write the cache")
+}
+
+fn read_cache(path: &Path) -> Result<Observed> {
+    let file = std::fs::File::open(path).context("cannot open the cache")?;
+    let bytes = file.metadata()?.len();
+    let mut f = BufReader::new(file);
+    let sizes: Vec<u64> = read_words(&mut f, bytes)?;
+    ensure!(
+        sizes.len() == 2,
+        "{} is not a cache of observations",
+        path.display()
+    );
+    let offsets: Vec<u64> = read_words(&mut f, bytes)?;
+    let observations = Observations {
+        n: sizes[0] as usize,
+        offsets: offsets.into_iter().map(|x| x as usize).collect(),
+        view: read_words(&mut f, bytes)?,
+        label: read_words(&mut f, bytes)?,
+        region: read_words(&mut f, bytes)?,
+        edge: read_words::<u8>(&mut f, bytes)?
+            .into_iter()
+            .map(|e| e != 0)
+            .collect(),
+    };
+    let knn = read_words(&mut f, bytes)?;
+    let classes = sizes[1] as usize;
+    Ok(Observed {
+        observations,
+        knn,
+        classes,
+    })
+}
+
+/// A list as its length and its bytes (this machine's byte order: a cache is local).
+fn write_words<T: bytemuck::Pod>(f: &mut impl Write, items: &[T]) -> Result<()> {
+    f.write_all(&(items.len() as u64).to_le_bytes())?;
+    Ok(f.write_all(bytemuck::cast_slice(items))?)
+}
+
+/// A list [`write_words`] wrote, in a file of `bytes` bytes.
+fn read_words<T: bytemuck::Pod>(f: &mut impl Read, bytes: u64) -> Result<Vec<T>> {
+    let mut len = [0u8; 8];
+    f.read_exact(&mut len).context("the cache ends early")?;
+    let len = u64::from_le_bytes(len);
+    ensure!(
+        len.saturating_mul(std::mem::size_of::<T>() as u64) <= bytes,
+        "the cache is not one this program wrote"
+    );
+    let mut items = vec![T::zeroed(); len as usize];
+    f.read_exact(bytemuck::cast_slice_mut(&mut items))
+        .context("the cache ends early")?;
+    Ok(items)
+}
