@@ -200,6 +200,24 @@ mod tests {
         assert_eq!(again, (0..100).map(|i| i * 2).collect::<Vec<_>>());
     }
 
+    /// A panic in a nested map's item (run on a worker or on a caller) passes up through
+    /// both maps to the outer caller, with its message.
+    #[test]
+    fn a_nested_panic_reaches_the_outer_caller() {
+        let caught = std::panic::catch_unwind(|| {
+            parallel_map(8, |i| {
+                parallel_map(8, |j| {
+                    if (i, j) == (5, 6) {
+                        panic!("item 5.6 failed");
+                    }
+                    i * j
+                })
+            })
+        });
+        let message = caught.expect_err("the maps panic");
+        assert_eq!(message.downcast_ref::<&str>(), Some(&"item 5.6 failed"));
+    }
+
     /// Several threads mapping at once share the workers: every map completes with its
     /// own results.
     #[test]
