@@ -222,7 +222,8 @@ run_ours() {
   if [[ "fuse office labels x 190" =~ ${CASES:-.} || "fuse cli office labels x 190" =~ ${CASES:-.} ||
     "fuse office labels x 190 heap" =~ ${CASES:-.} ||
     "fuse office labels x 190 two cores" =~ ${CASES:-.} ||
-    "fuse office labels x 190 lanes 4" =~ ${CASES:-.} ]]; then
+    "fuse office labels x 190 lanes 4" =~ ${CASES:-.} ||
+    "host scaling office labels" =~ ${CASES:-.} ]]; then
     timeout 300 semsplat synth --preset office --spacing "${ROOM_FUSE_SPACING:-0.0115}" \
       --views 190 --test-views 0 --width "${W:-1920}" --height "${H:-1080}" \
       --noise flicker=0.3 --no-previews --out /tmp/office_labels >>"$OUT/bench.log" 2>&1 ||
@@ -284,6 +285,21 @@ run_ours() {
     (taskset -pc 0,1 $BASHPID >/dev/null || { say "taskset failed: no two-core case"; exit; }
       CAP=120 b "fuse office labels x 190 two cores" bench fuse --scene /tmp/office_labels \
         --labels /tmp/office_labels/labels_noisy --views 190 --methods segment-consensus)
+  fi
+  # The consensus's host passes alone on 1, 2, 4, 8 and every core (examples/
+  # consensus_host: the office's views once, then its clustering and decision three times
+  # on the same observations, every step timed, into bench.log): where each pass stops
+  # scaling on this machine, and whether a warm repetition runs faster than the first. Its
+  # outputs hash is the development VM's (65cdd370932672fe at 1920x1080) wherever the
+  # views observe the same.
+  if [[ "host scaling office labels" =~ ${CASES:-.} ]] && [ -x "$bin/consensus_host" ] &&
+    [ "$(left)" -gt 60 ]; then
+    for cores in 0 0-1 0-3 0-7 "0-$(($(nproc) - 1))"; do
+      timeout 90 taskset -c "$cores" "$bin/consensus_host" --scene /tmp/office_labels \
+        --labels /tmp/office_labels/labels_noisy --cache /tmp/office.observations \
+        --repeats 3 --profile 2>&1 | sed "s/^/host scaling, cores $cores: /" >>"$OUT/bench.log"
+    done
+    say "host scaling office labels: $(grep -c '^host scaling.*outputs' "$OUT/bench.log") repetitions (bench.log)"
   fi
   # Real size (#14): 6M Gaussians, as Mip-NeRF 360's garden.
   b "render random 6M C=16" bench render --n 6000000 --width "${W:-1920}" --height "${H:-1080}" \
