@@ -277,9 +277,9 @@ fn segment_votes(
 ) -> (Vec<Vec<f64>>, Vec<Vec<f64>>, Vec<usize>) {
     const BLOCK: usize = 1024;
     // Each block's votes in one flat table, cut into the segments' vectors on this thread:
-    // under the CLI's one malloc arena every allocation of a worker thread (a fresh thread
-    // has no cache of freed blocks) takes the arena's lock, and there are tens of thousands
-    // of segments.
+    // under the CLI's one malloc arena every allocation a worker thread's cache of freed
+    // blocks cannot serve (new blocks, as these are) takes the arena's lock, and there are
+    // tens of thousands of segments.
     let blocks = parallel_map(segments.div_ceil(BLOCK), |b| {
         let in_block = b * BLOCK..segments.min((b + 1) * BLOCK);
         let cells = in_block.len() * classes;
