@@ -1,5 +1,6 @@
 //! A parallel map over indices on every core, for CPU work whose items differ in cost
-//! (threads take the next index as they finish, so slow items do not stall a fixed split).
+//! (threads take the next index as they finish, so slow items do not stall a fixed split),
+//! and the sorted-list helpers the parallel passes share (merging runs, searching near).
 
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Mutex, MutexGuard};
