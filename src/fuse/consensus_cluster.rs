@@ -1185,9 +1185,8 @@ mod tests {
         let pieces = Pieces::of(&roots);
         let firsts: Vec<u32> = (0..n as u32).filter(|&g| roots[g as usize] == g).collect();
         assert_eq!(pieces.first, firsts);
-        for g in 0..n {
-            let piece = pieces.of_gaussian[g] as usize;
-            assert_eq!(pieces.first[piece], roots[g], "Gaussian {g}");
+        for (g, (&piece, &root)) in pieces.of_gaussian.iter().zip(&roots).enumerate() {
+            assert_eq!(pieces.first[piece as usize], root, "Gaussian {g}");
         }
         for count in [1, 63, 64, 65, 130] {
             let mut set = SegmentSet::all(count);
