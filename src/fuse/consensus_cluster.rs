@@ -39,8 +39,8 @@ use super::consensus_surface::SurfaceNormals;
 use crate::contract::NO_NEIGHBOUR;
 use crate::util::quad_heap::QuadHeap;
 use crate::util::{
-    cores, map_in_blocks, merge_sorted_into, merge_sorted_runs, parallel_map, partition_point_near,
-    prefetch, split_parts, take_part, Laps,
+    collect_parts, cores, map_in_blocks, merge_sorted_into, merge_sorted_runs, parallel_map,
+    partition_point_near, prefetch, split_parts, take_part, Laps,
 };
 
 /// What the views said of the neighbour pairs between two segments, summed over the pairs
@@ -718,38 +718,31 @@ fn neighbour_pairs(
         let of_g = |g| lists(g).iter().filter(|&&h| from_g(g, h)).count();
         block(b).map(of_g).sum::<usize>()
     });
-    let total = counts.iter().sum();
-    // Counted first, so each block writes its part of one list in place, on its thread:
-    // the blocks' lists copied together wrote it all again on one (110 MB at a million
-    // Gaussians, each page faulted in anew).
-    let mut pairs: Vec<Pair> = Vec::with_capacity(total);
-    let parts = split_parts(&mut pairs.spare_capacity_mut()[..total], counts);
-    parallel_map(blocks, |b| {
-        let mut part = take_part(&parts[b]);
-        let mut slots = part.iter_mut();
-        for g in block(b) {
-            for &h in lists(g).iter().filter(|&&h| from_g(g, h)) {
-                let c = co_occurrence(obs, g, h as usize);
-                let e = PairEvidence {
-                    together: c.together,
-                    apart: c.apart,
-                    on_edge: c.on_edge,
-                    pairs: 1,
-                    pairs_along: surfaces.along(g, h as usize) as u32,
-                };
-                slots
-                    .next()
-                    .expect("a counted pair")
-                    .write((g as u32, h, e));
-            }
-        }
-        assert!(slots.next().is_none(), "every counted pair written");
-    });
-    drop(parts);
-    // SAFETY: the parts cover the first `total` slots and each block wrote every slot of
-    // its part (both asserted on its thread, whose panic would have stopped us above).
-    unsafe { pairs.set_len(total) };
-    pairs
+    // Counted first, so each block writes its part of one list in place, on its thread.
+    collect_parts(counts, |b| {
+        block(b).flat_map(move |g| {
+            let pairs_of_g = lists(g).iter().filter(move |&&h| from_g(g, h));
+            pairs_of_g.map(move |&h| (g as u32, h, pair_evidence(obs, surfaces, g, h as usize)))
+        })
+    })
+}
+
+/// What the views said of neighbours `g` and `h` ([`co_occurrence`]), as the evidence of one
+/// pair.
+fn pair_evidence(
+    obs: &Observations,
+    surfaces: &SurfaceNormals,
+    g: usize,
+    h: usize,
+) -> PairEvidence {
+    let c = co_occurrence(obs, g, h);
+    PairEvidence {
+        together: c.together,
+        apart: c.apart,
+        on_edge: c.on_edge,
+        pairs: 1,
+        pairs_along: surfaces.along(g, h) as u32,
+    }
 }
 
 /// Each Gaussian's piece (its lowest Gaussian) after the outright joins: neighbour pairs
@@ -933,20 +926,24 @@ fn runs_of_weight<T>(
 /// Per segment after the outright joins (`piece`: each Gaussian's piece, of `pieces`), the
 /// adjacent segments with the evidence of the pairs between them.
 fn piece_adjacency(pairs: &[Pair], piece: &[u32], pieces: usize) -> Vec<Adjacent> {
-    let between = |&&(g, h, _): &&Pair| piece[g as usize] != piece[h as usize];
-    let mut degree = vec![0usize; pieces];
-    for &(g, h, _) in pairs.iter().filter(between) {
-        degree[piece[g as usize] as usize] += 1;
-        degree[piece[h as usize] as usize] += 1;
+    let between = pairs_between_pieces(pairs, piece);
+    let mut degree = vec![0u32; pieces];
+    for &(a, b, _) in &between {
+        degree[a as usize] += 1;
+        degree[b as usize] += 1;
     }
     // Sized once rather than grown pair by pair (a million lists and maps), here, on one
     // thread: under the one malloc arena (src/util/memory.rs) the threads below would wait
     // on each other's allocations. A piece's degree counts its pairs, so it may get room
     // for more segments than it meets.
-    let mut edges: Vec<Adjacent> = degree.iter().map(|&d| Adjacent::with_capacity(d)).collect();
+    let mut edges: Vec<Adjacent> = (degree.iter())
+        .map(|&d| Adjacent::with_capacity(d as usize))
+        .collect();
     // Filled on every core: each thread a range of segments of about equal degree, for
-    // which it reads every pair (a pass over them is a small part of the additions).
-    let ranges = runs_of_weight(&degree, |&d| d, degree.iter().sum::<usize>() / cores() + 1);
+    // which it reads every pair between pieces (a pass over them is a small part of the
+    // additions).
+    let total = degree.iter().map(|&d| d as usize).sum::<usize>();
+    let ranges = runs_of_weight(&degree, |&d| d as usize, total / cores() + 1);
     let parts = split_parts(&mut edges, ranges.iter().map(|r| r.len()));
     parallel_map(parts.len(), |r| {
         let (mut part, first) = (take_part(&parts[r]), ranges[r].start);
@@ -956,14 +953,29 @@ fn piece_adjacency(pairs: &[Pair], piece: &[u32], pieces: usize) -> Vec<Adjacent
                 adjacent.add(b, e);
             }
         };
-        for &(g, h, e) in pairs.iter().filter(between) {
-            let (a, b) = (piece[g as usize], piece[h as usize]);
+        for &(a, b, e) in &between {
             add(a, b, e);
             add(b, a, e);
         }
     });
     drop(parts);
     edges
+}
+
+/// The neighbour pairs whose Gaussians lie in two pieces, as pairs of pieces, in order, on
+/// every core: what each thread of [`piece_adjacency`] reads, where every pair was (a
+/// capture's 3.9M pairs, 125 MB read by every thread; a quarter of them between pieces).
+fn pairs_between_pieces(pairs: &[Pair], piece: &[u32]) -> Vec<Pair> {
+    const BLOCK: usize = 1 << 16;
+    let blocks: Vec<&[Pair]> = pairs.chunks(BLOCK).collect();
+    let of_pieces = |&(g, h, e): &Pair| {
+        let (a, b) = (piece[g as usize], piece[h as usize]);
+        (a != b).then_some((a, b, e))
+    };
+    let counts = parallel_map(blocks.len(), |b| {
+        blocks[b].iter().filter_map(of_pieces).count()
+    });
+    collect_parts(counts, |b| blocks[b].iter().filter_map(of_pieces))
 }
 
 /// The segments while they join: per segment (by its first piece) the adjacent segments

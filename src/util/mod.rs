@@ -14,8 +14,8 @@ pub use atomic_write::{
     StagedFile,
 };
 pub use parallel::{
-    cores, map_in_blocks, merge_sorted_into, merge_sorted_runs, parallel_map, parallel_map_on,
-    partition_point_near, prefetch_ordered, split_parts, take_part, BusyTime,
+    collect_parts, cores, map_in_blocks, merge_sorted_into, merge_sorted_runs, parallel_map,
+    parallel_map_on, partition_point_near, prefetch_ordered, split_parts, take_part, BusyTime,
 };
 pub use rng::Rng;
 
