@@ -32,6 +32,7 @@ use semsplat::fuse::consensus_surface::SurfaceNormals;
 use semsplat::fuse::{ConsensusParams, FuseConfig, GaussianShapes, Method};
 use semsplat::scene::labels::LabelFormat;
 use semsplat::scene::Gaussians;
+use semsplat::util::scaling::{estimate_scaling, THREADS};
 
 #[derive(Parser)]
 struct Args {
@@ -53,6 +54,11 @@ struct Args {
     /// Leave glibc's allocator as it starts (the CLI sets one arena and fixed thresholds).
     #[arg(long)]
     glibc_defaults: bool,
+    /// Also print each repetition's clustering and decision modeled on 1, 2, 4, ... 32
+    /// threads, from each parallel item's time (semsplat::util::scaling; run on one core,
+    /// `taskset -c 0`, for items timed alone).
+    #[arg(long)]
+    model_threads: bool,
 }
 
 fn main() -> Result<()> {
@@ -81,20 +87,39 @@ fn main() -> Result<()> {
     let order = SpatialOrder::of(shapes.means);
     let surfaces = SurfaceNormals::of(&shapes, &order, &params);
     for _ in 0..args.repeats {
-        let start = std::time::Instant::now();
-        let (segment, clustering) =
-            cluster_segments_timed(&run.observations, &run.knn, &surfaces, &params);
-        let cluster_s = start.elapsed().as_secs_f64();
-        let start = std::time::Instant::now();
-        let (consensus, decision) =
-            decide_timed(&run.observations, &run.knn, segment, run.classes, &params);
-        let decide_s = start.elapsed().as_secs_f64();
+        let ((segment, clustering), cluster_model) = estimate_scaling(|| {
+            cluster_segments_timed(&run.observations, &run.knn, &surfaces, &params)
+        });
+        let ((consensus, decision), decide_model) = estimate_scaling(|| {
+            decide_timed(&run.observations, &run.knn, segment, run.classes, &params)
+        });
         println!(
-            "clustering {cluster_s:.3} s, decision {decide_s:.3} s, outputs {:016x}",
+            "clustering {:.3} s, decision {:.3} s, outputs {:016x}",
+            cluster_model.measured_s,
+            decide_model.measured_s,
             outputs_hash(&consensus)
         );
         if args.profile {
             println!("  {clustering:?}\n  {decision:?}");
+        }
+        if args.model_threads {
+            for (step, model) in [("clustering", cluster_model), ("decision", decide_model)] {
+                let modeled = THREADS.iter().zip(model.modeled_s);
+                let each = modeled.map(|(t, s)| format!("{t}: {s:.3}"));
+                println!(
+                    "  {step} modeled (threads: s) {}; {} parallel calls, {:.3} s of it",
+                    each.collect::<Vec<_>>().join(", "),
+                    model.calls,
+                    model.calls_s
+                );
+                for place in &model.by_place {
+                    let [one, _, _, eight, sixteen, _] = place.scheduled_s;
+                    println!(
+                        "    {} ({} calls): {:.4} s measured; modeled 1: {one:.4}, 8: {eight:.4}, 16: {sixteen:.4}; longest item {:.4}",
+                        place.place, place.calls, place.calls_s, place.longest_item_s
+                    );
+                }
+            }
         }
     }
     Ok(())

@@ -26,8 +26,6 @@
 //! the crease, the evidence ties the two joins, and the surface the strip continues should
 //! take it (docs/robustness.md, "Joins along a surface first").
 
-use std::ops::Range;
-
 use serde::Serialize;
 
 use super::consensus_adjacent::Adjacent;
@@ -40,7 +38,7 @@ use crate::contract::NO_NEIGHBOUR;
 use crate::util::quad_heap::QuadHeap;
 use crate::util::{
     collect_parts, cores, map_in_blocks, merge_sorted_into, merge_sorted_runs, parallel_map,
-    partition_point_near, prefetch, split_parts, take_part, Laps,
+    partition_point_near, prefetch, runs_of_weight, split_parts, take_part, Laps,
 };
 
 /// What the views said of the neighbour pairs between two segments, summed over the pairs
@@ -267,31 +265,46 @@ pub(crate) const SORT_BY_VIEW_FROM: usize = 1 << 16;
 /// sorted and counted in runs, blocks of views on every core. The values are scattered
 /// into their views' places directly: grouping the observations' indices by view with
 /// [`Groups`] and then reading each value through its index took 2-3x as long on a flagged
-/// wall of 4.6M observations (a random read per value, two more arrays). Bucketing runs of
-/// the members on every core, each view then gathering its values from every run, was no
-/// faster on two cores (docs/robustness.md, "The host's passes at a capture's size").
+/// wall of 4.6M observations (a random read per value, two more arrays). The counting sort
+/// itself runs in runs of members on every core, each run writing its own part of each
+/// view's place: on one core it took a sixteen-thread model's longest item of the flags'
+/// two passes (15 ms each of a capture's flagged wall, util::scaling).
 fn counts_sorted_by_view(obs: &Observations, members: &[u32], of: &[u32]) -> Vec<(u32, u32, u32)> {
-    let observations = || members.iter().flat_map(|&g| obs.row(g as usize));
-    let mut start: Vec<usize> = Vec::new(); // per view, its count, then where its values start
-    for i in observations() {
-        let view = obs.view[i] as usize;
-        if view + 1 >= start.len() {
-            start.resize(view + 2, 0);
+    let runs: Vec<&[u32]> = members.chunks(GAUSSIANS_PER_RUN).collect();
+    let per_run = parallel_map(runs.len(), |r| {
+        let mut of_view: Vec<usize> = Vec::new();
+        for i in runs[r].iter().flat_map(|&g| obs.row(g as usize)) {
+            let view = obs.view[i] as usize;
+            if view >= of_view.len() {
+                of_view.resize(view + 1, 0);
+            }
+            of_view[view] += 1;
         }
-        start[view + 1] += 1;
+        of_view
+    });
+    let views = per_run.iter().map(Vec::len).max().unwrap_or(0);
+    let count = |r: usize, view: usize| per_run[r].get(view).copied().unwrap_or(0);
+    // Each view's place, within it each run's part: part `view * runs + r`.
+    let lens = (0..views).flat_map(|view| (0..runs.len()).map(move |r| count(r, view)));
+    let mut start = vec![0usize; views + 1];
+    for view in 0..views {
+        start[view + 1] = start[view] + (0..runs.len()).map(|r| count(r, view)).sum::<usize>();
     }
-    for v in 1..start.len() {
-        start[v] += start[v - 1];
-    }
-    let mut next = start.clone();
-    let mut values = vec![0u32; *start.last().unwrap_or(&0)];
-    for i in observations() {
-        let at = &mut next[obs.view[i] as usize];
-        values[*at] = of[i];
-        *at += 1;
-    }
+    let mut values = vec![0u32; start[views]];
+    let parts = split_parts(&mut values, lens.collect::<Vec<_>>());
+    parallel_map(runs.len(), |r| {
+        let mut of_view: Vec<_> = (0..views)
+            .map(|view| take_part(&parts[view * runs.len() + r]))
+            .collect();
+        let mut next = vec![0usize; views];
+        for i in runs[r].iter().flat_map(|&g| obs.row(g as usize)) {
+            let view = obs.view[i] as usize;
+            of_view[view][next[view]] = of[i];
+            next[view] += 1;
+        }
+    });
+    drop(parts);
     const VIEWS_PER_BLOCK: usize = 8;
-    let views = start.len().saturating_sub(1);
     let blocks = parallel_map(views.div_ceil(VIEWS_PER_BLOCK), |b| {
         let mut counts = Vec::new();
         for view in b * VIEWS_PER_BLOCK..views.min((b + 1) * VIEWS_PER_BLOCK) {
@@ -602,7 +615,7 @@ impl Queue {
     /// and sorted on every core, then merged (a candidate is one pair of segments, so the
     /// order of equal items never arises).
     fn new(graph: &SegmentGraph, p: &ConsensusParams, sweep_from: usize) -> Queue {
-        let ranges = runs_of_weight(&graph.edges, Adjacent::len, 1 << 16);
+        let ranges = runs_of_weight(graph.edges.iter().map(Adjacent::len), 1 << 16);
         let runs = parallel_map(ranges.len(), |r| {
             let mut run = Vec::new();
             for a in ranges[r].clone() {
@@ -786,11 +799,8 @@ fn piece_regions(obs: &Observations, numbered: &Pieces) -> SegmentRegions {
     let pieces: Vec<u32> = (0..n as u32)
         .filter(|&s| members.group(s as usize).len() > 1)
         .collect();
-    let runs = runs_of_weight(
-        &pieces,
-        |&s| members.group(s as usize).len(),
-        GAUSSIANS_PER_RUN,
-    );
+    let sizes = pieces.iter().map(|&s| members.group(s as usize).len());
+    let runs = runs_of_weight(sizes, GAUSSIANS_PER_RUN);
     let built = parallel_map(runs.len(), |r| {
         (pieces[runs[r].clone()].iter())
             .map(|&s| RegionCounts::of_gaussians(obs, members.group(s as usize)))
@@ -901,28 +911,6 @@ impl SegmentRegions {
     }
 }
 
-/// `items` cut into consecutive runs of about `target` total weight, as index ranges: each
-/// run closes at the item that brings it to `target` or past it (an item heavier than
-/// `target`: a run of its own, or the end of one).
-fn runs_of_weight<T>(
-    items: &[T],
-    weight: impl Fn(&T) -> usize,
-    target: usize,
-) -> Vec<Range<usize>> {
-    let (mut runs, mut start, mut held) = (Vec::new(), 0, 0);
-    for (i, item) in items.iter().enumerate() {
-        held += weight(item);
-        if held >= target {
-            runs.push(start..i + 1);
-            (start, held) = (i + 1, 0);
-        }
-    }
-    if start < items.len() {
-        runs.push(start..items.len());
-    }
-    runs
-}
-
 /// Per segment after the outright joins (`piece`: each Gaussian's piece, of `pieces`), the
 /// adjacent segments with the evidence of the pairs between them.
 fn piece_adjacency(pairs: &[Pair], piece: &[u32], pieces: usize) -> Vec<Adjacent> {
@@ -943,7 +931,7 @@ fn piece_adjacency(pairs: &[Pair], piece: &[u32], pieces: usize) -> Vec<Adjacent
     // which it reads every pair between pieces (a pass over them is a small part of the
     // additions).
     let total = degree.iter().map(|&d| d as usize).sum::<usize>();
-    let ranges = runs_of_weight(&degree, |&d| d as usize, total / cores() + 1);
+    let ranges = runs_of_weight(degree.iter().map(|&d| d as usize), total / cores() + 1);
     let parts = split_parts(&mut edges, ranges.iter().map(|r| r.len()));
     parallel_map(parts.len(), |r| {
         let (mut part, first) = (take_part(&parts[r]), ranges[r].start);
@@ -1322,27 +1310,6 @@ mod tests {
                 assert_eq!(x.cmp(y), tx.cmp(ty), "{tx:?} against {ty:?}");
             }
         }
-    }
-
-    /// Runs keep the items in order, each but the last reaching the target, none past it
-    /// by more than its last item.
-    #[test]
-    fn runs_of_weight_cover_the_items_in_order() {
-        let mut rng = Rng::new(3);
-        let items: Vec<usize> = (0..2000).map(|_| 1 + rng.below(3000) as usize).collect();
-        for target in [1, 500, 4096, 1 << 30] {
-            let ranges = runs_of_weight(&items, |&w| w, target);
-            let runs: Vec<&[usize]> = ranges.into_iter().map(|r| &items[r]).collect();
-            assert_eq!(runs.concat(), items, "target {target}");
-            for (r, run) in runs.iter().enumerate() {
-                let held: usize = run.iter().sum();
-                let before_last = held - run.last().unwrap();
-                assert!(before_last < target, "target {target}, run {r}");
-                let last = r + 1 == runs.len();
-                assert!(last || held >= target, "target {target}, run {r}");
-            }
-        }
-        assert!(runs_of_weight(&[] as &[usize], |&w| w, 10).is_empty());
     }
 
     /// Both ways of counting a piece's observations agree, on pieces of one region per

@@ -109,6 +109,24 @@ impl Observations {
     pub fn row(&self, g: usize) -> std::ops::Range<usize> {
         self.offsets[g]..self.offsets[g + 1]
     }
+
+    /// The Gaussians cut into `parts` consecutive ranges of about equal observations
+    /// (fewer where Gaussians are fewer): work items for a pass whose cost is the
+    /// observations', where ranges of equal Gaussians differ by the views seeing them.
+    pub(crate) fn runs_of_equal_observations(&self, parts: usize) -> Vec<std::ops::Range<usize>> {
+        let total = self.offsets[self.n];
+        let mut ends: Vec<usize> = (1..parts.max(1))
+            .map(|k| self.offsets.partition_point(|&o| o * parts < k * total))
+            .chain([self.n])
+            .collect();
+        ends.dedup();
+        let starts = std::iter::once(0).chain(ends.iter().copied());
+        starts
+            .zip(ends.iter().copied())
+            .filter(|(a, b)| a < b)
+            .map(|(a, b)| a..b)
+            .collect()
+    }
 }
 
 /// One view's observation of a Gaussian: (Gaussian, label, region, edge).
@@ -408,6 +426,44 @@ impl CoOccurrence {
 mod tests {
     use super::*;
     use crate::util::Rng;
+
+    /// Runs of equal observations cover the Gaussians in order, each run's observations
+    /// within a row of the even share, none empty: rows of random lengths (unobserved ones
+    /// among them), parts more than Gaussians, no observations at all.
+    #[test]
+    fn runs_of_equal_observations_cover_the_gaussians() {
+        let mut rng = Rng::new(2);
+        for (n, parts) in [(1000, 7), (1000, 1), (5, 9), (300, 16)] {
+            let lens: Vec<usize> = (0..n).map(|_| rng.below(40) as usize).collect();
+            let mut offsets = vec![0];
+            lens.iter()
+                .for_each(|l| offsets.push(offsets.last().unwrap() + l));
+            let total = offsets[n];
+            let obs = Observations {
+                n,
+                offsets,
+                ..Default::default()
+            };
+            let runs = obs.runs_of_equal_observations(parts);
+            assert!(runs.len() <= parts.min(n), "{n} in {parts}: {runs:?}");
+            let covered: Vec<usize> = runs.iter().cloned().flatten().collect();
+            assert_eq!(covered, (0..n).collect::<Vec<_>>(), "{n} in {parts}");
+            let longest_row = lens.iter().max().copied().unwrap_or(0);
+            for run in &runs {
+                let held: usize = lens[run.clone()].iter().sum();
+                assert!(
+                    held <= total / parts + 2 * longest_row,
+                    "{n} in {parts}: {run:?}"
+                );
+            }
+        }
+        let unobserved = Observations {
+            n: 10,
+            offsets: vec![0; 11],
+            ..Default::default()
+        };
+        assert_eq!(unobserved.runs_of_equal_observations(4), vec![0..10]);
+    }
 
     /// Joined on every core in any order, the sets and their roots are those of one thread
     /// joining the same pairs in order: chains (long paths to halve) and random pairs, some

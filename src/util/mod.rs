@@ -8,6 +8,7 @@ pub mod parallel;
 mod pool;
 pub mod quad_heap;
 pub mod rng;
+pub mod scaling;
 
 pub use atomic_write::{
     check_output_file, check_output_folder, stage_atomic, write_atomic, write_bytes_atomic,
@@ -15,7 +16,8 @@ pub use atomic_write::{
 };
 pub use parallel::{
     collect_parts, cores, map_in_blocks, merge_sorted_into, merge_sorted_runs, parallel_map,
-    parallel_map_on, partition_point_near, prefetch_ordered, split_parts, take_part, BusyTime,
+    parallel_map_on, partition_point_near, prefetch_ordered, runs_of_weight, split_parts,
+    take_part, BusyTime,
 };
 pub use rng::Rng;
 

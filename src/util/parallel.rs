@@ -2,6 +2,7 @@
 //! (threads take the next index as they finish, so slow items do not stall a fixed split),
 //! and the sorted-list helpers the parallel passes share (merging runs, searching near).
 
+use std::ops::Range;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Mutex, MutexGuard};
 
@@ -14,15 +15,42 @@ pub fn cores() -> usize {
 
 /// `f(0), ..., f(count - 1)`, computed on up to all cores, in index order: on the calling
 /// thread and the process's kept worker threads (src/util/pool.rs).
+#[track_caller]
 pub fn parallel_map<T: Send>(count: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
+    if super::scaling::timing_call() {
+        return timed_parallel_map(std::panic::Location::caller(), count, f);
+    }
     let items = Items::new(count);
     let helpers = cores().min(count).saturating_sub(1);
     run_with_helpers(helpers, &|| items.compute(&f));
     items.into_results()
 }
 
+/// [`parallel_map`], each item timed for [`super::scaling::estimate_scaling`].
+fn timed_parallel_map<T: Send>(
+    place: &std::panic::Location,
+    count: usize,
+    f: impl Fn(usize) -> T + Sync,
+) -> Vec<T> {
+    let start = std::time::Instant::now();
+    let items_s = Mutex::new(vec![Default::default(); count]);
+    let items = Items::new(count);
+    let helpers = cores().min(count).saturating_sub(1);
+    let timed = |i: usize| {
+        let mut value = None;
+        let seconds = super::scaling::timed_item(|| value = Some(f(i)));
+        items_s.lock().unwrap_or_else(|e| e.into_inner())[i] = seconds;
+        value.expect("computed")
+    };
+    run_with_helpers(helpers, &|| items.compute(&timed));
+    let items_s = items_s.into_inner().unwrap_or_else(|e| e.into_inner());
+    super::scaling::add_call(place, start.elapsed().as_secs_f64(), &items_s);
+    items.into_results()
+}
+
 /// `f(0), ..., f(count - 1)` computed on every core in blocks of `block` indices (each
 /// block one work item: a lock per index would cost more than most items), in index order.
+#[track_caller]
 pub fn map_in_blocks<T: Send>(count: usize, block: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
     let block = block.max(1);
     let blocks = parallel_map(count.div_ceil(block), |b| {
@@ -111,6 +139,30 @@ impl BusyTime {
     }
 }
 
+/// Items of `weights` cut into consecutive runs of about `target` total weight, as index
+/// ranges: each run closes at the item that brings it to `target` or past it (an item
+/// heavier than `target`: a run of its own, or the end of one). Work items for
+/// [`parallel_map`] where items weigh very differently (a segment of a wall against
+/// thousands of a few Gaussians): by count, the heavy ones would meet in a few items.
+pub fn runs_of_weight(
+    weights: impl IntoIterator<Item = usize>,
+    target: usize,
+) -> Vec<Range<usize>> {
+    let (mut runs, mut start, mut held, mut count) = (Vec::new(), 0, 0, 0);
+    for (i, weight) in weights.into_iter().enumerate() {
+        held += weight;
+        count = i + 1;
+        if held >= target {
+            runs.push(start..i + 1);
+            (start, held) = (i + 1, 0);
+        }
+    }
+    if start < count {
+        runs.push(start..count);
+    }
+    runs
+}
+
 /// `data` cut into consecutive parts of `lens` (summing to at most its length), each behind
 /// a lock: the disjoint outputs of a [`parallel_map`] whose index `i` fills part `i` (each
 /// lock taken once, never waited on). Filled so, a parallel pass allocates nothing on its
@@ -133,6 +185,7 @@ pub fn split_parts<T>(
 /// than the one that makes them). Where each part's list copied into one would write all of
 /// it again on one thread (a million Gaussians' neighbour pairs: 110 MB, each page faulted
 /// in anew), and allocate on the workers under one malloc arena.
+#[track_caller]
 pub fn collect_parts<T: Send, I: Iterator<Item = T>>(
     counts: Vec<usize>,
     part: impl Fn(usize) -> I + Sync,
@@ -304,6 +357,27 @@ mod tests {
         assert_eq!(collect_parts(counts.clone(), items), expected);
         let short = std::panic::catch_unwind(|| collect_parts(vec![2, 2], |i| 0..i + 1));
         assert!(short.is_err(), "part 0 yields 1 of 2");
+    }
+
+    /// Runs keep the items in order, each but the last reaching the target, none past it
+    /// by more than its last item.
+    #[test]
+    fn runs_of_weight_cover_the_items_in_order() {
+        let mut rng = crate::util::Rng::new(3);
+        let items: Vec<usize> = (0..2000).map(|_| 1 + rng.below(3000) as usize).collect();
+        for target in [1, 500, 4096, 1 << 30] {
+            let ranges = runs_of_weight(items.iter().copied(), target);
+            let runs: Vec<&[usize]> = ranges.into_iter().map(|r| &items[r]).collect();
+            assert_eq!(runs.concat(), items, "target {target}");
+            for (r, run) in runs.iter().enumerate() {
+                let held: usize = run.iter().sum();
+                let before_last = held - run.last().unwrap();
+                assert!(before_last < target, "target {target}, run {r}");
+                let last = r + 1 == runs.len();
+                assert!(last || held >= target, "target {target}, run {r}");
+            }
+        }
+        assert!(runs_of_weight([], 10).is_empty());
     }
 
     /// Blocks of any size, the last one short, give the items of one map in order.
