@@ -531,7 +531,8 @@ struct Decided {
 
 /// Each Gaussian's class and evidence: its segment's where `kept` (the split stored once
 /// per segment, when a member first takes it: one that decides none of its members is
-/// never stored), else as [`Alone::decide`] decides it.
+/// never stored), else as [`Alone::decide`] decides it (those on every core first: a
+/// tenth to a half of the decision's time on one core, a noisy office and living room).
 fn each_gaussian(alone: &Alone, kept: &[Option<usize>], segments: usize) -> Decided {
     let (obs, n) = (alone.obs, alone.obs.n);
     let mut decided = Decided {
@@ -540,6 +541,16 @@ fn each_gaussian(alone: &Alone, kept: &[Option<usize>], segments: usize) -> Deci
         from_segment: 0,
         from_neighbour_segments: 0,
     };
+    let alone_ids: Vec<usize> = (0..n).filter(|&g| kept[g].is_none()).collect();
+    let (classes, width) = (alone.classes, alone.classes.max(1));
+    let blocks = decide_alone(alone, &alone_ids);
+    let mut decided_alone = blocks.iter().flat_map(|(outcomes, counts)| {
+        let rows = counts.chunks_exact(width).map(|row| &row[..classes]);
+        outcomes
+            .iter()
+            .zip(rows)
+            .map(|(&(c, by), row)| (c, row, by))
+    });
     let mut split_row: Vec<Option<u32>> = vec![None; segments];
     for (g, &segment_class) in kept.iter().enumerate() {
         let s = alone.segment[g] as usize;
@@ -553,9 +564,9 @@ fn each_gaussian(alone: &Alone, kept: &[Option<usize>], segments: usize) -> Deci
                 evidence.share(g, row);
             }
             None => {
-                let (c, counts, by_neighbours) = alone.decide(g);
+                let (c, counts, by_neighbours) = decided_alone.next().expect("decided alone");
                 decided.class[g] = c;
-                decided.evidence.set(g, &counts);
+                decided.evidence.set(g, counts);
                 // Unobserved ones are counted where their neighbours decide them below.
                 decided.from_neighbour_segments +=
                     usize::from(by_neighbours && !obs.row(g).is_empty());
@@ -563,6 +574,28 @@ fn each_gaussian(alone: &Alone, kept: &[Option<usize>], segments: usize) -> Deci
         }
     }
     decided
+}
+
+/// A block of [`decide_alone`]: each Gaussian's (class, whether by its neighbours'
+/// segments), and their counts in one table (a row of `classes.max(1)` each).
+type AloneBlock = (Vec<(Option<usize>, bool)>, Vec<f64>);
+
+/// [`Alone::decide`] of each of `ids`, on every core, in blocks in their order.
+fn decide_alone(alone: &Alone, ids: &[usize]) -> Vec<AloneBlock> {
+    const BLOCK: usize = 1024;
+    let width = alone.classes.max(1);
+    let blocks: Vec<&[usize]> = ids.chunks(BLOCK).collect();
+    parallel_map(blocks.len(), |b| {
+        let mut counts = vec![0.0; blocks[b].len() * width];
+        let mut spare = vec![0.0; 2 * width];
+        let rows = counts
+            .chunks_exact_mut(width)
+            .map(|row| &mut row[..alone.classes]);
+        let outcomes = (blocks[b].iter().zip(rows))
+            .map(|(&g, row)| alone.decide(g, row, &mut spare))
+            .collect();
+        (outcomes, counts)
+    })
 }
 
 /// Per Gaussian, its segment's class where the segment decides its members and the
@@ -610,18 +643,25 @@ struct Alone<'a> {
 }
 
 impl Alone<'_> {
-    /// Gaussian `g`'s class, the counts it was decided from, and whether those are its
-    /// neighbours' segments: theirs where they decide it ([`Alone::neighbour_segments`]),
-    /// else its own views' (a tie broken by its neighbours' views, then undecided).
-    fn decide(&self, g: usize) -> (Option<usize>, Vec<f64>, bool) {
+    /// Gaussian `g`'s class and whether the counts it was decided from, written to `counts`
+    /// (one per class), are its neighbours' segments: theirs where they decide it
+    /// ([`Alone::neighbour_segments`]), else its own views' (a tie broken by its
+    /// neighbours' views, then undecided). `spare`: two rows of classes for the steps
+    /// between. Allocates nothing: it runs on every core, under the CLI's one malloc arena.
+    fn decide(&self, g: usize, counts: &mut [f64], spare: &mut [f64]) -> (Option<usize>, bool) {
         let small = self.segments[self.segment[g] as usize].gaussians < self.p.min_segment;
-        if let Some((c, counts)) = small.then(|| self.neighbour_segments(g)).flatten() {
-            return (Some(c), counts, true);
+        if let Some(c) = small
+            .then(|| self.neighbour_segments(g, counts, spare))
+            .flatten()
+        {
+            return (Some(c), true);
         }
-        let mut own = vec![0.0; self.classes];
-        self.add_votes_through_regions(g, &mut own);
-        let tie_break = neighbour_votes(self.obs, self.knn, self.p.neighbours, g, self.classes);
-        (decisive_argmax(&own, &tie_break), own, false)
+        counts.fill(0.0);
+        self.add_votes_through_regions(g, counts);
+        let tie_break = &mut spare[..self.classes];
+        tie_break.fill(0.0);
+        add_neighbour_votes(self.obs, self.knn, self.p.neighbours, g, tie_break);
+        (decisive_argmax(counts, tie_break), false)
     }
 
     /// Adds Gaussian `g`'s own views' votes: through their label regions where those are
@@ -636,40 +676,41 @@ impl Alone<'_> {
     /// The class more than half of Gaussian `g`'s neighbours in decided segments of at
     /// least `min_segment` Gaussians hold, where at least `min_segment_neighbours` are, or
     /// `few_segment_neighbours` whose class its own views (labels) do not contradict; with
-    /// the count of those neighbours per class ([`ConsensusParams::min_segment_neighbours`]).
-    fn neighbour_segments(&self, g: usize) -> Option<(usize, Vec<f64>)> {
+    /// the count of those neighbours per class in `counts` ([`ConsensusParams::min_segment_neighbours`]).
+    /// `spare`: two rows of classes.
+    fn neighbour_segments(&self, g: usize, counts: &mut [f64], spare: &mut [f64]) -> Option<usize> {
         let (k, p) = (self.p.neighbours, self.p);
-        let mut counts = vec![0.0; self.classes];
-        let near = self.knn[g * k..(g + 1) * k].iter();
         // (class, segment) of each neighbour in a decided segment.
-        let decided: Vec<(usize, &SegmentVotes)> = near
-            .filter(|&&h| h != NO_NEIGHBOUR)
-            .map(|&h| &self.segments[self.segment[h as usize] as usize])
-            .filter_map(|votes| Some((deciding_class(votes, p)?, votes)))
-            .collect();
-        for &(c, _) in &decided {
-            counts[c] += 1.0;
-        }
+        let decided = || {
+            let near = self.knn[g * k..(g + 1) * k].iter();
+            near.filter(|&&h| h != NO_NEIGHBOUR)
+                .map(|&h| &self.segments[self.segment[h as usize] as usize])
+                .filter_map(|votes| Some((deciding_class(votes, p)?, votes)))
+        };
+        counts.fill(0.0);
+        decided().for_each(|(c, _)| counts[c] += 1.0);
         let total: f64 = counts.iter().sum();
         let top = (0..self.classes).find(|&c| 2.0 * counts[c] > total)?;
         if total >= p.min_segment_neighbours as f64 {
-            return Some((top, counts));
+            return Some(top);
         }
         if p.few_segment_neighbours == 0 || total < p.few_segment_neighbours as f64 {
             return None;
         }
         // The rate at which the views of the neighbours' segments give `top`: their splits,
         // each scaled to one.
-        let mut rate = vec![0.0; self.classes];
-        for (_, votes) in decided.iter().filter(|&&(c, _)| c == top) {
+        let (rate, own) = spare.split_at_mut(self.classes);
+        let own = &mut own[..self.classes];
+        rate.fill(0.0);
+        for (_, votes) in decided().filter(|&(c, _)| c == top) {
             let views: f64 = votes.split.iter().sum();
             rate.iter_mut()
                 .zip(&votes.split)
                 .for_each(|(r, v)| *r += v / views);
         }
-        let mut own = vec![0.0; self.classes];
-        add_own_votes(self.obs, g, &mut own);
-        (!contradicts(&own, top, &rate, p)).then_some((top, counts))
+        own.fill(0.0);
+        add_own_votes(self.obs, g, own);
+        (!contradicts(own, top, rate, p)).then_some(top)
     }
 }
 
@@ -888,21 +929,13 @@ fn segment_summary(
     }
 }
 
-/// The own votes of g's neighbours, summed: breaks a tie of g's own views.
-fn neighbour_votes(
-    obs: &Observations,
-    knn: &[u32],
-    k: usize,
-    g: usize,
-    classes: usize,
-) -> Vec<f64> {
-    let mut sum = vec![0.0; classes];
+/// Adds the own votes of g's neighbours to `sum`: what breaks a tie of g's own views.
+fn add_neighbour_votes(obs: &Observations, knn: &[u32], k: usize, g: usize, sum: &mut [f64]) {
     for &h in &knn[g * k..(g + 1) * k] {
         if h != NO_NEIGHBOUR {
-            add_own_votes(obs, h as usize, &mut sum);
+            add_own_votes(obs, h as usize, sum);
         }
     }
-    sum
 }
 
 /// Every Gaussian's (confidence, entropy) of its class under a Dirichlet(prior + counts)

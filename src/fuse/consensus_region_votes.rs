@@ -101,12 +101,8 @@ impl RegionVotes {
             rule.min_share > 0.5,
             "a share of a majority finds the class in one pass"
         );
-        let read_rows = || (0..obs.n).filter(|&g| reads[g]).flat_map(|g| obs.row(g));
-        let slots = RegionSlots::of(read_rows().map(|i| (obs.view[i], obs.region[i])));
-        let mut label = vec![0u32; slots.len()];
-        for i in read_rows() {
-            label[slots.slot(obs.view[i], obs.region[i]).expect("read")] = obs.label[i];
-        }
+        let read: Vec<usize> = (0..obs.n).filter(|&g| reads[g]).collect();
+        let (slots, label) = RegionSlots::of_rows_labelled(obs, &read);
         let clear: Vec<Option<u32>> = segments
             .iter()
             .map(|s| clear_class(s, p).map(|c| c as u32))
