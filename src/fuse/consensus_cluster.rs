@@ -322,19 +322,20 @@ fn counts_sorted_by_view(obs: &Observations, members: &[u32], of: &[u32]) -> Vec
 /// of outright joins lies in one region of nearly every view that sees it, so each
 /// observation is a search of a list of one or two, where sorting a wall's millions of
 /// observations on one core took most of the pieces' time (0.56-0.81 of 0.65-0.93 s on a
-/// noisy 1080p office, docs/robustness.md).
+/// noisy 1080p office, docs/robustness.md). A wall's members are counted in runs on every
+/// core, each run's lists then summed view by view: on one core it was a sixteen-thread
+/// model's longest item of the pieces' counts (8 of 45 ms, util::scaling).
 fn counts_by_view(obs: &Observations, members: &[u32]) -> Vec<(u32, u32, u32)> {
-    let mut per_view: Vec<Vec<(u32, u32)>> = Vec::new();
-    for &g in members {
-        for i in obs.row(g as usize) {
-            let (view, region) = (obs.view[i] as usize, obs.region[i]);
-            if view >= per_view.len() {
-                per_view.resize_with(view + 1, Vec::new);
-            }
-            let regions = &mut per_view[view];
-            match regions.iter_mut().find(|e| e.0 == region) {
-                Some(entry) => entry.1 += 1,
-                None => regions.push((region, 1)),
+    let runs: Vec<&[u32]> = members.chunks(GAUSSIANS_PER_RUN).collect();
+    let mut per_run = parallel_map(runs.len(), |r| regions_by_view(obs, runs[r]));
+    let mut per_view = per_run.pop().unwrap_or_default();
+    for run in per_run {
+        if run.len() > per_view.len() {
+            per_view.resize_with(run.len(), Vec::new);
+        }
+        for (sum, regions) in per_view.iter_mut().zip(run) {
+            for (region, count) in regions {
+                add_to_region(sum, region, count);
             }
         }
     }
@@ -344,6 +345,29 @@ fn counts_by_view(obs: &Observations, members: &[u32]) -> Vec<(u32, u32, u32)> {
         counts.extend(regions.into_iter().map(|(r, c)| (view as u32, r, c)));
     }
     counts
+}
+
+/// Per view, the (region, observations) of `members`, in no order.
+fn regions_by_view(obs: &Observations, members: &[u32]) -> Vec<Vec<(u32, u32)>> {
+    let mut per_view: Vec<Vec<(u32, u32)>> = Vec::new();
+    for &g in members {
+        for i in obs.row(g as usize) {
+            let (view, region) = (obs.view[i] as usize, obs.region[i]);
+            if view >= per_view.len() {
+                per_view.resize_with(view + 1, Vec::new);
+            }
+            add_to_region(&mut per_view[view], region, 1);
+        }
+    }
+    per_view
+}
+
+/// Adds `count` to `region`'s entry of a view's short list.
+fn add_to_region(regions: &mut Vec<(u32, u32)>, region: u32, count: u32) {
+    match regions.iter_mut().find(|e| e.0 == region) {
+        Some(entry) => entry.1 += count,
+        None => regions.push((region, count)),
+    }
 }
 
 /// A segment's dominant region per view, by view: (view, region, observations the view
@@ -1317,12 +1341,13 @@ mod tests {
     #[test]
     fn counts_by_view_match_the_sorted_counts() {
         let mut rng = Rng::new(7);
-        for regions_per_view in [1, 3, 40] {
-            let n = 500;
+        // The last: a wall in several runs, its later members seen by more views.
+        let wall = 2 * GAUSSIANS_PER_RUN + 700;
+        for (regions_per_view, n) in [(1, 500), (3, 500), (40, 500), (3, wall)] {
             let mut offsets = vec![0];
             let (mut view, mut region) = (Vec::new(), Vec::new());
-            for _ in 0..n {
-                for v in 0..30u32 {
+            for g in 0..n {
+                for v in 0..if g < n / 2 { 30u32 } else { 34 } {
                     if rng.below(3) > 0 {
                         view.push(v * 7);
                         region.push(1000 * v + rng.below(regions_per_view) as u32 * 13);
