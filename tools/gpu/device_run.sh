@@ -294,10 +294,14 @@ run_ours() {
   # views observe the same.
   if [[ "host scaling office labels" =~ ${CASES:-.} ]] && [ -x "$bin/consensus_host" ] &&
     [ "$(left)" -gt 60 ]; then
+    # On one core also the model of every thread count (util::scaling), to set beside the
+    # measured runs on more cores.
     for cores in 0 0-1 0-3 0-7 "0-$(($(nproc) - 1))"; do
+      model=()
+      [ "$cores" = 0 ] && model=(--model-threads)
       timeout 90 taskset -c "$cores" "$bin/consensus_host" --scene /tmp/office_labels \
         --labels /tmp/office_labels/labels_noisy --cache /tmp/office.observations \
-        --repeats 3 --profile 2>&1 | sed "s/^/host scaling, cores $cores: /" >>"$OUT/bench.log"
+        --repeats 3 --profile "${model[@]}" 2>&1 | sed "s/^/host scaling, cores $cores: /" >>"$OUT/bench.log"
     done
     say "host scaling office labels: $(grep -c '^host scaling.*outputs' "$OUT/bench.log") repetitions (bench.log)"
   fi
