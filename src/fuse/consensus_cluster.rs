@@ -686,11 +686,10 @@ impl Queue {
         if self.heap.len() < self.sweep_from || 2 * self.dead < self.heap.len() {
             return;
         }
-        let root = |s: u32| segments.holds(s);
         let in_heap = &mut self.in_heap;
         self.heap.retain(|c| {
             let (a, b) = c.segments();
-            let live = root(a) && root(b);
+            let live = segments.holds(a) && segments.holds(b);
             if !live {
                 in_heap[a as usize] -= 1;
                 in_heap[b as usize] -= 1;

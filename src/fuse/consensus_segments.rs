@@ -162,8 +162,8 @@ impl RegionSlots {
     /// The slots of the observations of `gaussians` (ascending), each with the label of
     /// its last observation among them in that order (a region's pixels hold one label, so
     /// any would do; the last is what one pass in order gives): on every core, in blocks of
-    /// Gaussians whose slots are then merged view by view, where one pass took a tenth of
-    /// a living room's decision on one core.
+    /// Gaussians whose slots are then merged view by view, where one pass on the calling
+    /// thread took a twentieth of a living room's decision on one core.
     pub(crate) fn of_rows_labelled(
         obs: &Observations,
         gaussians: &[usize],
