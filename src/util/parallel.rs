@@ -17,8 +17,8 @@ pub fn cores() -> usize {
 /// thread and the process's kept worker threads (src/util/pool.rs).
 #[track_caller]
 pub fn parallel_map<T: Send>(count: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
-    if super::scaling::timing_call() {
-        return timed_parallel_map(std::panic::Location::caller(), count, f);
+    if let Some(depth) = super::scaling::timing_call() {
+        return timed_parallel_map(std::panic::Location::caller(), depth, count, f);
     }
     let items = Items::new(count);
     let helpers = cores().min(count).saturating_sub(1);
@@ -29,6 +29,7 @@ pub fn parallel_map<T: Send>(count: usize, f: impl Fn(usize) -> T + Sync) -> Vec
 /// [`parallel_map`], each item timed for [`super::scaling::estimate_scaling`].
 fn timed_parallel_map<T: Send>(
     place: &std::panic::Location,
+    depth: u8,
     count: usize,
     f: impl Fn(usize) -> T + Sync,
 ) -> Vec<T> {
@@ -38,7 +39,7 @@ fn timed_parallel_map<T: Send>(
     let helpers = cores().min(count).saturating_sub(1);
     let timed = |i: usize| {
         let mut value = None;
-        let seconds = super::scaling::timed_item(|| value = Some(f(i)));
+        let seconds = super::scaling::timed_item(depth, || value = Some(f(i)));
         items_s.lock().unwrap_or_else(|e| e.into_inner())[i] = seconds;
         value.expect("computed")
     };

@@ -102,18 +102,20 @@ pub fn estimate_scaling<T>(work: impl FnOnce() -> T) -> (T, Scaling) {
     (out, scaling)
 }
 
-/// Whether a parallel call starting on this thread now is to be timed item by item: an
-/// outermost call of a stretch being modeled, or a call inside one of its items.
-pub(crate) fn timing_call() -> bool {
+/// Whether a parallel call starting on this thread now is to be timed item by item, and if
+/// so how deep its items are: 1 for an outermost call of a stretch being modeled, 2 for a
+/// call inside one of its items (whichever thread runs that item).
+pub(crate) fn timing_call() -> Option<u8> {
     match IN_ITEM.with(Cell::get).depth {
-        0 => TALLY.with(|t| t.borrow().is_some()),
-        depth => depth == 1,
+        0 => TALLY.with(|t| t.borrow().is_some()).then_some(1),
+        1 => Some(2),
+        _ => None,
     }
 }
 
 /// Runs one item of a timed call and returns its time on each of [`THREADS`]: as
 /// measured, less what its own calls took, plus their items scheduled on that many.
-pub(crate) fn timed_item(item: impl FnOnce()) -> PerThreads {
+pub(crate) fn timed_item(depth: u8, item: impl FnOnce()) -> PerThreads {
     /// Leaves the item, also where it panics (the pool's threads serve on).
     struct Leave(InItem);
     impl Drop for Leave {
@@ -125,7 +127,7 @@ pub(crate) fn timed_item(item: impl FnOnce()) -> PerThreads {
     let _leave = Leave(outer);
     IN_ITEM.with(|c| {
         c.set(InItem {
-            depth: outer.depth + 1,
+            depth,
             nested_change_s: [0.0; THREADS.len()],
         })
     });
@@ -225,6 +227,6 @@ mod tests {
         assert!(scaling.calls_s <= scaling.measured_s);
         let [one, two, ..] = scaling.modeled_s;
         assert!(two <= one, "{scaling:?}");
-        assert!(!timing_call(), "off after the stretch");
+        assert_eq!(timing_call(), None, "off after the stretch");
     }
 }
