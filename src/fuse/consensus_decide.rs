@@ -912,9 +912,7 @@ fn segment_summary(
 ) -> SegmentVotes {
     let class = decisive_argmax(&split, mass);
     let total: f64 = split.iter().sum();
-    let mut sorted = split.clone();
-    sorted.sort_by(|a, b| b.total_cmp(a));
-    let runner_up = sorted.get(1).copied().unwrap_or(0.0);
+    let runner_up = second_largest(&split).unwrap_or(0.0);
     SegmentVotes {
         gaussians,
         views,
@@ -928,6 +926,21 @@ fn segment_summary(
             && (class.is_none() || runner_up >= p.flag_share * total),
         view_classes: Vec::new(),
     }
+}
+
+/// The second of `values` in descending order (the largest again where it occurs twice),
+/// without sorting a copy: a scene of fragments holds tens of thousands of segments, each
+/// summarized on one thread.
+fn second_largest(values: &[f64]) -> Option<f64> {
+    let (mut first, mut second) = (f64::NEG_INFINITY, f64::NEG_INFINITY);
+    for &x in values {
+        if x > first {
+            (first, second) = (x, first);
+        } else if x > second {
+            second = x;
+        }
+    }
+    (values.len() >= 2).then_some(second)
 }
 
 /// Adds the own votes of g's neighbours to `sum`: what breaks a tie of g's own views.
@@ -1016,6 +1029,24 @@ mod tests {
     use crate::util::Rng;
 
     /// The most votes wins; a tie goes to the most mass; a tie in both, or no vote, to none.
+    /// The second largest is what sorting descending puts second, ties and all.
+    #[test]
+    fn second_largest_is_the_sorted_second() {
+        let mut rng = crate::util::Rng::new(12);
+        for len in 0..8 {
+            for _ in 0..50 {
+                let values: Vec<f64> = (0..len).map(|_| rng.below(4) as f64 * 0.5).collect();
+                let mut sorted = values.clone();
+                sorted.sort_by(|a, b| b.total_cmp(a));
+                assert_eq!(
+                    second_largest(&values),
+                    sorted.get(1).copied(),
+                    "{values:?}"
+                );
+            }
+        }
+    }
+
     #[test]
     fn decisive_argmax_breaks_ties_by_mass_or_not_at_all() {
         assert_eq!(decisive_argmax(&[1.0, 3.0, 2.0], &[9.0, 0.0, 9.0]), Some(1));
