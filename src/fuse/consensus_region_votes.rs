@@ -72,6 +72,12 @@ pub(crate) struct RegionVotes {
 /// longest (11 of 112 ms in fifteen blocks on a capture, util::scaling).
 const BLOCK: usize = 1 << 16;
 
+/// At least this many blocks for the one pass ([`counted_by_class`]), whose tables are at
+/// most [`ONE_PASS_MAX`] counters (a segmenter's scene: tens of thousands): a small scene's
+/// Gaussians in a block a thread made four blocks of a living room's 206k, 3.6 ms of a
+/// sixteen-thread model's decision where 32 take 1-2 (util::scaling).
+const ONE_PASS_BLOCKS: usize = 32;
+
 /// A slot's observations off its region's edge.
 #[derive(Clone, Copy, Default)]
 struct SlotCounts {
@@ -117,10 +123,15 @@ impl RegionVotes {
         let look_alike =
             |c: u32, l: u32| c != l && confusions.rate(c as usize, l as usize) > rule.max_confusion;
         let classes = clear.iter().flatten().max().map_or(0, |&c| c as usize + 1);
-        let blocks = obs.runs_of_equal_observations(obs.n.div_ceil(BLOCK));
+        let blocks =
+            |least: usize| obs.runs_of_equal_observations(obs.n.div_ceil(BLOCK).max(least));
         let (candidate, counts) = match slots.len() * (classes + 1) <= ONE_PASS_MAX {
-            true => counted_by_class(&blocks, classes, &label, &in_slots, &look_alike),
+            true => {
+                let blocks = blocks(ONE_PASS_BLOCKS);
+                counted_by_class(&blocks, classes, &label, &in_slots, &look_alike)
+            }
             false => {
+                let blocks = blocks(1);
                 let candidate = majority_candidates(&blocks, slots.len(), &in_slots);
                 let counts = slot_counts(&blocks, &candidate, &label, &in_slots, &look_alike);
                 (candidate, counts)
