@@ -73,9 +73,9 @@ pub(crate) struct RegionVotes {
 const BLOCK: usize = 1 << 16;
 
 /// At least this many blocks for the one pass ([`counted_by_class`]), whose tables are at
-/// most [`ONE_PASS_MAX`] counters (a segmenter's scene: tens of thousands): a small scene's
-/// Gaussians in a block a thread made four blocks of a living room's 206k, 3.6 ms of a
-/// sixteen-thread model's decision where 32 take 1-2 (util::scaling).
+/// most [`ONE_PASS_MAX`] counters (a segmenter's scene: tens of thousands): blocks of
+/// [`BLOCK`] Gaussians made four of a living room's 206k, 3.6 ms of a sixteen-thread
+/// model's decision, where 32 take 0.9 ms (util::scaling).
 const ONE_PASS_BLOCKS: usize = 32;
 
 /// A slot's observations off its region's edge.
