@@ -811,14 +811,12 @@ fn premerge(obs: &Observations, pairs: &[Pair], p: &ConsensusParams) -> Vec<u32>
     sets.roots()
 }
 
-/// The region counts of every piece of more than one Gaussian ([`premerge`]), on every
-/// core; a single Gaussian has none (its observations are read in place). The pieces go to
+/// The region counts of every piece of more than one Gaussian ([`premerge`]; `members`:
+/// the `n` pieces' Gaussians), on every core; a single Gaussian has none (its observations are read in place). The pieces go to
 /// the threads in runs of about [`GAUSSIANS_PER_RUN`] Gaussians: a segmenter's scene holds a
 /// few hundred pieces, a handful of them walls of a hundred thousand Gaussians and more, and
 /// runs of a fixed number of pieces put them all on one thread.
-fn piece_regions(obs: &Observations, numbered: &Pieces) -> SegmentRegions {
-    let n = numbered.first.len();
-    let members = Groups::by_key(&numbered.of_gaussian, n);
+fn piece_regions(obs: &Observations, members: &Groups, n: usize) -> SegmentRegions {
     let pieces: Vec<u32> = (0..n as u32)
         .filter(|&s| members.group(s as usize).len() > 1)
         .collect();
@@ -871,11 +869,11 @@ impl Pieces {
     }
 }
 
-/// The region counts of the segments that hold them, by segment (its lowest Gaussian): a
-/// slot per Gaussian and the counts in a list, where a [`RegionCounts`] for every Gaussian
-/// took 48 bytes each, defaults written on the one core the ordered joins run on (17-22 ms
-/// of a capture's 977k Gaussians), though only the pieces and the segments joins make ever
-/// hold counts.
+/// The region counts of the segments that hold them, by segment (its first piece): a slot
+/// per piece and the counts in a list, where a [`RegionCounts`] for every Gaussian took 48
+/// bytes each, defaults written on the one core the ordered joins run on (17-22 ms of a
+/// capture's 977k Gaussians), though only the pieces of several Gaussians and the segments
+/// joins make ever hold counts.
 struct SegmentRegions {
     /// Per segment, its counts' index in `held`, or [`SegmentRegions::NONE`].
     slot: Vec<u32>,
@@ -1019,12 +1017,10 @@ impl<'a> SegmentGraph<'a> {
         done.outright_s = laps.lap();
         let count = pieces.first.len();
         let edges = piece_adjacency(&pairs, &pieces.of_gaussian, count);
-        let mut size = vec![0u32; count];
-        for &piece in &pieces.of_gaussian {
-            size[piece as usize] += 1;
-        }
         done.adjacency_s = laps.lap();
-        let regions = piece_regions(obs, &pieces);
+        let members = Groups::by_key(&pieces.of_gaussian, count);
+        let size = (0..count).map(|s| members.group(s).len() as u32).collect();
+        let regions = piece_regions(obs, &members, count);
         done.piece_regions_s = laps.lap();
         SegmentGraph {
             obs,

@@ -113,7 +113,7 @@ impl Observations {
     /// The Gaussians cut into `parts` consecutive ranges of about equal observations
     /// (fewer where Gaussians are fewer): work items for a pass whose cost is the
     /// observations', where ranges of equal Gaussians differ by the views seeing them.
-    pub(crate) fn runs_of_equal_observations(&self, parts: usize) -> Vec<std::ops::Range<usize>> {
+    pub(crate) fn runs_of_equal_observations(&self, parts: usize) -> Vec<Range<usize>> {
         let total = self.offsets[self.n];
         let mut ends: Vec<usize> = (1..parts.max(1))
             .map(|k| self.offsets.partition_point(|&o| o * parts < k * total))

@@ -17,9 +17,14 @@ pub fn cores() -> usize {
 /// thread and the process's kept worker threads (src/util/pool.rs).
 #[track_caller]
 pub fn parallel_map<T: Send>(count: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
-    if let Some(depth) = super::scaling::timing_call() {
-        return timed_parallel_map(std::panic::Location::caller(), depth, count, f);
+    match super::scaling::timing_call() {
+        Some(depth) => timed_parallel_map(std::panic::Location::caller(), depth, count, f),
+        None => on_pool(count, f),
     }
+}
+
+/// `f(0), ..., f(count - 1)` on the calling thread and the pool's workers, in index order.
+fn on_pool<T: Send>(count: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
     let items = Items::new(count);
     let helpers = cores().min(count).saturating_sub(1);
     run_with_helpers(helpers, &|| items.compute(&f));
@@ -35,18 +40,15 @@ fn timed_parallel_map<T: Send>(
 ) -> Vec<T> {
     let start = std::time::Instant::now();
     let items_s = Mutex::new(vec![Default::default(); count]);
-    let items = Items::new(count);
-    let helpers = cores().min(count).saturating_sub(1);
-    let timed = |i: usize| {
+    let results = on_pool(count, |i| {
         let mut value = None;
         let seconds = super::scaling::timed_item(depth, || value = Some(f(i)));
         items_s.lock().unwrap_or_else(|e| e.into_inner())[i] = seconds;
         value.expect("computed")
-    };
-    run_with_helpers(helpers, &|| items.compute(&timed));
+    });
     let items_s = items_s.into_inner().unwrap_or_else(|e| e.into_inner());
     super::scaling::add_call(place, start.elapsed().as_secs_f64(), &items_s);
-    items.into_results()
+    results
 }
 
 /// `f(0), ..., f(count - 1)` computed on every core in blocks of `block` indices (each
