@@ -965,8 +965,8 @@ pub(crate) fn posteriors(
 ) -> (Vec<f32>, Vec<f32>) {
     const BLOCK: usize = 16384;
     // A row costs a logarithm per class where a Gaussian costs one lookup: the rows in
-    // smaller blocks (a living room's 26k rows were two blocks of 16,384, one of them 1.7
-    // ms on sixteen threads while the other fifteen waited).
+    // smaller blocks (a living room's 27,838 rows were two blocks of 16,384, one of them
+    // 1.7 ms on sixteen threads in a model while the other fifteen waited, util::scaling).
     const ROW_BLOCK: usize = 1024;
     let rows = evidence.rows().max(1); // row 0, the zeros, is there with no classes too
     let posteriors_of_rows = parallel_map(rows.div_ceil(ROW_BLOCK), |b| {
@@ -1032,7 +1032,6 @@ mod tests {
     use crate::fuse::consensus_segments::ViewEntry;
     use crate::util::Rng;
 
-    /// The most votes wins; a tie goes to the most mass; a tie in both, or no vote, to none.
     /// The second largest is what sorting descending puts second, ties and all.
     #[test]
     fn second_largest_is_the_sorted_second() {
@@ -1051,6 +1050,7 @@ mod tests {
         }
     }
 
+    /// The most votes wins; a tie goes to the most mass; a tie in both, or no vote, to none.
     #[test]
     fn decisive_argmax_breaks_ties_by_mass_or_not_at_all() {
         assert_eq!(decisive_argmax(&[1.0, 3.0, 2.0], &[9.0, 0.0, 9.0]), Some(1));

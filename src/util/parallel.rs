@@ -39,15 +39,14 @@ fn timed_parallel_map<T: Send>(
     f: impl Fn(usize) -> T + Sync,
 ) -> Vec<T> {
     let start = std::time::Instant::now();
-    let items_s = Mutex::new(vec![Default::default(); count]);
-    let results = on_pool(count, |i| {
+    let timed = on_pool(count, |i| {
         let mut value = None;
         let seconds = super::scaling::timed_item(depth, || value = Some(f(i)));
-        items_s.lock().unwrap_or_else(|e| e.into_inner())[i] = seconds;
-        value.expect("computed")
+        (value.expect("computed"), seconds)
     });
-    let items_s = items_s.into_inner().unwrap_or_else(|e| e.into_inner());
-    super::scaling::add_call(place, start.elapsed().as_secs_f64(), &items_s);
+    let wall_s = start.elapsed().as_secs_f64();
+    let (results, items_s): (Vec<T>, Vec<_>) = timed.into_iter().unzip();
+    super::scaling::add_call(place, wall_s, &items_s);
     results
 }
 
