@@ -43,6 +43,19 @@ fn fuse_writes_classes_reassigns_from_saved_evidence_and_extracts() {
     check_rendered_views_and_membership(d, truth.len());
     check_reassigned_from_saved_evidence(d, &g);
     check_extract_and_remove_add_up(d, truth.len());
+    check_scene_folder_and_its_cameras(d);
+}
+
+/// The synth folder itself as --scene, its cameras.json read without --cameras (and said
+/// so): the same classes as the files named one by one.
+fn check_scene_folder_and_its_cameras(d: &Path) {
+    let p = |f: &str| arg_in(d, f);
+    let args = ["fuse", "--scene", &p(""), "--labels", &p("labels")];
+    let err = ok(&[&args[..], &["--out", &p("folder.ply")]].concat());
+    assert!(err.contains("cameras.json"), "{err}");
+    let (named, folder) = (read_scene(d, "fused.ply"), read_scene(d, "folder.ply"));
+    assert_eq!(named.class_ids, folder.class_ids);
+    assert_eq!(named.class_conf, folder.class_conf);
 }
 
 /// Unseen Gaussians are -1 (never 0) with confidence 0; seen ones have a label id. Four

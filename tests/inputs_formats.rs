@@ -18,7 +18,9 @@ use semsplat::scene::classes::ClassTable;
 use semsplat::scene::colmap::read_images_txt_from;
 use semsplat::scene::gaussians::sh_coeffs_for_degree;
 use semsplat::scene::ply::{read_ply, read_ply_from, write_ply, write_ply_to};
-use semsplat::scene::scene_file::{read_scene, read_scene_or_point_cloud, resolve_scene_path};
+use semsplat::scene::scene_file::{
+    cameras_for_scene, read_scene, read_scene_or_point_cloud, resolve_scene_path,
+};
 use semsplat::scene::{Camera, Gaussians, SemanticLogits, Split};
 use semsplat::util::npy::parse_npy_f64;
 use semsplat::util::Rng;
@@ -746,7 +748,39 @@ fn inria_run_folder_gives_the_latest_iteration_and_its_cameras() {
     let empty = tmp.path().join("empty");
     std::fs::create_dir_all(&empty).unwrap();
     let err = format!("{:#}", read_scene(&empty).unwrap_err());
-    assert!(err.contains("iteration_<N>"), "{err}");
+    assert!(
+        err.contains("iteration_<N>") && err.contains("scene.ply"),
+        "{err}"
+    );
+    // Left out, the cameras are the run's cameras.json; given, the ones given.
+    assert_eq!(
+        cameras_for_scene(None, &run).unwrap(),
+        run.join("cameras.json")
+    );
+    let given = tmp.path().join("sparse/0");
+    assert_eq!(cameras_for_scene(Some(&given), &run).unwrap(), given);
+    // Without one in the scene's folder, the error asks for --cameras and names the folder.
+    let err = format!("{:#}", cameras_for_scene(None, &empty).unwrap_err());
+    assert!(err.contains("--cameras") && err.contains("empty"), "{err}");
+}
+
+/// A scene folder as `synth` writes it (scene.ply, cameras.json) names its scene file, and
+/// its cameras whether the folder or the file is given.
+#[test]
+fn scene_folder_gives_its_scene_ply_and_cameras() {
+    let tmp = tempfile::tempdir().unwrap();
+    let room = tmp.path().join("room");
+    std::fs::create_dir_all(&room).unwrap();
+    write_ply(&room.join("scene.ply"), &line_of_gaussians(5)).unwrap();
+    std::fs::write(room.join("cameras.json"), "[]").unwrap();
+    assert_eq!(resolve_scene_path(&room).unwrap(), room.join("scene.ply"));
+    assert_eq!(read_scene(&room).unwrap().len(), 5);
+    for scene in [room.clone(), room.join("scene.ply")] {
+        assert_eq!(
+            cameras_for_scene(None, &scene).unwrap(),
+            room.join("cameras.json")
+        );
+    }
 }
 
 /// An SfM point cloud (INRIA's input.ply: x y z, normals, uchar colours) and a 2DGS scene

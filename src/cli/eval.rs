@@ -17,7 +17,7 @@ use semsplat::scene::classes::{read_class_table, ClassTable};
 use semsplat::scene::images::load_view_image;
 use semsplat::scene::labels::{binary_mask_warning, LabelDir, LabelMap};
 use semsplat::scene::ply::{read_classes_sidecar, read_ply};
-use semsplat::scene::scene_file::read_scene;
+use semsplat::scene::scene_file::{cameras_for_scene, read_scene};
 use semsplat::scene::{Camera, Gaussians, Split};
 use semsplat::util::{interrupt, write_bytes_atomic};
 
@@ -38,8 +38,10 @@ pub struct EvalArgs {
     /// A PLY whose Gaussians carry `class` (as written by `semsplat fuse`).
     #[arg(long)]
     scene: PathBuf,
+    /// Cameras: COLMAP model folder, INRIA cameras.json or semsplat cameras.json. Default:
+    /// the cameras.json of the scene's folder.
     #[arg(long)]
-    cameras: PathBuf,
+    cameras: Option<PathBuf>,
     /// True label maps (gray or palette class ids, or colour-coded through the class table;
     /// see --ignore-id and docs/label-maps.md), matched by image name.
     #[arg(long)]
@@ -85,7 +87,12 @@ pub fn run(args: EvalArgs) -> Result<()> {
     };
     let table = eval_class_table(&args)?;
     let format = args.label_format.format();
-    let (cams, dir) = open_truth_views(&args.cameras, &args.labels, table.as_ref(), &format)?;
+    let (cams, dir) = open_truth_views(
+        &cameras_for_scene(args.cameras.as_deref(), &args.scene)?,
+        &args.labels,
+        table.as_ref(),
+        &format,
+    )?;
     for note in dir.notes() {
         eprintln!("{note}");
     }

@@ -27,7 +27,7 @@ use semsplat::scene::cameras::load_cameras;
 use semsplat::scene::classes::{read_class_table, write_class_table, ClassTable};
 use semsplat::scene::labels::{write_label_png, write_palette_png, LabelMap};
 use semsplat::scene::ply::{classes_sidecar_path, read_classes_sidecar, write_ply};
-use semsplat::scene::scene_file::{read_scene, resolve_scene_path};
+use semsplat::scene::scene_file::{cameras_for_scene, read_scene, resolve_scene_path};
 use semsplat::scene::Gaussians;
 use semsplat::util::npy::write_npy_rows;
 use semsplat::util::{interrupt, write_bytes_atomic};
@@ -51,11 +51,13 @@ enum MethodArg {
 #[derive(Args)]
 pub struct FuseArgs {
     /// The scene: a 3DGS PLY (INRIA layout, or SuperSplat's compressed PLY), a .splat, an
-    /// .spz, or an INRIA training-output folder (its latest iteration). --out is always a
-    /// standard PLY.
+    /// .spz, an INRIA training-output folder (its latest iteration) or a scene folder holding
+    /// scene.ply (as `synth` writes). --out is always a standard PLY.
     #[arg(long)]
     scene: PathBuf,
-    /// Cameras: COLMAP model folder, INRIA cameras.json or semsplat cameras.json.
+    /// Cameras: COLMAP model folder, INRIA cameras.json or semsplat cameras.json. Default
+    /// (with --labels or --render-views): the cameras.json of the scene's folder (a `synth`
+    /// room, an INRIA run).
     #[arg(long)]
     cameras: Option<PathBuf>,
     /// Folder of label PNGs (gray or palette class ids, or colour-coded through the class
@@ -183,7 +185,7 @@ pub struct OutputArgs {
     /// Render label and palette PNGs of every view from the fused scene into DIR
     /// (<view>.labels.png with label ids, 255/65535 where nothing is drawn; <view>.palette.png;
     /// rig views named by a relative path go into subfolders: DIR/cam0/00001.labels.png).
-    #[arg(long, requires = "cameras")]
+    #[arg(long)]
     pub render_views: Option<PathBuf>,
     /// Write the multi-instance membership S of FlashSplat's Listing 1.1 (with --gamma) as a
     /// float32 NumPy array [classes, Gaussians] of 0/1: a Gaussian may belong to several
@@ -279,9 +281,12 @@ pub(super) struct Provenance {
     pub start: Instant,
 }
 
-pub fn run(args: FuseArgs) -> Result<()> {
+pub fn run(mut args: FuseArgs) -> Result<()> {
     let start = Instant::now();
     check_output_args(&args.output)?;
+    if args.cameras.is_none() && (args.labels.is_some() || args.output.render_views.is_some()) {
+        args.cameras = Some(cameras_for_scene(None, &args.scene)?);
+    }
     let g = read_scene(&args.scene)?;
     let method = selected_method(&args)?;
     let accumulation = if args.float_atomics {

@@ -15,7 +15,7 @@ use semsplat::scene::cameras::load_cameras;
 use semsplat::scene::classes::ClassTable;
 use semsplat::scene::labels::{write_label_png, write_palette_png, LabelMap};
 use semsplat::scene::ply::read_classes_sidecar;
-use semsplat::scene::scene_file::{read_scene, resolve_scene_path};
+use semsplat::scene::scene_file::{cameras_for_scene, read_scene, resolve_scene_path};
 use semsplat::scene::{Camera, Gaussians};
 use semsplat::util::npy::write_npy_f32;
 use semsplat::util::{interrupt, write_bytes_atomic};
@@ -23,15 +23,17 @@ use semsplat::util::{interrupt, write_bytes_atomic};
 #[derive(Args)]
 pub struct RenderArgs {
     /// The scene: a 3DGS PLY (INRIA layout, or SuperSplat's compressed PLY), a .splat, an
-    /// .spz, or an INRIA training-output folder (its latest iteration). --semantics uses the
+    /// .spz, an INRIA training-output folder (its latest iteration) or a scene folder holding
+    /// scene.ply (as `synth` writes). --semantics uses the
     /// sem_0..sem_{C-1} logits, or a fused PLY's `class` property when it has no logits;
     /// class ids and colors come from the `<scene>.classes.json` sidecar if present.
     #[arg(long)]
     scene: PathBuf,
     /// Cameras: a COLMAP model folder (cameras/images .bin or .txt, or a folder with
-    /// sparse/0), an INRIA cameras.json, or a semsplat cameras.json.
+    /// sparse/0), an INRIA cameras.json, or a semsplat cameras.json. Default: the
+    /// cameras.json of the scene's folder (a `synth` room, an INRIA run).
     #[arg(long)]
-    cameras: PathBuf,
+    cameras: Option<PathBuf>,
     /// Render only these views (image names without extension, e.g. 00001, or cam0/00001
     /// for rig cameras whose stems repeat); default: all.
     #[arg(long, num_args = 1.., value_delimiter = ',')]
@@ -148,7 +150,10 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let scene_file = resolve_scene_path(&args.scene)?;
     let g = read_scene(&scene_file)?;
     let table = read_classes_sidecar(&scene_file)?;
-    let cams = select_views(load_cameras(&args.cameras)?, &args.views)?;
+    let cams = select_views(
+        load_cameras(&cameras_for_scene(args.cameras.as_deref(), &args.scene)?)?,
+        &args.views,
+    )?;
     let gpu = Gpu::new()?;
     let mut labels_from = label_source(&args, &g, &gpu)?;
     let scene = GpuScene::upload(&gpu, &g)?;

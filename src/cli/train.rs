@@ -16,7 +16,7 @@ use semsplat::gpu::Gpu;
 use semsplat::render::SemanticMode;
 use semsplat::scene::images::load_view_image;
 use semsplat::scene::ply::{classes_sidecar_path, read_ply, write_ply};
-use semsplat::scene::scene_file::read_scene_or_point_cloud;
+use semsplat::scene::scene_file::{cameras_for_scene, read_scene_or_point_cloud};
 use semsplat::scene::Gaussians;
 use semsplat::train::config::TrainConfig;
 use semsplat::train::trainer::{
@@ -36,11 +36,12 @@ pub struct TrainArgs {
     /// a label map train appearance only.
     #[arg(long)]
     labels: PathBuf,
-    /// Cameras: COLMAP model folder, INRIA cameras.json or semsplat cameras.json.
+    /// Cameras: COLMAP model folder, INRIA cameras.json or semsplat cameras.json. Default:
+    /// the cameras.json of --init's folder (a `synth` room, an INRIA run).
     #[arg(long)]
-    cameras: PathBuf,
+    cameras: Option<PathBuf>,
     /// Initial scene: a 3DGS PLY (a trained scene, or a synth room's init.ply), compressed PLY,
-    /// .splat, .spz or INRIA run folder, or a plain point-cloud PLY such as an SfM input.ply
+    /// .splat, .spz, INRIA run folder or scene folder (its scene.ply), or a plain point-cloud PLY such as an SfM input.ply
     /// (x y z [red green blue]), seeded into Gaussians as INRIA 3DGS does. Its logits, if any, are replaced by
     /// small random values over the classes present in the labels.
     #[arg(long)]
@@ -253,7 +254,7 @@ fn logits_from_fusion(
 /// The cameras, their label maps and the classes present (at least one).
 fn load_dataset(args: &TrainArgs) -> Result<Dataset> {
     let paths = DatasetPaths {
-        cameras: &args.cameras,
+        cameras: &cameras_for_scene(args.cameras.as_deref(), &args.init)?,
         labels: &args.labels,
         class_table: args.classes.as_deref(),
         train_only: args.train_only,

@@ -1,7 +1,9 @@
 //! Opening a scene whatever form it comes in: a PLY (standard INRIA layout or SuperSplat's
 //! compressed PLY), an antimatter15 `.splat`, a Niantic `.spz`, or an INRIA training-output
 //! folder (`output/run` or `output/run/point_cloud`, whose latest `iteration_*/point_cloud.ply`
-//! is used). semsplat writes only the standard PLY.
+//! is used), or a scene folder holding `scene.ply` (as `synth` writes). semsplat writes only
+//! the standard PLY. Where a command's `--cameras` is left out, the scene folder's
+//! `cameras.json` is read ([`cameras_for_scene`]).
 
 use std::path::{Path, PathBuf};
 
@@ -14,7 +16,8 @@ use super::splat_formats::{parse_splat, parse_spz};
 
 /// The scene file a user's `--scene` path names: the path itself for a file; for an INRIA
 /// run folder (or its `point_cloud` folder) the `point_cloud.ply` of the numerically latest
-/// `iteration_<N>` (so `iteration_30000` beats `iteration_7000`).
+/// `iteration_<N>` (so `iteration_30000` beats `iteration_7000`); for a scene folder its
+/// `scene.ply`.
 pub fn resolve_scene_path(path: &Path) -> Result<PathBuf> {
     if !path.is_dir() {
         if !path.exists() {
@@ -31,11 +34,52 @@ pub fn resolve_scene_path(path: &Path) -> Result<PathBuf> {
     match latest {
         Some(dir) => Ok(dir.join("point_cloud.ply")),
         None if path.join("point_cloud.ply").is_file() => Ok(path.join("point_cloud.ply")),
+        None if path.join(SCENE_FILE).is_file() => Ok(path.join(SCENE_FILE)),
         None => bail!(
-            "{} is a folder but not an INRIA training output: expected point_cloud/iteration_<N>/\
-             point_cloud.ply in it (or iteration_<N>/point_cloud.ply); pass a .ply, .splat or .spz file",
+            "{} is a folder but neither an INRIA training output (point_cloud/iteration_<N>/\
+             point_cloud.ply, or iteration_<N>/point_cloud.ply) nor a scene folder ({SCENE_FILE}, \
+             as `synth` writes); pass a .ply, .splat or .spz file",
             path.display()
         ),
+    }
+}
+
+/// The scene file of a scene folder (`synth`'s output, `bench --export`'s).
+pub const SCENE_FILE: &str = "scene.ply";
+/// The cameras file of a scene folder or an INRIA training output.
+pub const CAMERAS_FILE: &str = "cameras.json";
+
+/// The cameras a command reads: `cameras` where given, else the `cameras.json` of the
+/// scene's folder (`scene` itself where it is a folder: a `synth` room, an INRIA run; else
+/// the folder holding the scene file), said on stderr so the choice is never silent.
+pub fn cameras_for_scene(cameras: Option<&Path>, scene: &Path) -> Result<PathBuf> {
+    if let Some(path) = cameras {
+        return Ok(path.to_path_buf());
+    }
+    let folder = match scene.is_dir() {
+        true => scene,
+        false => scene.parent().unwrap_or(Path::new("")),
+    };
+    let beside = folder.join(CAMERAS_FILE);
+    if !beside.is_file() {
+        bail!(
+            "--cameras is needed (a COLMAP model folder, an INRIA cameras.json or a semsplat \
+             cameras.json): the scene's folder, {}, holds no {CAMERAS_FILE}",
+            display_folder(folder)
+        );
+    }
+    eprintln!(
+        "cameras: {} (the scene's; --cameras to choose others)",
+        beside.display()
+    );
+    Ok(beside)
+}
+
+/// A folder as a message names it (the current folder as `.`).
+fn display_folder(folder: &Path) -> String {
+    match folder.as_os_str().is_empty() {
+        true => ".".into(),
+        false => folder.display().to_string(),
     }
 }
 
