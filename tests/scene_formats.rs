@@ -842,6 +842,11 @@ fn check_inspect_summarizes_clean_scene(ply: &Path) -> Gaussians {
         classes.iter().find(|c| c["id"] == 2).unwrap()["name"],
         "class_2"
     );
+    // The folder holding scene.ply is its scene, not a label folder.
+    let (ok, stdout, stderr) = inspect(&[ply.parent().unwrap().as_os_str(), "--json".as_ref()]);
+    assert!(ok, "{stderr}");
+    let folder: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(folder["gaussians"], 20);
     g
 }
 

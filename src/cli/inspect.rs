@@ -18,12 +18,13 @@ use semsplat::scene::labels::{
     SizeFit,
 };
 use semsplat::scene::ply::{classes_sidecar_path, read_classes_sidecar};
-use semsplat::scene::scene_file::read_scene_unchecked;
+use semsplat::scene::scene_file::{read_scene_unchecked, resolve_scene_path};
 use semsplat::scene::{Camera, Gaussians, Split};
 
 const INSPECT_DETAILS: &str = "\
 PATH can be:
-  - a 3DGS PLY: Gaussian count, SH degree, bounds, opacity (after sigmoid) and scale (after exp)
+  - a 3DGS PLY (or a folder holding one: an INRIA training output's latest iteration, a
+    `synth` room's scene.ply): Gaussian count, SH degree, bounds, opacity (after sigmoid) and scale (after exp)
     ranges, semantic fields, per-class counts (named from <scene>.classes.json or --classes)
   - cameras: a COLMAP model folder (or a dataset folder with sparse/0), an INRIA cameras.json,
     or a semsplat camera JSON: count, resolutions, intrinsics ranges, splits
@@ -233,6 +234,11 @@ fn inspect_path(path: &Path, labels: &LabelInputs) -> Result<Report> {
     if path.is_dir() {
         if find_colmap_model(path).is_ok() {
             return inspect_cameras(path);
+        }
+        // A scene folder (synth's) or an INRIA run holds label PNGs in subfolders too
+        // (images, labels): its scene is what the folder is.
+        if let Ok(scene) = resolve_scene_path(path) {
+            return inspect_ply(&scene, table);
         }
         let pngs = list_label_pngs(path)?;
         if pngs.is_empty() {
