@@ -167,6 +167,11 @@ pub fn read_scene_unchecked(path: &Path) -> Result<Gaussians> {
 /// stderr, since the seed's scales and opacities are guesses, as in INRIA 3DGS).
 pub fn read_scene_or_point_cloud(path: &Path) -> Result<Gaussians> {
     let file = resolve_scene_path(path)?;
+    if path.is_dir() {
+        // A synth room holds init.ply (its points) beside scene.ply (the true scene): say
+        // which one a folder gave.
+        eprintln!("{}: starting from {}", path.display(), file.display());
+    }
     if scene_format(&file)? == SceneFormat::Ply {
         if let Some(cloud) = read_point_cloud_ply(&file)? {
             let g = gaussians_from_point_cloud(&cloud)
