@@ -98,6 +98,8 @@ fn check_train_report(report: &Path, init: &Gaussians) {
         init.len()
     );
     assert!(!rep["log"].as_array().unwrap().is_empty());
+    // Full training starts from Gaussian Semantics' small random logits.
+    assert_eq!(rep["logits_start"], "random");
     for key in ["forward_ms", "loss_ms", "backward_ms", "optimizer_ms"] {
         let v = rep["stage_ms_per_iteration"][key].as_f64().unwrap();
         assert!(v.is_finite() && v >= 0.0, "{key}: {v}");
@@ -133,9 +135,14 @@ fn semantics_only_keeps_the_geometry() {
     let out = tmp.path().join("sem.ply");
     let mut args = train_args(d, out.to_str().unwrap());
     args[8] = format!("{d}/scene.ply");
-    args.extend(["--iters", "15", "--semantics-only"].map(String::from));
+    let report = tmp.path().join("sem.json");
+    args.extend(["--iters", "15", "--semantics-only", "--report"].map(String::from));
+    args.push(report.to_str().unwrap().into());
     let r = run(&args);
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    // The logits alone start uniform (docs/joint-training.md).
+    let rep: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    assert_eq!(rep["logits_start"], "uniform");
     let g = read_ply(&out).unwrap();
     let scene = read_ply(Path::new(&format!("{d}/scene.ply"))).unwrap();
     assert_eq!(g.means, scene.means);

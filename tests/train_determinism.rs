@@ -1,5 +1,5 @@
-//! Reproducible training (lavapipe): `train` run twice with the same inputs and seed
-//! writes byte-identical PLYs, with and without densification, joint and
+//! Reproducible training (lavapipe): `train --deterministic` run twice with the same inputs
+//! and seed writes byte-identical PLYs, with and without densification, joint and
 //! `--semantics-only`; and one backward run twice gives bit-identical gradients. The
 //! gradients' accuracy against the f64 reference is in tests/render_backward.rs.
 

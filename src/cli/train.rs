@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{bail, ensure, Result};
-use clap::Args;
+use clap::{Args, ValueEnum};
 use serde::Serialize;
 
 use super::args;
@@ -20,8 +20,8 @@ use semsplat::scene::scene_file::{cameras_for_scene, read_scene_or_point_cloud};
 use semsplat::scene::Gaussians;
 use semsplat::train::config::TrainConfig;
 use semsplat::train::trainer::{
-    classes_from_logits, with_initial_logits, with_logits_from_classes, DensifyEvent, StageTotals,
-    Trainer,
+    classes_from_logits, with_initial_logits, with_logits_from_classes, DensifyEvent, LogitInit,
+    StageTotals, Trainer,
 };
 use semsplat::train::views::TrainView;
 use semsplat::util::{interrupt, parallel_map_on, write_bytes_atomic};
@@ -43,9 +43,18 @@ pub struct TrainArgs {
     /// Initial scene: a 3DGS PLY (a trained scene, or a synth room's init.ply), compressed PLY,
     /// .splat, .spz, INRIA run folder or scene folder (its scene.ply), or a plain point-cloud PLY such as an SfM input.ply
     /// (x y z [red green blue]), seeded into Gaussians as INRIA 3DGS does. Its logits, if any, are replaced by
-    /// small random values over the classes present in the labels.
+    /// new ones over the classes present in the labels (--logit-init).
     #[arg(long)]
     init: PathBuf,
+    /// How the logits start (without --init-semantics-from): `uniform` (zeros) or `random`
+    /// (Gaussian Semantics' small random values). Default: uniform with --semantics-only,
+    /// random otherwise. Random logits, with the entropy term under Adam, leave Gaussians
+    /// the cross-entropy reaches late at their random first choice (--semantics-only on the
+    /// demo room: held-out mIoU 0.932 -> 0.943 uniform); with the geometry trained too they
+    /// feed its densification early (uniform: higher mIoU but lower per-Gaussian accuracy and
+    /// PSNR, measured; docs/joint-training.md)
+    #[arg(long, value_enum, conflicts_with = "init_semantics_from")]
+    logit_init: Option<LogitStart>,
     /// Iterations (one view each). The densification schedule and the entropy warm-up
     /// follow 3DGS's 30k schedule scaled to this.
     #[arg(long, default_value_t = 30_000, value_parser = args::at_least_one::<u32>)]
@@ -112,6 +121,22 @@ pub struct TrainArgs {
     deterministic: bool,
 }
 
+/// `--logit-init`'s values.
+#[derive(Clone, Copy, ValueEnum)]
+enum LogitStart {
+    Uniform,
+    Random,
+}
+
+/// The logits' start: `--logit-init`, else the mode's default.
+fn logit_init(args: &TrainArgs) -> LogitInit {
+    match args.logit_init {
+        Some(LogitStart::Uniform) => LogitInit::Uniform,
+        Some(LogitStart::Random) => LogitInit::SmallRandom,
+        None => LogitInit::default_for(args.semantics_only),
+    }
+}
+
 #[derive(Serialize)]
 struct LogLine {
     iteration: u32,
@@ -126,6 +151,8 @@ struct LogLine {
 #[derive(Serialize)]
 struct TrainReport<'a> {
     config: &'a TrainConfig,
+    /// How the logits started: "uniform", "random" or "fusion" (--init-semantics-from).
+    logits_start: &'static str,
     views: usize,
     classes: usize,
     initial_gaussians: usize,
@@ -156,7 +183,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
     let init = read_scene_or_point_cloud(&args.init)?;
     let init = match &args.init_semantics_from {
         Some(fused) => logits_from_fusion(&init, fused, &data.classes)?,
-        None => with_initial_logits(&init, data.classes.len(), args.seed),
+        None => with_initial_logits(&init, data.classes.len(), logit_init(&args), args.seed),
     };
     let cfg = train_config(&args, init.len())?;
 
@@ -195,6 +222,11 @@ pub fn run(args: TrainArgs) -> Result<()> {
     if let Some(path) = &args.report {
         let report = TrainReport {
             config: &cfg,
+            logits_start: match (&args.init_semantics_from, logit_init(&args)) {
+                (Some(_), _) => "fusion",
+                (None, LogitInit::Uniform) => "uniform",
+                (None, LogitInit::SmallRandom) => "random",
+            },
             views: views.len(),
             classes: data.classes.len(),
             initial_gaussians: init.len(),

@@ -24,7 +24,7 @@ use crate::scene::Gaussians;
 use crate::scene::{Camera, Split};
 use crate::synth::SynthScene;
 use crate::train::config::TrainConfig;
-use crate::train::trainer::{classes_from_logits, with_initial_logits, Trainer};
+use crate::train::trainer::{classes_from_logits, with_initial_logits, LogitInit, Trainer};
 use crate::train::views::TrainView;
 
 #[derive(Clone, Debug, Serialize)]
@@ -290,7 +290,8 @@ fn fuse_lifted(
 }
 
 /// Joint optimization from the scene's Gaussians (the trained 3DGS every method gets),
-/// with small random logits; full mode also refines geometry and densifies.
+/// its logits started as `train` starts them ([`LogitInit::default_for`]); full mode also
+/// refines geometry and densifies.
 fn joint_lifted(
     gpu: &Gpu,
     s: &SynthScene,
@@ -300,7 +301,8 @@ fn joint_lifted(
     compact: &CompactClasses,
 ) -> Result<Lifted> {
     let views = synth_train_views(s, which, compact)?;
-    let init = with_initial_logits(&s.gaussians, compact.len(), s.config.seed);
+    let start = LogitInit::default_for(!full);
+    let init = with_initial_logits(&s.gaussians, compact.len(), start, s.config.seed);
     // Truth and instances ride along through densification (small integers, exact in f32).
     let rider = |v: &Option<Vec<i32>>| -> Vec<f32> {
         v.as_ref()

@@ -534,17 +534,54 @@ impl Trainer {
     }
 }
 
-/// Gives every Gaussian `channels` small random logits (Gaussian Semantics: "initialized with small
-/// random values"), replacing any it had.
-pub fn with_initial_logits(g: &Gaussians, channels: usize, seed: u64) -> Gaussians {
-    let mut rng = Rng::new(seed);
+/// How a run's semantic logits start where no fusion gives them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LogitInit {
+    /// All zero: every class equally likely, and the entropy regularizer's gradient zero
+    /// (uniform is its maximum), so a Gaussian keeps them until the cross-entropy reaches it.
+    Uniform,
+    /// Small random values (Gaussian Semantics: "initialized with small random values"),
+    /// standard deviation 0.01, from the run's seed. Under Adam (eps 1e-15, 3DGS's) the
+    /// entropy regularizer's gradient on them, however small, moves a logit by the learning
+    /// rate each iteration: every Gaussian the cross-entropy has not reached yet is sharpened
+    /// toward its random first choice, whatever the warm-up's weight (docs/joint-training.md,
+    /// "Where joint training's Gaussians go wrong").
+    SmallRandom,
+}
+
+impl LogitInit {
+    /// The start of a run that trains the logits alone (`semantics_only`) or with the
+    /// geometry: uniform for the logits alone (their accuracy, measured, is all it changes);
+    /// the paper's small random values with the geometry, whose densification the random
+    /// logits' early gradients feed (uniform ones give the geometry no semantic gradient
+    /// until the logits move: fewer Gaussians, lower PSNR, measured).
+    pub fn default_for(semantics_only: bool) -> LogitInit {
+        match semantics_only {
+            true => LogitInit::Uniform,
+            false => LogitInit::SmallRandom,
+        }
+    }
+}
+
+/// Gives every Gaussian `channels` logits started as `start` says (`seed`: the random
+/// values'), replacing any it had.
+pub fn with_initial_logits(
+    g: &Gaussians,
+    channels: usize,
+    start: LogitInit,
+    seed: u64,
+) -> Gaussians {
+    let logits = match start {
+        LogitInit::Uniform => vec![0.0; g.len() * channels],
+        LogitInit::SmallRandom => {
+            let mut rng = Rng::new(seed);
+            (0..g.len() * channels)
+                .map(|_| (rng.normal() * 0.01) as f32)
+                .collect()
+        }
+    };
     let mut out = g.clone();
-    out.semantics = Some(SemanticLogits {
-        channels,
-        logits: (0..g.len() * channels)
-            .map(|_| (rng.normal() * 0.01) as f32)
-            .collect(),
-    });
+    out.semantics = Some(SemanticLogits { channels, logits });
     out.class_ids = None;
     out.class_conf = None;
     out
@@ -585,8 +622,9 @@ pub fn with_logits_from_classes(
     out
 }
 
-/// Class (compact index, None where unseen) and confidence (softmax probability of the
-/// winner) per Gaussian from its logits.
+/// Class (compact index) and confidence (softmax probability of the winner) per Gaussian
+/// from its logits; None (confidence 0) where no view sees it or its top logits tie
+/// exactly (uniform logits the cross-entropy never reached: a class id would break the tie).
 pub fn classes_from_logits(g: &Gaussians, seen: &[bool]) -> (Vec<Option<u32>>, Vec<f32>) {
     let Some(s) = &g.semantics else {
         return (vec![None; g.len()], vec![0.0; g.len()]);
@@ -600,10 +638,10 @@ pub fn classes_from_logits(g: &Gaussians, seen: &[bool]) -> (Vec<Option<u32>>, V
                 .enumerate()
                 .max_by(|a, b| a.1.total_cmp(b.1))
                 .expect("channels > 0");
+            let tied = row.iter().filter(|&&v| v == max).count() > 1;
             let sum: f32 = row.iter().map(|v| (v - max).exp()).sum();
-            let conf = 1.0 / sum;
-            if seen.get(i).copied().unwrap_or(false) {
-                (Some(best as u32), conf)
+            if seen.get(i).copied().unwrap_or(false) && !tied {
+                (Some(best as u32), 1.0 / sum)
             } else {
                 (None, 0.0)
             }
@@ -642,5 +680,50 @@ mod tests {
         assert!((probs(2)[0] - FUSED_DEFAULT_CONF as f64).abs() < 1e-5);
         assert!((probs(4)[1] - FUSED_DEFAULT_CONF as f64).abs() < 1e-5);
         assert!(out.class_ids.is_none());
+    }
+
+    /// A tie at the top is no class (a class id would break it), whatever the ids; a clear
+    /// top is its class with its softmax probability; an unseen Gaussian none.
+    #[test]
+    fn classes_from_logits_leave_ties_and_unseen_without_a_class() {
+        let g = random_scene(&RandomSceneSpec {
+            n: 5,
+            ..Default::default()
+        });
+        let rows = [
+            [0.0, 0.0, 0.0],  // uniform: tied
+            [0.5, -1.0, 0.5], // tied top, first and last
+            [0.1, 0.3, -0.2], // class 1
+            [2.0, 0.0, 0.0],  // class 0, but unseen
+            [0.0, 0.0, 1e-6], // class 2 by a hair
+        ];
+        let mut g = with_initial_logits(&g, 3, LogitInit::Uniform, 0);
+        g.semantics.as_mut().unwrap().logits = rows.concat();
+        let seen = [true, true, true, false, true];
+        let (classes, conf) = classes_from_logits(&g, &seen);
+        assert_eq!(classes, [None, None, Some(1), None, Some(2)]);
+        let p1 = softmax(&rows[2])[1] as f32;
+        assert!((conf[2] - p1).abs() < 1e-6, "{conf:?}");
+        assert_eq!([conf[0], conf[1], conf[3]], [0.0; 3]);
+    }
+
+    /// Uniform logits are all zero; small random ones differ from Gaussian to Gaussian,
+    /// about 0.01 in size, the same for the same seed.
+    #[test]
+    fn initial_logits_uniform_or_small_random() {
+        let g = random_scene(&RandomSceneSpec {
+            n: 200,
+            ..Default::default()
+        });
+        let logits = |start, seed| {
+            let out = with_initial_logits(&g, 4, start, seed);
+            out.semantics.unwrap().logits
+        };
+        assert!(logits(LogitInit::Uniform, 1).iter().all(|&v| v == 0.0));
+        let random = logits(LogitInit::SmallRandom, 1);
+        assert_eq!(random, logits(LogitInit::SmallRandom, 1));
+        assert_ne!(random, logits(LogitInit::SmallRandom, 2));
+        let rms = (random.iter().map(|v| v * v).sum::<f32>() / random.len() as f32).sqrt();
+        assert!((0.008..0.012).contains(&rms), "{rms}");
     }
 }
