@@ -50,9 +50,9 @@ pub struct TrainArgs {
     /// (Gaussian Semantics' small random values). Default: uniform with --semantics-only,
     /// random otherwise. Random logits, with the entropy term under Adam, leave Gaussians
     /// the cross-entropy reaches late at their random first choice (--semantics-only on the
-    /// demo room: held-out mIoU 0.932 -> 0.943 uniform); with the geometry trained too they
-    /// feed its densification early (uniform: higher mIoU but lower per-Gaussian accuracy and
-    /// PSNR, measured; docs/joint-training.md)
+    /// demo room: held-out mIoU 0.932 -> 0.943 uniform); with the geometry trained too, those
+    /// wrong, sharpened logits drive its densification early (uniform there: higher mIoU,
+    /// lower PSNR, mostly lower per-Gaussian accuracy, measured; docs/joint-training.md)
     #[arg(long, value_enum, conflicts_with = "init_semantics_from")]
     logit_init: Option<LogitStart>,
     /// Iterations (one view each). The densification schedule and the entropy warm-up
@@ -60,7 +60,8 @@ pub struct TrainArgs {
     #[arg(long, default_value_t = 30_000, value_parser = args::at_least_one::<u32>)]
     iters: u32,
     /// Output PLY: the trained Gaussians with their logits (sem_0..sem_{C-1}), `class` (label id,
-    /// -1 for Gaussians no view sees) and `class_conf` (softmax probability of the class).
+    /// -1 for Gaussians no view sees or whose top logits training left tied) and `class_conf`
+    /// (softmax probability of the class).
     #[arg(long)]
     out: PathBuf,
     /// Train the semantic logits only: geometry and colors stay as in --init (fast; a

@@ -552,9 +552,9 @@ pub enum LogitInit {
 impl LogitInit {
     /// The start of a run that trains the logits alone (`semantics_only`) or with the
     /// geometry: uniform for the logits alone (their accuracy, measured, is all it changes);
-    /// the paper's small random values with the geometry, whose densification the random
-    /// logits' early gradients feed (uniform ones give the geometry no semantic gradient
-    /// until the logits move: fewer Gaussians, lower PSNR, measured).
+    /// the paper's small random values with the geometry: the entropy term's sharpening of
+    /// them keeps the cross-entropy's gradients into the geometry strong early, so the
+    /// densification grows more Gaussians (higher PSNR, lower mIoU than uniform, measured).
     pub fn default_for(semantics_only: bool) -> LogitInit {
         match semantics_only {
             true => LogitInit::Uniform,
