@@ -12,6 +12,7 @@ use crate::fuse::{LabelSource, NO_LABEL};
 use crate::render::RenderOptions;
 use crate::scene::cameras_json::write_semsplat_cameras;
 use crate::scene::ply::write_ply;
+use crate::scene::scene_file::{CAMERAS_FILE, SCENE_FILE};
 use crate::scene::{Camera, Gaussians};
 use crate::util::atomic_write::write_bytes_atomic;
 use crate::util::npy::write_npy_rows;
@@ -60,8 +61,8 @@ pub fn export_inputs(
     );
     std::fs::create_dir_all(dir)
         .with_context(|| format!("cannot create the export folder {}", dir.display()))?;
-    write_ply(&dir.join("scene.ply"), g)?;
-    write_semsplat_cameras(&dir.join("cameras.json"), cams)?;
+    write_ply(&dir.join(SCENE_FILE), g)?;
+    write_semsplat_cameras(&dir.join(CAMERAS_FILE), cams)?;
     let classes = labels.as_ref().map_or(0, |l| l.classes);
     if let Some(l) = labels {
         export_labels(&dir.join("labels.npy"), cams, &l)?;

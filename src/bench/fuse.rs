@@ -20,6 +20,7 @@ use crate::gpu::Gpu;
 use crate::render::{GpuScene, Rasterizer, RenderOptions};
 use crate::scene::labels::LabelFormat;
 use crate::scene::random_scene::{random_scene, RandomSceneSpec};
+use crate::scene::scene_file::CAMERAS_FILE;
 use crate::scene::{Camera, Gaussians};
 use crate::util::Rng;
 
@@ -346,7 +347,7 @@ fn scene_and_cameras(spec: &FuseBenchSpec) -> Result<(Gaussians, Vec<Camera>, Be
     };
     // The cameras again, matched to the maps (and scaled to them where they are resized).
     let mut dataset = Dataset::open(&DatasetPaths {
-        cameras: &dir.join("cameras.json"),
+        cameras: &dir.join(CAMERAS_FILE),
         labels,
         class_table: None,
         train_only: false,

@@ -104,15 +104,16 @@ pub fn time_cpu<T, R>(
 pub fn read_scene_folder(
     dir: &std::path::Path,
 ) -> anyhow::Result<(crate::scene::Gaussians, Vec<crate::scene::Camera>)> {
+    use crate::scene::scene_file::{CAMERAS_FILE, SCENE_FILE};
     use anyhow::ensure;
-    let g = crate::scene::ply::read_ply(&dir.join("scene.ply"))?;
+    let g = crate::scene::ply::read_ply(&dir.join(SCENE_FILE))?;
     ensure!(!g.is_empty(), "{} has no Gaussians", dir.display());
     ensure!(
         g.len() <= u32::MAX as usize,
         "{} has 2^32 Gaussians or more",
         dir.display()
     );
-    let json = dir.join("cameras.json");
+    let json = dir.join(CAMERAS_FILE);
     let cams = crate::scene::cameras_json::read_cameras_json(&json)?;
     ensure!(!cams.is_empty(), "{} has no camera", json.display());
     Ok((g, cams))

@@ -6,6 +6,7 @@ use std::path::Path;
 use anyhow::{bail, Context, Result};
 
 use super::camera::Camera;
+use super::scene_file::CAMERAS_FILE;
 use super::{cameras_json, colmap};
 
 /// Image file extensions stripped from names to get the stem label maps are matched by.
@@ -122,7 +123,7 @@ fn load_camera_dir(path: &Path) -> Result<Vec<Camera>> {
     if colmap::find_colmap_model(path).is_ok() {
         return colmap::read_colmap_model(path);
     }
-    for file in ["cameras.json", "transforms.json"] {
+    for file in [CAMERAS_FILE, "transforms.json"] {
         if path.join(file).is_file() {
             return cameras_json::read_cameras_json(&path.join(file));
         }

@@ -17,6 +17,7 @@ use crate::scene::cameras_json::write_semsplat_cameras;
 use crate::scene::classes::write_class_table;
 use crate::scene::labels::{write_label_png, write_palette_png, LabelMap};
 use crate::scene::ply::{write_classes_sidecar, write_ply};
+use crate::scene::scene_file::{CAMERAS_FILE, SCENE_FILE};
 use crate::util::{write_atomic, write_bytes_atomic};
 
 /// The output layout, for `--help`.
@@ -88,10 +89,10 @@ pub fn write_synth_with_progress(dir: &Path, scene: &SynthScene, progress: Progr
         .with_context(|| format!("creating output folder {}", dir.display()))?;
     remove_stale(dir, scene)?;
     let room = &scene.room;
-    write_ply(&dir.join("scene.ply"), &scene.gaussians)?;
-    write_classes_sidecar(&dir.join("scene.ply"), &room.classes)?;
+    write_ply(&dir.join(SCENE_FILE), &scene.gaussians)?;
+    write_classes_sidecar(&dir.join(SCENE_FILE), &room.classes)?;
     write_ply(&dir.join("init.ply"), &scene.init_points)?;
-    write_semsplat_cameras(&dir.join("cameras.json"), &scene.cameras)?;
+    write_semsplat_cameras(&dir.join(CAMERAS_FILE), &scene.cameras)?;
     write_class_table(&dir.join("classes.json"), &room.classes)?;
     let instances: Vec<InstanceEntry> = room
         .instances
