@@ -182,9 +182,10 @@ pub fn run(args: TrainArgs) -> Result<()> {
     let data = load_dataset(&args)?;
     let views = train_views(&args, &data)?;
     let init = read_scene_or_point_cloud(&args.init)?;
+    let logits_start = logit_init(&args);
     let init = match &args.init_semantics_from {
         Some(fused) => logits_from_fusion(&init, fused, &data.classes)?,
-        None => with_initial_logits(&init, data.classes.len(), logit_init(&args), args.seed),
+        None => with_initial_logits(&init, data.classes.len(), logits_start, args.seed),
     };
     let cfg = train_config(&args, init.len())?;
 
@@ -223,7 +224,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
     if let Some(path) = &args.report {
         let report = TrainReport {
             config: &cfg,
-            logits_start: match (&args.init_semantics_from, logit_init(&args)) {
+            logits_start: match (&args.init_semantics_from, logits_start) {
                 (Some(_), _) => "fusion",
                 (None, LogitInit::Uniform) => "uniform",
                 (None, LogitInit::SmallRandom) => "random",
