@@ -5,7 +5,7 @@
 # its geometry from the room's init point cloud on the train views' images (no semantic
 # loss: the labels do not shape the geometry), then fuses the clean and the noisy train
 # labels onto the trained Gaussians with each method and scores the held-out views against
-# the true labels. See docs/robustness.md, "On a trained scene".
+# the true labels. See docs/robustness-log.md, "On a trained scene".
 #
 # usage: bash tools/trained_check.sh OUT_DIR
 # env:   PRESET (living), SEED (3), NOISE (flicker=0.3), VIEWS (60), TEST_VIEWS (8),

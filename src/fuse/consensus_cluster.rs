@@ -18,13 +18,13 @@
 //! that saw it had merged their regions (flicker gave both one class): from 4 such views
 //! that joined a ceiling to its wall on one sweep run; from 6 (the default) the flicker
 //! sweep's means moved by at most 0.4 mIoU points (the office's segment consensus, up;
-//! docs/robustness.md, "Unanimous pairs joined outright").
+//! docs/robustness-log.md, "Unanimous pairs joined outright").
 //!
 //! The order's first key is the geometry: a candidate with a neighbour pair along a surface
 //! goes before every candidate whose pairs all cross a crease (src/fuse/consensus_surface.rs).
 //! Where the views saw a strip of one surface only in one region with its neighbour across
 //! the crease, the evidence ties the two joins, and the surface the strip continues should
-//! take it (docs/robustness.md, "Joins along a surface first").
+//! take it (docs/robustness-log.md, "Joins along a surface first").
 
 use serde::Serialize;
 
@@ -322,7 +322,7 @@ fn counts_sorted_by_view(obs: &Observations, members: &[u32], of: &[u32]) -> Vec
 /// of outright joins lies in one region of nearly every view that sees it, so each
 /// observation is a search of a list of one or two, where sorting a wall's millions of
 /// observations on one core took most of the pieces' time (0.56-0.81 of 0.65-0.93 s on a
-/// noisy 1080p office, docs/robustness.md). A wall's members are counted in runs on every
+/// noisy 1080p office, docs/robustness-log.md). A wall's members are counted in runs on every
 /// core, each run's lists then summed view by view: on one core it was a sixteen-thread
 /// model's longest item of the pieces' counts (8 of 45 ms, util::scaling).
 fn counts_by_view(obs: &Observations, members: &[u32]) -> Vec<(u32, u32, u32)> {
@@ -722,7 +722,7 @@ impl Queue {
 /// one. Which goes first in such ties otherwise went by the Gaussians' numbers: on the
 /// office of seed 3 under flicker 0.3 (a dump of its observations), numbered in space, a
 /// wall took 41% of the ceiling, Gaussian by Gaussian through those seen only by views that
-/// called the ceiling wall (docs/robustness.md, "Ties by size"). Classes rather than sizes: a join changes a
+/// called the ceiling wall (docs/robustness-log.md, "Ties by size"). Classes rather than sizes: a join changes a
 /// segment's class only when its size crosses a power of two, which is when its other
 /// candidates are queued again.
 fn size_class(size: u32) -> u32 {

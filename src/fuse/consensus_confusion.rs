@@ -28,7 +28,7 @@ struct Confusions {
 /// A class the views take for a label more often than this is one the label may be the
 /// flicker of (under flicker 0.3 a look-alike is called so in 5-27% of the views, other
 /// classes in under 2%): `--relabel`'s regions and a small segment's region votes relabel
-/// a region only to such a class, or leave it its label (docs/robustness.md).
+/// a region only to such a class, or leave it its label (docs/robustness-log.md).
 pub const LOOK_ALIKE_RATE: f64 = 0.03;
 
 /// Spread over the other classes and added to every rate at which one class's views call

@@ -45,7 +45,7 @@ pub struct ConsensusParams {
     /// core). Such a pair would pass every test as two single Gaussians; what it skips is
     /// waiting for its turn in the order, and the region test of the segments it links. Not
     /// fewer than 6: from 4, a few pairs across a ceiling's edge, seen only by views that
-    /// flicker had labeled the ceiling as wall, joined the two (docs/robustness.md).
+    /// flicker had labeled the ceiling as wall, joined the two (docs/robustness-log.md).
     pub premerge_views: u32,
     /// ...and those views are at least this share of the views that saw either of the two:
     /// where more than a quarter of them saw only one, the views that could have told the
@@ -956,7 +956,7 @@ fn add_neighbour_votes(obs: &Observations, knn: &[u32], k: usize, g: usize, sum:
 /// ([`RowPosterior::posterior`]), on every core. The entropy (a logarithm per class)
 /// depends on the counts alone, so it is computed once per distinct row of counts (a
 /// segment's members share its split: 47k rows for the 911k Gaussians of a noisy office,
-/// 64k for a 978k room under random block labels, docs/robustness.md), the confidence per
+/// 64k for a 978k room under random block labels, docs/robustness-log.md), the confidence per
 /// Gaussian.
 pub(crate) fn posteriors(
     evidence: &SharedCounts,

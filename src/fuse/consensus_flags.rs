@@ -7,7 +7,7 @@
 //! fall on decides its vote, so its views split though none mislabels anything: on the
 //! consistent-mislabel sweep at 320x240 such fragments were up to six flags a run. An
 //! object its views mislabel is a region of its own, or a large part of one, at least in the
-//! views that call it by its own class (docs/robustness.md, "Flags on objects, not on
+//! views that call it by its own class (docs/robustness-log.md, "Flags on objects, not on
 //! slivers").
 
 use super::consensus_cluster::{counts_sorted, counts_sorted_of};

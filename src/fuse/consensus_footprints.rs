@@ -18,7 +18,7 @@
 //! the cheaper.
 //!
 //! Tried first, and measured slower on lavapipe: per-Gaussian slots claimed by
-//! compare-and-swap on the region id (docs/robustness.md). Addressed by list entry, a sum
+//! compare-and-swap on the region id (docs/robustness-log.md). Addressed by list entry, a sum
 //! belongs to one tile's workgroup and needs no search.
 
 use anyhow::{ensure, Result};

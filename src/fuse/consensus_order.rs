@@ -5,13 +5,13 @@
 //! rows, segment ids, adjacency lists, region counts). A trained 3DGS scene lists its
 //! Gaussians in no spatial order (its SfM points, then each densification's clones and
 //! splits appended), so those reads miss the cache: with a room's Gaussians in random order
-//! the consensus's host work took twice as long (docs/robustness.md, "The Gaussians'
+//! the consensus's host work took twice as long (docs/robustness-log.md, "The Gaussians'
 //! order" and "The Gaussians numbered in space"). Numbered cell by cell of a grid, a
 //! Gaussian's neighbours have nearby numbers whatever the scene's order. Within a cell the
 //! Gaussians go by position, so the numbering, and with it every tie the consensus breaks by
 //! number, does not depend on the scene's order (except between Gaussians at the same
 //! position). (The k-d tree of the neighbour search, src/fuse/neighbours.rs, would number
-//! them at any density, but a new numbering is a new set of ties: docs/robustness.md,
+//! them at any density, but a new numbering is a new set of ties: docs/robustness-log.md,
 //! "Neighbours in scenes of many scales".)
 
 use std::sync::Arc;

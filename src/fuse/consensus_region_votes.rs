@@ -16,7 +16,7 @@
 //! nothing; one none of them was observed in, one whose clear class the views hardly ever
 //! take for its label, and one mostly of Gaussians no segment decides (a small object's
 //! region eroded by boundary noise) keep their label ([`RegionVoteRule`];
-//! docs/robustness.md, "Small segments read through their views' regions").
+//! docs/robustness-log.md, "Small segments read through their views' regions").
 
 use super::consensus_confusion::{clear_class, ConfusionRates};
 use super::consensus_decide::{ConsensusParams, SegmentVotes};

@@ -6,7 +6,7 @@
 //! ceiling wall saw from the wall (every view that saw both put them in one region), and
 //! such a strip's pairs with the wall are as strong as its pairs with the rest of the
 //! ceiling. Taken in the order of evidence alone, the wall took it, strip by strip (12-14%
-//! of the office's ceiling on two of three flicker runs, docs/robustness.md, "Joins along a
+//! of the office's ceiling on two of three flicker runs, docs/robustness-log.md, "Joins along a
 //! surface first"). The shapes say the strip continues the ceiling: a flat
 //! Gaussian's shortest axis is its surface's normal, and a ceiling's normals turn by 90
 //! degrees at the wall. Joined to the ceiling first, the strip is then tested as part of

@@ -6,7 +6,7 @@
 //! size). A grid sized by the bounding box puts the subject into a handful of cells of
 //! thousands of Gaussians each, and every search there scans them all: 200,000 Gaussians
 //! on a unit sphere with 2,000 more scattered 2 to 102 units out took 167 s on two cores,
-//! against 0.4 s without the 2,000 (docs/robustness.md, "Neighbours in scenes of many
+//! against 0.4 s without the 2,000 (docs/robustness-log.md, "Neighbours in scenes of many
 //! scales"). The tree splits where the Gaussians are, so its leaves hold a few each at any
 //! density, and the search is exact at any distance.
 

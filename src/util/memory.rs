@@ -22,7 +22,7 @@ pub fn peak_host_bytes() -> Option<u64> {
 /// not an entry at a time; the observations' are filled in place), so their threads rarely
 /// wait for the one arena's lock; lavapipe's own threads allocate more (its rendering there
 /// was 3-9% slower). A parallel pass that allocates per item does wait: the segment
-/// clustering tried in rounds of stars (docs/robustness.md) took 1.9-2.2 s for its joins on
+/// clustering tried in rounds of stars (docs/robustness-log.md) took 1.9-2.2 s for its joins on
 /// two cores under one arena, 1.25 s with eight.
 ///
 /// Fixed thresholds: glibc's own move with use (a block freed from a mapping of its own
@@ -35,7 +35,7 @@ pub fn peak_host_bytes() -> Option<u64> {
 /// 1080p maps; 0.36-0.38 s and 3,500-4,600 faults with these thresholds). A higher trim threshold holds
 /// more at the peak: a consensus run of that capture peaked at 1.23 GB with 128 MiB, at
 /// 1.0-1.22 GB with 64 MiB and 1.03-1.13 GB with glibc's own, runs moving by 0.1 GB
-/// (docs/robustness.md, "The label readers' pages").
+/// (docs/robustness-log.md, "The label readers' pages").
 pub fn configure_malloc() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     for (variable, parameter, value) in [

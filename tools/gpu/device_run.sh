@@ -264,7 +264,7 @@ run_ours() {
   # every block in the heap.
   # On the development VM's two cores: the clustering 0.1 s faster on the office of 911k,
   # peak memory an eighth higher; on sixteen the decision's parallel passes were no
-  # faster than there on two (docs/robustness.md, "The host's passes at a capture's size").
+  # faster than there on two (docs/robustness-log.md, "The host's passes at a capture's size").
   MALLOC_MMAP_THRESHOLD_=4294967296 MALLOC_TRIM_THRESHOLD_=17179869184 CAP=120 \
     b "fuse living labels x 60 heap" bench fuse --scene /tmp/living_labels \
     --labels /tmp/living_labels/labels_noisy --views 60 --iters 3 --methods segment-consensus
