@@ -232,6 +232,40 @@ fn gray_rgb_and_gray_alpha_pngs_hold_ids() {
     let map = read_label_png_as(&p, &LabelFormat::default(), Some(&ids)).unwrap();
     assert_eq!(map.labels, [0, 3, IGN]);
 
+    // A colour-coded view showing only gray classes: ADE20K's wall is 120-120-120 while
+    // its id 120 is a pot. Every gray but black being a class's colour, it reads by colour
+    // (black, no class's colour, unlabeled), as the folder's other views do.
+    let ade = ClassTable::from_json_str(
+        r#"[{"id": 1, "name": "wall", "color": [120, 120, 120]},
+            {"id": 120, "name": "pot", "color": [255, 31, 0]}]"#,
+    )
+    .unwrap();
+    let wall = dir.path().join("wall_only.png");
+    let pixels = [120, 120, 120, 120, 120, 120, 0, 0, 0];
+    write_png(
+        &wall,
+        (3, 1),
+        png::ColorType::Rgb,
+        png::BitDepth::Eight,
+        None,
+        &pixels,
+    );
+    let map = read_label_png_as(&wall, &LabelFormat::default(), Some(&ade)).unwrap();
+    assert_eq!(map.labels, [1, 1, IGN]);
+    // A gray that is no class's colour keeps the map's values ids.
+    let mixed = dir.path().join("mixed.png");
+    let pixels = [120, 120, 120, 1, 1, 1, 0, 0, 0];
+    write_png(
+        &mixed,
+        (3, 1),
+        png::ColorType::Rgb,
+        png::BitDepth::Eight,
+        None,
+        &pixels,
+    );
+    let map = read_label_png_as(&mixed, &LabelFormat::default(), Some(&ade)).unwrap();
+    assert_eq!(map.labels, [120, 1, 0]);
+
     // Gray + alpha: transparent pixels are unlabeled.
     let la = dir.path().join("la.png");
     write_png(

@@ -82,7 +82,7 @@ fn palette(labels: &[u16], table: &ClassTable) -> Vec<u8> {
 }
 
 pub fn run(args: DemoArgs) -> Result<()> {
-    check_outputs(&[], &[("--out", Some(&args.out))])?;
+    check_outputs(&[], &[("--out", Some(&args.out))], &[])?;
     let s = build_room(&args)?;
     let methods = args.methods.methods()?;
     let gpu = Gpu::new()?;

@@ -21,7 +21,7 @@ use semsplat::scene::scene_file::{cameras_for_scene, read_scene};
 use semsplat::scene::{Camera, Gaussians, Split};
 use semsplat::util::{interrupt, write_bytes_atomic};
 
-use super::check_outputs;
+use super::{check_outputs, Input};
 
 #[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
 enum Views {
@@ -77,7 +77,18 @@ struct EvalReport {
 }
 
 pub fn run(args: EvalArgs) -> Result<()> {
-    check_outputs(&[("--json", args.json.as_deref())], &[])?;
+    check_outputs(
+        &[("--json", args.json.as_deref())],
+        &[],
+        &[
+            Input::Scene("--scene", Some(&args.scene)),
+            Input::Cameras("--cameras", args.cameras.as_deref()),
+            Input::Tree("--labels", Some(&args.labels)),
+            Input::File("--classes", args.classes.as_deref()),
+            Input::File("--truth", args.truth.as_deref()),
+            Input::Tree("--images", args.images.as_deref()),
+        ],
+    )?;
     let g = read_scene(&args.scene)?;
     let Some(classes) = g.class_ids.clone() else {
         bail!(

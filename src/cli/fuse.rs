@@ -3,7 +3,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{anyhow, bail, ensure, Context, Result};
 use clap::{Args, ValueEnum};
 use serde::Serialize;
 
@@ -11,7 +11,7 @@ use super::args;
 use super::fuse_consensus::{fuse_by_consensus, ConsensusOutputs};
 use super::merge::ShardJob;
 use super::progress::{follow, views_bar};
-use super::{check_outputs, open_dataset, write_scene_with_table, Interruptible};
+use super::{check_outputs, open_dataset, write_scene_with_table, Input, Interruptible};
 use semsplat::dataset::Dataset;
 use semsplat::dataset::{user_classes, DatasetPaths};
 use semsplat::eval::label_render::LabelRenderer;
@@ -120,9 +120,15 @@ pub struct FuseArgs {
     classes: Option<PathBuf>,
     #[command(flatten)]
     label_format: super::LabelFormatArgs,
-    /// Reassign from a saved evidence matrix instead of rendering (no GPU needed), e.g. to
-    /// try another --gamma.
-    #[arg(long, conflicts_with_all = ["labels", "save_contrib"])]
+    /// Reassign from a saved evidence matrix (`--save-contrib` of an earlier run) instead of
+    /// rendering (no GPU needed), e.g. to try another --gamma: each Gaussian takes its
+    /// class of most evidence, so the options of how the evidence is gathered (--method and
+    /// its variants) do not apply; a segment-consensus run is not reproduced from its
+    /// evidence (its classes are decided per segment).
+    #[arg(long, conflicts_with_all = [
+        "labels", "save_contrib", "method", "occlusion", "weighted", "per_view", "relabel",
+        "depth_tol", "behind_tol", "float_atomics", "train_only",
+    ])]
     contrib: Option<PathBuf>,
     /// Accumulate with float32 atomics instead of 64-bit fixed point (fixed point gives the
     /// same A on every run).
@@ -276,17 +282,29 @@ fn selecting(args: &OutputArgs) -> bool {
 
 /// How the evidence was gathered, for the report.
 pub(super) struct Provenance {
-    pub method: Method,
+    /// How the report names the method: its CLI spelling, or where the evidence came from.
+    pub method: &'static str,
     pub accumulation: Accumulation,
     pub start: Instant,
 }
 
 pub fn run(mut args: FuseArgs) -> Result<()> {
     let start = Instant::now();
-    check_output_args(&args.output)?;
     if args.cameras.is_none() && (args.labels.is_some() || args.output.render_views.is_some()) {
         args.cameras = Some(cameras_for_scene(None, &args.scene)?);
     }
+    let contrib_table = args.contrib.as_deref().map(contrib_sidecar);
+    check_output_args(
+        &args.output,
+        &[
+            Input::Scene("--scene", Some(&args.scene)),
+            Input::Cameras("--cameras", args.cameras.as_deref()),
+            Input::Tree("--labels", args.labels.as_deref()),
+            Input::File("--classes", args.classes.as_deref()),
+            Input::File("--contrib", args.contrib.as_deref()),
+            Input::File("--contrib's class table", contrib_table.as_deref()),
+        ],
+    )?;
     let g = read_scene(&args.scene)?;
     let method = selected_method(&args)?;
     let accumulation = if args.float_atomics {
@@ -305,7 +323,10 @@ pub fn run(mut args: FuseArgs) -> Result<()> {
         None => fuse_views(&args, &g, method, accumulation)?,
     };
     let provenance = Provenance {
-        method,
+        method: match args.contrib {
+            Some(_) => "saved evidence (--contrib)",
+            None => method.name(),
+        },
         accumulation,
         start,
     };
@@ -335,14 +356,31 @@ pub(super) fn write_fused(
         stats,
         consensus,
     } = evidence;
+    let assign_start = Instant::now();
+    assign_classes(&mut g, assignment, &table);
+    let segments = consensus.map(|c| c.annotate(&mut g));
+    // Everything that can refuse the run, before its first file is written.
+    check_assigned(args, &g)?;
+    let selected_class = args.extract.as_ref().or(args.remove.as_ref());
+    let selected_class = selected_class
+        .map(|name| find_class(&table, name))
+        .transpose()?;
+    let cameras = match &args.render_views {
+        Some(_) => {
+            let cameras = cameras.context("--render-views needs --cameras")?;
+            ensure!(
+                cameras.exists(),
+                "--cameras {} does not exist",
+                cameras.display()
+            );
+            Some(cameras)
+        }
+        None => None,
+    };
     if let Some(path) = &args.save_contrib {
         kept(&mut rows)?.save_npy(path)?;
         write_class_table(&contrib_sidecar(path), &table)?;
     }
-
-    let assign_start = Instant::now();
-    assign_classes(&mut g, assignment, &table);
-    let segments = consensus.map(|c| c.annotate(&mut g));
     // One-vs-rest (--save-membership, --extract, --remove) divides by each Gaussian's
     // evidence over every class: one more read of the rows, once.
     let one_vs_rest = args.save_membership.is_some() || selecting(args);
@@ -353,16 +391,15 @@ pub(super) fn write_fused(
     if let Some(path) = &args.save_membership {
         save_membership(path, kept(&mut rows)?, &totals, args.gamma)?;
     }
-    if let Some(dir) = &args.render_views {
-        let cameras = cameras.context("--render-views needs --cameras")?;
+    if let (Some(dir), Some(cameras)) = (&args.render_views, cameras) {
         render_label_views(cameras, dir, &g, &table)?;
     }
-    let selected = select_members(args, g, &mut rows, &totals, &table)?;
+    let selected = select_members(args, selected_class, g, &mut rows, &totals, &table)?;
     let assign_s = assign_start.elapsed().as_secs_f64();
 
     write_outputs(args, &selected, &table)?;
     let report = Report {
-        method: provenance.method.name(),
+        method: provenance.method,
         accumulation: provenance.accumulation,
         gaussians: selected.len(),
         classes: table.len(),
@@ -439,8 +476,9 @@ fn select_from_fused(
     write_report(&args.output, &report)
 }
 
-/// Every file and folder the run will write can be written (checked before any work).
-pub(super) fn check_output_args(args: &OutputArgs) -> Result<()> {
+/// Every file and folder the run will write can be written, and is none of `inputs`
+/// (checked before any work).
+pub(super) fn check_output_args(args: &OutputArgs, inputs: &[Input]) -> Result<()> {
     let contrib_table = args.save_contrib.as_deref().map(contrib_sidecar);
     check_outputs(
         &[
@@ -456,6 +494,7 @@ pub(super) fn check_output_args(args: &OutputArgs) -> Result<()> {
             ("--palette-ply", args.palette_ply.as_deref()),
         ],
         &[("--render-views", args.render_views.as_deref())],
+        inputs,
     )
 }
 
@@ -611,10 +650,31 @@ fn fuse_shard(args: &FuseArgs, g: &Gaussians, method: Method, shard: Shard) -> R
 }
 
 /// Gives every Gaussian its winning class (user id, -1 unseen) and that class's share.
+/// The fusion's classes and confidences replace whatever semantics the input scene held: a
+/// trained scene's logits (which `render --semantics` would otherwise draw, through the new
+/// class table) and an earlier consensus's entropies and segments.
 fn assign_classes(g: &mut Gaussians, assignment: Assignment, table: &ClassTable) {
     let rows: Vec<u32> = table.classes.iter().map(|c| c.id).collect();
+    g.semantics = None;
+    g.class_entropy = None;
+    g.segment_ids = None;
     g.class_ids = Some(user_classes(&rows, assignment.class.iter().copied()));
     g.class_conf = Some(assignment.confidence);
+}
+
+/// Refuses a fusion in which no Gaussian took a class: its output would say nothing, and
+/// the cause is nearly always the inputs.
+fn check_assigned(args: &OutputArgs, g: &Gaussians) -> Result<()> {
+    let classes = g.class_ids.as_deref().unwrap_or(&[]);
+    if classes.is_empty() || classes.iter().any(|&c| c >= 0) || selecting(args) {
+        return Ok(());
+    }
+    bail!(
+        "no Gaussian took a class (nothing written): no view saw a Gaussian's center on a \
+         labeled pixel. Check that the cameras and the scene share one frame and scale (a \
+         nerfstudio export's applied_transform, cameras of another reconstruction) and that \
+         the label maps hold classes (`semsplat inspect LABELS --cameras CAMERAS`)"
+    )
 }
 
 /// Writes the one-vs-rest membership matrix S as float32 0/1 [classes, Gaussians], a row
@@ -664,15 +724,15 @@ fn render_label_views(
 /// [`class_totals`] of the rows); all of them without either.
 fn select_members(
     args: &OutputArgs,
+    selected_class: Option<u32>,
     g: Gaussians,
     rows: &mut Option<Box<dyn EvidenceRows>>,
     totals: &[f64],
     table: &ClassTable,
 ) -> Result<Gaussians> {
-    let ((Some(name), _) | (_, Some(name))) = (&args.extract, &args.remove) else {
+    let Some(id) = selected_class else {
         return Ok(g);
     };
-    let id = find_class(table, name)?;
     let row = table
         .classes
         .iter()

@@ -1,7 +1,7 @@
 //! Which methods `demo`, `sweep` and `bench fuse` run, the joint methods' schedule
 //! (shared flags), and the room demo and sweep build.
 
-use anyhow::{anyhow, Result};
+use anyhow::{anyhow, ensure, Result};
 use clap::Args;
 
 use super::args;
@@ -51,16 +51,18 @@ pub fn parse_methods(keys: &[String], known: &[Lifter]) -> Result<Vec<Lifter>> {
     if keys.is_empty() {
         return Ok(known.to_vec());
     }
-    keys.iter()
-        .map(|m| {
-            Lifter::from_key(m)
-                .filter(|l| known.contains(l))
-                .ok_or_else(|| {
-                    let keys: Vec<&str> = known.iter().map(|l| l.key()).collect();
-                    anyhow!("unknown method '{m}' (known: {})", keys.join(", "))
-                })
-        })
-        .collect()
+    let mut methods: Vec<Lifter> = Vec::with_capacity(keys.len());
+    for m in keys {
+        let lifter = Lifter::from_key(m).filter(|l| known.contains(l));
+        let lifter = lifter.ok_or_else(|| {
+            let keys: Vec<&str> = known.iter().map(|l| l.key()).collect();
+            anyhow!("unknown method '{m}' (known: {})", keys.join(", "))
+        })?;
+        // Twice would run the same work twice and show it twice.
+        ensure!(!methods.contains(&lifter), "--methods names '{m}' twice");
+        methods.push(lifter);
+    }
+    Ok(methods)
 }
 
 /// The room of `demo` and `sweep`: `preset` (or a room file) seen by `train_views` +

@@ -11,6 +11,7 @@ use clap::Args;
 
 use super::fuse::{write_fused, Evidence, OutputArgs, Provenance};
 use super::progress::{follow, views_bar};
+use super::Input;
 use semsplat::dataset::{load_split_cameras, Dataset};
 use semsplat::fuse::partial::{
     cameras_digest, check_parts, manifest_path, FileDigest, Fnv64, FusionKey, PartReader,
@@ -22,7 +23,7 @@ use semsplat::fuse::{
 };
 use semsplat::gpu::Gpu;
 use semsplat::render::GpuScene;
-use semsplat::scene::ply::read_ply;
+use semsplat::scene::scene_file::{read_scene, resolve_scene_path};
 use semsplat::scene::{Camera, Gaussians};
 
 /// Gaussians summed at a time by default: 1M columns of every part (8 MB per class and part
@@ -142,7 +143,7 @@ fn fusion_key(job: &ShardJob) -> Result<FusionKey> {
         labels.update(&bytes.to_le_bytes());
     }
     Ok(FusionKey {
-        scene: FileDigest::of_file(job.scene_path)?,
+        scene: FileDigest::of_file(&resolve_scene_path(job.scene_path)?)?,
         gaussians: job.gaussians.len(),
         cameras: cameras_digest(&data.cameras),
         camera_count: data.cameras.len(),
@@ -158,7 +159,15 @@ fn fusion_key(job: &ShardJob) -> Result<FusionKey> {
 
 pub fn run(args: MergeArgs) -> Result<()> {
     let start = Instant::now();
-    super::fuse::check_output_args(&args.output)?;
+    let manifests: Vec<PathBuf> = args.parts.iter().map(|p| manifest_path(p)).collect();
+    let inputs: Vec<Input> = (args.parts.iter().chain(&manifests))
+        .map(|p| Input::File("a part", Some(p)))
+        .chain([
+            Input::Scene("--scene", Some(&args.scene)),
+            Input::Cameras("--cameras", args.cameras.as_deref()),
+        ])
+        .collect();
+    super::fuse::check_output_args(&args.output, &inputs)?;
     ensure!(
         args.chunk_gaussians > 0,
         "--chunk-gaussians must be positive"
@@ -169,7 +178,8 @@ pub fn run(args: MergeArgs) -> Result<()> {
         .map(|p| Ok((p.clone(), PartManifest::read(p)?)))
         .collect::<Result<Vec<_>>>()?;
     let key = check_parts(&parts)?;
-    let scene_digest = FileDigest::of_file(&args.scene)?;
+    let scene_file = resolve_scene_path(&args.scene)?;
+    let scene_digest = FileDigest::of_file(&scene_file)?;
     ensure!(
         scene_digest == key.scene,
         "{} is not the scene the parts were fused from ({} bytes, FNV-1a {} vs {} bytes, {})",
@@ -187,13 +197,13 @@ pub fn run(args: MergeArgs) -> Result<()> {
             cameras.display()
         );
     }
-    let g = read_ply(&args.scene)?;
+    let g = read_scene(&scene_file)?;
     let method = Method::from_key(&key.method)
         .with_context(|| format!("the parts name an unknown method '{}'", key.method))?;
     let scores = sum_parts(&args.parts, &key, args.chunk_gaussians)?;
     let evidence = Evidence::from_matrix(scores, &g, key.classes.clone());
     let provenance = Provenance {
-        method,
+        method: method.name(),
         accumulation: Accumulation::FixedPoint,
         start,
     };

@@ -12,6 +12,7 @@ pub mod joint_args;
 pub mod merge;
 pub mod progress;
 pub mod render;
+pub mod run_paths;
 pub mod sweep;
 pub mod synth;
 pub mod train;
@@ -27,7 +28,9 @@ use semsplat::scene::labels::LabelFormat;
 use semsplat::scene::ply::{write_classes_sidecar, write_ply_to};
 use semsplat::scene::{Camera, Gaussians};
 use semsplat::util::interrupt;
-use semsplat::util::{check_output_file, check_output_folder, stage_atomic};
+use semsplat::util::stage_atomic;
+
+pub use run_paths::{check_outputs, Input};
 
 /// How label maps are read, shared by every command that reads them.
 #[derive(Args, Clone, Copy, Debug, Default)]
@@ -61,26 +64,6 @@ pub fn open_dataset(paths: &DatasetPaths, skipped: &str) -> Result<Dataset> {
         );
     }
     Ok(data)
-}
-
-/// Checks, before any long work, that every output can be written (see
-/// [`check_output_file`]): `files` and `folders` pair each path with its option's name.
-/// Missing options are `None` and skipped.
-pub fn check_outputs(
-    files: &[(&str, Option<&Path>)],
-    folders: &[(&str, Option<&Path>)],
-) -> Result<()> {
-    for (option, path) in files {
-        if let Some(path) = path {
-            check_output_file(option, path)?;
-        }
-    }
-    for (option, path) in folders {
-        if let Some(path) = path {
-            check_output_folder(option, path)?;
-        }
-    }
-    Ok(())
 }
 
 /// Writes a classified scene and its class table (`<out>.classes.json`) so that they never

@@ -7,7 +7,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 
 use super::progress::render_bar;
-use super::{args, check_outputs};
+use super::{args, check_outputs, Input};
 use semsplat::eval::label_render::LabelRenderer;
 use semsplat::gpu::Gpu;
 use semsplat::render::{GpuScene, Rasterizer, RenderOptions, RenderedFrame, SemanticMode};
@@ -146,7 +146,14 @@ pub fn run(args: RenderArgs) -> Result<()> {
             args.background
         );
     }
-    check_outputs(&[], &[("--out", Some(&args.out))])?;
+    check_outputs(
+        &[],
+        &[("--out", Some(&args.out))],
+        &[
+            Input::Scene("--scene", Some(&args.scene)),
+            Input::Cameras("--cameras", args.cameras.as_deref()),
+        ],
+    )?;
     let scene_file = resolve_scene_path(&args.scene)?;
     let g = read_scene(&scene_file)?;
     let table = read_classes_sidecar(&scene_file)?;

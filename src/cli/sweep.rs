@@ -4,7 +4,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, ensure, Context, Result};
 use clap::{Args, ValueEnum};
 use serde::Serialize;
 
@@ -18,7 +18,7 @@ use semsplat::experiment::{
     ORACLE_NAME,
 };
 use semsplat::gpu::Gpu;
-use semsplat::synth::{generate, NoiseSpec};
+use semsplat::synth::{generate, NoiseSpec, RoomSource};
 use semsplat::util::{interrupt, write_bytes_atomic};
 
 #[derive(Clone, Copy, ValueEnum, PartialEq, Eq, Debug)]
@@ -61,7 +61,12 @@ impl NoiseKind {
     /// refused before any runs rather than when the sweep reaches it.
     fn at(self, base: &NoiseSpec, level: f64) -> Result<NoiseSpec> {
         let item = if self == NoiseKind::Boundary {
-            format!("boundary={}", level.round() as u32)
+            ensure!(
+                level >= 0.0 && level.fract() == 0.0,
+                "--levels '{level}' for --noise boundary: a boundary warp is a whole number of \
+                 pixels (0, 2, 4, ...)"
+            );
+            format!("boundary={}", level as u32)
         } else {
             format!("{}={level}", self.key())
         };
@@ -78,6 +83,23 @@ impl NoiseKind {
         }
         Ok(spec)
     }
+}
+
+/// The levels in ascending order (the chart's line runs through them in that order); a
+/// level given twice would run the same work twice and be drawn twice.
+fn sorted_levels(mut levels: Vec<f64>) -> Result<Vec<f64>> {
+    levels.sort_by(f64::total_cmp);
+    let items: Vec<String> = levels.iter().map(f64::to_string).collect();
+    refuse_repeats("--levels", &items)?;
+    Ok(levels)
+}
+
+/// A list option naming one item twice would run the same work twice.
+fn refuse_repeats(list: &str, items: &[String]) -> Result<()> {
+    for (i, item) in items.iter().enumerate() {
+        ensure!(!items[..i].contains(item), "{list} names '{item}' twice");
+    }
+    Ok(())
 }
 
 #[derive(Args)]
@@ -236,11 +258,20 @@ pub fn run(args: SweepArgs) -> Result<()> {
     } else {
         args.seeds.clone()
     };
+    let levels = sorted_levels(levels)?;
+    refuse_repeats("--presets", &presets)?;
+    refuse_repeats(
+        "--seeds",
+        &seeds.iter().map(u64::to_string).collect::<Vec<_>>(),
+    )?;
+    for preset in &presets {
+        RoomSource::from_arg(preset)?; // every room named before the first run
+    }
     let base = base_noise(&args)?;
     let specs = (levels.iter())
         .map(|&level| Ok((level, args.noise.at(&base, level)?)))
         .collect::<Result<Vec<_>>>()?;
-    check_outputs(&[], &[("--out", Some(&args.out))])?;
+    check_outputs(&[], &[("--out", Some(&args.out))], &[])?;
     let methods = args.methods.methods()?;
     let gpu = Gpu::new()?;
     let mut runs = Vec::new();

@@ -10,12 +10,12 @@ use serde::Serialize;
 
 use super::args;
 use super::progress::iterations_bar;
-use super::{check_outputs, open_dataset, write_scene_with_table};
+use super::{check_outputs, open_dataset, write_scene_with_table, Input};
 use semsplat::dataset::{user_classes, CompactClasses, Dataset, DatasetPaths};
 use semsplat::gpu::Gpu;
 use semsplat::render::SemanticMode;
 use semsplat::scene::images::load_view_image;
-use semsplat::scene::ply::{classes_sidecar_path, read_ply, write_ply};
+use semsplat::scene::ply::{classes_sidecar_path, read_ply};
 use semsplat::scene::scene_file::{cameras_for_scene, read_scene_or_point_cloud};
 use semsplat::scene::Gaussians;
 use semsplat::train::config::TrainConfig;
@@ -178,6 +178,14 @@ pub fn run(args: TrainArgs) -> Result<()> {
             ("--report", args.report.as_deref()),
         ],
         &[],
+        &[
+            Input::Tree("--images", Some(&args.images)),
+            Input::Tree("--labels", Some(&args.labels)),
+            Input::Cameras("--cameras", args.cameras.as_deref()),
+            Input::Scene("--init", Some(&args.init)),
+            Input::File("--init-semantics-from", args.init_semantics_from.as_deref()),
+            Input::File("--classes", args.classes.as_deref()),
+        ],
     )?;
     let data = load_dataset(&args)?;
     let views = train_views(&args, &data)?;
@@ -197,17 +205,10 @@ pub fn run(args: TrainArgs) -> Result<()> {
         views.len(),
         init.len()
     );
-    let log = train_loop(&args, &mut trainer)?;
+    let log = train_loop(&args, &data, &mut trainer)?;
     let out = trainer.finish()?;
     let per_iter = per_iteration(&out.times);
-    let mut g: Gaussians = out.gaussians;
-    let (classes, conf) = classes_from_logits(&g, &out.seen);
-    g.class_ids = Some(user_classes(
-        data.classes.user_ids(),
-        classes.iter().map(|c| c.map(|c| c as usize)),
-    ));
-    g.class_conf = Some(conf);
-    write_scene_with_table(&args.out, &g, &data.table)?;
+    let g = write_trained(&args.out, out.gaussians, &out.seen, &data)?;
 
     let seconds = start.elapsed().as_secs_f64();
     eprintln!(
@@ -356,7 +357,7 @@ fn train_config(args: &TrainArgs, init_gaussians: usize) -> Result<TrainConfig> 
 }
 
 /// Runs every iteration with a progress bar, writing checkpoints; returns the loss log.
-fn train_loop(args: &TrainArgs, trainer: &mut Trainer) -> Result<Vec<LogLine>> {
+fn train_loop(args: &TrainArgs, data: &Dataset, trainer: &mut Trainer) -> Result<Vec<LogLine>> {
     let bar = iterations_bar(args.iters);
     let mut log = Vec::new();
     for _ in 0..args.iters {
@@ -381,13 +382,33 @@ fn train_loop(args: &TrainArgs, trainer: &mut Trainer) -> Result<Vec<LogLine>> {
         if let Some(k) = args.checkpoint_every {
             let it = trainer.iteration();
             if it % k == 0 && it < args.iters {
+                let seen = trainer.seen_by_views()?;
                 let path = checkpoint_path(&args.out, it);
-                write_ply(&path, &trainer.gaussians()?)?;
+                write_trained(&path, trainer.gaussians()?, &seen, data)?;
             }
         }
     }
     bar.finish();
     Ok(log)
+}
+
+/// Writes a trained model, as `--out` and its checkpoints are written: each Gaussian's class
+/// from its logits (none where no view sees it) and the class table beside it, so `render
+/// --semantics` and `eval` read a checkpoint as they read the final scene.
+fn write_trained(
+    path: &Path,
+    mut g: Gaussians,
+    seen: &[bool],
+    data: &Dataset,
+) -> Result<Gaussians> {
+    let (classes, conf) = classes_from_logits(&g, seen);
+    g.class_ids = Some(user_classes(
+        data.classes.user_ids(),
+        classes.iter().map(|c| c.map(|c| c as usize)),
+    ));
+    g.class_conf = Some(conf);
+    write_scene_with_table(path, &g, &data.table)?;
+    Ok(g)
 }
 
 /// GPU milliseconds per iteration, by stage.

@@ -186,6 +186,14 @@ pub fn classes_in_labels(
         present.extend(ids);
         ignored += ignored_pixels;
     }
+    if present.is_empty() && dir.len() > 0 {
+        bail!(
+            "the label maps of {} hold no class: every pixel is the ignore value ({}); pass \
+             --ignore-id with a value the maps do not use, or check the folder",
+            dir.dir().display(),
+            dir.format().describe_ignore()
+        );
+    }
     let compact = CompactClasses::from_ids(present)?;
     let table = compact.table(given.unwrap_or(&ClassTable::default()));
     Ok((compact, table, ignored))

@@ -500,10 +500,8 @@ impl Trainer {
         Ok(g)
     }
 
-    /// Ends the run: the model, which Gaussians the training views see, the riders.
-    pub fn finish(mut self) -> Result<TrainOutput> {
-        let peak_device_bytes = self.gpu.memory_reserved();
-        let gaussians = self.gaussians()?;
+    /// Per Gaussian, whether some training view renders it (one pass over the views).
+    pub fn seen_by_views(&mut self) -> Result<Vec<bool>> {
         let mut seen = vec![false; self.scene.n as usize];
         let opts = RenderOptions {
             semantics: None,
@@ -518,6 +516,14 @@ impl Trainer {
                 *s |= f != 0;
             }
         }
+        Ok(seen)
+    }
+
+    /// Ends the run: the model, which Gaussians the training views see, the riders.
+    pub fn finish(mut self) -> Result<TrainOutput> {
+        let peak_device_bytes = self.gpu.memory_reserved();
+        let gaussians = self.gaussians()?;
+        let seen = self.seen_by_views()?;
         let riders = self
             .riders
             .iter()

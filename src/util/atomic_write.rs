@@ -252,6 +252,12 @@ fn process_alive(pid: u32) -> bool {
 /// (after following links) and inside a folder that exists or can be created and accepts
 /// new files. `option` names the flag in the error.
 pub fn check_output_file(option: &str, target: &Path) -> Result<()> {
+    if target.as_os_str().as_encoded_bytes().last() == Some(&b'/') {
+        bail!(
+            "{option} {} ends in '/', which names a folder: give the file's name after it",
+            target.display()
+        );
+    }
     let resolved = resolve_output_file(target).with_context(|| option.to_string())?;
     let parent = match resolved.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,

@@ -343,9 +343,12 @@ fn labels_by_colour<'a>(
     Ok(labels)
 }
 
-/// An RGB map whose pixels are all gray holds gray ids, unless a class table is given, some
-/// gray value is not one of its ids, and every pixel's colour is one of its colours (a
-/// colour-coded map that happens to use only gray colours, e.g. Cityscapes' buildings).
+/// An RGB map whose pixels are all gray holds gray ids, unless a class table is given and
+/// every gray value but black (unlabeled in a colour-coded map) is one of its colours, and
+/// some value is not black: a colour-coded map that happens to show only
+/// gray classes (ADE20K's wall, 120-120-120, while id 120 is its pot; Cityscapes' building).
+/// Its neighbours in the folder are colour-coded, and an RGB map of ids whose every value is
+/// also a class's colour, of another class, is the far less likely file.
 fn gray_rgb_is_color_coded(
     n: usize,
     raw: &dyn Fn(usize) -> RawPixel,
@@ -362,10 +365,10 @@ fn gray_rgb_is_color_coded(
             seen[v as usize] = true;
         }
     }
-    let values = || (0..256u32).filter(|&v| seen[v as usize]);
-    let all_ids = values().all(|v| table.contains(v));
-    let all_colors = values().all(|v| table.classes.iter().any(|c| c.color == [v as u8; 3]));
-    !all_ids && all_colors
+    let is_color = |v: u32| table.classes.iter().any(|c| c.color == [v as u8; 3]);
+    // Black that is no class's colour reads as unlabeled in a colour-coded map.
+    let gray_classes = (1..256u32).filter(|&v| seen[v as usize]);
+    gray_classes.clone().count() > 0 && gray_classes.into_iter().all(is_color)
 }
 
 /// Colour -> class id of the table; ambiguous colours are an error.

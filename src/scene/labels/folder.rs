@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Context, Result};
 
-use super::decode::{read_label_png_as, read_png_header, LabelFormat};
+use super::decode::{read_label_png_as, read_png_header, LabelFormat, PngHeader};
 use super::LabelMap;
 use crate::scene::camera::Camera;
 use crate::scene::classes::{ClassTable, IGNORE_U16};
@@ -314,12 +314,36 @@ impl LabelDir {
                 e.camera_size.1
             );
         }
+        self.check_default_ignore(&header)
+            .with_context(|| format!("label map {}", e.path.display()))?;
         let map = read_label_png_as(&e.path, &self.format, self.table.as_ref())?;
         if let Some(allowed) = &self.allowed {
             check_ids_in_table(&map, allowed)
                 .with_context(|| format!("label map {}", e.path.display()))?;
         }
         Ok(map)
+    }
+
+    /// The default ignore value of a map this deep must not be a class of the table: its
+    /// pixels would silently never count (an explicit --ignore-id is checked at opening).
+    fn check_default_ignore(&self, header: &PngHeader) -> Result<()> {
+        let (None, Some(table)) = (self.format.ignore_id, &self.table) else {
+            return Ok(());
+        };
+        if header.bit_depth < 8 {
+            return Ok(()); // its samples never reach the ignore value
+        }
+        let ignore = self.format.ignore_for_depth(header.bit_depth);
+        match table.get(u32::from(ignore)) {
+            Some(c) => bail!(
+                "holds {}-bit values, where {ignore} means \"no label\" by default, but {ignore} is \
+                 class '{}' in the class table: its pixels would never count; pass --ignore-id \
+                 with an id no class uses",
+                header.bit_depth,
+                c.name
+            ),
+            None => Ok(()),
+        }
     }
 
     /// Streams `(camera index, map)` pairs in camera order.

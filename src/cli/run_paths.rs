@@ -1,0 +1,187 @@
+//! What a run reads and writes, checked against each other before any work. Each output
+//! must be writable ([`check_output_file`]), and must not be one of the run's inputs (or an
+//! input scene's class table), lie in a folder the run reads with its subfolders (label
+//! maps, images), or be another of its outputs: the run itself would destroy or mix up
+//! what it reads, or one output would replace another, and the run would still say it
+//! succeeded.
+
+use std::ffi::OsString;
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Result};
+use semsplat::scene::ply::classes_sidecar_path;
+use semsplat::scene::scene_file::{resolve_scene_path, CAMERAS_FILE};
+use semsplat::util::{check_output_file, check_output_folder};
+
+/// One input of a run, named by its option.
+#[derive(Clone, Copy)]
+pub enum Input<'a> {
+    /// A file read as a whole (a camera file, a class table, an evidence matrix).
+    File(&'a str, Option<&'a Path>),
+    /// A scene, given as a file or a folder: the file it resolves to, and its class table.
+    Scene(&'a str, Option<&'a Path>),
+    /// Cameras, given as a file or a model folder: the model files a folder holds.
+    Cameras(&'a str, Option<&'a Path>),
+    /// A folder read with its subfolders (label maps, images).
+    Tree(&'a str, Option<&'a Path>),
+}
+
+/// The model files a camera folder may hold (COLMAP's text and binary models, INRIA's and
+/// semsplat's `cameras.json`, nerfstudio's `transforms.json`), in it or in `sparse/0`.
+const CAMERA_FILES: [&str; 8] = [
+    "cameras.json",
+    "transforms.json",
+    "cameras.bin",
+    "cameras.txt",
+    "images.bin",
+    "images.txt",
+    "points3D.bin",
+    "points3D.txt",
+];
+
+/// Checks, before any long work, every output file and folder (each paired with its
+/// option's name; `None` where the option was not given) against the run's inputs and
+/// each other (see the module's description).
+pub fn check_outputs(
+    files: &[(&str, Option<&Path>)],
+    folders: &[(&str, Option<&Path>)],
+    inputs: &[Input],
+) -> Result<()> {
+    let files: Vec<(&str, &Path)> = given(files);
+    let folders: Vec<(&str, &Path)> = given(folders);
+    for &(option, path) in &files {
+        check_output_file(option, path)?;
+    }
+    for &(option, path) in &folders {
+        check_output_folder(option, path)?;
+    }
+    let (read_files, read_trees) = read_paths(inputs);
+    let mut written: Vec<(&str, PathBuf)> = Vec::new();
+    for &(option, path) in &files {
+        let id = identity(path);
+        if let Some((other, _)) = written.iter().find(|(_, w)| *w == id) {
+            bail!(
+                "{option} {} is also {other}: one would replace the other; give each its own file",
+                path.display()
+            );
+        }
+        if let Some((input, _)) = read_files.iter().find(|(_, r)| *r == id) {
+            bail!("{option} {} is the run's {input}: writing it would destroy that input; write elsewhere", path.display());
+        }
+        refuse_inside_trees(option, path, &id, &read_trees)?;
+        written.push((option, id));
+    }
+    for &(option, path) in &folders {
+        refuse_inside_trees(option, path, &identity(path), &read_trees)?;
+    }
+    Ok(())
+}
+
+fn given<'a>(paths: &[(&'a str, Option<&'a Path>)]) -> Vec<(&'a str, &'a Path)> {
+    (paths.iter())
+        .filter_map(|&(option, path)| Some((option, path?)))
+        .collect()
+}
+
+/// An output at or under a folder the run reads with its subfolders would be read back
+/// as an input by this run or the next (a label map replaced, a rendered view taken for one).
+fn refuse_inside_trees(
+    option: &str,
+    path: &Path,
+    id: &Path,
+    trees: &[(String, PathBuf)],
+) -> Result<()> {
+    if let Some((input, tree)) = trees.iter().find(|(_, t)| id.starts_with(t)) {
+        bail!(
+            "{option} {} is inside the {input} folder {}, which the run reads with its \
+             subfolders: write it outside that folder",
+            path.display(),
+            tree.display()
+        );
+    }
+    Ok(())
+}
+
+/// The files the inputs read, and the folders they read with their subfolders, each as
+/// its [`identity`] beside the option naming it.
+fn read_paths(inputs: &[Input]) -> (Vec<(String, PathBuf)>, Vec<(String, PathBuf)>) {
+    let (mut files, mut trees) = (Vec::new(), Vec::new());
+    for input in inputs {
+        match *input {
+            Input::File(option, Some(path)) => files.push((option.into(), identity(path))),
+            Input::Scene(option, Some(path)) => {
+                // A scene that does not resolve is reported by its reader, after these checks.
+                if let Ok(file) = resolve_scene_path(path) {
+                    let table = classes_sidecar_path(&file);
+                    files.push((format!("{option}'s class table"), identity(&table)));
+                    files.push((option.into(), identity(&file)));
+                }
+                // The cameras a scene's folder holds are its default cameras.
+                let folder = if path.is_dir() {
+                    path
+                } else {
+                    path.parent().unwrap_or(Path::new("."))
+                };
+                let cameras = folder.join(CAMERAS_FILE);
+                if cameras.is_file() {
+                    files.push((format!("{option}'s cameras"), identity(&cameras)));
+                }
+            }
+            Input::Cameras(option, Some(path)) if path.is_dir() => {
+                for folder in [path.to_path_buf(), path.join("sparse").join("0")] {
+                    let names = CAMERA_FILES.iter().map(|name| folder.join(name));
+                    let found = names.filter(|f| f.is_file());
+                    files.extend(found.map(|f| (option.into(), identity(&f))));
+                }
+            }
+            Input::Cameras(option, Some(path)) => files.push((option.into(), identity(path))),
+            Input::Tree(option, Some(path)) => trees.push((option.into(), identity(path))),
+            _ => {}
+        }
+    }
+    (files, trees)
+}
+
+/// One spelling per file: absolute, with the links and `..` of its existing part resolved
+/// (a write goes through links to their target) and the rest appended as given.
+fn identity(path: &Path) -> PathBuf {
+    let absolute = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    let mut head = absolute.as_path();
+    let mut tail: Vec<OsString> = Vec::new();
+    loop {
+        if let Ok(mut resolved) = fs::canonicalize(head) {
+            resolved.extend(tail.iter().rev());
+            return resolved;
+        }
+        match (head.file_name(), head.parent()) {
+            (Some(name), Some(parent)) => {
+                tail.push(name.to_os_string());
+                head = parent;
+            }
+            _ => return absolute,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn identity_resolves_links_and_dots_of_the_existing_part() {
+        let dir = std::env::temp_dir().join(format!("semsplat-identity-{}", std::process::id()));
+        fs::create_dir_all(dir.join("real")).unwrap();
+        let link = dir.join("link");
+        let _ = fs::remove_file(&link);
+        std::os::unix::fs::symlink(dir.join("real"), &link).unwrap();
+        let by_link = identity(&link.join("new.ply"));
+        let by_dots = identity(&dir.join("real").join("..").join("real").join("new.ply"));
+        assert_eq!(by_link, by_dots);
+        assert_eq!(
+            by_link,
+            fs::canonicalize(dir.join("real")).unwrap().join("new.ply")
+        );
+        fs::remove_dir_all(&dir).unwrap();
+    }
+}
