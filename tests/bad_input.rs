@@ -92,6 +92,62 @@ fn truncated_ply_is_an_error() {
 }
 
 #[test]
+fn ply_data_that_does_not_fit_its_header_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let v = "0 0 0 0 0 0 0 0 0 0 1 0 0 0";
+    let head =
+        |n: usize| format!("ply\nformat ascii 1.0\nelement vertex {n}\n{REQUIRED}end_header\n");
+    // One value short on one line, one over on the next: read as one stream, the second
+    // vertex would be shifted by one field.
+    let shifted = write_tmp(
+        dir.path(),
+        "shifted.ply",
+        format!("{}{v}\n0 0 0 0 0 0 0 0 0 1 0 0 0\n{v} 7\n", head(3)),
+    );
+    assert_error(
+        &error_of(read_ply(&shifted)),
+        &shifted,
+        &["vertex 1 ends after 13 values", "14 properties"],
+    );
+    let joined = write_tmp(dir.path(), "joined.ply", format!("{}{v} {v}\n", head(2)));
+    assert_error(
+        &error_of(read_ply(&joined)),
+        &joined,
+        &["vertex 0's line holds more"],
+    );
+    let more = write_tmp(dir.path(), "more.ply", format!("{}{v}\n{v}\n", head(1)));
+    assert_error(
+        &error_of(read_ply(&more)),
+        &more,
+        &["past the header's 1 vertices"],
+    );
+    // Binary: a count smaller than the data.
+    let good = dir.path().join("good.ply");
+    write_ply(&good, &one_gaussian()).unwrap();
+    let bytes = std::fs::read(&good).unwrap();
+    let mut fewer_bytes = bytes.clone();
+    let at = (bytes.windows(16))
+        .position(|w| w == b"element vertex 2")
+        .unwrap();
+    fewer_bytes[at + 15] = b'1';
+    let fewer = write_tmp(dir.path(), "fewer.ply", &fewer_bytes);
+    assert_error(
+        &error_of(read_ply(&fewer)),
+        &fewer,
+        &["past the header's 1 vertices"],
+    );
+    // A class written as an unsigned narrow type: its largest value is -1, as 2^32 - 1 is.
+    for (ty, max) in [("uchar", 255), ("ushort", 65535)] {
+        let p = write_tmp(
+            dir.path(),
+            &format!("{ty}.ply"),
+            format!("ply\nformat ascii 1.0\nelement vertex 2\n{REQUIRED}property {ty} class\nend_header\n{v} 3\n{v} {max}\n"),
+        );
+        assert_eq!(read_ply(&p).unwrap().class_ids.unwrap(), [3, -1], "{ty}");
+    }
+}
+
+#[test]
 fn malformed_ply_headers_are_errors() {
     let dir = tempfile::tempdir().unwrap();
     let cases: &[(&str, String, &str)] = &[

@@ -119,8 +119,16 @@ fn train_writes_classes_logits_checkpoints_and_a_report() {
     let init = read_ply(Path::new(&format!("{d}/init.ply"))).unwrap();
     assert!(g.len() <= 8000);
     check_classes_against_the_table(&g, tmp.path());
+    // Checkpoints are read as the final scene is: classes from their logits, the table beside.
     for it in [10, 20] {
-        assert!(tmp.path().join(format!("trained.iter{it}.ply")).is_file());
+        let checkpoint = tmp.path().join(format!("trained.iter{it}.ply"));
+        let c = read_ply(&checkpoint).unwrap();
+        let classes = c.class_ids.as_ref().expect("a checkpoint's classes");
+        assert!(classes.iter().any(|&k| k >= 0));
+        assert!(tmp
+            .path()
+            .join(format!("trained.iter{it}.classes.json"))
+            .is_file());
     }
     check_eval_scores_the_trained_scene(d, &out);
     check_train_report(&report, &init);
@@ -188,7 +196,10 @@ fn bad_input_gives_a_clear_error_and_no_output() {
     let r = run(&args);
     assert!(!r.status.success());
     let err = String::from_utf8_lossy(&r.stderr);
-    assert!(err.contains("is 10x10 but camera"), "{err}");
+    assert!(
+        err.contains("is 10x10, but camera") && err.contains("must have one size"),
+        "{err}"
+    );
 
     assert!(!out.exists(), "a failed run left {}", out.display());
 }

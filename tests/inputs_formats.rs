@@ -418,10 +418,24 @@ fn spz_versions_2_and_3_match_the_standard_ply_within_their_quantization() {
         &t,
         "spz degree 1",
     );
-    // Not gzip, and a version this build does not read, are named.
-    std::fs::write(&path, b"NGSP but not gzip").unwrap();
+    // Not gzip, a version 4 file (its header uncompressed), a cut gzip stream, and a
+    // version this build does not read, are named.
+    std::fs::write(&path, b"PLY, not gzip").unwrap();
     let err = format!("{:#}", read_scene(&path).unwrap_err());
-    assert!(err.contains("d1.spz") && err.contains("gzip"), "{err}");
+    assert!(
+        err.contains("d1.spz") && err.contains("gzip header"),
+        "{err}"
+    );
+    std::fs::write(&path, b"NGSP\x04\0\0\0 the rest").unwrap();
+    let err = format!("{:#}", read_scene(&path).unwrap_err());
+    assert!(
+        err.contains("version 4") && err.contains("convert it to PLY"),
+        "{err}"
+    );
+    let whole = write_spz_like_niantic(&g1, 2);
+    std::fs::write(&path, &whole[..whole.len() / 2]).unwrap();
+    let err = format!("{:#}", read_scene(&path).unwrap_err());
+    assert!(err.contains("truncated or corrupt"), "{err}");
     let mut v4 = write_spz_like_niantic(&g1, 2);
     let mut raw = Vec::new();
     flate2::read::GzDecoder::new(&v4[..])

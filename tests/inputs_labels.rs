@@ -750,3 +750,31 @@ fn the_first_bad_map_in_order_is_the_one_reported() {
         );
     }
 }
+
+/// A class table naming class 255 cannot be read with 8-bit maps' default ignore value,
+/// 255: its pixels would silently never count. Named, with the remedy; --ignore-id reads it.
+#[test]
+fn a_table_class_at_the_default_ignore_value_is_refused_for_8_bit_maps() {
+    let dir = tempfile::tempdir().unwrap();
+    let (cameras, labels) = dataset_dir(dir.path(), &[camera("a", (4, 3))]);
+    write_gray_4x3(&labels, "a", &[0, 255, 255, 0, 0, 0, 1, 1, 0, 0, 0, 0]);
+    let table = ClassTable::from_ids([0, 1, 255]);
+    let table_path = dir.path().join("classes.json");
+    write_class_table(&table_path, &table).unwrap();
+    let open_with = |ignore_id| {
+        Dataset::open(&DatasetPaths {
+            cameras: &cameras,
+            labels: &labels,
+            class_table: Some(&table_path),
+            train_only: false,
+            format: LabelFormat::with_ignore_id(ignore_id),
+        })
+    };
+    let e = format!("{:#}", open_with(None).err().expect("class 255 refused"));
+    assert!(
+        e.contains("255 is class") && e.contains("--ignore-id"),
+        "{e}"
+    );
+    let data = open_with(Some(1000)).unwrap();
+    assert_eq!(data.classes.user_ids(), [0, 1, 255]);
+}

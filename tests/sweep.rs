@@ -7,7 +7,7 @@ use std::path::Path;
 
 mod common;
 
-use common::cli::{ok, read_json};
+use common::cli::{fails, ok, read_json};
 use semsplat::experiment::{instance_oracle_classes, ORACLE_NAME};
 use semsplat::scene::labels::LabelMap;
 use semsplat::scene::Split;
@@ -289,5 +289,56 @@ fn instance_oracle_on_clean_labels_gives_every_seen_object_its_true_class() {
     assert!(decided > oracle.len() / 2, "{decided} of {}", oracle.len());
     for (i, (&o, &t)) in oracle.iter().zip(truth).enumerate() {
         assert!(o < 0 || o == t, "Gaussian {i}: oracle {o}, truth {t}");
+    }
+}
+
+/// A sweep's lists are checked before its first run: a level the noise cannot take, an item
+/// named twice (the same work run and drawn twice), a room that does not exist.
+#[test]
+fn sweep_refuses_bad_lists_before_any_run() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("sweep");
+    let out = out.to_str().unwrap();
+    let small = [
+        "sweep",
+        "--views",
+        "2",
+        "--test-views",
+        "1",
+        "--width",
+        "16",
+        "--height",
+        "12",
+    ];
+    let cases: [(&[&str], &str); 5] = [
+        (
+            &["--noise", "boundary", "--levels", "0,0.5"],
+            "whole number of pixels",
+        ),
+        (
+            &["--noise", "flicker", "--levels", "0,0.2,0"],
+            "--levels names '0' twice",
+        ),
+        (
+            &["--noise", "flicker", "--methods", "vote,vote"],
+            "--methods names 'vote' twice",
+        ),
+        (
+            &["--noise", "flicker", "--seeds", "1,1"],
+            "--seeds names '1' twice",
+        ),
+        (
+            &["--noise", "flicker", "--presets", "tiny,bogus"],
+            "unknown preset 'bogus'",
+        ),
+    ];
+    for (extra, expected) in cases {
+        let mut args = small.to_vec();
+        args.extend(extra);
+        args.extend(["--out", out]);
+        let e = fails(&args);
+        assert!(e.contains(expected), "{extra:?}: {e}");
+        assert!(!e.contains("seed "), "{extra:?} ran before refusing: {e}");
+        assert!(!Path::new(out).exists(), "{extra:?} wrote its output");
     }
 }

@@ -27,9 +27,10 @@ pub fn bench_scan(gpu: &Gpu, n: u64, iters: usize, seed: u64) -> Result<ScanBenc
         gpu.caps().timestamps,
         "the device has no timestamp queries; GPU time cannot be measured"
     );
+    // The device's limit is checked before the host array is made.
+    let scan = PrefixScan::new(gpu, n)?;
     let mut rng = Rng::new(seed);
     let data: Vec<u32> = (0..n).map(|_| rng.next_u32() % 1024).collect();
-    let scan = PrefixScan::new(gpu, n)?;
     let input = gpu.buffer_from("bench-scan-in", &data)?;
     let output = gpu.buffer("bench-scan-out", n * 4)?;
     let count = gpu.buffer_from("bench-count", &[n as u32])?;

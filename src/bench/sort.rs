@@ -32,11 +32,12 @@ pub fn bench_sort(gpu: &Gpu, n: u64, bits: u32, iters: usize, seed: u64) -> Resu
         gpu.caps().timestamps,
         "the device has no timestamp queries; GPU time cannot be measured"
     );
+    // The device's limit is checked before the host arrays are made (gigabytes at the limit).
+    let sorter = RadixSort::new(gpu, n)?;
     let mut rng = Rng::new(seed);
     let keys: Vec<u32> = (0..n).map(|_| rng.next_u32()).collect();
     let values: Vec<u32> = (0..n as u32).collect();
 
-    let sorter = RadixSort::new(gpu, n)?;
     let src_keys = gpu.buffer_from("bench-src-keys", &keys)?;
     let src_values = gpu.buffer_from("bench-src-values", &values)?;
     let work_keys = gpu.buffer("bench-keys", n * 4)?;

@@ -68,14 +68,15 @@ pub fn at_least_one<T: FromStr + Copy + TryInto<u64>>(s: &str) -> Result<T, Stri
     }
 }
 
-/// A size in bytes with an optional K/M/G suffix (binary units): 512M, 2G, 1.5G; at least
-/// one byte and at most 2^63.
+/// A size in bytes with an optional K/M/G/T suffix (binary units): 512M, 2G, 1.5T; at least
+/// one byte and at most 8,000 PiB (about 2^63 bytes).
 pub fn bytes(s: &str) -> Result<u64, String> {
     let s = s.trim();
     let (num, mul) = match s.char_indices().last() {
         Some((i, 'K' | 'k')) => (&s[..i], 1u64 << 10),
         Some((i, 'M' | 'm')) => (&s[..i], 1 << 20),
         Some((i, 'G' | 'g')) => (&s[..i], 1 << 30),
+        Some((i, 'T' | 't')) => (&s[..i], 1 << 40),
         _ => (s, 1),
     };
     let v: f64 = num
@@ -84,7 +85,7 @@ pub fn bytes(s: &str) -> Result<u64, String> {
     let total = v * mul as f64;
     if !total.is_finite() || !(1.0..=9.2e18).contains(&total) {
         return Err(format!(
-            "must be a size from 1 byte to 8E (like 512M or 2G), got {s}"
+            "must be a size from 1 byte to 8000000T (like 512M, 2G or 1T), got {s}"
         ));
     }
     Ok(total as u64)

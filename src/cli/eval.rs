@@ -38,7 +38,7 @@ pub struct EvalArgs {
     /// A PLY whose Gaussians carry `class` (as written by `semsplat fuse`).
     #[arg(long)]
     scene: PathBuf,
-    /// Cameras: COLMAP model folder, INRIA cameras.json or semsplat cameras.json. Default:
+    /// Cameras: COLMAP model folder, INRIA cameras.json, nerfstudio transforms.json or semsplat cameras.json. Default:
     /// the cameras.json of the scene's folder.
     #[arg(long)]
     cameras: Option<PathBuf>,
@@ -106,6 +106,13 @@ pub fn run(args: EvalArgs) -> Result<()> {
     )?;
     for note in dir.notes() {
         eprintln!("{note}");
+    }
+    if !dir.skipped().is_empty() {
+        eprintln!(
+            "note: {} of {} cameras have no label map and are not scored",
+            dir.skipped().len(),
+            cams.len()
+        );
     }
     let chosen = chosen_views(&args, &cams, &dir)?;
     let gaussian_accuracy = match &args.truth {

@@ -55,7 +55,7 @@ pub struct FuseArgs {
     /// scene.ply (as `synth` writes). --out is always a standard PLY.
     #[arg(long)]
     scene: PathBuf,
-    /// Cameras: COLMAP model folder, INRIA cameras.json or semsplat cameras.json. Default
+    /// Cameras: COLMAP model folder, INRIA cameras.json, nerfstudio transforms.json or semsplat cameras.json. Default
     /// (with --labels or --render-views): the cameras.json of the scene's folder (a `synth`
     /// room, an INRIA run).
     #[arg(long)]

@@ -23,11 +23,11 @@ use semsplat::scene::{Camera, Gaussians, Split};
 
 const INSPECT_DETAILS: &str = "\
 PATH can be:
-  - a 3DGS PLY (or a folder holding one: an INRIA training output's latest iteration, a
-    `synth` room's scene.ply): Gaussian count, SH degree, bounds, opacity (after sigmoid) and scale (after exp)
+  - a scene: a 3DGS PLY, SuperSplat's compressed PLY, a .splat or .spz file (or a folder
+    holding one: an INRIA training output's latest iteration, a `synth` room's scene.ply): Gaussian count, SH degree, bounds, opacity (after sigmoid) and scale (after exp)
     ranges, semantic fields, per-class counts (named from <scene>.classes.json or --classes)
   - cameras: a COLMAP model folder (or a dataset folder with sparse/0), an INRIA cameras.json,
-    or a semsplat camera JSON: count, resolutions, intrinsics ranges, splits
+    a nerfstudio transforms.json or a semsplat camera JSON: count, resolutions, intrinsics ranges, splits
   - a folder of PNG label maps (or one label PNG; gray, palette, gray+alpha, or RGB coded with
     the class table's colours, see docs/label-maps.md): sizes, class pixel shares, ignore share
     (--ignore-id; default 255 in 8-bit maps, 65535 in 16-bit maps); --cameras and --classes add

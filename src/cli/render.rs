@@ -30,7 +30,7 @@ pub struct RenderArgs {
     #[arg(long)]
     scene: PathBuf,
     /// Cameras: a COLMAP model folder (cameras/images .bin or .txt, or a folder with
-    /// sparse/0), an INRIA cameras.json, or a semsplat cameras.json. Default: the
+    /// sparse/0), an INRIA cameras.json, a nerfstudio transforms.json or a semsplat cameras.json. Default: the
     /// cameras.json of the scene's folder (a `synth` room, an INRIA run).
     #[arg(long)]
     cameras: Option<PathBuf>,
@@ -134,9 +134,9 @@ fn label_source(args: &RenderArgs, g: &Gaussians, gpu: &Gpu) -> Result<LabelSour
             args.scene.display()
         );
     }
-    Ok(LabelSource::Classes(Box::new(LabelRenderer::new(
-        gpu, g, ids,
-    )?)))
+    let renderer = LabelRenderer::new(gpu, g, ids)?;
+    renderer.check_fits_16_bit()?;
+    Ok(LabelSource::Classes(Box::new(renderer)))
 }
 
 pub fn run(args: RenderArgs) -> Result<()> {

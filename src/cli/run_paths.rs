@@ -27,6 +27,9 @@ pub enum Input<'a> {
     Tree(&'a str, Option<&'a Path>),
 }
 
+/// A path read, as its [`identity`], beside the option (or part of one) naming it.
+type Named = (String, PathBuf);
+
 /// The model files a camera folder may hold (COLMAP's text and binary models, INRIA's and
 /// semsplat's `cameras.json`, nerfstudio's `transforms.json`), in it or in `sparse/0`.
 const CAMERA_FILES: [&str; 8] = [
@@ -86,12 +89,7 @@ fn given<'a>(paths: &[(&'a str, Option<&'a Path>)]) -> Vec<(&'a str, &'a Path)> 
 
 /// An output at or under a folder the run reads with its subfolders would be read back
 /// as an input by this run or the next (a label map replaced, a rendered view taken for one).
-fn refuse_inside_trees(
-    option: &str,
-    path: &Path,
-    id: &Path,
-    trees: &[(String, PathBuf)],
-) -> Result<()> {
+fn refuse_inside_trees(option: &str, path: &Path, id: &Path, trees: &[Named]) -> Result<()> {
     if let Some((input, tree)) = trees.iter().find(|(_, t)| id.starts_with(t)) {
         bail!(
             "{option} {} is inside the {input} folder {}, which the run reads with its \
@@ -105,7 +103,7 @@ fn refuse_inside_trees(
 
 /// The files the inputs read, and the folders they read with their subfolders, each as
 /// its [`identity`] beside the option naming it.
-fn read_paths(inputs: &[Input]) -> (Vec<(String, PathBuf)>, Vec<(String, PathBuf)>) {
+fn read_paths(inputs: &[Input]) -> (Vec<Named>, Vec<Named>) {
     let (mut files, mut trees) = (Vec::new(), Vec::new());
     for input in inputs {
         match *input {

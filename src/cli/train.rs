@@ -36,7 +36,7 @@ pub struct TrainArgs {
     /// a label map train appearance only.
     #[arg(long)]
     labels: PathBuf,
-    /// Cameras: COLMAP model folder, INRIA cameras.json or semsplat cameras.json. Default:
+    /// Cameras: COLMAP model folder, INRIA cameras.json, nerfstudio transforms.json or semsplat cameras.json. Default:
     /// the cameras.json of --init's folder (a `synth` room, an INRIA run).
     #[arg(long)]
     cameras: Option<PathBuf>,
@@ -253,15 +253,23 @@ fn logits_from_fusion(
     classes: &CompactClasses,
 ) -> Result<Gaussians> {
     let f = read_ply(fused)?;
-    let same = f.len() == init.len() && f.means == init.means;
     ensure!(
-        same,
+        f.len() == init.len(),
         "--init-semantics-from {}: its {} Gaussians are not --init's {} (fuse the scene you \
          train from, and train from that scene)",
         fused.display(),
         f.len(),
         init.len()
     );
+    if let Some(i) = (0..f.len()).find(|&i| f.means[i] != init.means[i]) {
+        bail!(
+            "--init-semantics-from {}: its Gaussian {i} lies at {:?}, --init's at {:?}: not the \
+             scene --init holds (fuse the scene you train from, and train from that scene)",
+            fused.display(),
+            f.means[i],
+            init.means[i]
+        );
+    }
     let Some(ids) = &f.class_ids else {
         bail!(
             "--init-semantics-from {} has no `class` property (write it with `semsplat fuse`)",

@@ -186,7 +186,7 @@ pub fn classes_in_labels(
         present.extend(ids);
         ignored += ignored_pixels;
     }
-    if present.is_empty() && dir.len() > 0 {
+    if present.is_empty() && !dir.is_empty() {
         bail!(
             "the label maps of {} hold no class: every pixel is the ignore value ({}); pass \
              --ignore-id with a value the maps do not use, or check the folder",

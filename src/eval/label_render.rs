@@ -65,12 +65,19 @@ impl LabelRenderer {
             .collect())
     }
 
-    /// [`LabelRenderer::render_ids`] for writing a 16-bit label map: an error when a class id
-    /// does not fit below the 16-bit ignore value, never a silently cut id.
-    pub fn render(&mut self, cam: &Camera) -> Result<Vec<Option<u16>>> {
+    /// Every class id fits a 16-bit label map ([`LabelRenderer::render`]): checked once
+    /// before a run writes its first view.
+    pub fn check_fits_16_bit(&self) -> Result<()> {
         if let Some(&id) = self.channel_ids.iter().find(|&&id| id >= IGNORE_U16) {
             bail!("class id {id} does not fit a 16-bit label map (ids must be below {IGNORE_U16})");
         }
+        Ok(())
+    }
+
+    /// [`LabelRenderer::render_ids`] for writing a 16-bit label map: an error when a class id
+    /// does not fit below the 16-bit ignore value, never a silently cut id.
+    pub fn render(&mut self, cam: &Camera) -> Result<Vec<Option<u16>>> {
+        self.check_fits_16_bit()?;
         Ok(self
             .render_ids(cam)?
             .into_iter()

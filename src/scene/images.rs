@@ -26,7 +26,8 @@ pub fn load_view_image(dir: &Path, cam: &Camera) -> Result<Vec<f32>> {
         .to_rgb8();
     if img.width() != cam.width || img.height() != cam.height {
         bail!(
-            "{} is {}x{} but camera {} is {}x{}",
+            "{} is {}x{}, but camera {} renders at {}x{} (its label map's size, where the \
+             label maps are a resized copy): images and label maps must have one size",
             path.display(),
             img.width(),
             img.height(),

@@ -42,10 +42,11 @@ fn check_pinhole(frame: &Map<String, Value>, top: &Map<String, Value>) -> Result
     let model = key(frame, top, "camera_model")
         .and_then(Value::as_str)
         .unwrap_or("OPENCV");
-    if model != "OPENCV" && model != "PINHOLE" {
+    if !matches!(model, "OPENCV" | "PINHOLE" | "SIMPLE_PINHOLE") {
         bail!(
             "camera_model {model} is not supported: semsplat needs undistorted pinhole cameras \
-             (undistort the images and write camera_model OPENCV with zero distortion)"
+             (PINHOLE, SIMPLE_PINHOLE, or OPENCV with zero distortion: undistort the images \
+             first)"
         );
     }
     for k in DISTORTION_KEYS {
@@ -98,6 +99,13 @@ fn parse_frame(i: usize, v: &Value, top: &Map<String, Value>) -> Result<Camera> 
     )
     .map_err(|e| anyhow!("{label}: transform_matrix is not a 4x4 list of numbers ({e})"))?;
     let (rotation, translation) = pose_from_opengl_c2w(&matrix).with_context(|| label.clone())?;
+    if key(frame, top, "fl_x").is_none() && key(frame, top, "camera_angle_x").is_some() {
+        bail!(
+            "{label}: a Blender / instant-NGP transforms.json (camera_angle_x) is not read: its \
+             image size is not in the file; give w, h, fl_x, fl_y, cx and cy (as nerfstudio's \
+             ns-process-data writes them)"
+        );
+    }
     let num = |k: &str| number(frame, top, k).with_context(|| label.clone());
     let size = |k: &str| -> Result<u32> {
         let v = num(k)?;
@@ -111,7 +119,11 @@ fn parse_frame(i: usize, v: &Value, top: &Map<String, Value>) -> Result<Camera> 
         width: size("w")?,
         height: size("h")?,
         fx: num("fl_x")?,
-        fy: num("fl_y")?,
+        // SIMPLE_PINHOLE: one focal length, written as fl_x alone.
+        fy: match key(frame, top, "fl_y") {
+            None => num("fl_x")?,
+            Some(_) => num("fl_y")?,
+        },
         cx: num("cx")?,
         cy: num("cy")?,
         rotation,

@@ -517,16 +517,16 @@ pub fn read_ply_from(mut r: impl BufRead, total_len: Option<u64>) -> Result<Gaus
     };
 
     let mut g = empty_gaussians(&layout, reserve);
+    let last = vi + 1 == header.elements.len();
     match header.format {
-        PlyFormat::Ascii => read_ascii_vertices(&mut r, &layout, n, &mut g)?,
-        f => read_binary_vertices(
-            &mut r,
-            &layout,
-            record_len,
-            n,
-            f == PlyFormat::BinaryBigEndian,
-            &mut g,
-        )?,
+        PlyFormat::Ascii => read_ascii_vertices(&mut r, &layout, n, last, &mut g)?,
+        f => {
+            let big_endian = f == PlyFormat::BinaryBigEndian;
+            read_binary_vertices(&mut r, &layout, record_len, n, big_endian, &mut g)?;
+            if last {
+                refuse_binary_trailer(&mut r, n)?;
+            }
+        }
     }
     Ok(g)
 }
@@ -754,10 +754,21 @@ fn to_i32(v: f64, what: &str, vertex: usize) -> Result<i32> {
     Ok(v as i32)
 }
 
-/// Puts one decoded value where its slot says. `sh` and `sem` are this vertex's blocks.
+/// An id stored as an unsigned 8- or 16-bit property: its type's largest value is how -1
+/// (unseen / none) comes back from a tool that narrowed our `int` ids, as 2^32 - 1 is for
+/// 32 bits; 255 is also the 8-bit label maps' "no label".
+fn unsigned_minus_one(ty: Scalar, v: f64) -> f64 {
+    match (ty, v) {
+        (Scalar::U8, 255.0) | (Scalar::U16, 65535.0) => -1.0,
+        _ => v,
+    }
+}
+
+/// Puts one decoded value of type `ty` where its slot says. `sh` and `sem` are this
+/// vertex's blocks.
 #[inline]
 fn store(
-    slot: Slot,
+    (slot, ty): (Slot, Scalar),
     v: f64,
     vals: &mut VertexValues,
     sh: &mut [f32],
@@ -770,11 +781,11 @@ fn store(
         Slot::Opacity => vals.opacity = v as f32,
         Slot::Scale(i) => vals.scale[i] = v as f32,
         Slot::Rot(i) => vals.rot[i] = v as f32,
-        Slot::Class => vals.class = to_i32(v, "class", vertex)?,
+        Slot::Class => vals.class = to_i32(unsigned_minus_one(ty, v), "class", vertex)?,
         Slot::ClassConf => vals.conf = v as f32,
-        Slot::Instance => vals.instance = to_i32(v, "instance", vertex)?,
+        Slot::Instance => vals.instance = to_i32(unsigned_minus_one(ty, v), "instance", vertex)?,
         Slot::ClassEntropy => vals.entropy = v as f32,
-        Slot::Segment => vals.segment = to_i32(v, "segment", vertex)?,
+        Slot::Segment => vals.segment = to_i32(unsigned_minus_one(ty, v), "segment", vertex)?,
         Slot::Sem(i) => sem[i] = v as f32,
         Slot::Skip => {}
     }
@@ -845,7 +856,7 @@ fn read_binary_vertices(
                 let size = ty.size();
                 let v = ty.decode(&record[at..at + size], big_endian);
                 at += size;
-                store(slot, v, vals, sh, sem, vertex)?;
+                store((slot, ty), v, vals, sh, sem, vertex)?;
             }
             Ok(())
         })?;
@@ -853,23 +864,63 @@ fn read_binary_vertices(
     Ok(())
 }
 
+/// Data past the last vertex means the header's count is wrong (a file cut and pasted
+/// together, a count left from an earlier write): reading `n` of them would silently drop
+/// the rest. One byte is let pass (a newline some writers end with).
+fn refuse_binary_trailer(r: &mut impl Read, n: usize) -> Result<()> {
+    let mut rest = Vec::new();
+    r.take(4096).read_to_end(&mut rest)?;
+    if rest.len() > 1 {
+        bail!(
+            "data continues past the header's {n} vertices ({}{} more bytes): the header's \
+             vertex count is wrong, or the file holds more than it declares",
+            rest.len().min(4095),
+            if rest.len() == 4096 { "+" } else { "" }
+        );
+    }
+    Ok(())
+}
+
+/// ASCII vertices, one line each (as the format writes them): a line with more or fewer
+/// values than the header's properties is an error, where reading the values as one stream
+/// would shift every later vertex's fields silently. With `last` (no element follows),
+/// anything past the last vertex is an error too.
 fn read_ascii_vertices(
     r: &mut impl BufRead,
     layout: &Layout,
     n: usize,
+    last: bool,
     g: &mut Gaussians,
 ) -> Result<()> {
     let mut tokens = Tokens::new(r);
+    let per_line = layout.slots.len();
     for vertex in 0..n {
         push_vertex(g, |vals, sh, sem| {
-            for &(slot, _) in &layout.slots {
+            for (k, &(slot, ty)) in layout.slots.iter().enumerate() {
                 let v = tokens.next_value()?.ok_or_else(|| {
                     anyhow!("truncated file: the header claims {n} vertices, the data ends in vertex {vertex}")
                 })?;
-                store(slot, v, vals, sh, sem, vertex)?;
+                if k == 0 {
+                    tokens.mark_line();
+                } else if tokens.left_line() {
+                    bail!(
+                        "data line {}: vertex {vertex} ends after {k} values, but the header \
+                         declares {per_line} properties a vertex",
+                        tokens.marked
+                    );
+                }
+                store((slot, ty), v, vals, sh, sem, vertex)?;
             }
             Ok(())
         })?;
+        tokens.finish_vertex_line(vertex, per_line)?;
+    }
+    if last && tokens.next_value()?.is_some() {
+        bail!(
+            "data line {}: values continue past the header's {n} vertices: the header's vertex \
+             count is wrong, or the file holds more than it declares",
+            tokens.line_no
+        );
     }
     Ok(())
 }
@@ -880,6 +931,8 @@ struct Tokens<'a, R: BufRead> {
     line: String,
     pos: usize,
     line_no: usize,
+    /// The line of the current vertex's first value.
+    marked: usize,
 }
 
 impl<'a, R: BufRead> Tokens<'a, R> {
@@ -889,6 +942,7 @@ impl<'a, R: BufRead> Tokens<'a, R> {
             line: String::new(),
             pos: 0,
             line_no: 0,
+            marked: 0,
         }
     }
 
@@ -924,6 +978,28 @@ impl<'a, R: BufRead> Tokens<'a, R> {
                 return Ok(None);
             }
         }
+    }
+
+    /// Notes the line a vertex's first value was read from.
+    fn mark_line(&mut self) {
+        self.marked = self.line_no;
+    }
+
+    /// Whether reading moved past the line [`Tokens::mark_line`] noted.
+    fn left_line(&self) -> bool {
+        self.line_no != self.marked
+    }
+
+    /// A vertex's line ends with its values: anything left on it is an error.
+    fn finish_vertex_line(&mut self, vertex: usize, per_line: usize) -> Result<()> {
+        if !self.line[self.pos..].trim().is_empty() {
+            bail!(
+                "data line {}: vertex {vertex}'s line holds more than the header's {per_line} \
+                 properties a vertex",
+                self.line_no
+            );
+        }
+        Ok(())
     }
 
     /// Elements end at a line end: anything left on the current line is an error.

@@ -85,22 +85,36 @@ fn display_folder(folder: &Path) -> String {
 
 /// The `iteration_<N>` folder with the largest N that holds a `point_cloud.ply`.
 fn latest_iteration(dir: &Path) -> Result<Option<PathBuf>> {
-    let mut best: Option<(u64, PathBuf)> = None;
+    let mut iterations: Vec<(u64, PathBuf)> = Vec::new();
     for entry in std::fs::read_dir(dir).with_context(|| format!("listing {}", dir.display()))? {
         let entry = entry?;
         let name = entry.file_name();
-        let Some(n) = name
-            .to_str()
+        let number = (name.to_str())
             .and_then(|s| s.strip_prefix("iteration_"))
-            .and_then(|s| s.parse::<u64>().ok())
-        else {
-            continue;
-        };
-        if entry.path().join("point_cloud.ply").is_file() && best.as_ref().is_none_or(|b| n > b.0) {
-            best = Some((n, entry.path()));
+            .and_then(|s| s.parse::<u64>().ok());
+        if let Some(n) = number {
+            iterations.push((n, entry.path()));
         }
     }
-    Ok(best.map(|b| b.1))
+    iterations.sort();
+    let has_cloud = |(_, path): &&(u64, PathBuf)| path.join("point_cloud.ply").is_file();
+    let latest = iterations
+        .iter()
+        .rev()
+        .find(has_cloud)
+        .map(|(_, p)| p.clone());
+    // A newer iteration without its point cloud (a run still writing, or cut short): the
+    // older one is used, and said so rather than silently.
+    if let (Some((_, newest)), Some(used)) = (iterations.last(), &latest) {
+        if newest != used {
+            eprintln!(
+                "note: {} holds no point_cloud.ply; using {}",
+                newest.display(),
+                used.join("point_cloud.ply").display()
+            );
+        }
+    }
+    Ok(latest)
 }
 
 /// Which reader a scene file needs, from its extension (PLY variants are told apart by their

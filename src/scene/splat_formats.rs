@@ -114,11 +114,22 @@ fn parse_spz_header(b: &[u8]) -> Result<SpzHeader> {
 
 /// Reads a Niantic `.spz` file's (gzip-compressed) bytes.
 pub fn parse_spz(compressed: &[u8]) -> Result<Gaussians> {
+    match compressed {
+        [] => bail!("the .spz file is empty"),
+        // Versions 4 and later store their header uncompressed ("NGSP", then the version).
+        [b'N', b'G', b'S', b'P', version, ..] => bail!(
+            "an .spz file of version {version} with an uncompressed header (as splat-transform \
+             2 writes) is not supported (versions 2 and 3 are): convert it to PLY first, e.g. \
+             `splat-transform scene.spz scene.ply`"
+        ),
+        [0x1f, 0x8b, ..] => {}
+        _ => bail!("not an .spz file: it starts with neither a gzip header nor \"NGSP\""),
+    }
     let mut raw = Vec::new();
     flate2::read::GzDecoder::new(compressed)
         .take(MAX_SPZ_BYTES)
         .read_to_end(&mut raw)
-        .map_err(|e| anyhow!("not a gzip stream, as an .spz file must be ({e})"))?;
+        .map_err(|e| anyhow!("the .spz file's gzip stream is truncated or corrupt ({e})"))?;
     let h = parse_spz_header(&raw)?;
     let n = h.count;
     let rest = sh_coeffs_for_degree(h.sh_degree) - 1;
