@@ -6,11 +6,19 @@
 
 mod common;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use common::cli::{arg_in, fails, fuse_synth, fuse_synth_fails, ok, synth_tiny};
 use semsplat::scene::ply::{read_ply, write_ply};
 use semsplat::train::trainer::{with_initial_logits, LogitInit};
+
+/// A temporary folder holding the tiny room in `room/` (3 train views at 32x24).
+fn tiny_room() -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::tempdir().unwrap();
+    let room = tmp.path().join("room");
+    synth_tiny(&room, 3, (32, 24));
+    (tmp, room)
+}
 
 /// The file names in `dir` (not recursing), sorted.
 fn listing(dir: &Path) -> Vec<String> {
@@ -23,9 +31,7 @@ fn listing(dir: &Path) -> Vec<String> {
 
 #[test]
 fn outputs_that_are_inputs_or_each_other_are_refused_before_any_work() {
-    let tmp = tempfile::tempdir().unwrap();
-    let room = tmp.path().join("room");
-    synth_tiny(&room, 3, (32, 24));
+    let (tmp, room) = tiny_room();
     let (scene, cameras) = (
         std::fs::read(room.join("scene.ply")).unwrap(),
         listing(&room),
@@ -106,9 +112,7 @@ fn outputs_that_are_inputs_or_each_other_are_refused_before_any_work() {
 
 #[test]
 fn a_refused_fusion_writes_nothing_and_a_fused_scene_holds_only_its_fusions_semantics() {
-    let tmp = tempfile::tempdir().unwrap();
-    let room = tmp.path().join("room");
-    synth_tiny(&room, 3, (32, 24));
+    let (tmp, room) = tiny_room();
     let out = tmp.path().join("out");
     std::fs::create_dir(&out).unwrap();
     let at = |f: &str| arg_in(&out, f);
@@ -155,9 +159,7 @@ fn a_refused_fusion_writes_nothing_and_a_fused_scene_holds_only_its_fusions_sema
 
 #[test]
 fn fusions_that_class_nothing_are_errors() {
-    let tmp = tempfile::tempdir().unwrap();
-    let room = tmp.path().join("room");
-    synth_tiny(&room, 3, (32, 24));
+    let (tmp, room) = tiny_room();
     // Label maps of nothing but the ignore value.
     let blank = tmp.path().join("blank");
     std::fs::create_dir(&blank).unwrap();

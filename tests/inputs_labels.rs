@@ -240,31 +240,25 @@ fn gray_rgb_and_gray_alpha_pngs_hold_ids() {
             {"id": 120, "name": "pot", "color": [255, 31, 0]}]"#,
     )
     .unwrap();
-    let wall = dir.path().join("wall_only.png");
-    let pixels = [120, 120, 120, 120, 120, 120, 0, 0, 0];
-    write_png(
-        &wall,
-        (3, 1),
-        png::ColorType::Rgb,
-        png::BitDepth::Eight,
-        None,
-        &pixels,
-    );
-    let map = read_label_png_as(&wall, &LabelFormat::default(), Some(&ade)).unwrap();
-    assert_eq!(map.labels, [1, 1, IGN]);
+    let read_rgb_3x1 = |name: &str, pixels: &[u8]| {
+        let p = dir.path().join(name);
+        write_png(
+            &p,
+            (3, 1),
+            png::ColorType::Rgb,
+            png::BitDepth::Eight,
+            None,
+            pixels,
+        );
+        read_label_png_as(&p, &LabelFormat::default(), Some(&ade))
+            .unwrap()
+            .labels
+    };
+    let wall_only = [120, 120, 120, 120, 120, 120, 0, 0, 0];
+    assert_eq!(read_rgb_3x1("wall_only.png", &wall_only), [1, 1, IGN]);
     // A gray that is no class's colour keeps the map's values ids.
-    let mixed = dir.path().join("mixed.png");
-    let pixels = [120, 120, 120, 1, 1, 1, 0, 0, 0];
-    write_png(
-        &mixed,
-        (3, 1),
-        png::ColorType::Rgb,
-        png::BitDepth::Eight,
-        None,
-        &pixels,
-    );
-    let map = read_label_png_as(&mixed, &LabelFormat::default(), Some(&ade)).unwrap();
-    assert_eq!(map.labels, [120, 1, 0]);
+    let mixed = [120, 120, 120, 1, 1, 1, 0, 0, 0];
+    assert_eq!(read_rgb_3x1("mixed.png", &mixed), [120, 1, 0]);
 
     // Gray + alpha: transparent pixels are unlabeled.
     let la = dir.path().join("la.png");
