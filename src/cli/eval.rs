@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Result};
+use anyhow::{bail, ensure, Result};
 use clap::{Args, ValueEnum};
 use serde::Serialize;
 
@@ -122,7 +122,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
     let gpu = Gpu::new()?;
     let mut renderer = LabelRenderer::new(&gpu, &g, &classes)?;
     let mut confusion = Confusion::default();
-    let mut ignored = 0u64;
+    let (mut ignored, mut rendered) = (0u64, 0u64);
     for &i in &chosen {
         interrupt::check()?;
         let truth = dir.load(i)?;
@@ -131,12 +131,16 @@ pub fn run(args: EvalArgs) -> Result<()> {
             .iter()
             .filter(|&&l| l == LabelMap::IGNORE)
             .count() as u64;
-        confusion.add(
-            &truth.labels,
-            &renderer.render_ids(chosen_camera(&cams, &dir, i))?,
-            LabelMap::IGNORE,
-        );
+        let predicted = renderer.render_ids(chosen_camera(&cams, &dir, i))?;
+        rendered += predicted.iter().filter(|p| p.is_some()).count() as u64;
+        confusion.add(&truth.labels, &predicted, LabelMap::IGNORE);
     }
+    // A score of nothing rendered says nothing of the classes.
+    ensure!(
+        rendered > 0,
+        "no view renders any Gaussian with a class: check that the cameras and the scene share \
+         one frame and scale, and that the scene's classes are not all -1"
+    );
     let mut segmentation = confusion.scores();
     let true_ids: Vec<u32> = segmentation.per_class.iter().map(|c| c.id).collect();
     if let Some(w) = binary_mask_warning(&args.labels, &true_ids, ignored, &format) {

@@ -166,12 +166,13 @@ pub struct OutputArgs {
     /// Output PLY: the input Gaussians with `class` (label id, -1 for Gaussians no view saw)
     /// and `class_conf` (the winning class's share of the evidence; segment consensus: its
     /// posterior probability with every view counted once, beside `class_entropy` and
-    /// `segment`). The class table goes to <out>.classes.json.
-    /// With fuse --shard: the partial evidence (.npy, see --shard) instead.
+    /// `segment`); semantics the input scene held (a trained scene's logits) are replaced.
+    /// The class table goes to <out>.classes.json. With `fuse --shard`: the partial evidence
+    /// (.npy, see --shard) instead.
     #[arg(long)]
     pub out: PathBuf,
-    /// Write a JSON report: timings, views/s, peak device memory, per-class counts (segment
-    /// consensus: also the segments, their vote splits and the flagged ones, each with where
+    /// Write a JSON report: per-class counts, the assignment's time and (`fuse` of views) the
+    /// views' timings, views/s and peak device memory (segment consensus: also the segments, their vote splits and the flagged ones, each with where
     /// it is and which views called it what).
     #[arg(long)]
     pub report: Option<PathBuf>,
@@ -180,12 +181,12 @@ pub struct OutputArgs {
     #[arg(long)]
     pub save_contrib: Option<PathBuf>,
     /// Keep only the Gaussians of this class (name, any case, or id) in --out, by one-vs-rest
-    /// assignment with --gamma. On an already fused scene (a `class` property) without
-    /// --labels or --contrib, selects by that class directly (no re-fusing).
+    /// assignment with --gamma. `fuse` of an already fused scene (a `class` property) without
+    /// --labels or --contrib selects by that class directly (no re-fusing).
     #[arg(long, conflicts_with = "remove")]
     pub extract: Option<String>,
-    /// Drop the Gaussians of this class (name, any case, or id) from --out; on a fused scene
-    /// without --labels or --contrib, by its `class` property.
+    /// Drop the Gaussians of this class (name, any case, or id) from --out; `fuse` of a fused
+    /// scene without --labels or --contrib drops by its `class` property.
     #[arg(long)]
     pub remove: Option<String>,
     /// Render label and palette PNGs of every view from the fused scene into DIR
@@ -779,14 +780,23 @@ fn write_report(args: &OutputArgs, report: &Report) -> Result<()> {
         .iter()
         .find(|c| c.id == -1)
         .map_or(0, |c| c.gaussians);
-    eprintln!(
-        "fused {} Gaussians into {} classes ({} Gaussians left without a class) in {:.2} s -> {}",
-        report.gaussians,
-        report.classes,
-        without_class,
-        report.total_s,
-        args.out.display()
-    );
+    let out = args.out.display();
+    let seconds = report.total_s;
+    match (&args.extract, &args.remove) {
+        (Some(name), _) => eprintln!(
+            "kept the {} Gaussians of class '{name}' in {seconds:.2} s -> {out}",
+            report.gaussians
+        ),
+        (_, Some(name)) => eprintln!(
+            "kept {} Gaussians, those of class '{name}' removed, in {seconds:.2} s -> {out}",
+            report.gaussians
+        ),
+        _ => eprintln!(
+            "fused {} Gaussians into {} classes ({without_class} Gaussians left without a \
+             class) in {seconds:.2} s -> {out}",
+            report.gaussians, report.classes
+        ),
+    }
     // A flag is a finding the user acts on (an object the views disagree on, often one a
     // segmenter mislabels in most of them): say so even without --report.
     let flagged = report.segments.as_ref().map_or(0, |s| s.flagged.len());

@@ -18,7 +18,7 @@ use semsplat::scene::labels::{
     SizeFit,
 };
 use semsplat::scene::ply::{classes_sidecar_path, read_classes_sidecar};
-use semsplat::scene::scene_file::{read_scene_unchecked, resolve_scene_path};
+use semsplat::scene::scene_file::{read_scene_unchecked, resolve_scene_path, scene_format};
 use semsplat::scene::{Camera, Gaussians, Split};
 
 const INSPECT_DETAILS: &str = "\
@@ -262,9 +262,26 @@ fn inspect_path(path: &Path, labels: &LabelInputs) -> Result<Report> {
             inspect_labels(path, "label map", &[(stem, path.to_owned())], labels)
         }
         "json" if looks_like_class_table(path)? => inspect_class_table(path),
-        _ => inspect_cameras(path),
+        "json" | "txt" | "bin" => inspect_cameras(path),
+        "npy" => bail!(
+            "{} is a NumPy array (fuse's --save-contrib or --save-membership, or a --shard \
+             part): {KINDS}",
+            path.display()
+        ),
+        _ => {
+            scene_format(path)?; // names the scene formats it knows of but does not read
+            bail!(
+                "cannot tell what {} is from its name: {KINDS}",
+                path.display()
+            )
+        }
     }
 }
+
+/// What `inspect` reads, for the errors of what it does not.
+const KINDS: &str = "inspect reads scenes (.ply, .splat, .spz, or their folders), cameras (a \
+                     COLMAP model, a cameras.json or transforms.json), label maps (.png or a \
+                     folder of them) and class tables (.json)";
 
 fn looks_like_class_table(path: &Path) -> Result<bool> {
     let text =

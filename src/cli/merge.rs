@@ -23,7 +23,7 @@ use semsplat::fuse::{
 };
 use semsplat::gpu::Gpu;
 use semsplat::render::GpuScene;
-use semsplat::scene::scene_file::{read_scene, resolve_scene_path};
+use semsplat::scene::scene_file::{cameras_for_scene, read_scene, resolve_scene_path};
 use semsplat::scene::{Camera, Gaussians};
 
 /// Gaussians summed at a time by default: 1M columns of every part (8 MB per class and part
@@ -40,7 +40,7 @@ pub struct MergeArgs {
     #[arg(long)]
     scene: PathBuf,
     /// The cameras the parts were fused from: only needed by --render-views (checked
-    /// against the manifests).
+    /// against the manifests). Default there: the cameras.json of the scene's folder.
     #[arg(long)]
     cameras: Option<PathBuf>,
     /// Gaussians summed per chunk: memory is about parts x classes x this x 8 bytes.
@@ -157,8 +157,11 @@ fn fusion_key(job: &ShardJob) -> Result<FusionKey> {
     })
 }
 
-pub fn run(args: MergeArgs) -> Result<()> {
+pub fn run(mut args: MergeArgs) -> Result<()> {
     let start = Instant::now();
+    if args.cameras.is_none() && args.output.render_views.is_some() {
+        args.cameras = Some(cameras_for_scene(None, &args.scene)?);
+    }
     let manifests: Vec<PathBuf> = args.parts.iter().map(|p| manifest_path(p)).collect();
     let inputs: Vec<Input> = (args.parts.iter().chain(&manifests))
         .map(|p| Input::File("a part", Some(p)))

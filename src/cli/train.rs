@@ -28,7 +28,8 @@ use semsplat::util::{interrupt, parallel_map_on, write_bytes_atomic};
 
 #[derive(Args)]
 pub struct TrainArgs {
-    /// Folder of RGB images (PNG or JPEG) named like the cameras (<image name>.png).
+    /// Folder of RGB images (PNG or JPEG, the extension in any case) named like the cameras
+    /// (<image name>.png); an image with alpha is composited over black, 3DGS's default.
     #[arg(long)]
     images: PathBuf,
     /// Folder of label PNGs (gray or palette class ids, or colour-coded through the class
@@ -199,6 +200,15 @@ pub fn run(args: TrainArgs) -> Result<()> {
 
     let gpu = Gpu::new()?;
     let mut trainer = Trainer::new(&gpu, &init, &views, cfg.clone(), &[])?;
+    // One pass over the views: training on views that see nothing would run to the end
+    // and write an untouched scene.
+    ensure!(
+        trainer.seen_by_views()?.contains(&true),
+        "no training view sees any of --init's {} Gaussians: check that the cameras and the \
+         scene share one frame and scale (a nerfstudio export's applied_transform, cameras of \
+         another reconstruction)",
+        init.len()
+    );
     eprintln!(
         "training {} iterations on {} views from {} Gaussians (Ctrl-C stops without writing --out)",
         args.iters,

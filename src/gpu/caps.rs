@@ -199,7 +199,11 @@ pub(crate) fn cpu_forms(device: bool, asked: Option<bool>) -> bool {
     let asked = asked.or_else(|| match std::env::var("SEMSPLAT_CPU_FORMS").as_deref() {
         Ok("0") => Some(false),
         Ok("1") => Some(true),
-        _ => None,
+        Ok(other) => {
+            eprintln!("warning: SEMSPLAT_CPU_FORMS={other} is neither 0 nor 1: the device's default is used");
+            None
+        }
+        Err(_) => None,
     });
     asked.unwrap_or(device)
 }

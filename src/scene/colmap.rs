@@ -301,6 +301,7 @@ pub fn read_cameras_bin_from(r: &mut impl Read) -> Result<Vec<ColmapCamera>> {
             params,
         });
     }
+    refuse_more(r, count, "cameras")?;
     Ok(cams)
 }
 
@@ -339,7 +340,19 @@ pub fn read_images_bin_from(r: &mut impl Read) -> Result<Vec<ColmapImage>> {
             name,
         });
     }
+    refuse_more(r, count, "images")?;
     Ok(images)
+}
+
+/// A binary model holding more than its count says (a count left from an earlier write, two
+/// files joined): reading `count` entries would silently leave the rest out.
+fn refuse_more(r: &mut impl Read, count: u64, what: &str) -> Result<()> {
+    let mut next = [0u8; 1];
+    match r.read(&mut next) {
+        Ok(0) => Ok(()),
+        Ok(_) => bail!("data continues past the {count} {what} its count names: the count is wrong, or the file holds more than it declares"),
+        Err(e) => Err(anyhow!("read error after the {count} {what}: {e}")),
+    }
 }
 
 fn read_nul_terminated(r: &mut impl Read, what: &str) -> Result<String> {

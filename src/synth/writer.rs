@@ -259,5 +259,9 @@ fn remove_stale(dir: &Path, scene: &SynthScene) -> Result<()> {
         std::fs::remove_file(&noise_json)
             .with_context(|| format!("removing stale {}", noise_json.display()))?;
     }
+    // A folder this run does not fill, left empty, would read as an empty label folder.
+    for sub in VIEW_DIRS.iter().rev().filter(|sub| !keep(sub)) {
+        let _ = std::fs::remove_dir(dir.join(sub)); // only when empty: a user's files stay
+    }
     Ok(())
 }

@@ -129,7 +129,7 @@ impl Trainer {
         let channels = init.semantics.as_ref().map_or(0, |s| s.channels) as u32;
         ensure!(
             channels > 0 || !cfg.semantics_only,
-            "--semantics-only needs semantic classes"
+            "--semantics-only needs semantic classes (the labels' classes; `bench train`: --channels of at least 1)"
         );
         for r in riders {
             ensure!(r.len() == init.len(), "a rider has the wrong length");
