@@ -7,6 +7,7 @@ use semsplat::scene::cameras::load_cameras;
 use semsplat::scene::cameras_json::{parse_cameras_json, write_semsplat_cameras};
 use semsplat::scene::classes::{read_class_table, ClassTable};
 use semsplat::scene::colmap::{read_colmap_model, read_images_bin_from};
+use semsplat::scene::images::load_view_image;
 use semsplat::scene::labels::{read_label_png, write_label_png, LabelDir, LabelMap, MissingLabels};
 use semsplat::scene::ply::{read_ply, read_ply_from, read_ply_unchecked, write_ply};
 use semsplat::scene::{Camera, Gaussians, Split};
@@ -401,6 +402,15 @@ fn broken_colmap_models_are_errors() {
     huge_points.extend_from_slice(&(u64::MAX / 2).to_le_bytes());
     let err = error_of(read_images_bin_from(&mut &huge_points[..]));
     assert!(err.contains("2D points"), "{err}");
+    // More records than the count names: the rest would be left out silently.
+    let mut more = cams.clone();
+    more.extend_from_slice(&cams[8..]);
+    let p = write_tmp(bin.path(), "cameras.bin", &more);
+    assert_error(
+        &error_of(read_colmap_model(bin.path())),
+        &p,
+        &["continues past the 1 cameras"],
+    );
     let mut bad_model = cams.clone();
     bad_model[12..16].copy_from_slice(&99i32.to_le_bytes());
     let p = write_tmp(bin.path(), "cameras.bin", &bad_model);
@@ -635,4 +645,39 @@ fn invalid_class_tables_are_errors() {
         let p = write_tmp(dir.path(), &format!("classes{i}.json"), text);
         assert_error(&error_of(read_class_table(&p)), &p, &[needle]);
     }
+}
+
+/// Train images: the extension in any case, one image a view (two are an error naming
+/// both), and transparent pixels composited over black (3DGS's default background).
+#[test]
+fn view_images_are_found_in_any_case_once_and_composited_over_black() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cam = good_camera("a");
+    (cam.width, cam.height) = (2, 1);
+    image::RgbImage::from_raw(2, 1, vec![255, 0, 0, 0, 0, 255])
+        .unwrap()
+        .save_with_format(dir.path().join("a.PNG"), image::ImageFormat::Png)
+        .unwrap();
+    let rgb = load_view_image(dir.path(), &cam).unwrap();
+    assert_eq!(rgb, [1.0, 0.0, 0.0, 0.0, 0.0, 1.0]);
+    image::RgbImage::new(2, 1)
+        .save(dir.path().join("a.jpg"))
+        .unwrap();
+    let err = error_of(load_view_image(dir.path(), &cam));
+    assert!(
+        err.contains("2 images") && err.contains("a.jpg") && err.contains("a.PNG"),
+        "{err}"
+    );
+    // White under alpha 0 is no observation; half alpha halves the colour.
+    cam.name = "b".into();
+    image::RgbaImage::from_raw(2, 1, vec![255, 255, 255, 0, 255, 255, 255, 128])
+        .unwrap()
+        .save(dir.path().join("b.png"))
+        .unwrap();
+    let rgb = load_view_image(dir.path(), &cam).unwrap();
+    assert_eq!(&rgb[..3], [0.0; 3]);
+    assert!(
+        rgb[3..].iter().all(|&v| (v - 128.0 / 255.0).abs() < 1e-6),
+        "{rgb:?}"
+    );
 }

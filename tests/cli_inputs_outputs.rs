@@ -155,10 +155,26 @@ fn a_refused_fusion_writes_nothing_and_a_fused_scene_holds_only_its_fusions_sema
     let f = read_ply(Path::new(&fused)).unwrap();
     assert!(f.semantics.is_none());
     assert!(f.class_ids.unwrap().iter().any(|&c| c >= 0));
+
+    // Segment consensus extracts by the classes it decided (its evidence rows are not its
+    // decision): every Gaussian kept is of the class, and every one of the class is kept.
+    let (whole, boxes) = (at("whole.ply"), at("box.ply"));
+    let consensus = ["--method", "segment-consensus"];
+    fuse_synth(&room, &[&consensus[..], &["--out", &whole]].concat());
+    fuse_synth(
+        &room,
+        &[&consensus[..], &["--out", &boxes, "--extract", "box"]].concat(),
+    );
+    let box_id = 3; // the tiny room's box
+    let whole = read_ply(Path::new(&whole)).unwrap().class_ids.unwrap();
+    let boxes = read_ply(Path::new(&boxes)).unwrap().class_ids.unwrap();
+    assert!(boxes.iter().all(|&c| c == box_id));
+    assert_eq!(boxes.len(), whole.iter().filter(|&&c| c == box_id).count());
+    assert!(!boxes.is_empty());
 }
 
 #[test]
-fn fusions_that_class_nothing_are_errors() {
+fn runs_on_views_that_see_nothing_are_errors() {
     let (tmp, room) = tiny_room();
     // Label maps of nothing but the ignore value.
     let blank = tmp.path().join("blank");
@@ -207,6 +223,144 @@ fn fusions_that_class_nothing_are_errors() {
     ]);
     assert!(e.contains("no Gaussian took a class"), "{e}");
     assert!(!Path::new(&out).exists());
+    // Training and scoring on those cameras say so too.
+    let (scene, labels) = (arg_in(&room, "scene.ply"), arg_in(&room, "labels"));
+    let far = far.to_str().unwrap();
+    let e = fails(&[
+        "train",
+        "--images",
+        &arg_in(&room, "images"),
+        "--labels",
+        &labels,
+        "--cameras",
+        far,
+        "--init",
+        &scene,
+        "--iters",
+        "2",
+        "--out",
+        &out,
+    ]);
+    assert!(e.contains("no training view sees any"), "{e}");
+    let e = fails(&[
+        "eval",
+        "--scene",
+        &scene,
+        "--cameras",
+        far,
+        "--labels",
+        &labels,
+    ]);
+    assert!(e.contains("no view renders any Gaussian"), "{e}");
     // The same scene and labels fuse with their own cameras.
     fuse_synth(&room, &["--out", &out]);
+}
+
+/// The outputs of `bench --export`, `train`'s checkpoints and `--render-views` are checked
+/// like the others; a trained scene with another scene's class table is refused by
+/// `render --semantics`; `inspect` flags label maps of nothing but the ignore value.
+#[test]
+fn exports_checkpoints_and_view_folders_are_checked_too() {
+    let (tmp, room) = tiny_room();
+    let cameras = std::fs::read(room.join("cameras.json")).unwrap();
+    let e = fails(&[
+        "bench",
+        "fuse",
+        "--scene",
+        room.to_str().unwrap(),
+        "--views",
+        "2",
+        "--width",
+        "16",
+        "--height",
+        "12",
+        "--iters",
+        "1",
+        "--export",
+        room.to_str().unwrap(),
+    ]);
+    assert!(
+        e.contains("--export") && e.contains("would destroy that input"),
+        "{e}"
+    );
+    assert_eq!(std::fs::read(room.join("cameras.json")).unwrap(), cameras);
+
+    // Resuming from a checkpoint under the same --out would write over it.
+    let (images, labels) = (arg_in(&room, "images"), arg_in(&room, "labels"));
+    let checkpoint = arg_in(tmp.path(), "t.iter2.ply");
+    std::fs::copy(room.join("scene.ply"), &checkpoint).unwrap();
+    let e = fails(&[
+        "train",
+        "--images",
+        &images,
+        "--labels",
+        &labels,
+        "--init",
+        &checkpoint,
+        "--cameras",
+        &arg_in(&room, "cameras.json"),
+        "--iters",
+        "4",
+        "--checkpoint-every",
+        "2",
+        "--out",
+        &arg_in(tmp.path(), "t.ply"),
+    ]);
+    assert!(
+        e.contains("replaced by the checkpoint of iteration 2"),
+        "{e}"
+    );
+
+    let e = fuse_synth_fails(
+        &room,
+        &[
+            "--out",
+            &arg_in(tmp.path(), "v.ply"),
+            "--render-views",
+            &arg_in(tmp.path(), "v.ply"),
+        ],
+    );
+    assert!(e.contains("cannot share a path"), "{e}");
+    assert_eq!(listing(tmp.path()), ["room", "t.iter2.ply"]);
+
+    // Logits of 3 channels beside the room's 6-class table.
+    let trained = tmp.path().join("trained.ply");
+    let g = read_ply(&room.join("scene.ply")).unwrap();
+    write_ply(
+        &trained,
+        &with_initial_logits(&g, 3, LogitInit::SmallRandom, 1),
+    )
+    .unwrap();
+    std::fs::copy(
+        room.join("scene.classes.json"),
+        tmp.path().join("trained.classes.json"),
+    )
+    .unwrap();
+    let e = fails(&[
+        "render",
+        "--scene",
+        trained.to_str().unwrap(),
+        "--cameras",
+        &arg_in(&room, "cameras.json"),
+        "--semantics",
+        "--out",
+        &arg_in(tmp.path(), "views"),
+    ]);
+    assert!(
+        e.contains("3 semantic channels") && e.contains("lists"),
+        "{e}"
+    );
+
+    let blank = tmp.path().join("blank");
+    std::fs::create_dir(&blank).unwrap();
+    image::GrayImage::from_pixel(4, 3, image::Luma([255]))
+        .save(blank.join("a.png"))
+        .unwrap();
+    let out = common::cli::semsplat(&["inspect", blank.to_str().unwrap()]);
+    assert!(!out.status.success());
+    let report = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        report.contains("every pixel is the ignore value"),
+        "{report}"
+    );
 }

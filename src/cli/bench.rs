@@ -1,7 +1,7 @@
 //! `semsplat bench`: GPU kernel throughput from timestamps, against a CPU baseline measured
 //! in the same run on the same data; fusion against a forward render of the same views.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use clap::{Args, Subcommand};
@@ -10,6 +10,7 @@ use serde::Serialize;
 use super::args;
 use super::joint_args::{methods_help, parse_methods};
 use super::progress::{follow, views_bar};
+use super::{check_outputs, Input};
 use semsplat::bench::fuse::{bench_fuse, FuseBench, FuseBenchSpec};
 use semsplat::bench::render::{bench_render, BenchInput};
 use semsplat::bench::train::{bench_train, TrainBench};
@@ -17,6 +18,7 @@ use semsplat::bench::{scan::bench_scan, sort::bench_sort};
 use semsplat::experiment::{Lifter, ALL_METHODS};
 use semsplat::gpu::timings::KernelTotal;
 use semsplat::gpu::Gpu;
+use semsplat::scene::scene_file::{CAMERAS_FILE, SCENE_FILE};
 
 #[derive(Subcommand)]
 pub enum BenchCommand {
@@ -292,6 +294,12 @@ fn print_fuse(r: &FuseBench) {
 
 pub fn run(cmd: BenchCommand) -> Result<()> {
     let gpu = Gpu::new()?;
+    match &cmd {
+        BenchCommand::Render(a) => check_export(&a.input.export, &a.input.scene, &None)?,
+        BenchCommand::Train(a) => check_export(&a.input.export, &a.input.scene, &None)?,
+        BenchCommand::Fuse(a) => check_export(&a.export, &a.scene, &a.labels)?,
+        BenchCommand::Sort(_) | BenchCommand::Scan(_) => {}
+    }
     match cmd {
         BenchCommand::Sort(a) => run_sort(&gpu, a),
         BenchCommand::Scan(a) => run_scan(&gpu, a),
@@ -299,6 +307,34 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
         BenchCommand::Fuse(a) => run_fuse(&gpu, a),
         BenchCommand::Train(a) => run_train(&gpu, a),
     }
+}
+
+/// `--export DIR` writes a scene folder's files: not over the `--scene` folder it reads (its
+/// cameras would be cut to the benchmark's, its scene given random logits), nor into the
+/// label folder.
+fn check_export(
+    export: &Option<PathBuf>,
+    scene: &Option<PathBuf>,
+    labels: &Option<PathBuf>,
+) -> Result<()> {
+    let Some(dir) = export else {
+        return Ok(());
+    };
+    let files = [SCENE_FILE, CAMERAS_FILE, "labels.npy", "bench.json"].map(|f| dir.join(f));
+    let named: Vec<(&str, Option<&Path>)> = files
+        .iter()
+        .map(|f| ("--export", Some(f.as_path())))
+        .collect();
+    let cameras = scene.as_ref().map(|s| s.join(CAMERAS_FILE));
+    check_outputs(
+        &named,
+        &[],
+        &[
+            Input::Scene("--scene", scene.as_deref()),
+            Input::Cameras("--scene's cameras", cameras.as_deref()),
+            Input::Tree("--labels", labels.as_deref()),
+        ],
+    )
 }
 
 fn run_sort(gpu: &Gpu, a: SortArgs) -> Result<()> {

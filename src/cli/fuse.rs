@@ -180,12 +180,14 @@ pub struct OutputArgs {
     /// of FILE.classes.json written beside it.
     #[arg(long)]
     pub save_contrib: Option<PathBuf>,
-    /// Keep only the Gaussians of this class (name, any case, or id) in --out, by one-vs-rest
-    /// assignment with --gamma. `fuse` of an already fused scene (a `class` property) without
+    /// Keep only the Gaussians of this class (name, any case, or id) in --out, by FlashSplat's
+    /// one-vs-rest assignment with --gamma (which may keep Gaussians whose own class is
+    /// another; segment consensus selects by the classes it decided). `fuse` of an already fused scene (a `class` property) without
     /// --labels or --contrib selects by that class directly (no re-fusing).
     #[arg(long, conflicts_with = "remove")]
     pub extract: Option<String>,
-    /// Drop the Gaussians of this class (name, any case, or id) from --out; `fuse` of a fused
+    /// Drop the Gaussians of this class (name, any case, or id) from --out (as --extract
+    /// selects them); `fuse` of a fused
     /// scene without --labels or --contrib drops by its `class` property.
     #[arg(long)]
     pub remove: Option<String>,
@@ -395,7 +397,12 @@ pub(super) fn write_fused(
     if let (Some(dir), Some(cameras)) = (&args.render_views, cameras) {
         render_label_views(cameras, dir, &g, &table)?;
     }
-    let selected = select_members(args, selected_class, g, &mut rows, &totals, &table)?;
+    // The consensus decides per segment, which its evidence rows do not hold: it selects by
+    // the classes it decided; the evidence methods by FlashSplat's one-vs-rest.
+    let selected = match segments {
+        Some(_) => select_by_class(args, selected_class, g),
+        None => select_members(args, selected_class, g, &mut rows, &totals, &table)?,
+    };
     let assign_s = assign_start.elapsed().as_secs_f64();
 
     write_outputs(args, &selected, &table)?;
@@ -745,6 +752,18 @@ fn select_members(
         .map(|&m| m == args.extract.is_some())
         .collect();
     Ok(g.select(&keep))
+}
+
+/// --extract / --remove by each Gaussian's decided class.
+fn select_by_class(args: &OutputArgs, selected_class: Option<u32>, g: Gaussians) -> Gaussians {
+    let Some(id) = selected_class else {
+        return g;
+    };
+    let classes = g.class_ids.as_deref().unwrap_or(&[]);
+    let keep: Vec<bool> = (classes.iter())
+        .map(|&c| (c == id as i32) == args.extract.is_some())
+        .collect();
+    g.select(&keep)
 }
 
 /// The output PLY with its class table, and the palette-colored copy if asked for.

@@ -687,6 +687,13 @@ fn add_label_classes(r: &mut Report, counts: &[u64], table: Option<&ClassTable>)
             row
         })
         .collect();
+    if total > 0 && rows.is_empty() {
+        r.problems.push(
+            "every pixel is the ignore value: the maps hold no class (fuse, train and eval \
+             refuse them; see --ignore-id)"
+                .into(),
+        );
+    }
     r.add("classes_present", rows.len());
     r.add("classes", rows);
     if !unknown.is_empty() {

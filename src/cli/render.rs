@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, ensure, Context, Result};
 use clap::Args;
 
 use super::progress::render_bar;
@@ -161,6 +161,18 @@ pub fn run(args: RenderArgs) -> Result<()> {
         load_cameras(&cameras_for_scene(args.cameras.as_deref(), &args.scene)?)?,
         &args.views,
     )?;
+    // Channel k of the logits is the table's k-th class: a table of another length (one
+    // copied from another scene) would name every channel wrong.
+    if let (Some(s), Some(table), true) = (&g.semantics, &table, args.semantics) {
+        ensure!(
+            table.len() == s.channels,
+            "{} has {} semantic channels (sem_*) but its class table lists {} classes: the \
+             table is not this scene's (train writes both together)",
+            scene_file.display(),
+            s.channels,
+            table.len()
+        );
+    }
     let gpu = Gpu::new()?;
     let mut labels_from = label_source(&args, &g, &gpu)?;
     let scene = GpuScene::upload(&gpu, &g)?;

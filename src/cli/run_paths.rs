@@ -76,7 +76,14 @@ pub fn check_outputs(
         written.push((option, id));
     }
     for &(option, path) in &folders {
-        refuse_inside_trees(option, path, &identity(path), &read_trees)?;
+        let id = identity(path);
+        if let Some((file, _)) = written.iter().find(|(_, w)| *w == id) {
+            bail!(
+                "{option} {} is also {file}: a folder and a file cannot share a path",
+                path.display()
+            );
+        }
+        refuse_inside_trees(option, path, &id, &read_trees)?;
     }
     Ok(())
 }
@@ -143,7 +150,7 @@ fn read_paths(inputs: &[Input]) -> (Vec<Named>, Vec<Named>) {
 
 /// One spelling per file: absolute, with the links and `..` of its existing part resolved
 /// (a write goes through links to their target) and the rest appended as given.
-fn identity(path: &Path) -> PathBuf {
+pub(super) fn identity(path: &Path) -> PathBuf {
     let absolute = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
     let mut head = absolute.as_path();
     let mut tail: Vec<OsString> = Vec::new();

@@ -10,13 +10,16 @@ use serde::Serialize;
 
 use super::args;
 use super::progress::iterations_bar;
+use super::run_paths::identity;
 use super::{check_outputs, open_dataset, write_scene_with_table, Input};
 use semsplat::dataset::{user_classes, CompactClasses, Dataset, DatasetPaths};
 use semsplat::gpu::Gpu;
 use semsplat::render::SemanticMode;
 use semsplat::scene::images::load_view_image;
 use semsplat::scene::ply::{classes_sidecar_path, read_ply};
-use semsplat::scene::scene_file::{cameras_for_scene, read_scene_or_point_cloud};
+use semsplat::scene::scene_file::{
+    cameras_for_scene, read_scene_or_point_cloud, resolve_scene_path,
+};
 use semsplat::scene::Gaussians;
 use semsplat::train::config::TrainConfig;
 use semsplat::train::trainer::{
@@ -188,6 +191,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
             Input::File("--classes", args.classes.as_deref()),
         ],
     )?;
+    check_checkpoints(&args)?;
     let data = load_dataset(&args)?;
     let views = train_views(&args, &data)?;
     let init = read_scene_or_point_cloud(&args.init)?;
@@ -440,6 +444,52 @@ fn per_iteration(t: &StageTotals) -> StageTotals {
         densify_ms: t.densify_ms / iters,
         iterations: t.iterations,
     }
+}
+
+/// No checkpoint (`<out>.iter<N>.ply` and its class table) may land on an input or the
+/// report: resuming from a checkpoint under the same --out is the likely way.
+fn check_checkpoints(args: &TrainArgs) -> Result<()> {
+    let Some(every) = args.checkpoint_every else {
+        return Ok(());
+    };
+    let init = resolve_scene_path(&args.init).unwrap_or_else(|_| args.init.clone());
+    let others = [
+        ("--init", Some(&init)),
+        ("--init-semantics-from", args.init_semantics_from.as_ref()),
+        ("--report", args.report.as_ref()),
+        ("--classes", args.classes.as_ref()),
+    ];
+    for (option, path) in others.iter().filter_map(|(o, p)| Some((o, (*p)?))) {
+        let name = path
+            .file_name()
+            .and_then(|n| n.to_str())
+            .unwrap_or_default();
+        let out_stem = args
+            .out
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .unwrap_or_default();
+        let number = (name.strip_prefix(out_stem))
+            .and_then(|s| s.strip_prefix(".iter"))
+            .and_then(|s| {
+                s.strip_suffix(".ply")
+                    .or_else(|| s.strip_suffix(".classes.json"))
+            })
+            .and_then(|n| n.parse::<u32>().ok());
+        let Some(n) = number.filter(|n| n % every == 0 && *n < args.iters) else {
+            continue;
+        };
+        let checkpoint = checkpoint_path(&args.out, n);
+        let written = [checkpoint.clone(), classes_sidecar_path(&checkpoint)];
+        if written.iter().any(|w| identity(w) == identity(path)) {
+            bail!(
+                "{option} {} would be replaced by the checkpoint of iteration {n} \
+                 (--checkpoint-every {every}): give --out another name",
+                path.display()
+            );
+        }
+    }
+    Ok(())
 }
 
 fn checkpoint_path(out: &Path, iteration: u32) -> PathBuf {

@@ -49,8 +49,13 @@ fn view_image_path(dir: &Path, name: &str) -> Result<std::path::PathBuf> {
         None => dir.to_path_buf(),
     };
     let stem = file.file_name().and_then(|s| s.to_str()).unwrap_or(name);
-    let mut found: Vec<std::path::PathBuf> = std::fs::read_dir(&folder)
-        .with_context(|| format!("listing {}", folder.display()))?
+    let entries = std::fs::read_dir(&folder).with_context(|| {
+        format!(
+            "no image for camera {name}: cannot list {}",
+            folder.display()
+        )
+    })?;
+    let mut found: Vec<std::path::PathBuf> = entries
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.is_file() && p.file_stem().and_then(|s| s.to_str()) == Some(stem))
         .filter(|p| {
