@@ -20,6 +20,16 @@ fn tiny_room() -> (tempfile::TempDir, PathBuf) {
     (tmp, room)
 }
 
+/// `dir/trained.ply`: the room's scene with small random logits of `channels` classes, as
+/// a `train` output holds them.
+fn with_logits(room: &Path, dir: &Path, channels: usize) -> PathBuf {
+    let trained = dir.join("trained.ply");
+    let g = read_ply(&room.join("scene.ply")).unwrap();
+    let g = with_initial_logits(&g, channels, LogitInit::SmallRandom, 1);
+    write_ply(&trained, &g).unwrap();
+    trained
+}
+
 /// The file names in `dir` (not recursing), sorted.
 fn listing(dir: &Path) -> Vec<String> {
     let mut names: Vec<String> = (std::fs::read_dir(dir).unwrap())
@@ -133,13 +143,7 @@ fn a_refused_fusion_writes_nothing_and_a_fused_scene_holds_only_its_fusions_sema
 
     // A trained scene's logits do not survive its fusion: `render --semantics` would draw
     // them through the fusion's class table.
-    let trained = tmp.path().join("trained.ply");
-    let g = read_ply(&room.join("scene.ply")).unwrap();
-    write_ply(
-        &trained,
-        &with_initial_logits(&g, 3, LogitInit::SmallRandom, 1),
-    )
-    .unwrap();
+    let trained = with_logits(&room, tmp.path(), 3);
     let fused = at("fused.ply");
     ok(&[
         "fuse",
@@ -284,6 +288,24 @@ fn exports_checkpoints_and_view_folders_are_checked_too() {
         "{e}"
     );
     assert_eq!(std::fs::read(room.join("cameras.json")).unwrap(), cameras);
+    // The scene as a file, its cameras beside it; exported elsewhere.
+    let export = arg_in(tmp.path(), "export");
+    ok(&[
+        "bench",
+        "render",
+        "--scene",
+        &arg_in(&room, "scene.ply"),
+        "--iters",
+        "1",
+        "--json",
+        "--export",
+        &export,
+    ]);
+    assert_eq!(
+        listing(Path::new(&export)),
+        ["bench.json", "cameras.json", "scene.ply"]
+    );
+    std::fs::remove_dir_all(&export).unwrap();
 
     // Resuming from a checkpoint under the same --out would write over it.
     let (images, labels) = (arg_in(&room, "images"), arg_in(&room, "labels"));
@@ -324,13 +346,7 @@ fn exports_checkpoints_and_view_folders_are_checked_too() {
     assert_eq!(listing(tmp.path()), ["room", "t.iter2.ply"]);
 
     // Logits of 3 channels beside the room's 6-class table.
-    let trained = tmp.path().join("trained.ply");
-    let g = read_ply(&room.join("scene.ply")).unwrap();
-    write_ply(
-        &trained,
-        &with_initial_logits(&g, 3, LogitInit::SmallRandom, 1),
-    )
-    .unwrap();
+    let trained = with_logits(&room, tmp.path(), 3);
     std::fs::copy(
         room.join("scene.classes.json"),
         tmp.path().join("trained.classes.json"),

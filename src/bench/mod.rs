@@ -99,21 +99,28 @@ pub fn time_cpu<T, R>(
     (median(&mut samples), last.expect("at least one run"))
 }
 
-/// A benchmark's scene folder: its `scene.ply` (at least one Gaussian, fewer than 2^32) and
-/// the cameras of its `cameras.json` (at least one).
+/// A benchmark's scene (at least one Gaussian, fewer than 2^32), as `fuse --scene` takes it
+/// (a scene folder, an INRIA run, a scene file), and the cameras of its folder's
+/// `cameras.json` (at least one).
 pub fn read_scene_folder(
     dir: &std::path::Path,
 ) -> anyhow::Result<(crate::scene::Gaussians, Vec<crate::scene::Camera>)> {
-    use crate::scene::scene_file::{CAMERAS_FILE, SCENE_FILE};
+    use crate::scene::scene_file::{read_scene, resolve_scene_path, CAMERAS_FILE};
     use anyhow::ensure;
-    let g = crate::scene::ply::read_ply(&dir.join(SCENE_FILE))?;
-    ensure!(!g.is_empty(), "{} has no Gaussians", dir.display());
+    let scene = resolve_scene_path(dir)?;
+    let g = read_scene(&scene)?;
+    ensure!(!g.is_empty(), "{} has no Gaussians", scene.display());
     ensure!(
         g.len() <= u32::MAX as usize,
         "{} has 2^32 Gaussians or more",
-        dir.display()
+        scene.display()
     );
-    let json = dir.join(CAMERAS_FILE);
+    let folder = if dir.is_dir() {
+        dir
+    } else {
+        scene.parent().unwrap_or(dir)
+    };
+    let json = folder.join(CAMERAS_FILE);
     let cams = crate::scene::cameras_json::read_cameras_json(&json)?;
     ensure!(!cams.is_empty(), "{} has no camera", json.display());
     Ok((g, cams))

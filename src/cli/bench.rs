@@ -56,8 +56,9 @@ pub struct FuseArgs {
     /// Number of Gaussians (a random scene, SH degree 3).
     #[arg(long, default_value_t = 200_000)]
     n: usize,
-    /// A folder with `scene.ply` and `cameras.json` (a `synth` room, a trained scene) instead
-    /// of the random scene: its first --views cameras, scaled to --width x --height.
+    /// A scene with a `cameras.json` in its folder (a `synth` room or its scene.ply, an INRIA
+    /// run) instead of the random scene: its first --views cameras, scaled to --width x
+    /// --height.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["preset", "n"])]
     scene: Option<PathBuf>,
     /// Views: cameras on a ring in front of the scene, each seeing most of it (or the
@@ -140,8 +141,9 @@ pub struct InputArgs {
     /// Semantic channels blended with RGB (0: RGB only), with random logits.
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u16).range(0..=256))]
     channels: u16,
-    /// A folder with `scene.ply` and `cameras.json` (e.g. a `synth` output) to use instead
-    /// of the random scene; its first camera is the view (--n, --width, --height ignored).
+    /// A scene with a `cameras.json` in its folder (a `synth` room or its scene.ply, an INRIA
+    /// run) to use instead of the random scene; its first camera is the view (--n, --width,
+    /// --height ignored).
     #[arg(long, value_name = "DIR")]
     scene: Option<PathBuf>,
     /// Also write the scene (PLY, with the semantic channels), the camera (JSON) and a

@@ -83,8 +83,8 @@ fn palette(labels: &[u16], table: &ClassTable) -> Vec<u8> {
 
 pub fn run(args: DemoArgs) -> Result<()> {
     check_outputs(&[], &[("--out", Some(&args.out))], &[])?;
-    let s = build_room(&args)?;
     let methods = args.methods.methods()?;
+    let s = build_room(&args)?;
     let gpu = Gpu::new()?;
     let which = if args.noise.is_some() {
         TrainLabels::Noisy
