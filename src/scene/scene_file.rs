@@ -106,12 +106,16 @@ fn latest_iteration(dir: &Path) -> Result<Option<PathBuf>> {
     // A newer iteration without its point cloud (a run still writing, or cut short): the
     // older one is used, and said so rather than silently.
     if let (Some((_, newest)), Some(used)) = (iterations.last(), &latest) {
-        if newest != used {
+        // Once a process: a command resolves its scene more than once.
+        static NOTED: std::sync::Mutex<Vec<PathBuf>> = std::sync::Mutex::new(Vec::new());
+        let mut noted = NOTED.lock().unwrap_or_else(|p| p.into_inner());
+        if newest != used && !noted.contains(newest) {
             eprintln!(
                 "note: {} holds no point_cloud.ply; using {}",
                 newest.display(),
                 used.join("point_cloud.ply").display()
             );
+            noted.push(newest.clone());
         }
     }
     Ok(latest)
