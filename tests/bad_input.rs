@@ -132,6 +132,9 @@ fn ply_data_that_does_not_fit_its_header_is_an_error() {
         .unwrap();
     fewer_bytes[at + 15] = b'1';
     let fewer = write_tmp(dir.path(), "fewer.ply", &fewer_bytes);
+    // Less than a vertex past the count is a writer's padding, let pass.
+    let padded = write_tmp(dir.path(), "padded.ply", [&bytes[..], &[0, 0, 0]].concat());
+    assert_eq!(read_ply(&padded).unwrap().len(), 2);
     assert_error(
         &error_of(read_ply(&fewer)),
         &fewer,
@@ -680,4 +683,30 @@ fn view_images_are_found_in_any_case_once_and_composited_over_black() {
         rgb[3..].iter().all(|&v| (v - 128.0 / 255.0).abs() < 1e-6),
         "{rgb:?}"
     );
+}
+
+/// A plain point cloud in ASCII (x y z and uchar colours, a point a line), as SfM tools
+/// write `input.ply`, reads as a cloud.
+#[test]
+fn ascii_point_clouds_are_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let header = "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n\
+                  property float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\n\
+                  end_header\n";
+    let p = write_tmp(
+        dir.path(),
+        "cloud.ply",
+        format!("{header}0 1 2 255 0 0\n3 4 5 0 0 255\n"),
+    );
+    let cloud = semsplat::scene::ply::read_point_cloud_ply(&p)
+        .unwrap()
+        .expect("a cloud");
+    assert_eq!(cloud.points, [[0.0, 1.0, 2.0], [3.0, 4.0, 5.0]]);
+    let short = write_tmp(
+        dir.path(),
+        "short.ply",
+        format!("{header}0 1 2 255 0\n3 4 5 0 0 255\n"),
+    );
+    let err = error_of(semsplat::scene::ply::read_point_cloud_ply(&short));
+    assert!(err.contains("more values"), "{err}");
 }

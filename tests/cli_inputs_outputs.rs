@@ -59,14 +59,14 @@ fn outputs_that_are_inputs_or_each_other_are_refused_before_any_work() {
                 "--report".into(),
                 arg_in(&room, "cameras.json"),
             ],
-            "would destroy that input",
+            "would replace that input",
         ),
         (
             vec!["--out".into(), arg_in(&room, "scene.classes.json")],
             "--scene's class table",
         ),
         (
-            vec!["--out".into(), arg_in(&room, "labels/x.ply")],
+            vec!["--out".into(), arg_in(&room, "labels/x.png")],
             "inside the --labels folder",
         ),
         (
@@ -284,7 +284,7 @@ fn exports_checkpoints_and_view_folders_are_checked_too() {
         room.to_str().unwrap(),
     ]);
     assert!(
-        e.contains("--export") && e.contains("would destroy that input"),
+        e.contains("--export") && e.contains("would replace that input"),
         "{e}"
     );
     assert_eq!(std::fs::read(room.join("cameras.json")).unwrap(), cameras);
@@ -344,7 +344,13 @@ fn exports_checkpoints_and_view_folders_are_checked_too() {
     );
     assert!(e.contains("cannot share a path"), "{e}");
     assert_eq!(listing(tmp.path()), ["room", "t.iter2.ply"]);
+}
 
+/// `render --semantics` refuses a class table of another length than the logits, and gives
+/// pixels whose logits tie no class; `inspect` flags maps of nothing but the ignore value.
+#[test]
+fn render_and_inspect_say_what_would_mislead() {
+    let (tmp, room) = tiny_room();
     // Logits of 3 channels beside the room's 6-class table.
     let trained = with_logits(&room, tmp.path(), 3);
     std::fs::copy(
@@ -366,6 +372,25 @@ fn exports_checkpoints_and_view_folders_are_checked_too() {
         e.contains("3 semantic channels") && e.contains("lists"),
         "{e}"
     );
+    // Uniform logits (untouched by training) tie everywhere: no class, not the last one.
+    std::fs::remove_file(tmp.path().join("trained.classes.json")).unwrap();
+    let g = read_ply(&room.join("scene.ply")).unwrap();
+    write_ply(&trained, &with_initial_logits(&g, 3, LogitInit::Uniform, 1)).unwrap();
+    let views = arg_in(tmp.path(), "views");
+    ok(&[
+        "render",
+        "--scene",
+        trained.to_str().unwrap(),
+        "--cameras",
+        &arg_in(&room, "cameras.json"),
+        "--semantics",
+        "--views",
+        "train_0000",
+        "--out",
+        &views,
+    ]);
+    let labels = image::open(Path::new(&views).join("train_0000.labels.png")).unwrap();
+    assert!(labels.to_luma8().pixels().all(|p| p[0] == 255));
 
     let blank = tmp.path().join("blank");
     std::fs::create_dir(&blank).unwrap();

@@ -38,6 +38,13 @@ struct ExportMeta {
     no_label: u16,
 }
 
+/// The label maps' file of an export (`uint16 [views, height, width]`).
+pub const LABELS_FILE: &str = "labels.npy";
+/// The benchmark's description in an export.
+pub const META_FILE: &str = "bench.json";
+/// Every file an export may write into its folder.
+pub const EXPORT_FILES: [&str; 4] = [SCENE_FILE, CAMERAS_FILE, LABELS_FILE, META_FILE];
+
 /// Label maps to export: the source and its class count.
 pub struct ExportLabels<'a> {
     pub source: &'a dyn LabelSource,
@@ -65,7 +72,7 @@ pub fn export_inputs(
     write_semsplat_cameras(&dir.join(CAMERAS_FILE), cams)?;
     let classes = labels.as_ref().map_or(0, |l| l.classes);
     if let Some(l) = labels {
-        export_labels(&dir.join("labels.npy"), cams, &l)?;
+        export_labels(&dir.join(LABELS_FILE), cams, &l)?;
     }
     let meta = ExportMeta {
         n: g.len(),
@@ -79,7 +86,7 @@ pub fn export_inputs(
         sh_degree: g.sh_degree,
         no_label: EXPORT_NO_LABEL,
     };
-    write_bytes_atomic(&dir.join("bench.json"), &serde_json::to_vec_pretty(&meta)?)
+    write_bytes_atomic(&dir.join(META_FILE), &serde_json::to_vec_pretty(&meta)?)
 }
 
 /// Streams every view's label map into one `uint16` array, view by view.

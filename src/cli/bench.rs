@@ -11,6 +11,7 @@ use super::args;
 use super::joint_args::{methods_help, parse_methods};
 use super::progress::{follow, views_bar};
 use super::{check_outputs, Input};
+use semsplat::bench::export::EXPORT_FILES;
 use semsplat::bench::fuse::{bench_fuse, FuseBench, FuseBenchSpec};
 use semsplat::bench::render::{bench_render, BenchInput};
 use semsplat::bench::train::{bench_train, TrainBench};
@@ -18,7 +19,6 @@ use semsplat::bench::{scan::bench_scan, sort::bench_sort};
 use semsplat::experiment::{Lifter, ALL_METHODS};
 use semsplat::gpu::timings::KernelTotal;
 use semsplat::gpu::Gpu;
-use semsplat::scene::scene_file::{CAMERAS_FILE, SCENE_FILE};
 
 #[derive(Subcommand)]
 pub enum BenchCommand {
@@ -322,18 +322,16 @@ fn check_export(
     let Some(dir) = export else {
         return Ok(());
     };
-    let files = [SCENE_FILE, CAMERAS_FILE, "labels.npy", "bench.json"].map(|f| dir.join(f));
+    let files = EXPORT_FILES.map(|f| dir.join(f));
     let named: Vec<(&str, Option<&Path>)> = files
         .iter()
         .map(|f| ("--export", Some(f.as_path())))
         .collect();
-    let cameras = scene.as_ref().map(|s| s.join(CAMERAS_FILE));
     check_outputs(
         &named,
         &[],
         &[
             Input::Scene("--scene", scene.as_deref()),
-            Input::Cameras("--scene's cameras", cameras.as_deref()),
             Input::Tree("--labels", labels.as_deref()),
         ],
     )

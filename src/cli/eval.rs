@@ -21,7 +21,7 @@ use semsplat::scene::scene_file::{cameras_for_scene, read_scene};
 use semsplat::scene::{Camera, Gaussians, Split};
 use semsplat::util::{interrupt, write_bytes_atomic};
 
-use super::{check_outputs, Input};
+use super::{check_outputs, Input, FRAME_HINT};
 
 #[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
 enum Views {
@@ -35,7 +35,10 @@ enum Views {
 
 #[derive(Args)]
 pub struct EvalArgs {
-    /// A PLY whose Gaussians carry `class` (as written by `semsplat fuse`).
+    /// A PLY whose Gaussians carry `class` (as `fuse` and `train` write it). The labels are
+    /// rendered with each Gaussian drawn in its `class` alone (one-hot), so every method is
+    /// scored alike: a trained scene by its Gaussians' classes, not by its blended logits
+    /// (`render --semantics` draws those, and may differ by a point or so).
     #[arg(long)]
     scene: PathBuf,
     /// Cameras: COLMAP model folder, INRIA cameras.json, nerfstudio transforms.json or semsplat cameras.json. Default:
@@ -120,27 +123,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
         None => None,
     };
     let gpu = Gpu::new()?;
-    let mut renderer = LabelRenderer::new(&gpu, &g, &classes)?;
-    let mut confusion = Confusion::default();
-    let (mut ignored, mut rendered) = (0u64, 0u64);
-    for &i in &chosen {
-        interrupt::check()?;
-        let truth = dir.load(i)?;
-        ignored += truth
-            .labels
-            .iter()
-            .filter(|&&l| l == LabelMap::IGNORE)
-            .count() as u64;
-        let predicted = renderer.render_ids(chosen_camera(&cams, &dir, i))?;
-        rendered += predicted.iter().filter(|p| p.is_some()).count() as u64;
-        confusion.add(&truth.labels, &predicted, LabelMap::IGNORE);
-    }
-    // A score of nothing rendered says nothing of the classes.
-    ensure!(
-        rendered > 0,
-        "no view renders any Gaussian with a class: check that the cameras and the scene share \
-         one frame and scale, and that the scene's classes are not all -1"
-    );
+    let (confusion, ignored) = score_views(&gpu, &g, &classes, &chosen, &cams, &dir)?;
     let mut segmentation = confusion.scores();
     let true_ids: Vec<u32> = segmentation.per_class.iter().map(|c| c.id).collect();
     if let Some(w) = binary_mask_warning(&args.labels, &true_ids, ignored, &format) {
@@ -170,6 +153,40 @@ pub fn run(args: EvalArgs) -> Result<()> {
         write_bytes_atomic(path, serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
     Ok(())
+}
+
+/// The confusion of the labels rendered from `g` (each Gaussian in its class) against the
+/// `chosen` views' label maps, and the pixels those maps leave unlabeled.
+fn score_views(
+    gpu: &Gpu,
+    g: &Gaussians,
+    classes: &[i32],
+    chosen: &[usize],
+    cams: &[Camera],
+    dir: &LabelDir,
+) -> Result<(Confusion, u64)> {
+    let mut renderer = LabelRenderer::new(gpu, g, classes)?;
+    let mut confusion = Confusion::default();
+    let (mut ignored, mut rendered) = (0u64, 0u64);
+    for &i in chosen {
+        interrupt::check()?;
+        let truth = dir.load(i)?;
+        ignored += truth
+            .labels
+            .iter()
+            .filter(|&&l| l == LabelMap::IGNORE)
+            .count() as u64;
+        let predicted = renderer.render_ids(chosen_camera(cams, dir, i))?;
+        rendered += predicted.iter().filter(|p| p.is_some()).count() as u64;
+        confusion.add(&truth.labels, &predicted, LabelMap::IGNORE);
+    }
+    // A score of nothing rendered says nothing of the classes.
+    ensure!(
+        rendered > 0,
+        "no view renders any Gaussian with a class. {FRAME_HINT}, and that the scene's \
+         classes are not all -1"
+    );
+    Ok((confusion, ignored))
 }
 
 /// `--classes`, else the scene's sidecar, else classes.json in or beside the label folder.

@@ -3,7 +3,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{anyhow, bail, ensure, Context, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use clap::{Args, ValueEnum};
 use serde::Serialize;
 
@@ -11,10 +11,12 @@ use super::args;
 use super::fuse_consensus::{fuse_by_consensus, ConsensusOutputs};
 use super::merge::ShardJob;
 use super::progress::{follow, views_bar};
-use super::{check_outputs, open_dataset, write_scene_with_table, Input, Interruptible};
+use super::{
+    check_outputs, open_dataset, write_scene_with_table, Input, Interruptible, FRAME_HINT,
+};
 use semsplat::dataset::Dataset;
 use semsplat::dataset::{user_classes, DatasetPaths};
-use semsplat::eval::label_render::LabelRenderer;
+use semsplat::eval::label_render::{check_ids_fit_16_bit, LabelRenderer};
 use semsplat::fuse::consensus_report::SegmentReport;
 use semsplat::fuse::{
     accumulate_assigned, assign_semantic_near, class_totals, nearest_neighbours, one_vs_rest_row,
@@ -28,7 +30,7 @@ use semsplat::scene::classes::{read_class_table, write_class_table, ClassTable};
 use semsplat::scene::labels::{write_label_png, write_palette_png, LabelMap};
 use semsplat::scene::ply::{classes_sidecar_path, read_classes_sidecar, write_ply};
 use semsplat::scene::scene_file::{cameras_for_scene, read_scene, resolve_scene_path};
-use semsplat::scene::Gaussians;
+use semsplat::scene::{Camera, Gaussians};
 use semsplat::util::npy::write_npy_rows;
 use semsplat::util::{interrupt, write_bytes_atomic};
 
@@ -368,16 +370,11 @@ pub(super) fn write_fused(
     let selected_class = selected_class
         .map(|name| find_class(&table, name))
         .transpose()?;
-    let cameras = match &args.render_views {
-        Some(_) => {
-            let cameras = cameras.context("--render-views needs --cameras")?;
-            ensure!(
-                cameras.exists(),
-                "--cameras {} does not exist",
-                cameras.display()
-            );
-            Some(cameras)
-        }
+    let label_views = match &args.render_views {
+        Some(_) => Some(LabelViews::open(
+            cameras.context("--render-views needs --cameras")?,
+            &g,
+        )?),
         None => None,
     };
     if let Some(path) = &args.save_contrib {
@@ -394,8 +391,8 @@ pub(super) fn write_fused(
     if let Some(path) = &args.save_membership {
         save_membership(path, kept(&mut rows)?, &totals, args.gamma)?;
     }
-    if let (Some(dir), Some(cameras)) = (&args.render_views, cameras) {
-        render_label_views(cameras, dir, &g, &table)?;
+    if let (Some(dir), Some(views)) = (&args.render_views, label_views) {
+        views.render(dir, &g, &table)?;
     }
     // The consensus decides per segment, which its evidence rows do not hold: it selects by
     // the classes it decided; the evidence methods by FlashSplat's one-vs-rest.
@@ -678,10 +675,9 @@ fn check_assigned(args: &OutputArgs, g: &Gaussians) -> Result<()> {
         return Ok(());
     }
     bail!(
-        "no Gaussian took a class (nothing written): no view saw a Gaussian's center on a \
-         labeled pixel. Check that the cameras and the scene share one frame and scale (a \
-         nerfstudio export's applied_transform, cameras of another reconstruction) and that \
-         the label maps hold classes (`semsplat inspect LABELS --cameras CAMERAS`)"
+        "no Gaussian took a class (nothing written): the evidence holds none (with views: no \
+         view saw a Gaussian's center on a labeled pixel). {FRAME_HINT}, and that the label \
+         maps hold classes (`semsplat inspect LABELS --cameras CAMERAS`)"
     )
 }
 
@@ -703,29 +699,41 @@ fn save_membership(
     })
 }
 
-/// Label and palette PNGs of every camera, rendered from the fused scene.
-fn render_label_views(
-    cam_path: &Path,
-    dir: &Path,
-    g: &Gaussians,
-    table: &ClassTable,
-) -> Result<()> {
-    let cams = load_cameras(cam_path)?;
-    let gpu = Gpu::new()?;
-    let ids = g.class_ids.as_deref().expect("classes assigned");
-    let mut renderer = LabelRenderer::new(&gpu, g, ids)?;
-    for cam in &cams {
-        interrupt::check()?;
-        let labels: Vec<u16> = renderer
-            .render(cam)?
-            .into_iter()
-            .map(|l| l.unwrap_or(LabelMap::IGNORE))
-            .collect();
-        let map = LabelMap::new(cam.width, cam.height, labels)?;
-        write_label_png(&dir.join(format!("{}.labels.png", cam.name)), &map)?;
-        write_palette_png(&dir.join(format!("{}.palette.png", cam.name)), &map, table)?;
+/// `--render-views`' cameras and device, opened before a fusion writes its first file (a
+/// camera file that does not parse, or no device, must not leave the other outputs behind).
+struct LabelViews {
+    cams: Vec<Camera>,
+    gpu: Gpu,
+}
+
+impl LabelViews {
+    fn open(cameras: &Path, g: &Gaussians) -> Result<LabelViews> {
+        let cams = load_cameras(cameras)?;
+        let ids = g.class_ids.as_deref().expect("classes assigned");
+        check_ids_fit_16_bit(ids.iter().map(|&id| i64::from(id)))?;
+        Ok(LabelViews {
+            cams,
+            gpu: Gpu::new()?,
+        })
     }
-    Ok(())
+
+    /// Label and palette PNGs of every camera, rendered from the fused scene.
+    fn render(self, dir: &Path, g: &Gaussians, table: &ClassTable) -> Result<()> {
+        let ids = g.class_ids.as_deref().expect("classes assigned");
+        let mut renderer = LabelRenderer::new(&self.gpu, g, ids)?;
+        for cam in &self.cams {
+            interrupt::check()?;
+            let labels: Vec<u16> = renderer
+                .render(cam)?
+                .into_iter()
+                .map(|l| l.unwrap_or(LabelMap::IGNORE))
+                .collect();
+            let map = LabelMap::new(cam.width, cam.height, labels)?;
+            write_label_png(&dir.join(format!("{}.labels.png", cam.name)), &map)?;
+            write_palette_png(&dir.join(format!("{}.palette.png", cam.name)), &map, table)?;
+        }
+        Ok(())
+    }
 }
 
 /// The Gaussians `--extract` keeps or `--remove` leaves (one-vs-rest with --gamma, `totals`:

@@ -163,8 +163,12 @@ pub fn run(mut args: MergeArgs) -> Result<()> {
         args.cameras = Some(cameras_for_scene(None, &args.scene)?);
     }
     let manifests: Vec<PathBuf> = args.parts.iter().map(|p| manifest_path(p)).collect();
-    let inputs: Vec<Input> = (args.parts.iter().chain(&manifests))
-        .map(|p| Input::File("a part", Some(p)))
+    let inputs: Vec<Input> = (args.parts.iter().map(|p| Input::File("part", Some(p))))
+        .chain(
+            manifests
+                .iter()
+                .map(|m| Input::File("part's manifest", Some(m))),
+        )
         .chain([
             Input::Scene("--scene", Some(&args.scene)),
             Input::Cameras("--cameras", args.cameras.as_deref()),

@@ -139,6 +139,22 @@ fn label_source(args: &RenderArgs, g: &Gaussians, gpu: &Gpu) -> Result<LabelSour
     Ok(LabelSource::Classes(Box::new(renderer)))
 }
 
+/// Channel k of the logits is the table's k-th class: a table of another length (one
+/// copied from another scene) would name every channel wrong.
+fn check_table_fits_logits(scene: &Path, g: &Gaussians, table: Option<&ClassTable>) -> Result<()> {
+    if let (Some(s), Some(table)) = (&g.semantics, table) {
+        ensure!(
+            table.len() == s.channels,
+            "{} has {} semantic channels (sem_*) but its class table lists {} classes: the \
+             table is not this scene's (train writes both together)",
+            scene.display(),
+            s.channels,
+            table.len()
+        );
+    }
+    Ok(())
+}
+
 pub fn run(args: RenderArgs) -> Result<()> {
     if args.background.len() != 3 {
         bail!(
@@ -161,17 +177,8 @@ pub fn run(args: RenderArgs) -> Result<()> {
         load_cameras(&cameras_for_scene(args.cameras.as_deref(), &args.scene)?)?,
         &args.views,
     )?;
-    // Channel k of the logits is the table's k-th class: a table of another length (one
-    // copied from another scene) would name every channel wrong.
-    if let (Some(s), Some(table), true) = (&g.semantics, &table, args.semantics) {
-        ensure!(
-            table.len() == s.channels,
-            "{} has {} semantic channels (sem_*) but its class table lists {} classes: the \
-             table is not this scene's (train writes both together)",
-            scene_file.display(),
-            s.channels,
-            table.len()
-        );
+    if args.semantics {
+        check_table_fits_logits(&scene_file, &g, table.as_ref())?;
     }
     let gpu = Gpu::new()?;
     let mut labels_from = label_source(&args, &g, &gpu)?;

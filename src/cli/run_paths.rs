@@ -1,13 +1,12 @@
 //! What a run reads and writes, checked against each other before any work. Each output
 //! must be writable ([`check_output_file`]), and must not be one of the run's inputs (or an
-//! input scene's class table), lie in a folder the run reads with its subfolders (label
-//! maps, images), or be another of its outputs: the run itself would destroy or mix up
+//! input scene's class table or cameras), be an image inside a folder the run reads with its
+//! subfolders (label maps, images) or a folder there, or be another of its outputs: the run itself would destroy or mix up
 //! what it reads, or one output would replace another, and the run would still say it
 //! succeeded.
 
-use std::ffi::OsString;
 use std::fs;
-use std::path::{Path, PathBuf};
+use std::path::{Component, Path, PathBuf};
 
 use anyhow::{bail, Result};
 use semsplat::scene::ply::classes_sidecar_path;
@@ -70,9 +69,11 @@ pub fn check_outputs(
             );
         }
         if let Some((input, _)) = read_files.iter().find(|(_, r)| *r == id) {
-            bail!("{option} {} is the run's {input}: writing it would destroy that input; write elsewhere", path.display());
+            bail!("{option} {} is the run's {input}: writing it would replace that input; write elsewhere", path.display());
         }
-        refuse_inside_trees(option, path, &id, &read_trees)?;
+        if is_image(path) {
+            refuse_inside_trees(option, path, &id, &read_trees)?;
+        }
         written.push((option, id));
     }
     for &(option, path) in &folders {
@@ -92,6 +93,16 @@ fn given<'a>(paths: &[(&'a str, Option<&'a Path>)]) -> Vec<(&'a str, &'a Path)> 
     (paths.iter())
         .filter_map(|&(option, path)| Some((option, path?)))
         .collect()
+}
+
+/// Whether a file is of a kind the folders read with their subfolders hold (the label
+/// maps' and images' PNG and JPEG): only those are read back from there.
+fn is_image(path: &Path) -> bool {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or_default();
+    ["png", "jpg", "jpeg"].contains(&ext.to_ascii_lowercase().as_str())
 }
 
 /// An output at or under a folder the run reads with its subfolders would be read back
@@ -133,14 +144,23 @@ fn read_paths(inputs: &[Input]) -> (Vec<Named>, Vec<Named>) {
                     files.push((format!("{option}'s cameras"), identity(&cameras)));
                 }
             }
-            Input::Cameras(option, Some(path)) if path.is_dir() => {
-                for folder in [path.to_path_buf(), path.join("sparse").join("0")] {
+            Input::Cameras(option, Some(path)) => {
+                // A model file is read with its siblings (COLMAP's cameras and images).
+                let folders = match path.is_dir() {
+                    true => vec![
+                        path.to_path_buf(),
+                        path.join("sparse"),
+                        path.join("sparse/0"),
+                    ],
+                    false => vec![path.parent().unwrap_or(Path::new(".")).to_path_buf()],
+                };
+                files.push((option.into(), identity(path)));
+                for folder in folders {
                     let names = CAMERA_FILES.iter().map(|name| folder.join(name));
                     let found = names.filter(|f| f.is_file());
                     files.extend(found.map(|f| (option.into(), identity(&f))));
                 }
             }
-            Input::Cameras(option, Some(path)) => files.push((option.into(), identity(path))),
             Input::Tree(option, Some(path)) => trees.push((option.into(), identity(path))),
             _ => {}
         }
@@ -152,21 +172,25 @@ fn read_paths(inputs: &[Input]) -> (Vec<Named>, Vec<Named>) {
 /// (a write goes through links to their target) and the rest appended as given.
 pub(super) fn identity(path: &Path) -> PathBuf {
     let absolute = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
-    let mut head = absolute.as_path();
-    let mut tail: Vec<OsString> = Vec::new();
-    loop {
-        if let Ok(mut resolved) = fs::canonicalize(head) {
-            resolved.extend(tail.iter().rev());
-            return resolved;
-        }
-        match (head.file_name(), head.parent()) {
-            (Some(name), Some(parent)) => {
-                tail.push(name.to_os_string());
-                head = parent;
+    let parts: Vec<Component> = absolute.components().collect();
+    for existing in (1..=parts.len()).rev() {
+        let head: PathBuf = parts[..existing].iter().collect();
+        let Ok(mut resolved) = fs::canonicalize(&head) else {
+            continue;
+        };
+        // The rest does not exist yet, so holds no link: its `..` is the folder above.
+        for part in &parts[existing..] {
+            match part {
+                Component::ParentDir => {
+                    resolved.pop();
+                }
+                Component::CurDir => {}
+                other => resolved.push(other),
             }
-            _ => return absolute,
         }
+        return resolved;
     }
+    absolute
 }
 
 #[cfg(test)]
@@ -183,6 +207,9 @@ mod tests {
         let by_link = identity(&link.join("new.ply"));
         let by_dots = identity(&dir.join("real").join("..").join("real").join("new.ply"));
         assert_eq!(by_link, by_dots);
+        // `..` past a folder that does not exist yet.
+        let by_new = identity(&dir.join("new").join("..").join("real").join("new.ply"));
+        assert_eq!(by_link, by_new);
         assert_eq!(
             by_link,
             fs::canonicalize(dir.join("real")).unwrap().join("new.ply")

@@ -56,8 +56,8 @@ impl NoiseKind {
         }
     }
 
-    /// The label noise of one level: `base` with this kind at `level` (boundary: pixels,
-    /// rounded). Checked as `--noise` would check it (a rate in [0, 1]), so every level is
+    /// The label noise of one level: `base` with this kind at `level` (boundary: whole
+    /// pixels). Checked as `--noise` would check it (a rate in [0, 1]), so every level is
     /// refused before any runs rather than when the sweep reaches it.
     fn at(self, base: &NoiseSpec, level: f64) -> Result<NoiseSpec> {
         let item = if self == NoiseKind::Boundary {

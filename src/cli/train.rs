@@ -4,14 +4,14 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{bail, ensure, Result};
+use anyhow::{bail, ensure, Context, Result};
 use clap::{Args, ValueEnum};
 use serde::Serialize;
 
 use super::args;
 use super::progress::iterations_bar;
 use super::run_paths::identity;
-use super::{check_outputs, open_dataset, write_scene_with_table, Input};
+use super::{check_outputs, open_dataset, write_scene_with_table, Input, FRAME_HINT};
 use semsplat::dataset::{user_classes, CompactClasses, Dataset, DatasetPaths};
 use semsplat::gpu::Gpu;
 use semsplat::render::SemanticMode;
@@ -172,26 +172,7 @@ struct TrainReport<'a> {
 
 pub fn run(args: TrainArgs) -> Result<()> {
     let start = Instant::now();
-    check_outputs(
-        &[
-            ("--out", Some(&args.out)),
-            (
-                "--out's class table",
-                Some(&classes_sidecar_path(&args.out)),
-            ),
-            ("--report", args.report.as_deref()),
-        ],
-        &[],
-        &[
-            Input::Tree("--images", Some(&args.images)),
-            Input::Tree("--labels", Some(&args.labels)),
-            Input::Cameras("--cameras", args.cameras.as_deref()),
-            Input::Scene("--init", Some(&args.init)),
-            Input::File("--init-semantics-from", args.init_semantics_from.as_deref()),
-            Input::File("--classes", args.classes.as_deref()),
-        ],
-    )?;
-    check_checkpoints(&args)?;
+    check_paths(&args)?;
     let data = load_dataset(&args)?;
     let views = train_views(&args, &data)?;
     let init = read_scene_or_point_cloud(&args.init)?;
@@ -204,13 +185,10 @@ pub fn run(args: TrainArgs) -> Result<()> {
 
     let gpu = Gpu::new()?;
     let mut trainer = Trainer::new(&gpu, &init, &views, cfg.clone(), &[])?;
-    // One pass over the views: training on views that see nothing would run to the end
-    // and write an untouched scene.
+    // Training on views that see nothing would run to the end and write an untouched scene.
     ensure!(
-        trainer.seen_by_views()?.contains(&true),
-        "no training view sees any of --init's {} Gaussians: check that the cameras and the \
-         scene share one frame and scale (a nerfstudio export's applied_transform, cameras of \
-         another reconstruction)",
+        trainer.some_view_sees_a_gaussian()?,
+        "no training view sees any of --init's {} Gaussians. {FRAME_HINT}",
         init.len()
     );
     eprintln!(
@@ -299,6 +277,17 @@ fn logits_from_fusion(
                 .map(u32::from)
         })
         .collect();
+    // A fused class the training labels lack has no logit: its Gaussians start uniform.
+    let lost = (ids.iter().zip(&compact))
+        .filter(|(&id, c)| id >= 0 && c.is_none())
+        .count();
+    if lost > 0 {
+        eprintln!(
+            "note: {lost} Gaussians of --init-semantics-from {} hold classes the training \
+             labels lack (another class table?): they start uniform",
+            fused.display()
+        );
+    }
     let conf = f.class_conf.as_deref();
     Ok(with_logits_from_classes(
         init,
@@ -429,6 +418,13 @@ fn write_trained(
         classes.iter().map(|c| c.map(|c| c as usize)),
     ));
     g.class_conf = Some(conf);
+    g.validate().with_context(|| {
+        format!(
+            "training diverged (nothing written to {}): lower the learning rates or the loss \
+             weights, or run with --deterministic, which stops at the first non-finite gradient",
+            path.display()
+        )
+    })?;
     write_scene_with_table(path, &g, &data.table)?;
     Ok(g)
 }
@@ -446,6 +442,28 @@ fn per_iteration(t: &StageTotals) -> StageTotals {
     }
 }
 
+/// Every output, checkpoints included, against the inputs and each other (before any work).
+fn check_paths(args: &TrainArgs) -> Result<()> {
+    let table = classes_sidecar_path(&args.out);
+    check_outputs(
+        &[
+            ("--out", Some(&args.out)),
+            ("--out's class table", Some(&table)),
+            ("--report", args.report.as_deref()),
+        ],
+        &[],
+        &[
+            Input::Tree("--images", Some(&args.images)),
+            Input::Tree("--labels", Some(&args.labels)),
+            Input::Cameras("--cameras", args.cameras.as_deref()),
+            Input::Scene("--init", Some(&args.init)),
+            Input::File("--init-semantics-from", args.init_semantics_from.as_deref()),
+            Input::File("--classes", args.classes.as_deref()),
+        ],
+    )?;
+    check_checkpoints(args)
+}
+
 /// No checkpoint (`<out>.iter<N>.ply` and its class table) may land on an input or the
 /// report: resuming from a checkpoint under the same --out is the likely way.
 fn check_checkpoints(args: &TrainArgs) -> Result<()> {
@@ -460,28 +478,9 @@ fn check_checkpoints(args: &TrainArgs) -> Result<()> {
         ("--classes", args.classes.as_ref()),
     ];
     for (option, path) in others.iter().filter_map(|(o, p)| Some((o, (*p)?))) {
-        let name = path
-            .file_name()
-            .and_then(|n| n.to_str())
-            .unwrap_or_default();
-        let out_stem = args
-            .out
-            .file_stem()
-            .and_then(|s| s.to_str())
-            .unwrap_or_default();
-        let number = (name.strip_prefix(out_stem))
-            .and_then(|s| s.strip_prefix(".iter"))
-            .and_then(|s| {
-                s.strip_suffix(".ply")
-                    .or_else(|| s.strip_suffix(".classes.json"))
-            })
-            .and_then(|n| n.parse::<u32>().ok());
-        let Some(n) = number.filter(|n| n % every == 0 && *n < args.iters) else {
-            continue;
-        };
-        let checkpoint = checkpoint_path(&args.out, n);
-        let written = [checkpoint.clone(), classes_sidecar_path(&checkpoint)];
-        if written.iter().any(|w| identity(w) == identity(path)) {
+        let written = (checkpoint_iteration(&args.out, path))
+            .filter(|&n| n > 0 && n % every == 0 && n < args.iters);
+        if let Some(n) = written {
             bail!(
                 "{option} {} would be replaced by the checkpoint of iteration {n} \
                  (--checkpoint-every {every}): give --out another name",
@@ -492,7 +491,25 @@ fn check_checkpoints(args: &TrainArgs) -> Result<()> {
     Ok(())
 }
 
+/// A checkpoint of `out`: `<out's stem>.iter<N>.ply` beside it, its class table beside that.
 fn checkpoint_path(out: &Path, iteration: u32) -> PathBuf {
     let stem = out.file_stem().unwrap_or_default().to_string_lossy();
     out.with_file_name(format!("{stem}.iter{iteration}.ply"))
+}
+
+/// The iteration whose checkpoint of `out` (or its class table) `path` is, if any.
+fn checkpoint_iteration(out: &Path, path: &Path) -> Option<u32> {
+    let name = path.file_name()?.to_str()?;
+    let stem = out.file_stem()?.to_str()?;
+    let number = (name.strip_prefix(stem)?.strip_prefix(".iter")?)
+        .strip_suffix(".ply")
+        .or_else(|| {
+            name.strip_prefix(stem)?
+                .strip_prefix(".iter")?
+                .strip_suffix(".classes.json")
+        })?;
+    let n: u32 = number.parse().ok()?;
+    let checkpoint = checkpoint_path(out, n);
+    let same = |file: &Path| identity(file) == identity(path);
+    (same(&checkpoint) || same(&classes_sidecar_path(&checkpoint))).then_some(n)
 }

@@ -68,10 +68,7 @@ impl LabelRenderer {
     /// Every class id fits a 16-bit label map ([`LabelRenderer::render`]): checked once
     /// before a run writes its first view.
     pub fn check_fits_16_bit(&self) -> Result<()> {
-        if let Some(&id) = self.channel_ids.iter().find(|&&id| id >= IGNORE_U16) {
-            bail!("class id {id} does not fit a 16-bit label map (ids must be below {IGNORE_U16})");
-        }
-        Ok(())
+        check_ids_fit_16_bit(self.channel_ids.iter().map(|&id| id as i64))
     }
 
     /// [`LabelRenderer::render_ids`] for writing a 16-bit label map: an error when a class id
@@ -84,4 +81,13 @@ impl LabelRenderer {
             .map(|p| p.map(|id| id as u16))
             .collect())
     }
+}
+
+/// Every class id is below the 16-bit label maps' ignore value (the maps a label render is
+/// written as): an error naming the first that is not, never a silently cut id.
+pub fn check_ids_fit_16_bit(ids: impl IntoIterator<Item = i64>) -> Result<()> {
+    if let Some(id) = ids.into_iter().find(|&id| id >= i64::from(IGNORE_U16)) {
+        bail!("class id {id} does not fit a 16-bit label map (ids must be below {IGNORE_U16})");
+    }
+    Ok(())
 }

@@ -19,6 +19,8 @@ pub struct MislabelFollow {
     pub wrong_class: String,
     /// Fraction of the train views that showed the object with the wrong class.
     pub wrong_view_rate: f64,
+    /// How many train views showed it with the wrong class (of those that showed it).
+    pub wrong_views: usize,
     /// Fraction of the object's Gaussians assigned the wrong class.
     pub assigned_wrong: f64,
     /// Mean confidence on the object's Gaussians, and on every other seen Gaussian.
@@ -98,6 +100,7 @@ pub fn mislabel_follow(s: &SynthScene, score: &MethodScore) -> Vec<MislabelFollo
                 true_class: m.true_class_name.clone(),
                 wrong_class: m.wrong_class_name.clone(),
                 wrong_view_rate: m.rate,
+                wrong_views: m.views_wrong,
                 assigned_wrong: wrong as f64 / members.len().max(1) as f64,
                 confidence_on_object: mean(&on_object),
                 confidence_elsewhere: mean(&|i| !on_object(i)),

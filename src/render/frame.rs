@@ -79,7 +79,9 @@ impl RenderedFrame {
         })
     }
 
-    /// Argmax class (compact index) per pixel, or None where nothing was blended or C = 0.
+    /// Argmax class (compact index) per pixel, or None where nothing was blended, C = 0, or
+    /// the top channels tie exactly (Gaussians whose logits training never moved from a
+    /// uniform start: no class, as `classes_from_logits` gives them none, not the last id).
     pub fn argmax_labels(&self) -> Vec<Option<u32>> {
         let c = self.channels as usize;
         (0..self.alpha.len())
@@ -88,12 +90,9 @@ impl RenderedFrame {
                     return None;
                 }
                 let s = &self.sem_norm[i * c..(i + 1) * c];
-                let best = s
-                    .iter()
-                    .enumerate()
-                    .max_by(|a, b| a.1.total_cmp(b.1))
-                    .map(|(k, _)| k as u32);
-                best
+                let (best, &top) = s.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1))?;
+                let tied = s.iter().filter(|&&v| v == top).count() > 1;
+                (!tied).then_some(best as u32)
             })
             .collect()
     }

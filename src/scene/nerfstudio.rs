@@ -107,6 +107,8 @@ fn parse_frame(i: usize, v: &Value, top: &Map<String, Value>) -> Result<Camera> 
         );
     }
     let num = |k: &str| number(frame, top, k).with_context(|| label.clone());
+    let model = key(frame, top, "camera_model").and_then(Value::as_str);
+    let simple = model == Some("SIMPLE_PINHOLE");
     let size = |k: &str| -> Result<u32> {
         let v = num(k)?;
         if v.fract() != 0.0 || !(1.0..=u32::MAX as f64).contains(&v) {
@@ -120,9 +122,9 @@ fn parse_frame(i: usize, v: &Value, top: &Map<String, Value>) -> Result<Camera> 
         height: size("h")?,
         fx: num("fl_x")?,
         // SIMPLE_PINHOLE: one focal length, written as fl_x alone.
-        fy: match key(frame, top, "fl_y") {
-            None => num("fl_x")?,
-            Some(_) => num("fl_y")?,
+        fy: match (key(frame, top, "fl_y"), simple) {
+            (None, true) => num("fl_x")?,
+            _ => num("fl_y")?,
         },
         cx: num("cx")?,
         cy: num("cy")?,

@@ -524,7 +524,7 @@ pub fn read_ply_from(mut r: impl BufRead, total_len: Option<u64>) -> Result<Gaus
             let big_endian = f == PlyFormat::BinaryBigEndian;
             read_binary_vertices(&mut r, &layout, record_len, n, big_endian, &mut g)?;
             if last {
-                refuse_binary_trailer(&mut r, n)?;
+                refuse_binary_trailer(&mut r, n, record_len)?;
             }
         }
     }
@@ -557,22 +557,14 @@ impl Columns {
     }
 }
 
-fn read_columns(r: &mut impl Read, header: &Header) -> Result<Columns> {
+fn read_columns(r: &mut impl BufRead, header: &Header) -> Result<Columns> {
     if header.format == PlyFormat::Ascii {
-        bail!("an ASCII compressed PLY is not supported (SuperSplat writes binary)");
+        return read_ascii_columns(r, header);
     }
     let big_endian = header.format == PlyFormat::BinaryBigEndian;
     let mut elements = Vec::new();
     for el in &header.elements {
-        let mut types = Vec::new();
-        for p in &el.props {
-            match p {
-                PropertyDef::Scalar { ty, .. } => types.push(*ty),
-                PropertyDef::List { name } => {
-                    bail!("element '{}' has a list property '{name}'", el.name)
-                }
-            }
-        }
+        let types = scalar_types(el)?;
         let record_len: usize = types.iter().map(|t| t.size()).sum();
         let mut cols: Vec<Vec<f64>> = vec![Vec::new(); types.len()];
         let mut record = vec![0u8; record_len];
@@ -589,6 +581,44 @@ fn read_columns(r: &mut impl Read, header: &Header) -> Result<Columns> {
                 col.push(ty.decode(&record[at..at + ty.size()], big_endian));
                 at += ty.size();
             }
+        }
+        let names = el.props.iter().map(|p| p.name().to_owned());
+        elements.push((el.name.clone(), names.zip(cols).collect()));
+    }
+    Ok(Columns { elements })
+}
+
+/// The scalar types of an element's properties (list properties refused).
+fn scalar_types(el: &ElementDef) -> Result<Vec<Scalar>> {
+    (el.props.iter())
+        .map(|p| match *p {
+            PropertyDef::Scalar { ty, .. } => Ok(ty),
+            PropertyDef::List { ref name } => {
+                bail!("element '{}' has a list property '{name}'", el.name)
+            }
+        })
+        .collect()
+}
+
+/// [`read_columns`] of an ASCII PLY: a row a line.
+fn read_ascii_columns(r: &mut impl BufRead, header: &Header) -> Result<Columns> {
+    let mut tokens = Tokens::new(r);
+    let mut elements = Vec::new();
+    for el in &header.elements {
+        let props = scalar_types(el)?.len();
+        let mut cols: Vec<Vec<f64>> = vec![Vec::new(); props];
+        for row in 0..el.count {
+            for col in cols.iter_mut() {
+                let v = tokens.next_value()?.ok_or_else(|| {
+                    anyhow!(
+                        "truncated file: element '{}' ends in row {row} of {}",
+                        el.name,
+                        el.count
+                    )
+                })?;
+                col.push(v);
+            }
+            tokens.finish_line()?;
         }
         let names = el.props.iter().map(|p| p.name().to_owned());
         elements.push((el.name.clone(), names.zip(cols).collect()));
@@ -754,13 +784,20 @@ fn to_i32(v: f64, what: &str, vertex: usize) -> Result<i32> {
     Ok(v as i32)
 }
 
-/// An id stored as an unsigned 8- or 16-bit property: its type's largest value is how -1
-/// (unseen / none) comes back from a tool that narrowed our `int` ids, as 2^32 - 1 is for
-/// 32 bits; 255 is also the 8-bit label maps' "no label".
+/// A `class` stored as an unsigned 8- or 16-bit property: its type's largest value is how
+/// -1 (unseen) comes back from a tool that narrowed our `int` classes, as 2^32 - 1 is for
+/// 32 bits; 255 is also the 8-bit label maps' "no label". (Instance and segment ids keep
+/// their values: other tools number those past 255.)
 fn unsigned_minus_one(ty: Scalar, v: f64) -> f64 {
-    match (ty, v) {
-        (Scalar::U8, 255.0) | (Scalar::U16, 65535.0) => -1.0,
-        _ => v,
+    let largest = match ty {
+        Scalar::U8 => f64::from(u8::MAX),
+        Scalar::U16 => f64::from(u16::MAX),
+        _ => return v,
+    };
+    if v == largest {
+        -1.0
+    } else {
+        v
     }
 }
 
@@ -783,9 +820,9 @@ fn store(
         Slot::Rot(i) => vals.rot[i] = v as f32,
         Slot::Class => vals.class = to_i32(unsigned_minus_one(ty, v), "class", vertex)?,
         Slot::ClassConf => vals.conf = v as f32,
-        Slot::Instance => vals.instance = to_i32(unsigned_minus_one(ty, v), "instance", vertex)?,
+        Slot::Instance => vals.instance = to_i32(v, "instance", vertex)?,
         Slot::ClassEntropy => vals.entropy = v as f32,
-        Slot::Segment => vals.segment = to_i32(unsigned_minus_one(ty, v), "segment", vertex)?,
+        Slot::Segment => vals.segment = to_i32(v, "segment", vertex)?,
         Slot::Sem(i) => sem[i] = v as f32,
         Slot::Skip => {}
     }
@@ -864,18 +901,17 @@ fn read_binary_vertices(
     Ok(())
 }
 
-/// Data past the last vertex means the header's count is wrong (a file cut and pasted
-/// together, a count left from an earlier write): reading `n` of them would silently drop
-/// the rest. One byte is let pass (a newline some writers end with).
-fn refuse_binary_trailer(r: &mut impl Read, n: usize) -> Result<()> {
+/// A whole vertex's bytes or more past the last vertex mean the header's count is wrong (a
+/// count left from an earlier write, files joined): reading `n` would silently drop the
+/// rest. Less than one vertex is let pass (a newline, a writer's padding).
+fn refuse_binary_trailer(r: &mut impl Read, n: usize, record_len: usize) -> Result<()> {
     let mut rest = Vec::new();
-    r.take(4096).read_to_end(&mut rest)?;
-    if rest.len() > 1 {
+    r.take(record_len as u64).read_to_end(&mut rest)?;
+    if rest.len() == record_len && record_len > 0 {
         bail!(
-            "data continues past the header's {n} vertices ({}{} more bytes): the header's \
-             vertex count is wrong, or the file holds more than it declares",
-            rest.len().min(4095),
-            if rest.len() == 4096 { "+" } else { "" }
+            "data continues past the header's {n} vertices (at least one more vertex's \
+             {record_len} bytes): the header's vertex count is wrong, or the file holds more \
+             than it declares"
         );
     }
     Ok(())

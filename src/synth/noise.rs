@@ -8,7 +8,7 @@ use serde::Serialize;
 use super::noise_spec::NoiseSpec;
 use super::raycast::{ViewTruth, IGNORE};
 use super::room::Room;
-use crate::scene::Camera;
+use crate::scene::{Camera, Split};
 use crate::util::Rng;
 
 const NOISE_STREAM: u64 = 0x4E01_5E00;
@@ -45,7 +45,8 @@ pub struct ConsistentMislabel {
     pub true_class_name: String,
     pub wrong_class: u32,
     pub wrong_class_name: String,
-    /// Views in which the object covers at least one pixel.
+    /// Train views in which the object covers at least one pixel (held-out views keep its
+    /// true class).
     pub views_visible: usize,
     pub views_wrong: usize,
     pub rate: f64,
@@ -303,9 +304,11 @@ fn choose_consistent(
     if spec.consistent <= 0.0 {
         return Vec::new();
     }
+    // The train views: the rate is of the views a method lifts from (held-out views are
+    // scored against the true labels, so mislabeling them would only make the rate a lie).
     let visible_views = |id: u32| -> Vec<usize> {
         (0..counts.len())
-            .filter(|&v| counts[v][id as usize] > 0)
+            .filter(|&v| cameras[v].split == Split::Train && counts[v][id as usize] > 0)
             .collect()
     };
     let mut candidates: Vec<(usize, u32)> = room

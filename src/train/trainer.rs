@@ -64,7 +64,7 @@ pub struct TrainOutput {
     /// Trained Gaussians with their semantic logits (and no class fields: see
     /// [`classes_from_logits`]).
     pub gaussians: Gaussians,
-    /// Per Gaussian: whether some training view saw it.
+    /// Per Gaussian: whether some training view with a label map saw it.
     pub seen: Vec<bool>,
     /// The riders given to [`Trainer::new`], carried through densification.
     pub riders: Vec<Vec<f32>>,
@@ -500,23 +500,53 @@ impl Trainer {
         Ok(g)
     }
 
-    /// Per Gaussian, whether some training view renders it (one pass over the views).
+    /// Per Gaussian, whether some training view with a label map renders it (one pass over
+    /// those views): only they give its logits evidence; a Gaussian no such view sees keeps
+    /// what the entropy term made of its start, which is no class.
     pub fn seen_by_views(&mut self) -> Result<Vec<bool>> {
         let mut seen = vec![false; self.scene.n as usize];
+        self.each_view_visibility(true, |flags| {
+            for (s, f) in seen.iter_mut().zip(flags) {
+                *s |= *f != 0;
+            }
+            true
+        })?;
+        Ok(seen)
+    }
+
+    /// Whether some training view renders some Gaussian (stops at the first that does).
+    pub fn some_view_sees_a_gaussian(&mut self) -> Result<bool> {
+        let mut seen = false;
+        self.each_view_visibility(false, |flags| {
+            seen = flags.iter().any(|&f| f != 0);
+            !seen
+        })?;
+        Ok(seen)
+    }
+
+    /// Renders the training views (`labeled_only`: those with a label map) in turn, handing
+    /// each one's visibility flags (one per Gaussian) to `visit`, until it returns false.
+    fn each_view_visibility(
+        &mut self,
+        labeled_only: bool,
+        mut visit: impl FnMut(&[u32]) -> bool,
+    ) -> Result<()> {
         let opts = RenderOptions {
             semantics: None,
             ..Default::default()
         };
         for vi in 0..self.views.len() {
+            if labeled_only && !self.views[vi].labeled {
+                continue;
+            }
             let cam = self.views[vi].camera.clone();
             self.rasterizer
                 .run_tiled(&self.scene, &cam, &opts, |_, _| Ok(()))?;
-            let flags = self.rasterizer.last_visible_flags(self.scene.n)?;
-            for (s, f) in seen.iter_mut().zip(flags) {
-                *s |= f != 0;
+            if !visit(&self.rasterizer.last_visible_flags(self.scene.n)?) {
+                break;
             }
         }
-        Ok(seen)
+        Ok(())
     }
 
     /// Ends the run: the model, which Gaussians the training views see, the riders.

@@ -24,6 +24,8 @@ pub(crate) struct DeviceView {
     pub camera: Camera,
     pub rgb: Buffer,
     pub labels: Buffer,
+    /// The view has a label map (else it trains appearance only).
+    pub labeled: bool,
 }
 
 impl TrainView {
@@ -65,6 +67,7 @@ impl TrainView {
             camera: c.clone(),
             rgb: gpu.buffer_from("target_rgb", &self.rgb)?,
             labels: gpu.buffer_from("target_labels", &labels)?,
+            labeled: !self.labels.is_empty(),
         })
     }
 }

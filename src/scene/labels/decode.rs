@@ -347,8 +347,8 @@ fn labels_by_colour<'a>(
 /// every gray value but black (unlabeled in a colour-coded map) is one of its colours, and
 /// some value is not black: a colour-coded map that happens to show only
 /// gray classes (ADE20K's wall, 120-120-120, while id 120 is its pot; Cityscapes' building).
-/// Its neighbours in the folder are colour-coded, and an RGB map of ids whose every value is
-/// also a class's colour, of another class, is the far less likely file.
+/// Decided map by map: an RGB map of ids whose every value but 0 is also a class's colour,
+/// of another class, is the far less likely file.
 fn gray_rgb_is_color_coded(
     n: usize,
     raw: &dyn Fn(usize) -> RawPixel,

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Context, Result};
 
-use super::decode::{read_label_png_as, read_png_header, LabelFormat, PngHeader};
+use super::decode::{read_label_png_as, read_png_header, LabelFormat};
 use super::LabelMap;
 use crate::scene::camera::Camera;
 use crate::scene::classes::{ClassTable, IGNORE_U16};
@@ -220,7 +220,9 @@ impl LabelDir {
             );
         }
         let allowed = table.map(allowed_ids);
-        let notes = scaled_note(&entries, cameras).into_iter().collect();
+        let notes = (scaled_note(&entries, cameras).into_iter())
+            .chain(table.and_then(|t| ignored_class_note(format, t)))
+            .collect();
         Ok(LabelDir {
             dir: dir.to_owned(),
             entries,
@@ -314,36 +316,12 @@ impl LabelDir {
                 e.camera_size.1
             );
         }
-        self.check_default_ignore(&header)
-            .with_context(|| format!("label map {}", e.path.display()))?;
         let map = read_label_png_as(&e.path, &self.format, self.table.as_ref())?;
         if let Some(allowed) = &self.allowed {
             check_ids_in_table(&map, allowed)
                 .with_context(|| format!("label map {}", e.path.display()))?;
         }
         Ok(map)
-    }
-
-    /// The default ignore value of a map this deep must not be a class of the table: its
-    /// pixels would silently never count (an explicit --ignore-id is checked at opening).
-    fn check_default_ignore(&self, header: &PngHeader) -> Result<()> {
-        let (None, Some(table)) = (self.format.ignore_id, &self.table) else {
-            return Ok(());
-        };
-        if header.bit_depth < 8 {
-            return Ok(()); // its samples never reach the ignore value
-        }
-        let ignore = self.format.ignore_for_depth(header.bit_depth);
-        match table.get(u32::from(ignore)) {
-            Some(c) => bail!(
-                "holds {}-bit values, where {ignore} means \"no label\" by default, but {ignore} is \
-                 class '{}' in the class table: its pixels would never count; pass --ignore-id \
-                 with an id no class uses",
-                header.bit_depth,
-                c.name
-            ),
-            None => Ok(()),
-        }
     }
 
     /// Streams `(camera index, map)` pairs in camera order.
@@ -364,6 +342,20 @@ fn check_ignore_id(format: &LabelFormat, table: Option<&ClassTable>) -> Result<(
         }
     }
     Ok(())
+}
+
+/// A class of the table at 8-bit maps' default "no label", 255: tables that list it as
+/// "void" mean exactly that, but a real class there would silently never count, so the
+/// user hears which it is taken for, and how to count it.
+fn ignored_class_note(format: &LabelFormat, table: &ClassTable) -> Option<String> {
+    let ignore = u32::from(format.ignore_for_depth(8));
+    let class = table.get(ignore).filter(|_| format.ignore_id.is_none())?;
+    Some(format!(
+        "note: class {ignore} '{}' of the class table is 8-bit label maps' default \
+         \"no label\": its pixels are ignored; to count them as a class, pass --ignore-id \
+         with an id no class uses",
+        class.name
+    ))
 }
 
 /// A matched entry; the size it must have comes from the PNG header when the map is a
