@@ -1,6 +1,6 @@
 //! RGB images of the views, matched to cameras by name.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 
@@ -42,28 +42,17 @@ pub fn load_view_image(dir: &Path, cam: &Camera) -> Result<Vec<f32>> {
 }
 
 /// The image file of view `name` in `dir`.
-fn view_image_path(dir: &Path, name: &str) -> Result<std::path::PathBuf> {
-    let file = Path::new(name);
-    let folder = match file.parent() {
-        Some(sub) => dir.join(sub),
-        None => dir.to_path_buf(),
-    };
-    let stem = file.file_name().and_then(|s| s.to_str()).unwrap_or(name);
-    let entries = std::fs::read_dir(&folder).with_context(|| {
-        format!(
-            "no image for camera {name}: cannot list {}",
-            folder.display()
-        )
-    })?;
-    let mut found: Vec<std::path::PathBuf> = entries
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.is_file() && p.file_stem().and_then(|s| s.to_str()) == Some(stem))
-        .filter(|p| {
-            let ext = p.extension().and_then(|e| e.to_str()).unwrap_or_default();
-            ["png", "jpg", "jpeg"].contains(&ext.to_ascii_lowercase().as_str())
-        })
-        .collect();
-    found.sort();
+fn view_image_path(dir: &Path, name: &str) -> Result<PathBuf> {
+    // The usual spellings first: a few stats a view, where listing the folder for every
+    // view would read a capture's thousands of entries thousands of times.
+    let spelled =
+        ["png", "PNG", "jpg", "JPG", "jpeg", "JPEG"].map(|e| dir.join(format!("{name}.{e}")));
+    let mut found: Vec<PathBuf> = spelled.into_iter().filter(|p| p.is_file()).collect();
+    if found.is_empty() {
+        found = images_named(dir, name)?; // `.Png`, `.Jpg` and other mixed cases
+    }
+    // One file can answer to two spellings on a case-insensitive file system.
+    found.dedup_by(|a, b| same_file(a, b));
     match found.len() {
         1 => Ok(found.remove(0)),
         0 => bail!(
@@ -73,12 +62,39 @@ fn view_image_path(dir: &Path, name: &str) -> Result<std::path::PathBuf> {
         _ => bail!(
             "camera {name} has {} images in {}: {}; keep one",
             found.len(),
-            folder.display(),
+            dir.display(),
             found
                 .iter()
                 .map(|p| p.display().to_string())
                 .collect::<Vec<_>>()
                 .join(", ")
         ),
+    }
+}
+
+/// The PNG and JPEG files of view `name` in `dir` (its subfolder for a rig view), any case
+/// of extension, by listing the folder.
+fn images_named(dir: &Path, name: &str) -> Result<Vec<PathBuf>> {
+    let file = Path::new(name);
+    let folder = file.parent().map_or(dir.to_path_buf(), |sub| dir.join(sub));
+    let stem = file.file_name().and_then(|s| s.to_str()).unwrap_or(name);
+    let Ok(entries) = std::fs::read_dir(&folder) else {
+        return Ok(Vec::new()); // a missing folder: no image, said by the caller
+    };
+    let mut found: Vec<PathBuf> = (entries.filter_map(|e| e.ok().map(|e| e.path())))
+        .filter(|p| p.file_stem().and_then(|s| s.to_str()) == Some(stem))
+        .filter(|p| {
+            let ext = p.extension().and_then(|e| e.to_str()).unwrap_or_default();
+            ["png", "jpg", "jpeg"].contains(&ext.to_ascii_lowercase().as_str()) && p.is_file()
+        })
+        .collect();
+    found.sort();
+    Ok(found)
+}
+
+fn same_file(a: &Path, b: &Path) -> bool {
+    match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
     }
 }
