@@ -260,3 +260,28 @@ fn training_starts_from_a_fusion_of_its_scene() {
     assert!(err.contains("--init-semantics-from"), "{err}");
     assert!(!tmp.path().join("bad.ply").exists());
 }
+
+/// A checkpoint renders every labeled view between two iterations: the training after it
+/// must not see that (the same bytes as a run without checkpoints, under --deterministic).
+#[test]
+fn checkpoints_do_not_change_the_training() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path().join("room");
+    synth_tiny(&d, 4, (48, 36));
+    let d = d.to_str().unwrap();
+    let trained = |name: &str, extra: &[&str]| {
+        let out = tmp.path().join(name);
+        let mut args = train_args(d, out.to_str().unwrap());
+        args.extend(["--iters", "6", "--deterministic"].map(String::from));
+        args.extend(extra.iter().map(|s| s.to_string()));
+        let r = run(&args);
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+        std::fs::read(out).unwrap()
+    };
+    let plain = trained("plain.ply", &[]);
+    let with_checkpoints = trained("checked.ply", &["--checkpoint-every", "2"]);
+    assert!(
+        plain == with_checkpoints,
+        "a checkpoint changed the training"
+    );
+}
