@@ -20,13 +20,12 @@ fn tiny_room() -> (tempfile::TempDir, PathBuf) {
     (tmp, room)
 }
 
-/// `dir/trained.ply`: the room's scene with small random logits of `channels` classes, as
-/// a `train` output holds them.
-fn with_logits(room: &Path, dir: &Path, channels: usize) -> PathBuf {
+/// `dir/trained.ply`: the room's scene with logits of `channels` classes started as
+/// `start`, as a `train` output holds them.
+fn with_logits(room: &Path, dir: &Path, channels: usize, start: LogitInit) -> PathBuf {
     let trained = dir.join("trained.ply");
     let g = read_ply(&room.join("scene.ply")).unwrap();
-    let g = with_initial_logits(&g, channels, LogitInit::SmallRandom, 1);
-    write_ply(&trained, &g).unwrap();
+    write_ply(&trained, &with_initial_logits(&g, channels, start, 1)).unwrap();
     trained
 }
 
@@ -143,7 +142,7 @@ fn a_refused_fusion_writes_nothing_and_a_fused_scene_holds_only_its_fusions_sema
 
     // A trained scene's logits do not survive its fusion: `render --semantics` would draw
     // them through the fusion's class table.
-    let trained = with_logits(&room, tmp.path(), 3);
+    let trained = with_logits(&room, tmp.path(), 3, LogitInit::SmallRandom);
     let fused = at("fused.ply");
     ok(&[
         "fuse",
@@ -352,7 +351,7 @@ fn exports_checkpoints_and_view_folders_are_checked_too() {
 fn render_and_inspect_say_what_would_mislead() {
     let (tmp, room) = tiny_room();
     // Logits of 3 channels beside the room's 6-class table.
-    let trained = with_logits(&room, tmp.path(), 3);
+    let trained = with_logits(&room, tmp.path(), 3, LogitInit::SmallRandom);
     std::fs::copy(
         room.join("scene.classes.json"),
         tmp.path().join("trained.classes.json"),
@@ -374,8 +373,7 @@ fn render_and_inspect_say_what_would_mislead() {
     );
     // Uniform logits (untouched by training) tie everywhere: no class, not the last one.
     std::fs::remove_file(tmp.path().join("trained.classes.json")).unwrap();
-    let g = read_ply(&room.join("scene.ply")).unwrap();
-    write_ply(&trained, &with_initial_logits(&g, 3, LogitInit::Uniform, 1)).unwrap();
+    let trained = with_logits(&room, tmp.path(), 3, LogitInit::Uniform);
     let views = arg_in(tmp.path(), "views");
     ok(&[
         "render",

@@ -217,30 +217,8 @@ fn colour_coded_maps_read_through_the_class_table() {
 #[test]
 fn gray_rgb_and_gray_alpha_pngs_hold_ids() {
     let dir = tempfile::tempdir().unwrap();
-    let p = dir.path().join("rgb_gray.png");
-    write_png(
-        &p,
-        (3, 1),
-        png::ColorType::Rgb,
-        png::BitDepth::Eight,
-        None,
-        &[0, 0, 0, 3, 3, 3, 255, 255, 255],
-    );
-    assert_eq!(read_label_png(&p).unwrap().labels, [0, 3, IGN]);
-    // With a table listing those ids, they stay ids (not colours).
-    let ids = ClassTable::from_ids([0, 3]);
-    let map = read_label_png_as(&p, &LabelFormat::default(), Some(&ids)).unwrap();
-    assert_eq!(map.labels, [0, 3, IGN]);
-
-    // A colour-coded view showing only gray classes: ADE20K's wall is 120-120-120 while
-    // its id 120 is a pot. Every gray but black being a class's colour, it reads by colour
-    // (black, no class's colour, unlabeled), as the folder's other views do.
-    let ade = ClassTable::from_json_str(
-        r#"[{"id": 1, "name": "wall", "color": [120, 120, 120]},
-            {"id": 120, "name": "pot", "color": [255, 31, 0]}]"#,
-    )
-    .unwrap();
-    let read_rgb_3x1 = |name: &str, pixels: &[u8]| {
+    // A 3x1 RGB map of `pixels`, read with `table` (None: ids only).
+    let read_rgb_3x1 = |name: &str, pixels: &[u8], table: Option<&ClassTable>| {
         let p = dir.path().join(name);
         write_png(
             &p,
@@ -250,15 +228,32 @@ fn gray_rgb_and_gray_alpha_pngs_hold_ids() {
             None,
             pixels,
         );
-        read_label_png_as(&p, &LabelFormat::default(), Some(&ade))
+        read_label_png_as(&p, &LabelFormat::default(), table)
             .unwrap()
             .labels
     };
+    let gray = [0, 0, 0, 3, 3, 3, 255, 255, 255];
+    assert_eq!(read_rgb_3x1("rgb_gray.png", &gray, None), [0, 3, IGN]);
+    // With a table listing those ids, they stay ids (not colours).
+    let ids = ClassTable::from_ids([0, 3]);
+    assert_eq!(read_rgb_3x1("rgb_gray.png", &gray, Some(&ids)), [0, 3, IGN]);
+
+    // A colour-coded view showing only gray classes: ADE20K's wall is 120-120-120 while
+    // its id 120 is a pot. Every gray but black being a class's colour, it reads by colour
+    // (black, no class's colour, unlabeled); each map is decided on its own.
+    let ade = ClassTable::from_json_str(
+        r#"[{"id": 1, "name": "wall", "color": [120, 120, 120]},
+            {"id": 120, "name": "pot", "color": [255, 31, 0]}]"#,
+    )
+    .unwrap();
     let wall_only = [120, 120, 120, 120, 120, 120, 0, 0, 0];
-    assert_eq!(read_rgb_3x1("wall_only.png", &wall_only), [1, 1, IGN]);
+    assert_eq!(
+        read_rgb_3x1("wall_only.png", &wall_only, Some(&ade)),
+        [1, 1, IGN]
+    );
     // A gray that is no class's colour keeps the map's values ids.
     let mixed = [120, 120, 120, 1, 1, 1, 0, 0, 0];
-    assert_eq!(read_rgb_3x1("mixed.png", &mixed), [120, 1, 0]);
+    assert_eq!(read_rgb_3x1("mixed.png", &mixed, Some(&ade)), [120, 1, 0]);
 
     // Gray + alpha: transparent pixels are unlabeled.
     let la = dir.path().join("la.png");

@@ -9,6 +9,8 @@ use std::fs;
 use std::path::{Component, Path, PathBuf};
 
 use anyhow::{bail, Result};
+use semsplat::scene::cameras::camera_files;
+use semsplat::scene::images::is_view_image;
 use semsplat::scene::ply::classes_sidecar_path;
 use semsplat::scene::scene_file::{resolve_scene_path, CAMERAS_FILE};
 use semsplat::util::{check_output_file, check_output_folder};
@@ -20,7 +22,7 @@ pub enum Input<'a> {
     File(&'a str, Option<&'a Path>),
     /// A scene, given as a file or a folder: the file it resolves to, and its class table.
     Scene(&'a str, Option<&'a Path>),
-    /// Cameras, given as a file or a model folder: the model files a folder holds.
+    /// Cameras, given as a file or a model folder: the files their reader reads.
     Cameras(&'a str, Option<&'a Path>),
     /// A folder read with its subfolders (label maps, images).
     Tree(&'a str, Option<&'a Path>),
@@ -28,19 +30,6 @@ pub enum Input<'a> {
 
 /// A path read, as its [`identity`], beside the option (or part of one) naming it.
 type Named = (String, PathBuf);
-
-/// The model files a camera folder may hold (COLMAP's text and binary models, INRIA's and
-/// semsplat's `cameras.json`, nerfstudio's `transforms.json`), in it or in `sparse/0`.
-const CAMERA_FILES: [&str; 8] = [
-    "cameras.json",
-    "transforms.json",
-    "cameras.bin",
-    "cameras.txt",
-    "images.bin",
-    "images.txt",
-    "points3D.bin",
-    "points3D.txt",
-];
 
 /// Checks, before any long work, every output file and folder (each paired with its
 /// option's name; `None` where the option was not given) against the run's inputs and
@@ -71,7 +60,8 @@ pub fn check_outputs(
         if let Some((input, _)) = read_files.iter().find(|(_, r)| *r == id) {
             bail!("{option} {} is the run's {input}: writing it would replace that input; write elsewhere", path.display());
         }
-        if is_image(path) {
+        // Only images are read back from the label and image folders.
+        if is_view_image(path) {
             refuse_inside_trees(option, path, &id, &read_trees)?;
         }
         written.push((option, id));
@@ -93,16 +83,6 @@ fn given<'a>(paths: &[(&'a str, Option<&'a Path>)]) -> Vec<(&'a str, &'a Path)> 
     (paths.iter())
         .filter_map(|&(option, path)| Some((option, path?)))
         .collect()
-}
-
-/// Whether a file is of a kind the folders read with their subfolders hold (the label
-/// maps' and images' PNG and JPEG): only those are read back from there.
-fn is_image(path: &Path) -> bool {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .unwrap_or_default();
-    ["png", "jpg", "jpeg"].contains(&ext.to_ascii_lowercase().as_str())
 }
 
 /// An output at or under a folder the run reads with its subfolders would be read back
@@ -145,21 +125,8 @@ fn read_paths(inputs: &[Input]) -> (Vec<Named>, Vec<Named>) {
                 }
             }
             Input::Cameras(option, Some(path)) => {
-                // A model file is read with its siblings (COLMAP's cameras and images).
-                let folders = match path.is_dir() {
-                    true => vec![
-                        path.to_path_buf(),
-                        path.join("sparse"),
-                        path.join("sparse/0"),
-                    ],
-                    false => vec![path.parent().unwrap_or(Path::new(".")).to_path_buf()],
-                };
-                files.push((option.into(), identity(path)));
-                for folder in folders {
-                    let names = CAMERA_FILES.iter().map(|name| folder.join(name));
-                    let found = names.filter(|f| f.is_file());
-                    files.extend(found.map(|f| (option.into(), identity(&f))));
-                }
+                let read = camera_files(path).into_iter().chain([path.to_path_buf()]);
+                files.extend(read.map(|f| (option.into(), identity(&f))));
             }
             Input::Tree(option, Some(path)) => trees.push((option.into(), identity(path))),
             _ => {}

@@ -1,7 +1,7 @@
 //! Loading cameras from any supported format (detected from the path).
 
 use std::collections::HashMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 
@@ -117,34 +117,35 @@ pub fn validate_cameras(cameras: &[Camera]) -> Result<()> {
     Ok(())
 }
 
-/// A folder: a COLMAP model (itself, `sparse/0` or `sparse`), else an INRIA training output's
-/// `cameras.json`, else a nerfstudio `transforms.json`.
-fn load_camera_dir(path: &Path) -> Result<Vec<Camera>> {
-    if colmap::find_colmap_model(path).is_ok() {
-        return colmap::read_colmap_model(path);
-    }
-    for file in [CAMERAS_FILE, "transforms.json"] {
-        if path.join(file).is_file() {
-            return cameras_json::read_cameras_json(&path.join(file));
-        }
-    }
-    bail!(
-        "{} is not a COLMAP model (cameras/images .bin or .txt, here, in sparse/0 or in \
-         sparse) and holds no INRIA cameras.json or nerfstudio transforms.json",
-        path.display()
-    )
+/// Where [`load_cameras`] reads a path's cameras from: one dispatch for the reader and for
+/// [`camera_files`], so what an output must not replace is what the reader reads.
+enum CameraSource {
+    /// A COLMAP model: the folder [`colmap::find_colmap_model`] is given.
+    Colmap(PathBuf),
+    /// An INRIA, nerfstudio or semsplat camera JSON.
+    Json(PathBuf),
 }
 
-/// Loads cameras from a COLMAP model folder (or a dataset folder with `sparse/0`, or one of
-/// the model's files), an INRIA `cameras.json` (or a training-output folder holding one), a
-/// nerfstudio `transforms.json` (or its folder), or a semsplat camera JSON. The cameras are
-/// validated; errors name the file and the problem.
-pub fn load_cameras(path: &Path) -> Result<Vec<Camera>> {
+/// A folder is a COLMAP model (itself, `sparse/0` or `sparse`), else an INRIA training
+/// output's `cameras.json`, else a nerfstudio `transforms.json`; a file by its name.
+fn camera_source(path: &Path) -> Result<CameraSource> {
     if !path.exists() {
         bail!("camera path {} does not exist", path.display());
     }
     if path.is_dir() {
-        return load_camera_dir(path);
+        if colmap::find_colmap_model(path).is_ok() {
+            return Ok(CameraSource::Colmap(path.to_path_buf()));
+        }
+        for file in [CAMERAS_FILE, "transforms.json"] {
+            if path.join(file).is_file() {
+                return Ok(CameraSource::Json(path.join(file)));
+            }
+        }
+        bail!(
+            "{} is not a COLMAP model (cameras/images .bin or .txt, here, in sparse/0 or in \
+             sparse) and holds no INRIA cameras.json or nerfstudio transforms.json",
+            path.display()
+        );
     }
     let file_name = path
         .file_name()
@@ -154,7 +155,7 @@ pub fn load_cameras(path: &Path) -> Result<Vec<Camera>> {
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("json"));
     if is_json {
-        return cameras_json::read_cameras_json(path);
+        return Ok(CameraSource::Json(path.to_path_buf()));
     }
     let colmap_files = ["cameras", "images", "points3D", "rigs", "frames"];
     let is_colmap_file = colmap_files.iter().any(|stem| {
@@ -165,7 +166,7 @@ pub fn load_cameras(path: &Path) -> Result<Vec<Camera>> {
             .parent()
             .filter(|p| !p.as_os_str().is_empty())
             .unwrap_or(Path::new("."));
-        return colmap::read_colmap_model(dir);
+        return Ok(CameraSource::Colmap(dir.to_path_buf()));
     }
     bail!(
         "cannot tell the camera format of {}: expected a COLMAP model folder (cameras/images \
@@ -173,4 +174,31 @@ pub fn load_cameras(path: &Path) -> Result<Vec<Camera>> {
          camera JSON",
         path.display()
     )
+}
+
+/// Loads cameras from a COLMAP model folder (or a dataset folder with `sparse/0`, or one of
+/// the model's files), an INRIA `cameras.json` (or a training-output folder holding one), a
+/// nerfstudio `transforms.json` (or its folder), or a semsplat camera JSON. The cameras are
+/// validated; errors name the file and the problem.
+pub fn load_cameras(path: &Path) -> Result<Vec<Camera>> {
+    match camera_source(path)? {
+        CameraSource::Colmap(dir) => colmap::read_colmap_model(&dir),
+        CameraSource::Json(file) => cameras_json::read_cameras_json(&file),
+    }
+}
+
+/// The files [`load_cameras`] reads for `path` (a COLMAP model's cameras and images files,
+/// or the JSON); `path` itself where it names no camera source (its reader says why).
+pub fn camera_files(path: &Path) -> Vec<PathBuf> {
+    let model = match camera_source(path) {
+        Ok(CameraSource::Json(file)) => return vec![file],
+        Ok(CameraSource::Colmap(dir)) => colmap::find_colmap_model(&dir).ok(),
+        Err(_) => None,
+    };
+    match model {
+        Some((dir, format)) => ["cameras", "images"]
+            .map(|stem| dir.join(format!("{stem}.{}", format.ext())))
+            .to_vec(),
+        None => vec![path.to_path_buf()],
+    }
 }

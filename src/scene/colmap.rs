@@ -82,7 +82,7 @@ pub enum ColmapFormat {
 }
 
 impl ColmapFormat {
-    fn ext(self) -> &'static str {
+    pub fn ext(self) -> &'static str {
         match self {
             ColmapFormat::Binary => "bin",
             ColmapFormat::Text => "txt",

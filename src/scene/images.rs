@@ -42,12 +42,26 @@ pub fn load_view_image(dir: &Path, cam: &Camera) -> Result<Vec<f32>> {
 }
 
 /// The image file of view `name` in `dir`.
+/// The extensions of view images (and of label maps, PNG), in lower case.
+pub const VIEW_IMAGE_EXTENSIONS: [&str; 3] = ["png", "jpg", "jpeg"];
+
+/// Whether `path` names a view image or label map by its extension, in any case.
+pub fn is_view_image(path: &Path) -> bool {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or_default();
+    VIEW_IMAGE_EXTENSIONS.contains(&ext.to_ascii_lowercase().as_str())
+}
+
 fn view_image_path(dir: &Path, name: &str) -> Result<PathBuf> {
     // The usual spellings first: a few stats a view, where listing the folder for every
     // view would read a capture's thousands of entries thousands of times.
-    let spelled =
-        ["png", "PNG", "jpg", "JPG", "jpeg", "JPEG"].map(|e| dir.join(format!("{name}.{e}")));
-    let mut found: Vec<PathBuf> = spelled.into_iter().filter(|p| p.is_file()).collect();
+    let spellings = VIEW_IMAGE_EXTENSIONS
+        .iter()
+        .flat_map(|e| [e.to_string(), e.to_uppercase()]);
+    let spelled = spellings.map(|e| dir.join(format!("{name}.{e}")));
+    let mut found: Vec<PathBuf> = spelled.filter(|p| p.is_file()).collect();
     if found.is_empty() {
         found = images_named(dir, name)?; // `.Png`, `.Jpg` and other mixed cases
     }
@@ -83,10 +97,7 @@ fn images_named(dir: &Path, name: &str) -> Result<Vec<PathBuf>> {
     };
     let mut found: Vec<PathBuf> = (entries.filter_map(|e| e.ok().map(|e| e.path())))
         .filter(|p| p.file_stem().and_then(|s| s.to_str()) == Some(stem))
-        .filter(|p| {
-            let ext = p.extension().and_then(|e| e.to_str()).unwrap_or_default();
-            ["png", "jpg", "jpeg"].contains(&ext.to_ascii_lowercase().as_str()) && p.is_file()
-        })
+        .filter(|p| is_view_image(p) && p.is_file())
         .collect();
     found.sort();
     Ok(found)

@@ -932,24 +932,30 @@ fn read_ascii_vertices(
     let per_line = layout.slots.len();
     for vertex in 0..n {
         push_vertex(g, |vals, sh, sem| {
+            let mut first_line = 0;
             for (k, &(slot, ty)) in layout.slots.iter().enumerate() {
                 let v = tokens.next_value()?.ok_or_else(|| {
                     anyhow!("truncated file: the header claims {n} vertices, the data ends in vertex {vertex}")
                 })?;
                 if k == 0 {
-                    tokens.mark_line();
-                } else if tokens.left_line() {
+                    first_line = tokens.line_no;
+                } else if tokens.line_no != first_line {
                     bail!(
-                        "data line {}: vertex {vertex} ends after {k} values, but the header \
-                         declares {per_line} properties a vertex",
-                        tokens.marked
+                        "data line {first_line}: vertex {vertex} ends after {k} values, but the \
+                         header declares {per_line} properties a vertex"
                     );
                 }
                 store((slot, ty), v, vals, sh, sem, vertex)?;
             }
             Ok(())
         })?;
-        tokens.finish_vertex_line(vertex, per_line)?;
+        if !tokens.line_done() {
+            bail!(
+                "data line {}: vertex {vertex}'s line holds more than the header's {per_line} \
+                 properties a vertex",
+                tokens.line_no
+            );
+        }
     }
     if last && tokens.next_value()?.is_some() {
         bail!(
@@ -967,8 +973,6 @@ struct Tokens<'a, R: BufRead> {
     line: String,
     pos: usize,
     line_no: usize,
-    /// The line of the current vertex's first value.
-    marked: usize,
 }
 
 impl<'a, R: BufRead> Tokens<'a, R> {
@@ -978,7 +982,6 @@ impl<'a, R: BufRead> Tokens<'a, R> {
             line: String::new(),
             pos: 0,
             line_no: 0,
-            marked: 0,
         }
     }
 
@@ -1016,31 +1019,14 @@ impl<'a, R: BufRead> Tokens<'a, R> {
         }
     }
 
-    /// Notes the line a vertex's first value was read from.
-    fn mark_line(&mut self) {
-        self.marked = self.line_no;
-    }
-
-    /// Whether reading moved past the line [`Tokens::mark_line`] noted.
-    fn left_line(&self) -> bool {
-        self.line_no != self.marked
-    }
-
-    /// A vertex's line ends with its values: anything left on it is an error.
-    fn finish_vertex_line(&mut self, vertex: usize, per_line: usize) -> Result<()> {
-        if !self.line[self.pos..].trim().is_empty() {
-            bail!(
-                "data line {}: vertex {vertex}'s line holds more than the header's {per_line} \
-                 properties a vertex",
-                self.line_no
-            );
-        }
-        Ok(())
+    /// Whether the current line holds no more values.
+    fn line_done(&self) -> bool {
+        self.line[self.pos..].trim().is_empty()
     }
 
     /// Elements end at a line end: anything left on the current line is an error.
     fn finish_line(&mut self) -> Result<()> {
-        if !self.line[self.pos..].trim().is_empty() {
+        if !self.line_done() {
             bail!(
                 "data line {}: more values than the header declares",
                 self.line_no
