@@ -451,6 +451,10 @@ fn invalid_camera_jsons_are_errors() {
     let cases: Vec<(String, &str)> = vec![
         (cam("").replace("\"fx\": 2", "\"fx\": 0"), "fx = 0"),
         (cam("").replace("\"width\": 4", "\"width\": 0"), "size 0x3"),
+        (
+            cam("").replace("\"width\": 4, \"height\": 3", "\"width\": 1048576, \"height\": 4096"),
+            "32-bit pixel indices",
+        ),
         (cam("").replace("[1,0,0,0],[0,1,0,0]", "[2,0,0,0],[0,1,0,0]"), "not orthonormal"),
         (cam("").replace("[1,0,0,0],[0,1,0,0]", "[-1,0,0,0],[0,1,0,0]"), "reflection"),
         (cam("").replace("[0,0,0,1]]", "[0,0,1,1]]"), "last row"),

@@ -5,8 +5,8 @@ mod common;
 use std::path::Path;
 
 use common::cli::{
-    arg_in, fuse_synth, fuse_synth_args, ok, read_json, semsplat, semsplat_with_env, strings,
-    synth_tiny,
+    arg_in, fails, fuse_synth, fuse_synth_args, ok, read_json, semsplat, semsplat_with_env,
+    strings, synth_tiny,
 };
 use semsplat::scene::Gaussians;
 
@@ -325,6 +325,20 @@ fn assert_one_clear_error(args: &[String], needle: &str) {
 /// its error must mention.
 fn bad_fuse_inputs(d: &Path) -> Vec<(Vec<String>, &'static str)> {
     let p = |f: &str| arg_in(d, f);
+    // `fuse` from a saved matrix (here a file that is none) into x.ply, with `extra` options.
+    let contrib_with = |extra: &[&str]| -> Vec<String> {
+        let (scene, contrib, out) = (p("scene.ply"), p("cameras.json"), p("x.ply"));
+        let args = [
+            "fuse",
+            "--scene",
+            &scene,
+            "--contrib",
+            &contrib,
+            "--out",
+            &out,
+        ];
+        strings(&[&args[..], extra].concat())
+    };
     // A complete `fuse` command writing x.ply, with `extra` options.
     let fuse_with = |extra: &[&str]| -> Vec<String> {
         let mut args = fuse_synth_args(d, extra);
@@ -369,18 +383,9 @@ fn bad_fuse_inputs(d: &Path) -> Vec<(Vec<String>, &'static str)> {
             fuse_with(&["--method", "vote", "--per-view"]),
             "--per-view is a variant of --method flashsplat",
         ),
-        (
-            strings(&[
-                "fuse",
-                "--scene",
-                &p("scene.ply"),
-                "--contrib",
-                &p("cameras.json"),
-                "--out",
-                &p("x.ply"),
-            ]),
-            "cameras.json",
-        ),
+        (contrib_with(&[]), "cameras.json"),
+        // The saved matrix is assigned on the host: a device budget would not apply.
+        (contrib_with(&["--mem-budget", "1G"]), "--mem-budget"),
     ]
 }
 
@@ -418,6 +423,38 @@ fn bad_render_inputs(d: &Path) -> Vec<(Vec<String>, &'static str)> {
             "nope",
         ),
     ]
+}
+
+/// `bench render --scene` draws the folder's scene from its first camera at that camera's
+/// size, reports the scene's Gaussians (not the random scene's unused `--n`), and refuses
+/// the random scene's size options beside it.
+#[test]
+fn bench_render_times_a_scene_folder_from_its_first_camera() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    synth_tiny(d, 2, (40, 30));
+    let gaussians = semsplat::scene::ply::read_ply(&d.join("scene.ply"))
+        .unwrap()
+        .len();
+    let folder = d.to_str().unwrap();
+    let bench = [
+        "bench", "render", "--scene", folder, "--iters", "1", "--json",
+    ];
+    let out = semsplat(&bench);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["gaussians"], gaussians as u64, "{v}");
+    assert!(v.get("n").is_none(), "{v}");
+    assert_eq!(
+        (v["width"].clone(), v["height"].clone()),
+        (40.into(), 30.into())
+    );
+    let err = fails(&["bench", "render", "--scene", folder, "--n", "5"]);
+    assert!(err.contains("--n"), "{err}");
 }
 
 /// `bench fuse --scene` times a folder's scene on its first `--views` cameras, scaled to the
@@ -608,4 +645,39 @@ fn assert_same_files(whole: &Path, limited: &Path, subs: &[&str]) -> usize {
         }
     }
     compared
+}
+
+/// Options the chosen method does not read are noted, and the run is what it is without
+/// them; an option the method reads is not.
+#[test]
+fn options_without_effect_are_noted() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    synth_tiny(d, 3, (40, 30));
+    let out = arg_in(d, "f.ply");
+    let err = fuse_synth(
+        d,
+        &[
+            "--method",
+            "flashsplat",
+            "--depth-tol",
+            "0.2",
+            "--gamma",
+            "0.1",
+            "--out",
+            &out,
+        ],
+    );
+    assert!(
+        err.contains("note: --depth-tol has no effect with flashsplat"),
+        "{err}"
+    );
+    assert!(err.contains("note: --gamma has no effect without"), "{err}");
+    let plain = arg_in(d, "plain.ply");
+    fuse_synth(d, &["--method", "flashsplat", "--out", &plain]);
+    assert_eq!(std::fs::read(&out).unwrap(), std::fs::read(&plain).unwrap());
+
+    let occlusion = ["--method", "vote", "--occlusion", "--depth-tol", "0.2"];
+    let err = fuse_synth(d, &[&occlusion[..], &["--out", &out]].concat());
+    assert!(!err.contains("no effect"), "{err}");
 }

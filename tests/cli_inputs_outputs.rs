@@ -96,6 +96,26 @@ fn outputs_that_are_inputs_or_each_other_are_refused_before_any_work() {
             "is also --out's class table",
         ),
         (vec!["--out".into(), at("new/")], "ends in '/'"),
+        // The label folder's class table beside it (the room's), and inside it (none yet:
+        // the next run would take a file written there for its table).
+        (
+            vec![
+                "--out".into(),
+                at("f.ply"),
+                "--report".into(),
+                arg_in(&room, "classes.json"),
+            ],
+            "--labels folder's class table",
+        ),
+        (
+            vec![
+                "--out".into(),
+                at("f.ply"),
+                "--save-contrib".into(),
+                arg_in(&room, "labels/classes.json"),
+            ],
+            "--labels folder's class table",
+        ),
     ];
     for (extra, expected) in cases {
         let extra: Vec<&str> = extra.iter().map(String::as_str).collect();

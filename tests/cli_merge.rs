@@ -212,3 +212,98 @@ fn merge_refuses_parts_that_do_not_belong_together() {
     let err = fuse_synth_fails(d, &["--shard", "0/2", "--float-atomics", "--out", &a0]);
     assert!(err.contains("--float-atomics"), "{err}");
 }
+
+/// `--depth-tol` is part of a part's key only for the methods that read it: FlashSplat
+/// shards given different tolerances merge, occlusion-checked vote shards are refused.
+#[test]
+fn depth_tolerance_matters_to_merge_only_where_the_method_reads_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    synth_tiny(d, 4, (48, 32));
+    let p = |f: &str| d.join(f).to_str().unwrap().to_string();
+    let scene = p("scene.ply");
+    let shard = |k: &str, method: &[&str], tol: &str, out: &str| {
+        let mut args = method.to_vec();
+        args.extend_from_slice(&["--depth-tol", tol, "--shard", k, "--out", out]);
+        fuse_synth(d, &args)
+    };
+    let merge = |a: &str, b: &str, out: &str| {
+        vec![
+            "merge".to_string(),
+            a.into(),
+            b.into(),
+            "--scene".into(),
+            scene.clone(),
+            "--out".into(),
+            out.into(),
+        ]
+    };
+    let (f0, f1) = (p("f0.npy"), p("f1.npy"));
+    shard("0/2", &["--method", "flashsplat"], "0.05", &f0);
+    shard("1/2", &["--method", "flashsplat"], "0.2", &f1);
+    let args = merge(&f0, &f1, &p("f.ply"));
+    ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+
+    let occlusion = ["--method", "vote", "--occlusion"];
+    let (o0, o1) = (p("o0.npy"), p("o1.npy"));
+    shard("0/2", &occlusion, "0.05", &o0);
+    shard("1/2", &occlusion, "0.2", &o1);
+    let args = merge(&o0, &o1, &p("o.ply"));
+    let err = fails(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(err.contains("depth_tolerance"), "{err}");
+}
+
+/// A label map written again between two shards' runs (here its classes 0 and 1 swapped)
+/// is told apart by its contents, whatever its size; label maps at half the cameras'
+/// resolution (which scale the views) still merge with `--cameras` naming the file the
+/// shards were given.
+#[test]
+fn merge_knows_label_contents_and_the_cameras_file_of_scaled_views() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    synth_tiny(d, 4, (64, 48));
+    let p = |f: &str| d.join(f).to_str().unwrap().to_string();
+    let (scene, cameras) = (p("scene.ply"), p("cameras.json"));
+    let maps = common::cli::label_pngs(d);
+    // Half-resolution copies of every map.
+    for map in &maps {
+        let img = image::open(map).unwrap().to_luma8();
+        let half = image::imageops::resize(&img, 32, 24, image::imageops::FilterType::Nearest);
+        half.save(map).unwrap();
+    }
+    let shard = |k: &str, out: &str| {
+        fuse_synth(d, &["--method", "vote", "--shard", k, "--out", out]);
+    };
+    let (a0, a1) = (p("a0.npy"), p("a1.npy"));
+    shard("0/2", &a0);
+    shard("1/2", &a1);
+    let merged = p("m.ply");
+    let views = p("views");
+    ok(&[
+        "merge",
+        &a0,
+        &a1,
+        "--scene",
+        &scene,
+        "--cameras",
+        &cameras,
+        "--render-views",
+        &views,
+        "--out",
+        &merged,
+    ]);
+
+    let first = &maps[0];
+    let mut img = image::open(first).unwrap().to_luma8();
+    for v in img.pixels_mut() {
+        v.0[0] = match v.0[0] {
+            0 => 1,
+            1 => 0,
+            other => other,
+        };
+    }
+    img.save(first).unwrap();
+    shard("1/2", &a1);
+    let err = fails(&["merge", &a0, &a1, "--scene", &scene, "--out", &p("n.ply")]);
+    assert!(err.contains("labels"), "{err}");
+}

@@ -114,6 +114,7 @@ fn bad_numeric_options_are_refused_naming_option_value_and_range() {
     let render = with_out("render --scene s.ply --cameras c.json --out", o);
     let sweep = with_out("sweep --noise salt --out", o);
     let demo = with_out("demo --out", o);
+    let synth = with_out("synth --out", o);
     // (command, option, bad value, words of the allowed range in the error)
     let cases: &[(&[&str], &str, &str, &str)] = &[
         (&train, "--lr-logits", "nan", "> 0"),
@@ -145,6 +146,10 @@ fn bad_numeric_options_are_refused_naming_option_value_and_range() {
         (&["bench", "render"], "--n", "0", ">= 1"),
         (&["bench", "render"], "--iters", "0", ">= 1"),
         (&["bench", "sort"], "--n", "0", ">= 1"),
+        (&synth, "--fov", "nan", "20.0..=120.0 degrees"),
+        (&synth, "--spacing", "0", "0.002..=1.0 m"),
+        (&synth, "--init-spacing", "9", "0.01..=5.0 m"),
+        (&synth, "--width", "9000", "1..=8192 pixels"),
     ];
     for (command, option, value, range) in cases {
         assert_refused_naming_option_value_and_range(command, option, value, range, &out);

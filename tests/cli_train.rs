@@ -285,3 +285,35 @@ fn checkpoints_do_not_change_the_training() {
         "a checkpoint changed the training"
     );
 }
+
+/// An iteration on a view without a label map logs no cross-entropy (null, not a perfect
+/// 0.0); iterations on the labeled view log their cross-entropy.
+#[test]
+fn the_log_has_no_cross_entropy_for_views_without_labels() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path().join("room");
+    synth_tiny(&d, 4, (48, 36));
+    let maps = common::cli::label_pngs(&d);
+    for map in &maps[1..] {
+        std::fs::remove_file(map).unwrap();
+    }
+    let ds = d.to_str().unwrap();
+    let report = tmp.path().join("train.json");
+    let mut args = train_args(ds, tmp.path().join("t.ply").to_str().unwrap());
+    args.pop(); // every view, not only the train ones: more of them lack labels
+    args.extend(["--iters", "80", "--report", report.to_str().unwrap()].map(String::from));
+    let r = run(&args);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let rep: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    let ce: Vec<&serde_json::Value> = rep["log"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|l| &l["ce"])
+        .collect();
+    assert!(ce.iter().any(|c| c.is_null()), "{ce:?}");
+    assert!(
+        ce.iter().any(|c| c.as_f64().is_some_and(|v| v > 0.0)),
+        "{ce:?}"
+    );
+}

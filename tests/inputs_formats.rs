@@ -766,11 +766,22 @@ fn inria_run_folder_gives_the_latest_iteration_and_its_cameras() {
         err.contains("iteration_<N>") && err.contains("scene.ply"),
         "{err}"
     );
-    // Left out, the cameras are the run's cameras.json; given, the ones given.
-    assert_eq!(
-        cameras_for_scene(None, &run).unwrap(),
-        run.join("cameras.json")
-    );
+    // Left out, the cameras are the run's cameras.json, from the run or a scene inside it;
+    // given, the ones given.
+    let iteration = run.join("point_cloud/iteration_7000");
+    for scene in [
+        run.clone(),
+        run.join("point_cloud"),
+        iteration.clone(),
+        iteration.join("point_cloud.ply"),
+    ] {
+        assert_eq!(
+            cameras_for_scene(None, &scene).unwrap(),
+            run.join("cameras.json"),
+            "{}",
+            scene.display()
+        );
+    }
     let given = tmp.path().join("sparse/0");
     assert_eq!(cameras_for_scene(Some(&given), &run).unwrap(), given);
     // Without one in the scene's folder, the error asks for --cameras and names the folder.

@@ -542,6 +542,15 @@ fn jpeg_images_load() {
         &camera("cam0/00001", (w, h + 1)),
     ));
     assert!(e.contains("16x8") && e.contains("16x9"), "{e}");
+
+    // A rig whose image stems are unique names its cameras by stem (`00001`): the image is
+    // found in its subfolder, as the label maps are; a stem in two subfolders is an error.
+    let by_stem = load_view_image(dir.path(), &camera("00001", (w, h))).unwrap();
+    assert_eq!(by_stem, rgb);
+    std::fs::create_dir_all(dir.path().join("cam1")).unwrap();
+    std::fs::copy(&path, dir.path().join("cam1/00001.jpg")).unwrap();
+    let e = err(load_view_image(dir.path(), &camera("00001", (w, h))));
+    assert!(e.contains("2 images"), "{e}");
 }
 
 // ---------------------------------------------------------------------------------------
@@ -768,6 +777,30 @@ fn a_table_class_at_the_default_ignore_value_is_ignored_and_said_so() {
         "{note}"
     );
     let data = open_with(Some(1000));
+    assert_eq!(data.classes.user_ids(), [0, 1, 255]);
+    assert!(data.warnings.iter().all(|w| !w.contains("class 255")));
+
+    // `inspect` says the same of the label folder read through the table, and of the table.
+    let (labels_arg, table_arg) = (labels.to_str().unwrap(), table_path.to_str().unwrap());
+    for args in [vec![labels_arg, "--classes", table_arg], vec![table_arg]] {
+        let out = semsplat(&[&["inspect"][..], &args].concat());
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            text.contains("class 255") && text.contains("--ignore-id"),
+            "{args:?}: {text}"
+        );
+        let out = semsplat(&[&["inspect"][..], &args, &["--ignore-id", "1000"]].concat());
+        assert!(
+            !String::from_utf8_lossy(&out.stdout).contains("class 255"),
+            "{args:?}"
+        );
+    }
+
+    // 16-bit maps count 255 as a class: no note.
+    let px16: Vec<u16> = vec![0, 255, 255, 0, 0, 0, 1, 1, 0, 0, 0, 0];
+    let map16 = image::ImageBuffer::<image::Luma<u16>, _>::from_raw(4, 3, px16).unwrap();
+    map16.save(labels.join("a.png")).unwrap();
+    let data = open_with(None);
     assert_eq!(data.classes.user_ids(), [0, 1, 255]);
     assert!(data.warnings.iter().all(|w| !w.contains("class 255")));
 }

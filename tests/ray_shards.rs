@@ -120,10 +120,16 @@ fn ray_sharded_fuse_equals_one_fuse_and_survives_a_failed_and_a_killed_task() {
     let out = run_driver(d, "ray.ply", &[], "2");
     assert_same_as_single(d, &out, "ray.ply");
 
+    // The next run replaces the parts an earlier one left, and only them.
+    let (stale, other) = (d.join("parts/part9.npy"), d.join("parts/particles.ply"));
+    std::fs::write(&stale, b"old").unwrap();
+    std::fs::write(&other, b"mine").unwrap();
+
     // Shard 1's CLI exits non-zero on its first attempt: Ray retries it once.
     let fail_once = [("SEMSPLAT_RAY_FAULT_SHARD", "1")];
     let out = run_driver(d, "retried.ply", &fail_once, "2");
     assert_same_as_single(d, &out, "retried.ply");
+    assert!(!stale.exists() && other.exists());
     assert_eq!(attempts_of_shard1(d), 2, "one failed attempt, one retry");
 
     // Shard 1's worker process dies on its first attempt: Ray retries it on another.
@@ -155,4 +161,53 @@ fn ray_driver_names_a_shard_that_always_fails_and_merges_nothing() {
     assert!(stderr.contains("nothing merged"), "{stderr}");
     assert_eq!(attempts_of_shard1(d), 2, "the first attempt and one retry");
     assert!(!d.join("lost.ply").exists());
+}
+
+/// Before any shard runs, the driver names a missing input or CLI, and the lack of Ray (here
+/// a `ray` module that fails to import shadows the real one), in one line each: no
+/// traceback, no part folder made.
+#[test]
+fn ray_driver_names_missing_inputs_and_a_missing_ray_before_any_shard() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let existing = d.to_str().unwrap();
+    let run = |scene: &str, semsplat: &str, env: &[(&str, &str)]| {
+        let parts = d.join("parts");
+        let mut cmd = Command::new("python3");
+        cmd.arg(driver())
+            .args(["--shards", "2", "--scene", scene, "--cameras", existing]);
+        cmd.args([
+            "--labels",
+            existing,
+            "--out",
+            "x.ply",
+            "--semsplat",
+            semsplat,
+        ]);
+        cmd.arg("--parts").arg(&parts).envs(env.iter().copied());
+        let out = cmd.output().unwrap();
+        assert!(!parts.exists(), "a refused run made its part folder");
+        assert!(!out.status.success());
+        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert!(!stderr.contains("Traceback"), "{stderr}");
+        stderr
+    };
+    let missing = d.join("missing.ply");
+    let err = run(missing.to_str().unwrap(), SEMSPLAT, &[]);
+    assert!(
+        err.contains("--scene") && err.contains("does not exist"),
+        "{err}"
+    );
+    let err = run(existing, "no-such-semsplat", &[]);
+    assert!(err.contains("--semsplat no-such-semsplat"), "{err}");
+
+    let shadow = d.join("shadow");
+    std::fs::create_dir(&shadow).unwrap();
+    std::fs::write(shadow.join("ray.py"), "raise ModuleNotFoundError('ray')\n").unwrap();
+    let err = run(
+        existing,
+        SEMSPLAT,
+        &[("PYTHONPATH", shadow.to_str().unwrap())],
+    );
+    assert!(err.contains("needs Ray"), "{err}");
 }

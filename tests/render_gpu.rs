@@ -6,10 +6,13 @@ mod common;
 use common::{check_validation, gpu, separate_depth_ties};
 use glam::DVec3;
 use semsplat::contract::{MEDIAN_T, OPAQUE_T};
-use semsplat::render::reference::{self, RenderSettings};
-use semsplat::render::{GpuScene, Rasterizer, RenderOptions, RenderedFrame, SemanticMode};
+use semsplat::render::reference::{self, ProjectedGaussian, RenderSettings};
+use semsplat::render::{
+    BandWork, GpuScene, Rasterizer, RenderOptions, RenderedFrame, SemanticMode,
+};
 use semsplat::scene::random_scene::{random_scene, RandomSceneSpec};
 use semsplat::scene::{Camera, Gaussians};
+use std::collections::BTreeSet;
 
 const TOL: f64 = 1e-4;
 
@@ -45,15 +48,44 @@ fn poses(w: u32, h: u32) -> Vec<Camera> {
     ]
 }
 
-fn max_diff(gpu: &[f32], cpu: impl Iterator<Item = f64>) -> (f64, usize) {
+/// The largest difference of `gpu` and `cpu` and its index, over the pixels (of
+/// `per_pixel` values each) not in `skipped`.
+fn max_diff_outside(
+    gpu: &[f32],
+    cpu: impl Iterator<Item = f64>,
+    per_pixel: usize,
+    skipped: &BTreeSet<usize>,
+) -> (f64, usize) {
     let mut worst = (0.0, 0);
     for (i, (g, c)) in gpu.iter().zip(cpu).enumerate() {
         let d = (*g as f64 - c).abs();
-        if d.is_nan() || d > worst.0 {
+        if (d.is_nan() || d > worst.0) && !skipped.contains(&(i / per_pixel.max(1))) {
             worst = (d, i);
         }
     }
     worst
+}
+
+/// The pixels where some Gaussian's alpha at the pixel center lies within float32 rounding
+/// (1e-5 relative) of the 1/255 cutoff: float32 and the f64 reference may keep or skip it
+/// there, a step of up to 1/255 in the pixel's sums and one in its contributor count.
+fn alpha_cutoff_pixels(projected: &[ProjectedGaussian], cam: &Camera) -> BTreeSet<usize> {
+    let mut pixels = BTreeSet::new();
+    for p in projected {
+        for py in 0..cam.height {
+            for px in 0..cam.width {
+                let dx = p.mean2d.x - (px as f64 + 0.5);
+                let dy = p.mean2d.y - (py as f64 + 0.5);
+                let [a, b, c] = p.conic;
+                let sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy;
+                let alpha = p.opacity * (-sigma).exp();
+                if (alpha / reference::ALPHA_THRESHOLD - 1.0).abs() < 1e-5 {
+                    pixels.insert((py * cam.width + px) as usize);
+                }
+            }
+        }
+    }
+    pixels
 }
 
 /// `g` rendered by `raster` and by the f64 reference with the same background and
@@ -104,6 +136,9 @@ fn compare_within(
     let g = &separate_depth_ties(g, cam);
     let (frame, r, settings) = render_both(raster, g, cam, mode);
     assert_eq!(frame.channels as usize, r.channels, "{what}: channels");
+    let projected = reference::project(g, cam, &settings);
+    let cutoff = alpha_cutoff_pixels(&projected, cam);
+    let pixels = (cam.width * cam.height) as usize;
     let checks: [(&str, &[f32], Vec<f64>); 5] = [
         ("rgb", &frame.rgb, r.rgb.iter().flatten().copied().collect()),
         ("alpha", &frame.alpha, r.alpha.clone()),
@@ -113,7 +148,7 @@ fn compare_within(
     ];
     for (name, got, want) in checks {
         assert_eq!(got.len(), want.len(), "{what}: {name} length");
-        let (d, i) = max_diff(got, want.iter().copied());
+        let (d, i) = max_diff_outside(got, want.iter().copied(), got.len() / pixels, &cutoff);
         assert!(
             d <= tol,
             "{what}: {name} differs by {d:.3e} at element {i}: gpu {} cpu {}",
@@ -124,16 +159,17 @@ fn compare_within(
     // Expected depth is a ratio of sums: compare relative to the depth itself.
     for (i, (&gd, &cd)) in frame.depth.iter().zip(&r.depth).enumerate() {
         assert!(
-            (gd as f64 - cd).abs() <= tol * cd.abs().max(1.0),
+            cutoff.contains(&i) || (gd as f64 - cd).abs() <= tol * cd.abs().max(1.0),
             "{what}: depth at {i}: gpu {gd} cpu {cd}"
         );
     }
     if !exact_lists {
         return frame;
     }
-    assert_eq!(frame.n_contrib, r.n_contrib, "{what}: contributor counts");
+    let counts_differ = (frame.n_contrib.iter().zip(&r.n_contrib).enumerate())
+        .find(|(i, (a, b))| a != b && !cutoff.contains(i));
+    assert_eq!(counts_differ, None, "{what}: contributor counts");
 
-    let projected = reference::project(g, cam, &settings);
     let want = reference::tile_intersections(&projected, cam);
     let got = raster.last_intersections().unwrap();
     assert_eq!(
@@ -415,7 +451,7 @@ fn views_binned_in_bands_of_rows_match_the_reference() {
         let busiest = per_row.iter().copied().max().unwrap();
         banded.set_list_capacity(busiest.max(whole.intersections / 3));
         let run = banded
-            .run_tiled_in_bands(&scene, &cam, &opts, |_, _| Ok(()))
+            .run_tiled_in_bands(&scene, &cam, &opts, BandWork::Overwrite, |_, _| Ok(()))
             .unwrap();
         assert!(
             run.list_bands >= 3,
@@ -671,7 +707,7 @@ fn compare_allowing_threshold_pixels(
     for (name, got, want) in checks {
         assert_eq!(got.len(), want.len(), "{}: {name} length", cam.name);
         let per_pixel = got.len() / pixels;
-        let mut off = std::collections::BTreeSet::new();
+        let mut off = BTreeSet::new();
         for (i, (&a, &b)) in got.iter().zip(&want).enumerate() {
             let d = (a as f64 - b).abs();
             assert!(d <= 0.02, "{}: {name}[{i}] gpu {a} cpu {b}", cam.name);
@@ -742,7 +778,7 @@ fn both_tile_forms_render_the_same_bytes() {
                 let scene = GpuScene::upload(gpu, &g).unwrap();
                 let f = raster.render(&scene, &cam, &opts).unwrap();
                 raster
-                    .run_tiled_in_bands(&scene, &cam, &opts, |rec, tiles| {
+                    .run_tiled_in_bands(&scene, &cam, &opts, BandWork::Overwrite, |rec, tiles| {
                         tiles.record_median_depth(rec)
                     })
                     .unwrap();
@@ -796,7 +832,7 @@ fn median_depth_matches_the_reference() {
         // Semantics on: the kernel's carried state must not follow the frame's channels.
         let opts = RenderOptions::default();
         raster
-            .run_tiled_in_bands(&scene, &cam, &opts, |rec, tiles| {
+            .run_tiled_in_bands(&scene, &cam, &opts, BandWork::Overwrite, |rec, tiles| {
                 tiles.record_median_depth(rec)
             })
             .unwrap();

@@ -779,7 +779,7 @@ fn cli_writes_a_room_and_rejects_bad_arguments() {
     std::fs::write(dir.path().join("notes.txt"), "mine").unwrap();
     for (args, needle) in [
         (vec!["--views", "0"], "train view"),
-        (vec!["--width", "0"], "image size"),
+        (vec!["--width", "0"], "--width"),
         (vec!["--noise", "flicker=lots"], "not a number"),
         (vec!["--noise", "blur=1"], "unknown noise key"),
         (vec!["--noise", "salt=1.5"], "[0, 1]"),

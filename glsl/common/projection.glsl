@@ -5,7 +5,9 @@
 //
 // Chain: q -> R (unit quaternion); M = R diag(s), cov3 = M M^T; covc = W cov3 W^T (world
 // to camera); cov2 = J covc J^T with the clamped perspective Jacobian J(p); dilation;
-// conic = cov2^-1. The 2D mean is (fx x/z + cx, fy y/z + cy).
+// conic = cov2^-1. The forward computes cov2 as (J W M)(J W M)^T and its determinant from
+// J W M's minors (persp_proj_cov_det); the backward differentiates the same function of
+// covc. The 2D mean is (fx x/z + cx, fy y/z + cy).
 //
 // A symmetric 2x2 matrix travels as vec3 (xx, xy, yy), the layout of the conic buffer; its
 // gradient as the full mat2 (see conic_vjp).
@@ -43,6 +45,22 @@ vec4 quat_to_mat_vjp(vec4 q, mat3 v_r) {
         qw * (R(1, 0) - R(0, 1)) + qx * (R(2, 0) + R(0, 2)) + qy * (R(2, 1) + R(1, 2)) - 2.0 * qz * (R(0, 0) + R(1, 1)));
 #undef R
     return v_q;
+}
+
+// The unit quaternion of q_raw, and qn = |q_raw| (0: no rotation, the Gaussian is culled).
+// Scaled by its largest component first: length() of components of 1e20 overflows float32
+// and of 1e-30 underflows, which turned the first into the identity and culled the second.
+vec4 quat_normalized(vec4 q_raw, out float qn) {
+    vec4 mag = abs(q_raw);
+    float largest = max(max(mag.x, mag.y), max(mag.z, mag.w));
+    if (!(largest > 0.0)) {
+        qn = 0.0;
+        return vec4(1.0, 0.0, 0.0, 0.0);
+    }
+    vec4 q = q_raw / largest;
+    float scaled = length(q);
+    qn = largest * scaled;
+    return q / scaled;
 }
 
 // dL/dq_raw of q = q_raw / qn (qn = |q_raw|), from v_q = dL/dq.
@@ -106,15 +124,20 @@ mat3x2 persp_jacobian(vec3 p, vec4 intrinsics, vec2 txy) {
 }
 
 // 2D covariance J covc J^T of a Gaussian at camera-space p in an image of `size` pixels,
-// before dilation, as (xx, xy, yy).
-vec3 persp_proj_cov(vec3 p, mat3 covc, vec4 intrinsics, vec2 size) {
+// before dilation, as (xx, xy, yy), and its determinant (w). The camera-space covariance
+// comes as its factor wm = W R diag(s) (covc = wm wm^T), so that cov2 = T T^T with the 2x3
+// T = J wm, and the determinant is the sum of T's squared 2x2 minors (Cauchy-Binet):
+// xx yy - xy^2 cancels to nothing in float32 for a needle (50 m by 1 cm: a determinant 2
+// ulp of xx yy), whose conic then blew up and whose pixels vanished. Never forming covc
+// also keeps cov2 finite wherever T is.
+vec4 persp_proj_cov_det(vec3 p, mat3 wm, vec4 intrinsics, vec2 size) {
     bvec2 clamped;
-    mat3x2 jac = persp_jacobian(p, intrinsics, frustum_clamped_xy(p, intrinsics, size, clamped));
-    // The rows of J.
-    vec3 j0 = vec3(jac[0][0], jac[1][0], jac[2][0]);
-    vec3 j1 = vec3(jac[0][1], jac[1][1], jac[2][1]);
-    vec3 cj0 = covc * j0, cj1 = covc * j1;
-    return vec3(dot(j0, cj0), dot(j0, cj1), dot(j1, cj1));
+    mat3x2 t = persp_jacobian(p, intrinsics, frustum_clamped_xy(p, intrinsics, size, clamped)) * wm;
+    // The rows of T.
+    vec3 t0 = vec3(t[0][0], t[1][0], t[2][0]);
+    vec3 t1 = vec3(t[0][1], t[1][1], t[2][1]);
+    vec3 minors = cross(t0, t1);
+    return vec4(dot(t0, t0), dot(t0, t1), dot(t1, t1), dot(minors, minors));
 }
 
 // From dL/dmean2d and v_cov2 = dL/dcov2 to dL/dp, through the 2D mean and through J, and to
@@ -155,11 +178,19 @@ vec3 dilate_cov2(vec3 cov2) {
     return vec3(cov2.x + COV2D_DILATION, cov2.y, cov2.z + COV2D_DILATION);
 }
 
-// The conic: inverse of the symmetric cov2, its determinant clamped at DET_MIN.
-vec3 cov2_to_conic(vec3 cov2) {
-    float a = cov2.x, b = cov2.y, c = cov2.z;
-    float det = max(a * c - b * b, DET_MIN);
-    return vec3(c / det, -b / det, a / det);
+// The conic: inverse of the dilated cov2 = dilate_cov2(cov.xyz), from the undilated
+// covariance and its determinant cov.w (persp_proj_cov_det): det(cov + d I) = det(cov) +
+// d tr(cov) + d^2, clamped at DET_MIN.
+vec3 dilated_conic(vec4 cov) {
+    vec3 cov2 = dilate_cov2(cov.xyz);
+    const float d = COV2D_DILATION;
+    float det = max(cov.w + d * (cov.x + cov.z) + d * d, DET_MIN);
+    return vec3(cov2.z / det, -cov2.y / det, cov2.x / det);
+}
+
+// Whether every component is a finite float (NaN compares false).
+bool all_finite(vec3 v) {
+    return all(lessThanEqual(abs(v), vec3(3.4028235e38)));
 }
 
 // conic = cov2^-1: dL/dcov2 = -conic G conic, G the symmetric gradient of the conic built

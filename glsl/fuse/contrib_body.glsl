@@ -191,7 +191,9 @@ float contrib_step(inout Pixel p, TileWindow tw, uint j, vec4 g) {
     if (!p.done) {
         vec2 d = pixel_offset(g.xy, STEP_FRAC, vec2(tw.px, tw.py));
         float sigma = conic_sigma(STEP_CONIC, d);
-        float alpha = sigma < 0.0 ? 0.0 : min(ALPHA_MAX, g.w * exp(-sigma));
+        // As blend_step: an exponent that is negative or NaN draws nothing (min(0.999, NaN)
+        // is 0.999 on some drivers: a near-opaque splat).
+        float alpha = sigma >= 0.0 ? min(ALPHA_MAX, g.w * exp(-sigma)) : 0.0;
         if (alpha >= ALPHA_MIN) {
             float next_t = p.T * (1.0 - alpha);
 #if defined(MEDIAN_DEPTH_OUT)

@@ -94,13 +94,13 @@ void main() {
     mat3 w = transpose(mat3(pc.world_to_camera[0].xyz, pc.world_to_camera[1].xyz, pc.world_to_camera[2].xyz)); // world -> camera
     vec3 p = w * mean + vec3(pc.world_to_camera[0].w, pc.world_to_camera[1].w, pc.world_to_camera[2].w);
     vec4 q_raw = vec4(quats.data[4 * i], quats.data[4 * i + 1], quats.data[4 * i + 2], quats.data[4 * i + 3]);
-    float qn = length(q_raw);
-    vec4 q = q_raw / qn;
+    float qn;
+    vec4 q = quat_normalized(q_raw, qn);
     mat3 rq = quat_to_mat(q);
     vec3 s = exp(vec3(log_scales.data[3 * i], log_scales.data[3 * i + 1], log_scales.data[3 * i + 2]));
     mat3 covc = covar_world_to_cam(w, rot_scale_to_covar(rq, s));
     float width = float(pc.width), height = float(pc.height);
-    vec3 conic = cov2_to_conic(dilate_cov2(persp_proj_cov(p, covc, pc.intrinsics, vec2(width, height))));
+    vec3 conic = dilated_conic(persp_proj_cov_det(p, w * rot_scale(rq, s), pc.intrinsics, vec2(width, height)));
 
     // Back along the chain; the dilation passes the gradient through unchanged.
     mat2 v_cov2 = cov2_to_conic_vjp(conic, v_conic);

@@ -59,8 +59,9 @@ void main() {
     if (!(p.z > pc.near && p.z < pc.far)) {
         return;
     }
-    vec4 q = vec4(quats.data[4 * i], quats.data[4 * i + 1], quats.data[4 * i + 2], quats.data[4 * i + 3]);
-    float qn = length(q);
+    vec4 q_raw = vec4(quats.data[4 * i], quats.data[4 * i + 1], quats.data[4 * i + 2], quats.data[4 * i + 3]);
+    float qn;
+    vec4 q = quat_normalized(q_raw, qn);
     if (!(qn > 0.0)) {
         return;
     }
@@ -70,13 +71,18 @@ void main() {
     }
 
     // 3D covariance R S S^T R^T, into camera space, then onto the image.
-    mat3 rq = quat_to_mat(q / qn);
+    mat3 rq = quat_to_mat(q);
     vec3 s = exp(vec3(log_scales.data[3 * i], log_scales.data[3 * i + 1], log_scales.data[3 * i + 2]));
     mat3 w = transpose(mat3(pc.world_to_camera[0].xyz, pc.world_to_camera[1].xyz, pc.world_to_camera[2].xyz)); // rows -> matrix
-    mat3 covc = covar_world_to_cam(w, rot_scale_to_covar(rq, s));
     float width = float(pc.width), height = float(pc.height);
-    vec3 cov2 = dilate_cov2(persp_proj_cov(p, covc, pc.intrinsics, vec2(width, height)));
-    vec3 conic = cov2_to_conic(cov2);
+    vec4 cov_det = persp_proj_cov_det(p, w * rot_scale(rq, s), pc.intrinsics, vec2(width, height));
+    vec3 cov2 = dilate_cov2(cov_det.xyz);
+    vec3 conic = dilated_conic(cov_det);
+    // A covariance float32 cannot hold (scales of e^40) has no footprint to draw: culled,
+    // as the CPU reference culls it, rather than blended with a NaN exponent.
+    if (!(all_finite(cov2) && all_finite(conic))) {
+        return;
+    }
 
 #ifdef PROJECT_F64
     dvec2 m2 = dvec2(camera64.data[12] * pd.x / pd.z + camera64.data[14], camera64.data[13] * pd.y / pd.z + camera64.data[15]);

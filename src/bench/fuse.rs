@@ -17,7 +17,7 @@ use crate::fuse::{
 };
 use crate::gpu::timings::KernelTotal;
 use crate::gpu::Gpu;
-use crate::render::{GpuScene, Rasterizer, RenderOptions};
+use crate::render::{BandWork, GpuScene, Rasterizer, RenderOptions};
 use crate::scene::labels::LabelFormat;
 use crate::scene::random_scene::{random_scene, RandomSceneSpec};
 use crate::scene::scene_file::CAMERAS_FILE;
@@ -230,7 +230,9 @@ fn forward_run(
     for (i, cam) in cams.iter().enumerate() {
         progress(i);
         let run =
-            raster.run_tiled_in_bands(scene, cam, opts, |rec, tiles| tiles.record_blend(rec))?;
+            raster.run_tiled_in_bands(scene, cam, opts, BandWork::Overwrite, |rec, tiles| {
+                tiles.record_blend(rec)
+            })?;
         total.add(run.timings.total_ns() * 1e-6, 0.0, gpu.memory_reserved());
         run.timings.add_to(&mut total.kernels);
         total.visible += f64::from(run.visible);

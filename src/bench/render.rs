@@ -11,7 +11,7 @@ use super::export::export_inputs;
 use super::{median, warm_up};
 use crate::gpu::timings::KernelTotal;
 use crate::gpu::Gpu;
-use crate::render::{GpuScene, Rasterizer, RenderOptions, SemanticMode, StageTimes};
+use crate::render::{BandWork, GpuScene, Rasterizer, RenderOptions, SemanticMode, StageTimes};
 use crate::scene::random_scene::{random_scene, RandomSceneSpec};
 use crate::scene::{Camera, Gaussians, SemanticLogits};
 use crate::util::Rng;
@@ -19,9 +19,11 @@ use crate::util::Rng;
 /// The scene and view a render or training benchmark works on.
 #[derive(Clone, Debug, Serialize)]
 pub struct BenchInput {
-    /// Gaussians of the random scene (SH degree 3); ignored with `scene`.
-    pub n: usize,
-    /// Image size of the random scene's camera; ignored with `scene`.
+    /// Gaussians of the random scene (SH degree 3); none with `scene` (its count is the
+    /// report's `gaussians`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub n: Option<usize>,
+    /// Image size of the random scene's camera; with `scene`, its camera's.
     pub width: u32,
     pub height: u32,
     /// Semantic channels blended with RGB (0: RGB only); random logits.
@@ -55,7 +57,7 @@ impl BenchInput {
     /// Gaussians.
     fn random(&self) -> (Gaussians, Camera) {
         let g = random_scene(&RandomSceneSpec {
-            n: self.n,
+            n: self.n.unwrap_or_default(),
             channels: self.channels,
             sh_degree: 3,
             seed: self.seed,
@@ -122,7 +124,11 @@ pub fn bench_render(gpu: &Gpu, input: &BenchInput, iters: usize) -> Result<Rende
     };
     let mut raster = Rasterizer::new(gpu);
     // The frame stays on the device (downloading it is no part of rendering).
-    let mut frame = || raster.run_tiled_in_bands(&scene, &cam, &opts, |r, t| t.record_blend(r));
+    let mut frame = || {
+        raster.run_tiled_in_bands(&scene, &cam, &opts, BandWork::Overwrite, |r, t| {
+            t.record_blend(r)
+        })
+    };
     let warm = frame()?;
     warm_up(|| frame().map(drop))?;
     let mut frames = Vec::new();

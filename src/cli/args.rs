@@ -18,7 +18,7 @@ fn finite<T: FromStr + Copy + Into<f64>>(s: &str) -> Result<T, String> {
 }
 
 /// A finite value within `lo..=hi`, the range spelled as the error says it.
-fn within<T: FromStr + Copy + Into<f64>>(
+pub fn within<T: FromStr + Copy + Into<f64>>(
     s: &str,
     lo: f64,
     hi: f64,

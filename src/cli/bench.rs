@@ -142,9 +142,9 @@ pub struct InputArgs {
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u16).range(0..=256))]
     channels: u16,
     /// A scene with a `cameras.json` in its folder (a `synth` room or its scene.ply, an INRIA
-    /// run) to use instead of the random scene; its first camera is the view (--n, --width,
-    /// --height ignored).
-    #[arg(long, value_name = "DIR")]
+    /// run) to use instead of the random scene; its first camera is the view, at its own
+    /// size.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["n", "width", "height"])]
     scene: Option<PathBuf>,
     /// Also write the scene (PLY, with the semantic channels), the camera (JSON) and a
     /// `bench.json` into DIR, so other renderers can be timed on the same bytes.
@@ -155,7 +155,7 @@ pub struct InputArgs {
 impl InputArgs {
     fn input(&self, seed: u64) -> BenchInput {
         BenchInput {
-            n: self.n,
+            n: self.scene.is_none().then_some(self.n),
             width: self.width,
             height: self.height,
             channels: self.channels as usize,
@@ -332,7 +332,7 @@ fn check_export(
         &[],
         &[
             Input::Scene("--scene", scene.as_deref()),
-            Input::Tree("--labels", labels.as_deref()),
+            Input::Labels("--labels", labels.as_deref()),
         ],
     )
 }

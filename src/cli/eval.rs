@@ -14,7 +14,7 @@ use semsplat::eval::label_render::LabelRenderer;
 use semsplat::eval::metrics::{gaussian_accuracy, Confusion, SegmentationScores};
 use semsplat::gpu::Gpu;
 use semsplat::scene::classes::{read_class_table, ClassTable};
-use semsplat::scene::images::load_view_image;
+use semsplat::scene::images::ImageDir;
 use semsplat::scene::labels::{binary_mask_warning, LabelDir, LabelMap};
 use semsplat::scene::ply::{read_classes_sidecar, read_ply};
 use semsplat::scene::scene_file::{cameras_for_scene, read_scene};
@@ -62,7 +62,8 @@ pub struct EvalArgs {
     #[arg(long)]
     truth: Option<PathBuf>,
     /// Images of the views (named like the cameras): also report PSNR and SSIM of the
-    /// scene's rendered RGB (for trained scenes, whose appearance changed).
+    /// scene's rendered RGB (for trained scenes, whose appearance changed), the means over
+    /// the views; a view rendered exactly makes the PSNR infinite (null in the JSON).
     #[arg(long)]
     images: Option<PathBuf>,
     /// Write the scores as JSON.
@@ -86,7 +87,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
         &[
             Input::Scene("--scene", Some(&args.scene)),
             Input::Cameras("--cameras", args.cameras.as_deref()),
-            Input::Tree("--labels", Some(&args.labels)),
+            Input::Labels("--labels", Some(&args.labels)),
             Input::File("--classes", args.classes.as_deref()),
             Input::File("--truth", args.truth.as_deref()),
             Input::Tree("--images", args.images.as_deref()),
@@ -245,9 +246,10 @@ fn rendered_quality(
     image_dir: &Path,
     views: &[&Camera],
 ) -> Result<ImageQuality> {
+    let dir = ImageDir::new(image_dir);
     let images = views
         .iter()
-        .map(|cam| load_view_image(image_dir, cam))
+        .map(|cam| dir.load(cam))
         .collect::<Result<Vec<_>>>()?;
     let pairs: Vec<(&Camera, &[f32])> = views
         .iter()

@@ -102,11 +102,12 @@ pub struct FuseArgs {
     /// others' flicker, so its edge was drawn off.
     #[arg(long)]
     relabel: bool,
-    /// Relative depth tolerance of the visibility test (> 0): vote --occlusion's, against the
-    /// expected depth, and segment consensus's, against the median depth (the depth of the
-    /// Gaussian that takes a pixel's transmittance below one half).
-    #[arg(long, default_value_t = 0.05, value_parser = args::positive::<f32>)]
-    depth_tol: f32,
+    /// Relative depth tolerance of the visibility test (> 0; default 0.05): vote
+    /// --occlusion's, against the expected depth, and segment consensus's, against the
+    /// median depth (the depth of the Gaussian that takes a pixel's transmittance below one
+    /// half). The other methods have no such test (a note says so).
+    #[arg(long, value_parser = args::positive::<f32>)]
+    depth_tol: Option<f32>,
     /// The consensus methods' visibility test also hides a Gaussian whose center lies
     /// behind the surface its pixel shows: more than this fraction of the median depth
     /// behind the opaque depth (the depth of the Gaussian that takes the transmittance below
@@ -114,8 +115,9 @@ pub struct FuseArgs {
     /// changes depth across a pixel). A wall or floor a few centimetres behind an object
     /// standing in front of it passes --depth-tol there, and would count as seen on the
     /// object. A pixel that never turns opaque hides nothing; 1e9 turns the test off.
-    #[arg(long, default_value_t = 0.01, value_parser = args::non_negative::<f32>)]
-    behind_tol: f32,
+    /// Default 0.01.
+    #[arg(long, value_parser = args::non_negative::<f32>)]
+    behind_tol: Option<f32>,
     /// Class table (JSON: id, name, color). Default: classes.json beside or inside the label
     /// folder, else the ids found in the label maps.
     #[arg(long)]
@@ -129,7 +131,7 @@ pub struct FuseArgs {
     /// evidence (its classes are decided per segment).
     #[arg(long, conflicts_with_all = [
         "labels", "save_contrib", "method", "occlusion", "weighted", "per_view", "relabel",
-        "depth_tol", "behind_tol", "float_atomics", "train_only",
+        "depth_tol", "behind_tol", "float_atomics", "train_only", "ignore_id", "mem_budget",
     ])]
     contrib: Option<PathBuf>,
     /// Accumulate with float32 atomics instead of 64-bit fixed point (fixed point gives the
@@ -147,8 +149,9 @@ pub struct FuseArgs {
     /// Fuse only shard K of N of the labeled views (the views, in camera order, whose
     /// position among those with a label map is K modulo N) and write its partial evidence
     /// exactly (uint64 fixed point or uint32 vote counts, NumPy [classes, Gaussians]) to
-    /// --out, with <out>.manifest.json naming the inputs; `semsplat merge` sums the N parts
-    /// into what one fuse of every view gives, bit for bit (docs/sharded-fusion.md).
+    /// --out, with a manifest naming the inputs beside it (part0.npy: part0.manifest.json);
+    /// `semsplat merge` sums the N parts into what one fuse of every view gives, bit for bit
+    /// (docs/sharded-fusion.md).
     #[arg(long, value_parser = Shard::parse, conflicts_with_all = [
         "contrib", "save_contrib", "float_atomics", "extract", "remove", "render_views",
         "save_membership", "palette_ply", "report",
@@ -158,24 +161,30 @@ pub struct FuseArgs {
     output: OutputArgs,
 }
 
+/// `--gamma` when not given: no bias toward the background.
+const DEFAULT_GAMMA: f64 = 0.0;
+
 /// What `fuse` and `merge` write from the evidence matrix.
 #[derive(Args)]
 pub struct OutputArgs {
-    /// Background bias of the one-vs-rest assignment used by --extract/--remove, in [-1, 1]
-    /// (FlashSplat's Listing 1.1): larger keeps fewer Gaussians in the object.
-    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true, value_parser = args::signed_unit_interval)]
-    pub gamma: f64,
+    /// Background bias of the one-vs-rest assignment used by --extract, --remove and
+    /// --save-membership, in [-1, 1] (FlashSplat's Listing 1.1; default 0): larger keeps
+    /// fewer Gaussians in the object.
+    #[arg(long, allow_hyphen_values = true, value_parser = args::signed_unit_interval)]
+    pub gamma: Option<f64>,
     /// Output PLY: the input Gaussians with `class` (label id, -1 for Gaussians no view saw)
-    /// and `class_conf` (the winning class's share of the evidence; segment consensus: its
-    /// posterior probability with every view counted once, beside `class_entropy` and
-    /// `segment`); semantics the input scene held (a trained scene's logits) are replaced.
-    /// The class table goes to <out>.classes.json. With `fuse --shard`: the partial evidence
-    /// (.npy, see --shard) instead.
+    /// and `class_conf` (the winning class's share of the evidence; `fuse`'s segment
+    /// consensus: its posterior probability with every view counted once, beside
+    /// `class_entropy` and `segment`); semantics the input scene held (a trained scene's
+    /// logits) are replaced. The class table goes beside it, its extension replaced
+    /// (fused.ply: fused.classes.json). `fuse --shard` only: the partial evidence (.npy, see
+    /// --shard) instead.
     #[arg(long)]
     pub out: PathBuf,
     /// Write a JSON report: per-class counts, the assignment's time and (`fuse` of views) the
-    /// views' timings, views/s and peak device memory (segment consensus: also the segments, their vote splits and the flagged ones, each with where
-    /// it is and which views called it what).
+    /// views' timings, views/s and peak device memory (`fuse`'s segment consensus: also the
+    /// segments, their vote splits and the flagged ones, each with where it is and which
+    /// views called it what).
     #[arg(long)]
     pub report: Option<PathBuf>,
     /// Write the evidence matrix A as float64 NumPy [classes, Gaussians], rows in the order
@@ -184,8 +193,9 @@ pub struct OutputArgs {
     pub save_contrib: Option<PathBuf>,
     /// Keep only the Gaussians of this class (name, any case, or id) in --out, by FlashSplat's
     /// one-vs-rest assignment with --gamma (which may keep Gaussians whose own class is
-    /// another; segment consensus selects by the classes it decided). `fuse` of an already fused scene (a `class` property) without
-    /// --labels or --contrib selects by that class directly (no re-fusing).
+    /// another; `fuse`'s segment consensus selects by the classes it decided). `fuse` of an
+    /// already fused scene (a `class` property) without --labels or --contrib selects by
+    /// that class directly (no re-fusing).
     #[arg(long, conflicts_with = "remove")]
     pub extract: Option<String>,
     /// Drop the Gaussians of this class (name, any case, or id) from --out (as --extract
@@ -200,7 +210,7 @@ pub struct OutputArgs {
     pub render_views: Option<PathBuf>,
     /// Write the multi-instance membership S of FlashSplat's Listing 1.1 (with --gamma) as a
     /// float32 NumPy array [classes, Gaussians] of 0/1: a Gaussian may belong to several
-    /// classes or none. Rows follow <out>.classes.json.
+    /// classes or none. Rows follow --out's class table.
     #[arg(long)]
     pub save_membership: Option<PathBuf>,
     /// Also write a copy colored by class palette, viewable in any 3DGS viewer.
@@ -304,7 +314,7 @@ pub fn run(mut args: FuseArgs) -> Result<()> {
         &[
             Input::Scene("--scene", Some(&args.scene)),
             Input::Cameras("--cameras", args.cameras.as_deref()),
-            Input::Tree("--labels", args.labels.as_deref()),
+            Input::Labels("--labels", args.labels.as_deref()),
             Input::File("--classes", args.classes.as_deref()),
             Input::File("--contrib", args.contrib.as_deref()),
             Input::File("--contrib's class table", contrib_table.as_deref()),
@@ -312,6 +322,9 @@ pub fn run(mut args: FuseArgs) -> Result<()> {
     )?;
     let g = read_scene(&args.scene)?;
     let method = selected_method(&args)?;
+    if args.contrib.is_none() {
+        note_options_without_effect(&args, method);
+    }
     let accumulation = if args.float_atomics {
         Accumulation::Float
     } else {
@@ -389,7 +402,12 @@ pub(super) fn write_fused(
         false => Vec::new(),
     };
     if let Some(path) = &args.save_membership {
-        save_membership(path, kept(&mut rows)?, &totals, args.gamma)?;
+        save_membership(
+            path,
+            kept(&mut rows)?,
+            &totals,
+            args.gamma.unwrap_or(DEFAULT_GAMMA),
+        )?;
     }
     if let (Some(dir), Some(views)) = (&args.render_views, label_views) {
         views.render(dir, &g, &table)?;
@@ -485,6 +503,13 @@ fn select_from_fused(
 /// (checked before any work).
 pub(super) fn check_output_args(args: &OutputArgs, inputs: &[Input]) -> Result<()> {
     let contrib_table = args.save_contrib.as_deref().map(contrib_sidecar);
+    if args.gamma.is_some()
+        && args.extract.is_none()
+        && args.remove.is_none()
+        && args.save_membership.is_none()
+    {
+        eprintln!("note: --gamma has no effect without --extract, --remove or --save-membership");
+    }
     check_outputs(
         &[
             ("--out", Some(&args.out)),
@@ -629,13 +654,41 @@ fn open_labeled_views(args: &FuseArgs) -> Result<Dataset> {
 }
 
 fn fuse_config(args: &FuseArgs, method: Method, accumulation: Accumulation) -> FuseConfig {
+    let defaults = FuseConfig::default();
     FuseConfig {
         method,
         accumulation,
         mem_budget: args.mem_budget,
-        depth_tolerance: args.depth_tol,
-        behind_tolerance: args.behind_tol,
-        ..Default::default()
+        depth_tolerance: args.depth_tol.unwrap_or(defaults.depth_tolerance),
+        behind_tolerance: args.behind_tol.unwrap_or(defaults.behind_tolerance),
+        ..defaults
+    }
+}
+
+/// A note for each option given that `method` does not read (the run goes on: the result
+/// is what it would be without it).
+fn note_options_without_effect(args: &FuseArgs, method: Method) {
+    use Method::*;
+    let unread = [
+        (
+            "--depth-tol",
+            args.depth_tol.is_some() && !method.reads_depth_tolerance(),
+        ),
+        (
+            "--behind-tol",
+            args.behind_tol.is_some() && !method.is_consensus(),
+        ),
+        (
+            "--float-atomics",
+            args.float_atomics && matches!(method, Vote | VoteOcclusion | SegmentConsensus),
+        ),
+        (
+            "--mem-budget",
+            args.mem_budget.is_some() && method == SegmentConsensus,
+        ),
+    ];
+    for (option, _) in unread.iter().filter(|(_, unread)| *unread) {
+        eprintln!("note: {option} has no effect with {}", method.name());
     }
 }
 
@@ -644,6 +697,7 @@ fn fuse_shard(args: &FuseArgs, g: &Gaussians, method: Method, shard: Shard) -> R
     let data = open_labeled_views(args)?;
     let job = ShardJob {
         scene_path: &args.scene,
+        cameras_path: args.cameras.as_deref().context("--shard needs --cameras")?,
         gaussians: g,
         data: &data,
         cfg: fuse_config(args, method, Accumulation::FixedPoint),
@@ -754,7 +808,11 @@ fn select_members(
         .iter()
         .position(|c| c.id == id)
         .expect("class in table");
-    let members = one_vs_rest_row(&kept(rows)?.row(row)?, totals, args.gamma);
+    let members = one_vs_rest_row(
+        &kept(rows)?.row(row)?,
+        totals,
+        args.gamma.unwrap_or(DEFAULT_GAMMA),
+    );
     let keep: Vec<bool> = members
         .iter()
         .map(|&m| m == args.extract.is_some())

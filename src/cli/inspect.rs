@@ -14,8 +14,8 @@ use semsplat::scene::cameras_json::{read_cameras_json_kind, CameraJsonKind};
 use semsplat::scene::classes::{read_class_table, ClassTable, IGNORE_U16};
 use semsplat::scene::colmap::{find_colmap_model, ColmapFormat};
 use semsplat::scene::labels::{
-    binary_mask_warning, label_size_fit, list_label_pngs, read_label_png_as, LabelFormat, LabelMap,
-    SizeFit,
+    binary_mask_warning, ignored_class_note, label_size_fit, list_label_pngs, read_label_png_as,
+    LabelFormat, LabelMap, SizeFit,
 };
 use semsplat::scene::ply::{classes_sidecar_path, read_classes_sidecar};
 use semsplat::scene::scene_file::{read_scene_unchecked, resolve_scene_path, scene_format};
@@ -261,7 +261,7 @@ fn inspect_path(path: &Path, labels: &LabelInputs) -> Result<Report> {
                 .to_owned();
             inspect_labels(path, "label map", &[(stem, path.to_owned())], labels)
         }
-        "json" if looks_like_class_table(path)? => inspect_class_table(path),
+        "json" if looks_like_class_table(path)? => inspect_class_table(path, &labels.format),
         "json" | "txt" | "bin" => inspect_cameras(path),
         "npy" => bail!(
             "{} is a NumPy array (fuse's --save-contrib or --save-membership, or a --shard \
@@ -546,6 +546,7 @@ fn inspect_labels(
         .collect();
     r.add("sizes", sizes);
     add_label_classes(&mut r, &tally.counts, table);
+    add_ignored_class_note(&mut r, colors, &labels.format);
     let present: Vec<u32> = (0..IGNORE_U16)
         .filter(|&id| tally.counts[id as usize] > 0)
         .collect();
@@ -706,7 +707,7 @@ fn add_label_classes(r: &mut Report, counts: &[u64], table: Option<&ClassTable>)
 
 // ---------------------------------------------------------------------------------------
 
-fn inspect_class_table(path: &Path) -> Result<Report> {
+fn inspect_class_table(path: &Path, format: &LabelFormat) -> Result<Report> {
     let table = read_class_table(path)?;
     let mut r = Report::new("class table", path);
     r.add("classes", table.len());
@@ -716,12 +717,14 @@ fn inspect_class_table(path: &Path) -> Result<Report> {
         .map(|c| json!({"id": c.id, "name": c.name, "color": c.color}))
         .collect();
     r.add("entries", rows);
-    if table.classes.iter().any(|c| c.id == 255) {
-        r.add(
-            "note",
-            "id 255 is the default ignore value of 8-bit label maps: its maps must be 16-bit, or \
-             pass --ignore-id with another value",
-        );
-    }
+    add_ignored_class_note(&mut r, Some(&table), format);
     Ok(r)
+}
+
+/// The note `fuse`, `train` and `eval` print when the class table lists 8-bit maps' default
+/// "no label" (255) as a class.
+fn add_ignored_class_note(r: &mut Report, table: Option<&ClassTable>, format: &LabelFormat) {
+    if let Some(note) = table.and_then(|t| ignored_class_note(format, t)) {
+        r.add("note", note.trim_start_matches("note: "));
+    }
 }

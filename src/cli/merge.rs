@@ -53,6 +53,8 @@ pub struct MergeArgs {
 /// One shard of `fuse`: what it fuses, and where the part goes.
 pub struct ShardJob<'a> {
     pub scene_path: &'a Path,
+    /// The cameras file, as given (its views may since be scaled to their label maps).
+    pub cameras_path: &'a Path,
     pub gaussians: &'a Gaussians,
     pub data: &'a Dataset,
     pub cfg: FuseConfig,
@@ -131,27 +133,31 @@ fn fusion_key(job: &ShardJob) -> Result<FusionKey> {
     let mut labels = Fnv64::default();
     for i in 0..data.labels.len() {
         let path = data.labels.path(i).context("label entry without a path")?;
-        let bytes = std::fs::metadata(path)
-            .with_context(|| format!("reading {}", path.display()))?
-            .len();
+        // The contents, not the size: a frame segmented again between two shards' runs
+        // often keeps its size (a few hundred KB a map, read once more per shard).
+        let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
         let name = data
             .labels
             .camera_index(i)
             .map_or("", |c| data.cameras[c].name.as_str());
         labels.update(name.as_bytes());
         labels.update(&[0]);
-        labels.update(&bytes.to_le_bytes());
+        labels.update(&(bytes.len() as u64).to_le_bytes());
+        labels.update(&bytes);
     }
     Ok(FusionKey {
         scene: FileDigest::of_file(&resolve_scene_path(job.scene_path)?)?,
         gaussians: job.gaussians.len(),
-        cameras: cameras_digest(&data.cameras),
+        // The cameras as the file holds them, which `merge --cameras` is checked against:
+        // `data`'s are scaled to label maps of another resolution.
+        cameras: cameras_digest(&load_split_cameras(job.cameras_path, job.train_only)?),
         camera_count: data.cameras.len(),
         labels: labels.hex(),
         label_files: data.labels.len(),
         classes: data.table.clone(),
         method: job.cfg.method.key().into(),
-        depth_tolerance: job.cfg.depth_tolerance,
+        depth_tolerance: (job.cfg.method.reads_depth_tolerance())
+            .then_some(job.cfg.depth_tolerance),
         train_only: job.train_only,
         evidence,
     })

@@ -14,7 +14,7 @@ use semsplat::render::{GpuScene, Rasterizer, RenderOptions, RenderedFrame, Seman
 use semsplat::scene::cameras::load_cameras;
 use semsplat::scene::classes::ClassTable;
 use semsplat::scene::labels::{write_label_png, write_palette_png, LabelMap};
-use semsplat::scene::ply::read_classes_sidecar;
+use semsplat::scene::ply::{classes_sidecar_path, read_classes_sidecar};
 use semsplat::scene::scene_file::{cameras_for_scene, read_scene, resolve_scene_path};
 use semsplat::scene::{Camera, Gaussians};
 use semsplat::util::npy::write_npy_f32;
@@ -179,6 +179,16 @@ pub fn run(args: RenderArgs) -> Result<()> {
     )?;
     if args.semantics {
         check_table_fits_logits(&scene_file, &g, table.as_ref())?;
+        if table.is_none() && g.semantics.is_some() {
+            // Without the table the channels have no ids: a trained scene's `class` may
+            // hold others (4711), and its label images would silently disagree with them.
+            eprintln!(
+                "note: {} has no class table ({}): label images hold the logits' channel \
+                 indices 0..C-1, not class ids",
+                scene_file.display(),
+                classes_sidecar_path(&scene_file).display()
+            );
+        }
     }
     let gpu = Gpu::new()?;
     let mut labels_from = label_source(&args, &g, &gpu)?;

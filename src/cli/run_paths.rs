@@ -9,10 +9,11 @@ use std::fs;
 use std::path::{Component, Path, PathBuf};
 
 use anyhow::{bail, Result};
+use semsplat::dataset::CLASS_TABLE_FILE;
 use semsplat::scene::cameras::camera_files;
 use semsplat::scene::images::is_view_image;
 use semsplat::scene::ply::classes_sidecar_path;
-use semsplat::scene::scene_file::{resolve_scene_path, CAMERAS_FILE};
+use semsplat::scene::scene_file::{resolve_scene_path, scene_cameras_file};
 use semsplat::util::{check_output_file, check_output_folder};
 
 /// One input of a run, named by its option.
@@ -24,8 +25,11 @@ pub enum Input<'a> {
     Scene(&'a str, Option<&'a Path>),
     /// Cameras, given as a file or a model folder: the files their reader reads.
     Cameras(&'a str, Option<&'a Path>),
-    /// A folder read with its subfolders (label maps, images).
+    /// A folder read with its subfolders (images).
     Tree(&'a str, Option<&'a Path>),
+    /// A label folder: read with its subfolders, and its class table `classes.json` inside
+    /// or beside it (where it exists or will: a file written there is the next run's table).
+    Labels(&'a str, Option<&'a Path>),
 }
 
 /// A path read, as its [`identity`], beside the option (or part of one) naming it.
@@ -113,14 +117,8 @@ fn read_paths(inputs: &[Input]) -> (Vec<Named>, Vec<Named>) {
                     files.push((format!("{option}'s class table"), identity(&table)));
                     files.push((option.into(), identity(&file)));
                 }
-                // The cameras a scene's folder holds are its default cameras.
-                let folder = if path.is_dir() {
-                    path
-                } else {
-                    path.parent().unwrap_or(Path::new("."))
-                };
-                let cameras = folder.join(CAMERAS_FILE);
-                if cameras.is_file() {
+                // The cameras a scene's folder (or INRIA run) holds are its default cameras.
+                if let Some(cameras) = scene_cameras_file(path) {
                     files.push((format!("{option}'s cameras"), identity(&cameras)));
                 }
             }
@@ -129,6 +127,16 @@ fn read_paths(inputs: &[Input]) -> (Vec<Named>, Vec<Named>) {
                 files.extend(read.map(|f| (option.into(), identity(&f))));
             }
             Input::Tree(option, Some(path)) => trees.push((option.into(), identity(path))),
+            Input::Labels(option, Some(path)) => {
+                trees.push((option.into(), identity(path)));
+                let beside = path.parent().map(|p| p.join(CLASS_TABLE_FILE));
+                for table in [Some(path.join(CLASS_TABLE_FILE)), beside]
+                    .into_iter()
+                    .flatten()
+                {
+                    files.push((format!("{option} folder's class table"), identity(&table)));
+                }
+            }
             _ => {}
         }
     }

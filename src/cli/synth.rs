@@ -8,12 +8,14 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 
+use super::args;
 use super::progress::{follow, phase_bar};
 use semsplat::synth::writer::OUTPUT_LAYOUT;
 use semsplat::synth::{
     self, NoiseSpec, RoomSource, SynthConfig, DEFAULT_HEIGHT, DEFAULT_HFOV_DEG,
     DEFAULT_INIT_JITTER, DEFAULT_INIT_SPACING, DEFAULT_SPACING, DEFAULT_TEST_VIEWS,
-    DEFAULT_TRAIN_VIEWS, DEFAULT_WIDTH, NOISE_KEYS_HELP, PRESETS,
+    DEFAULT_TRAIN_VIEWS, DEFAULT_WIDTH, HFOV_RANGE, INIT_JITTER_RANGE, INIT_SPACING_RANGE,
+    MAX_SIDE, NOISE_KEYS_HELP, PRESETS, SPACING_RANGE,
 };
 
 static AFTER_HELP: LazyLock<String> = LazyLock::new(|| {
@@ -59,24 +61,28 @@ pub struct SynthArgs {
     #[arg(long, default_value_t = DEFAULT_TEST_VIEWS)]
     test_views: usize,
     /// Image width in pixels.
-    #[arg(long, default_value_t = DEFAULT_WIDTH)]
+    #[arg(long, default_value_t = DEFAULT_WIDTH, value_parser = image_side)]
     width: u32,
     /// Image height in pixels.
-    #[arg(long, default_value_t = DEFAULT_HEIGHT)]
+    #[arg(long, default_value_t = DEFAULT_HEIGHT, value_parser = image_side)]
     height: u32,
     /// Horizontal field of view in degrees (20..=120).
-    #[arg(long, default_value_t = DEFAULT_HFOV_DEG)]
+    #[arg(long, default_value_t = DEFAULT_HFOV_DEG,
+          value_parser = |s: &str| in_range(s, HFOV_RANGE, "degrees"))]
     fov: f64,
     /// Gaussian spacing on surfaces in meters (density ~ 1/spacing^2; only surfaces some
     /// view sees get Gaussians: office ~150k at 0.03 with the default views, 41k at 0.03 and
     /// ~1M at 0.0053 with one view).
-    #[arg(long, default_value_t = DEFAULT_SPACING)]
+    #[arg(long, default_value_t = DEFAULT_SPACING,
+          value_parser = |s: &str| in_range(s, SPACING_RANGE, "m"))]
     spacing: f64,
     /// Point spacing of init.ply in meters.
-    #[arg(long, default_value_t = DEFAULT_INIT_SPACING)]
+    #[arg(long, default_value_t = DEFAULT_INIT_SPACING,
+          value_parser = |s: &str| in_range(s, INIT_SPACING_RANGE, "m"))]
     init_spacing: f64,
     /// Standard deviation of init.ply's offsets off the surface, meters.
-    #[arg(long, default_value_t = DEFAULT_INIT_JITTER)]
+    #[arg(long, default_value_t = DEFAULT_INIT_JITTER,
+          value_parser = |s: &str| in_range(s, INIT_JITTER_RANGE, "m"))]
     init_jitter: f64,
     /// Label noise, e.g. flicker=0.3,boundary=2,consistent=0.6,salt=0.01,missing=0.05 (keys in
     /// --help); writes labels_noisy/.
@@ -92,6 +98,18 @@ pub struct SynthArgs {
     /// training would prune them).
     #[arg(long)]
     keep_hidden: bool,
+}
+
+/// An image side of 1..=MAX_SIDE pixels.
+fn image_side(s: &str) -> Result<u32, String> {
+    let range = format!("1..={MAX_SIDE} pixels");
+    args::within::<u32>(s, 1.0, MAX_SIDE as f64, &range)
+}
+
+/// A finite number in `range`, of `unit`.
+fn in_range(s: &str, range: std::ops::RangeInclusive<f64>, unit: &str) -> Result<f64, String> {
+    let spelled = format!("{range:?} {unit}");
+    args::within::<f64>(s, *range.start(), *range.end(), &spelled)
 }
 
 pub fn run(args: SynthArgs) -> Result<()> {

@@ -15,7 +15,7 @@ use super::{check_outputs, open_dataset, write_scene_with_table, Input, FRAME_HI
 use semsplat::dataset::{user_classes, CompactClasses, Dataset, DatasetPaths};
 use semsplat::gpu::Gpu;
 use semsplat::render::SemanticMode;
-use semsplat::scene::images::load_view_image;
+use semsplat::scene::images::ImageDir;
 use semsplat::scene::ply::{classes_sidecar_path, read_ply};
 use semsplat::scene::scene_file::{
     cameras_for_scene, read_scene_or_point_cloud, resolve_scene_path,
@@ -59,8 +59,9 @@ pub struct TrainArgs {
     /// lower PSNR, mostly lower per-Gaussian accuracy, measured; docs/joint-training.md)
     #[arg(long, value_enum, conflicts_with = "init_semantics_from")]
     logit_init: Option<LogitStart>,
-    /// Iterations (one view each). The densification schedule and the entropy warm-up
-    /// follow 3DGS's 30k schedule scaled to this.
+    /// Iterations (one view each). The densification schedule (500..15000 every 100, the
+    /// interval at least 10) and the entropy warm-up follow 3DGS's 30k schedule scaled to
+    /// this; the opacity reset stays every 3000 iterations.
     #[arg(long, default_value_t = 30_000, value_parser = args::at_least_one::<u32>)]
     iters: u32,
     /// Output PLY: the trained Gaussians with their logits (sem_0..sem_{C-1}), `class` (label id,
@@ -149,7 +150,9 @@ struct LogLine {
     l1: f32,
     ssim: f32,
     psnr: f32,
-    ce: f32,
+    /// None (null) on a view without labels: it has no cross-entropy, and a 0 would read
+    /// as a perfect one.
+    ce: Option<f32>,
     entropy: f32,
 }
 
@@ -317,11 +320,12 @@ fn load_dataset(args: &TrainArgs) -> Result<Dataset> {
 /// on every core (hundreds of 1080p images and maps take seconds on one); an error is the
 /// first failing view's.
 fn train_views(args: &TrainArgs, data: &Dataset) -> Result<Vec<TrainView>> {
+    let images = ImageDir::new(&args.images);
     let view = |i: usize| -> Result<TrainView> {
         let camera = &data.cameras[i];
         Ok(TrainView {
             camera: camera.clone(),
-            rgb: load_view_image(&args.images, camera)?,
+            rgb: images.load(camera)?,
             labels: data.compact_labels(i)?.unwrap_or_default(),
         })
     };
@@ -380,12 +384,13 @@ fn train_loop(args: &TrainArgs, data: &Dataset, trainer: &mut Trainer) -> Result
                 l1: l.l1,
                 ssim: l.ssim,
                 psnr: l.psnr(),
-                ce: l.ce,
+                ce: (l.labeled_pixels > 0).then_some(l.ce),
                 entropy: l.entropy,
             };
+            let ce = line.ce.map_or("-".to_string(), |ce| format!("{ce:.3}"));
             bar.set_message(format!(
-                "L1 {:.4} SSIM {:.3} CE {:.3} H {:.3} PSNR {:.2} dB, {} Gaussians",
-                line.l1, line.ssim, line.ce, line.entropy, line.psnr, line.gaussians
+                "L1 {:.4} SSIM {:.3} CE {ce} H {:.3} PSNR {:.2} dB, {} Gaussians",
+                line.l1, line.ssim, line.entropy, line.psnr, line.gaussians
             ));
             log.push(line);
         }
@@ -421,7 +426,8 @@ fn write_trained(
     g.validate().with_context(|| {
         format!(
             "training diverged (nothing written to {}): lower the learning rates or the loss \
-             weights, or run with --deterministic, which stops at the first non-finite gradient",
+             weights, and look for extreme values in --init (`semsplat inspect` lists each \
+             attribute's range)",
             path.display()
         )
     })?;
@@ -454,7 +460,7 @@ fn check_paths(args: &TrainArgs) -> Result<()> {
         &[],
         &[
             Input::Tree("--images", Some(&args.images)),
-            Input::Tree("--labels", Some(&args.labels)),
+            Input::Labels("--labels", Some(&args.labels)),
             Input::Cameras("--cameras", args.cameras.as_deref()),
             Input::Scene("--init", Some(&args.init)),
             Input::File("--init-semantics-from", args.init_semantics_from.as_deref()),

@@ -133,13 +133,16 @@ pub fn open_truth_views(
     Ok((cameras, labels))
 }
 
+/// The name of a label folder's class table, inside the folder or beside it.
+pub const CLASS_TABLE_FILE: &str = "classes.json";
+
 /// classes.json inside the label folder or beside it, if there is one.
 pub fn default_class_table(labels: &Path) -> Option<PathBuf> {
     [
-        labels.join("classes.json"),
+        labels.join(CLASS_TABLE_FILE),
         labels
             .parent()
-            .map(|p| p.join("classes.json"))
+            .map(|p| p.join(CLASS_TABLE_FILE))
             .unwrap_or_default(),
     ]
     .into_iter()

@@ -13,6 +13,8 @@ use crate::train::loss::ImageLoss;
 /// Means over the views.
 #[derive(Clone, Copy, Debug, Serialize)]
 pub struct ImageQuality {
+    /// Mean of the views' PSNR in dB: infinite where a view renders its image exactly, which
+    /// JSON writes as null.
     pub psnr: f64,
     pub ssim: f64,
     pub views: usize,

@@ -9,7 +9,7 @@ use anyhow::{bail, Result};
 
 use crate::dataset::NO_LABEL;
 use crate::gpu::Gpu;
-use crate::render::{GpuScene, Rasterizer, RenderOptions, SemanticMode};
+use crate::render::{BandWork, GpuScene, Rasterizer, RenderOptions, SemanticMode};
 use crate::scene::classes::IGNORE_U16;
 use crate::scene::{Camera, Gaussians};
 
@@ -53,10 +53,13 @@ impl LabelRenderer {
             ..Default::default()
         };
         let pixels = cam.width as usize * cam.height as usize;
-        self.raster
-            .run_tiled_in_bands(&self.scene, cam, &opts, |rec, tiles| {
-                tiles.record_blend(rec)
-            })?;
+        self.raster.run_tiled_in_bands(
+            &self.scene,
+            cam,
+            &opts,
+            BandWork::Overwrite,
+            |rec, tiles| tiles.record_blend(rec),
+        )?;
         Ok(self
             .raster
             .last_labels(pixels)?

@@ -25,7 +25,7 @@ use crate::gpu::kernel_table::Kernel;
 use crate::gpu::staging::grown;
 use crate::gpu::timings::KernelTotal;
 use crate::gpu::{Buffer, BufferRange, Gpu, Recorder, Timings};
-use crate::render::rasterizer::{OcclusionDepths, SplitSizes, TileLists};
+use crate::render::rasterizer::{BandWork, OcclusionDepths, SplitSizes, TileLists};
 use crate::render::{camera_rows_f32, GpuScene, Rasterizer, RenderOptions};
 use crate::scene::Camera;
 use crate::util::{prefetch_ordered, BusyTime};
@@ -415,6 +415,7 @@ impl Lane {
             ctx.scene,
             &ctx.cams[view],
             &ctx.opts,
+            BandWork::Add,
             |rec, tiles| {
                 if tiles.band() == 0 {
                     labels.record_upload(rec); // every band reads the whole map
@@ -426,8 +427,9 @@ impl Lane {
         Ok(finished)
     }
 
-    /// Waits for the lane's submitted view, if any, and runs it again where its lists
-    /// overflowed (that attempt added nothing); returns its GPU work.
+    /// Waits for the lane's submitted view, if any, and runs the rows of the bands whose
+    /// lists overflowed again (those bands added nothing, the others their part); returns
+    /// its GPU work.
     fn finish(&mut self, ctx: &PassContext) -> Result<ViewGpu> {
         let Some(view) = self.view.take() else {
             return Ok(ViewGpu::default());
@@ -442,6 +444,7 @@ impl Lane {
                     ctx.scene,
                     &ctx.cams[view],
                     &ctx.opts,
+                    BandWork::Add,
                     |rec, tiles| record_contrib(rec, tiles, n, labels, carry, ctx.pass, ctx.cfg),
                 )?
             }
@@ -965,9 +968,13 @@ fn vote_occluded(
     cam: &Camera,
     labels: &ViewLabels,
 ) -> Result<ViewGpu> {
-    let run = raster.run_tiled_in_bands(ctx.scene, cam, &ctx.opts, |rec, tiles| {
-        tiles.record_blend(rec)
-    })?;
+    let run = raster.run_tiled_in_bands(
+        ctx.scene,
+        cam,
+        &ctx.opts,
+        BandWork::Overwrite,
+        |rec, tiles| tiles.record_blend(rec),
+    )?;
     let mut work = ViewGpu::of(&run.timings);
     work.add(run_vote(ctx, cam, labels, Some(raster.depth()))?);
     Ok(work)
@@ -1160,7 +1167,7 @@ pub(crate) fn center_params(
     out_addr: [u32; 2],
 ) -> Result<CenterParams> {
     Ok(CenterParams {
-        world_to_camera: camera_rows_f32(cam),
+        world_to_camera: camera_rows_f32(&scene.local_camera(cam)),
         means_addr: scene.params.means.address_words(12)?,
         out_addr,
         spatial_addr: [0, 0], // at each Gaussian's own index

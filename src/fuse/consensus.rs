@@ -213,7 +213,8 @@ pub fn consensus_evidence(
     cfg: &FuseConfig,
 ) -> Result<(ClassScores, FuseStats)> {
     let n = scene.n as usize;
-    let means: Vec<[f32; 3]> = gpu.download(&scene.params.means, 0, n)?;
+    let mut means: Vec<[f32; 3]> = gpu.download(&scene.params.means, 0, n)?;
+    scene.means_to_world(&mut means);
     let log_scales: Vec<[f32; 3]> = gpu.download(&scene.params.log_scales, 0, n)?;
     let quats: Vec<[f32; 4]> = gpu.download(&scene.params.quats, 0, n)?;
     let params = ConsensusParams::default();

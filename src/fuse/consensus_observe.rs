@@ -32,7 +32,7 @@ use crate::contract::REGION_EDGE_BIT;
 use crate::gpu::kernel_table::ids;
 use crate::gpu::timings::KernelTotal;
 use crate::gpu::{Buffer, Gpu, Recorder, Timings};
-use crate::render::rasterizer::OcclusionDepths;
+use crate::render::rasterizer::{BandWork, OcclusionDepths};
 use crate::render::{GpuScene, Rasterizer};
 use crate::scene::Camera;
 use crate::util::{prefetch_ordered, BusyTime};
@@ -502,7 +502,8 @@ fn center_pixels(
     // stops at the surface in front instead of at saturation (a third of the consensus's
     // time on lavapipe), and on an object's silhouette it is the depth of one of the two
     // surfaces, not a blend that matches neither.
-    let run = raster.run_tiled_in_bands(scene, cam, &cfg.render_options(), |rec, tiles| {
+    let opts = cfg.render_options();
+    let run = raster.run_tiled_in_bands(scene, cam, &opts, BandWork::Overwrite, |rec, tiles| {
         match footprints.as_deref_mut() {
             Some(table) => table.record_walk(rec, tiles, tiles.occlusion_depths())?,
             None => tiles.record_median_depth(rec)?,

@@ -55,6 +55,12 @@ impl Method {
         )
     }
 
+    /// Whether the method's visibility test reads `--depth-tol`: the occlusion-checked vote
+    /// and the consensus methods (the others weigh every Gaussian a pixel blends).
+    pub fn reads_depth_tolerance(self) -> bool {
+        self == Method::VoteOcclusion || self.is_consensus()
+    }
+
     /// Whether the method accumulates over each view's tile lists (alpha * T per pixel and
     /// Gaussian), as the weighted vote and FlashSplat do.
     pub fn is_tiled(self) -> bool {

@@ -384,7 +384,8 @@ pub struct FusionKey {
     /// Digest and count of the cameras fused from (after --train-only).
     pub cameras: String,
     pub camera_count: usize,
-    /// FNV-1a 64 of the matched label files (camera name and byte size of each, in order).
+    /// FNV-1a 64 of the matched label files (camera name, byte size and bytes of each, in
+    /// order).
     pub labels: String,
     pub label_files: usize,
     /// The class table of the evidence's rows, in row order.
@@ -392,7 +393,9 @@ pub struct FusionKey {
     /// `--methods` key of the method ("vote-occlusion"); it always sums in fixed point or
     /// counts (`evidence`), float atomics have no exact parts.
     pub method: String,
-    pub depth_tolerance: f32,
+    /// `--depth-tol`, where the method reads it (none for plain vote and FlashSplat, so
+    /// their parts merge whatever a shard was given).
+    pub depth_tolerance: Option<f32>,
     pub train_only: bool,
     pub evidence: EvidenceKind,
 }
@@ -410,7 +413,9 @@ pub struct PartManifest {
 
 /// `format` of every manifest.
 pub const MANIFEST_FORMAT: &str = "semsplat partial evidence";
-pub const MANIFEST_VERSION: u32 = 1;
+/// 2: the label files' contents in `labels` (1: their sizes), the cameras as their file
+/// holds them, `depth_tolerance` only for the methods that read it.
+pub const MANIFEST_VERSION: u32 = 2;
 
 /// `<part>.manifest.json`.
 pub fn manifest_path(part: &Path) -> PathBuf {

@@ -3,10 +3,12 @@
 
 use std::ops::{Index, Range};
 
+use glam::DVec3;
+
 use crate::gpu::kernel_table::ids;
 use crate::gpu::{Buffer, BufferRange, Gpu, GpuError, GpuResult, Recorder};
 use crate::scene::gaussians::SemanticLogits;
-use crate::scene::Gaussians;
+use crate::scene::{Camera, Gaussians};
 
 use super::chunks::part_of;
 use super::SemanticMode;
@@ -192,6 +194,34 @@ impl GaussianParams<Buffer> {
     }
 }
 
+/// How many widths of a scene its center may lie from the world origin before the device
+/// works relative to the center: float32's relative error (6e-8) times this stays far under
+/// a pixel of any view, and scenes built around the origin keep their bytes.
+pub const FAR_FROM_ORIGIN: f64 = 16.0;
+
+/// The origin of the device's coordinates for a scene of these means: the center of their
+/// bounding box where it lies farther from the world origin than [`FAR_FROM_ORIGIN`] times
+/// the box's width (at least a metre), as a georeferenced capture does (10^6 m away, a
+/// camera-space point computed in float32 from world coordinates is off by centimetres,
+/// which moved Gaussians' center pixels and depths); else the world origin, so a scene
+/// around it uploads its means as they are.
+pub fn device_origin(means: &[[f32; 3]]) -> DVec3 {
+    let points = means.iter().map(|m| DVec3::from(m.map(f64::from)));
+    let Some((lo, hi)) = points.fold(None, |acc: Option<(DVec3, DVec3)>, m| {
+        Some(acc.map_or((m, m), |(lo, hi)| (lo.min(m), hi.max(m))))
+    }) else {
+        return DVec3::ZERO;
+    };
+    let center = 0.5 * (lo + hi);
+    let width = (hi - lo).max_element().max(1.0);
+    if center.abs().max_element() > FAR_FROM_ORIGIN * width {
+        // Whole metres: the world's coordinates of the device's are then exact.
+        center.round()
+    } else {
+        DVec3::ZERO
+    }
+}
+
 /// `g`'s parameter tensors as the flat f32 arrays the device holds.
 fn host_tensors(g: &Gaussians) -> GaussianParams<&[f32]> {
     GaussianParams {
@@ -247,6 +277,10 @@ pub struct GpuScene {
     /// [n * C]
     pub(crate) logits: Option<Buffer>,
     pub(crate) probs: std::sync::OnceLock<Buffer>,
+    /// Where the device's coordinates have their origin, in world coordinates
+    /// ([`device_origin`]): the means are uploaded relative to it, and every camera a
+    /// kernel reads is moved with it ([`GpuScene::local_camera`]).
+    pub origin: DVec3,
 }
 
 impl GpuScene {
@@ -280,7 +314,21 @@ impl GpuScene {
             ),
             _ => (0, None),
         };
-        let host = host_tensors(g);
+        let origin = device_origin(&g.means);
+        let local_means: Option<Vec<f32>> = (origin != DVec3::ZERO).then(|| {
+            g.means
+                .iter()
+                .flat_map(|m| {
+                    (DVec3::from(m.map(f64::from)) - origin)
+                        .as_vec3()
+                        .to_array()
+                })
+                .collect()
+        });
+        let mut host = host_tensors(g);
+        if let Some(means) = &local_means {
+            host.means = means;
+        }
         let colour = attributes.holds(ParamTensor::Sh);
         Ok(GpuScene {
             n: g.len() as u32,
@@ -298,7 +346,29 @@ impl GpuScene {
             })?,
             logits,
             probs: std::sync::OnceLock::new(),
+            origin,
         })
+    }
+
+    /// Means downloaded from the device, moved back into world coordinates.
+    pub(crate) fn means_to_world(&self, means: &mut [[f32; 3]]) {
+        if self.origin != DVec3::ZERO {
+            for m in means {
+                *m = (DVec3::from(m.map(f64::from)) + self.origin)
+                    .as_vec3()
+                    .to_array();
+            }
+        }
+    }
+
+    /// `cam` in the device's coordinates (the world moved by -[`GpuScene::origin`]): what
+    /// every kernel that projects this scene's means is given.
+    pub(crate) fn local_camera(&self, cam: &Camera) -> Camera {
+        let mut local = cam.clone();
+        if self.origin != DVec3::ZERO {
+            local.translation += cam.rotation * self.origin;
+        }
+        local
     }
 
     /// Uploads `g` (without its logits) with one class per Gaussian for label rendering:
@@ -388,6 +458,7 @@ impl GpuScene {
             .params
             .download_with(gpu, self.n, self.sh_coeffs, &extra)?;
         g.means = bytemuck::cast_slice(&params.means).to_vec();
+        self.means_to_world(&mut g.means);
         g.log_scales = bytemuck::cast_slice(&params.log_scales).to_vec();
         g.quats = bytemuck::cast_slice(&params.quats).to_vec();
         g.opacity_logits = params.opacity_logits;

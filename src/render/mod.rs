@@ -10,14 +10,15 @@ pub mod windows;
 
 pub use frame::RenderedFrame;
 pub use gpu_scene::GpuScene;
-pub use rasterizer::Rasterizer;
+pub use rasterizer::{BandWork, Rasterizer};
 
 use serde::Serialize;
 
 use crate::gpu::{Mark, Timings};
 
 /// The world-to-camera transform as three float32 rows (R00 R01 R02 t0, ...), as the
-/// kernels take it in push constants.
+/// kernels take it in push constants; `cam` in the device's coordinates
+/// ([`GpuScene::local_camera`]).
 pub(crate) fn camera_rows_f32(cam: &crate::scene::Camera) -> [[f32; 4]; 3] {
     let (r, t) = (cam.rotation, cam.translation);
     [0, 1, 2].map(|k| {
@@ -34,6 +35,7 @@ pub(crate) fn project_params(
     near: f32,
     far: f32,
 ) -> crate::contract::params::ProjectParams {
+    let cam = &scene.local_camera(cam);
     let c = cam.center();
     crate::contract::params::ProjectParams {
         world_to_camera: camera_rows_f32(cam),

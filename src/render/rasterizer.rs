@@ -102,6 +102,29 @@ pub struct Rasterizer {
     list_bands: u32,
     /// Entries one band's lists hold at most, when a test sets it (else one binding's).
     list_capacity: Option<u32>,
+    /// The rows an additive pass's view must run again after some of its bands overflowed.
+    retry: Option<Retry>,
+}
+
+/// What a per-tile pass does to the frame, which decides what a view whose lists
+/// overflowed in some bands runs again.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BandWork {
+    /// Writes each pixel's outputs (rendering, depths): the whole view runs again, since
+    /// growing the lists may reallocate the outputs the other bands wrote.
+    Overwrite,
+    /// Adds into the caller's buffers (fusion's evidence): the bands that did not overflow
+    /// have added their part, so only the rows of those that did run again (running every
+    /// band again counted the others twice).
+    Add,
+}
+
+/// The rows of a view an additive pass runs again, and the intersections its bands that
+/// did not overflow already binned (for the run's statistics).
+struct Retry {
+    cam: Camera,
+    rows: Vec<Range<u32>>,
+    intersections: u32,
 }
 
 /// How finely the rasterizer splits its work, where a test overrides the sizes the device
@@ -123,6 +146,13 @@ struct PendingRun {
     recorded: RecordedRun,
     cam: Camera,
     banded: bool,
+    work: BandWork,
+    /// The attempt's bands of tile rows, and whether they are only the rows of an
+    /// additive pass's retry (not the whole frame).
+    rows: Vec<Range<u32>>,
+    partial: bool,
+    /// Intersections of the view's bands an earlier attempt already ran (a retry's).
+    done_intersections: u32,
     /// The sizes the attempt ran with (grown from on an overflow).
     need: Need,
 }
@@ -171,13 +201,20 @@ enum Attempt {
 /// `tiles_y` tile rows split into at most `bands` consecutive ranges of nearly equal size,
 /// each starting at a multiple of `step` rows.
 fn split_rows(tiles_y: u32, bands: u32, step: u32) -> Vec<Range<u32>> {
-    let per_band = tiles_y
-        .div_ceil(bands.max(1))
-        .next_multiple_of(step.max(1))
+    split_range(0..tiles_y.max(1), bands, step)
+}
+
+/// `rows` (starting at a multiple of `step`) split into at most `bands` consecutive ranges
+/// of nearly equal size, each starting at a multiple of `step` rows.
+fn split_range(rows: Range<u32>, bands: u32, step: u32) -> Vec<Range<u32>> {
+    let per_band = rows
+        .len()
+        .div_ceil(bands.max(1) as usize)
+        .next_multiple_of(step.max(1) as usize)
         .max(1);
-    (0..tiles_y.max(1))
-        .step_by(per_band as usize)
-        .map(|first| first..(first + per_band).min(tiles_y))
+    let end = rows.end;
+    rows.step_by(per_band)
+        .map(|first| first..(first + per_band as u32).min(end))
         .collect()
 }
 
@@ -296,6 +333,7 @@ impl Rasterizer {
             list_bands: 1,
             list_capacity: None,
             pending: None,
+            retry: None,
         }
     }
 
@@ -416,7 +454,9 @@ impl Rasterizer {
         opts: &RenderOptions,
     ) -> Result<RenderedFrame> {
         let frame =
-            self.run_tiled_in_bands(scene, cam, opts, |rec, tiles| tiles.record_blend(rec))?;
+            self.run_tiled_in_bands(scene, cam, opts, BandWork::Overwrite, |rec, tiles| {
+                tiles.record_blend(rec)
+            })?;
         self.download_frame(cam, &frame)
     }
 
@@ -461,31 +501,34 @@ impl Rasterizer {
     where
         F: FnMut(&mut Recorder, &TileLists) -> Result<()>,
     {
-        self.run_binned(scene, cam, opts, false, per_tile)
+        self.run_binned(scene, cam, opts, None, per_tile)
     }
 
     /// [`Rasterizer::run_tiled`] for passes that honour [`FrameSpec::rows`]: a view whose
     /// (tile, Gaussian) pairs pass one binding (or 2^32) is binned in bands of tile rows,
-    /// each binned and passed to `per_tile` in turn.
+    /// each binned and passed to `per_tile` in turn. `work` says what runs again where some
+    /// bands overflowed ([`BandWork`]).
     pub fn run_tiled_in_bands<F>(
         &mut self,
         scene: &GpuScene,
         cam: &Camera,
         opts: &RenderOptions,
+        work: BandWork,
         per_tile: F,
     ) -> Result<TiledRun>
     where
         F: FnMut(&mut Recorder, &TileLists) -> Result<()>,
     {
-        self.run_binned(scene, cam, opts, true, per_tile)
+        self.run_binned(scene, cam, opts, Some(work), per_tile)
     }
 
+    /// Runs the view until no band overflows (`banded`: None bins it in one band).
     fn run_binned<F>(
         &mut self,
         scene: &GpuScene,
         cam: &Camera,
         opts: &RenderOptions,
-        banded: bool,
+        banded: Option<BandWork>,
         mut per_tile: F,
     ) -> Result<TiledRun>
     where
@@ -508,22 +551,24 @@ impl Rasterizer {
         scene: &GpuScene,
         cam: &Camera,
         opts: &RenderOptions,
+        work: BandWork,
         mut per_tile: F,
     ) -> Result<()>
     where
         F: FnMut(&mut Recorder, &TileLists) -> Result<()>,
     {
-        self.submit_binned(scene, cam, opts, true, &mut per_tile)
+        self.submit_binned(scene, cam, opts, Some(work), &mut per_tile)
     }
 
     /// Records one attempt at the view (binning and `per_tile`, band by band, then a copy
-    /// of the status words the host reads) and submits it.
+    /// of the status words the host reads) and submits it: the whole frame, or an additive
+    /// pass's rows left to run again.
     fn submit_binned<F>(
         &mut self,
         scene: &GpuScene,
         cam: &Camera,
         opts: &RenderOptions,
-        banded: bool,
+        banded: Option<BandWork>,
         per_tile: &mut F,
     ) -> Result<()>
     where
@@ -543,20 +588,31 @@ impl Rasterizer {
         let frame = self.frame_spec(scene, cam, opts)?;
         let need = self.need(scene, &frame);
         self.ensure(need)?;
-        // Start from the last view's band count: neighbouring views need about the same.
-        let bands = if banded {
-            self.list_bands.min(frame.tiles_y)
-        } else {
-            1
+        let work = banded.unwrap_or(BandWork::Overwrite);
+        let retry = self.retry.take().filter(|r| r.cam == *cam);
+        let (rows, partial, done_intersections) = match retry {
+            Some(r) if work == BandWork::Add => (r.rows, true, r.intersections),
+            _ => {
+                // Start from the last view's band count: neighbouring views need about the
+                // same.
+                let bands = match banded {
+                    Some(_) => self.list_bands.min(frame.tiles_y),
+                    None => 1,
+                };
+                let step = row_step(cam.width, frame.band_limits.offset_alignment);
+                (split_rows(frame.tiles_y, bands, step), false, 0)
+            }
         };
-        let step = row_step(cam.width, frame.band_limits.offset_alignment);
-        let rows = split_rows(frame.tiles_y, bands, step);
         let (recorded, rec) = self.record_bands(scene, opts, &frame, &rows, per_tile)?;
         self.pending = Some(PendingRun {
             submission: rec.submit()?,
             recorded,
             cam: cam.clone(),
-            banded,
+            banded: banded.is_some(),
+            work,
+            rows,
+            partial,
+            done_intersections,
             need,
         });
         Ok(())
@@ -577,10 +633,19 @@ impl Rasterizer {
         let bands = pending.recorded.spans.len();
         let words: Vec<u32> = b.status_host.read_mapped(bands * stride);
         let statuses: Vec<Vec<u32>> = words.chunks(stride).map(|w| w.to_vec()).collect();
-        let run = pending.recorded.run(timings, &statuses);
-        match self.next_attempt(&pending.cam, &statuses, bands as u32, pending.banded)? {
+        let mut run = pending.recorded.run(timings, &statuses);
+        run.intersections = run.intersections.saturating_add(pending.done_intersections);
+        let attempt = self.next_attempt(&pending.cam, &statuses, bands as u32, pending.banded)?;
+        if pending.work == BandWork::Add && !matches!(attempt, Attempt::Done) {
+            let done = pending.done_intersections;
+            let retry = self.failed_rows(&pending.cam, &pending.rows, done, &statuses, &attempt)?;
+            self.retry = Some(retry);
+        }
+        match attempt {
             Attempt::Done => {
-                self.list_bands = bands as u32;
+                if !pending.partial {
+                    self.list_bands = bands as u32;
+                }
                 Ok(Some(run))
             }
             Attempt::Grow(isect) => {
@@ -591,10 +656,65 @@ impl Rasterizer {
                 Ok(None)
             }
             Attempt::Split(more) => {
-                self.list_bands = more;
+                self.list_bands = self.list_bands.max(more);
                 Ok(None)
             }
         }
+    }
+
+    /// The rows of an attempt's bands (`rows`, with `statuses`) that overflowed, which an
+    /// additive pass runs again: as they were for lists grown, or each split in enough bands
+    /// that its pairs fit. `done`: intersections of bands earlier attempts ran.
+    fn failed_rows(
+        &self,
+        cam: &Camera,
+        rows: &[Range<u32>],
+        done: u32,
+        statuses: &[Vec<u32>],
+        attempt: &Attempt,
+    ) -> Result<Retry> {
+        let fits = self.list_capacity();
+        let step = row_step(cam.width, self.gpu.caps().min_storage_offset_alignment);
+        let mut retry = Retry {
+            cam: cam.clone(),
+            rows: Vec::new(),
+            intersections: done,
+        };
+        for (status, rows) in statuses.iter().zip(rows) {
+            let wrapped = status[ST_ISECT_WRAPPED as usize] != 0;
+            if !wrapped && status[ST_OVERFLOW as usize] == 0 {
+                retry.intersections = retry
+                    .intersections
+                    .saturating_add(status[ST_ISECT as usize]);
+                continue;
+            }
+            let needed = status[ST_ISECT_NEEDED as usize];
+            let pieces = match attempt {
+                Attempt::Split(_) if wrapped => 4,
+                Attempt::Split(_) => needed.div_ceil(fits) + 1,
+                _ => 1,
+            };
+            let split = split_range(rows.clone(), pieces, step);
+            ensure!(
+                pieces == 1 || split.len() > 1,
+                "view {}: tile rows {rows:?} alone cover {} (tile, Gaussian) pairs, more than one \
+                 list holds within the binding limit ({fits} entries); render a smaller image or \
+                 fewer (or smaller) Gaussians",
+                cam.name,
+                if wrapped {
+                    "more than 2^32 - 1".to_string()
+                } else {
+                    needed.to_string()
+                }
+            );
+            retry.rows.extend(split);
+        }
+        ensure!(
+            retry.rows.len() <= MAX_LIST_BANDS as usize,
+            "view {}: its lists need more than {MAX_LIST_BANDS} bands of tile rows",
+            cam.name
+        );
+        Ok(retry)
     }
 
     /// Records the view's binning and `per_tile` band by band, and the copy of each band's
@@ -907,7 +1027,8 @@ impl Buffers {
         // With float64, the camera-space and 2D means are computed from the camera in
         // double precision (float32 loses ~1e-5 px, which shows in alpha).
         let kernel = if float64 {
-            let (r, t) = (cam.rotation, cam.translation);
+            let local = scene.local_camera(cam);
+            let (r, t) = (local.rotation, local.translation);
             let camera64: Vec<f64> = (0..3)
                 .flat_map(|k| {
                     let row = r.row(k);

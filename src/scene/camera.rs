@@ -13,6 +13,9 @@ pub enum Split {
     Test,
 }
 
+/// Most pixels a view may have: the kernels index a frame's pixels in 32 bits.
+pub const MAX_PIXELS: u64 = u32::MAX as u64;
+
 #[derive(Clone, Debug, PartialEq)]
 pub struct Camera {
     /// Image name without extension (the stem), or for images whose stems repeat (multi-camera
@@ -127,6 +130,14 @@ impl Camera {
         if self.width == 0 || self.height == 0 {
             anyhow::bail!(
                 "camera '{name}' has size {}x{}; both must be positive",
+                self.width,
+                self.height
+            );
+        }
+        if self.width as u64 * self.height as u64 > MAX_PIXELS {
+            anyhow::bail!(
+                "camera '{name}' has size {}x{}: more than {MAX_PIXELS} pixels, which the \
+                 kernels' 32-bit pixel indices cannot address",
                 self.width,
                 self.height
             );

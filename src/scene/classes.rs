@@ -126,9 +126,22 @@ impl ClassTable {
     }
 
     /// The class a user names on the command line: an exact name, else a name matched
-    /// case-insensitively (when only one matches), else an id. The error lists the names.
+    /// case-insensitively (when only one matches), else an id. A key that is one class's
+    /// name and another's id is an error naming both. The error lists the names.
     pub fn find(&self, key: &str) -> Result<&ClassInfo> {
+        let by_id = key.trim().parse::<u32>().ok().and_then(|id| self.get(id));
         if let Some(c) = self.by_name(key) {
+            if let Some(other) = by_id.filter(|o| o.id != c.id) {
+                bail!(
+                    "class '{key}' is the name of class {} and the id of class '{}': give \
+                     '{}' for class {}, or rename class {}",
+                    c.id,
+                    other.name,
+                    other.name,
+                    other.id,
+                    c.id
+                );
+            }
             return Ok(c);
         }
         let folded: Vec<&ClassInfo> = self
@@ -144,7 +157,7 @@ impl ClassTable {
                 bail!("class '{key}' matches several names when case is ignored: {names:?}; give the exact name or the id")
             }
         }
-        if let Some(c) = key.trim().parse::<u32>().ok().and_then(|id| self.get(id)) {
+        if let Some(c) = by_id {
             return Ok(c);
         }
         let names: Vec<&str> = self.classes.iter().map(|c| c.name.as_str()).collect();
@@ -241,4 +254,36 @@ pub fn write_class_table(path: &Path, table: &ClassTable) -> Result<()> {
         w.write_all(b"\n")?;
         Ok(())
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn table(classes: &[(u32, &str)]) -> ClassTable {
+        ClassTable {
+            classes: (classes.iter())
+                .map(|&(id, name)| ClassInfo {
+                    id,
+                    name: name.into(),
+                    color: [0; 3],
+                })
+                .collect(),
+        }
+    }
+
+    #[test]
+    fn find_takes_names_then_ids_and_refuses_a_key_that_is_both() {
+        let t = table(&[(0, "floor"), (7, "Wall"), (1000, "vase"), (3, "1000")]);
+        assert_eq!(t.find("floor").unwrap().id, 0);
+        assert_eq!(t.find("wall").unwrap().id, 7); // case ignored
+        assert_eq!(t.find("7").unwrap().id, 7); // an id
+        let err = t.find("1000").unwrap_err().to_string();
+        assert!(
+            err.contains("name of class 3") && err.contains("id of class 'vase'"),
+            "{err}"
+        );
+        assert_eq!(t.find("vase").unwrap().id, 1000);
+        assert!(t.find("sofa").is_err());
+    }
 }

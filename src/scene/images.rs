@@ -1,18 +1,82 @@
 //! RGB images of the views, matched to cameras by name.
 
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
 
 use anyhow::{bail, Context, Result};
 
 use super::Camera;
 
-/// Loads `<name>.png|jpg|jpeg` (the extension in any case) for a camera as [H, W, 3]
-/// floats in [0, 1]; a name with subfolders (`cam0/00001`) reads from the same subfolders of
-/// `dir`. Two images of one name (`x.png` and `x.jpg`) are an error: which is the view's
-/// would be a guess.
+/// Loads one camera's image from `dir` (see [`ImageDir::load`]).
 pub fn load_view_image(dir: &Path, cam: &Camera) -> Result<Vec<f32>> {
-    let path = view_image_path(dir, &cam.name)?;
-    let img = image::open(&path).with_context(|| format!("reading {}", path.display()))?;
+    ImageDir::new(dir).load(cam)
+}
+
+/// A folder of view images, matched to cameras as label maps are: `<name>.png|jpg|jpeg`
+/// (the extension in any case), a name with subfolders (`cam0/00001`) in the same
+/// subfolders, and a plain name not found there by its stem anywhere below (a rig whose
+/// image stems are unique names its cameras by stem: `cam1/0005.jpg` is camera `0005`).
+pub struct ImageDir {
+    dir: PathBuf,
+    /// Every image below `dir` by stem, listed once on the first name not found directly.
+    by_stem: OnceLock<HashMap<String, Vec<PathBuf>>>,
+}
+
+impl ImageDir {
+    pub fn new(dir: &Path) -> ImageDir {
+        ImageDir {
+            dir: dir.to_path_buf(),
+            by_stem: OnceLock::new(),
+        }
+    }
+
+    /// The camera's image as [H, W, 3] floats in [0, 1]. Two images of one name (`x.png`
+    /// and `x.jpg`, or one stem in two subfolders) are an error: which is the view's would
+    /// be a guess.
+    pub fn load(&self, cam: &Camera) -> Result<Vec<f32>> {
+        let path = self.path_of(&cam.name)?;
+        decode_view_image(&path, cam)
+    }
+
+    fn path_of(&self, name: &str) -> Result<PathBuf> {
+        let found = view_images_named(&self.dir, name)?;
+        if !found.is_empty() || name.contains('/') {
+            return one_image(&self.dir, name, found);
+        }
+        let index = self.by_stem.get_or_init(|| images_below(&self.dir));
+        let below = index.get(name).cloned().unwrap_or_default();
+        one_image(&self.dir, name, below)
+    }
+}
+
+/// The images below `dir` (its subfolders too) by file stem.
+fn images_below(dir: &Path) -> HashMap<String, Vec<PathBuf>> {
+    let mut by_stem: HashMap<String, Vec<PathBuf>> = HashMap::new();
+    let mut folders = vec![dir.to_path_buf()];
+    while let Some(folder) = folders.pop() {
+        let Ok(entries) = std::fs::read_dir(&folder) else {
+            continue;
+        };
+        for path in entries.filter_map(|e| e.ok().map(|e| e.path())) {
+            if path.is_dir() {
+                folders.push(path);
+            } else if let Some(stem) = path.file_stem().and_then(|s| s.to_str()) {
+                if is_view_image(&path) {
+                    by_stem.entry(stem.to_string()).or_default().push(path);
+                }
+            }
+        }
+    }
+    for paths in by_stem.values_mut() {
+        paths.sort();
+    }
+    by_stem
+}
+
+/// Decodes the image at `path` for `cam`, checking its size.
+fn decode_view_image(path: &Path, cam: &Camera) -> Result<Vec<f32>> {
+    let img = image::open(path).with_context(|| format!("reading {}", path.display()))?;
     let (width, height) = (img.width(), img.height());
     if (width, height) != (cam.width, cam.height) {
         bail!(
@@ -41,7 +105,6 @@ pub fn load_view_image(dir: &Path, cam: &Camera) -> Result<Vec<f32>> {
     Ok(over_black.collect())
 }
 
-/// The image file of view `name` in `dir`.
 /// The extensions of view images (and of label maps, PNG), in lower case.
 pub const VIEW_IMAGE_EXTENSIONS: [&str; 3] = ["png", "jpg", "jpeg"];
 
@@ -54,7 +117,8 @@ pub fn is_view_image(path: &Path) -> bool {
     VIEW_IMAGE_EXTENSIONS.contains(&ext.to_ascii_lowercase().as_str())
 }
 
-fn view_image_path(dir: &Path, name: &str) -> Result<PathBuf> {
+/// The image files of view `name` at its path in `dir`, any case of extension.
+fn view_images_named(dir: &Path, name: &str) -> Result<Vec<PathBuf>> {
     // The usual spellings first: a few stats a view, where listing the folder for every
     // view would read a capture's thousands of entries thousands of times.
     let spellings = VIEW_IMAGE_EXTENSIONS
@@ -67,10 +131,16 @@ fn view_image_path(dir: &Path, name: &str) -> Result<PathBuf> {
     }
     // One file can answer to two spellings on a case-insensitive file system.
     found.dedup_by(|a, b| same_file(a, b));
+    Ok(found)
+}
+
+/// The one image found for view `name`, or an error naming none or all.
+fn one_image(dir: &Path, name: &str, mut found: Vec<PathBuf>) -> Result<PathBuf> {
     match found.len() {
         1 => Ok(found.remove(0)),
         0 => bail!(
-            "no image for camera {name} in {} (expected {name}.png or .jpg)",
+            "no image for camera {name} in {} (expected {name}.png or .jpg, there or by its \
+             stem in a subfolder)",
             dir.display()
         ),
         _ => bail!(

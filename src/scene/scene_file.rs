@@ -56,23 +56,47 @@ pub fn cameras_for_scene(cameras: Option<&Path>, scene: &Path) -> Result<PathBuf
     if let Some(path) = cameras {
         return Ok(path.to_path_buf());
     }
-    let folder = match scene.is_dir() {
-        true => scene,
-        false => scene.parent().unwrap_or(Path::new("")),
-    };
-    let beside = folder.join(CAMERAS_FILE);
-    if !beside.is_file() {
+    let Some(beside) = scene_cameras_file(scene) else {
         bail!(
-            "--cameras is needed (a COLMAP model folder, an INRIA cameras.json or a semsplat \
-             cameras.json): the scene's folder, {}, holds no {CAMERAS_FILE}",
-            display_folder(folder)
+            "--cameras is needed (a COLMAP model folder, an INRIA or nerfstudio camera file, or \
+             a semsplat cameras.json): the scene's folder, {}, holds no {CAMERAS_FILE}",
+            display_folder(scene_folder(scene))
         );
-    }
+    };
     eprintln!(
         "cameras: {} (the scene's; --cameras to choose others)",
         beside.display()
     );
     Ok(beside)
+}
+
+/// The folder a scene given as a file or a folder lies in.
+fn scene_folder(scene: &Path) -> &Path {
+    match scene.is_dir() {
+        true => scene,
+        false => scene.parent().unwrap_or(Path::new("")),
+    }
+}
+
+/// The scene's own cameras, where it has them: the `cameras.json` of its folder, or of the
+/// INRIA run it lies in (`run/point_cloud` or `run/point_cloud/iteration_N`, the cameras
+/// at `run/cameras.json`).
+pub fn scene_cameras_file(scene: &Path) -> Option<PathBuf> {
+    let folder = scene_folder(scene);
+    let name_of = |p: &Path| p.file_name().and_then(|n| n.to_str()).map(str::to_owned);
+    let mut run = folder;
+    if name_of(run).is_some_and(|n| n.starts_with("iteration_")) {
+        run = run.parent().unwrap_or(run);
+    }
+    let run = match name_of(run).as_deref() {
+        Some("point_cloud") => run.parent(),
+        _ => None,
+    };
+    [Some(folder), run]
+        .into_iter()
+        .flatten()
+        .map(|f| f.join(CAMERAS_FILE))
+        .find(|c| c.is_file())
 }
 
 /// A folder as a message names it (the current folder as `.`).

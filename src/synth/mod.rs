@@ -123,7 +123,15 @@ pub const DEFAULT_HFOV_DEG: f64 = 65.0;
 pub const DEFAULT_SPACING: f64 = 0.03;
 pub const DEFAULT_INIT_SPACING: f64 = 0.12;
 pub const DEFAULT_INIT_JITTER: f64 = 0.01;
-const MAX_SIDE: u32 = 8192;
+/// Largest image side `synth` renders, in pixels.
+pub const MAX_SIDE: u32 = 8192;
+/// The ranges of the numeric settings (checked by [`SynthConfig::validate`] and the CLI's
+/// parsers): horizontal field of view in degrees, Gaussian spacing, init point spacing and
+/// init jitter in metres.
+pub const HFOV_RANGE: std::ops::RangeInclusive<f64> = 20.0..=120.0;
+pub const SPACING_RANGE: std::ops::RangeInclusive<f64> = 0.002..=1.0;
+pub const INIT_SPACING_RANGE: std::ops::RangeInclusive<f64> = 0.01..=5.0;
+pub const INIT_JITTER_RANGE: std::ops::RangeInclusive<f64> = 0.0..=1.0;
 const MAX_TOTAL_PIXELS: f64 = 4e8;
 const MAX_GAUSSIANS: f64 = 2e7;
 
@@ -172,23 +180,23 @@ impl SynthConfig {
             self.height
         );
         ensure!(
-            self.hfov_deg.is_finite() && (20.0..=120.0).contains(&self.hfov_deg),
-            "field of view must be 20..=120 degrees, got {}",
+            HFOV_RANGE.contains(&self.hfov_deg),
+            "field of view must be {HFOV_RANGE:?} degrees, got {}",
             self.hfov_deg
         );
         ensure!(
-            self.spacing.is_finite() && (0.002..=1.0).contains(&self.spacing),
-            "Gaussian spacing must be 0.002..=1 m, got {}",
+            SPACING_RANGE.contains(&self.spacing),
+            "Gaussian spacing must be {SPACING_RANGE:?} m, got {}",
             self.spacing
         );
         ensure!(
-            self.init_spacing.is_finite() && (0.01..=5.0).contains(&self.init_spacing),
-            "init point spacing must be 0.01..=5 m, got {}",
+            INIT_SPACING_RANGE.contains(&self.init_spacing),
+            "init point spacing must be {INIT_SPACING_RANGE:?} m, got {}",
             self.init_spacing
         );
         ensure!(
-            self.init_jitter.is_finite() && (0.0..=1.0).contains(&self.init_jitter),
-            "init jitter must be 0..=1 m, got {}",
+            INIT_JITTER_RANGE.contains(&self.init_jitter),
+            "init jitter must be {INIT_JITTER_RANGE:?} m, got {}",
             self.init_jitter
         );
         Ok(())

@@ -93,7 +93,7 @@ pub fn write_synth_with_progress(dir: &Path, scene: &SynthScene, progress: Progr
     write_classes_sidecar(&dir.join(SCENE_FILE), &room.classes)?;
     write_ply(&dir.join("init.ply"), &scene.init_points)?;
     write_semsplat_cameras(&dir.join(CAMERAS_FILE), &scene.cameras)?;
-    write_class_table(&dir.join("classes.json"), &room.classes)?;
+    write_class_table(&dir.join(crate::dataset::CLASS_TABLE_FILE), &room.classes)?;
     let instances: Vec<InstanceEntry> = room
         .instances
         .iter()

@@ -455,6 +455,7 @@ impl Trainer {
             params,
             logits,
             probs: OnceLock::new(),
+            origin: old.origin,
         };
         let mut grads = SceneGrads::new(&self.gpu, &scene, self.grads.accumulation)?;
         grads.semantics_only = self.grads.semantics_only;

@@ -51,6 +51,17 @@ pub fn fails(args: &[&str]) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()
 }
 
+/// The PNG label maps of a room `dir`'s `labels` folder, in name order.
+pub fn label_pngs(dir: &Path) -> Vec<std::path::PathBuf> {
+    let mut maps: Vec<_> = std::fs::read_dir(dir.join("labels"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "png"))
+        .collect();
+    maps.sort();
+    maps
+}
+
 /// Writes the tiny synthetic room into `dir`: `views` train views and one held-out view at
 /// `width` x `height`, without preview images.
 pub fn synth_tiny(dir: &Path, views: u32, (width, height): (u32, u32)) {

@@ -16,6 +16,7 @@ task's worker process (=kill).
 
 import argparse
 import os
+import re
 import shlex
 import shutil
 import subprocess
@@ -24,7 +25,15 @@ import time
 from pathlib import Path
 
 os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
-import ray  # noqa: E402  (after the environment above)
+try:
+    import ray  # noqa: E402  (after the environment above)
+except ModuleNotFoundError:
+    # --help needs no Ray; a run does, and says so in one line rather than a traceback.
+    ray = None
+
+
+# The files a shard's part is: part<K>.npy and its manifest.
+STALE_PART = re.compile(r"part\d+\.(npy|manifest\.json)")
 
 
 def parse_args(argv):
@@ -56,6 +65,14 @@ def parse_args(argv):
         value = getattr(args, name)
         if os.path.exists(value):
             setattr(args, name, os.path.abspath(value))
+    # On a local cluster every task sees the driver's files: name what is missing now, not
+    # once per shard and retry.
+    if args.address is None:
+        for name in ("scene", "cameras", "labels"):
+            if not os.path.exists(getattr(args, name)):
+                p.error(f"--{name} {getattr(args, name)} does not exist")
+        if shutil.which(args.semsplat) is None:
+            p.error(f"--semsplat {args.semsplat}: no such program (give the CLI's path)")
     return args
 
 
@@ -141,10 +158,14 @@ def gather(refs, args):
 
 def main(argv):
     args = parse_args(argv)
+    if ray is None:
+        sys.exit("error: this driver needs Ray on the driver and every node: pip install 'ray[default]'")
     parts = Path(args.parts).resolve()
     parts.mkdir(parents=True, exist_ok=True)
-    for stale in parts.glob("part*"):
-        stale.unlink()
+    # An earlier run's parts (merge would refuse a stale one); nothing else in the folder.
+    for stale in parts.iterdir():
+        if STALE_PART.fullmatch(stale.name) and stale.is_file():
+            stale.unlink()
     for marker in parts.glob(".fault-shard*"):
         marker.unlink()
     if args.address:

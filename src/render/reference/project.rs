@@ -22,7 +22,7 @@ pub const FRUSTUM_MARGIN: f64 = 0.3;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Culled {
     /// A non-finite input value (mean, scale, quaternion or opacity logit), or a projection
-    /// that came out non-finite.
+    /// that came out non-finite or with a 2D covariance past float32's range.
     NonFinite,
     /// Camera-space depth `<= near` or `>= far`.
     Depth,
@@ -267,7 +267,10 @@ pub(super) fn project_values(
     let det = (a * c - b * b).max(DET_MIN);
     let conic = [c / det, -b / det, a / det];
     let mean2d = DVec2::new(cam.fx * p.x / p.z + cam.cx, cam.fy * p.y / p.z + cam.cy);
-    if !(mean2d.is_finite() && conic.iter().all(|v| v.is_finite())) {
+    // A 2D covariance past float32's range (scales of e^40 and more) is not drawn: the
+    // device, which holds it in float32, has no footprint for it.
+    let fits_f32 = [a, b, c].iter().all(|&v| v.abs() <= f32::MAX as f64);
+    if !(mean2d.is_finite() && conic.iter().all(|v| v.is_finite()) && fits_f32) {
         return Err(Culled::NonFinite);
     }
 

@@ -220,8 +220,12 @@ impl LabelDir {
             );
         }
         let allowed = table.map(allowed_ids);
+        // 16-bit maps count class 255: the note is for folders holding 8-bit maps.
+        let ignored = table
+            .and_then(|t| ignored_class_note(format, t))
+            .filter(|_| entries.iter().any(|e| holds_8_bit_ids(&e.path)));
         let notes = (scaled_note(&entries, cameras).into_iter())
-            .chain(table.and_then(|t| ignored_class_note(format, t)))
+            .chain(ignored)
             .collect();
         Ok(LabelDir {
             dir: dir.to_owned(),
@@ -344,16 +348,22 @@ fn check_ignore_id(format: &LabelFormat, table: Option<&ClassTable>) -> Result<(
     Ok(())
 }
 
+/// Whether the map at `path` holds 8-bit ids (its header says; an unreadable one is
+/// reported where the map is read).
+fn holds_8_bit_ids(path: &Path) -> bool {
+    read_png_header(path).is_ok_and(|h| h.bit_depth <= 8)
+}
+
 /// A class of the table at 8-bit maps' default "no label", 255: tables that list it as
 /// "void" mean exactly that, but a real class there would silently never count, so the
 /// user hears which it is taken for, and how to count it.
-fn ignored_class_note(format: &LabelFormat, table: &ClassTable) -> Option<String> {
+pub fn ignored_class_note(format: &LabelFormat, table: &ClassTable) -> Option<String> {
     let ignore = u32::from(format.ignore_for_depth(8));
     let class = table.get(ignore).filter(|_| format.ignore_id.is_none())?;
     Some(format!(
         "note: class {ignore} '{}' of the class table is 8-bit label maps' default \
-         \"no label\": its pixels are ignored; to count them as a class, pass --ignore-id \
-         with an id no class uses",
+         \"no label\": in 8-bit maps its pixels are ignored; to count them as a class, pass \
+         --ignore-id with an id no class uses",
         class.name
     ))
 }
