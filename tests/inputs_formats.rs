@@ -103,6 +103,23 @@ fn truncated_npy_names_the_file_and_byte_counts() {
     );
 }
 
+/// Contributions that are finite one by one but whose sum for a Gaussian is not (its
+/// confidence would divide by infinity) are refused, naming the Gaussian; NaN too.
+#[test]
+fn evidence_past_float64s_range_is_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("A.npy");
+    let cases: [(&[f64], &str); 2] = [
+        (&[1., 1e308, 3., 4., 1e308, 6.], "Gaussian 1 sum past"),
+        (&[1., f64::NAN, 3., 4., 5., 6.], "finite and >= 0"),
+    ];
+    for (values, needle) in cases {
+        std::fs::write(&path, npy_bytes("<f8", false, &[2, 3], &f64_bytes(values))).unwrap();
+        let err = format!("{:#}", ClassScores::load_npy(&path).unwrap_err());
+        assert!(err.contains(needle), "{err}");
+    }
+}
+
 /// `n` plain Gaussians along x (degree 0), enough for file-format tests.
 fn line_of_gaussians(n: usize) -> Gaussians {
     Gaussians {

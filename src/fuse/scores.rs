@@ -7,7 +7,7 @@ use std::io::{Read, Seek, SeekFrom, Write};
 use std::path::Path;
 use std::sync::Arc;
 
-use anyhow::{ensure, Context, Result};
+use anyhow::{bail, ensure, Context, Result};
 
 use crate::util::atomic_write::{stage_scratch, StagedFile};
 use crate::util::npy::{read_npy_f64, write_npy_rows, NpyArray};
@@ -53,9 +53,22 @@ impl ClassScores {
             "{}: contributions must be finite and >= 0",
             path.display()
         );
+        let n = shape[1] as usize;
+        // A Gaussian's shares divide by its total: one past f64's range gave its class a
+        // confidence of 0 and its one-vs-rest tests NaN.
+        let mut totals = vec![0.0f64; n];
+        for row in data.chunks(n.max(1)) {
+            totals.iter_mut().zip(row).for_each(|(t, v)| *t += v);
+        }
+        if let Some(g) = totals.iter().position(|t| !t.is_finite()) {
+            bail!(
+                "{}: the contributions of Gaussian {g} sum past float64's range; scale the matrix down",
+                path.display()
+            );
+        }
         Ok(ClassScores {
             classes: shape[0] as usize,
-            n: shape[1] as usize,
+            n,
             data,
         })
     }
