@@ -386,6 +386,11 @@ fn bad_fuse_inputs(d: &Path) -> Vec<(Vec<String>, &'static str)> {
         (contrib_with(&[]), "cameras.json"),
         // The saved matrix is assigned on the host: a device budget would not apply.
         (contrib_with(&["--mem-budget", "1G"]), "--mem-budget"),
+        // Its rows are named by the table saved beside it.
+        (
+            contrib_with(&["--classes", &p("classes.json")]),
+            "--classes",
+        ),
     ]
 }
 
@@ -676,6 +681,21 @@ fn options_without_effect_are_noted() {
     let plain = arg_in(d, "plain.ply");
     fuse_synth(d, &["--method", "flashsplat", "--out", &plain]);
     assert_eq!(std::fs::read(&out).unwrap(), std::fs::read(&plain).unwrap());
+
+    // Segment consensus selects by its decided classes: --gamma does not move it.
+    let consensus = [
+        "--method",
+        "segment-consensus",
+        "--gamma",
+        "0.5",
+        "--extract",
+        "1",
+    ];
+    let err = fuse_synth(d, &[&consensus[..], &["--out", &out]].concat());
+    assert!(
+        err.contains("note: --gamma has no effect with segment-consensus"),
+        "{err}"
+    );
 
     let occlusion = ["--method", "vote", "--occlusion", "--depth-tol", "0.2"];
     let err = fuse_synth(d, &[&occlusion[..], &["--out", &out]].concat());

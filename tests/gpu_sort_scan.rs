@@ -158,11 +158,13 @@ fn sort_clamps_a_count_above_capacity_on(gpu: &semsplat::gpu::Gpu) {
 
 #[test]
 fn pass_plans_cover_the_bits_in_an_even_number_of_passes() {
-    for bits in 0..=32 {
-        let passes = plan_passes(bits);
+    for (bits, digit) in (0..=32).flat_map(|b| [(b, 4), (b, 8)]) {
+        let passes = plan_passes(bits, digit);
         assert_eq!(passes.len() % 2, 0, "bits={bits}");
         assert_eq!(passes.iter().map(|p| p.1).sum::<u32>(), bits);
-        assert!(passes.iter().all(|p| p.1 <= 4));
+        assert!(passes.iter().all(|p| p.1 <= digit));
+        // As few passes as the digit allows (but even).
+        assert!(passes.len() <= (bits.div_ceil(digit) as usize + 1).max(2));
         let mut shift = 0;
         for &(s, w) in &passes {
             if w > 0 {

@@ -799,6 +799,25 @@ fn inria_run_folder_gives_the_latest_iteration_and_its_cameras() {
             scene.display()
         );
     }
+    // Also named from inside the run (a relative scene, `.`).
+    for (inside, scene) in [
+        (&iteration, "point_cloud.ply"),
+        (&iteration, "."),
+        (&run, "point_cloud"),
+    ] {
+        let views = tmp.path().join("views");
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_semsplat"))
+            .args(["render", "--scene", scene, "--out", views.to_str().unwrap()])
+            .current_dir(inside)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            out.status.success(),
+            "{scene} in {}: {stderr}",
+            inside.display()
+        );
+    }
     let given = tmp.path().join("sparse/0");
     assert_eq!(cameras_for_scene(Some(&given), &run).unwrap(), given);
     // Without one in the scene's folder, the error asks for --cameras and names the folder.

@@ -193,6 +193,15 @@ fn a_covariance_past_float32_is_culled_by_rendering_fusion_and_the_reference() {
     assert_eq!(a.data[..g.len()], b.data[..]);
     assert_eq!(a.get(0, g.len()), 0.0);
     check_validation(gpu());
+
+    // `inspect` names it as a problem.
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("huge.ply");
+    write_ply(&path, &huge).unwrap();
+    let out = common::cli::semsplat(&["inspect", path.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(!out.status.success(), "{text}");
+    assert!(text.contains("1 Gaussians are larger than 1e6 m"), "{text}");
 }
 
 #[test]

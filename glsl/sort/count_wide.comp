@@ -11,10 +11,10 @@ layout(set = 0, binding = 2) writeonly buffer CountsBuf { uint data[]; } counts;
 
 void main() {
     uint blocks = state.data[0];
-    uint hist[RADIX];
+    uint hist[RADIX_WIDE];
     count_run(run_range(state.data[SORT_STATE_N]), hist);
     barrier();
-    for (uint d = gl_LocalInvocationIndex; d < RADIX; d += SORT_WIDE_LANES) {
+    for (uint d = gl_LocalInvocationIndex; d < RADIX_WIDE; d += SORT_WIDE_LANES) {
         uint total = 0;
         for (uint lane = 0; lane < SORT_WIDE_LANES; lane++) {
             total += run_digits[d * SORT_WIDE_LANES + lane];

@@ -10,7 +10,7 @@ layout(push_constant) uniform SortPassParams {
     uvec2 keys_out_addr;    // scatter only
     uvec2 values_out_addr;  // scatter only
     uint shift;
-    uint bits; // digit width of this pass, 0..=RADIX_BITS
+    uint bits; // digit width of this pass, 0..=RADIX_BITS (RADIX_BITS_WIDE: the wide forms)
 } pc;
 
 #include "addressed_arrays.glsl"

@@ -14,11 +14,11 @@ layout(set = 0, binding = 5) readonly buffer OffsetsBuf { uint data[]; } offsets
 void main() {
     uint blocks = state.data[0];
     uvec2 run = run_range(state.data[SORT_STATE_N]);
-    uint next[RADIX];
+    uint next[RADIX_WIDE];
     count_run(run, next);
     barrier();
     // Each digit's slots: the block's offset, then each lane's run after the runs before it.
-    for (uint d = gl_LocalInvocationIndex; d < RADIX; d += SORT_WIDE_LANES) {
+    for (uint d = gl_LocalInvocationIndex; d < RADIX_WIDE; d += SORT_WIDE_LANES) {
         uint slot = offsets.data[d * blocks + gl_WorkGroupID.x];
         for (uint lane = 0; lane < SORT_WIDE_LANES; lane++) {
             uint keys = run_digits[d * SORT_WIDE_LANES + lane];
@@ -28,7 +28,7 @@ void main() {
     }
     barrier();
     uint lane = gl_LocalInvocationIndex;
-    [[unroll]] for (uint d = 0; d < RADIX; d++) {
+    for (uint d = 0; d < RADIX_WIDE; d++) {
         next[d] = run_digits[d * SORT_WIDE_LANES + lane];
     }
     for (uint i = run.x; i < run.y; i++) {

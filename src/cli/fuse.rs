@@ -127,11 +127,13 @@ pub struct FuseArgs {
     /// Reassign from a saved evidence matrix (`--save-contrib` of an earlier run) instead of
     /// rendering (no GPU needed), e.g. to try another --gamma: each Gaussian takes its
     /// class of most evidence, so the options of how the evidence is gathered (--method and
-    /// its variants) do not apply; a segment-consensus run is not reproduced from its
-    /// evidence (its classes are decided per segment).
+    /// its variants) do not apply, and its rows are the classes of the table saved beside
+    /// it (FILE.classes.json, not --classes); a segment-consensus run is not reproduced from
+    /// its evidence (its classes are decided per segment).
     #[arg(long, conflicts_with_all = [
         "labels", "save_contrib", "method", "occlusion", "weighted", "per_view", "relabel",
         "depth_tol", "behind_tol", "float_atomics", "train_only", "ignore_id", "mem_budget",
+        "classes",
     ])]
     contrib: Option<PathBuf>,
     /// Accumulate with float32 atomics instead of 64-bit fixed point (fixed point gives the
@@ -474,6 +476,9 @@ fn select_from_fused(
     let ((Some(name), _) | (_, Some(name))) = (&args.output.extract, &args.output.remove) else {
         unreachable!("fused_scene_table checked --extract/--remove");
     };
+    if args.output.gamma.is_some() {
+        eprintln!("note: --gamma has no effect selecting by a fused scene's class");
+    }
     let id = find_class(table, name)? as i32;
     let ids = g
         .class_ids
@@ -685,6 +690,14 @@ fn note_options_without_effect(args: &FuseArgs, method: Method) {
         (
             "--mem-budget",
             args.mem_budget.is_some() && method == SegmentConsensus,
+        ),
+        // The consensus selects by its decided classes; only --save-membership reads it.
+        (
+            "--gamma",
+            args.output.gamma.is_some()
+                && method.is_consensus()
+                && args.output.save_membership.is_none()
+                && (args.output.extract.is_some() || args.output.remove.is_some()),
         ),
     ];
     for (option, _) in unread.iter().filter(|(_, unread)| *unread) {

@@ -365,8 +365,32 @@ fn inspect_ply(path: &Path, table: Option<&ClassTable>) -> Result<Report> {
     }
     r.problems
         .extend(g.value_problems().iter().map(|p| p.to_string()));
+    r.problems.extend(huge_gaussians(&g));
     Ok(r)
 }
+
+/// Gaussians larger than any scene ([`HUGE_SCALE_M`]): a corrupt or diverged model. Those
+/// whose 2D covariance passes float32's range are culled by every command; the others
+/// cover whole views.
+fn huge_gaussians(g: &Gaussians) -> Option<String> {
+    let largest = |s: &[f32; 3]| s.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+    let huge: Vec<f32> = (g.log_scales.iter())
+        .map(largest)
+        .filter(|&s| (s as f64).exp() > HUGE_SCALE_M)
+        .collect();
+    let max = huge.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+    (!huge.is_empty()).then(|| {
+        format!(
+            "{} Gaussians are larger than {HUGE_SCALE_M:e} m (the largest e^{max:.1} m): a \
+             corrupt or diverged model? Past float32's range a Gaussian is culled, below it \
+             it covers whole views",
+            huge.len()
+        )
+    })
+}
+
+/// A Gaussian scale no scene needs (a thousand kilometres).
+const HUGE_SCALE_M: f64 = 1e6;
 
 /// Bounds of the finite centers, opacity and scale ranges.
 fn add_geometry(r: &mut Report, g: &Gaussians) {

@@ -4,7 +4,8 @@
 //! no workgroup waits on another, and every invocation's loops stay far below lavapipe's
 //! 65,535-iteration cap. On CPU devices the count and scatter take their `*_wide` forms
 //! (glsl/sort/wide_runs.glsl: each invocation walks a run of a block's keys in order, with
-//! no ballots; `DeviceCaps::cpu_forms`): the same blocks, histogram, scan and result.
+//! no ballots; `DeviceCaps::cpu_forms`) with digits of 6 bits where the GPU forms take 4:
+//! the same blocks and result.
 
 use super::buffer::Buffer;
 use super::context::Gpu;
@@ -14,27 +15,38 @@ use super::kernel_table::ids;
 use super::recorder::Recorder;
 use super::scan::PrefixScan;
 use crate::contract::params::{SortPassParams, SortSetupParams};
-use crate::contract::{self, RADIX_BITS};
+use crate::contract::{self, RADIX_BITS, RADIX_BITS_WIDE};
 
 /// Elements per workgroup.
 pub const SORT_BLOCK: u64 = contract::SORT_BLOCK as u64;
-/// Digits per pass.
-const RADIX: u64 = 1 << RADIX_BITS;
 
-/// The digit passes for sorting the low `bits` bits: (shift, width) each, width <= 4. The
-/// number of passes is even so the result lands back in the caller's buffers without a
-/// copy; the widths are spread evenly.
+/// The digit width of the passes `gpu` runs: the CPU-driver forms count 6-bit digits
+/// (fewer passes over the keys, the sort being half of a frame on lavapipe; a private
+/// histogram of 64 per run: 128 and 256 measured slower there), the GPU forms 4 (their
+/// shared-memory histograms and ballots grow with the digit).
+pub fn digit_bits(gpu: &Gpu) -> u32 {
+    match gpu.caps().cpu_forms {
+        true => RADIX_BITS_WIDE,
+        false => RADIX_BITS,
+    }
+}
+
+/// The digit passes for sorting the low `bits` bits with digits of at most `digit` bits:
+/// (shift, width) each. The number of passes is even so the result lands back in the
+/// caller's buffers without a copy; the widths are spread evenly.
 ///
 /// ```
 /// use semsplat::gpu::sort::plan_passes;
-/// // 13 bits (tile ids of a 1080p frame): four passes of 4 + 3 + 3 + 3 bits.
-/// assert_eq!(plan_passes(13), vec![(0, 4), (4, 3), (7, 3), (10, 3)]);
+/// // 13 bits (tile ids of a 1080p frame): four passes of 4 + 3 + 3 + 3 bits (with 6-bit
+/// // digits too: three, made even); 12 bits: two passes of 6 bits with 6-bit digits.
+/// assert_eq!(plan_passes(13, 4), vec![(0, 4), (4, 3), (7, 3), (10, 3)]);
+/// assert_eq!(plan_passes(12, 6), vec![(0, 6), (6, 6)]);
 /// // One bit still takes two passes (the second copies), so no copy-back is needed.
-/// assert_eq!(plan_passes(1).len(), 2);
+/// assert_eq!(plan_passes(1, 4).len(), 2);
 /// ```
-pub fn plan_passes(bits: u32) -> Vec<(u32, u32)> {
+pub fn plan_passes(bits: u32, digit: u32) -> Vec<(u32, u32)> {
     assert!(bits <= 32, "radix sort of {bits} bits: keys are 32-bit");
-    let mut passes = bits.div_ceil(RADIX_BITS);
+    let mut passes = bits.div_ceil(digit.max(1));
     if passes % 2 == 1 {
         passes += 1;
     }
@@ -52,6 +64,8 @@ pub fn plan_passes(bits: u32) -> Vec<(u32, u32)> {
 /// A radix sorter for up to `capacity` pairs, owning its scratch buffers (reuse it).
 pub struct RadixSort {
     capacity: u64,
+    /// Bits of each pass's digit ([`digit_bits`]).
+    digit: u32,
     tmp_keys: Buffer,
     tmp_values: Buffer,
     counts: Buffer,
@@ -73,13 +87,16 @@ impl RadixSort {
             )));
         }
         let blocks = capacity.div_ceil(SORT_BLOCK).max(1);
+        let digit = digit_bits(gpu);
+        let radix = 1u64 << digit;
         Ok(RadixSort {
             capacity,
+            digit,
             tmp_keys: gpu.buffer("sort-tmp-keys", capacity * 4)?,
             tmp_values: gpu.buffer("sort-tmp-values", capacity * 4)?,
-            counts: gpu.buffer("sort-counts", blocks * RADIX * 4)?,
+            counts: gpu.buffer("sort-counts", blocks * radix * 4)?,
             state: gpu.buffer("sort-state", 16)?,
-            scan: PrefixScan::new(gpu, blocks * RADIX)?,
+            scan: PrefixScan::new(gpu, blocks * radix)?,
         })
     }
 
@@ -97,7 +114,7 @@ impl RadixSort {
         count: GpuCount,
         bits: u32,
     ) -> GpuResult<()> {
-        let passes = plan_passes(bits);
+        let passes = plan_passes(bits, self.digit);
         if passes.is_empty() {
             return Ok(());
         }
@@ -112,13 +129,13 @@ impl RadixSort {
             [1, 1, 1],
         )?;
         rec.barrier();
-        // RADIX counters per block; state[0] holds the block count. Every pass scans a
+        // 2^digit counters per block; state[0] holds the block count. Every pass scans a
         // histogram of that size, so one scan setup serves them all.
         let histogram_len = GpuCount {
             buffer: &self.state,
             index: 0,
             div: 1,
-            mul: RADIX as u32,
+            mul: 1 << self.digit,
         };
         self.scan.record_setup(rec, histogram_len)?;
         for (p, &(shift, width)) in passes.iter().enumerate() {

@@ -585,11 +585,11 @@ impl Rasterizer {
             self.pending.is_none(),
             "internal error: a view is still in flight on this rasterizer; wait for it first"
         );
+        let work = banded.unwrap_or(BandWork::Overwrite);
+        let retry = self.retry.take().filter(|r| r.cam == *cam);
         let frame = self.frame_spec(scene, cam, opts)?;
         let need = self.need(scene, &frame);
         self.ensure(need)?;
-        let work = banded.unwrap_or(BandWork::Overwrite);
-        let retry = self.retry.take().filter(|r| r.cam == *cam);
         let (rows, partial, done_intersections) = match retry {
             Some(r) if work == BandWork::Add => (r.rows, true, r.intersections),
             _ => {
@@ -636,11 +636,15 @@ impl Rasterizer {
         let mut run = pending.recorded.run(timings, &statuses);
         run.intersections = run.intersections.saturating_add(pending.done_intersections);
         let attempt = self.next_attempt(&pending.cam, &statuses, bands as u32, pending.banded)?;
-        if pending.work == BandWork::Add && !matches!(attempt, Attempt::Done) {
-            let done = pending.done_intersections;
-            let retry = self.failed_rows(&pending.cam, &pending.rows, done, &statuses, &attempt)?;
-            self.retry = Some(retry);
-        }
+        // Set only once the view can run again: a retry left by an attempt that failed
+        // here would bin a later view's rows from this one's.
+        let retry = match pending.work == BandWork::Add && !matches!(attempt, Attempt::Done) {
+            true => {
+                let done = pending.done_intersections;
+                Some(self.failed_rows(&pending.cam, &pending.rows, done, &statuses, &attempt)?)
+            }
+            false => None,
+        };
         match attempt {
             Attempt::Done => {
                 if !pending.partial {
@@ -653,10 +657,12 @@ impl Rasterizer {
                     isect,
                     ..pending.need
                 })?;
+                self.retry = retry;
                 Ok(None)
             }
             Attempt::Split(more) => {
                 self.list_bands = self.list_bands.max(more);
+                self.retry = retry;
                 Ok(None)
             }
         }
@@ -689,9 +695,11 @@ impl Rasterizer {
                 continue;
             }
             let needed = status[ST_ISECT_NEEDED as usize];
+            // Only a band past one list splits; one that needs longer lists runs whole,
+            // and grows them when no band is left to split.
             let pieces = match attempt {
                 Attempt::Split(_) if wrapped => 4,
-                Attempt::Split(_) => needed.div_ceil(fits) + 1,
+                Attempt::Split(_) if needed > fits => needed.div_ceil(fits) + 1,
                 _ => 1,
             };
             let split = split_range(rows.clone(), pieces, step);

@@ -83,16 +83,23 @@ fn scene_folder(scene: &Path) -> &Path {
 /// at `run/cameras.json`).
 pub fn scene_cameras_file(scene: &Path) -> Option<PathBuf> {
     let folder = scene_folder(scene);
+    // Absolute, so that `.` or a scene given from inside the run names its folders.
+    let here = if folder.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        folder
+    };
+    let absolute: PathBuf = std::path::absolute(here).ok()?.components().collect();
     let name_of = |p: &Path| p.file_name().and_then(|n| n.to_str()).map(str::to_owned);
-    let mut run = folder;
+    let mut run = absolute.as_path();
     if name_of(run).is_some_and(|n| n.starts_with("iteration_")) {
         run = run.parent().unwrap_or(run);
     }
-    let run = match name_of(run).as_deref() {
-        Some("point_cloud") => run.parent(),
+    let run: Option<PathBuf> = match name_of(run).as_deref() {
+        Some("point_cloud") => run.parent().map(Path::to_path_buf),
         _ => None,
     };
-    [Some(folder), run]
+    [Some(folder.to_path_buf()), run]
         .into_iter()
         .flatten()
         .map(|f| f.join(CAMERAS_FILE))
