@@ -1147,7 +1147,7 @@ impl Buffers {
             GpuCount::at(&b.status, base + ST_VISIBLE_PLUS1),
         )?;
         rec.dispatch_indirect_ranges(
-            ids::RASTER_EMIT,
+            ids::RASTER_EMIT.for_device(ids::RASTER_EMIT_WIDE, rec.gpu()),
             &[
                 ("status", status),
                 ("isect_keys", whole(&b.isect_keys)),
