@@ -54,6 +54,28 @@ fn device_override_that_matches_nothing_lists_the_devices() {
     );
 }
 
+/// The testing knobs' values that mean nothing are named, and the run goes on with the
+/// device's own setting.
+#[test]
+fn testing_knobs_of_no_meaning_are_warned_of() {
+    for (knob, value) in [
+        ("SEMSPLAT_MAX_BINDING", "64k"),
+        ("SEMSPLAT_CPU_FORMS", "yes"),
+    ] {
+        let out = semsplat()
+            .args(["bench", "sort", "--n", "100", "--iters", "1"])
+            .env(knob, value)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{knob}={value}: {stderr}");
+        assert!(
+            stderr.contains(&format!("warning: {knob}={value}")),
+            "{knob}={value}: {stderr}"
+        );
+    }
+}
+
 #[test]
 fn device_choice_prefers_discrete_and_names_missing_features() {
     let real = list_devices().unwrap();

@@ -184,9 +184,12 @@ pub fn probe_device(instance: &ash::Instance, pd: vk::PhysicalDevice) -> (Device
 /// `GpuOptions::max_binding`. It can only lower the limit.
 pub(crate) fn binding_limit(device: u64, asked: Option<u64>) -> u64 {
     let asked = asked.or_else(|| {
-        std::env::var("SEMSPLAT_MAX_BINDING")
-            .ok()
-            .and_then(|v| v.parse::<u64>().ok())
+        let v = std::env::var("SEMSPLAT_MAX_BINDING").ok()?;
+        let parsed = v.trim().parse::<u64>().ok();
+        if parsed.is_none() {
+            eprintln!("warning: SEMSPLAT_MAX_BINDING={v} is not a whole number of bytes: the device's limit is used");
+        }
+        parsed
     });
     asked.map_or(device, |a| (a / 256 * 256).clamp(256, device))
 }
