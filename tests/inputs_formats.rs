@@ -803,6 +803,7 @@ fn inria_run_folder_gives_the_latest_iteration_and_its_cameras() {
     for (inside, scene) in [
         (&iteration, "point_cloud.ply"),
         (&iteration, "."),
+        (&iteration, ".."),
         (&run, "point_cloud"),
     ] {
         let views = tmp.path().join("views");

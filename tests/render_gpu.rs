@@ -498,6 +498,38 @@ fn a_tile_longer_than_lavapipes_loop_cap_renders_whole() {
     check_validation(gpu);
 }
 
+/// One Gaussian covering 257 x 257 tiles, more than lavapipe's loop cap of 65,535
+/// iterations an invocation: emission takes the load-balanced form there, and every tile
+/// draws it (one invocation writing its pairs stopped 4,653 tiles short of 69,696).
+#[test]
+fn a_gaussian_over_more_tiles_than_the_loop_cap_is_emitted_whole() {
+    let side = 257 * 16;
+    let g = common::spec_scene::scene(&[common::spec_scene::Spec {
+        mean: [0.0, 0.0, 5.0],
+        log_scale: [50f32.ln(); 3],
+        quat: [1.0, 0.0, 0.0, 0.0],
+        logit: 4.0,
+        sh: vec![[0.5; 3]],
+        logits: vec![],
+    }]);
+    let cam = camera("wide", DVec3::ZERO, DVec3::Z, side, side);
+    for wide in [false, true] {
+        let gpu = common::gpu_with_cpu_forms(wide);
+        let scene = GpuScene::upload(gpu, &g).unwrap();
+        let opts = RenderOptions {
+            semantics: None,
+            ..Default::default()
+        };
+        let frame = Rasterizer::new(gpu).render(&scene, &cam, &opts).unwrap();
+        let empty = frame.alpha.iter().filter(|&&a| a < 0.5).count();
+        assert_eq!(
+            empty, 0,
+            "wide forms {wide}: {empty} pixels without the Gaussian"
+        );
+        check_validation(gpu);
+    }
+}
+
 #[test]
 fn intersection_buffer_grows_on_overflow() {
     // 200 large Gaussians on a 640x480 image: ~240k intersections, past the first guess

@@ -3,8 +3,9 @@
 // `DeviceCaps::cpu_forms`): one invocation per visible Gaussian writes its own pairs, row
 // by row of its tiles within the binned rows, from the first slot its offset gives: the
 // same pairs in the same slots as emit.comp's load-balanced walk, without its shared memory
-// (which a CPU driver reads one lane at a time) and binary searches. Rows and columns are
-// separate loops, each far under lavapipe's 65,535-iteration loop cap.
+// (which a CPU driver reads one lane at a time) and binary searches. lavapipe's loop cap
+// counts every iteration of an invocation, so the host picks this form only where one
+// Gaussian's pairs in the band stay under it (`emit_kernel` in src/render/rasterizer.rs).
 #include "raster_common.glsl"
 
 layout(local_size_x = 256) in;

@@ -17,7 +17,7 @@ use crate::contract::{
     BLEND_CARRY_BASE, GRAD2D_STRIDE, ST_ARGS_ISECT, ST_ARGS_VISIBLE, ST_ISECT, ST_ISECT_NEEDED,
     ST_ISECT_WRAPPED, ST_N_PLUS1, ST_OVERFLOW, ST_VISIBLE, ST_VISIBLE_PLUS1, ST_WORDS,
 };
-use crate::gpu::kernel_table::ids;
+use crate::gpu::kernel_table::{ids, Kernel};
 use crate::gpu::{
     Buffer, BufferRange, Gpu, GpuCount, Mark, PrefixScan, RadixSort, Recorder, Submission, Timings,
 };
@@ -196,6 +196,23 @@ enum Attempt {
     Grow(u32),
     /// Bin the view in this many bands of tile rows and run again.
     Split(u32),
+}
+
+/// The emission kernel for a band of `rows` tile rows `tiles_x` wide: the CPU drivers' form
+/// (one invocation a Gaussian) where one Gaussian's pairs in the band stay under the
+/// driver's loop cap, which counts every iteration of an invocation (a Gaussian of 70k
+/// tiles lost its last 4,653 in a 4224x4224 view); else the load-balanced form, whose
+/// invocations write a 256th of their group's pairs.
+fn emit_kernel(gpu: &Gpu, tiles_x: u32, rows: &Range<u32>) -> Kernel<EmitParams> {
+    let iterations = rows.len() as u64 * (tiles_x as u64 + 1);
+    let fits = gpu
+        .caps()
+        .loop_iteration_cap
+        .is_none_or(|cap| iterations < cap as u64);
+    match fits {
+        true => ids::RASTER_EMIT.for_device(ids::RASTER_EMIT_WIDE, gpu),
+        false => ids::RASTER_EMIT,
+    }
 }
 
 /// `tiles_y` tile rows split into at most `bands` consecutive ranges of nearly equal size,
@@ -661,6 +678,19 @@ impl Rasterizer {
                 Ok(None)
             }
             Attempt::Split(more) => {
+                // Bands that only need longer lists get them now, not after another attempt.
+                let fits = self.list_capacity();
+                let longest = (statuses.iter())
+                    .filter(|s| s[ST_OVERFLOW as usize] != 0)
+                    .map(|s| s[ST_ISECT_NEEDED as usize])
+                    .filter(|&n| n <= fits)
+                    .max();
+                if let Some(isect) = longest {
+                    self.ensure(Need {
+                        isect,
+                        ..pending.need
+                    })?;
+                }
                 self.list_bands = self.list_bands.max(more);
                 self.retry = retry;
                 Ok(None)
@@ -807,10 +837,14 @@ impl Rasterizer {
             let tiles_y = cam.height.div_ceil(TILE_SIZE);
             // Enough bands that an even split would fit, and at least twice as many.
             let wanted = needed.map_or(0, |n| (n as u64 * bands as u64).div_ceil(fits as u64));
-            let more = (wanted as u32 + 1)
-                .max(bands * 2)
-                .min(tiles_y)
-                .min(MAX_LIST_BANDS);
+            let step = row_step(cam.width, self.gpu.caps().min_storage_offset_alignment);
+            let least = (wanted as u32 + 1).max(bands * 2);
+            // The fewest bands from `least` up that split_rows really makes more of than this
+            // attempt had: band starts are multiples of `step` rows, so several counts give
+            // the same bands, and asking for one of those again would loop for ever.
+            let more = (least..=tiles_y.min(MAX_LIST_BANDS))
+                .find(|&m| split_rows(tiles_y, m, step).len() as u32 > bands)
+                .unwrap_or(bands);
             ensure!(
                 banded && more > bands,
                 "view {}: {} visible Gaussians cover {} (tile, Gaussian) pairs at {}x{}, more \
@@ -1147,7 +1181,7 @@ impl Buffers {
             GpuCount::at(&b.status, base + ST_VISIBLE_PLUS1),
         )?;
         rec.dispatch_indirect_ranges(
-            ids::RASTER_EMIT.for_device(ids::RASTER_EMIT_WIDE, rec.gpu()),
+            emit_kernel(rec.gpu(), tiles_x, rows),
             &[
                 ("status", status),
                 ("isect_keys", whole(&b.isect_keys)),

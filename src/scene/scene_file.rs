@@ -89,7 +89,7 @@ pub fn scene_cameras_file(scene: &Path) -> Option<PathBuf> {
     } else {
         folder
     };
-    let absolute: PathBuf = std::path::absolute(here).ok()?.components().collect();
+    let absolute = lexically_normal(&std::path::absolute(here).ok()?);
     let name_of = |p: &Path| p.file_name().and_then(|n| n.to_str()).map(str::to_owned);
     let mut run = absolute.as_path();
     if name_of(run).is_some_and(|n| n.starts_with("iteration_")) {
@@ -104,6 +104,22 @@ pub fn scene_cameras_file(scene: &Path) -> Option<PathBuf> {
         .flatten()
         .map(|f| f.join(CAMERAS_FILE))
         .find(|c| c.is_file())
+}
+
+/// `path` with its `.` and `..` resolved by name (`run/point_cloud/iteration_7/..` is
+/// `run/point_cloud`), as a message's reader would: no links are followed.
+fn lexically_normal(path: &Path) -> PathBuf {
+    let mut out = PathBuf::new();
+    for part in path.components() {
+        match part {
+            std::path::Component::CurDir => {}
+            std::path::Component::ParentDir => {
+                out.pop();
+            }
+            other => out.push(other),
+        }
+    }
+    out
 }
 
 /// A folder as a message names it (the current folder as `.`).

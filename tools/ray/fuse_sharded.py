@@ -63,7 +63,10 @@ def parse_args(argv):
     # Workers may start in another folder: name local inputs absolutely.
     for name in ("scene", "cameras", "labels", "semsplat"):
         value = getattr(args, name)
-        if os.path.exists(value):
+        # A bare program name is looked up on PATH, even where a folder of that name exists
+        # here (the repository's own `semsplat/`).
+        bare = name == "semsplat" and os.sep not in value
+        if os.path.exists(value) and not bare:
             setattr(args, name, os.path.abspath(value))
     # On a local cluster every task sees the driver's files: name what is missing now, not
     # once per shard and retry.
