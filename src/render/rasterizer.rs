@@ -215,6 +215,15 @@ fn emit_kernel(gpu: &Gpu, tiles_x: u32, rows: &Range<u32>) -> Kernel<EmitParams>
     }
 }
 
+/// The fewest bands, from `least` up (at most one a tile row, and [`MAX_LIST_BANDS`]), that
+/// [`split_rows`] really makes more of than the `bands` an attempt had: band starts are
+/// multiples of `step` rows, so several counts give the same bands, and asking for one of
+/// those again would run the same attempt for ever. None where no count gives more.
+fn more_bands(tiles_y: u32, least: u32, bands: u32, step: u32) -> Option<u32> {
+    let most = tiles_y.min(MAX_LIST_BANDS);
+    (least.min(most)..=most).find(|&m| split_rows(tiles_y, m, step).len() as u32 > bands)
+}
+
 /// `tiles_y` tile rows split into at most `bands` consecutive ranges of nearly equal size,
 /// each starting at a multiple of `step` rows.
 fn split_rows(tiles_y: u32, bands: u32, step: u32) -> Vec<Range<u32>> {
@@ -839,12 +848,7 @@ impl Rasterizer {
             let wanted = needed.map_or(0, |n| (n as u64 * bands as u64).div_ceil(fits as u64));
             let step = row_step(cam.width, self.gpu.caps().min_storage_offset_alignment);
             let least = (wanted as u32 + 1).max(bands * 2);
-            // The fewest bands from `least` up that split_rows really makes more of than this
-            // attempt had: band starts are multiples of `step` rows, so several counts give
-            // the same bands, and asking for one of those again would loop for ever.
-            let more = (least..=tiles_y.min(MAX_LIST_BANDS))
-                .find(|&m| split_rows(tiles_y, m, step).len() as u32 > bands)
-                .unwrap_or(bands);
+            let more = more_bands(tiles_y, least, bands, step).unwrap_or(bands);
             ensure!(
                 banded && more > bands,
                 "view {}: {} visible Gaussians cover {} (tile, Gaussian) pairs at {}x{}, more \
@@ -1567,3 +1571,35 @@ pub struct ProjectedAddrs {
 
 /// Bytes of a pixel's RGB.
 pub(crate) const RGB_BYTES: u64 = 12;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn more_bands_asks_for_a_count_that_gives_more_bands() {
+        // Ten tile rows whose bands start at multiples of 4 rows: 3 bands at most.
+        assert_eq!(split_rows(10, 6, 4).len(), 3);
+        // From 2 bands, asking for 4 gives 3: more.
+        assert_eq!(more_bands(10, 4, 2, 4), Some(4));
+        assert_eq!(split_rows(10, 4, 4).len(), 3);
+        // From 3, no count gives more (asking for 6 again gave 3 again, for ever).
+        assert_eq!(more_bands(10, 6, 3, 4), None);
+        // With a step of one row, the count asked for is the bands it gives.
+        assert_eq!(more_bands(10, 4, 2, 1), Some(4));
+        // Never more than one band a tile row.
+        assert_eq!(more_bands(3, 4, 2, 1), Some(3));
+        assert_eq!(more_bands(3, 6, 3, 1), None);
+    }
+
+    #[test]
+    fn split_range_covers_its_rows_once_from_multiples_of_the_step() {
+        for (rows, bands, step) in [(0..10, 3, 1), (4..17, 4, 4), (8..9, 5, 2), (0..1, 1, 1)] {
+            let split = split_range(rows.clone(), bands, step);
+            assert!(split.len() as u32 <= bands.max(1));
+            let covered: Vec<u32> = split.iter().flat_map(|r| r.clone()).collect();
+            assert_eq!(covered, rows.clone().collect::<Vec<_>>());
+            assert!(split.iter().all(|r| (r.start - rows.start) % step == 0));
+        }
+    }
+}
