@@ -8,7 +8,9 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::cli::{arg_in, fails, fuse_synth, fuse_synth_fails, ok, synth_tiny};
+use common::cli::{
+    arg_in, fails, fails_owned, fuse_synth, fuse_synth_fails, ok, ok_owned, synth_tiny,
+};
 use semsplat::scene::ply::{read_ply, write_ply};
 use semsplat::train::trainer::{with_initial_logits, LogitInit};
 
@@ -377,16 +379,19 @@ fn render_and_inspect_say_what_would_mislead() {
         tmp.path().join("trained.classes.json"),
     )
     .unwrap();
-    let e = fails(&[
-        "render",
-        "--scene",
-        trained.to_str().unwrap(),
-        "--cameras",
-        &arg_in(&room, "cameras.json"),
-        "--semantics",
-        "--out",
-        &arg_in(tmp.path(), "views"),
-    ]);
+    let views = arg_in(tmp.path(), "views");
+    let cameras = arg_in(&room, "cameras.json");
+    // `render --semantics` of `scene` into `views`, with `extra` arguments.
+    let render_semantics = |scene: &Path, extra: &[&str]| -> Vec<String> {
+        let mut args = ["render", "--scene", scene.to_str().unwrap()]
+            .into_iter()
+            .chain(["--cameras", &cameras, "--semantics", "--out", &views])
+            .map(str::to_owned)
+            .collect::<Vec<_>>();
+        args.extend(extra.iter().map(|a| a.to_string()));
+        args
+    };
+    let e = fails_owned(&render_semantics(&trained, &[]));
     assert!(
         e.contains("3 semantic channels") && e.contains("lists"),
         "{e}"
@@ -394,19 +399,7 @@ fn render_and_inspect_say_what_would_mislead() {
     // Uniform logits (untouched by training) tie everywhere: no class, not the last one.
     std::fs::remove_file(tmp.path().join("trained.classes.json")).unwrap();
     let trained = with_logits(&room, tmp.path(), 3, LogitInit::Uniform);
-    let views = arg_in(tmp.path(), "views");
-    ok(&[
-        "render",
-        "--scene",
-        trained.to_str().unwrap(),
-        "--cameras",
-        &arg_in(&room, "cameras.json"),
-        "--semantics",
-        "--views",
-        "train_0000",
-        "--out",
-        &views,
-    ]);
+    ok_owned(&render_semantics(&trained, &["--views", "train_0000"]));
     let labels = image::open(Path::new(&views).join("train_0000.labels.png")).unwrap();
     assert!(labels.to_luma8().pixels().all(|p| p[0] == 255));
 

@@ -3,7 +3,9 @@
 
 mod common;
 
-use common::cli::{arg_in, fails, fuse_synth, fuse_synth_fails, ok, read_json, synth_tiny};
+use common::cli::{
+    arg_in, fails, fails_owned, fuse_synth, fuse_synth_fails, ok, ok_owned, read_json, synth_tiny,
+};
 
 use std::path::Path;
 
@@ -242,14 +244,14 @@ fn depth_tolerance_matters_to_merge_only_where_the_method_reads_it() {
     shard("0/2", &["--method", "flashsplat"], "0.05", &f0);
     shard("1/2", &["--method", "flashsplat"], "0.2", &f1);
     let args = merge(&f0, &f1, &p("f.ply"));
-    ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    ok_owned(&args);
 
     let occlusion = ["--method", "vote", "--occlusion"];
     let (o0, o1) = (p("o0.npy"), p("o1.npy"));
     shard("0/2", &occlusion, "0.05", &o0);
     shard("1/2", &occlusion, "0.2", &o1);
     let args = merge(&o0, &o1, &p("o.ply"));
-    let err = fails(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let err = fails_owned(&args);
     assert!(err.contains("depth_tolerance"), "{err}");
 }
 

@@ -1,6 +1,7 @@
 //! A scene's Gaussians uploaded once, structure-of-arrays as the kernels read them, and
 //! [`GaussianParams`], the one list of their parameter tensors.
 
+use std::borrow::Cow;
 use std::ops::{Index, Range};
 
 use glam::DVec3;
@@ -362,13 +363,16 @@ impl GpuScene {
     }
 
     /// `cam` in the device's coordinates (the world moved by -[`GpuScene::origin`]): what
-    /// every kernel that projects this scene's means is given.
-    pub(crate) fn local_camera(&self, cam: &Camera) -> Camera {
-        let mut local = cam.clone();
-        if self.origin != DVec3::ZERO {
-            local.translation += cam.rotation * self.origin;
+    /// every kernel that projects this scene's means is given. `cam` itself (no copy) for a
+    /// scene uploaded as it is.
+    pub(crate) fn local_camera<'c>(&self, cam: &'c Camera) -> Cow<'c, Camera> {
+        if self.origin == DVec3::ZERO {
+            return Cow::Borrowed(cam);
         }
-        local
+        Cow::Owned(Camera {
+            translation: cam.translation + cam.rotation * self.origin,
+            ..cam.clone()
+        })
     }
 
     /// Uploads `g` (without its logits) with one class per Gaussian for label rendering:

@@ -51,6 +51,16 @@ pub fn fails(args: &[&str]) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()
 }
 
+/// [`ok`] for arguments built as owned strings.
+pub fn ok_owned(args: &[String]) -> String {
+    ok(&args.iter().map(String::as_str).collect::<Vec<_>>())
+}
+
+/// [`fails`] for arguments built as owned strings.
+pub fn fails_owned(args: &[String]) -> String {
+    fails(&args.iter().map(String::as_str).collect::<Vec<_>>())
+}
+
 /// The PNG label maps of a room `dir`'s `labels` folder, in name order.
 pub fn label_pngs(dir: &Path) -> Vec<std::path::PathBuf> {
     let mut maps: Vec<_> = std::fs::read_dir(dir.join("labels"))
@@ -124,11 +134,11 @@ pub fn fuse_synth_args(dir: &Path, extra: &[&str]) -> Vec<String> {
 /// `--out`), and returns its stderr.
 pub fn fuse_synth(dir: &Path, extra: &[&str]) -> String {
     let args = fuse_synth_args(dir, extra);
-    ok(&args.iter().map(String::as_str).collect::<Vec<_>>())
+    ok_owned(&args)
 }
 
 /// Like [`fuse_synth`] for a command that must fail; returns its error message.
 pub fn fuse_synth_fails(dir: &Path, extra: &[&str]) -> String {
     let args = fuse_synth_args(dir, extra);
-    fails(&args.iter().map(String::as_str).collect::<Vec<_>>())
+    fails_owned(&args)
 }
