@@ -714,3 +714,236 @@ fn ascii_point_clouds_are_read() {
     let err = error_of(semsplat::scene::ply::read_point_cloud_ply(&short));
     assert!(err.contains("more values"), "{err}");
 }
+
+// ---------------------------------------------------------------------------------------
+// Found by fuzzing the readers
+
+/// A compressed PLY (SuperSplat) of `n` packed vertices in `chunks` chunk rows, with an
+/// `sh` element of 9 bytes per splat; binary. `packed_ty` is the packed words' type.
+fn compressed_ply(header_n: usize, n: usize, packed_ty: &str) -> Vec<u8> {
+    let mut h = String::from("ply\nformat binary_little_endian 1.0\nelement chunk 1\n");
+    for p in [
+        "x", "y", "z", "scale_x", "scale_y", "scale_z", "r", "g", "b",
+    ] {
+        h += &format!("property float min_{p}\nproperty float max_{p}\n");
+    }
+    h += &format!("element vertex {header_n}\n");
+    for p in ["position", "rotation", "scale", "color"] {
+        h += &format!("property {packed_ty} packed_{p}\n");
+    }
+    h += &format!("element sh {header_n}\n");
+    for i in 0..9 {
+        h += &format!("property uchar f_rest_{i}\n");
+    }
+    h += "end_header\n";
+    let mut b = h.into_bytes();
+    for k in 0..18 {
+        b.extend_from_slice(&(k as f32).to_le_bytes());
+    }
+    for i in 0..n {
+        for w in 0..4u32 {
+            match packed_ty {
+                "float" => b.extend_from_slice(&(-5.0f32 + w as f32).to_le_bytes()),
+                _ => b.extend_from_slice(&(0x1234_5678 * (i as u32 + w)).to_le_bytes()),
+            }
+        }
+    }
+    b.extend(std::iter::repeat_n(128u8, 9 * n));
+    b
+}
+
+/// An element without properties holds no bytes: a count of 2^64 - 1 must not be looped
+/// over (the compressed-PLY and point-cloud readers hung), and data past the header's
+/// counts is refused there as in the Gaussian reader (it was dropped silently, and the
+/// compressed reader read its `sh` rows shifted into the vertices').
+#[test]
+fn ply_column_readers_skip_empty_rows_and_refuse_data_past_the_counts() {
+    let dir = tempfile::tempdir().unwrap();
+    for fmt in ["binary_little_endian", "ascii"] {
+        let h = format!(
+            "ply\nformat {fmt} 1.0\nelement chunk 0\nproperty float min_x\nelement vertex 0\n\
+             property uint packed_position\nelement pad 18446744073709551615\nend_header\n"
+        );
+        let err = error_of(read_ply_from(h.as_bytes(), Some(h.len() as u64)));
+        assert!(err.contains("no property 'packed_rotation'"), "{err}");
+    }
+    let xyz = "property float x\nproperty float y\nproperty float z\n";
+    let mut bytes = format!(
+        "ply\nformat binary_little_endian 1.0\nelement vertex 1\n{xyz}\
+         element pad 18446744073709551615\nend_header\n"
+    )
+    .into_bytes();
+    bytes.extend_from_slice(&[0; 12]);
+    let p = write_tmp(dir.path(), "pad.ply", &bytes);
+    let cloud = semsplat::scene::ply::read_point_cloud_ply(&p)
+        .unwrap()
+        .unwrap();
+    assert_eq!(cloud.points, [[0.0; 3]]);
+
+    // One vertex declared, two stored.
+    let mut bytes =
+        format!("ply\nformat binary_little_endian 1.0\nelement vertex 1\n{xyz}end_header\n")
+            .into_bytes();
+    bytes.extend_from_slice(&[0; 24]);
+    let p = write_tmp(dir.path(), "more.ply", &bytes);
+    let err = error_of(semsplat::scene::ply::read_point_cloud_ply(&p));
+    assert_error(&err, &p, &["data continues past", "counts are wrong"]);
+    let p = write_tmp(
+        dir.path(),
+        "more_ascii.ply",
+        format!("ply\nformat ascii 1.0\nelement vertex 1\n{xyz}end_header\n0 0 0\n1 1 1\n"),
+    );
+    let err = error_of(semsplat::scene::ply::read_point_cloud_ply(&p));
+    assert_error(&err, &p, &["values continue past", "counts are wrong"]);
+
+    // A compressed PLY whose counts say 2 of its 3 splats; a writer's padding passes.
+    assert_eq!(
+        read_ply_from(&compressed_ply(3, 3, "uint")[..], None)
+            .unwrap()
+            .len(),
+        3
+    );
+    let mut padded = compressed_ply(3, 3, "uint");
+    padded.push(b'\n');
+    assert!(read_ply_from(&padded[..], None).is_ok());
+    let err = error_of(read_ply_from(&compressed_ply(2, 3, "uint")[..], None));
+    assert!(err.contains("data continues past"), "{err}");
+}
+
+/// Packed words are uint32 bit fields: a float property's -5 was cast to 0, silently.
+#[test]
+fn compressed_ply_words_that_are_not_uint32_are_errors() {
+    let err = error_of(read_ply_from(&compressed_ply(1, 1, "float")[..], None));
+    assert!(
+        err.contains("'packed_position' value -5 is not a 32-bit unsigned word"),
+        "{err}"
+    );
+}
+
+fn spz(count: u32, splats: usize, fractional_bits: u8, flags: u8) -> Vec<u8> {
+    use std::io::Write;
+    let mut raw = 0x5053_474e_u32.to_le_bytes().to_vec();
+    raw.extend_from_slice(&2u32.to_le_bytes());
+    raw.extend_from_slice(&count.to_le_bytes());
+    raw.extend_from_slice(&[0, fractional_bits, flags, 0]);
+    // Positions: x = 2^22 in 24-bit fixed point; then alpha, colour, scale, rotation.
+    for _ in 0..splats {
+        raw.extend_from_slice(&[0, 0, 0x40, 0, 0, 0, 0, 0, 0]);
+    }
+    raw.extend(std::iter::repeat_n(128u8, splats * (1 + 3 + 3 + 3)));
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    gz.write_all(&raw).unwrap();
+    gz.finish().unwrap()
+}
+
+/// A count below the data read every later attribute stream from the previous one's bytes
+/// (alphas from positions, ...); fractional bits past 23 were read as 23; a gzip stream
+/// that is no .spz was inflated whole (up to 8 GiB) before its magic was looked at.
+#[test]
+fn spz_counts_below_the_data_and_unsupported_fractional_bits_are_errors() {
+    use semsplat::scene::splat_formats::parse_spz;
+    assert_eq!(parse_spz(&spz(3, 3, 12, 0)).unwrap().means[0][0], 1024.0);
+    let err = error_of(parse_spz(&spz(2, 3, 12, 0)));
+    assert!(
+        err.contains("data continues past the .spz header's 2 splats"),
+        "{err}"
+    );
+    // Extensions (flag 0x2) may follow the SH.
+    assert_eq!(parse_spz(&spz(2, 3, 12, 2)).unwrap().len(), 2);
+    assert_eq!(
+        parse_spz(&spz(1, 1, 30, 0)).unwrap().means[0][0],
+        1.0 / 256.0
+    );
+    let err = error_of(parse_spz(&spz(1, 1, 200, 0)));
+    assert!(err.contains("fractional bits 200"), "{err}");
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    std::io::Write::write_all(&mut gz, &[0u8; 1 << 16]).unwrap();
+    let err = error_of(parse_spz(&gz.finish().unwrap()));
+    assert!(err.contains("not an .spz stream"), "{err}");
+}
+
+fn npy_v1(header: &str) -> Vec<u8> {
+    let mut h = header.to_string();
+    while (10 + h.len() + 1) % 64 != 0 {
+        h.push(' ');
+    }
+    h.push('\n');
+    let mut out = b"\x93NUMPY\x01\x00".to_vec();
+    out.extend_from_slice(&(h.len() as u16).to_le_bytes());
+    out.extend_from_slice(h.as_bytes());
+    out
+}
+
+/// npyz multiplied the shape unchecked (a panic: overflow checks are on in release) and
+/// allocated a version 2 header's length whole (4 GiB for a 15-byte file).
+#[test]
+fn npy_headers_that_do_not_fit_are_errors_not_panics() {
+    use semsplat::util::npy::parse_npy_f64;
+    let header =
+        |shape: &str| format!("{{'descr': '<f8', 'fortran_order': False, 'shape': {shape}, }}");
+    let err = error_of(parse_npy_f64(&npy_v1(&header("(4294967296, 4294967296)"))));
+    assert!(
+        err.contains("shape [4294967296, 4294967296] is too large"),
+        "{err}"
+    );
+    let err = error_of(parse_npy_f64(&npy_v1(&header("(0x100000000, 2)"))));
+    assert!(err.contains("not a tuple of whole numbers"), "{err}");
+    let err = error_of(parse_npy_f64(b"\x93NUMPY\x02\x00\xff\xff\xff\xff{'de"));
+    assert!(err.contains("header claims 4294967295 bytes"), "{err}");
+    // An empty evidence matrix whose other dimension is huge: refused, not allocated.
+    let tmp = tempfile::tempdir().unwrap();
+    let empty = tmp.path().join("empty.npy");
+    std::fs::write(&empty, npy_v1(&header("(0, 1099511627776)"))).unwrap();
+    let err = error_of(semsplat::fuse::scores::ClassScores::load_npy(&empty));
+    assert!(err.contains("an empty matrix"), "{err}");
+    // A shape that fits still reads.
+    let mut ok = npy_v1(&header("(2,)"));
+    ok.extend_from_slice(&[0; 16]);
+    assert_eq!(parse_npy_f64(&ok).unwrap().shape, [2]);
+}
+
+/// A distortion coefficient or camera model of the wrong JSON type was skipped, reading a
+/// distorted camera as a pinhole one.
+#[test]
+fn nerfstudio_distortion_that_is_not_a_number_is_an_error() {
+    let json = |extra: &str| {
+        format!(
+            r#"{{"fl_x": 500, "fl_y": 500, "cx": 320, "cy": 240, "w": 640, "h": 480, {extra}
+            "frames": [{{"file_path": "a.png", "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,2],[0,0,0,1]]}}]}}"#
+        )
+    };
+    for (extra, needle) in [
+        (r#""k1": "0.3","#, "distortion k1 = \"0.3\" is not a number"),
+        (r#""p1": [0.1],"#, "distortion p1 = [0.1] is not a number"),
+        (
+            r#""camera_model": 5,"#,
+            "camera_model 5 is not a model name",
+        ),
+    ] {
+        let err = error_of(parse_cameras_json(json(extra).as_bytes()));
+        assert!(err.contains(needle), "{err}");
+    }
+    assert!(parse_cameras_json(json(r#""k1": null, "camera_model": null,"#).as_bytes()).is_ok());
+}
+
+/// Joining a name's words turned two spaces or a tab into one space.
+#[test]
+fn colmap_text_image_names_keep_their_whitespace() {
+    let text = "1 1 0 0 0 0 0 0 1 my  image.png\n\n2 1 0 0 0 0 0 1 1 tab\there.png  \n";
+    let images = semsplat::scene::colmap::read_images_txt_from(&mut text.as_bytes()).unwrap();
+    let names: Vec<&str> = images.iter().map(|i| i.name.as_str()).collect();
+    assert_eq!(names, ["my  image.png", "tab\there.png"]);
+}
+
+/// A 57-byte PNG claiming 16384 x 16384 RGBA had a 1 GiB buffer zeroed (about a second)
+/// before its decoder found no data.
+#[test]
+fn label_pngs_too_small_for_their_size_are_refused_from_the_header() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut png = b"\x89PNG\r\n\x1a\n\0\0\0\x0dIHDR\0\0\x40\0\0\0\x40\0\x08\x06\0\0\0".to_vec();
+    png.extend_from_slice(&[0; 4]); // CRC (not read before the check)
+    png.extend_from_slice(b"\0\0\0\0IDAT\0\0\0\0\0\0\0\0IEND\0\0\0\0");
+    let p = write_tmp(dir.path(), "huge.png", &png);
+    let err = error_of(read_label_png(&p));
+    assert_error(&err, &p, &["16384x16384", "cannot hold that many pixels"]);
+}

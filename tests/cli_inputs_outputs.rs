@@ -141,6 +141,41 @@ fn outputs_that_are_inputs_or_each_other_are_refused_before_any_work() {
     assert_eq!(listing(&room), cameras);
 }
 
+/// An output named by a link is checked where the write lands (a link without an image's
+/// extension into the label folder replaced a label map; a dangling link to `--out` as
+/// `--palette-ply` replaced the fused scene), a PLY written through a link has its class
+/// table beside the link's target, and a name too long for its temp file is refused before
+/// the work.
+#[test]
+fn outputs_named_by_links_are_checked_where_they_land() {
+    let (tmp, room) = tiny_room();
+    let d = tmp.path();
+    let link = |name: &str, to: &Path| {
+        std::os::unix::fs::symlink(to, d.join(name)).unwrap();
+        arg_in(d, name)
+    };
+    let map = room.join("labels/train_0000.png");
+    let map_bytes = std::fs::read(&map).unwrap();
+    let into_labels = link("L", &map);
+    let e = fuse_synth_fails(&room, &["--out", &into_labels]);
+    assert!(e.contains("inside the --labels folder"), "{e}");
+    let fused = arg_in(d, "a.ply");
+    let to_fused = link("P", &d.join("a.ply"));
+    let e = fuse_synth_fails(&room, &["--out", &fused, "--palette-ply", &to_fused]);
+    assert!(e.contains("is also --out"), "{e}");
+    let long = arg_in(d, &format!("{}.ply", "n".repeat(240)));
+    let e = fuse_synth_fails(&room, &["--out", &long]);
+    assert!(e.contains("too long to be written safely"), "{e}");
+    assert_eq!(std::fs::read(&map).unwrap(), map_bytes);
+    assert_eq!(listing(d), ["L", "P", "room"]);
+
+    std::fs::create_dir(d.join("real")).unwrap();
+    let through = link("T.ply", &d.join("real/t.ply"));
+    fuse_synth(&room, &["--out", &through]);
+    assert_eq!(listing(&d.join("real")), ["t.classes.json", "t.ply"]);
+    assert!(!d.join("T.classes.json").exists());
+}
+
 #[test]
 fn a_refused_fusion_writes_nothing_and_a_fused_scene_holds_only_its_fusions_semantics() {
     let (tmp, room) = tiny_room();

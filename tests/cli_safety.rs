@@ -597,6 +597,67 @@ fn ctrl_c_during_synth_writing_exits_at_once_without_temp_files() {
     );
 }
 
+/// A synth stopped part-way over an earlier one leaves no room to read: the earlier run's
+/// views are removed before any is written, and the cameras and summary come last (a
+/// stopped rerun left the new scene beside the old run's label maps, and fuse read them,
+/// mIoU 0.20 where the room gives 0.94). Its rerun needs no --force.
+#[test]
+fn a_synth_stopped_part_way_leaves_no_mixed_room() {
+    let tmp = tempfile::tempdir().unwrap();
+    let synth_seed = |out: &Path, seed: &str| {
+        semsplat(
+            [
+                "synth",
+                "--preset",
+                "tiny",
+                "--views",
+                "6",
+                "--test-views",
+                "1",
+            ]
+            .into_iter()
+            .chain(["--width", "64", "--height", "48", "--no-previews"])
+            .chain(["--seed", seed, "--out", out.to_str().unwrap()]),
+        )
+    };
+    let (room, reference) = (tmp.path().join("room"), tmp.path().join("reference"));
+    assert!(synth_seed(&room, "0").status.success());
+    assert!(synth_seed(&reference, "7").status.success());
+    // A view's image that cannot be replaced (a folder in its place) stops the rerun.
+    let blocker = room.join("images/train_0003.png");
+    std::fs::remove_file(&blocker).unwrap();
+    std::fs::create_dir(&blocker).unwrap();
+    let stopped = synth_seed(&room, "7");
+    assert!(!stopped.status.success());
+    assert!(!room.join("cameras.json").exists() && !room.join("synth.json").exists());
+    for name in all_files(&room.join("labels")) {
+        let left = std::fs::read(room.join("labels").join(&name)).unwrap();
+        let new = std::fs::read(reference.join("labels").join(&name)).unwrap();
+        assert!(left == new, "labels/{name} is the earlier run's");
+    }
+    let (labels, fused) = (room.join("labels"), tmp.path().join("f.ply"));
+    let fuse = semsplat([
+        "fuse",
+        "--scene",
+        room.to_str().unwrap(),
+        "--labels",
+        labels.to_str().unwrap(),
+        "--out",
+        fused.to_str().unwrap(),
+    ]);
+    assert!(
+        !fuse.status.success() && stderr(&fuse).contains("cameras"),
+        "{}",
+        stderr(&fuse)
+    );
+    std::fs::remove_dir(&blocker).unwrap();
+    assert!(
+        synth_seed(&room, "7").status.success(),
+        "the rerun needs --force"
+    );
+    assert!(room.join("cameras.json").is_file() && room.join("synth.json").is_file());
+}
+
 /// A finite but absurd learning rate makes the logits overflow: training stops with the
 /// iteration, and writes nothing (it used to write a NaN model with exit 0).
 #[test]

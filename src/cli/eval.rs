@@ -89,7 +89,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
             Input::Cameras("--cameras", args.cameras.as_deref()),
             Input::Labels("--labels", Some(&args.labels)),
             Input::File("--classes", args.classes.as_deref()),
-            Input::File("--truth", args.truth.as_deref()),
+            Input::Scene("--truth", args.truth.as_deref()),
             Input::Tree("--images", args.images.as_deref()),
         ],
     )?;

@@ -14,7 +14,7 @@ use semsplat::scene::cameras::camera_files;
 use semsplat::scene::images::is_view_image;
 use semsplat::scene::ply::classes_sidecar_path;
 use semsplat::scene::scene_file::{resolve_scene_path, scene_cameras_file};
-use semsplat::util::{check_output_file, check_output_folder};
+use semsplat::util::{check_output_file, check_output_folder, resolve_output_file};
 
 /// One input of a run, named by its option.
 #[derive(Clone, Copy)]
@@ -54,7 +54,8 @@ pub fn check_outputs(
     let (read_files, read_trees) = read_paths(inputs);
     let mut written: Vec<(&str, PathBuf)> = Vec::new();
     for &(option, path) in &files {
-        let id = identity(path);
+        // Where the write lands: a link (dangling too) is written through to its target.
+        let id = identity(&resolve_output_file(path)?);
         if let Some((other, _)) = written.iter().find(|(_, w)| *w == id) {
             bail!(
                 "{option} {} is also {other}: one would replace the other; give each its own file",
@@ -65,7 +66,7 @@ pub fn check_outputs(
             bail!("{option} {} is the run's {input}: writing it would replace that input; write elsewhere", path.display());
         }
         // Only images are read back from the label and image folders.
-        if is_view_image(path) {
+        if is_view_image(path) || is_view_image(&id) {
             refuse_inside_trees(option, path, &id, &read_trees)?;
         }
         written.push((option, id));

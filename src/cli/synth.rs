@@ -10,7 +10,7 @@ use clap::Args;
 
 use super::args;
 use super::progress::{follow, phase_bar};
-use semsplat::synth::writer::OUTPUT_LAYOUT;
+use semsplat::synth::writer::{OUTPUT_LAYOUT, ROOM_FILE, SUMMARY_FILE};
 use semsplat::synth::{
     self, NoiseSpec, RoomSource, SynthConfig, DEFAULT_HEIGHT, DEFAULT_HFOV_DEG,
     DEFAULT_INIT_JITTER, DEFAULT_INIT_SPACING, DEFAULT_SPACING, DEFAULT_TEST_VIEWS,
@@ -189,7 +189,11 @@ fn check_output_folder(out: &Path, force: bool) -> Result<()> {
             .with_context(|| format!("reading {}", out.display()))?
             .next()
             .is_some();
-    if non_empty && !force && !out.join("synth.json").is_file() {
+    // room.json alone: a run stopped part-way (the summary is written last).
+    let earlier_synth = [SUMMARY_FILE, ROOM_FILE]
+        .iter()
+        .any(|f| out.join(f).is_file());
+    if non_empty && !force && !earlier_synth {
         bail!(
             "--out {} is not empty and holds no earlier synth output; pick another folder or pass --force",
             out.display()

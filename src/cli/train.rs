@@ -463,7 +463,7 @@ fn check_paths(args: &TrainArgs) -> Result<()> {
             Input::Labels("--labels", Some(&args.labels)),
             Input::Cameras("--cameras", args.cameras.as_deref()),
             Input::Scene("--init", Some(&args.init)),
-            Input::File("--init-semantics-from", args.init_semantics_from.as_deref()),
+            Input::Scene("--init-semantics-from", args.init_semantics_from.as_deref()),
             Input::File("--classes", args.classes.as_deref()),
         ],
     )?;

@@ -48,6 +48,13 @@ impl ClassScores {
             "{}: expected a 2-D array [classes, gaussians], got shape {shape:?}",
             path.display()
         );
+        // An empty matrix holds no evidence, and its other dimension is unbounded by the
+        // file's size: [0, 2^40] would have the totals below allocated at 8 TiB.
+        ensure!(
+            shape.iter().all(|&d| d > 0),
+            "{}: an empty matrix (shape {shape:?}): no classes or no Gaussians",
+            path.display()
+        );
         ensure!(
             data.iter().all(|v| v.is_finite() && *v >= 0.0),
             "{}: contributions must be finite and >= 0",

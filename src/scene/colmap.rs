@@ -482,12 +482,15 @@ fn parse_pose_line(toks: &[&str], data: &str, line_no: usize) -> Result<ColmapIm
         *v = parse_num(toks[5 + k], "the translation", line_no)?;
     }
     let camera_id = parse_num(toks[8], "CAMERA_ID", line_no)?;
+    // The name is the rest of the line as written: joining its words would turn "a  b.png"
+    // or a tab into one space, naming a file that is not there.
+    let name_at = toks[9].as_ptr() as usize - data.as_ptr() as usize;
     Ok(ColmapImage {
         id,
         qvec,
         tvec,
         camera_id,
-        name: toks[9..].join(" "),
+        name: data[name_at..].to_owned(),
     })
 }
 

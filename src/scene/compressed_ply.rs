@@ -77,6 +77,27 @@ pub(crate) fn decode(cols: &Columns) -> Result<Gaussians> {
     .map(|p| cols.get("vertex", p))
     .collect::<Result<_>>()?;
     let n = packed[0].len();
+    // The words are uint32 bit fields: a value that is not one (a float property holding
+    // -5, 3.7 or NaN) must not be cast into some other word.
+    for (name, col) in [
+        "packed_position",
+        "packed_rotation",
+        "packed_scale",
+        "packed_color",
+    ]
+    .iter()
+    .zip(&packed)
+    {
+        if let Some(i) = col
+            .iter()
+            .position(|&v| !(v >= 0.0 && v <= u32::MAX as f64 && v.fract() == 0.0))
+        {
+            bail!(
+                "vertex {i}: '{name}' value {} is not a 32-bit unsigned word",
+                col[i]
+            );
+        }
+    }
     let chunk = |p: &str| cols.get("chunk", p);
     let bounds = |prefix: &str, axes: [&str; 3]| -> Result<Vec<(&[f64], &[f64])>> {
         axes.iter()

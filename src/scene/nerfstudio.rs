@@ -39,9 +39,13 @@ fn number(frame: &Map<String, Value>, top: &Map<String, Value>, k: &str) -> Resu
 
 /// Refuses distorted or non-pinhole camera models.
 fn check_pinhole(frame: &Map<String, Value>, top: &Map<String, Value>) -> Result<()> {
-    let model = key(frame, top, "camera_model")
-        .and_then(Value::as_str)
-        .unwrap_or("OPENCV");
+    // null as absent (a writer's None).
+    let model = match key(frame, top, "camera_model").filter(|v| !v.is_null()) {
+        None => "OPENCV",
+        Some(v) => v
+            .as_str()
+            .ok_or_else(|| anyhow!("camera_model {v} is not a model name (a string)"))?,
+    };
     if !matches!(model, "OPENCV" | "PINHOLE" | "SIMPLE_PINHOLE") {
         bail!(
             "camera_model {model} is not supported: semsplat needs undistorted pinhole cameras \
@@ -50,7 +54,11 @@ fn check_pinhole(frame: &Map<String, Value>, top: &Map<String, Value>) -> Result
         );
     }
     for k in DISTORTION_KEYS {
-        if let Some(v) = key(frame, top, k).and_then(Value::as_f64) {
+        if let Some(v) = key(frame, top, k).filter(|v| !v.is_null()) {
+            // A coefficient that is not a number must not be read as no distortion.
+            let v = v
+                .as_f64()
+                .ok_or_else(|| anyhow!("distortion {k} = {v} is not a number"))?;
             if v != 0.0 {
                 bail!(
                     "distortion {k} = {v}: semsplat needs undistorted pinhole cameras; undistort \

@@ -563,12 +563,15 @@ fn read_columns(r: &mut impl BufRead, header: &Header) -> Result<Columns> {
     }
     let big_endian = header.format == PlyFormat::BinaryBigEndian;
     let mut elements = Vec::new();
+    let mut last_record_len = 0;
     for el in &header.elements {
         let types = scalar_types(el)?;
         let record_len: usize = types.iter().map(|t| t.size()).sum();
         let mut cols: Vec<Vec<f64>> = vec![Vec::new(); types.len()];
         let mut record = vec![0u8; record_len];
-        for row in 0..el.count {
+        // Rows without properties hold no bytes: a count of 2^64 - 1 must not loop.
+        let rows = if types.is_empty() { 0 } else { el.count };
+        for row in 0..rows {
             r.read_exact(&mut record).map_err(|_| {
                 anyhow!(
                     "truncated file: element '{}' ends in row {row} of {}",
@@ -584,6 +587,18 @@ fn read_columns(r: &mut impl BufRead, header: &Header) -> Result<Columns> {
         }
         let names = el.props.iter().map(|p| p.name().to_owned());
         elements.push((el.name.clone(), names.zip(cols).collect()));
+        last_record_len = record_len;
+    }
+    // As for the vertices of a Gaussian PLY: a whole row more of the last element means the
+    // header's counts are wrong (and every later column would be read shifted).
+    let mut rest = Vec::new();
+    r.take(last_record_len as u64).read_to_end(&mut rest)?;
+    if last_record_len > 0 && rest.len() == last_record_len {
+        bail!(
+            "data continues past the header's last element (at least one more row of {} \
+             bytes): the header's counts are wrong, or the file holds more than it declares",
+            last_record_len
+        );
     }
     Ok(Columns { elements })
 }
@@ -607,6 +622,14 @@ fn read_ascii_columns(r: &mut impl BufRead, header: &Header) -> Result<Columns> 
     for el in &header.elements {
         let props = scalar_types(el)?.len();
         let mut cols: Vec<Vec<f64>> = vec![Vec::new(); props];
+        if props == 0 {
+            // Rows without properties hold no values: a count of 2^64 - 1 must not loop.
+            if el.count > 0 {
+                tokens.finish_line()?;
+            }
+            elements.push((el.name.clone(), Vec::new()));
+            continue;
+        }
         for row in 0..el.count {
             for col in cols.iter_mut() {
                 let v = tokens.next_value()?.ok_or_else(|| {
@@ -622,6 +645,13 @@ fn read_ascii_columns(r: &mut impl BufRead, header: &Header) -> Result<Columns> 
         }
         let names = el.props.iter().map(|p| p.name().to_owned());
         elements.push((el.name.clone(), names.zip(cols).collect()));
+    }
+    if tokens.next_value()?.is_some() {
+        bail!(
+            "data line {}: values continue past the header's last element: the header's \
+             counts are wrong, or the file holds more than it declares",
+            tokens.line_no
+        );
     }
     Ok(Columns { elements })
 }
@@ -1214,7 +1244,12 @@ pub fn write_ply_to(w: &mut impl Write, g: &Gaussians) -> Result<()> {
 // Class table sidecar
 
 /// `<ply path without .ply>.classes.json`: where the class table of a PLY's `class` ids lives.
+/// Beside the file the path names, through any symbolic links: a PLY written through a
+/// link lands in its target, and its table must land beside it (a table beside the link
+/// would leave the target with its old one).
 pub fn classes_sidecar_path(ply_path: &Path) -> PathBuf {
+    let resolved = crate::util::resolve_output_file(ply_path);
+    let ply_path = resolved.as_deref().unwrap_or(ply_path);
     let is_ply = ply_path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("ply"));

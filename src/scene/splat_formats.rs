@@ -74,12 +74,16 @@ pub fn parse_splat(bytes: &[u8]) -> Result<Gaussians> {
     Ok(g)
 }
 
+/// spz's `FlagHasExtensions`: extension records follow the attribute streams.
+const SPZ_FLAG_HAS_EXTENSIONS: u8 = 0x2;
+
 /// The fixed header of a gzip-era .spz (versions 1..=3).
 struct SpzHeader {
     version: u32,
     count: usize,
     sh_degree: u32,
     fractional_bits: u32,
+    flags: u8,
 }
 
 fn parse_spz_header(b: &[u8]) -> Result<SpzHeader> {
@@ -104,11 +108,18 @@ fn parse_spz_header(b: &[u8]) -> Result<SpzHeader> {
         sh_degree <= 3,
         ".spz SH degree {sh_degree} is not supported (0..=3)"
     );
+    // spz scales positions by 1 / (1 << fractionalBits), a 32-bit shift.
+    let fractional_bits = b[13] as u32;
+    ensure!(
+        fractional_bits < 32,
+        ".spz fractional bits {fractional_bits} are not supported (0..=31)"
+    );
     Ok(SpzHeader {
         version,
         count: u(8) as usize,
         sh_degree,
-        fractional_bits: b[13] as u32,
+        fractional_bits,
+        flags: b[14],
     })
 }
 
@@ -125,11 +136,13 @@ pub fn parse_spz(compressed: &[u8]) -> Result<Gaussians> {
         [0x1f, 0x8b, ..] => {}
         _ => bail!("not an .spz file: it starts with neither a gzip header nor \"NGSP\""),
     }
+    let corrupt =
+        |e: std::io::Error| anyhow!("the .spz file's gzip stream is truncated or corrupt ({e})");
+    // The header first: a stream that is no .spz (or a gzip bomb) is refused before its
+    // data is inflated, and no more is inflated than the header's count needs.
+    let mut gz = flate2::read::GzDecoder::new(compressed);
     let mut raw = Vec::new();
-    flate2::read::GzDecoder::new(compressed)
-        .take(MAX_SPZ_BYTES)
-        .read_to_end(&mut raw)
-        .map_err(|e| anyhow!("the .spz file's gzip stream is truncated or corrupt ({e})"))?;
+    (&mut gz).take(16).read_to_end(&mut raw).map_err(corrupt)?;
     let h = parse_spz_header(&raw)?;
     let n = h.count;
     let rest = sh_coeffs_for_degree(h.sh_degree) - 1;
@@ -138,9 +151,25 @@ pub fn parse_spz(compressed: &[u8]) -> Result<Gaussians> {
     let sizes = [9 * n, n, 3 * n, 3 * n, rot_bytes * n, 3 * rest * n];
     let need: usize = 16 + sizes.iter().sum::<usize>();
     ensure!(
+        need as u64 <= MAX_SPZ_BYTES,
+        "the .spz header claims {n} splats ({need} bytes of data), more than the \
+         {MAX_SPZ_BYTES} bytes this reader accepts"
+    );
+    // One byte past the splats tells a stream holding more than its count says.
+    gz.take((need + 1 - raw.len()) as u64)
+        .read_to_end(&mut raw)
+        .map_err(corrupt)?;
+    ensure!(
         raw.len() >= need,
         "the .spz data is truncated: {n} splats need {need} bytes, the stream holds {}",
         raw.len()
+    );
+    // Reading `n` of more splats would take the start of each attribute stream as the
+    // previous one's end (alphas read from positions, ...). Extensions may follow the SH.
+    ensure!(
+        raw.len() == need || h.flags & SPZ_FLAG_HAS_EXTENSIONS != 0,
+        "data continues past the .spz header's {n} splats (and the header announces no \
+         extensions): the count is wrong, or the file holds more than it declares"
     );
     let mut at = 16;
     let mut next = |len: usize| {
@@ -156,7 +185,7 @@ pub fn parse_spz(compressed: &[u8]) -> Result<Gaussians> {
         next(sizes[4]),
         next(sizes[5]),
     );
-    let fixed_scale = 1.0 / (1u64 << h.fractional_bits.min(23)) as f32;
+    let fixed_scale = 1.0 / (1u64 << h.fractional_bits) as f32;
     let flip_p = [1.0f32, -1.0, -1.0];
     let mut g = Gaussians {
         sh_degree: h.sh_degree,

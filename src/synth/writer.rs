@@ -1,6 +1,9 @@
 //! Writes a generated scene as an output folder (layout in `OUTPUT_LAYOUT`). Every file is
-//! written atomically; views are written several at a time. Files a previous run left in our
-//! own subfolders for views that no longer exist are removed, so a folder never mixes runs.
+//! written atomically; views are written several at a time. A folder never mixes runs, even
+//! when a run stops part-way (a signal, a full disk): an earlier run's cameras and summary go
+//! first, then every view file in our own subfolders, and this run's cameras and summary are
+//! written last, once every view is. A folder without `cameras.json` is refused by every
+//! command that reads the room; `room.json`, written first, marks it as synth's for a rerun.
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -36,6 +39,12 @@ pub const OUTPUT_LAYOUT: &str = "  scene.ply              ground-truth Gaussians
   labels_noisy/NAME.png  noisy class ids for every view, with --noise (evaluate on labels/)
   labels_noisy/noise.json  spec, seed, the consistently mislabeled objects and measured rates
   vis/labels*/NAME.png   palette-colored previews of the label maps (unless --no-previews)";
+
+/// The run's summary; written last, with the cameras.
+pub const SUMMARY_FILE: &str = "synth.json";
+/// The room's description; written first, so a folder a run left part-way is known as
+/// synth's to the next run.
+pub const ROOM_FILE: &str = "room.json";
 
 const VIEW_DIRS: &[&str] = &[
     "images",
@@ -87,12 +96,12 @@ pub fn write_synth(dir: &Path, scene: &SynthScene) -> Result<()> {
 pub fn write_synth_with_progress(dir: &Path, scene: &SynthScene, progress: Progress) -> Result<()> {
     std::fs::create_dir_all(dir)
         .with_context(|| format!("creating output folder {}", dir.display()))?;
-    remove_stale(dir, scene)?;
+    remove_previous_run(dir, scene)?;
     let room = &scene.room;
+    write_json(&dir.join(ROOM_FILE), &room.spec)?;
     write_ply(&dir.join(SCENE_FILE), &scene.gaussians)?;
     write_classes_sidecar(&dir.join(SCENE_FILE), &room.classes)?;
     write_ply(&dir.join("init.ply"), &scene.init_points)?;
-    write_semsplat_cameras(&dir.join(CAMERAS_FILE), &scene.cameras)?;
     write_class_table(&dir.join(crate::dataset::CLASS_TABLE_FILE), &room.classes)?;
     let instances: Vec<InstanceEntry> = room
         .instances
@@ -106,12 +115,17 @@ pub fn write_synth_with_progress(dir: &Path, scene: &SynthScene, progress: Progr
         })
         .collect();
     write_json(&dir.join("instances.json"), &instances)?;
-    write_json(&dir.join("room.json"), &room.spec)?;
-    write_json(&dir.join("synth.json"), &summary(scene))?;
     if let Some(noisy) = &scene.noisy {
         write_json(&dir.join("labels_noisy").join("noise.json"), &noisy.report)?;
     }
+    write_views(dir, scene, progress)?;
+    // Last: with them the folder reads as a room (see the module's description).
+    write_semsplat_cameras(&dir.join(CAMERAS_FILE), &scene.cameras)?;
+    write_json(&dir.join(SUMMARY_FILE), &summary(scene))
+}
 
+/// Writes every view's files, several views at a time; the first error stops the others.
+fn write_views(dir: &Path, scene: &SynthScene, progress: Progress) -> Result<()> {
     let next = AtomicUsize::new(0);
     // Counted under a lock so the calls see `done` rising, whichever thread finishes first.
     let done = Mutex::new(0);
@@ -220,9 +234,19 @@ fn summary(scene: &SynthScene) -> RunSummary<'_> {
     }
 }
 
-/// Removes PNGs in our view folders that this run will not rewrite (views of an earlier, larger
-/// run; noisy labels or previews this run does not produce) and an outdated noise.json.
-fn remove_stale(dir: &Path, scene: &SynthScene) -> Result<()> {
+/// Removes what an earlier run wrote that could be read with this run's files: its cameras
+/// and summary first (a folder without them is no room, whatever else is left), then every
+/// PNG in our view folders (this run rewrites the views it has; the others were an earlier,
+/// larger run's, or noisy labels or previews this run does not produce) and an outdated
+/// noise.json.
+fn remove_previous_run(dir: &Path, scene: &SynthScene) -> Result<()> {
+    for file in [CAMERAS_FILE, SUMMARY_FILE] {
+        let path = dir.join(file);
+        if path.is_file() {
+            std::fs::remove_file(&path)
+                .with_context(|| format!("removing the earlier run's {}", path.display()))?;
+        }
+    }
     let keep = |sub: &str| -> bool {
         match sub {
             "labels_noisy" => scene.noisy.is_some(),
@@ -239,12 +263,7 @@ fn remove_stale(dir: &Path, scene: &SynthScene) -> Result<()> {
         let mut stale: Vec<PathBuf> = Vec::new();
         for entry in entries.flatten() {
             let path = entry.path();
-            let is_png = path.extension().is_some_and(|e| e == "png") && path.is_file();
-            let stem = path
-                .file_stem()
-                .and_then(|s| s.to_str())
-                .unwrap_or_default();
-            if is_png && (!keep(sub) || !scene.cameras.iter().any(|c| c.name == stem)) {
+            if path.extension().is_some_and(|e| e == "png") && path.is_file() {
                 stale.push(path);
             }
         }

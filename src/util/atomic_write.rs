@@ -19,6 +19,8 @@ use super::interrupt;
 
 /// The temp-name marker between the target's name and the writer's PID.
 const TEMP_MARKER: &str = ".semsplat-tmp";
+/// The longest file name Linux's file systems hold, in bytes.
+const MAX_FILE_NAME_BYTES: usize = 255;
 /// Symbolic links followed before giving up (the kernel's own limit is 40).
 const MAX_LINKS: usize = 40;
 
@@ -259,6 +261,17 @@ pub fn check_output_file(option: &str, target: &Path) -> Result<()> {
         );
     }
     let resolved = resolve_output_file(target).with_context(|| option.to_string())?;
+    // Found here rather than at the write, after the run's work: the file is written under
+    // a longer temp name first.
+    let temp_name_len = temp_path(&resolved).file_name().map_or(0, |n| n.len());
+    if temp_name_len > MAX_FILE_NAME_BYTES {
+        bail!(
+            "{option} {}: the file's name is too long to be written safely (its temp name would \
+             take {temp_name_len} bytes, over the {MAX_FILE_NAME_BYTES} a name may hold); \
+             shorten it",
+            target.display()
+        );
+    }
     let parent = match resolved.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),

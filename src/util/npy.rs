@@ -87,6 +87,7 @@ pub fn read_npy_f64(path: &Path) -> Result<NpyArray> {
 
 /// [`read_npy_f64`] from memory.
 pub fn parse_npy_f64(bytes: &[u8]) -> Result<NpyArray> {
+    check_npy_header(bytes)?;
     let mut data_bytes = bytes;
     let header = npyz::NpyHeader::from_reader(&mut data_bytes)
         .map_err(|e| anyhow!("not a .npy file: {e}"))?;
@@ -128,6 +129,84 @@ pub fn parse_npy_f64(bytes: &[u8]) -> Result<NpyArray> {
         npyz::Order::Fortran => fortran_to_c_order(&shape, &stored),
     };
     Ok(NpyArray { shape, data })
+}
+
+/// Checks what npyz trusts before it parses a header: the header's length, which it
+/// allocates whole (up to 4 GiB for a 12-byte file), and the shape, whose dimensions it
+/// multiplies unchecked (a product past u64 panics).
+fn check_npy_header(bytes: &[u8]) -> Result<()> {
+    // Magic (6 bytes), version (2), then the header's length: 2 bytes in version 1, 4 in
+    // versions 2 and 3. Anything else is left to npyz to name.
+    let len_bytes = match bytes.get(6) {
+        Some(1) => 2,
+        Some(2 | 3) => 4,
+        _ => return Ok(()),
+    };
+    let Some(len_field) = bytes.get(8..8 + len_bytes) else {
+        return Ok(());
+    };
+    let mut le = [0u8; 4];
+    le[..len_bytes].copy_from_slice(len_field);
+    let header_len = u32::from_le_bytes(le) as usize;
+    let rest = &bytes[8 + len_bytes..];
+    ensure!(
+        header_len <= rest.len(),
+        "not a .npy file: its header claims {header_len} bytes but only {} follow (truncated \
+         file?)",
+        rest.len()
+    );
+    let header = String::from_utf8_lossy(&rest[..header_len]);
+    let Some(dims) = header_shape(&header) else {
+        return Ok(()); // no 'shape' key: npyz names it
+    };
+    let dims = dims.ok_or_else(|| {
+        anyhow!("the header's shape is not a tuple of whole numbers (as numpy writes it)")
+    })?;
+    let mut nonzero = dims.iter().filter(|&&d| d != 0);
+    ensure!(
+        nonzero.try_fold(1u64, |p, &d| p.checked_mul(d)).is_some(),
+        "shape {dims:?} is too large"
+    );
+    Ok(())
+}
+
+/// The dimensions of the header's `'shape': (..)` entry: None without one, Some(None) when
+/// it is not a tuple or list of plain whole numbers.
+fn header_shape(header: &str) -> Option<Option<Vec<u64>>> {
+    let mut value = None;
+    for key in ["'shape'", "\"shape\""] {
+        for (at, _) in header.match_indices(key) {
+            // A structured dtype's field may be named 'shape': the key is followed by ':'.
+            if let Some(v) = header[at + key.len()..].trim_start().strip_prefix(':') {
+                value = Some(v.trim_start());
+                break;
+            }
+        }
+        if value.is_some() {
+            break;
+        }
+    }
+    let value = value?;
+    let close = match value.chars().next() {
+        Some('(') => ')',
+        Some('[') => ']',
+        _ => return Some(None),
+    };
+    let Some(end) = value.find(close) else {
+        return Some(None);
+    };
+    let dims = value[1..end]
+        .split(',')
+        .map(str::trim)
+        .filter(|t| !t.is_empty())
+        .map(|t| {
+            t.bytes()
+                .all(|b| b.is_ascii_digit())
+                .then(|| t.parse::<u64>().ok())
+                .flatten()
+        })
+        .collect();
+    Some(dims)
 }
 
 /// Reorders values stored column-major (the first axis fastest) into row-major order.

@@ -83,6 +83,14 @@ impl PngHeader {
         self.width as u64 * self.height as u64 * self.channels() as u64 * per_sample
     }
 
+    /// Bytes the samples take packed as stored (sub-byte depths packed), before filtering:
+    /// the least the image's zlib stream inflates to.
+    fn stored_bytes(&self) -> u64 {
+        let bits =
+            self.width as u64 * self.height as u64 * self.channels() as u64 * self.bit_depth as u64;
+        bits / 8
+    }
+
     fn kind(&self) -> &'static str {
         match self.color_type {
             0 => "a grayscale",
@@ -144,6 +152,26 @@ pub fn read_png_header(path: &Path) -> Result<PngHeader> {
     header.check()?;
     Ok(header)
 }
+
+/// zlib inflates at most 1032 bytes from one (deflate's longest match, 258 bytes, in two
+/// bits): a file that cannot hold its samples is refused before a buffer of their size is
+/// filled (up to 1 GiB for a 60-byte file).
+fn check_file_holds_samples(path: &Path, h: &PngHeader) -> Result<()> {
+    let file_len = std::fs::metadata(path).map(|m| m.len()).unwrap_or(u64::MAX);
+    if h.stored_bytes() > file_len.saturating_mul(MAX_DEFLATE_RATIO) {
+        bail!(
+            "cannot decode PNG: it is {}x{} ({} PNG) but its {file_len} bytes cannot hold that \
+             many pixels (truncated or corrupt file)",
+            h.width,
+            h.height,
+            h.kind()
+        );
+    }
+    Ok(())
+}
+
+/// The most bytes zlib inflates from one byte of a stream.
+const MAX_DEFLATE_RATIO: u64 = 1032;
 
 /// The raw samples of a PNG exactly as stored (no palette expansion: an index is a class
 /// id), written over `buf`; returns the byte length of each row.
@@ -241,6 +269,7 @@ pub fn read_label_png_as(
 
 fn read_inner(path: &Path, format: &LabelFormat, table: Option<&ClassTable>) -> Result<LabelMap> {
     let h = read_png_header(path)?;
+    check_file_holds_samples(path, &h)?;
     SAMPLES.with_borrow_mut(|samples| {
         let map = decode_labels(path, format, table, &h, samples);
         if samples.capacity() > KEPT_SAMPLE_BYTES {
