@@ -219,6 +219,18 @@ fn camera_names_that_are_paths_are_refused_by_every_command() {
         .filter(|n| n.starts_with("escaped"))
         .collect();
     assert!(leaked.is_empty(), "wrote outside --out: {leaked:?}");
+
+    // A camera named after another's label map would write its image over it.
+    let mut cams = cameras.clone();
+    let other = cams["cameras"][1]["name"].as_str().unwrap().to_owned();
+    cams["cameras"][0]["name"] = format!("{other}.labels").into();
+    let file = tmp.path().join("clash.json");
+    std::fs::write(&file, serde_json::to_vec(&cams).unwrap()).unwrap();
+    let render = &commands_naming_files_by_camera(&room, &file, &out)[0];
+    let o = semsplat(render);
+    let e = stderr(&o);
+    assert!(!o.status.success() && e.contains("would both write"), "{e}");
+    assert!(!out.exists(), "a refused render wrote into --out");
 }
 
 /// Every command that names files after cameras: on the synth `room`, with the camera file

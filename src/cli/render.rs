@@ -1,6 +1,7 @@
 //! `semsplat render`: renders views of a scene on the GPU and writes images (and, with
 //! --raw, float arrays for comparison with other tools).
 
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, ensure, Context, Result};
@@ -155,6 +156,41 @@ fn check_table_fits_logits(scene: &Path, g: &Gaussians, table: Option<&ClassTabl
     Ok(())
 }
 
+/// What a view's files append to its camera's name.
+const RGB_PNG: &str = ".png";
+const LABELS_PNG: &str = ".labels.png";
+const PALETTE_PNG: &str = ".palette.png";
+const RAW_NPY: [&str; 5] = [
+    ".rgb.npy",
+    ".alpha.npy",
+    ".depth.npy",
+    ".sem.npy",
+    ".sem_norm.npy",
+];
+
+/// Refuses views whose files would land on one path (a camera named `X.labels` wrote its
+/// RGB image to `X.labels.png`, camera `X`'s label map), before anything is written.
+fn check_view_files_distinct(cams: &[Camera]) -> Result<()> {
+    let suffixes = [RGB_PNG, LABELS_PNG, PALETTE_PNG]
+        .into_iter()
+        .chain(RAW_NPY);
+    let suffixes: Vec<&str> = suffixes.collect();
+    let mut writer: HashMap<String, &str> = HashMap::new();
+    for cam in cams {
+        for suffix in &suffixes {
+            let file = format!("{}{suffix}", cam.name);
+            if let Some(other) = writer.insert(file.clone(), &cam.name) {
+                bail!(
+                    "cameras '{other}' and '{}' would both write {file} in --out: render them \
+                     in two runs, or rename one",
+                    cam.name
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
 pub fn run(args: RenderArgs) -> Result<()> {
     if args.background.len() != 3 {
         bail!(
@@ -177,6 +213,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
         load_cameras(&cameras_for_scene(args.cameras.as_deref(), &args.scene)?)?,
         &args.views,
     )?;
+    check_view_files_distinct(&cams)?;
     if args.semantics {
         check_table_fits_logits(&scene_file, &g, table.as_ref())?;
         if table.is_none() && g.semantics.is_some() {
@@ -222,15 +259,15 @@ pub fn run(args: RenderArgs) -> Result<()> {
         // Rig names (`cam0/00001`) write into subfolders of --out; check_camera_name keeps
         // every component a plain name, so nothing lands outside it.
         let out = |suffix: &str| args.out.join(format!("{}{suffix}", cam.name));
-        write_rgb_png(&out(".png"), &f)?;
+        write_rgb_png(&out(RGB_PNG), &f)?;
         let labels = match &mut labels_from {
             LabelSource::None => None,
             LabelSource::Logits => Some(label_map(&f, table.as_ref())?),
             LabelSource::Classes(r) => Some(class_label_map(r, cam)?),
         };
         if let Some(labels) = &labels {
-            write_label_png(&out(".labels.png"), labels)?;
-            write_palette_png(&out(".palette.png"), labels, &palette_table)?;
+            write_label_png(&out(LABELS_PNG), labels)?;
+            write_palette_png(&out(PALETTE_PNG), labels, &palette_table)?;
         }
         if args.raw {
             write_raw(&f, &out, args.semantics)?;
@@ -254,12 +291,13 @@ fn class_label_map(r: &mut LabelRenderer, cam: &Camera) -> Result<LabelMap> {
 
 fn write_raw(f: &RenderedFrame, out: &dyn Fn(&str) -> PathBuf, semantics: bool) -> Result<()> {
     let (h, w, c) = (f.height as u64, f.width as u64, f.channels as u64);
-    write_npy_f32(&out(".rgb.npy"), &[h, w, 3], &f.rgb)?;
-    write_npy_f32(&out(".alpha.npy"), &[h, w], &f.alpha)?;
-    write_npy_f32(&out(".depth.npy"), &[h, w], &f.depth)?;
+    let [rgb, alpha, depth, sem, sem_norm] = RAW_NPY;
+    write_npy_f32(&out(rgb), &[h, w, 3], &f.rgb)?;
+    write_npy_f32(&out(alpha), &[h, w], &f.alpha)?;
+    write_npy_f32(&out(depth), &[h, w], &f.depth)?;
     if semantics {
-        write_npy_f32(&out(".sem.npy"), &[h, w, c], &f.sem)?;
-        write_npy_f32(&out(".sem_norm.npy"), &[h, w, c], &f.sem_norm)?;
+        write_npy_f32(&out(sem), &[h, w, c], &f.sem)?;
+        write_npy_f32(&out(sem_norm), &[h, w, c], &f.sem_norm)?;
     }
     Ok(())
 }
