@@ -169,6 +169,13 @@ fn outputs_named_by_links_are_checked_where_they_land() {
     assert_eq!(std::fs::read(&map).unwrap(), map_bytes);
     assert_eq!(listing(d), ["L", "P", "room"]);
 
+    // An output named as the spilled evidence's scratch file once was (`--out`'s stem and
+    // `.evidence`): creating its temp file truncated the scratch before it was read back.
+    let (fused, contrib) = (arg_in(d, "b.ply"), arg_in(d, "b.evidence"));
+    fuse_synth(&room, &["--out", &fused, "--save-membership", &contrib]);
+    let saved = semsplat::util::npy::read_npy_f64(&d.join("b.evidence")).unwrap();
+    assert!(saved.data.iter().any(|&v| v > 0.0), "no evidence saved");
+
     std::fs::create_dir(d.join("real")).unwrap();
     let through = link("T.ply", &d.join("real/t.ply"));
     fuse_synth(&room, &["--out", &through]);

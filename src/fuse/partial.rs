@@ -417,9 +417,15 @@ pub const MANIFEST_FORMAT: &str = "semsplat partial evidence";
 /// holds them, `depth_tolerance` only for the methods that read it.
 pub const MANIFEST_VERSION: u32 = 2;
 
-/// `<part>.manifest.json`.
+/// `<part without .npy>.manifest.json`.
 pub fn manifest_path(part: &Path) -> PathBuf {
-    part.with_extension("manifest.json")
+    // Only `.npy` is replaced: parts named `part.0`, `part.1` would share one manifest.
+    if part.extension().is_some_and(|e| e == "npy") {
+        return part.with_extension("manifest.json");
+    }
+    let mut name = part.file_name().unwrap_or_default().to_os_string();
+    name.push(".manifest.json");
+    part.with_file_name(name)
 }
 
 impl PartManifest {
@@ -517,6 +523,16 @@ pub fn check_parts(parts: &[(PathBuf, PartManifest)]) -> Result<FusionKey> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Parts told apart only by an extension of their own keep their manifests apart.
+    #[test]
+    fn every_part_has_its_own_manifest() {
+        let manifest = |p: &str| manifest_path(Path::new(p)).display().to_string();
+        assert_eq!(manifest("d/part0.npy"), "d/part0.manifest.json");
+        assert_eq!(manifest("d/part.0"), "d/part.0.manifest.json");
+        assert_eq!(manifest("d/part.1"), "d/part.1.manifest.json");
+        assert_eq!(manifest("part"), "part.manifest.json");
+    }
 
     #[test]
     fn shard_split_is_round_robin_and_covers_every_view_once() {

@@ -19,6 +19,8 @@ use super::interrupt;
 
 /// The temp-name marker between the target's name and the writer's PID.
 const TEMP_MARKER: &str = ".semsplat-tmp";
+/// Appended to a scratch file's name before its temp name is formed.
+const SCRATCH_MARKER: &str = ".semsplat-scratch";
 /// The longest file name Linux's file systems hold, in bytes.
 const MAX_FILE_NAME_BYTES: usize = 255;
 /// Symbolic links followed before giving up (the kernel's own limit is 40).
@@ -183,6 +185,12 @@ fn create_temp(target: PathBuf) -> Result<(fs::File, StagedFile)> {
 /// [`StagedFile`] drops; nothing is ever renamed onto `target`.
 pub fn stage_scratch(target: &Path) -> Result<(fs::File, StagedFile)> {
     let target = resolve_output_file(target)?;
+    // Apart from the temp names of outputs: an output named like `target` (`--out b.ply`
+    // spilling beside `--save-membership b.evidence`) would truncate the scratch as it
+    // created its own temp file.
+    let mut name = target.file_name().unwrap_or_default().to_os_string();
+    name.push(SCRATCH_MARKER);
+    let target = target.with_file_name(name);
     if let Some(parent) = target.parent().filter(|p| !p.as_os_str().is_empty()) {
         fs::create_dir_all(parent)
             .with_context(|| format!("creating directory {}", parent.display()))?;
