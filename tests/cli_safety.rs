@@ -362,6 +362,11 @@ fn outputs_are_checked_writable_before_any_work() {
     let contrib_s = contrib.to_str().unwrap().to_string();
     let blocker_s = blocker.to_str().unwrap().to_string();
     let fuse = |extra: &[&str]| fuse_on(&room, extra);
+    let at = |name: &str| tmp.path().join(name).to_str().unwrap().to_string();
+    std::fs::create_dir(tmp.path().join("a_file_out.iter50000.ply")).unwrap();
+    std::fs::create_dir(tmp.path().join("a_file_part.manifest.json")).unwrap();
+    std::os::unix::fs::symlink(tmp.path().join("nowhere/x"), tmp.path().join("a_file_link"))
+        .unwrap();
     let cases: Vec<(Vec<String>, &str)> = vec![
         // Would train 100000 iterations and then fail on --out without the check.
         (train_100000_iters(&room, &under_file), "--out"),
@@ -381,6 +386,23 @@ fn outputs_are_checked_writable_before_any_work() {
         (
             fuse(&["--out", &good_s, "--palette-ply", &under_file]),
             "--palette-ply",
+        ),
+        // Derived outputs, and a dangling link as a folder: found before the work too.
+        (
+            {
+                let mut a = train_100000_iters(&room, &at("a_file_out.ply"));
+                a.extend(strings(&["--checkpoint-every", "50000"]));
+                a
+            },
+            "--checkpoint-every",
+        ),
+        (
+            fuse(&["--shard", "0/2", "--out", &at("a_file_part.npy")]),
+            "--out's manifest",
+        ),
+        (
+            fuse(&["--out", &good_s, "--render-views", &at("a_file_link")]),
+            "--render-views",
         ),
     ];
     for (args, option) in cases {

@@ -18,6 +18,7 @@ use semsplat::dataset::Dataset;
 use semsplat::dataset::{user_classes, DatasetPaths};
 use semsplat::eval::label_render::{check_ids_fit_16_bit, LabelRenderer};
 use semsplat::fuse::consensus_report::SegmentReport;
+use semsplat::fuse::partial::manifest_path;
 use semsplat::fuse::{
     accumulate_assigned, assign_semantic_near, class_totals, nearest_neighbours, one_vs_rest_row,
     Accumulation, AssignOnGpu, Assignment, ClassScores, EvidenceRows, FuseConfig, FuseStats,
@@ -322,6 +323,11 @@ pub fn run(mut args: FuseArgs) -> Result<()> {
             Input::File("--contrib's class table", contrib_table.as_deref()),
         ],
     )?;
+    if args.shard.is_some() {
+        // Written after the part: a folder in its place is found now, not after the work.
+        let manifest = manifest_path(&args.output.out);
+        semsplat::util::check_output_file("--out's manifest", &manifest)?;
+    }
     let g = read_scene(&args.scene)?;
     let method = selected_method(&args)?;
     if args.contrib.is_none() {

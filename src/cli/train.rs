@@ -27,7 +27,9 @@ use semsplat::train::trainer::{
     StageTotals, Trainer,
 };
 use semsplat::train::views::TrainView;
-use semsplat::util::{interrupt, parallel_map_on, write_bytes_atomic};
+use semsplat::util::{
+    check_output_file, interrupt, parallel_map_on, resolve_output_file, write_bytes_atomic,
+};
 
 #[derive(Args)]
 pub struct TrainArgs {
@@ -493,6 +495,18 @@ fn check_checkpoints(args: &TrainArgs) -> Result<()> {
                 path.display()
             );
         }
+    }
+    // Each checkpoint a file that can be written (not a folder in its place), the last,
+    // longest name short enough: found here, not at its iteration.
+    let iterations: Vec<u32> = (every..args.iters).step_by(every as usize).collect();
+    for &n in &iterations {
+        let checkpoint = checkpoint_path(&args.out, n);
+        for file in [classes_sidecar_path(&checkpoint), checkpoint] {
+            resolve_output_file(&file).context("--checkpoint-every")?;
+        }
+    }
+    if let Some(&last) = iterations.last() {
+        check_output_file("--checkpoint-every", &checkpoint_path(&args.out, last))?;
     }
     Ok(())
 }

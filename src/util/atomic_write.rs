@@ -300,7 +300,17 @@ fn check_writable_folder(dir: &Path) -> Result<()> {
         match fs::metadata(existing) {
             Ok(meta) if meta.is_dir() => break,
             Ok(_) => bail!("{} exists and is not a folder", existing.display()),
-            Err(e) if e.kind() == ErrorKind::NotFound => {}
+            // A dangling link: creating the folder would fail ("File exists") after the work.
+            Err(e) if e.kind() == ErrorKind::NotFound => {
+                if let Ok(target) = fs::read_link(existing) {
+                    bail!(
+                        "{} is a link to {}, which does not exist: create that folder, or name \
+                         another",
+                        existing.display(),
+                        target.display()
+                    );
+                }
+            }
             Err(e) => return Err(e).with_context(|| format!("checking {}", existing.display())),
         }
         existing = match existing.parent() {
