@@ -183,6 +183,43 @@ fn outputs_named_by_links_are_checked_where_they_land() {
     assert!(!d.join("T.classes.json").exists());
 }
 
+/// Unmounts its folder when dropped (a failed assertion too), before the test's temp
+/// folder is removed through it.
+struct Unmount(PathBuf);
+
+impl Drop for Unmount {
+    fn drop(&mut self) {
+        let _ = std::process::Command::new("umount").arg(&self.0).status();
+    }
+}
+
+/// The room under a second mount point (a bind mount, as a container's volume mounted
+/// twice gives): its scene and label folder are still the run's inputs there. Needs mount
+/// permission (root, as CI runs); elsewhere it says so and checks nothing.
+#[test]
+fn inputs_under_a_second_mount_point_are_still_inputs() {
+    let (tmp, room) = tiny_room();
+    let bind = tmp.path().join("bind");
+    std::fs::create_dir(&bind).unwrap();
+    let mounted = std::process::Command::new("mount")
+        .arg("--bind")
+        .args([&room, &bind])
+        .stderr(std::process::Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    if !mounted {
+        eprintln!("skipped: no permission to bind-mount here");
+        return;
+    }
+    let _unmount = Unmount(bind.clone());
+    let scene_bytes = std::fs::read(room.join("scene.ply")).unwrap();
+    let e = fuse_synth_fails(&room, &["--out", &arg_in(&bind, "scene.ply")]);
+    assert!(e.contains("is the run's --scene"), "{e}");
+    let e = fuse_synth_fails(&room, &["--out", &arg_in(&bind, "labels/x.png")]);
+    assert!(e.contains("inside the --labels folder"), "{e}");
+    assert_eq!(std::fs::read(room.join("scene.ply")).unwrap(), scene_bytes);
+}
+
 #[test]
 fn a_refused_fusion_writes_nothing_and_a_fused_scene_holds_only_its_fusions_semantics() {
     let (tmp, room) = tiny_room();

@@ -62,7 +62,7 @@ pub fn check_outputs(
                 path.display()
             );
         }
-        if let Some((input, _)) = read_files.iter().find(|(_, r)| *r == id) {
+        if let Some((input, _)) = read_files.iter().find(|(_, r)| same_file(r, &id)) {
             bail!("{option} {} is the run's {input}: writing it would replace that input; write elsewhere", path.display());
         }
         // Only images are read back from the label and image folders.
@@ -84,6 +84,26 @@ pub fn check_outputs(
     Ok(())
 }
 
+/// The (device, inode) of an existing file or folder: one file under two mount points (a
+/// bind mount, a container's volume mounted twice) has two paths, which no resolving of
+/// links makes one, and one of these.
+fn file_id(path: &Path) -> Option<(u64, u64)> {
+    use std::os::unix::fs::MetadataExt;
+    fs::metadata(path).ok().map(|m| (m.dev(), m.ino()))
+}
+
+/// Whether two identities name one file: by path, or as the same existing file.
+fn same_file(a: &Path, b: &Path) -> bool {
+    a == b || file_id(a).is_some_and(|f| file_id(b) == Some(f))
+}
+
+/// Whether `id` is `tree` or lies under it: by path, or through a folder above it that is
+/// `tree` under another mount point.
+fn is_within(id: &Path, tree: &Path) -> bool {
+    id.starts_with(tree)
+        || file_id(tree).is_some_and(|t| id.ancestors().any(|a| file_id(a) == Some(t)))
+}
+
 fn given<'a>(paths: &[(&'a str, Option<&'a Path>)]) -> Vec<(&'a str, &'a Path)> {
     (paths.iter())
         .filter_map(|&(option, path)| Some((option, path?)))
@@ -93,7 +113,7 @@ fn given<'a>(paths: &[(&'a str, Option<&'a Path>)]) -> Vec<(&'a str, &'a Path)> 
 /// An output at or under a folder the run reads with its subfolders would be read back
 /// as an input by this run or the next (a label map replaced, a rendered view taken for one).
 fn refuse_inside_trees(option: &str, path: &Path, id: &Path, trees: &[Named]) -> Result<()> {
-    if let Some((input, tree)) = trees.iter().find(|(_, t)| id.starts_with(t)) {
+    if let Some((input, tree)) = trees.iter().find(|(_, t)| is_within(id, t)) {
         bail!(
             "{option} {} is inside the {input} folder {}, which the run reads with its \
              subfolders: write it outside that folder",
