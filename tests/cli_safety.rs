@@ -365,6 +365,8 @@ fn outputs_are_checked_writable_before_any_work() {
     let at = |name: &str| tmp.path().join(name).to_str().unwrap().to_string();
     std::fs::create_dir(tmp.path().join("a_file_out.iter50000.ply")).unwrap();
     std::fs::create_dir(tmp.path().join("a_file_part.manifest.json")).unwrap();
+    std::fs::create_dir_all(tmp.path().join("a_file_sweep/robustness_flicker.json")).unwrap();
+    std::fs::create_dir_all(tmp.path().join("a_file_demo/strip.png")).unwrap();
     std::os::unix::fs::symlink(tmp.path().join("nowhere/x"), tmp.path().join("a_file_link"))
         .unwrap();
     let cases: Vec<(Vec<String>, &str)> = vec![
@@ -403,6 +405,14 @@ fn outputs_are_checked_writable_before_any_work() {
         (
             fuse(&["--out", &good_s, "--render-views", &at("a_file_link")]),
             "--render-views",
+        ),
+        (
+            strings(&["sweep", "--noise", "flicker", "--out", &at("a_file_sweep")]),
+            "--out's report",
+        ),
+        (
+            strings(&["demo", "--out", &at("a_file_demo")]),
+            "--out's strip",
         ),
     ];
     for (args, option) in cases {

@@ -81,8 +81,23 @@ fn palette(labels: &[u16], table: &ClassTable) -> Vec<u8> {
         .collect()
 }
 
+/// The files demo writes in --out.
+const REPORT_FILE: &str = "report.json";
+const CHART_FILE: &str = "speed_vs_accuracy.png";
+const STRIP_FILE: &str = "strip.png";
+
 pub fn run(args: DemoArgs) -> Result<()> {
-    check_outputs(&[], &[("--out", Some(&args.out))], &[])?;
+    let file = |name: &str| Some(args.out.join(name));
+    let (report, chart, strip) = (file(REPORT_FILE), file(CHART_FILE), file(STRIP_FILE));
+    check_outputs(
+        &[
+            ("--out's report", report.as_deref()),
+            ("--out's chart", chart.as_deref()),
+            ("--out's strip", strip.as_deref()),
+        ],
+        &[("--out", Some(&args.out))],
+        &[],
+    )?;
     let methods = args.methods.methods()?;
     let s = build_room(&args)?;
     let gpu = Gpu::new()?;
@@ -115,7 +130,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         input_image_quality,
     };
     write_bytes_atomic(
-        &args.out.join("report.json"),
+        &args.out.join(REPORT_FILE),
         serde_json::to_string_pretty(&report)?.as_bytes(),
     )?;
     write_charts(&args, &gpu, &s, &scores)
@@ -184,12 +199,12 @@ fn write_charts(args: &DemoArgs, gpu: &Gpu, s: &SynthScene, scores: &[MethodScor
         args.views
     );
     speed_vs_accuracy(
-        &out.join("speed_vs_accuracy.png"),
+        &out.join(CHART_FILE),
         &title,
         "mIoU on held-out views",
         &points,
     )?;
-    write_view_strip(gpu, s, scores, &out.join("strip.png"))?;
+    write_view_strip(gpu, s, scores, &out.join(STRIP_FILE))?;
     eprintln!(
         "wrote {}/report.json, speed_vs_accuracy.png, strip.png",
         out.display()

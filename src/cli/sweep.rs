@@ -271,7 +271,15 @@ pub fn run(args: SweepArgs) -> Result<()> {
     let specs = (levels.iter())
         .map(|&level| Ok((level, args.noise.at(&base, level)?)))
         .collect::<Result<Vec<_>>>()?;
-    check_outputs(&[], &[("--out", Some(&args.out))], &[])?;
+    let (report_file, chart_file) = (sweep_file(&args, "json"), sweep_file(&args, "png"));
+    check_outputs(
+        &[
+            ("--out's report", Some(&report_file)),
+            ("--out's chart", Some(&chart_file)),
+        ],
+        &[("--out", Some(&args.out))],
+        &[],
+    )?;
     let methods = args.methods.methods()?;
     let gpu = Gpu::new()?;
     let mut runs = Vec::new();
@@ -313,10 +321,16 @@ pub fn run(args: SweepArgs) -> Result<()> {
     };
     print_summary(&report);
     write_bytes_atomic(
-        &args.out.join(format!("robustness_{key}.json")),
+        &report_file,
         serde_json::to_string_pretty(&report)?.as_bytes(),
     )?;
     Ok(())
+}
+
+/// `robustness_<noise>.<extension>` in --out: the sweep's report and chart.
+fn sweep_file(args: &SweepArgs, extension: &str) -> PathBuf {
+    let key = args.noise.key();
+    args.out.join(format!("robustness_{key}.{extension}"))
 }
 
 /// `--base-noise`, refused where it sets the kind the levels sweep (the levels would
@@ -535,7 +549,7 @@ fn write_chart(
         details += &format!(", with {base}");
     }
     lines(
-        &args.out.join(format!("robustness_{key}.png")),
+        &sweep_file(args, "png"),
         &format!("{}: mIoU as {key} noise grows{details}", presets.join("+")),
         &format!("{key} level"),
         "mIoU on held-out views",
