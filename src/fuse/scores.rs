@@ -4,7 +4,7 @@
 use std::borrow::Cow;
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom, Write};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use anyhow::{bail, ensure, Context, Result};
@@ -267,6 +267,8 @@ impl EvidenceRows for Arc<SharedCounts> {
 pub struct SpilledRows {
     file: File,
     _scratch: StagedFile,
+    /// The folder the scratch file is in, for a write's error (a full disk).
+    folder: PathBuf,
     classes: usize,
     n: usize,
     /// Rows appended so far (they arrive in class order).
@@ -277,9 +279,14 @@ impl SpilledRows {
     /// An empty spill for [classes][n] beside `output` (in its folder).
     pub fn beside(output: &Path, classes: usize, n: usize) -> Result<SpilledRows> {
         let (file, scratch) = stage_scratch(&output.with_extension("evidence"))?;
+        let folder = match output.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
         Ok(SpilledRows {
             file,
             _scratch: scratch,
+            folder,
             classes,
             n,
             written: 0,
@@ -296,9 +303,13 @@ impl SpilledRows {
             self.n
         );
         let bytes: Vec<u8> = row.iter().flat_map(|v| v.to_le_bytes()).collect();
-        self.file
-            .write_all(&bytes)
-            .context("spilling evidence rows")?;
+        self.file.write_all(&bytes).with_context(|| {
+            format!(
+                "spilling evidence rows to a scratch file in {} (all rows take {:.1} MiB there)",
+                self.folder.display(),
+                (self.classes * self.n * 8) as f64 / (1 << 20) as f64
+            )
+        })?;
         self.written += 1;
         Ok(())
     }
