@@ -2,6 +2,9 @@
 
 use std::path::{Path, PathBuf};
 
+mod common;
+
+use common::npy::npy_v1;
 use glam::{DMat3, DVec3};
 use semsplat::scene::cameras::load_cameras;
 use semsplat::scene::cameras_json::{parse_cameras_json, write_semsplat_cameras};
@@ -862,18 +865,6 @@ fn spz_counts_below_the_data_and_unsupported_fractional_bits_are_errors() {
     assert!(err.contains("not an .spz stream"), "{err}");
 }
 
-fn npy_v1(header: &str) -> Vec<u8> {
-    let mut h = header.to_string();
-    while (10 + h.len() + 1) % 64 != 0 {
-        h.push(' ');
-    }
-    h.push('\n');
-    let mut out = b"\x93NUMPY\x01\x00".to_vec();
-    out.extend_from_slice(&(h.len() as u16).to_le_bytes());
-    out.extend_from_slice(h.as_bytes());
-    out
-}
-
 /// npyz multiplied the shape unchecked (a panic: overflow checks are on in release) and
 /// allocated a version 2 header's length whole (4 GiB for a 15-byte file).
 #[test]
@@ -881,24 +872,26 @@ fn npy_headers_that_do_not_fit_are_errors_not_panics() {
     use semsplat::util::npy::parse_npy_f64;
     let header =
         |shape: &str| format!("{{'descr': '<f8', 'fortran_order': False, 'shape': {shape}, }}");
-    let err = error_of(parse_npy_f64(&npy_v1(&header("(4294967296, 4294967296)"))));
+    let err = error_of(parse_npy_f64(&npy_v1(
+        &header("(4294967296, 4294967296)"),
+        &[],
+    )));
     assert!(
         err.contains("shape [4294967296, 4294967296] is too large"),
         "{err}"
     );
-    let err = error_of(parse_npy_f64(&npy_v1(&header("(0x100000000, 2)"))));
+    let err = error_of(parse_npy_f64(&npy_v1(&header("(0x100000000, 2)"), &[])));
     assert!(err.contains("not a tuple of whole numbers"), "{err}");
     let err = error_of(parse_npy_f64(b"\x93NUMPY\x02\x00\xff\xff\xff\xff{'de"));
     assert!(err.contains("header claims 4294967295 bytes"), "{err}");
     // An empty evidence matrix whose other dimension is huge: refused, not allocated.
     let tmp = tempfile::tempdir().unwrap();
     let empty = tmp.path().join("empty.npy");
-    std::fs::write(&empty, npy_v1(&header("(0, 1099511627776)"))).unwrap();
+    std::fs::write(&empty, npy_v1(&header("(0, 1099511627776)"), &[])).unwrap();
     let err = error_of(semsplat::fuse::scores::ClassScores::load_npy(&empty));
     assert!(err.contains("an empty matrix"), "{err}");
     // A shape that fits still reads.
-    let mut ok = npy_v1(&header("(2,)"));
-    ok.extend_from_slice(&[0; 16]);
+    let ok = npy_v1(&header("(2,)"), &[0; 16]);
     assert_eq!(parse_npy_f64(&ok).unwrap().shape, [2]);
 }
 

@@ -42,17 +42,8 @@ fn npy_bytes(descr: &str, fortran: bool, shape: &[usize], raw: &[u8]) -> Vec<u8>
         format!("({})", dims.join(", "))
     };
     let order = if fortran { "True" } else { "False" };
-    let mut dict =
-        format!("{{'descr': '{descr}', 'fortran_order': {order}, 'shape': {shape_text}, }}");
-    while (10 + dict.len() + 1) % 64 != 0 {
-        dict.push(' ');
-    }
-    dict.push('\n');
-    let mut out = b"\x93NUMPY\x01\x00".to_vec();
-    out.extend_from_slice(&(dict.len() as u16).to_le_bytes());
-    out.extend_from_slice(dict.as_bytes());
-    out.extend_from_slice(raw);
-    out
+    let dict = format!("{{'descr': '{descr}', 'fortran_order': {order}, 'shape': {shape_text}, }}");
+    common::npy::npy_v1(&dict, raw)
 }
 
 fn f64_bytes(v: &[f64]) -> Vec<u8> {

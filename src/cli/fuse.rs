@@ -312,8 +312,11 @@ pub fn run(mut args: FuseArgs) -> Result<()> {
         args.cameras = Some(cameras_for_scene(None, &args.scene)?);
     }
     let contrib_table = args.contrib.as_deref().map(contrib_sidecar);
+    // A shard's manifest is written after its part.
+    let manifest = args.shard.map(|_| manifest_path(&args.output.out));
     check_output_args(
         &args.output,
+        &[("--out's manifest", manifest.as_deref())],
         &[
             Input::Scene("--scene", Some(&args.scene)),
             Input::Cameras("--cameras", args.cameras.as_deref()),
@@ -323,11 +326,6 @@ pub fn run(mut args: FuseArgs) -> Result<()> {
             Input::File("--contrib's class table", contrib_table.as_deref()),
         ],
     )?;
-    if args.shard.is_some() {
-        // Written after the part: a folder in its place is found now, not after the work.
-        let manifest = manifest_path(&args.output.out);
-        semsplat::util::check_output_file("--out's manifest", &manifest)?;
-    }
     let g = read_scene(&args.scene)?;
     let method = selected_method(&args)?;
     if args.contrib.is_none() {
@@ -510,9 +508,13 @@ fn select_from_fused(
     write_report(&args.output, &report)
 }
 
-/// Every file and folder the run will write can be written, and is none of `inputs`
-/// (checked before any work).
-pub(super) fn check_output_args(args: &OutputArgs, inputs: &[Input]) -> Result<()> {
+/// Every file and folder the run will write (`args`' and the `extra` files) can be
+/// written, and is none of `inputs` (checked before any work).
+pub(super) fn check_output_args(
+    args: &OutputArgs,
+    extra: &[(&str, Option<&Path>)],
+    inputs: &[Input],
+) -> Result<()> {
     let contrib_table = args.save_contrib.as_deref().map(contrib_sidecar);
     if args.gamma.is_some()
         && args.extract.is_none()
@@ -521,19 +523,20 @@ pub(super) fn check_output_args(args: &OutputArgs, inputs: &[Input]) -> Result<(
     {
         eprintln!("note: --gamma has no effect without --extract, --remove or --save-membership");
     }
+    let files = [
+        ("--out", Some(args.out.as_path())),
+        (
+            "--out's class table",
+            Some(&classes_sidecar_path(&args.out)),
+        ),
+        ("--report", args.report.as_deref()),
+        ("--save-contrib", args.save_contrib.as_deref()),
+        ("--save-contrib's class table", contrib_table.as_deref()),
+        ("--save-membership", args.save_membership.as_deref()),
+        ("--palette-ply", args.palette_ply.as_deref()),
+    ];
     check_outputs(
-        &[
-            ("--out", Some(&args.out)),
-            (
-                "--out's class table",
-                Some(&classes_sidecar_path(&args.out)),
-            ),
-            ("--report", args.report.as_deref()),
-            ("--save-contrib", args.save_contrib.as_deref()),
-            ("--save-contrib's class table", contrib_table.as_deref()),
-            ("--save-membership", args.save_membership.as_deref()),
-            ("--palette-ply", args.palette_ply.as_deref()),
-        ],
+        &[&files[..], extra].concat(),
         &[("--render-views", args.render_views.as_deref())],
         inputs,
     )

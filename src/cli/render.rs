@@ -171,10 +171,10 @@ const RAW_NPY: [&str; 5] = [
 /// Refuses views whose files would land on one path (a camera named `X.labels` wrote its
 /// RGB image to `X.labels.png`, camera `X`'s label map), before anything is written.
 fn check_view_files_distinct(cams: &[Camera]) -> Result<()> {
-    let suffixes = [RGB_PNG, LABELS_PNG, PALETTE_PNG]
+    let suffixes: Vec<&str> = [RGB_PNG, LABELS_PNG, PALETTE_PNG]
         .into_iter()
-        .chain(RAW_NPY);
-    let suffixes: Vec<&str> = suffixes.collect();
+        .chain(RAW_NPY)
+        .collect();
     let mut writer: HashMap<String, &str> = HashMap::new();
     for cam in cams {
         for suffix in &suffixes {

@@ -9,7 +9,7 @@ use std::sync::Arc;
 
 use anyhow::{bail, ensure, Context, Result};
 
-use crate::util::atomic_write::{stage_scratch, StagedFile};
+use crate::util::atomic_write::{folder_of, stage_scratch, StagedFile};
 use crate::util::npy::{read_npy_f64, write_npy_rows, NpyArray};
 
 #[derive(Clone, Debug, PartialEq)]
@@ -279,14 +279,10 @@ impl SpilledRows {
     /// An empty spill for [classes][n] beside `output` (in its folder).
     pub fn beside(output: &Path, classes: usize, n: usize) -> Result<SpilledRows> {
         let (file, scratch) = stage_scratch(&output.with_extension("evidence"))?;
-        let folder = match output.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-            _ => PathBuf::from("."),
-        };
         Ok(SpilledRows {
             file,
             _scratch: scratch,
-            folder,
+            folder: folder_of(output).to_path_buf(),
             classes,
             n,
             written: 0,

@@ -280,11 +280,16 @@ pub fn check_output_file(option: &str, target: &Path) -> Result<()> {
             target.display()
         );
     }
-    let parent = match resolved.parent() {
+    check_writable_folder(folder_of(&resolved))
+        .with_context(|| format!("{option} {}", target.display()))
+}
+
+/// The folder a file path lies in (`.` for a bare name).
+pub fn folder_of(path: &Path) -> &Path {
+    match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
-    };
-    check_writable_folder(parent).with_context(|| format!("{option} {}", target.display()))
+    }
 }
 
 /// Like [`check_output_file`] for an output folder (`render --out`, `--render-views`).

@@ -11,8 +11,8 @@ pub mod rng;
 pub mod scaling;
 
 pub use atomic_write::{
-    check_output_file, check_output_folder, resolve_output_file, stage_atomic, write_atomic,
-    write_bytes_atomic, StagedFile,
+    check_output_file, check_output_folder, folder_of, resolve_output_file, stage_atomic,
+    write_atomic, write_bytes_atomic, StagedFile,
 };
 pub use parallel::{
     collect_parts, cores, map_in_blocks, merge_sorted_into, merge_sorted_runs, parallel_map,

@@ -5,6 +5,7 @@
 
 pub mod cli;
 pub mod consensus;
+pub mod npy;
 pub mod regions;
 pub mod spec_scene;
 
