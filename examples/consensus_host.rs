@@ -29,7 +29,7 @@ use semsplat::fuse::consensus_decide::{decide_timed, Consensus};
 use semsplat::fuse::consensus_order::SpatialOrder;
 use semsplat::fuse::consensus_segments::Observations;
 use semsplat::fuse::consensus_surface::SurfaceNormals;
-use semsplat::fuse::{ConsensusParams, FuseConfig, GaussianShapes, Method};
+use semsplat::fuse::{Clustering, ConsensusParams, FuseConfig, GaussianShapes, Method};
 use semsplat::scene::labels::LabelFormat;
 use semsplat::scene::Gaussians;
 use semsplat::util::scaling::{estimate_scaling, Scaling, THREADS};
@@ -59,6 +59,10 @@ struct Args {
     /// `taskset -c 0`, for items timed alone).
     #[arg(long)]
     model_threads: bool,
+    /// The clustering's joins after the outright joins (the observations' cache does not
+    /// depend on it).
+    #[arg(long, value_enum, default_value_t = Clustering::Order)]
+    clustering: Clustering,
 }
 
 fn main() -> Result<()> {
@@ -68,7 +72,10 @@ fn main() -> Result<()> {
     }
     let (g, _) = semsplat::bench::read_scene_folder(&args.scene)?;
     let shapes = GaussianShapes::of(&g);
-    let params = ConsensusParams::default();
+    let params = ConsensusParams {
+        clustering: args.clustering,
+        ..ConsensusParams::default()
+    };
     let run = match args.cache.exists() {
         true => read_cache(&args.cache)?,
         false => {

@@ -669,12 +669,18 @@ fn options_without_effect_are_noted() {
             "0.2",
             "--gamma",
             "0.1",
+            "--clustering",
+            "rounds",
             "--out",
             &out,
         ],
     );
     assert!(
         err.contains("note: --depth-tol has no effect with flashsplat"),
+        "{err}"
+    );
+    assert!(
+        err.contains("note: --clustering has no effect with flashsplat"),
         "{err}"
     );
     assert!(err.contains("note: --gamma has no effect without"), "{err}");
@@ -696,6 +702,13 @@ fn options_without_effect_are_noted() {
         err.contains("note: --gamma has no effect with segment-consensus"),
         "{err}"
     );
+
+    // Segment consensus reads --clustering: a run in rounds writes its classes and segments.
+    let rounds = ["--method", "segment-consensus", "--clustering", "rounds"];
+    let err = fuse_synth(d, &[&rounds[..], &["--out", &out]].concat());
+    assert!(!err.contains("no effect"), "{err}");
+    let fused = read_scene(d, "f.ply");
+    assert!(fused.segment_ids.is_some() && fused.class_ids.is_some());
 
     let occlusion = ["--method", "vote", "--occlusion", "--depth-tol", "0.2"];
     let err = fuse_synth(d, &[&occlusion[..], &["--out", &out]].concat());

@@ -21,7 +21,7 @@ use semsplat::fuse::consensus_segments::{co_occurrence, label_regions, Observati
 use semsplat::fuse::consensus_surface::SurfaceNormals;
 use semsplat::fuse::{
     assign_semantic, assign_semantic_near, fuse_consensus, nearest_neighbours, ClassScores,
-    ConsensusInput, ConsensusParams, FuseConfig, GaussianShapes, NO_LABEL,
+    Clustering, ConsensusInput, ConsensusParams, FuseConfig, GaussianShapes, NO_LABEL,
 };
 use semsplat::gpu::Gpu;
 use semsplat::render::GpuScene;
@@ -471,12 +471,14 @@ fn assert_same_partition(segment: &[u32], label: &[usize]) {
 fn clustering_matches_a_plain_transcription_under_heavy_noise() {
     let default = ConsensusParams::default();
     let mut region_refusals: BTreeMap<u32, usize> = BTreeMap::new();
-    for (seed, premerge_views) in
-        (1..=12).flat_map(|s| [(s, 0), (s, 4), (s, default.premerge_views)])
-    {
+    let (mut attached, mut most_rounds) = (0, 0);
+    let runs = (1..=12).flat_map(|s| [(s, 0), (s, 4), (s, default.premerge_views)]);
+    let clusterings = [Clustering::Order, Clustering::Rounds];
+    for ((seed, premerge_views), clustering) in runs.flat_map(|r| clusterings.map(|c| (r, c))) {
         let (means, obs) = four_objects(10, seed);
         let p = ConsensusParams {
             premerge_views,
+            clustering,
             ..default.clone()
         };
         let knn = nearest_neighbours(&means, p.neighbours);
@@ -494,7 +496,16 @@ fn clustering_matches_a_plain_transcription_under_heavy_noise() {
             done.pieces - done.segments,
             "seed {seed}: {done:?}"
         );
-        assert!(done.pairs >= done.candidates, "seed {seed}: {done:?}");
+        assert!(done.attached <= done.joins, "seed {seed}: {done:?}");
+        assert_eq!(
+            done.attach_rounds > 0,
+            clustering == Clustering::Rounds,
+            "seed {seed}: {done:?}"
+        );
+        (attached, most_rounds) = (
+            attached + done.attached,
+            most_rounds.max(done.attach_rounds),
+        );
         assert_eq!(
             outright > 0,
             premerge_views > 0,
@@ -522,6 +533,12 @@ fn clustering_matches_a_plain_transcription_under_heavy_noise() {
     assert!(
         region_refusals.values().all(|&r| r > 0),
         "{region_refusals:?}"
+    );
+    // Single Gaussians attached, in some seed over several rounds (one attached in a round
+    // changed another's candidates).
+    assert!(
+        attached > 0 && most_rounds >= 3,
+        "{attached} in at most {most_rounds} rounds"
     );
 }
 
@@ -567,17 +584,33 @@ fn views_of(obs: &Observations, g: usize) -> BTreeMap<u32, (u32, bool)> {
         .collect()
 }
 
-/// The clustering rule transcribed plainly: segments are labels (their lowest Gaussian),
-/// first joined outright wherever a neighbour pair was seen by `p.premerge_views` views or
-/// more, all of them putting it in one region with neither on its edge; then every step
-/// sums, from scratch, what the views said of every neighbour pair between two segments
-/// (together: one region, neither on its edge; apart: two regions; else on the edge),
-/// takes the best pair of segments not dropped at that same evidence and size (any of its
-/// neighbour pairs along a surface, then net evidence per pair, then views together, then
-/// the smaller size class of the larger segment, then the lowest labels), and joins it if
-/// the evidence and the segments' dominant regions allow, else drops it.
+/// The clustering rule transcribed plainly: segments are labels (their first Gaussian when
+/// they formed; a single Gaussian attached to a segment takes the segment's label), first
+/// joined outright wherever a neighbour pair was seen by `p.premerge_views` views or more,
+/// all of them putting it in one region with neither on its edge. Then ordered joins among
+/// all segments; with `Clustering::Rounds` first ordered joins among the segments of two
+/// Gaussians or more, and the single Gaussians left attached in rounds.
+///
+/// An ordered join: every step sums, from scratch, what the views said of every neighbour
+/// pair between two segments (together: one region, neither on its edge; apart: two
+/// regions; else on the edge), takes the best pair of segments not dropped at that same
+/// evidence and size (any of its neighbour pairs along a surface, then net evidence per
+/// pair, then views together, then the smaller size class of the larger segment, then the
+/// lowest labels), and joins it if the evidence and the segments' dominant regions allow
+/// (the lower label stays), else drops it.
+///
+/// The attachment goes by levels, the bands of one view of priority (candidates along a
+/// surface above all others), highest first. At a level a single Gaussian chooses the first
+/// of its candidates at the level or above, in that order, that the evidence and the
+/// dominant regions allow; a level's first round tests the single Gaussians with a
+/// candidate in its band, each next round those one of whose candidates' evidence the last
+/// changed. In a round a tested Gaussian joins the segment it chose if
+/// that holds several Gaussians, or the single Gaussian it chose if that one chose it too
+/// (all choices made against the segments as the round began); all join at once.
+///
 /// Also returns how many candidates the pairs' evidence refused, how many it allowed but
-/// the dominant regions refused, and how many Gaussians joined outright.
+/// the dominant regions refused (in the ordered joins), and how many Gaussians joined
+/// outright.
 fn cluster_by_hand(
     obs: &Observations,
     knn: &[u32],
@@ -597,41 +630,192 @@ fn cluster_by_hand(
         .collect();
     let mut label = premerged_by_hand(obs, &pairs, p);
     let outright = (0..n).filter(|&g| label[g] != g).count();
-    let mut dropped: HashMap<(usize, usize), ([u32; 5], u32)> = HashMap::new();
     let mut refused = [0; 2];
+    if p.clustering == Clustering::Rounds {
+        join_in_order_by_hand(obs, &mut label, &pairs, normals, p, 2, &mut refused);
+        attach_by_hand(obs, &mut label, &pairs, normals, p);
+    }
+    join_in_order_by_hand(obs, &mut label, &pairs, normals, p, 1, &mut refused);
+    (label, refused, outright)
+}
+
+/// A candidate's order in the transcription, greatest first: a pair along a surface, net
+/// evidence per pair, views together, the smaller size class of the larger segment, the
+/// lowest labels.
+type OrderByHand = (bool, i64, u32, Reverse<u32>, Reverse<usize>, Reverse<usize>);
+
+fn order_by_hand(
+    e: &[u32; 5],
+    class: u32,
+    (lo, hi): (usize, usize),
+    p: &ConsensusParams,
+) -> OrderByHand {
+    let net = e[0] as f64 - p.apart_weight * e[1] as f64;
+    let priority = (net / e[3] as f64 * (1 << 20) as f64).round() as i64;
+    (
+        e[4] > 0,
+        priority,
+        e[0],
+        Reverse(class),
+        Reverse(lo),
+        Reverse(hi),
+    )
+}
+
+/// Whether the transcription's segments `lo` and `hi` may join on evidence `e`: the pairs'
+/// evidence allows it (first), and the dominant regions (second).
+fn may_join_by_hand(
+    obs: &Observations,
+    label: &[usize],
+    e: &[u32; 5],
+    (lo, hi): (usize, usize),
+    p: &ConsensusParams,
+) -> (bool, bool) {
+    let allowed = allowed_by_hand(e, p);
+    let (same, differ) = dominant_agreement(obs, label, lo, hi);
+    (
+        allowed,
+        allowed && differ as f64 <= p.region_max_disagree * (same + differ) as f64,
+    )
+}
+
+/// Whether the pairs' evidence `e` allows a join: enough views together, few apart, and
+/// together in a share of all that saw the pairs.
+fn allowed_by_hand(e: &[u32; 5], p: &ConsensusParams) -> bool {
+    let decided = (e[0] + e[1]) as f64;
+    e[0] >= p.min_together
+        && e[1] as f64 <= p.max_apart_share * decided
+        && e[0] as f64 >= p.min_together_share * (decided + e[2] as f64)
+}
+
+/// The ordered joins of [`cluster_by_hand`] among segments of at least `min_size`
+/// Gaussians.
+fn join_in_order_by_hand(
+    obs: &Observations,
+    label: &mut [usize],
+    pairs: &BTreeSet<(usize, usize)>,
+    normals: &[[f32; 3]],
+    p: &ConsensusParams,
+    min_size: usize,
+    refused: &mut [usize; 2],
+) {
+    let mut dropped: HashMap<(usize, usize), ([u32; 5], u32)> = HashMap::new();
     loop {
-        let sums = evidence_by_hand(obs, &label, &pairs, normals, p);
-        let priority = |e: &[u32; 5]| {
-            let net = e[0] as f64 - p.apart_weight * e[1] as f64;
-            (net / e[3] as f64 * (1 << 20) as f64).round() as i64
-        };
+        let sums = evidence_by_hand(obs, label, pairs, normals, p);
+        let size = |s| label.iter().filter(|&&l| l == s).count();
         let best = sums
             .iter()
-            .map(|(key, e)| (key, e, larger_size_class(&label, *key)))
+            .filter(|(key, _)| size(key.0).min(size(key.1)) >= min_size)
+            .map(|(key, e)| (key, e, larger_size_class(label, *key)))
             .filter(|(key, e, class)| dropped.get(key) != Some(&(**e, *class)))
-            .max_by_key(|(key, e, class)| {
-                (
-                    e[4] > 0,
-                    priority(e),
-                    e[0],
-                    Reverse(*class),
-                    Reverse(key.0),
-                    Reverse(key.1),
-                )
-            });
+            .max_by_key(|(key, e, class)| order_by_hand(e, *class, **key, p));
         let Some((&(lo, hi), &e, class)) = best else {
-            return (label, refused, outright);
+            return;
         };
-        let decided = (e[0] + e[1]) as f64;
-        let allowed = e[0] >= p.min_together
-            && e[1] as f64 <= p.max_apart_share * decided
-            && e[0] as f64 >= p.min_together_share * (decided + e[2] as f64);
-        let (same, differ) = dominant_agreement(obs, &label, lo, hi);
-        if allowed && differ as f64 <= p.region_max_disagree * (same + differ) as f64 {
+        let (allowed, joins) = may_join_by_hand(obs, label, &e, (lo, hi), p);
+        if joins {
             label.iter_mut().filter(|l| **l == hi).for_each(|l| *l = lo);
         } else {
             dropped.insert((lo, hi), (e, class));
             refused[allowed as usize] += 1;
+        }
+    }
+}
+
+/// The levels and rounds of attachment of [`cluster_by_hand`].
+fn attach_by_hand(
+    obs: &Observations,
+    label: &mut [usize],
+    pairs: &BTreeSet<(usize, usize)>,
+    normals: &[[f32; 3]],
+    p: &ConsensusParams,
+) {
+    let size = |label: &[usize], s| label.iter().filter(|&&l| l == s).count();
+    // Per single Gaussian (its label is itself), its candidates: (evidence, class).
+    let candidates = |label: &[usize]| -> BTreeMap<usize, BTreeMap<usize, ([u32; 5], u32)>> {
+        let mut of_single: BTreeMap<usize, BTreeMap<usize, ([u32; 5], u32)>> = (0..label.len())
+            .filter(|&g| size(label, label[g]) == 1)
+            .map(|g| (g, BTreeMap::new()))
+            .collect();
+        for (key, e) in evidence_by_hand(obs, label, pairs, normals, p) {
+            let class = larger_size_class(label, key);
+            for (single, other) in [key, (key.1, key.0)] {
+                if let Some(of_g) = of_single.get_mut(&single) {
+                    of_g.insert(other, (e, class));
+                }
+            }
+        }
+        of_single
+    };
+    let allowed = |e: &[u32; 5]| allowed_by_hand(e, p);
+    let band = |e: &[u32; 5]| {
+        let (along, priority, ..) = order_by_hand(e, 0, (0, 0), p);
+        (priority + if along { 1 << 50 } else { 0 }).div_euclid(1 << 20)
+    };
+    let bands_of = |of_g: &BTreeMap<usize, ([u32; 5], u32)>| -> Vec<i64> {
+        of_g.values()
+            .filter(|(e, _)| allowed(e))
+            .map(|(e, _)| band(e))
+            .collect()
+    };
+    let mut level = i64::MAX;
+    loop {
+        let mut before = candidates(label);
+        let below = before
+            .values()
+            .flat_map(bands_of)
+            .filter(|&b| b < level)
+            .max();
+        let Some(next) = below else {
+            return;
+        };
+        level = next;
+        let mut tested: BTreeSet<usize> = (before.iter())
+            .filter(|(_, of_g)| bands_of(of_g).contains(&level))
+            .map(|(&g, _)| g)
+            .collect();
+        while !tested.is_empty() {
+            // Every single Gaussian's choice: the first candidate at the level or above, in
+            // order, that may join.
+            let choice: BTreeMap<usize, usize> = (before.iter())
+                .filter_map(|(&g, of_g)| {
+                    let mut order: Vec<_> = of_g
+                        .iter()
+                        .filter(|(_, (e, _))| allowed(e) && band(e) >= level)
+                        .collect();
+                    let key = |other: usize| (g.min(other), g.max(other));
+                    order.sort_by_key(|(&other, (e, class))| {
+                        Reverse(order_by_hand(e, *class, key(other), p))
+                    });
+                    let first = order
+                        .into_iter()
+                        .find(|(&other, (e, _))| may_join_by_hand(obs, label, e, key(other), p).1);
+                    first.map(|(&other, _)| (g, other))
+                })
+                .collect();
+            let mut attach = Vec::new();
+            for g in &tested {
+                let Some(&other) = choice.get(g) else {
+                    continue;
+                };
+                if size(label, other) > 1 {
+                    attach.push((*g, other));
+                } else if choice.get(&other) == Some(g) {
+                    attach.push(((*g).max(other), (*g).min(other)));
+                }
+            }
+            for &(g, segment) in &attach {
+                label[g] = segment;
+            }
+            let after = candidates(label);
+            let evidence = |of_g: Option<&BTreeMap<usize, ([u32; 5], u32)>>| {
+                of_g.map(|of_g| of_g.iter().map(|(&o, (e, _))| (o, *e)).collect::<Vec<_>>())
+            };
+            tested = (after.iter())
+                .filter(|(g, of_g)| evidence(before.get(g)) != evidence(Some(of_g)))
+                .map(|(&g, _)| g)
+                .collect();
+            before = after;
         }
     }
 }

@@ -12,8 +12,9 @@ use super::export::{export_inputs, ExportLabels};
 use super::median;
 use crate::dataset::{Dataset, DatasetPaths};
 use crate::fuse::{
-    accumulate_assigned, nearest_neighbours, AssignOnGpu, ClusterProfile, DecideProfile,
-    FuseConfig, LabelSource, Method, ObserveTimes, TieNeighbours, NO_LABEL, TIE_NEIGHBOURS,
+    accumulate_assigned, nearest_neighbours, AssignOnGpu, ClusterProfile, Clustering,
+    DecideProfile, FuseConfig, LabelSource, Method, ObserveTimes, TieNeighbours, NO_LABEL,
+    TIE_NEIGHBOURS,
 };
 use crate::gpu::timings::KernelTotal;
 use crate::gpu::Gpu;
@@ -57,6 +58,8 @@ pub struct FuseBenchSpec {
     /// Views each method keeps in flight at most ([`FuseConfig::views_in_flight`]; what it
     /// kept is each method's `views_in_flight`).
     pub views_in_flight: usize,
+    /// Segment consensus's clustering ([`FuseConfig::clustering`]).
+    pub clustering: Clustering,
 }
 
 /// The forward render of every view.
@@ -299,6 +302,7 @@ pub fn bench_fuse(
             .map(|&method| FuseConfig {
                 method,
                 views_in_flight: spec.views_in_flight,
+                clustering: spec.clustering,
                 ..Default::default()
             })
             .collect(),

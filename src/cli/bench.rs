@@ -98,6 +98,9 @@ pub struct FuseArgs {
           value_parser = clap::builder::RangedU64ValueParser::<usize>::new()
               .range(1..=semsplat::fuse::MAX_LANES as u64))]
     views_in_flight: usize,
+    /// Segment consensus's clustering (`fuse --clustering`).
+    #[arg(long, value_enum, default_value_t = semsplat::fuse::Clustering::Order)]
+    clustering: semsplat::fuse::Clustering,
     /// Also write the scene (PLY), the cameras (JSON), every view's label map (one uint16
     /// `labels.npy`, 65535 where unlabeled) and a `bench.json` into DIR, so other tools can
     /// be timed on the same bytes.
@@ -445,6 +448,7 @@ fn run_fuse(gpu: &Gpu, a: FuseArgs) -> Result<()> {
         labels: a.labels,
         export: a.export,
         views_in_flight: a.views_in_flight,
+        clustering: a.clustering,
     };
     let bar = views_bar(0);
     let r = bench_fuse(gpu, &spec, &methods, |phase, done, total| {

@@ -106,9 +106,15 @@ pub fn run(args: DemoArgs) -> Result<()> {
     } else {
         TrainLabels::True
     };
-    let scores = score_methods(&gpu, &s, which, &methods, &args.methods.schedule(), |m| {
-        eprintln!("lifting with {m}")
-    })?;
+    let scores = score_methods(
+        &gpu,
+        &s,
+        which,
+        &methods,
+        &args.methods.schedule(),
+        args.methods.clustering(),
+        |m| eprintln!("lifting with {m}"),
+    )?;
     print_scores(&scores);
 
     let input_image_quality = held_out_quality(&gpu, &s, &s.gaussians)?;

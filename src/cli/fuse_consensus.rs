@@ -43,7 +43,7 @@ pub(super) fn fuse_by_consensus(
 ) -> Result<Evidence> {
     let gpu = Gpu::new()?;
     let scene = GpuScene::upload_for(&gpu, g, cfg.method.scene_attributes())?;
-    let params = ConsensusParams::default();
+    let params = ConsensusParams::of(cfg);
     // The relabeled method visits every view twice (the second time its labels, or a walk
     // where its footprints were not kept): the bar counts visits.
     let visits = if cfg.method == Method::SegmentConsensusRelabel {

@@ -6,6 +6,7 @@ use clap::Args;
 
 use super::args;
 use semsplat::experiment::{JointSchedule, Lifter, ALL_METHODS};
+use semsplat::fuse::Clustering;
 use semsplat::synth::{RoomSource, SynthConfig};
 
 #[derive(Args, Clone)]
@@ -18,11 +19,18 @@ pub struct MethodArgs {
     /// Iterations of full joint training (geometry, appearance and logits).
     #[arg(long, default_value_t = JointSchedule::default().full_iters, value_parser = args::at_least_one::<u32>)]
     joint_iters: u32,
+    /// Segment consensus's clustering (`fuse --clustering`), for the consensus methods.
+    #[arg(long, value_enum, default_value_t = Clustering::Order)]
+    clustering: Clustering,
 }
 
 impl MethodArgs {
     pub fn methods(&self) -> Result<Vec<Lifter>> {
         parse_methods(&self.methods, &ALL_METHODS)
+    }
+
+    pub fn clustering(&self) -> Clustering {
+        self.clustering
     }
 
     pub fn schedule(&self) -> JointSchedule {

@@ -231,6 +231,8 @@ struct SweepReport {
     base_noise: Option<String>,
     presets: Vec<String>,
     seeds: Vec<u64>,
+    /// Segment consensus's clustering (`--clustering`).
+    clustering: semsplat::fuse::Clustering,
     /// Mean, min and max over the runs (every preset and seed).
     levels: Vec<LevelSummary>,
     /// None when the levels do not include 0. With `base_noise`, level 0 is that noise alone
@@ -314,6 +316,7 @@ pub fn run(args: SweepArgs) -> Result<()> {
         base_noise: args.base_text(),
         presets,
         seeds,
+        clustering: args.methods.clustering(),
         breaks_at: breaks_at(&summary),
         levels: summary,
         clean_reference,
@@ -400,6 +403,7 @@ fn run_level(
         TrainLabels::Noisy,
         methods,
         &args.methods.schedule(),
+        args.methods.clustering(),
         |m| eprintln!("  {m}"),
     )?;
     let oracle = score_instance_oracle(gpu, &s)?;

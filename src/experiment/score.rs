@@ -14,8 +14,8 @@ use crate::eval::image_quality::{image_quality, ImageQuality};
 use crate::eval::label_render::LabelRenderer;
 use crate::eval::metrics::{gaussian_accuracy, ClassIou, Confusion, SegmentationScores};
 use crate::fuse::{
-    accumulate_assigned, lift_by_consensus, AssignOnGpu, ConsensusInput, ConsensusParams,
-    FuseConfig, GaussianShapes, Method, SegmentVotes, TieNeighbours, TIE_NEIGHBOURS,
+    accumulate_assigned, lift_by_consensus, AssignOnGpu, Clustering, ConsensusInput,
+    ConsensusParams, FuseConfig, GaussianShapes, SegmentVotes, TieNeighbours, TIE_NEIGHBOURS,
 };
 use crate::gpu::Gpu;
 use crate::render::GpuScene;
@@ -136,6 +136,7 @@ pub fn score_methods(
     which: TrainLabels,
     methods: &[Lifter],
     joint: &JointSchedule,
+    clustering: Clustering,
     mut progress: impl FnMut(&str),
 ) -> Result<Vec<MethodScore>> {
     let truth0 = s.gaussians.class_ids.clone().unwrap_or_default();
@@ -150,7 +151,14 @@ pub fn score_methods(
         progress(lifter.name());
         let start = Instant::now();
         let lifted = match lifter {
-            Lifter::Fuse(method) => fuse_lifted(gpu, s, method, &labels, &compact)?,
+            Lifter::Fuse(method) => {
+                let cfg = FuseConfig {
+                    method,
+                    clustering,
+                    ..Default::default()
+                };
+                fuse_lifted(gpu, s, &cfg, &labels, &compact)?
+            }
             Lifter::JointSemantics | Lifter::JointFull => {
                 joint_lifted(gpu, s, which, lifter == Lifter::JointFull, joint, &compact)?
             }
@@ -237,15 +245,12 @@ struct Lifted {
 fn fuse_lifted(
     gpu: &Gpu,
     s: &SynthScene,
-    method: Method,
+    cfg: &FuseConfig,
     labels: &Vec<Option<Vec<u32>>>,
     compact: &CompactClasses,
 ) -> Result<Lifted> {
+    let method = cfg.method;
     let scene = GpuScene::upload_for(gpu, &s.gaussians, method.scene_attributes())?;
-    let cfg = FuseConfig {
-        method,
-        ..Default::default()
-    };
     if method.is_consensus() {
         let input = ConsensusInput {
             gpu,
@@ -255,7 +260,7 @@ fn fuse_lifted(
             labels,
             classes: compact.len(),
         };
-        let lift = lift_by_consensus(&input, &cfg, &ConsensusParams::default(), &mut |_, _| {})?;
+        let lift = lift_by_consensus(&input, cfg, &ConsensusParams::of(cfg), &mut |_, _| {})?;
         return Ok(Lifted {
             classes: user_classes(compact.user_ids(), lift.assignment.class.iter().copied()),
             confidence: lift.assignment.confidence,
@@ -275,7 +280,7 @@ fn fuse_lifted(
         &s.cameras,
         labels,
         compact.len(),
-        &cfg,
+        cfg,
         with,
         |_, _| {},
     )?;

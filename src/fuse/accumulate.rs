@@ -14,7 +14,7 @@ use serde::Serialize;
 use super::assign::{assign_semantic_near, Assignment};
 use super::assign_gpu::GpuAssigner;
 use super::consensus_cluster::ClusterProfile;
-use super::consensus_decide::DecideProfile;
+use super::consensus_decide::{Clustering, DecideProfile};
 use super::method::Method;
 use super::neighbours::nearest_neighbours;
 use super::partial::{fixed_to_f64, EvidenceKind, RawEvidence};
@@ -67,6 +67,8 @@ pub struct FuseConfig {
     /// default); fewer where the device has no room for another view's buffers (see
     /// [`Lanes`]).
     pub views_in_flight: usize,
+    /// Segment consensus's clustering.
+    pub clustering: Clustering,
 }
 
 impl Default for FuseConfig {
@@ -81,6 +83,7 @@ impl Default for FuseConfig {
             far: 1e10,
             split: SplitSizes::default(),
             views_in_flight: LANES,
+            clustering: Clustering::Order,
         }
     }
 }

@@ -217,7 +217,7 @@ pub fn consensus_evidence(
     scene.means_to_world(&mut means);
     let log_scales: Vec<[f32; 3]> = gpu.download(&scene.params.log_scales, 0, n)?;
     let quats: Vec<[f32; 4]> = gpu.download(&scene.params.quats, 0, n)?;
-    let params = ConsensusParams::default();
+    let params = ConsensusParams::of(cfg);
     let input = ConsensusInput {
         gpu,
         scene,

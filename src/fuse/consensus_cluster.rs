@@ -25,11 +25,17 @@
 //! Where the views saw a strip of one surface only in one region with its neighbour across
 //! the crease, the evidence ties the two joins, and the surface the strip continues should
 //! take it (docs/robustness-log.md, "Joins along a surface first").
+//!
+//! With [`Clustering::Rounds`] most joins leave the order: those that take in a single
+//! Gaussian are made in rounds on every core between an order among the pieces and one
+//! among what is left ([`attach`]).
+
+mod attach;
 
 use serde::Serialize;
 
 use super::consensus_adjacent::Adjacent;
-use super::consensus_decide::ConsensusParams;
+use super::consensus_decide::{Clustering, ConsensusParams};
 use super::consensus_segments::{
     co_occurrence, Groups, Observations, SharedSets, GAUSSIANS_PER_RUN,
 };
@@ -40,6 +46,9 @@ use crate::util::{
     collect_parts, cores, map_in_blocks, merge_sorted_into, merge_sorted_runs, parallel_map,
     partition_point_near, prefetch, runs_of_weight, split_parts, take_part, Laps,
 };
+
+/// One view of [`PairEvidence::priority`], its fixed point's unit.
+const PRIORITY_ONE: i64 = 1 << 20;
 
 /// What the views said of the neighbour pairs between two segments, summed over the pairs
 /// ([`co_occurrence`] per pair).
@@ -69,7 +78,7 @@ impl PairEvidence {
     /// Fixed point (2^-20) so the order is exact and the same wherever it is computed.
     pub fn priority(&self, apart_weight: f64) -> i64 {
         let net = self.together as f64 - apart_weight * self.apart as f64;
-        (net / self.pairs.max(1) as f64 * (1 << 20) as f64).round() as i64
+        (net / self.pairs.max(1) as f64 * PRIORITY_ONE as f64).round() as i64
     }
 
     /// The candidates' first key: those with a pair along a surface above every candidate
@@ -479,6 +488,12 @@ impl Candidate {
         }
     }
 
+    /// The band of [`PairEvidence::queue_key`] the candidate falls in: one view's worth of
+    /// priority (candidates along a surface in bands above all others).
+    fn band(&self) -> i64 {
+        ((self.key ^ (1 << 63)) as i64).div_euclid(PRIORITY_ONE)
+    }
+
     /// The two segments (the lower first).
     fn segments(&self) -> (u32, u32) {
         (!(self.ids >> 32) as u32, !self.ids as u32)
@@ -531,8 +546,14 @@ pub struct ClusterProfile {
     pub outright_s: f64,
     pub adjacency_s: f64,
     pub piece_regions_s: f64,
-    /// The ordered joins: the candidates sorted, then taken one at a time.
+    /// The joins: the candidates sorted, then taken one at a time, among the pieces and
+    /// then among all segments (`joins_s`), the single Gaussians attached between
+    /// (`attach_s`) not included.
     pub joins_s: f64,
+    /// Of `joins_s`, the ordered joins among the pieces ([`Clustering::Rounds`] only).
+    pub pieces_joins_s: f64,
+    /// The single Gaussians joined in rounds ([`Clustering::Rounds`] only).
+    pub attach_s: f64,
     /// Neighbour pairs, the segments the ordered joins start from (pieces and single
     /// Gaussians), the candidates they start with, the joins they make and the segments
     /// at the end.
@@ -540,6 +561,9 @@ pub struct ClusterProfile {
     pub pieces: usize,
     pub candidates: usize,
     pub joins: usize,
+    /// Of `joins`, the single Gaussians attached in rounds, and the rounds.
+    pub attached: usize,
+    pub attach_rounds: usize,
     pub segments: usize,
     /// The ordered joins' queue: candidates taken from it (most of them stale: a segment
     /// joined another since, or the evidence changed), those tested ([`may_join`]), and
@@ -583,8 +607,48 @@ fn cluster(
     let mut graph = SegmentGraph::new(obs, pairs, p, &mut done);
     done.pieces_s = laps.lap();
     done.pieces = graph.parent.len();
-    let mut queue = Queue::new(&graph, p, sweep_from);
-    done.candidates = queue.sorted.len();
+    if p.clustering == Clustering::Rounds {
+        let mut queue = Queue::new(&graph, p, sweep_from, Among::Pieces);
+        done.candidates = queue.sorted.len();
+        join_in_order(&mut graph, &mut queue, p, &mut done, Among::Pieces);
+        done.pieces_joins_s = laps.lap();
+        attach::attach_single_gaussians(&mut graph, p, &mut done);
+        done.attach_s = laps.lap();
+    }
+    let mut queue = Queue::new(&graph, p, sweep_from, Among::All);
+    done.candidates += queue.sorted.len();
+    join_in_order(&mut graph, &mut queue, p, &mut done, Among::All);
+    let roots = graph.segment_of_gaussians();
+    done.joins_s = laps.lap() + done.pieces_joins_s;
+    done.segments = done.pieces - done.joins;
+    (renumber(&roots), done)
+}
+
+/// Which segments the ordered joins take candidates between.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Among {
+    /// Segments of two Gaussians or more: the pieces and what they joined, before the
+    /// single Gaussians attach ([`attach::attach_single_gaussians`]).
+    Pieces,
+    /// Every segment.
+    All,
+}
+
+impl Among {
+    fn takes(self, graph: &SegmentGraph, a: u32, b: u32) -> bool {
+        self == Among::All || graph.size[a as usize].min(graph.size[b as usize]) > 1
+    }
+}
+
+/// The ordered joins: the queue's candidates taken best first, each that [`may_join`]
+/// joined, the candidates it changed queued again (those `among` takes).
+fn join_in_order(
+    graph: &mut SegmentGraph,
+    queue: &mut Queue,
+    p: &ConsensusParams,
+    done: &mut ClusterProfile,
+    among: Among,
+) {
     let mut changed = Vec::new();
     while let Some(queued) = queue.pop() {
         done.popped += 1;
@@ -602,17 +666,15 @@ fn cluster(
             graph.join(a, b, &mut changed);
             queue.joined(b);
             for &(c, e) in changed.iter().filter(|(_, e)| e.allows_join(p)) {
-                let (lo, hi) = (a.min(c), a.max(c));
-                queue.push(graph.candidate(lo, hi, e, p));
-                done.requeued += 1;
+                if among.takes(graph, a, c) {
+                    let (lo, hi) = (a.min(c), a.max(c));
+                    queue.push(graph.candidate(lo, hi, e, p));
+                    done.requeued += 1;
+                }
             }
             queue.sweep_if_dead(&graph.segments);
         }
     }
-    let roots = graph.segment_of_gaussians();
-    done.joins_s = laps.lap();
-    done.segments = done.pieces - done.joins;
-    (renumber(&roots), done)
 }
 
 /// The candidates, greatest first: the neighbour pairs' in one sorted list, and those a
@@ -638,7 +700,7 @@ impl Queue {
     /// Every candidate whose evidence allows a join, sorted: ranges of segments listed
     /// and sorted on every core, then merged (a candidate is one pair of segments, so the
     /// order of equal items never arises).
-    fn new(graph: &SegmentGraph, p: &ConsensusParams, sweep_from: usize) -> Queue {
+    fn new(graph: &SegmentGraph, p: &ConsensusParams, sweep_from: usize, among: Among) -> Queue {
         let ranges = runs_of_weight(graph.edges.iter().map(Adjacent::len), 1 << 16);
         let runs = parallel_map(ranges.len(), |r| {
             let mut run = Vec::new();
@@ -646,7 +708,7 @@ impl Queue {
                 let a = a as u32;
                 run.extend(
                     (graph.edges[a as usize].iter())
-                        .filter(|&(b, e)| a < b && e.allows_join(p))
+                        .filter(|&(b, e)| a < b && e.allows_join(p) && among.takes(graph, a, b))
                         .map(|(b, e)| graph.candidate(a, b, e, p)),
                 );
             }
@@ -1053,9 +1115,19 @@ impl<'a> SegmentGraph<'a> {
 
     /// Each Gaussian's segment, named by its lowest Gaussian.
     fn segment_of_gaussians(&self) -> Vec<u32> {
+        // A piece's parent is lower, except a single Gaussian's attached to a segment
+        // ([`attach::attach_single_gaussians`]): that segment's root, not its own, is resolved after.
         let mut root: Vec<u32> = (0..self.parent.len() as u32).collect();
+        let mut attached = Vec::new();
         for s in 0..root.len() {
-            root[s] = root[self.parent[s] as usize]; // parents have lower indices
+            let parent = self.parent[s] as usize;
+            match parent <= s {
+                true => root[s] = root[parent],
+                false => attached.push(s),
+            }
+        }
+        for s in attached {
+            root[s] = root[self.parent[s] as usize]; // a segment of pieces: resolved above
         }
         let of_piece = |piece: u32| self.pieces.first[root[piece as usize] as usize];
         map_in_blocks(self.pieces.of_gaussian.len(), 1 << 16, |g| {
@@ -1063,7 +1135,7 @@ impl<'a> SegmentGraph<'a> {
         })
     }
 
-    /// Joins segment `b` into `a` (a < b); `changed` gets the segments whose evidence with
+    /// Joins segment `b` into `a` (a < b, or `b` a single Gaussian); `changed` gets the segments whose evidence with
     /// `a` changed, and those whose candidate with `a` changed by its size class alone,
     /// with that evidence (a buffer reused over the joins).
     fn join(&mut self, a: u32, b: u32, changed: &mut Vec<(u32, PairEvidence)>) {

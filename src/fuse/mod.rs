@@ -37,7 +37,7 @@ pub use consensus::{
     fuse_consensus, lift_by_consensus, ConsensusInput, ConsensusLift, LiftEvidence,
 };
 pub use consensus_cluster::ClusterProfile;
-pub use consensus_decide::{Consensus, ConsensusParams, DecideProfile, SegmentVotes};
+pub use consensus_decide::{Clustering, Consensus, ConsensusParams, DecideProfile, SegmentVotes};
 pub use consensus_surface::GaussianShapes;
 pub use method::{Method, SPELLINGS};
 pub use neighbours::nearest_neighbours;

@@ -223,6 +223,7 @@ run_ours() {
     "fuse office labels x 190 heap" =~ ${CASES:-.} ||
     "fuse office labels x 190 two cores" =~ ${CASES:-.} ||
     "fuse office labels x 190 lanes 4" =~ ${CASES:-.} ||
+    "fuse office labels x 190 rounds" =~ ${CASES:-.} ||
     "host scaling office labels" =~ ${CASES:-.} ]]; then
     timeout 300 semsplat synth --preset office --spacing "${ROOM_FUSE_SPACING:-0.0115}" \
       --views 190 --test-views 0 --width "${W:-1920}" --height "${H:-1080}" \
@@ -239,6 +240,15 @@ run_ours() {
     CAP=120 b_with semsplat "" "fuse office labels x 190 lanes 4" bench fuse \
       --scene /tmp/office_labels --labels /tmp/office_labels/labels_noisy --views 190 \
       --views-in-flight 4 --methods flashsplat,segment-consensus,segment-consensus-relabel
+  fi
+  # Segment consensus with its single Gaussians joined in rounds on every core (this build
+  # only: the flag is new in it); on the development VM's one core as fast as the order,
+  # modeled on sixteen threads 20-40% less clustering time (docs/robustness-log.md, "The
+  # single Gaussians in rounds").
+  if [[ "fuse office labels x 190 rounds" =~ ${CASES:-.} ]]; then
+    CAP=120 b_with semsplat "" "fuse office labels x 190 rounds" bench fuse \
+      --scene /tmp/office_labels --labels /tmp/office_labels/labels_noisy --views 190 \
+      --clustering rounds --methods flashsplat,segment-consensus,segment-consensus-relabel
   fi
   for m in flashsplat vote segment-consensus; do
     CAP=120 cli "fuse cli office labels x 190 $m" fuse --scene /tmp/office_labels/scene.ply \
@@ -302,6 +312,11 @@ run_ours() {
       timeout 90 taskset -c "$cores" "$bin/consensus_host" --scene /tmp/office_labels \
         --labels /tmp/office_labels/labels_noisy --cache /tmp/office.observations \
         --repeats 3 --profile "${model[@]}" 2>&1 | sed "s/^/host scaling, cores $cores: /" >>"$OUT/bench.log"
+      # The same with the single Gaussians in rounds (a build that has the flag).
+      timeout 90 taskset -c "$cores" "$bin/consensus_host" --scene /tmp/office_labels \
+        --labels /tmp/office_labels/labels_noisy --cache /tmp/office.observations \
+        --repeats 3 --profile --clustering rounds "${model[@]}" 2>&1 |
+        sed "s/^/host scaling rounds, cores $cores: /" >>"$OUT/bench.log"
     done
     say "host scaling office labels: $(grep -c '^host scaling.*outputs' "$OUT/bench.log") repetitions (bench.log)"
   fi
