@@ -88,9 +88,11 @@ def fuse_tables(cases):
     return out
 
 
+# "host scaling" lines are the order's clustering, "host scaling rounds" --clustering rounds.
 SCALING = re.compile(
-    r"^host scaling, cores (\S+): clustering ([0-9.]+) s, decision ([0-9.]+) s, outputs (\w+)")
-MODEL = re.compile(r"^host scaling, cores (\S+):\s+(clustering|decision) modeled \(threads: s\) (.*?);")
+    r"^host scaling( rounds)?, cores (\S+): clustering ([0-9.]+) s, decision ([0-9.]+) s, outputs (\w+)")
+MODEL = re.compile(
+    r"^host scaling( rounds)?, cores (\S+):\s+(clustering|decision) modeled \(threads: s\) (.*?);")
 
 
 def scaling_tables(log_path):
@@ -99,20 +101,24 @@ def scaling_tables(log_path):
         for line in f:
             m = SCALING.match(line)
             if m:
-                runs[m.group(1)].append((float(m.group(2)), float(m.group(3)), m.group(4)))
+                clustering = "rounds" if m.group(1) else "order"
+                runs[(clustering, m.group(2))].append(
+                    (float(m.group(3)), float(m.group(4)), m.group(5)))
                 continue
             m = MODEL.match(line)
             if m:
-                models[m.group(2)] = m.group(3)
+                models[("rounds" if m.group(1) else "order", m.group(3))] = m.group(4)
     if not runs:
         return []
-    rows = [[cores, f"{min(r[0] for r in reps):.3f}", f"{min(r[1] for r in reps):.3f}",
-             str(len(reps)), " ".join(sorted({r[2] for r in reps}))]
-            for cores, reps in runs.items()]
+    rows = [[clustering, cores, f"{min(r[0] for r in reps):.3f}",
+             f"{min(r[1] for r in reps):.3f}", str(len(reps)), " ".join(sorted({r[2] for r in reps}))]
+            for (clustering, cores), reps in runs.items()]
     out = ["### host scaling office labels (consensus_host, fastest of the repetitions)\n",
-           table(["cores", "clustering s", "decision s", "repetitions", "outputs"], rows) + "\n"]
-    for step, figures in models.items():
-        out.append(f"{step} modeled from one core's items, its last repetition (threads: s): {figures}\n")
+           table(["clustering", "cores", "clustering s", "decision s", "repetitions", "outputs"],
+                 rows) + "\n"]
+    for (clustering, step), figures in models.items():
+        out.append(f"{step} ({clustering}) modeled from one core's items, its last repetition "
+                   f"(threads: s): {figures}\n")
     return out
 
 
