@@ -163,9 +163,9 @@ pub enum Clustering {
     // The ordered joins among the pieces, then the single Gaussians attached in rounds,
     // then the ordered joins among what is left: most joins take in one Gaussian, and in
     // rounds they need no order. Under flicker 0.3 the same per-Gaussian accuracy as the
-    // order, held-out mIoU 0.07 points lower with `--relabel` and 0.68 without (mean of 10
-    // synthetic runs; most of it one run's 21-pixel sliver of a desk); on many cores less
-    // time (docs/robustness-log.md, "The single Gaussians in rounds").
+    // order, held-out mIoU 0.04 points higher with `--relabel` and 0.78 lower without (mean
+    // of 10 synthetic runs; most of it one run's 21-pixel sliver of a desk); on many cores
+    // less time (docs/robustness-log.md, "The single Gaussians in rounds").
     Rounds,
 }
 

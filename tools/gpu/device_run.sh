@@ -301,7 +301,7 @@ run_ours() {
   # on the same observations, every step timed, into bench.log): where each pass stops
   # scaling on this machine, and whether a warm repetition runs faster than the first. Its
   # outputs hash is the development VM's (65cdd370932672fe at 1920x1080; with --clustering
-  # rounds bf8784e0646abc8f) wherever the views observe the same.
+  # rounds 1180ee780834eca0) wherever the views observe the same.
   if [[ "host scaling office labels" =~ ${CASES:-.} ]] && [ -x "$bin/consensus_host" ] &&
     [ "$(left)" -gt 60 ]; then
     # On one core also the model of every thread count (util::scaling), to set beside the
