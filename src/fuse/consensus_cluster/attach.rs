@@ -10,12 +10,11 @@
 //! form a GPU's passes take.
 
 use std::collections::BTreeMap;
-use std::sync::Mutex;
 
 use super::{may_join, Candidate, ClusterProfile, PairEvidence, RegionCounts, SegmentGraph};
 use crate::fuse::consensus_adjacent::Adjacent;
 use crate::fuse::consensus_decide::ConsensusParams;
-use crate::util::{map_in_blocks, parallel_map};
+use crate::util::{map_in_blocks, parallel_map, split_parts, take_part};
 
 /// Attaches the single Gaussians by levels, the bands of one view of priority
 /// ([`Candidate::band`]), highest first, each in rounds. At a level a single Gaussian chooses
@@ -103,8 +102,9 @@ impl SegmentGraph<'_> {
             may_join(&e, self.dominant(s), self.dominant(c), p)
         };
         let several = |c: &&(Candidate, u32, PairEvidence)| self.size[c.1 as usize] > 1;
+        let single = |c: &&(Candidate, u32, PairEvidence)| !several(c);
         let segment = (at_level.clone().filter(several).find(joins))
-            .or_else(|| at_level.clone().find(joins))
+            .or_else(|| at_level.clone().filter(single).find(joins))
             .map(|&(_, c, _)| c);
         let below = candidates.iter().map(|c| c.0.band()).find(|&b| b < level);
         Choice {
@@ -184,24 +184,26 @@ impl SegmentGraph<'_> {
             .collect();
         changed.sort_unstable();
         changed.dedup();
-        let lists: Vec<Mutex<Adjacent>> = (changed.iter())
-            .map(|&a| Mutex::new(std::mem::take(&mut self.edges[a as usize])))
+        // Taken out, each updated on a thread of its own, put back.
+        let mut lists: Vec<Adjacent> = (changed.iter())
+            .map(|&a| std::mem::take(&mut self.edges[a as usize]))
             .collect();
         {
             let graph = &*self;
+            let parts = split_parts(&mut lists, std::iter::repeat_n(1, changed.len()));
             let of = |pairs: &'_ [(u32, u32)], a: u32| -> std::ops::Range<usize> {
                 let at = pairs.partition_point(|p| p.0 < a);
                 at..at + pairs[at..].partition_point(|p| p.0 == a)
             };
             let block = (changed.len() / 256).max(16);
             map_in_blocks(changed.len(), block, |i| {
-                let (a, mut list) = (changed[i], lists[i].lock().expect("one item a list"));
+                let (a, mut list) = (changed[i], take_part(&parts[i]));
                 let adjacent = &adjacent[of(&adjacent, a)];
-                graph.update_adjacency(a, &mut list, adjacent, &attach[of(&attach, a)]);
+                graph.update_adjacency(a, &mut list[0], adjacent, &attach[of(&attach, a)]);
             });
         }
         for (&a, list) in changed.iter().zip(lists) {
-            self.edges[a as usize] = list.into_inner().expect("no panic");
+            self.edges[a as usize] = list;
         }
         for &(_, s) in &attach {
             self.edges[s as usize] = Adjacent::default();
@@ -215,12 +217,13 @@ impl SegmentGraph<'_> {
     /// Each segment of `groups` (segment, Gaussian) takes in its attached Gaussians: their
     /// number, their observations in its region counts (on every core).
     fn grow_segments(&mut self, groups: &[&[(u32, u32)]]) {
-        let taken: Vec<Mutex<_>> = (groups.iter())
-            .map(|group| Mutex::new(self.regions.take(group[0].0)))
+        let mut taken: Vec<RegionCounts> = (groups.iter())
+            .map(|group| self.regions.take(group[0].0))
             .collect();
         let (obs, first) = (self.obs, &self.pieces.first);
+        let parts = split_parts(&mut taken, std::iter::repeat_n(1, groups.len()));
         parallel_map(groups.len(), |i| {
-            let mut counts = taken[i].lock().expect("one item a group");
+            let counts = &mut take_part(&parts[i])[0];
             // The Gaussians' counts together, then added once: a wall takes in thousands
             // in a round, and each addition merges into its counts.
             let members: Vec<u32> = groups[i].iter().map(|&(_, s)| first[s as usize]).collect();
@@ -231,8 +234,7 @@ impl SegmentGraph<'_> {
         for (group, counts) in groups.iter().zip(taken) {
             let segment = group[0].0;
             self.size[segment as usize] += group.len() as u32;
-            self.regions
-                .put(segment, counts.into_inner().expect("no panic"));
+            self.regions.put(segment, counts);
         }
     }
 
