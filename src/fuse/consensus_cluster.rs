@@ -32,6 +32,8 @@
 
 mod attach;
 
+use std::cell::RefCell;
+
 use serde::Serialize;
 
 use super::consensus_adjacent::Adjacent;
@@ -165,32 +167,77 @@ impl RegionCounts {
         if other.counts.len() > self.counts.len() {
             std::mem::swap(self, &mut other);
         }
+        self.add(&other.counts);
+    }
+
+    /// Adds the observations of the single Gaussians `members` (none of them in the
+    /// segment) to the counts of the segment whose lowest Gaussian is `first`: what
+    /// [`RegionCounts::absorb`] of their [`RegionCounts::of_gaussians`] gives, their counts
+    /// built in the thread's lists rather than in new ones where they are few.
+    fn absorb_gaussians(
+        &mut self,
+        first: usize,
+        members: impl Iterator<Item = u32> + Clone,
+        obs: &Observations,
+    ) {
+        let observations: usize = members.clone().map(|g| obs.row(g as usize).len()).sum();
+        if observations >= COUNT_BY_VIEW_FROM {
+            let members: Vec<u32> = members.collect();
+            let theirs = RegionCounts::of_gaussians(obs, &members);
+            return self.absorb(first, theirs, members[0] as usize, obs);
+        }
+        if self.counts.is_empty() {
+            *self = RegionCounts::of_gaussian(obs, first);
+        }
+        MEMBERS_SCRATCH.with_borrow_mut(|Scratch(seen, counts)| {
+            seen.clear();
+            let rows = members.map(|g| obs.row(g as usize));
+            seen.extend(rows.flat_map(|row| row.map(|i| (obs.view[i], obs.region[i]))));
+            seen.sort_unstable();
+            counts.clear();
+            let runs = seen.chunk_by(|a, b| a == b);
+            counts.extend(runs.map(|run| (run[0].0, run[0].1, run.len() as u32)));
+            self.add(counts);
+        });
+    }
+
+    /// Adds `other`, (view, region, observations) sorted as the counts, to a segment's
+    /// built counts, and sets the dominant region of each view it names.
+    fn add(&mut self, other: &[(u32, u32, u32)]) {
         if self.dominant.is_empty() {
             self.dominant = self.counts.clone();
         }
-        // `other`'s entries are sorted as `self`'s, so each search starts where the last
-        // ended (most joins: a Gaussian's few dozen views into a segment's thousands of
-        // entries; binary searches of the whole list were a third of the ordered joins).
-        let (mut fresh, mut at) = (Vec::new(), 0);
-        for &(view, region, count) in &other.counts {
-            at += partition_point_near(&self.counts[at..], |e| (e.0, e.1) < (view, region));
-            match self.counts.get_mut(at) {
-                Some(e) if (e.0, e.1) == (view, region) => e.2 += count,
-                _ => fresh.push((view, region, count)),
+        ADD_SCRATCH.with_borrow_mut(|Scratch(fresh, new_views)| {
+            // `other`'s entries are sorted as `self`'s, so each search starts where the
+            // last ended (most joins: a Gaussian's few dozen views into a segment's
+            // thousands of entries; binary searches of the whole list were a third of the
+            // ordered joins).
+            fresh.clear();
+            new_views.clear();
+            let mut at = 0;
+            for &(view, region, count) in other {
+                at += partition_point_near(&self.counts[at..], |e| (e.0, e.1) < (view, region));
+                match self.counts.get_mut(at) {
+                    Some(e) if (e.0, e.1) == (view, region) => e.2 += count,
+                    _ => fresh.push((view, region, count)),
+                }
             }
-        }
-        merge_sorted_into(&mut self.counts, &fresh);
-        let (mut new_views, mut run, mut entry) = (Vec::new(), 0, 0);
-        for &(view, ..) in other.table() {
-            run += partition_point_near(&self.counts[run..], |e| e.0 < view);
-            let d = self.dominant_from(run, view);
-            entry += partition_point_near(&self.dominant[entry..], |e| e.0 < view);
-            match self.dominant.get_mut(entry) {
-                Some(e) if e.0 == view => *e = d,
-                _ => new_views.push(d),
+            merge_sorted_into(&mut self.counts, fresh);
+            let (mut run, mut entry) = (0, 0);
+            for view in other
+                .chunk_by(|a, b| a.0 == b.0)
+                .map(|entries| entries[0].0)
+            {
+                run += partition_point_near(&self.counts[run..], |e| e.0 < view);
+                let d = self.dominant_from(run, view);
+                entry += partition_point_near(&self.dominant[entry..], |e| e.0 < view);
+                match self.dominant.get_mut(entry) {
+                    Some(e) if e.0 == view => *e = d,
+                    _ => new_views.push(d),
+                }
             }
-        }
-        merge_sorted_into(&mut self.dominant, &new_views);
+            merge_sorted_into(&mut self.dominant, new_views);
+        });
     }
 
     /// (view, dominant region, observations) of one view, from the counts.
@@ -228,6 +275,25 @@ impl RegionCounts {
             },
             false => Dominant::Table(self.table()),
         }
+    }
+}
+
+thread_local! {
+    /// [`RegionCounts::add`]'s lists of new entries, and [`RegionCounts::absorb_gaussians`]'s
+    /// of the Gaussians' observations and counts: reused by the thread join after join. The
+    /// single Gaussians joined in rounds are added on every core, under the one malloc arena
+    /// the CLI's threads share (src/util/memory.rs), where lists allocated for each join kept
+    /// the threads waiting on each other.
+    static ADD_SCRATCH: RefCell<Scratch<(u32, u32, u32)>> = const { Scratch::new() };
+    static MEMBERS_SCRATCH: RefCell<Scratch<(u32, u32)>> = const { Scratch::new() };
+}
+
+/// Two lists a thread keeps for its next use (the second of (view, region, observations)).
+struct Scratch<T>(Vec<T>, Vec<(u32, u32, u32)>);
+
+impl<T> Scratch<T> {
+    const fn new() -> RefCell<Scratch<T>> {
+        RefCell::new(Scratch(Vec::new(), Vec::new()))
     }
 }
 

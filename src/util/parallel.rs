@@ -52,17 +52,15 @@ fn timed_parallel_map<T: Send>(
 
 /// `f(0), ..., f(count - 1)` computed on every core in blocks of `block` indices (each
 /// block one work item: a lock per index would cost more than most items), in index order.
+/// Each block is written in place into the one list ([`collect_parts`]): a list per block
+/// was an allocation on the worker threads, which share one malloc arena
+/// (src/util/memory.rs), and the segment clustering's rounds make thousands of calls.
 #[track_caller]
 pub fn map_in_blocks<T: Send>(count: usize, block: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
     let block = block.max(1);
-    let blocks = parallel_map(count.div_ceil(block), |b| {
-        (b * block..count.min((b + 1) * block))
-            .map(&f)
-            .collect::<Vec<T>>()
-    });
-    let mut out = Vec::with_capacity(count);
-    blocks.into_iter().for_each(|block| out.extend(block));
-    out
+    let range = |b: usize| b * block..count.min((b + 1) * block);
+    let lens = (0..count.div_ceil(block)).map(|b| range(b).len()).collect();
+    collect_parts(lens, |b| range(b).map(&f))
 }
 
 /// [`parallel_map`] on at most `threads` threads, started for the call and ended after

@@ -9,6 +9,7 @@
 //! by segment, on every core too; each round's work is per Gaussian or per segment, the
 //! form a GPU's passes take.
 
+use std::cell::RefCell;
 use std::collections::BTreeMap;
 
 use super::{may_join, Candidate, ClusterProfile, PairEvidence, RegionCounts, SegmentGraph};
@@ -68,6 +69,17 @@ pub(super) fn attach_single_gaussians(
     }
 }
 
+thread_local! {
+    /// A single Gaussian's candidates while it chooses ([`SegmentGraph::choice`]), the
+    /// thread's list reused Gaussian after Gaussian. A list allocated for each (about two
+    /// million allocations for a capture's rounds), from the one malloc arena the CLI's
+    /// threads share (src/util/memory.rs), kept the cores waiting on each other: the
+    /// office at 1080p attached in 1.07-1.22 s on two cores, slower than on one
+    /// (docs/robustness-log.md, "The rounds' allocations").
+    static CANDIDATES: RefCell<Vec<(Candidate, u32, PairEvidence)>> =
+        const { RefCell::new(Vec::new()) };
+}
+
 /// No band: no candidate left below.
 const NO_BAND: i64 = i64::MIN;
 
@@ -92,10 +104,23 @@ impl SegmentGraph<'_> {
     /// at the level or above, in the queue's order, that [`may_join`]; a segment of several
     /// before any single Gaussian.
     fn choice(&self, s: u32, level: i64, p: &ConsensusParams) -> Choice {
-        let mut candidates: Vec<(Candidate, u32, PairEvidence)> = (self.edges[s as usize].iter())
-            .filter(|&(_, e)| e.allows_join(p))
-            .map(|(c, e)| (self.candidate(s.min(c), s.max(c), e, p), c, e))
-            .collect();
+        CANDIDATES.with_borrow_mut(|candidates| self.choice_among(s, level, p, candidates))
+    }
+
+    /// [`SegmentGraph::choice`], its candidates listed in `candidates` (the thread's buffer).
+    fn choice_among(
+        &self,
+        s: u32,
+        level: i64,
+        p: &ConsensusParams,
+        candidates: &mut Vec<(Candidate, u32, PairEvidence)>,
+    ) -> Choice {
+        candidates.clear();
+        candidates.extend(
+            (self.edges[s as usize].iter())
+                .filter(|&(_, e)| e.allows_join(p))
+                .map(|(c, e)| (self.candidate(s.min(c), s.max(c), e, p), c, e)),
+        );
         candidates.sort_unstable_by_key(|c| std::cmp::Reverse(c.0));
         let at_level = candidates.iter().take_while(|c| c.0.band() >= level);
         let joins = |&&(_, c, e): &&(Candidate, u32, PairEvidence)| {
@@ -226,10 +251,9 @@ impl SegmentGraph<'_> {
             let counts = &mut take_part(&parts[i])[0];
             // The Gaussians' counts together, then added once: a wall takes in thousands
             // in a round, and each addition merges into its counts.
-            let members: Vec<u32> = groups[i].iter().map(|&(_, s)| first[s as usize]).collect();
-            let theirs = RegionCounts::of_gaussians(obs, &members);
+            let members = groups[i].iter().map(|&(_, s)| first[s as usize]);
             let segment_first = first[groups[i][0].0 as usize] as usize;
-            counts.absorb(segment_first, theirs, members[0] as usize, obs);
+            counts.absorb_gaussians(segment_first, members, obs);
         });
         for (group, counts) in groups.iter().zip(taken) {
             let segment = group[0].0;
