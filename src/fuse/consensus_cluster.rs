@@ -1470,6 +1470,98 @@ mod tests {
         }
     }
 
+    /// Single Gaussians added to a segment at once (`absorb_gaussians`: a few in the
+    /// thread's lists, many counted as a piece's) give the counts and per-view dominant
+    /// regions of a plain count of all its Gaussians; so does a segment absorbing a larger
+    /// one. Dominant: the region holding most of the view's observations, ties to the lowest
+    /// region id, beside the view's total.
+    #[test]
+    fn gaussians_absorbed_at_once_count_as_the_whole_segment() {
+        let mut rng = Rng::new(17);
+        let n = 3000;
+        let mut offsets = vec![0];
+        let (mut view, mut region) = (Vec::new(), Vec::new());
+        for _ in 0..n {
+            for v in 0..40u32 {
+                if rng.below(3) > 0 {
+                    view.push(v);
+                    region.push(100 * v + rng.below(3) as u32);
+                }
+            }
+            offsets.push(view.len());
+        }
+        let m = view.len();
+        let obs = Observations {
+            n,
+            offsets,
+            view,
+            label: vec![0; m],
+            region,
+            edge: vec![false; m],
+        };
+        let plain = |members: &[u32]| {
+            let mut counts = std::collections::BTreeMap::new();
+            for i in members.iter().flat_map(|&g| obs.row(g as usize)) {
+                *counts.entry((obs.view[i], obs.region[i])).or_insert(0u32) += 1;
+            }
+            let mut dominant: Vec<(u32, u32, u32)> = Vec::new();
+            for (&(v, r), &c) in &counts {
+                match dominant.last_mut() {
+                    Some(d) if d.0 == v => {
+                        let best = if counts[&(v, d.1)] < c { r } else { d.1 };
+                        *d = (v, best, d.2 + c);
+                    }
+                    _ => dominant.push((v, r, c)),
+                }
+            }
+            let counts: Vec<(u32, u32, u32)> =
+                counts.into_iter().map(|((v, r), c)| (v, r, c)).collect();
+            (counts, dominant)
+        };
+        // (the segment's Gaussians, those joining it): a single Gaussian taking one, a
+        // piece taking a few, a piece taking more than COUNT_BY_VIEW_FROM observations.
+        let cases: [(Vec<u32>, Vec<u32>); 3] = [
+            (vec![5], vec![9]),
+            ((100..150).collect(), vec![7, 300, 2999]),
+            ((0..10).collect(), (1000..1400).step_by(2).collect()),
+        ];
+        for (segment, joining) in cases {
+            let mut counts = match segment.len() {
+                1 => RegionCounts::default(),
+                _ => RegionCounts::of_gaussians(&obs, &segment),
+            };
+            let first = segment[0] as usize;
+            counts.absorb_gaussians(first, joining.iter().copied(), &obs);
+            let all: Vec<u32> = segment.iter().chain(&joining).copied().collect();
+            let (want_counts, want_dominant) = plain(&all);
+            assert_eq!(
+                counts.counts,
+                want_counts,
+                "{} + {}",
+                segment.len(),
+                joining.len()
+            );
+            assert_eq!(
+                counts.table(),
+                want_dominant,
+                "{} + {}",
+                segment.len(),
+                joining.len()
+            );
+            // The other way: the joining Gaussians' segment absorbs the (smaller) segment.
+            let mut theirs = RegionCounts::of_gaussians(&obs, &joining);
+            let ours = match segment.len() {
+                1 => RegionCounts::default(),
+                _ => RegionCounts::of_gaussians(&obs, &segment),
+            };
+            theirs.absorb(joining[0] as usize, ours, first, &obs);
+            assert_eq!(theirs.counts, want_counts);
+            assert_eq!(theirs.table(), want_dominant);
+        }
+        let big: usize = (1000..1400).step_by(2).map(|g| obs.row(g).len()).sum();
+        assert!(big >= COUNT_BY_VIEW_FROM, "{big}");
+    }
+
     /// Both ways of counting a piece's observations agree, on pieces of one region per
     /// view and of many (each view's regions in no order).
     #[test]
