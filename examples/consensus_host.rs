@@ -15,10 +15,18 @@
 //! segments, classes, confidences and entropies, which must not change between
 //! repetitions, and changes between builds only when their outputs do. The process's
 //! allocator is set as the CLI's (one arena, fixed thresholds) unless `--glibc-defaults`.
+//! Beside them, the allocations the clustering and the decision made on other threads than
+//! the caller's: under the one arena those threads wait on each other's, which a model of
+//! their items (`--model-threads`) does not see (the rounds' candidates listed anew for
+//! every Gaussian made two cores slower than one: docs/robustness-log.md, "The rounds'
+//! allocations").
 
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
 use std::hash::{Hash, Hasher};
 use std::io::{BufReader, BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use anyhow::{ensure, Context, Result};
 use clap::Parser;
@@ -33,6 +41,58 @@ use semsplat::fuse::{Clustering, ConsensusParams, FuseConfig, GaussianShapes, Me
 use semsplat::scene::labels::LabelFormat;
 use semsplat::scene::Gaussians;
 use semsplat::util::scaling::{estimate_scaling, Scaling, THREADS};
+
+/// The system allocator, counting the allocations made on threads other than `main`'s.
+struct CountingAllocator;
+
+/// Allocations and reallocations on other threads than `main`'s, since the process began.
+static OTHER_THREADS_ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
+
+thread_local! {
+    /// Set on `main`'s thread: its allocations are not counted.
+    static CALLER: Cell<bool> = const { Cell::new(false) };
+}
+
+fn count_allocation() {
+    if !CALLER.with(Cell::get) {
+        OTHER_THREADS_ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+// SAFETY: every call is passed on to `System` unchanged; the count touches no allocation.
+unsafe impl GlobalAlloc for CountingAllocator {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        count_allocation();
+        unsafe { System.alloc(layout) }
+    }
+
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        count_allocation();
+        unsafe { System.alloc_zeroed(layout) }
+    }
+
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        count_allocation();
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static ALLOCATOR: CountingAllocator = CountingAllocator;
+
+/// `work`'s output and the allocations other threads made meanwhile.
+fn counting_others<T>(work: impl FnOnce() -> T) -> (T, u64) {
+    let before = OTHER_THREADS_ALLOCATIONS.load(Ordering::Relaxed);
+    let out = work();
+    (
+        out,
+        OTHER_THREADS_ALLOCATIONS.load(Ordering::Relaxed) - before,
+    )
+}
 
 #[derive(Parser)]
 struct Args {
@@ -66,6 +126,7 @@ struct Args {
 }
 
 fn main() -> Result<()> {
+    CALLER.with(|caller| caller.set(true));
     let args = Args::parse();
     if !args.glibc_defaults {
         semsplat::util::memory::configure_malloc();
@@ -94,17 +155,25 @@ fn main() -> Result<()> {
     let order = SpatialOrder::of(shapes.means);
     let surfaces = SurfaceNormals::of(&shapes, &order, &params);
     for _ in 0..args.repeats {
-        let ((segment, clustering), cluster_model) = timed(args.model_threads, || {
-            cluster_segments_timed(&run.observations, &run.knn, &surfaces, &params)
+        let (((segment, clustering), cluster_model), cluster_allocations) = counting_others(|| {
+            timed(args.model_threads, || {
+                cluster_segments_timed(&run.observations, &run.knn, &surfaces, &params)
+            })
         });
-        let ((consensus, decision), decide_model) = timed(args.model_threads, || {
-            decide_timed(&run.observations, &run.knn, segment, run.classes, &params)
+        let (((consensus, decision), decide_model), decide_allocations) = counting_others(|| {
+            timed(args.model_threads, || {
+                decide_timed(&run.observations, &run.knn, segment, run.classes, &params)
+            })
         });
         println!(
             "clustering {:.3} s, decision {:.3} s, outputs {:016x}",
             cluster_model.measured_s,
             decide_model.measured_s,
             outputs_hash(&consensus)
+        );
+        println!(
+            "  allocations on the worker threads: clustering {cluster_allocations}, decision \
+             {decide_allocations}"
         );
         if args.profile {
             println!("  {clustering:?}\n  {decision:?}");

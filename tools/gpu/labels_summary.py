@@ -93,10 +93,15 @@ SCALING = re.compile(
     r"^host scaling( rounds)?, cores (\S+): clustering ([0-9.]+) s, decision ([0-9.]+) s, outputs (\w+)")
 MODEL = re.compile(
     r"^host scaling( rounds)?, cores (\S+):\s+(clustering|decision) modeled \(threads: s\) (.*?);")
+# After each repetition's line (builds from 2026-12-01 on): the allocations its passes made
+# on the worker threads, which wait on each other under the CLI's one malloc arena.
+ALLOCATIONS = re.compile(
+    r"^host scaling( rounds)?, cores (\S+):\s+allocations on the worker threads: "
+    r"clustering (\d+), decision (\d+)")
 
 
 def scaling_tables(log_path):
-    runs, models = defaultdict(list), {}
+    runs, models, allocations = defaultdict(list), {}, defaultdict(list)
     with open(log_path, errors="replace") as f:
         for line in f:
             m = SCALING.match(line)
@@ -108,14 +113,20 @@ def scaling_tables(log_path):
             m = MODEL.match(line)
             if m:
                 models[("rounds" if m.group(1) else "order", m.group(3))] = m.group(4)
+                continue
+            m = ALLOCATIONS.match(line)
+            if m:
+                allocations[("rounds" if m.group(1) else "order", m.group(2))].append(
+                    f"{m.group(3)} / {m.group(4)}")
     if not runs:
         return []
     rows = [[clustering, cores, f"{min(r[0] for r in reps):.3f}",
-             f"{min(r[1] for r in reps):.3f}", str(len(reps)), " ".join(sorted({r[2] for r in reps}))]
+             f"{min(r[1] for r in reps):.3f}", str(len(reps)), " ".join(sorted({r[2] for r in reps})),
+             ", ".join(allocations.get((clustering, cores), [])) or "-"]
             for (clustering, cores), reps in runs.items()]
     out = ["### host scaling office labels (consensus_host, fastest of the repetitions)\n",
-           table(["clustering", "cores", "clustering s", "decision s", "repetitions", "outputs"],
-                 rows) + "\n"]
+           table(["clustering", "cores", "clustering s", "decision s", "repetitions", "outputs",
+                  "worker allocations (clustering / decision)"], rows) + "\n"]
     for (clustering, step), figures in models.items():
         out.append(f"{step} ({clustering}) modeled from one core's items, its last repetition "
                    f"(threads: s): {figures}\n")
