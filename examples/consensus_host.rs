@@ -16,10 +16,11 @@
 //! repetitions, and changes between builds only when their outputs do. The process's
 //! allocator is set as the CLI's (one arena, fixed thresholds) unless `--glibc-defaults`.
 //! Beside them, the allocations the clustering and the decision made on other threads than
-//! the caller's: under the one arena those threads wait on each other's, which a model of
-//! their items (`--model-threads`) does not see (the rounds' candidates listed anew for
-//! every Gaussian made two cores slower than one: docs/robustness-log.md, "The rounds'
-//! allocations").
+//! the caller's, and the process's page faults: under the one arena those threads wait on
+//! each other's allocations, and pages touched for the first time are zeroed and mapped
+//! one by one, neither of which a model of their items (`--model-threads`) sees (the
+//! rounds' candidates listed anew for every Gaussian made two cores slower than one:
+//! docs/robustness-log.md, "The rounds' allocations").
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
@@ -84,14 +85,42 @@ unsafe impl GlobalAlloc for CountingAllocator {
 #[global_allocator]
 static ALLOCATOR: CountingAllocator = CountingAllocator;
 
-/// `work`'s output and the allocations other threads made meanwhile.
-fn counting_others<T>(work: impl FnOnce() -> T) -> (T, u64) {
-    let before = OTHER_THREADS_ALLOCATIONS.load(Ordering::Relaxed);
+/// What a stretch of work cost beside its time, in ways a model of its items on one core
+/// does not see.
+#[derive(Clone, Copy)]
+struct Costs {
+    /// Allocations other threads made (under one arena they wait on each other's).
+    worker_allocations: u64,
+    /// The process's minor page faults: pages touched for the first time, each zeroed by
+    /// the kernel (many threads faulting at once share the process's memory map).
+    page_faults: u64,
+}
+
+/// `work`'s output and what it cost meanwhile ([`Costs`]).
+fn costs<T>(work: impl FnOnce() -> T) -> (T, Costs) {
+    let (allocations, faults) = (
+        OTHER_THREADS_ALLOCATIONS.load(Ordering::Relaxed),
+        minor_faults(),
+    );
     let out = work();
-    (
-        out,
-        OTHER_THREADS_ALLOCATIONS.load(Ordering::Relaxed) - before,
-    )
+    let costs = Costs {
+        worker_allocations: OTHER_THREADS_ALLOCATIONS.load(Ordering::Relaxed) - allocations,
+        page_faults: minor_faults().saturating_sub(faults),
+    };
+    (out, costs)
+}
+
+/// The process's minor page faults so far (`minflt` of /proc/self/stat; 0 without it).
+fn minor_faults() -> u64 {
+    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    // The fields after the command's name, which ends at the last ')': minflt is the
+    // eighth of them (the tenth of the line).
+    let after_name = stat.rsplit_once(')').map_or("", |(_, rest)| rest);
+    after_name
+        .split_whitespace()
+        .nth(7)
+        .and_then(|f| f.parse().ok())
+        .unwrap_or(0)
 }
 
 #[derive(Parser)]
@@ -155,12 +184,12 @@ fn main() -> Result<()> {
     let order = SpatialOrder::of(shapes.means);
     let surfaces = SurfaceNormals::of(&shapes, &order, &params);
     for _ in 0..args.repeats {
-        let (((segment, clustering), cluster_model), cluster_allocations) = counting_others(|| {
+        let (((segment, clustering), cluster_model), cluster_costs) = costs(|| {
             timed(args.model_threads, || {
                 cluster_segments_timed(&run.observations, &run.knn, &surfaces, &params)
             })
         });
-        let (((consensus, decision), decide_model), decide_allocations) = counting_others(|| {
+        let (((consensus, decision), decide_model), decide_costs) = costs(|| {
             timed(args.model_threads, || {
                 decide_timed(&run.observations, &run.knn, segment, run.classes, &params)
             })
@@ -171,9 +200,11 @@ fn main() -> Result<()> {
             decide_model.measured_s,
             outputs_hash(&consensus)
         );
+        let [c, d] = [cluster_costs, decide_costs];
         println!(
-            "  allocations on the worker threads: clustering {cluster_allocations}, decision \
-             {decide_allocations}"
+            "  allocations on the worker threads: clustering {}, decision {}; page faults: \
+             clustering {}, decision {}",
+            c.worker_allocations, d.worker_allocations, c.page_faults, d.page_faults
         );
         if args.profile {
             println!("  {clustering:?}\n  {decision:?}");

@@ -94,10 +94,11 @@ SCALING = re.compile(
 MODEL = re.compile(
     r"^host scaling( rounds)?, cores (\S+):\s+(clustering|decision) modeled \(threads: s\) (.*?);")
 # After each repetition's line (builds from 2026-12-01 on): the allocations its passes made
-# on the worker threads, which wait on each other under the CLI's one malloc arena.
+# on the worker threads, which wait on each other under the CLI's one malloc arena, and
+# the process's page faults.
 ALLOCATIONS = re.compile(
     r"^host scaling( rounds)?, cores (\S+):\s+allocations on the worker threads: "
-    r"clustering (\d+), decision (\d+)")
+    r"clustering (\d+), decision (\d+)(?:; page faults: clustering (\d+), decision (\d+))?")
 
 
 def scaling_tables(log_path):
@@ -116,8 +117,9 @@ def scaling_tables(log_path):
                 continue
             m = ALLOCATIONS.match(line)
             if m:
+                faults = f"; faults {m.group(5)} / {m.group(6)}" if m.group(5) else ""
                 allocations[("rounds" if m.group(1) else "order", m.group(2))].append(
-                    f"{m.group(3)} / {m.group(4)}")
+                    f"{m.group(3)} / {m.group(4)}{faults}")
     if not runs:
         return []
     rows = [[clustering, cores, f"{min(r[0] for r in reps):.3f}",
@@ -126,7 +128,7 @@ def scaling_tables(log_path):
             for (clustering, cores), reps in runs.items()]
     out = ["### host scaling office labels (consensus_host, fastest of the repetitions)\n",
            table(["clustering", "cores", "clustering s", "decision s", "repetitions", "outputs",
-                  "worker allocations (clustering / decision)"], rows) + "\n"]
+                  "worker allocations (clustering / decision); page faults"], rows) + "\n"]
     for (clustering, step), figures in models.items():
         out.append(f"{step} ({clustering}) modeled from one core's items, its last repetition "
                    f"(threads: s): {figures}\n")
