@@ -1470,6 +1470,38 @@ mod tests {
         }
     }
 
+    /// Observations of `n` Gaussians, Gaussian `g` seen by each of its first `views(g)`
+    /// views with odds of 2 in 3, the `v`-th as `draw(rng, v)`: (view, region). No labels,
+    /// no edges.
+    fn drawn_observations(
+        rng: &mut Rng,
+        n: usize,
+        views: impl Fn(usize) -> u32,
+        mut draw: impl FnMut(&mut Rng, u32) -> (u32, u32),
+    ) -> Observations {
+        let mut offsets = vec![0];
+        let (mut view, mut region) = (Vec::new(), Vec::new());
+        for g in 0..n {
+            for v in 0..views(g) {
+                if rng.below(3) > 0 {
+                    let (drawn_view, drawn_region) = draw(rng, v);
+                    view.push(drawn_view);
+                    region.push(drawn_region);
+                }
+            }
+            offsets.push(view.len());
+        }
+        let m = view.len();
+        Observations {
+            n,
+            offsets,
+            view,
+            label: vec![0; m],
+            region,
+            edge: vec![false; m],
+        }
+    }
+
     /// Single Gaussians added to a segment at once (`absorb_gaussians`: a few in the
     /// thread's lists, many counted as a piece's) give the counts and per-view dominant
     /// regions of a plain count of all its Gaussians; so does a segment absorbing a larger
@@ -1478,27 +1510,12 @@ mod tests {
     #[test]
     fn gaussians_absorbed_at_once_count_as_the_whole_segment() {
         let mut rng = Rng::new(17);
-        let n = 3000;
-        let mut offsets = vec![0];
-        let (mut view, mut region) = (Vec::new(), Vec::new());
-        for _ in 0..n {
-            for v in 0..40u32 {
-                if rng.below(3) > 0 {
-                    view.push(v);
-                    region.push(100 * v + rng.below(3) as u32);
-                }
-            }
-            offsets.push(view.len());
-        }
-        let m = view.len();
-        let obs = Observations {
-            n,
-            offsets,
-            view,
-            label: vec![0; m],
-            region,
-            edge: vec![false; m],
-        };
+        let obs = drawn_observations(
+            &mut rng,
+            3000,
+            |_| 40,
+            |rng, v| (v, 100 * v + rng.below(3) as u32),
+        );
         let plain = |members: &[u32]| {
             let mut counts = std::collections::BTreeMap::new();
             for i in members.iter().flat_map(|&g| obs.row(g as usize)) {
@@ -1570,26 +1587,10 @@ mod tests {
         // The last: a wall in several runs, its later members seen by more views.
         let wall = 2 * GAUSSIANS_PER_RUN + 700;
         for (regions_per_view, n) in [(1, 500), (3, 500), (40, 500), (3, wall)] {
-            let mut offsets = vec![0];
-            let (mut view, mut region) = (Vec::new(), Vec::new());
-            for g in 0..n {
-                for v in 0..if g < n / 2 { 30u32 } else { 34 } {
-                    if rng.below(3) > 0 {
-                        view.push(v * 7);
-                        region.push(1000 * v + rng.below(regions_per_view) as u32 * 13);
-                    }
-                }
-                offsets.push(view.len());
-            }
-            let m = view.len();
-            let obs = Observations {
-                n,
-                offsets,
-                view,
-                label: vec![0; m],
-                region,
-                edge: vec![false; m],
-            };
+            let views = |g: usize| if g < n / 2 { 30 } else { 34 };
+            let obs = drawn_observations(&mut rng, n, views, |rng, v| {
+                (v * 7, 1000 * v + rng.below(regions_per_view) as u32 * 13)
+            });
             let members: Vec<u32> = (0..n as u32).filter(|_| rng.below(4) > 0).collect();
             let by_view = counts_by_view(&obs, &members);
             assert_eq!(by_view, counts_sorted(&obs, &members));
