@@ -7,14 +7,14 @@
 
 mod common;
 
-use std::io::{BufRead, BufReader};
+use std::io::{BufRead, BufReader, Write};
 use std::path::Path;
 use std::process::{Child, Command, Output, Stdio};
 use std::sync::mpsc;
 use std::time::Duration;
 
 use common::cli::strings;
-use semsplat::util::{write_atomic, write_bytes_atomic};
+use semsplat::util::{stage_atomic, write_atomic, write_bytes_atomic};
 
 fn semsplat<I, S>(args: I) -> Output
 where
@@ -326,26 +326,93 @@ fn writes_go_through_symlinks_and_never_replace_special_files() {
         .is_char_device());
 }
 
+/// A PID that names no running process (a child's, waited for).
+fn dead_pid() -> u32 {
+    let mut child = Command::new("true").spawn().unwrap();
+    let dead = child.id();
+    child.wait().unwrap();
+    dead
+}
+
+/// Writes `path` as last modified two minutes ago (a temp file as old as a killed run's).
+fn write_aged(path: &Path) -> std::fs::File {
+    std::fs::write(path, "x").unwrap();
+    let file = std::fs::File::options().write(true).open(path).unwrap();
+    let two_minutes_ago = std::time::SystemTime::now() - Duration::from_secs(120);
+    file.set_modified(two_minutes_ago).unwrap();
+    file
+}
+
 #[test]
 fn stale_temp_files_of_dead_runs_are_removed_and_live_ones_kept() {
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();
-    let mut child = Command::new("true").spawn().unwrap();
-    let dead = child.id();
-    child.wait().unwrap();
-    let stale = d.join(format!(".out.ply.semsplat-tmp{dead}"));
+    let dead = dead_pid();
+    let stale = d.join(format!(".out.ply.semsplat-tmp{dead}-0a1b2c3d"));
+    let stale_old_name = d.join(format!(".old.ply.semsplat-tmp{dead}"));
     // PID 1 is always alive: its temp file may be in use.
-    let live = d.join(".other.ply.semsplat-tmp1");
+    let live = d.join(".other.ply.semsplat-tmp1-0a1b2c3d");
     let unrelated = d.join(".notes.tmp123");
-    for f in [&stale, &live, &unrelated] {
-        std::fs::write(f, "x").unwrap();
+    for f in [&stale, &stale_old_name, &live, &unrelated] {
+        write_aged(f);
     }
     write_bytes_atomic(&d.join("out.ply"), b"new").unwrap();
-    assert!(!stale.exists(), "stale temp file left");
+    assert!(
+        !stale.exists() && !stale_old_name.exists(),
+        "stale temp file left"
+    );
     assert!(
         live.exists() && unrelated.exists(),
         "removed a file that is not stale"
     );
+}
+
+/// A run in another PID namespace (a container sharing the folder) has a PID that names no
+/// process here: its temp file is kept while its writer holds the file's lock, or while it
+/// is younger than a minute (its writer may not have locked it yet), and removed once
+/// neither holds. A write here takes a temp name no file has, whatever its PID.
+#[test]
+fn temp_files_of_runs_in_other_namespaces_are_kept_while_in_use() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dead = dead_pid();
+    let folder = |name: &str| {
+        let d = tmp.path().join(name);
+        std::fs::create_dir(&d).unwrap();
+        d
+    };
+    let (locked_dir, young_dir, idle_dir) = (folder("locked"), folder("young"), folder("idle"));
+    let temp_in = |d: &Path| d.join(format!(".out.ply.semsplat-tmp{dead}-0a1b2c3d"));
+    let writer = write_aged(&temp_in(&locked_dir));
+    writer.lock().unwrap();
+    std::fs::write(temp_in(&young_dir), "x").unwrap();
+    write_aged(&temp_in(&idle_dir));
+    for d in [&locked_dir, &young_dir, &idle_dir] {
+        write_bytes_atomic(&d.join("out.ply"), b"new").unwrap();
+        assert_eq!(std::fs::read(d.join("out.ply")).unwrap(), b"new");
+    }
+    assert!(temp_in(&locked_dir).exists(), "a locked temp file removed");
+    assert!(
+        temp_in(&young_dir).exists(),
+        "a temp file younger than a minute removed"
+    );
+    assert!(
+        !temp_in(&idle_dir).exists(),
+        "an unlocked old temp file left"
+    );
+    assert_eq!(
+        std::fs::read(temp_in(&locked_dir)).unwrap(),
+        b"x",
+        "the other run's temp file written over"
+    );
+    // Two writes of one file at once (as two runs with one PID would): two temp files, each
+    // renamed with its own bytes.
+    let target = idle_dir.join("twice.ply");
+    let first = stage_atomic(&target, |w| Ok(w.write_all(b"first")?)).unwrap();
+    let second = stage_atomic(&target, |w| Ok(w.write_all(b"second")?)).unwrap();
+    first.commit().unwrap();
+    assert_eq!(std::fs::read(&target).unwrap(), b"first");
+    second.commit().unwrap();
+    assert_eq!(std::fs::read(&target).unwrap(), b"second");
 }
 
 #[test]

@@ -373,13 +373,13 @@ fn two_objects(views: u32, seed: u64) -> (Vec<[f32; 3]>, Observations, Vec<u32>)
             let class = [0u32, 1].map(|o| if rng.next() % 10 < 3 { 1 - o } else { o });
             (0..means.len() as u32)
                 .filter_map(|g| {
-                    if rng.next() % 3 == 0 {
+                    if rng.next().is_multiple_of(3) {
                         return None; // not seen by this view
                     }
                     let o = object[g as usize] as usize;
                     let region = if class[0] == class[1] { 0 } else { o as u32 };
                     // Every tenth observation lies on a region edge.
-                    Some((g, class[o], region, rng.next() % 10 == 0))
+                    Some((g, class[o], region, rng.next().is_multiple_of(10)))
                 })
                 .collect()
         })
@@ -434,15 +434,15 @@ fn four_objects(views: u32, seed: u64) -> (Vec<[f32; 3]>, Observations) {
             let mut seen = Vec::new();
             for g in 0..means.len() {
                 let visible = if middle(means[g]) {
-                    rng.next() % 4 == 0
+                    rng.next().is_multiple_of(4)
                 } else {
-                    rng.next() % 3 != 0
+                    !rng.next().is_multiple_of(3)
                 };
                 if visible {
                     let o = object[g] as usize;
                     let stray = rng.next() % 100 < 3;
                     let r = if stray { 10 + g as u32 } else { region[o] };
-                    seen.push((g as u32, class[o], r, rng.next() % 10 == 0));
+                    seen.push((g as u32, class[o], r, rng.next().is_multiple_of(10)));
                 }
             }
             seen
@@ -1520,7 +1520,7 @@ fn objects_in_a_row(objects: usize, step: f32) -> Vec<[f32; 3]> {
 #[test]
 fn an_edge_seen_only_in_relabeled_views_does_not_join_two_objects() {
     let means = objects_in_a_row(2, 1.05);
-    let on_edge_column = |g: usize| (g < 60 && g % 10 == 9) || (g >= 60 && g % 10 == 0);
+    let on_edge_column = |g: usize| (g < 60 && g % 10 == 9) || (g >= 60 && g.is_multiple_of(10));
     let per_view: Vec<Vec<(u32, u32, u32, bool)>> = (0..10u32)
         .map(|v| {
             let relabeled = v < 2; // both objects labeled class 0: one region
@@ -1554,7 +1554,7 @@ fn an_edge_seen_only_in_relabeled_views_does_not_join_two_objects() {
 /// four views (object 0's from view 6 on, object 1's from view 8 on), never together: every
 /// view that saw an edge pair put it in one region, six of them, enough to join outright.
 fn objects_seen_apart_only_alone(alone: u32) -> Observations {
-    let edge_column = |g: usize| (g < 60 && g % 10 == 9) || (g >= 60 && g % 10 == 0);
+    let edge_column = |g: usize| (g < 60 && g % 10 == 9) || (g >= 60 && g.is_multiple_of(10));
     let per_view: Vec<Vec<(u32, u32, u32, bool)>> = (0..10u32)
         .map(|v| {
             let merged = v < 6;

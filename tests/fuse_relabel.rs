@@ -214,7 +214,7 @@ fn random_case(seed: u64, w: usize, h: usize) -> (Vec<u32>, Vec<(u32, u32)>) {
             _ => rng.next_u32() % 4,
         };
         seeds.push((p, class));
-        if rng.next_u32() % 8 == 0 {
+        if rng.next_u32().is_multiple_of(8) {
             seeds.push((p, rng.next_u32() % 4));
         }
     }

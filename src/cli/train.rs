@@ -399,7 +399,7 @@ fn train_loop(args: &TrainArgs, data: &Dataset, trainer: &mut Trainer) -> Result
         bar.inc(1);
         if let Some(k) = args.checkpoint_every {
             let it = trainer.iteration();
-            if it % k == 0 && it < args.iters {
+            if it.is_multiple_of(k) && it < args.iters {
                 let seen = trainer.seen_by_views()?;
                 let path = checkpoint_path(&args.out, it);
                 write_trained(&path, trainer.gaussians()?, &seen, data)?;

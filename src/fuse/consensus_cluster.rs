@@ -1254,7 +1254,7 @@ impl SegmentSet {
     /// Segments `0..n`.
     fn all(n: usize) -> SegmentSet {
         let mut bits = vec![u64::MAX; n.div_ceil(64)];
-        if n % 64 != 0 {
+        if !n.is_multiple_of(64) {
             bits[n / 64] = (1 << (n % 64)) - 1;
         }
         SegmentSet { bits }

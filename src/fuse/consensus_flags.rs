@@ -213,7 +213,7 @@ mod tests {
         let mut view = || {
             let mut list = Vec::new();
             for g in 0..n as u32 {
-                if rng.next_u32() % left_out_one_in > 0 {
+                if !rng.next_u32().is_multiple_of(left_out_one_in) {
                     let (label, region) = value(rng);
                     list.push((g, label, region, false));
                 }

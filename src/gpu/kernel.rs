@@ -134,7 +134,7 @@ impl Gpu {
         let device = self.device();
         // Full subgroups make gl_SubgroupID * gl_SubgroupSize + gl_SubgroupInvocationID a
         // bijection onto the workgroup, which the scans and the stable sort rely on.
-        let full_subgroups = info.workgroup_size[0] % self.caps().max_subgroup_size == 0;
+        let full_subgroups = info.workgroup_size[0].is_multiple_of(self.caps().max_subgroup_size);
         let stage_flags = if full_subgroups {
             vk::PipelineShaderStageCreateFlags::REQUIRE_FULL_SUBGROUPS
         } else {

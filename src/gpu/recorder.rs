@@ -383,7 +383,7 @@ impl Recorder {
     /// buffer itself: no staging buffer, ordered with the other commands.
     pub fn update(&mut self, dst: &Buffer, offset: u64, data: &[u8]) {
         assert!(
-            data.len() % 4 == 0 && data.len() <= 65_536,
+            data.len().is_multiple_of(4) && data.len() <= 65_536,
             "vkCmdUpdateBuffer takes 4..=65536 bytes in words"
         );
         if data.is_empty() {

@@ -112,7 +112,7 @@ pub fn bands(
     let per_band = limits
         .tile_rows
         .map_or(fit / step * step, |r| r as u64 * step);
-    if per_band == 0 || rows.start as u64 % step != 0 {
+    if per_band == 0 || !(rows.start as u64).is_multiple_of(step) {
         bail!(
             "one row of 16-pixel tiles at width {width} needs {tile_row_bytes} bytes per buffer \
              ({bytes_per_pixel} per pixel), over the device's {}-byte binding limit: use a \

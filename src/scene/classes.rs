@@ -37,7 +37,7 @@ pub struct ClassTable {
 pub fn default_color(id: u32) -> [u8; 3] {
     let hue = (id as f64 * 0.618_033_988_749_895).fract();
     // Alternate two value levels so neighbouring ids also differ in brightness.
-    let (s, v) = if id % 2 == 0 {
+    let (s, v) = if id.is_multiple_of(2) {
         (0.75, 0.95)
     } else {
         (0.85, 0.70)

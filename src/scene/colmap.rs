@@ -454,7 +454,7 @@ pub fn read_images_txt_from(r: &mut impl BufRead) -> Result<Vec<ColmapImage>> {
 
 /// True for a 2D-points line: `X Y POINT3D_ID` triples (POINT3D_ID is -1 when unmatched).
 fn is_points_line(toks: &[&str]) -> bool {
-    toks.len() % 3 == 0
+    toks.len().is_multiple_of(3)
         && toks.chunks(3).all(|t| {
             t[0].parse::<f64>().is_ok()
                 && t[1].parse::<f64>().is_ok()

@@ -46,7 +46,7 @@ fn logit_of_u8(a: u8) -> f32 {
 /// Reads an antimatter15 `.splat` file's bytes.
 pub fn parse_splat(bytes: &[u8]) -> Result<Gaussians> {
     ensure!(
-        bytes.len() % SPLAT_RECORD == 0,
+        bytes.len().is_multiple_of(SPLAT_RECORD),
         "a .splat file holds 32-byte records, but its size {} is not a multiple of 32 \
          (truncated, or not a .splat file)",
         bytes.len()

@@ -45,7 +45,7 @@ pub fn class_color(name: &str, index: usize) -> [u8; 3] {
     }
     // Golden-angle hues with alternating lightness stay distinguishable for many classes.
     let hue = (index as f64 * 137.508).rem_euclid(360.0);
-    let (s, v) = if index % 2 == 0 {
+    let (s, v) = if index.is_multiple_of(2) {
         (0.65, 0.9)
     } else {
         (0.8, 0.65)

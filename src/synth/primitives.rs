@@ -153,7 +153,7 @@ impl OrientedBox {
     fn face_normal_local(face: u8) -> DVec3 {
         let axis = (face / 2) as usize;
         let mut n = DVec3::ZERO;
-        n[axis] = if face % 2 == 0 { 1.0 } else { -1.0 };
+        n[axis] = if face.is_multiple_of(2) { 1.0 } else { -1.0 };
         n
     }
 

@@ -232,7 +232,7 @@ impl Trainer {
         self.times.iterations = step;
         self.last_loss = Some(key);
         self.densify_on_schedule(step)?;
-        let log = step % self.cfg.log_every.max(1) == 0 || step == self.cfg.iters;
+        let log = step.is_multiple_of(self.cfg.log_every.max(1)) || step == self.cfg.iters;
         if log {
             let values = self.losses[&key].read_values()?;
             ensure!(
@@ -385,10 +385,10 @@ impl Trainer {
     fn densify_on_schedule(&mut self, step: u32) -> Result<()> {
         if let Some(d) = self.cfg.densify {
             let start = Instant::now();
-            if step < d.until && step > d.from && step % d.every == 0 {
+            if step < d.until && step > d.from && step.is_multiple_of(d.every) {
                 self.densify(step > d.opacity_reset_every)?;
             }
-            if step < d.until && step % d.opacity_reset_every == 0 {
+            if step < d.until && step.is_multiple_of(d.opacity_reset_every) {
                 self.reset_opacity()?;
             }
             self.times.densify_ms += start.elapsed().as_secs_f64() * 1e3;

@@ -4,8 +4,12 @@
 //! The target is resolved first: an existing symbolic link is written through (the temp file
 //! and the rename happen in its target's folder, so the link stays a link), and anything that
 //! is not a regular file (a folder, a device such as /dev/stdout, a FIFO, a socket) is
-//! refused rather than replaced. Temp files are named `.NAME.semsplat-tmpPID`; those left by
-//! a killed run (PID no longer alive) are removed at the next write into that folder.
+//! refused rather than replaced. Temp files are named `.NAME.semsplat-tmpPID-NONCE`, created
+//! only where no file of that name exists, and locked by their writer until renamed or
+//! removed; those left by a killed run (PID no longer alive, unlocked, untouched for a
+//! minute) are removed at the next write into that folder. The lock and the nonce matter
+//! where runs in several PID namespaces (containers) write into one shared folder: there a
+//! live run's PID may name no process here, or the same number as this run's.
 
 use std::collections::HashSet;
 use std::fs;
@@ -26,12 +30,32 @@ const MAX_FILE_NAME_BYTES: usize = 255;
 /// Symbolic links followed before giving up (the kernel's own limit is 40).
 const MAX_LINKS: usize = 40;
 
-fn temp_path(target: &Path) -> PathBuf {
+/// Temp files this young are never removed as stale: their writer may be between creating
+/// and locking them.
+const STALE_AFTER: std::time::Duration = std::time::Duration::from_secs(60);
+
+/// `target`'s temp name with `nonce` (8 hex digits, so every temp name of a target is as
+/// long as [`check_output_file`] checks).
+fn temp_path(target: &Path, nonce: u32) -> PathBuf {
     let name = target
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    target.with_file_name(format!(".{name}{TEMP_MARKER}{}", std::process::id()))
+    let pid = std::process::id();
+    target.with_file_name(format!(".{name}{TEMP_MARKER}{pid}-{nonce:08x}"))
+}
+
+/// A nonce for a temp name: the clock's nanoseconds mixed with a count of this process's
+/// temp files (two names of one process never share one; processes of two namespaces
+/// with one PID draw apart by the clock, and a name taken is drawn again).
+fn temp_nonce() -> u32 {
+    use std::sync::atomic::{AtomicU32, Ordering};
+    static MADE: AtomicU32 = AtomicU32::new(0);
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.subsec_nanos() ^ d.as_secs() as u32);
+    let made = MADE.fetch_add(1, Ordering::Relaxed);
+    nanos.wrapping_mul(0x9e37_79b9) ^ made.wrapping_mul(0x85eb_ca6b).rotate_left(16)
 }
 
 /// The file a write to `target` lands in: `target` itself, or the end of its chain of
@@ -106,6 +130,9 @@ pub struct StagedFile {
     tmp: PathBuf,
     target: PathBuf,
     committed: bool,
+    /// The temp file, open and locked ([`fs::File::lock`]) until it is renamed or removed:
+    /// how a run elsewhere tells it is in use ([`remove_stale_temps`]).
+    _locked: fs::File,
 }
 
 impl StagedFile {
@@ -158,26 +185,45 @@ where
     staged.with_context(|| format!("writing {}", target.display()))
 }
 
-/// Creates the temp file of `target`, registered so a signal handler can remove it.
+/// Creates the temp file of `target` under a name no file has, locked, and registered so a
+/// signal handler can remove it.
 fn create_temp(target: PathBuf) -> Result<(fs::File, StagedFile)> {
-    let tmp = temp_path(&target);
     let mut temps = interrupt::temp_files();
     interrupt::check()?;
-    // Readable too: a scratch file (`stage_scratch`) is read back by its writer.
-    let file = fs::OpenOptions::new()
-        .read(true)
-        .write(true)
-        .create(true)
-        .truncate(true)
-        .open(&tmp)
-        .with_context(|| format!("creating {}", tmp.display()))?;
+    let (tmp, file) = create_new_temp(&target)?;
     temps.push(tmp.clone());
+    // Locked before anything is written; a file system without locks writes unlocked.
+    let _ = file.lock();
     let staged = StagedFile {
         tmp,
         target,
         committed: false,
+        _locked: file.try_clone().context("opening the temp file twice")?,
     };
     Ok((file, staged))
+}
+
+/// A new temp file of `target`, open for reading (a scratch file is read back by its
+/// writer) and writing, its name drawn again while one is taken.
+fn create_new_temp(target: &Path) -> Result<(PathBuf, fs::File)> {
+    const TRIES: usize = 16;
+    let mut tried = 0;
+    loop {
+        tried += 1;
+        let tmp = temp_path(target, temp_nonce());
+        let created = fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create_new(true)
+            .open(&tmp);
+        match created {
+            Err(e) if e.kind() == ErrorKind::AlreadyExists && tried < TRIES => continue,
+            created => {
+                let file = created.with_context(|| format!("creating {}", tmp.display()))?;
+                return Ok((tmp, file));
+            }
+        }
+    }
 }
 
 /// A scratch file beside `target`, named and registered like a temp file (so a signal or a
@@ -235,18 +281,40 @@ fn remove_stale_temps(target: &Path) {
         };
         let is_file = entry.file_type().is_ok_and(|t| t.is_file());
         if is_file && pid != std::process::id() && !process_alive(pid) {
-            let _ = fs::remove_file(entry.path());
+            remove_if_unused(&entry.path());
         }
     }
 }
 
-/// The writer's PID if `name` is one of our temp names (`.NAME.semsplat-tmpPID`).
+/// Removes a temp file no writer holds: not locked (a writer in another PID namespace has
+/// a PID that names no process here) and untouched for [`STALE_AFTER`].
+fn remove_if_unused(path: &Path) {
+    let Ok(file) = fs::File::open(path) else {
+        return;
+    };
+    let idle = (file.metadata().and_then(|m| m.modified()).ok())
+        .and_then(|modified| modified.elapsed().ok())
+        .is_some_and(|age| age >= STALE_AFTER);
+    if idle && file.try_lock().is_ok() {
+        let _ = fs::remove_file(path);
+    }
+}
+
+/// The writer's PID if `name` is one of our temp names (`.NAME.semsplat-tmpPID-NONCE`, or
+/// `.NAME.semsplat-tmpPID` as earlier versions named them).
 fn stale_temp_pid(name: &str) -> Option<u32> {
-    let (head, pid) = name.rsplit_once(TEMP_MARKER)?;
-    if !head.starts_with('.') || head.len() < 2 || pid.is_empty() {
+    let (head, tail) = name.rsplit_once(TEMP_MARKER)?;
+    if !head.starts_with('.') || head.len() < 2 {
         return None;
     }
-    if !pid.bytes().all(|b| b.is_ascii_digit()) {
+    let pid = match tail.split_once('-') {
+        Some((pid, nonce)) if nonce.len() == 8 && nonce.bytes().all(|b| b.is_ascii_hexdigit()) => {
+            pid
+        }
+        Some(_) => return None,
+        None => tail,
+    };
+    if pid.is_empty() || !pid.bytes().all(|b| b.is_ascii_digit()) {
         return None;
     }
     pid.parse().ok()
@@ -271,7 +339,7 @@ pub fn check_output_file(option: &str, target: &Path) -> Result<()> {
     let resolved = resolve_output_file(target).with_context(|| option.to_string())?;
     // Found here rather than at the write, after the run's work: the file is written under
     // a longer temp name first.
-    let temp_name_len = temp_path(&resolved).file_name().map_or(0, |n| n.len());
+    let temp_name_len = temp_path(&resolved, 0).file_name().map_or(0, |n| n.len());
     if temp_name_len > MAX_FILE_NAME_BYTES {
         bail!(
             "{option} {}: the file's name is too long to be written safely (its temp name would \
@@ -341,6 +409,13 @@ mod tests {
     #[test]
     fn only_our_temp_names_are_stale_candidates() {
         assert_eq!(stale_temp_pid(".out.ply.semsplat-tmp123"), Some(123));
+        assert_eq!(
+            stale_temp_pid(".out.ply.semsplat-tmp123-0a1b2c3d"),
+            Some(123)
+        );
+        assert_eq!(stale_temp_pid(".out.ply.semsplat-tmp123-0a1b2c3"), None);
+        assert_eq!(stale_temp_pid(".out.ply.semsplat-tmp123-0a1b2c3g"), None);
+        assert_eq!(stale_temp_pid(".out.ply.semsplat-tmp-0a1b2c3d"), None);
         assert_eq!(stale_temp_pid("out.ply.semsplat-tmp123"), None);
         assert_eq!(stale_temp_pid(".out.ply.semsplat-tmp"), None);
         assert_eq!(stale_temp_pid(".out.ply.semsplat-tmp12x"), None);

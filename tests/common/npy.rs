@@ -4,7 +4,7 @@
 /// multiple of 64 bytes and ended by '\n', then `raw` (the little-endian values).
 pub fn npy_v1(dict: &str, raw: &[u8]) -> Vec<u8> {
     let mut header = dict.to_string();
-    while (10 + header.len() + 1) % 64 != 0 {
+    while !(10 + header.len() + 1).is_multiple_of(64) {
         header.push(' ');
     }
     header.push('\n');
