@@ -2127,8 +2127,8 @@ fn a_region_mostly_undecided_keeps_its_label() {
     }
 }
 
-/// Gaussians no view observed take their decided neighbours' majority, outward in rounds; a
-/// tie leaves one undecided.
+/// Gaussians no view observed take their decided neighbours' majority, outward in rounds,
+/// with no confidence (no view counted); a tie leaves one undecided.
 #[test]
 fn unobserved_gaussians_take_their_neighbours_class() {
     // A line: 0 1 2 observed as class 1; 3 4 5 unobserved; 6 observed as class 0, far away.
@@ -2166,7 +2166,15 @@ fn unobserved_gaussians_take_their_neighbours_class() {
     );
     assert_eq!(c.assignment.class[5], Some(1));
     assert_eq!(c.from_neighbours, 3);
-    assert!(c.assignment.confidence[4] > 0.5 && c.assignment.confidence[4] < 1.0);
+    // No view saw them: no posterior, whatever their neighbours gave them.
+    for g in 3..6 {
+        assert_eq!(c.assignment.confidence[g], 0.0);
+        assert_eq!(c.entropy[g], 2f32.ln());
+    }
+    assert!(
+        c.assignment.confidence[2] > 0.5,
+        "seen: its views' posterior"
+    );
     // Two neighbours of different classes: a tie, undecided.
     let per_view: Vec<Vec<(u32, u32, u32, bool)>> = (0..3)
         .map(|_| vec![(0, 1, 0, false), (2, 0, 1, false)])

@@ -184,10 +184,11 @@ pub struct OutputArgs {
     /// fewer Gaussians in the object.
     #[arg(long, allow_hyphen_values = true, value_parser = args::signed_unit_interval)]
     pub gamma: Option<f64>,
-    /// Output PLY: the input Gaussians with `class` (label id, -1 for Gaussians no view saw)
-    /// and `class_conf` (the winning class's share of the evidence; `fuse`'s segment
-    /// consensus: its posterior probability with every view counted once, beside
-    /// `class_entropy` and `segment`); semantics the input scene held (a trained scene's
+    /// Output PLY: the input Gaussians with `class` (label id, -1 for Gaussians no view saw;
+    /// segment consensus gives those their neighbours' class where they agree) and
+    /// `class_conf` (the winning class's share of the evidence; `fuse`'s segment consensus:
+    /// its posterior probability with every view counted once, 0 where no view saw the
+    /// Gaussian, beside `class_entropy` and `segment`); semantics the input scene held (a trained scene's
     /// logits) are replaced. The class table goes beside it, its extension replaced
     /// (fused.ply: fused.classes.json). `fuse --shard` only: the partial evidence (.npy, see
     /// --shard) instead.

@@ -533,7 +533,9 @@ pub fn decide_timed(
     took.fill_s = laps.lap();
     let smoothed = smooth_small_segments(&mut decided.class, &mut decided.evidence, &alone);
     took.smooth_s = laps.lap();
-    let (confidence, entropy) = posteriors(&decided.evidence, &decided.class, p.prior);
+    let (mut confidence, mut entropy) = posteriors(&decided.evidence, &decided.class, p.prior);
+    let unseen: Vec<bool> = (0..obs.n).map(|g| obs.row(g).is_empty()).collect();
+    unseen_without_confidence(&unseen, &mut confidence, Some(&mut entropy), classes);
     took.posteriors_s = laps.lap();
     let consensus = Consensus {
         assignment: Assignment {
@@ -1020,6 +1022,26 @@ pub(crate) fn posteriors(
             .collect::<Vec<_>>()
     });
     blocks.into_iter().flatten().unzip()
+}
+
+/// The Gaussians no view saw (`unseen`) have no posterior, whatever class their neighbours gave them
+/// ([`fill_unobserved`], whose counts are their evidence, not views): confidence 0 and the
+/// entropy of no evidence (ln `classes`), as an undecided Gaussian's. Their neighbours'
+/// counts as a posterior read as certainty where few labeled pixels reached a scene (one
+/// per view: every Gaussian at confidence 1).
+pub(crate) fn unseen_without_confidence(
+    unseen: &[bool],
+    confidence: &mut [f32],
+    mut entropy: Option<&mut [f32]>,
+    classes: usize,
+) {
+    let none = (classes.max(1) as f32).ln();
+    for g in (0..unseen.len()).filter(|&g| unseen[g]) {
+        confidence[g] = 0.0;
+        if let Some(entropy) = entropy.as_deref_mut() {
+            entropy[g] = none;
+        }
+    }
 }
 
 /// What a row of counts gives every class's posterior under a Dirichlet(prior + counts):

@@ -27,7 +27,7 @@ use super::accumulate::{FuseConfig, FuseStats, LabelSource, NO_LABEL};
 use super::assign::{assign_semantic_near, Assignment};
 use super::consensus::{consensus_run, ConsensusInput, ConsensusLift, Kept, LiftEvidence};
 use super::consensus_confusion::ConfusionRates;
-use super::consensus_decide::{posteriors, ConsensusParams};
+use super::consensus_decide::{posteriors, unseen_without_confidence, ConsensusParams};
 use super::consensus_footprints::{
     flashsplat_pass, footprints_for, relabeled_footprints, ViewFootprints,
 };
@@ -386,6 +386,8 @@ pub fn fuse_relabeled_by(
     // The relabeling reads the centers and the classes, not the observations (13 bytes
     // each): freed before the views' second visit, so its FlashSplat pass reuses their
     // memory instead of adding to the peak.
+    let seen_by_none = (0..run.observations.n).map(|g| run.observations.row(g).is_empty());
+    let unseen = run.order.to_scene(&seen_by_none.collect::<Vec<bool>>());
     drop(std::mem::take(&mut run.observations));
     let relabeled = RelabeledViews {
         inner: input.labels,
@@ -424,7 +426,8 @@ pub fn fuse_relabeled_by(
             }
         }
     }
-    let (confidence, _) = posteriors(&consensus.evidence, &class, params.prior);
+    let (mut confidence, _) = posteriors(&consensus.evidence, &class, params.prior);
+    unseen_without_confidence(&unseen, &mut confidence, None, input.classes);
     let mut stats = both_visits(run.stats, fs_stats, relabel_stats);
     stats.wall_s = start.elapsed().as_secs_f64();
     stats.views_per_s = stats.views as f64 / stats.wall_s.max(1e-9);
