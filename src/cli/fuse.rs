@@ -766,9 +766,12 @@ fn check_assigned(args: &OutputArgs, g: &Gaussians) -> Result<()> {
         return Ok(());
     }
     bail!(
-        "no Gaussian took a class (nothing written): the evidence holds none (with views: no \
-         view saw a Gaussian's center on a labeled pixel). {FRAME_HINT}, and that the label \
-         maps hold classes (`semsplat inspect LABELS --cameras CAMERAS`)"
+        "no Gaussian took a class (nothing written): the evidence holds none, or ties every \
+         Gaussian's classes (with views: no view saw a Gaussian on a labeled pixel, or, for \
+         vote --occlusion and segment consensus, the visibility test took none for seen \
+         there: images of a few pixels, or depths far from the render's; see --depth-tol). \
+         {FRAME_HINT}, and that the label maps hold classes (`semsplat inspect LABELS \
+         --cameras CAMERAS`)"
     )
 }
 
@@ -914,9 +917,11 @@ fn write_report(args: &OutputArgs, report: &Report) -> Result<()> {
             report.gaussians
         ),
         _ => eprintln!(
-            "fused {} Gaussians into {} classes ({without_class} Gaussians left without a \
+            "fused {} Gaussians into {} class{} ({without_class} Gaussians left without a \
              class) in {seconds:.2} s -> {out}",
-            report.gaussians, report.classes
+            report.gaussians,
+            report.classes,
+            if report.classes == 1 { "" } else { "es" }
         ),
     }
     // A flag is a finding the user acts on (an object the views disagree on, often one a

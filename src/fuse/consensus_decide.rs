@@ -1056,12 +1056,14 @@ impl RowPosterior {
     fn of(counts: &[f64], prior: f64) -> RowPosterior {
         let counted: f64 = counts.iter().sum();
         let total = counted + prior * counts.len() as f64;
-        let entropy = -counts
-            .iter()
-            .map(|c| (c + prior) / total)
-            .filter(|&q| q > 0.0)
-            .map(|q| q * q.ln())
-            .sum::<f64>();
+        // 0 - sum, not -sum: a certain row (one class) has entropy +0, not -0 in the PLY.
+        let entropy = 0.0
+            - counts
+                .iter()
+                .map(|c| (c + prior) / total)
+                .filter(|&q| q > 0.0)
+                .map(|q| q * q.ln())
+                .sum::<f64>();
         RowPosterior {
             total,
             entropy,
