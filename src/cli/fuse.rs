@@ -33,7 +33,7 @@ use semsplat::scene::ply::{classes_sidecar_path, read_classes_sidecar, write_ply
 use semsplat::scene::scene_file::{cameras_for_scene, read_scene, resolve_scene_path};
 use semsplat::scene::{Camera, Gaussians};
 use semsplat::util::npy::write_npy_rows;
-use semsplat::util::{interrupt, write_bytes_atomic};
+use semsplat::util::{interrupt, write_bytes_atomic, OutputBatch};
 
 /// The base methods of `--method`; their variant flags (`--occlusion`, `--weighted`,
 /// `--per-view`) pick the [`Method`] from `semsplat::fuse::SPELLINGS`.
@@ -406,6 +406,9 @@ pub(super) fn write_fused(
         )?),
         None => None,
     };
+    // Every file from here lands with the others or none does (a failed PLY left the
+    // membership matrix written before it beside the last run's PLY).
+    let batch = OutputBatch::open();
     if let Some(path) = &args.save_contrib {
         kept(&mut rows)?.save_npy(path)?;
         write_class_table(&contrib_sidecar(path), &table)?;
@@ -448,7 +451,7 @@ pub(super) fn write_fused(
         per_class: per_class_counts(&selected, &table),
         segments,
     };
-    write_report(args, &report)
+    write_report(args, &report, batch)
 }
 
 /// With --extract/--remove on an already fused scene (a `class` property) and no evidence
@@ -503,6 +506,7 @@ fn select_from_fused(
         .map(|&c| (c == id) == args.output.extract.is_some())
         .collect();
     let selected = g.select(&keep);
+    let batch = OutputBatch::open();
     write_outputs(&args.output, &selected, table)?;
     let report = Report {
         method: "class property of a fused scene",
@@ -515,7 +519,7 @@ fn select_from_fused(
         per_class: per_class_counts(&selected, table),
         segments: None,
     };
-    write_report(&args.output, &report)
+    write_report(&args.output, &report, batch)
 }
 
 /// Every file and folder the run will write (`args`' and the `extra` files) can be
@@ -894,11 +898,12 @@ fn write_outputs(args: &OutputArgs, selected: &Gaussians, table: &ClassTable) ->
     Ok(())
 }
 
-/// The JSON report if asked for, and the summary line.
-fn write_report(args: &OutputArgs, report: &Report) -> Result<()> {
+/// The JSON report if asked for, the run's outputs landed (`batch`), and the summary line.
+fn write_report(args: &OutputArgs, report: &Report, batch: OutputBatch) -> Result<()> {
     if let Some(path) = &args.report {
         write_bytes_atomic(path, serde_json::to_string_pretty(report)?.as_bytes())?;
     }
+    batch.commit()?;
     // Class -1: Gaussians no view decided (unobserved, or tied).
     let without_class = report
         .per_class

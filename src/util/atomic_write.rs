@@ -131,13 +131,69 @@ pub struct StagedFile {
     target: PathBuf,
     committed: bool,
     /// The temp file, open and locked ([`fs::File::lock`]) until it is renamed or removed:
-    /// how a run elsewhere tells it is in use ([`remove_stale_temps`]).
-    _locked: fs::File,
+    /// how a run elsewhere tells it is in use ([`remove_stale_temps`]). Closed once the
+    /// file waits in an [`OutputBatch`] (a batch of a thousand rendered views would hold a
+    /// thousand descriptors); its age then keeps it for a minute.
+    locked: Option<fs::File>,
+}
+
+thread_local! {
+    /// The staged files of the thread's open [`OutputBatch`], in the order committed.
+    static BATCH: std::cell::RefCell<Option<Vec<StagedFile>>> =
+        const { std::cell::RefCell::new(None) };
+}
+
+/// One run's outputs, landed together: while a batch is open, every output committed
+/// ([`StagedFile::commit`], [`write_atomic`]) waits, written but not renamed; the batch's
+/// [`OutputBatch::commit`] renames them all in the order they were committed, and a batch
+/// dropped uncommitted (an error, Ctrl-C) removes them. Without it a fusion that failed
+/// writing its PLY left the membership matrix it had written just before, beside the
+/// previous run's PLY. One batch a thread, holding that thread's outputs only.
+#[must_use = "a batch's outputs are removed unless it is committed"]
+pub struct OutputBatch(());
+
+impl OutputBatch {
+    pub fn open() -> OutputBatch {
+        BATCH.with_borrow_mut(|batch| {
+            assert!(batch.is_none(), "one output batch a thread");
+            *batch = Some(Vec::new());
+        });
+        OutputBatch(())
+    }
+
+    /// Renames every output the batch holds onto its target, in order.
+    pub fn commit(self) -> Result<()> {
+        let staged = take_batch();
+        std::mem::forget(self);
+        staged
+            .into_iter()
+            .try_for_each(StagedFile::rename_into_place)
+    }
+}
+
+impl Drop for OutputBatch {
+    fn drop(&mut self) {
+        drop(take_batch()); // each staged file removes its temp file
+    }
+}
+
+fn take_batch() -> Vec<StagedFile> {
+    BATCH.with_borrow_mut(Option::take).unwrap_or_default()
 }
 
 impl StagedFile {
-    /// Renames the temp file onto the target, unless a signal arrived (then it is removed).
+    /// Renames the temp file onto the target, unless a signal arrived (then it is removed);
+    /// while an [`OutputBatch`] is open, when the batch commits.
     pub fn commit(mut self) -> Result<()> {
+        if BATCH.with_borrow(Option::is_none) {
+            return self.rename_into_place();
+        }
+        self.locked = None;
+        BATCH.with_borrow_mut(|batch| batch.as_mut().expect("a batch is open").push(self));
+        Ok(())
+    }
+
+    fn rename_into_place(mut self) -> Result<()> {
         {
             let mut temps = interrupt::temp_files();
             if !interrupt::is_interrupted() {
@@ -198,7 +254,7 @@ fn create_temp(target: PathBuf) -> Result<(fs::File, StagedFile)> {
         tmp,
         target,
         committed: false,
-        _locked: file.try_clone().context("opening the temp file twice")?,
+        locked: Some(file.try_clone().context("opening the temp file twice")?),
     };
     Ok((file, staged))
 }
@@ -404,7 +460,56 @@ fn check_writable_folder(dir: &Path) -> Result<()> {
 
 #[cfg(test)]
 mod tests {
-    use super::stale_temp_pid;
+    use super::{stale_temp_pid, write_bytes_atomic, OutputBatch};
+
+    /// A batch's outputs land together when it commits, in order (a file written twice:
+    /// the later bytes), and not at all when it is dropped (the files there before stay,
+    /// no temp file is left); another thread's writes meanwhile land at once.
+    #[test]
+    fn a_batch_lands_its_outputs_together_or_not_at_all() {
+        let tmp = tempfile::tempdir().unwrap();
+        let (a, b) = (tmp.path().join("a.ply"), tmp.path().join("a.npy"));
+        std::fs::write(&a, "before").unwrap();
+        let listing = || {
+            let mut names: Vec<String> = (std::fs::read_dir(tmp.path()).unwrap())
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .collect();
+            names.sort();
+            names
+        };
+        let dropped = OutputBatch::open();
+        write_bytes_atomic(&b, b"membership").unwrap();
+        write_bytes_atomic(&a, b"after").unwrap();
+        assert_eq!(
+            std::fs::read(&a).unwrap(),
+            b"before",
+            "landed before the batch"
+        );
+        let other = tmp.path().join("other.json");
+        std::thread::scope(|s| {
+            s.spawn(|| write_bytes_atomic(&other, b"{}").unwrap());
+        });
+        assert!(
+            other.exists(),
+            "another thread's write waited for this thread's batch"
+        );
+        drop(dropped);
+        assert_eq!(listing(), ["a.ply", "other.json"]);
+        assert_eq!(std::fs::read(&a).unwrap(), b"before");
+        let batch = OutputBatch::open();
+        write_bytes_atomic(&b, b"membership").unwrap();
+        write_bytes_atomic(&a, b"first").unwrap();
+        write_bytes_atomic(&a, b"second").unwrap();
+        batch.commit().unwrap();
+        assert_eq!(listing(), ["a.npy", "a.ply", "other.json"]);
+        assert_eq!(std::fs::read(&a).unwrap(), b"second");
+        write_bytes_atomic(&a, b"alone").unwrap();
+        assert_eq!(
+            std::fs::read(&a).unwrap(),
+            b"alone",
+            "no batch open: at once"
+        );
+    }
 
     #[test]
     fn only_our_temp_names_are_stale_candidates() {

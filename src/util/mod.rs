@@ -12,7 +12,7 @@ pub mod scaling;
 
 pub use atomic_write::{
     check_output_file, check_output_folder, folder_of, resolve_output_file, stage_atomic,
-    write_atomic, write_bytes_atomic, StagedFile,
+    write_atomic, write_bytes_atomic, OutputBatch, StagedFile,
 };
 pub use parallel::{
     collect_parts, cores, map_in_blocks, merge_sorted_into, merge_sorted_runs, parallel_map,
