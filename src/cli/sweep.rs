@@ -369,8 +369,20 @@ fn print_summary(report: &SweepReport) {
         Some(base) => format!("its mIoU with {base} alone"),
         None => "its clean mIoU".to_string(),
     };
+    let clean = report.levels.iter().find(|l| l.level == 0.0);
+    let clean_miou = |m: &str| {
+        let of_method = clean.and_then(|l| l.methods.iter().find(|s| s.method == m));
+        of_method.map_or(0.0, |s| s.miou.mean)
+    };
     for (m, b) in breaks {
         match b {
+            // Half of nothing is nothing: a method that classified nothing there (fuse
+            // refuses such a run) has no break to find.
+            _ if clean_miou(m) == 0.0 => {
+                println!(
+                    "{m}: {reference} is 0 (it classified no Gaussian there): no break to find"
+                )
+            }
             Some(l) => println!("{m}: below half of {reference} at {key}={l}"),
             None => println!("{m}: never below half of {reference} in this range"),
         }
@@ -457,13 +469,14 @@ fn summarize(runs: &[RunResult]) -> Vec<LevelSummary> {
         .collect()
 }
 
-/// The best mean mIoU at level 0 among the methods (not the oracle); None without level 0.
+/// The best mean mIoU at level 0 among the methods (not the oracle); None without level 0,
+/// or where every method scored 0 there.
 fn clean_reference(summary: &[LevelSummary]) -> Option<CleanReference> {
     let clean = summary.iter().find(|l| l.level == 0.0)?;
     clean
         .methods
         .iter()
-        .filter(|m| m.method != ORACLE_NAME)
+        .filter(|m| m.method != ORACLE_NAME && m.miou.mean > 0.0)
         .max_by(|a, b| a.miou.mean.total_cmp(&b.miou.mean))
         .map(|m| CleanReference {
             method: m.method.clone(),

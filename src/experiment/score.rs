@@ -164,6 +164,13 @@ pub fn score_methods(
             }
         };
         let seconds = start.elapsed().as_secs_f64();
+        if lifted.classes.iter().all(|&c| c < 0) {
+            // `fuse` refuses such a run; here it is a score, and says so.
+            eprintln!(
+                "note: {} classified no Gaussian (every score of it here is 0)",
+                lifter.name()
+            );
+        }
         let Lifted {
             classes,
             confidence,
