@@ -635,12 +635,27 @@ fn cluster_by_hand(
     let mut label = premerged_by_hand(obs, &pairs, p);
     let outright = (0..n).filter(|&g| label[g] != g).count();
     let mut refused = [0; 2];
+    let scene = SceneByHand {
+        obs,
+        pairs: &pairs,
+        normals,
+        p,
+    };
     if p.clustering == Clustering::Rounds {
-        join_in_order_by_hand(obs, &mut label, &pairs, normals, p, 2, &mut refused);
-        attach_by_hand(obs, &mut label, &pairs, normals, p);
+        join_in_order_by_hand(&scene, &mut label, 2, &mut refused);
+        attach_by_hand(&scene, &mut label);
     }
-    join_in_order_by_hand(obs, &mut label, &pairs, normals, p, 1, &mut refused);
+    join_in_order_by_hand(&scene, &mut label, 1, &mut refused);
     (label, refused, outright)
+}
+
+/// What the transcription's joins read besides the labels: the observations, the neighbour
+/// pairs (lower Gaussian first), the normals and the parameters.
+struct SceneByHand<'a> {
+    obs: &'a Observations,
+    pairs: &'a BTreeSet<(usize, usize)>,
+    normals: &'a [[f32; 3]],
+    p: &'a ConsensusParams,
 }
 
 /// A candidate's order in the transcription, greatest first: a pair along a surface, net
@@ -695,17 +710,15 @@ fn allowed_by_hand(e: &[u32; 5], p: &ConsensusParams) -> bool {
 /// The ordered joins of [`cluster_by_hand`] among segments of at least `min_size`
 /// Gaussians.
 fn join_in_order_by_hand(
-    obs: &Observations,
+    scene: &SceneByHand,
     label: &mut [usize],
-    pairs: &BTreeSet<(usize, usize)>,
-    normals: &[[f32; 3]],
-    p: &ConsensusParams,
     min_size: usize,
     refused: &mut [usize; 2],
 ) {
+    let (obs, p) = (scene.obs, scene.p);
     let mut dropped: HashMap<(usize, usize), ([u32; 5], u32)> = HashMap::new();
     loop {
-        let sums = evidence_by_hand(obs, label, pairs, normals, p);
+        let sums = evidence_by_hand(scene, label);
         let size = |s| label.iter().filter(|&&l| l == s).count();
         let best = sums
             .iter()
@@ -727,13 +740,8 @@ fn join_in_order_by_hand(
 }
 
 /// The levels and rounds of attachment of [`cluster_by_hand`].
-fn attach_by_hand(
-    obs: &Observations,
-    label: &mut [usize],
-    pairs: &BTreeSet<(usize, usize)>,
-    normals: &[[f32; 3]],
-    p: &ConsensusParams,
-) {
+fn attach_by_hand(scene: &SceneByHand, label: &mut [usize]) {
+    let (obs, p) = (scene.obs, scene.p);
     let size = |label: &[usize], s| label.iter().filter(|&&l| l == s).count();
     // Per single Gaussian (its label is itself), its candidates: (evidence, class).
     let candidates = |label: &[usize]| -> BTreeMap<usize, BTreeMap<usize, ([u32; 5], u32)>> {
@@ -741,7 +749,7 @@ fn attach_by_hand(
             .filter(|&g| size(label, label[g]) == 1)
             .map(|g| (g, BTreeMap::new()))
             .collect();
-        for (key, e) in evidence_by_hand(obs, label, pairs, normals, p) {
+        for (key, e) in evidence_by_hand(scene, label) {
             let class = larger_size_class(label, key);
             for (single, other) in [key, (key.1, key.0)] {
                 if let Some(of_g) = of_single.get_mut(&single) {
@@ -824,13 +832,13 @@ fn attach_by_hand(
 
 /// [together, apart, on edge, pairs, pairs along a surface] per pair of segments (labels),
 /// summed from scratch over the neighbour pairs between them.
-fn evidence_by_hand(
-    obs: &Observations,
-    label: &[usize],
-    pairs: &BTreeSet<(usize, usize)>,
-    normals: &[[f32; 3]],
-    p: &ConsensusParams,
-) -> BTreeMap<(usize, usize), [u32; 5]> {
+fn evidence_by_hand(scene: &SceneByHand, label: &[usize]) -> BTreeMap<(usize, usize), [u32; 5]> {
+    let SceneByHand {
+        obs,
+        pairs,
+        normals,
+        p,
+    } = *scene;
     let mut sums: BTreeMap<(usize, usize), [u32; 5]> = BTreeMap::new();
     for &(g, h) in pairs {
         let (lg, lh) = (label[g], label[h]);
