@@ -1106,10 +1106,7 @@ fn decisions_match_a_plain_transcription() {
             Some(object[g] as usize),
             "Gaussian {g}"
         );
-        assert_eq!(
-            &c.evidence[g],
-            c.segments[segment[g] as usize].split.as_slice()
-        );
+        assert_eq!(c.evidence.dense(g), c.segments[segment[g] as usize].split);
     }
     assert_eq!(c.evidence.rows(), 3);
 }
@@ -1910,7 +1907,7 @@ fn small_segments_take_their_neighbours_segments_class() {
     // Eight segments of one: every neighbour of 8 in segment 0 (8 Gaussians, class 0).
     let c = decide_with(8, 3);
     assert_eq!(c.assignment.class[8], Some(0), "its 8 neighbours' segment");
-    assert_eq!(c.evidence[8], [8.0, 0.0]);
+    assert_eq!(c.evidence.dense(8), [8.0, 0.0]);
     assert_eq!(c.from_neighbour_segments, 1);
     let c = decide_with(8, 9);
     assert_eq!(
@@ -1927,10 +1924,10 @@ fn small_segments_take_their_neighbours_segments_class() {
         Some(0),
         "three views do not contradict"
     );
-    assert_eq!(c.evidence[8], [8.0, 0.0]);
+    assert_eq!(c.evidence.dense(8), [8.0, 0.0]);
     let c = decide_with_few(8, 9, 1, 6);
     assert_eq!(c.assignment.class[8], Some(1), "six views contradict");
-    assert_eq!(c.evidence[8], [0.0, 6.0]);
+    assert_eq!(c.evidence.dense(8), [0.0, 6.0]);
     let c = decide_with_few(8, 9, 9, 3);
     assert_eq!(
         c.assignment.class[8],
@@ -1942,11 +1939,11 @@ fn small_segments_take_their_neighbours_segments_class() {
     assert_eq!(c.segments[0].class, Some(0));
     assert_eq!(c.segments[1].class, Some(1));
     assert_eq!(c.assignment.class[8], Some(1));
-    assert_eq!(c.evidence[8], [0.0, 3.0], "own views");
+    assert_eq!(c.evidence.dense(8), [0.0, 3.0], "own views");
     // Segments of 5 and 3: only the 5 count (3 is under min_segment), all class 0.
     let c = decide_with(5, 3);
     assert_eq!(c.assignment.class[8], Some(0));
-    assert_eq!(c.evidence[8], [5.0, 0.0]);
+    assert_eq!(c.evidence.dense(8), [5.0, 0.0]);
 }
 
 /// After the rules above, the observed Gaussians of small segments are decided again from
@@ -1994,18 +1991,22 @@ fn small_segments_are_smoothed_by_their_neighbours_classes() {
     };
     let c = decide_with(1, 0);
     assert_eq!(c.assignment.class[8], Some(1), "its own view, not smoothed");
-    assert_eq!(c.evidence[8], [0.0, 1.0]);
+    assert_eq!(c.evidence.dense(8), [0.0, 1.0]);
     assert_eq!(c.smoothed, 0);
     // One round: 8 counts its four neighbours' class 0; 9 still counts 8 as class 1, as it
     // stood at the round's start.
     let c = decide_with(1, 1);
     assert_eq!(c.assignment.class[8], Some(0));
-    assert_eq!(c.evidence[8], [4.0, 1.0]);
-    assert_eq!(c.evidence[9], [6.0, 1.0], "own 3 + neighbours 7, 8, 10, 11");
+    assert_eq!(c.evidence.dense(8), [4.0, 1.0]);
+    assert_eq!(
+        c.evidence.dense(9),
+        [6.0, 1.0],
+        "own 3 + neighbours 7, 8, 10, 11"
+    );
     assert_eq!(c.smoothed, 1);
     let c = decide_with(1, 3);
     assert_eq!(
-        c.evidence[9],
+        c.evidence.dense(9),
         [7.0, 0.0],
         "8 is class 0 from the second round"
     );
@@ -2014,7 +2015,7 @@ fn small_segments_are_smoothed_by_their_neighbours_classes() {
     // Seen as class 1 by four views: 4 : 4, a tie, which keeps its class and evidence.
     let c = decide_with(4, 3);
     assert_eq!(c.assignment.class[8], Some(1));
-    assert_eq!(c.evidence[8], [0.0, 4.0]);
+    assert_eq!(c.evidence.dense(8), [0.0, 4.0]);
     assert_eq!(c.smoothed, 0);
 }
 
@@ -2068,7 +2069,7 @@ fn small_segments_read_their_views_regions() {
         Some(0),
         "flickered views: their region's class"
     );
-    assert_eq!(c.evidence[16], [4.0, 0.0, 0.0]);
+    assert_eq!(c.evidence.dense(16), [4.0, 0.0, 0.0]);
     let c = decide_with(true, false);
     assert_eq!(c.assignment.class[16], Some(1), "by its labels");
     let c = decide_with(false, true);
@@ -2079,7 +2080,7 @@ fn small_segments_read_their_views_regions() {
         Some(2),
         "an edge drawn off: its label"
     );
-    assert_eq!(c.evidence[16], [0.0, 0.0, 4.0]);
+    assert_eq!(c.evidence.dense(16), [0.0, 0.0, 4.0]);
 }
 
 /// A region speaks for a class only where that class's clear segments make up at least

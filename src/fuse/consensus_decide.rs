@@ -17,7 +17,7 @@ use super::consensus_flags::{name_views_of_flagged, unflag_slivers};
 use super::consensus_region_votes::{RegionVoteRule, RegionVotes};
 use super::consensus_relabel::RelabelRule;
 use super::consensus_segments::{Groups, Observations, GAUSSIANS_PER_RUN};
-use super::scores::SharedCounts;
+use super::shared_counts::{count_of, SharedCounts, SparseCounts, SparseRowList};
 use super::FuseConfig;
 use crate::contract::NO_NEIGHBOUR;
 use crate::util::{parallel_map, runs_of_weight, Laps};
@@ -578,14 +578,9 @@ fn each_gaussian(alone: &Alone, kept: &[Option<usize>], segments: usize) -> Deci
         from_neighbour_segments: 0,
     };
     let alone_ids: Vec<usize> = (0..n).filter(|&g| kept[g].is_none()).collect();
-    let (classes, width) = (alone.classes, alone.classes.max(1));
     let blocks = decide_alone(alone, &alone_ids);
     let mut decided_alone = blocks.iter().flat_map(|(outcomes, counts)| {
-        let rows = counts.chunks_exact(width).map(|row| &row[..classes]);
-        outcomes
-            .iter()
-            .zip(rows)
-            .map(|(&(c, by), row)| (c, row, by))
+        (outcomes.iter().zip(counts.iter())).map(|(&(c, by), row)| (c, row, by))
     });
     let mut split_row: Vec<Option<u32>> = vec![None; segments];
     for (g, &segment_class) in kept.iter().enumerate() {
@@ -602,7 +597,7 @@ fn each_gaussian(alone: &Alone, kept: &[Option<usize>], segments: usize) -> Deci
             None => {
                 let (c, counts, by_neighbours) = decided_alone.next().expect("decided alone");
                 decided.class[g] = c;
-                decided.evidence.set(g, counts);
+                decided.evidence.set_sparse(g, counts);
                 // Unobserved ones are counted where their neighbours decide them below.
                 decided.from_neighbour_segments +=
                     usize::from(by_neighbours && !obs.row(g).is_empty());
@@ -613,24 +608,26 @@ fn each_gaussian(alone: &Alone, kept: &[Option<usize>], segments: usize) -> Deci
 }
 
 /// A block of [`decide_alone`]: each Gaussian's (class, whether by its neighbours'
-/// segments), and their counts in one table (a row of `classes.max(1)` each).
-type AloneBlock = (Vec<(Option<usize>, bool)>, Vec<f64>);
+/// segments), and their counts by their nonzero classes (a Gaussian's views give few of a
+/// scene's classes; a row of every class each held 1.6 GB for 5,191 classes).
+type AloneBlock = (Vec<(Option<usize>, bool)>, SparseRowList);
 
 /// [`Alone::decide`] of each of `ids`, on every core, in blocks in their order.
 fn decide_alone(alone: &Alone, ids: &[usize]) -> Vec<AloneBlock> {
     const BLOCK: usize = 1024;
-    let width = alone.classes.max(1);
     let blocks: Vec<&[usize]> = ids.chunks(BLOCK).collect();
     parallel_map(blocks.len(), |b| {
-        let mut counts = vec![0.0; blocks[b].len() * width];
-        let mut spare = vec![0.0; 2 * width];
-        let rows = counts
-            .chunks_exact_mut(width)
-            .map(|row| &mut row[..alone.classes]);
-        let outcomes = (blocks[b].iter().zip(rows))
-            .map(|(&g, row)| alone.decide(g, row, &mut spare))
+        let mut counts = vec![0.0; alone.classes];
+        let mut spare = vec![0.0; 2 * alone.classes];
+        let mut rows = SparseRowList::default();
+        let outcomes = (blocks[b].iter())
+            .map(|&g| {
+                let outcome = alone.decide(g, &mut counts, &mut spare);
+                rows.push_dense(&counts);
+                outcome
+            })
             .collect();
-        (outcomes, counts)
+        (outcomes, rows)
     })
 }
 
@@ -819,19 +816,24 @@ fn fill_unobserved(
     let mut decided = 0;
     while !frontier.is_empty() {
         // Decided from the classes as they stood at the round's start.
-        let found: Vec<(usize, usize, Vec<f64>)> = frontier
+        // Their counts by nonzero class: a round may decide most of a scene.
+        let mut counts = vec![0.0; evidence.classes()];
+        let mut found_counts = SparseRowList::default();
+        let found: Vec<(usize, usize)> = frontier
             .iter()
             .filter_map(|&g| {
-                let mut counts = vec![0.0; evidence.classes()];
+                counts.fill(0.0);
                 add_neighbour_classes(class, knn, k, g, &mut counts);
-                decisive_argmax(&counts, &counts).map(|c| (g, c, counts))
+                let c = decisive_argmax(&counts, &counts)?;
+                found_counts.push_dense(&counts);
+                Some((g, c))
             })
             .collect();
         decided += found.len();
         frontier.clear();
-        for (g, c, counts) in found {
+        for ((g, c), counts) in found.into_iter().zip(found_counts.iter()) {
             (class[g], pending[g]) = (Some(c), false);
-            evidence.set(g, &counts);
+            evidence.set_sparse(g, counts);
             frontier.extend(listed_by.row(g).filter(|&f| pending[f]));
         }
         frontier.sort_unstable();
@@ -860,33 +862,32 @@ fn smooth_small_segments(
         .filter(|&g| !obs.row(g).is_empty())
         .collect();
     let first: Vec<Option<usize>> = small.iter().map(|&g| class[g]).collect();
-    let (classes, width) = (evidence.classes(), evidence.classes().max(1));
     let blocks: Vec<&[usize]> = small.chunks(4096).collect();
     for _ in 0..p.smooth_rounds {
-        // Each block's votes on every core, then stored in the Gaussians' order.
+        // Each block's votes on every core (by nonzero class), then stored in the
+        // Gaussians' order.
         let now: &[Option<usize>] = class;
         let voted = parallel_map(blocks.len(), |b| {
-            let block = blocks[b];
-            let mut votes = vec![0.0; block.len() * width];
-            let rows = votes.chunks_exact_mut(width).map(|row| &mut row[..classes]);
-            let decided: Vec<Option<usize>> = (block.iter().zip(rows))
-                .map(|(&g, votes)| {
-                    alone.add_votes_through_regions(g, votes);
-                    add_neighbour_classes(now, alone.knn, k, g, votes);
-                    decisive_argmax(votes, votes)
+            let mut votes = vec![0.0; evidence.classes()];
+            let mut rows = SparseRowList::default();
+            let decided: Vec<Option<usize>> = (blocks[b].iter())
+                .map(|&g| {
+                    votes.fill(0.0);
+                    alone.add_votes_through_regions(g, &mut votes);
+                    add_neighbour_classes(now, alone.knn, k, g, &mut votes);
+                    rows.push_dense(&votes);
+                    decisive_argmax(&votes, &votes)
                 })
                 .collect();
-            (decided, votes)
+            (decided, rows)
         });
         let decided: Vec<Option<usize>> = (voted.iter().flat_map(|(decided, _)| decided))
             .copied()
             .collect();
-        let votes = voted
-            .iter()
-            .flat_map(|(_, votes)| votes.chunks_exact(width));
+        let votes = voted.iter().flat_map(|(_, rows)| rows.iter());
         for ((&g, c), votes) in small.iter().zip(&decided).zip(votes) {
             if c.is_some() {
-                evidence.replace_own(g, &votes[..classes]); // the rounds read classes, not evidence
+                evidence.replace_own(g, votes); // the rounds read classes, not evidence
             }
         }
         for (&g, c) in small.iter().zip(decided) {
@@ -1007,7 +1008,7 @@ pub(crate) fn posteriors(
     let posteriors_of_rows = parallel_map(rows.div_ceil(ROW_BLOCK), |b| {
         let block = b * ROW_BLOCK..rows.min((b + 1) * ROW_BLOCK);
         block
-            .map(|r| RowPosterior::of(evidence.row(r), prior))
+            .map(|r| RowPosterior::of(evidence.row(r), evidence.classes(), prior))
             .collect::<Vec<_>>()
     });
     let posteriors_of_rows: Vec<RowPosterior> = posteriors_of_rows.into_iter().flatten().collect();
@@ -1016,7 +1017,8 @@ pub(crate) fn posteriors(
         block
             .map(|g| {
                 let row_posterior = &posteriors_of_rows[evidence.row_index(g)];
-                let (c, h) = row_posterior.posterior(&evidence[g], class[g], prior);
+                let (c, h) =
+                    row_posterior.posterior(evidence.get(g), evidence.classes(), class[g], prior);
                 (c as f32, h as f32)
             })
             .collect::<Vec<_>>()
@@ -1053,14 +1055,19 @@ struct RowPosterior {
 }
 
 impl RowPosterior {
-    fn of(counts: &[f64], prior: f64) -> RowPosterior {
-        let counted: f64 = counts.iter().sum();
-        let total = counted + prior * counts.len() as f64;
+    fn of(counts: &SparseCounts, classes: usize, prior: f64) -> RowPosterior {
+        let counted: f64 = counts.iter().map(|&(_, x)| x).sum();
+        let total = counted + prior * classes as f64;
+        // Every class in order, its count or 0: the sum as a row of every class's sums it.
+        let mut nonzero = counts.iter().peekable();
+        let mut count = |k: usize| match nonzero.next_if(|&&(c, _)| c as usize == k) {
+            Some(&(_, x)) => x,
+            None => 0.0,
+        };
         // 0 - sum, not -sum: a certain row (one class) has entropy +0, not -0 in the PLY.
         let entropy = 0.0
-            - counts
-                .iter()
-                .map(|c| (c + prior) / total)
+            - (0..classes)
+                .map(|k| (count(k) + prior) / total)
                 .filter(|&q| q > 0.0)
                 .map(|q| q * q.ln())
                 .sum::<f64>();
@@ -1074,11 +1081,21 @@ impl RowPosterior {
     /// Posterior mean of `class` under a Dirichlet(prior + counts), and the entropy (nats)
     /// of the posterior mean; unseen or undecided: 0 and ln(classes). `counts`: the row this
     /// was computed from.
-    fn posterior(&self, counts: &[f64], class: Option<usize>, prior: f64) -> (f64, f64) {
-        debug_assert_eq!(self.seen, counts.iter().sum::<f64>() > 0.0, "another row");
+    fn posterior(
+        &self,
+        counts: &SparseCounts,
+        classes: usize,
+        class: Option<usize>,
+        prior: f64,
+    ) -> (f64, f64) {
+        debug_assert_eq!(
+            self.seen,
+            counts.iter().any(|&(_, x)| x > 0.0),
+            "another row"
+        );
         match class {
-            Some(c) if self.seen => ((counts[c] + prior) / self.total, self.entropy),
-            _ => (0.0, (counts.len() as f64).ln()),
+            Some(c) if self.seen => ((count_of(counts, c) + prior) / self.total, self.entropy),
+            _ => (0.0, (classes as f64).ln()),
         }
     }
 }
@@ -1213,7 +1230,7 @@ mod tests {
         }
         let (confidence, entropy) = posteriors(&evidence, &class, prior);
         for g in 0..n {
-            let counts = &evidence[g];
+            let counts = evidence.dense(g);
             let total: f64 = counts.iter().sum();
             let (conf, h) = match class[g] {
                 Some(c) if total > 0.0 => {

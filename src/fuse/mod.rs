@@ -23,6 +23,7 @@ pub mod neighbours;
 pub mod partial;
 pub mod regions_gpu;
 pub mod scores;
+pub mod shared_counts;
 
 pub use accumulate::{
     accumulate, accumulate_assigned, accumulate_raw, gpu_assignable, Accumulation, AssignOnGpu,
@@ -42,4 +43,5 @@ pub use consensus_surface::GaussianShapes;
 pub use method::{Method, SPELLINGS};
 pub use neighbours::nearest_neighbours;
 pub use partial::{EvidenceKind, PartManifest, RawEvidence, Shard};
-pub use scores::{ClassScores, EvidenceRows, SharedCounts, SpilledRows};
+pub use scores::{ClassScores, EvidenceRows, SpilledRows};
+pub use shared_counts::SharedCounts;

@@ -5,7 +5,6 @@ use std::borrow::Cow;
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 
 use anyhow::{bail, ensure, Context, Result};
 
@@ -81,133 +80,6 @@ impl ClassScores {
     }
 }
 
-/// Per-Gaussian count vectors, each distinct one stored once: segment consensus decides most
-/// Gaussians from their segment's vote split, so a million Gaussians share a few thousand
-/// rows (a vector per Gaussian held n x classes values, and as many again in the matrix
-/// built from them).
-#[derive(Clone, Debug, PartialEq)]
-pub struct SharedCounts {
-    classes: usize,
-    /// Row-major [rows][classes]; row 0 is zeros.
-    counts: Vec<f64>,
-    /// Per Gaussian, its row.
-    row_of: Vec<u32>,
-}
-
-impl SharedCounts {
-    /// `n` Gaussians over `classes` classes, each at the row of zeros.
-    pub fn zeros(classes: usize, n: usize) -> SharedCounts {
-        SharedCounts {
-            classes,
-            counts: vec![0.0; classes],
-            row_of: vec![0; n],
-        }
-    }
-
-    /// Adds a row of counts (`classes` long) no Gaussian holds yet; returns its index.
-    pub fn add_row(&mut self, counts: &[f64]) -> u32 {
-        assert_eq!(counts.len(), self.classes, "a row of counts per class");
-        let row = (self.counts.len() / self.classes.max(1)) as u32;
-        self.counts.extend_from_slice(counts);
-        row
-    }
-
-    /// Gaussian `g` holds row `row`.
-    pub fn share(&mut self, g: usize, row: u32) {
-        self.row_of[g] = row;
-    }
-
-    /// Gaussian `g` holds counts of its own (all zeros: the shared row of zeros, as for
-    /// a Gaussian no view observed).
-    pub fn set(&mut self, g: usize, counts: &[f64]) {
-        self.row_of[g] = match counts.iter().all(|&c| c == 0.0) {
-            true => 0,
-            false => self.add_row(counts),
-        };
-    }
-
-    /// Gaussian `g`'s counts rewritten in place where it holds a row of its own (from
-    /// [`SharedCounts::set`]; the caller knows no other Gaussian shares it), else stored as
-    /// by `set`: rounds that decide a Gaussian again do not store a row each time.
-    pub fn replace_own(&mut self, g: usize, counts: &[f64]) {
-        match self.row_of[g] as usize {
-            0 => self.set(g, counts),
-            row => {
-                self.counts[row * self.classes..(row + 1) * self.classes].copy_from_slice(counts)
-            }
-        }
-    }
-
-    pub fn classes(&self) -> usize {
-        self.classes
-    }
-
-    /// Distinct rows stored (the row of zeros included).
-    pub fn rows(&self) -> usize {
-        self.counts.len() / self.classes.max(1)
-    }
-
-    /// Gaussians.
-    pub fn len(&self) -> usize {
-        self.row_of.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.row_of.is_empty()
-    }
-
-    /// Distinct row `row`'s counts (row 0: zeros).
-    pub fn row(&self, row: usize) -> &[f64] {
-        &self.counts[row * self.classes..(row + 1) * self.classes]
-    }
-
-    /// The distinct row Gaussian `g` holds.
-    pub fn row_index(&self, g: usize) -> usize {
-        self.row_of[g] as usize
-    }
-
-    /// The counts with Gaussian `g` holding what Gaussian `held_by(g)` held (a
-    /// renumbering of the Gaussians: the rows are kept as they are).
-    pub fn reordered(self, held_by: impl Fn(usize) -> usize) -> SharedCounts {
-        let row_of = (0..self.row_of.len())
-            .map(|g| self.row_of[held_by(g)])
-            .collect();
-        SharedCounts { row_of, ..self }
-    }
-
-    /// Gaussian `g`'s counts.
-    pub fn get(&self, g: usize) -> &[f64] {
-        let at = self.row_of[g] as usize * self.classes;
-        &self.counts[at..at + self.classes]
-    }
-
-    /// Every Gaussian's count of `class` (< `classes`), in Gaussian order.
-    fn class_row(&self, class: usize) -> impl Iterator<Item = f64> + '_ {
-        let classes = self.classes;
-        (self.row_of.iter()).map(move |&r| self.counts[r as usize * classes + class])
-    }
-
-    /// As an evidence matrix [classes][n].
-    pub fn to_scores(&self) -> ClassScores {
-        let n = self.len();
-        let mut scores = ClassScores::zeros(self.classes, n);
-        for (c, row) in scores.data.chunks_exact_mut(n.max(1)).enumerate() {
-            row.iter_mut()
-                .zip(self.class_row(c))
-                .for_each(|(x, v)| *x = v);
-        }
-        scores
-    }
-}
-
-impl std::ops::Index<usize> for SharedCounts {
-    type Output = [f64];
-
-    fn index(&self, g: usize) -> &[f64] {
-        self.get(g)
-    }
-}
-
 /// The evidence matrix read one class row at a time, wherever it is: in memory
 /// ([`ClassScores`]) or spilled to disk as it streamed from the GPU ([`SpilledRows`]).
 pub trait EvidenceRows {
@@ -236,27 +108,6 @@ impl EvidenceRows for ClassScores {
 
     fn row(&mut self, class: usize) -> Result<Cow<'_, [f64]>> {
         Ok(Cow::Borrowed(ClassScores::row(self, class)))
-    }
-}
-
-/// Read a class row at a time, never as a whole matrix; shared with the consensus that holds
-/// it (no copy).
-impl EvidenceRows for Arc<SharedCounts> {
-    fn classes(&self) -> usize {
-        self.classes
-    }
-
-    fn n(&self) -> usize {
-        self.len()
-    }
-
-    fn row(&mut self, class: usize) -> Result<Cow<'_, [f64]>> {
-        ensure!(
-            class < self.classes,
-            "no class row {class} of {}",
-            self.classes
-        );
-        Ok(Cow::Owned(self.class_row(class).collect()))
     }
 }
 
@@ -337,57 +188,5 @@ impl EvidenceRows for SpilledRows {
             .map(|b| f64::from_le_bytes(b.try_into().expect("8 bytes")))
             .collect();
         Ok(Cow::Owned(row))
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Shared rows read back per Gaussian, as a matrix and a class row at a time, all the
-    /// same as the vectors they stand for; a shared row is stored once.
-    #[test]
-    fn shared_counts_read_back_as_the_vectors_they_hold() {
-        let vectors = [
-            vec![2.0, 1.0, 0.0],
-            vec![0.5, 0.0, 3.0],
-            vec![2.0, 1.0, 0.0],
-            vec![0.0, 0.0, 0.0],
-            vec![0.0, 4.0, 0.0],
-        ];
-        let mut counts = SharedCounts::zeros(3, vectors.len());
-        let segment = counts.add_row(&vectors[0]);
-        counts.share(0, segment);
-        counts.share(2, segment);
-        counts.set(1, &vectors[1]);
-        counts.set(4, &vectors[4]);
-        counts.set(3, &vectors[3]); // zeros: the shared row
-        assert_eq!(counts.rows(), 4);
-        for (g, v) in vectors.iter().enumerate() {
-            assert_eq!(&counts[g], v.as_slice());
-        }
-        let scores = counts.to_scores();
-        for (g, v) in vectors.iter().enumerate() {
-            for (c, &x) in v.iter().enumerate() {
-                assert_eq!(scores.get(c, g), x);
-            }
-        }
-        // Rewritten in place where a Gaussian holds a row of its own; the row of zeros is
-        // never overwritten (Gaussian 3 gets a row instead).
-        let mut rewritten = counts.clone();
-        rewritten.replace_own(1, &[1.0, 1.0, 1.0]);
-        assert_eq!(rewritten.rows(), 4);
-        rewritten.replace_own(3, &[0.0, 0.0, 2.0]);
-        assert_eq!(rewritten.rows(), 5);
-        assert_eq!(&rewritten[1], &[1.0, 1.0, 1.0]);
-        assert_eq!(&rewritten[3], &[0.0, 0.0, 2.0]);
-        for g in [0, 2, 4] {
-            assert_eq!(&rewritten[g], vectors[g].as_slice());
-        }
-        let mut rows = Arc::new(counts);
-        for c in 0..3 {
-            assert_eq!(EvidenceRows::row(&mut rows, c).unwrap(), scores.row(c));
-        }
-        assert!(EvidenceRows::row(&mut rows, 3).is_err());
     }
 }
