@@ -495,3 +495,142 @@ fn render_and_inspect_say_what_would_mislead() {
         "{report}"
     );
 }
+
+/// Runs whose result would mean nothing are errors (a scene of no Gaussians, label maps
+/// with no label), and say what they chose: `--extract` names the class and its id, and
+/// selecting from a fused scene reads the `--classes` given; `eval --truth` takes a scene
+/// folder as `--scene` does.
+#[test]
+fn empty_inputs_are_errors_and_selections_name_their_class() {
+    let (tmp, room) = tiny_room();
+    let (d, p) = (tmp.path(), |f: &Path| f.to_str().unwrap().to_string());
+    let cameras = arg_in(&room, "cameras.json");
+    let fused = d.join("fused").join("fused.ply");
+    fuse_synth(&room, &["--out", &p(&fused)]);
+
+    let blank = d.join("blank");
+    std::fs::create_dir(&blank).unwrap();
+    for map in std::fs::read_dir(room.join("labels")).unwrap() {
+        let name = map.unwrap().file_name();
+        image::GrayImage::from_pixel(32, 24, image::Luma([255]))
+            .save(blank.join(name))
+            .unwrap();
+    }
+    let eval = |labels: &Path, extra: &[&str]| {
+        let mut args = vec![
+            "eval",
+            "--scene",
+            fused.to_str().unwrap(),
+            "--cameras",
+            &cameras,
+        ];
+        args.extend_from_slice(&["--labels", labels.to_str().unwrap(), "--views", "all"]);
+        args.extend_from_slice(extra);
+        args.iter().map(|a| a.to_string()).collect::<Vec<_>>()
+    };
+    let e = fails_owned(&eval(&blank, &[]));
+    assert!(e.contains("nothing to score"), "{e}");
+    let truth = p(&room);
+    let scored = eval(&room.join("labels"), &["--truth", &truth]);
+    let out = common::cli::semsplat(&scored.iter().map(String::as_str).collect::<Vec<_>>());
+    let printed = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(printed.contains("3D accuracy"), "{printed}");
+
+    let picked = ok_owned(&fuse_args(
+        &room,
+        &["--extract", "BALL", "--out", &arg_in(d, "b.ply")],
+    ));
+    assert!(picked.contains("class 'ball' (id 4)"), "{picked}");
+    let e = fuse_synth_fails(
+        &room,
+        &["--extract", "ceiling", "--out", &arg_in(d, "c.ply")],
+    );
+    assert!(e.contains("classes the label maps use"), "{e}");
+    // A fused scene without its sidecar selects through the table given.
+    let bare = d.join("bare");
+    std::fs::create_dir(&bare).unwrap();
+    std::fs::copy(&fused, bare.join("fused.ply")).unwrap();
+    let classes = arg_in(&room, "classes.json");
+    let from_fused = [
+        "fuse",
+        "--scene",
+        &arg_in(&bare, "fused.ply"),
+        "--classes",
+        &classes,
+    ];
+    let picked = ok(&[
+        &from_fused[..],
+        &["--extract", "ball", "--out", &arg_in(d, "f.ply")],
+    ]
+    .concat());
+    assert!(picked.contains("class 'ball' (id 4)"), "{picked}");
+
+    let empty = d.join("empty.ply");
+    let g = read_ply(&room.join("scene.ply")).unwrap();
+    write_ply(&empty, &g.select(&vec![false; g.len()])).unwrap();
+    let e = fails(&[
+        "fuse",
+        "--scene",
+        &p(&empty),
+        "--cameras",
+        &cameras,
+        "--labels",
+        &arg_in(&room, "labels"),
+        "--out",
+        &arg_in(d, "e.ply"),
+    ]);
+    assert!(e.contains("holds no Gaussians"), "{e}");
+    assert!(!d.join("e.ply").exists());
+    let out = common::cli::semsplat(&["inspect", &p(&empty)]);
+    assert!(
+        !out.status.success(),
+        "inspect calls an empty scene a problem"
+    );
+    assert!(String::from_utf8_lossy(&out.stdout).contains("no Gaussians"));
+}
+
+/// `fuse` on the room with `extra`, as owned arguments.
+fn fuse_args(room: &Path, extra: &[&str]) -> Vec<String> {
+    common::cli::fuse_synth_args(room, extra)
+}
+
+/// `render` never replaces files it did not write (a view's label map and photo share its
+/// name) unless forced; its own output folder renders again.
+#[test]
+fn render_keeps_off_files_it_did_not_write() {
+    let (tmp, room) = tiny_room();
+    let labels = room.join("labels");
+    let map = labels.join("train_0000.png");
+    let before = std::fs::read(&map).unwrap();
+    let render = |out: &Path, extra: &[&str]| -> Vec<String> {
+        let args = [
+            "render",
+            "--scene",
+            room.to_str().unwrap(),
+            "--semantics",
+            "--out",
+        ];
+        let all = [&args[..], &[out.to_str().unwrap()], extra].concat();
+        all.iter().map(|a| a.to_string()).collect()
+    };
+    let e = fails_owned(&render(&labels, &[]));
+    assert!(
+        e.contains("no render wrote") && e.contains("--force"),
+        "{e}"
+    );
+    assert_eq!(
+        std::fs::read(&map).unwrap(),
+        before,
+        "the label map is untouched"
+    );
+    let views = tmp.path().join("views");
+    ok_owned(&render(&views, &[]));
+    ok_owned(&render(&views, &[]));
+    ok_owned(&render(&labels, &["--force"]));
+    assert_ne!(std::fs::read(&map).unwrap(), before, "forced");
+}

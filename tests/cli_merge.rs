@@ -198,8 +198,19 @@ fn merge_refuses_parts_that_do_not_belong_together() {
         "{err}"
     );
 
-    // A part cut short in transfer is refused, not read as zeros.
+    // Another shard's part under this one's manifest (the same shape, other sums) is
+    // refused by the part's digest, as is a part whose sums were edited.
     let data = bytes(Path::new(&a1));
+    std::fs::copy(&a0, &a1).unwrap();
+    let err = merge(&[&a0, &a1]);
+    assert!(err.contains("not the part its manifest"), "{err}");
+    let mut edited = data.clone();
+    *edited.last_mut().unwrap() ^= 1;
+    std::fs::write(&a1, &edited).unwrap();
+    let err = merge(&[&a0, &a1]);
+    assert!(err.contains("not the part its manifest"), "{err}");
+
+    // A part cut short in transfer is refused, not read as zeros.
     std::fs::write(&a1, &data[..data.len() - 8]).unwrap();
     let err = merge(&[&a0, &a1]);
     assert!(err.contains("truncated"), "{err}");

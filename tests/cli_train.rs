@@ -176,6 +176,13 @@ fn bad_input_gives_a_clear_error_and_no_output() {
     assert!(!r.status.success());
     assert!(String::from_utf8_lossy(&r.stderr).contains("no image for camera"));
 
+    // Semantics alone without their loss would write the scene it started from.
+    let mut args = train_args(ds, outs);
+    args.extend(["--iters", "5", "--semantics-only", "--lambda-sem", "0"].map(String::from));
+    let r = run(&args);
+    assert!(!r.status.success());
+    assert!(String::from_utf8_lossy(&r.stderr).contains("trains nothing"));
+
     // More Gaussians than allowed.
     let mut args = train_args(ds, outs);
     args.extend(["--iters", "5", "--max-gaussians", "10"].map(String::from));
@@ -316,4 +323,15 @@ fn the_log_has_no_cross_entropy_for_views_without_labels() {
         ce.iter().any(|c| c.as_f64().is_some_and(|v| v > 0.0)),
         "{ce:?}"
     );
+
+    // With --semantics-only (appearance frozen) such views teach nothing: they are left out,
+    // and every logged step has its cross-entropy.
+    args.extend(["--semantics-only"].map(String::from));
+    let r = run(&args);
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(r.status.success(), "{err}");
+    assert!(err.contains("have no label map and are left out"), "{err}");
+    let rep: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    let log = rep["log"].as_array().unwrap();
+    assert!(log.iter().all(|l| l["ce"].as_f64().is_some()), "{log:?}");
 }

@@ -16,7 +16,7 @@ use semsplat::gpu::Gpu;
 use semsplat::scene::classes::{read_class_table, ClassTable};
 use semsplat::scene::images::ImageDir;
 use semsplat::scene::labels::{binary_mask_warning, LabelDir, LabelMap};
-use semsplat::scene::ply::{read_classes_sidecar, read_ply};
+use semsplat::scene::ply::read_classes_sidecar;
 use semsplat::scene::scene_file::{cameras_for_scene, read_scene};
 use semsplat::scene::{Camera, Gaussians, Split};
 use semsplat::util::{interrupt, write_bytes_atomic};
@@ -168,10 +168,11 @@ fn score_views(
 ) -> Result<(Confusion, u64)> {
     let mut renderer = LabelRenderer::new(gpu, g, classes)?;
     let mut confusion = Confusion::default();
-    let (mut ignored, mut rendered) = (0u64, 0u64);
+    let (mut ignored, mut rendered, mut pixels) = (0u64, 0u64, 0u64);
     for &i in chosen {
         interrupt::check()?;
         let truth = dir.load(i)?;
+        pixels += truth.labels.len() as u64;
         ignored += truth
             .labels
             .iter()
@@ -186,6 +187,13 @@ fn score_views(
         rendered > 0,
         "no view renders any Gaussian with a class. {FRAME_HINT}, and that the scene's \
          classes are not all -1"
+    );
+    // Nor does a score against maps with no label: every class's IoU would read 0.
+    ensure!(
+        ignored < pixels,
+        "every pixel of the {} scored views' label maps is unlabeled (the ignore id): there is \
+         nothing to score against. Check --ignore-id and --views",
+        chosen.len()
     );
     Ok((confusion, ignored))
 }
@@ -224,7 +232,7 @@ fn chosen_camera<'a>(cams: &'a [Camera], dir: &LabelDir, i: usize) -> &'a Camera
 
 /// 3D accuracy of `classes` against the true classes in the PLY at `path`.
 fn truth_accuracy(path: &Path, classes: &[i32]) -> Result<f64> {
-    let truth = read_ply(path)?;
+    let truth = read_scene(path)?;
     let Some(t) = truth.class_ids else {
         bail!("{} has no `class` property", path.display())
     };

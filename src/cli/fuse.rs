@@ -3,7 +3,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{anyhow, bail, ensure, Context, Result};
 use clap::{Args, ValueEnum};
 use serde::Serialize;
 
@@ -27,7 +27,7 @@ use semsplat::fuse::{
 use semsplat::gpu::Gpu;
 use semsplat::render::GpuScene;
 use semsplat::scene::cameras::load_cameras;
-use semsplat::scene::classes::{read_class_table, write_class_table, ClassTable};
+use semsplat::scene::classes::{read_class_table, write_class_table, ClassInfo, ClassTable};
 use semsplat::scene::labels::{write_label_png, write_palette_png, LabelMap};
 use semsplat::scene::ply::{classes_sidecar_path, read_classes_sidecar, write_ply};
 use semsplat::scene::scene_file::{cameras_for_scene, read_scene, resolve_scene_path};
@@ -129,7 +129,8 @@ pub struct FuseArgs {
     #[arg(long, value_parser = args::non_negative::<f32>)]
     behind_tol: Option<f32>,
     /// Class table (JSON: id, name, color). Default: classes.json beside or inside the label
-    /// folder, else the ids found in the label maps.
+    /// folder, else the ids found in the label maps; selecting from a fused scene (no
+    /// --labels), its `.classes.json`, else its ids.
     #[arg(long)]
     classes: Option<PathBuf>,
     #[command(flatten)]
@@ -257,8 +258,8 @@ struct Report<'a> {
     segments: Option<SegmentReport>,
 }
 
-fn find_class(table: &ClassTable, key: &str) -> Result<u32> {
-    table.find(key).map(|c| c.id)
+fn find_class(table: &ClassTable, key: &str) -> Result<ClassInfo> {
+    table.find(key).cloned()
 }
 
 /// Every Gaussian's class, the evidence rows where an output reads them, and the rows'
@@ -337,6 +338,12 @@ pub fn run(mut args: FuseArgs) -> Result<()> {
         ],
     )?;
     let g = read_scene(&args.scene)?;
+    // An empty scene would fuse to an empty PLY, exit 0: nearly always the wrong file.
+    ensure!(
+        !g.is_empty(),
+        "--scene {} holds no Gaussians: nothing to fuse",
+        args.scene.display()
+    );
     let method = selected_method(&args)?;
     if args.contrib.is_none() {
         note_options_without_effect(&args, method);
@@ -396,8 +403,13 @@ pub(super) fn write_fused(
     // Everything that can refuse the run, before its first file is written.
     check_assigned(args, &g)?;
     let selected_class = args.extract.as_ref().or(args.remove.as_ref());
+    // The table of a fusion holds the classes its label maps use, not every class of a
+    // class table given.
     let selected_class = selected_class
-        .map(|name| find_class(&table, name))
+        .map(|name| {
+            find_class(&table, name)
+                .context("--extract and --remove choose among the classes the label maps use")
+        })
         .transpose()?;
     let label_views = match &args.render_views {
         Some(_) => Some(LabelViews::open(
@@ -433,9 +445,10 @@ pub(super) fn write_fused(
     }
     // The consensus decides per segment, which its evidence rows do not hold: it selects by
     // the classes it decided; the evidence methods by FlashSplat's one-vs-rest.
+    let selected_id = selected_class.as_ref().map(|c| c.id);
     let selected = match segments {
-        Some(_) => select_by_class(args, selected_class, g),
-        None => select_members(args, selected_class, g, &mut rows, &totals, &table)?,
+        Some(_) => select_by_class(args, selected_id, g),
+        None => select_members(args, selected_id, g, &mut rows, &totals, &table)?,
     };
     let assign_s = assign_start.elapsed().as_secs_f64();
 
@@ -451,12 +464,13 @@ pub(super) fn write_fused(
         per_class: per_class_counts(&selected, &table),
         segments,
     };
-    write_report(args, &report, batch)
+    write_report(args, &report, selected_class.as_ref(), batch)
 }
 
 /// With --extract/--remove on an already fused scene (a `class` property) and no evidence
-/// to fuse from (neither --labels nor --contrib), the class table to select with: the
-/// scene's `.classes.json` sidecar, else the ids present. `None` when fusing as usual.
+/// to fuse from (neither --labels nor --contrib), the class table to select with: --classes,
+/// else the scene's `.classes.json` sidecar, else the ids present. `None` when fusing as
+/// usual.
 fn fused_scene_table(args: &FuseArgs, g: &Gaussians) -> Result<Option<ClassTable>> {
     if !selecting(&args.output) || args.labels.is_some() || args.contrib.is_some() {
         return Ok(None);
@@ -473,6 +487,9 @@ fn fused_scene_table(args: &FuseArgs, g: &Gaussians) -> Result<Option<ClassTable
              matrix: --save-contrib, --save-membership and --render-views need --labels or \
              --contrib (render a fused scene with `semsplat render --semantics`)"
         );
+    }
+    if let Some(path) = &args.classes {
+        return read_class_table(path).map(Some);
     }
     let scene_file = resolve_scene_path(&args.scene)?;
     Ok(Some(match read_classes_sidecar(&scene_file)? {
@@ -496,7 +513,8 @@ fn select_from_fused(
     if args.output.gamma.is_some() {
         eprintln!("note: --gamma has no effect selecting by a fused scene's class");
     }
-    let id = find_class(table, name)? as i32;
+    let class = find_class(table, name)?;
+    let id = class.id as i32;
     let ids = g
         .class_ids
         .as_deref()
@@ -519,7 +537,7 @@ fn select_from_fused(
         per_class: per_class_counts(&selected, table),
         segments: None,
     };
-    write_report(&args.output, &report, batch)
+    write_report(&args.output, &report, Some(&class), batch)
 }
 
 /// Every file and folder the run will write (`args`' and the `extra` files) can be
@@ -898,8 +916,14 @@ fn write_outputs(args: &OutputArgs, selected: &Gaussians, table: &ClassTable) ->
     Ok(())
 }
 
-/// The JSON report if asked for, the run's outputs landed (`batch`), and the summary line.
-fn write_report(args: &OutputArgs, report: &Report, batch: OutputBatch) -> Result<()> {
+/// The JSON report if asked for, the run's outputs landed (`batch`), and the summary line
+/// (naming the class --extract or --remove chose, `selected`).
+fn write_report(
+    args: &OutputArgs,
+    report: &Report,
+    selected: Option<&ClassInfo>,
+    batch: OutputBatch,
+) -> Result<()> {
     if let Some(path) = &args.report {
         write_bytes_atomic(path, serde_json::to_string_pretty(report)?.as_bytes())?;
     }
@@ -912,16 +936,19 @@ fn write_report(args: &OutputArgs, report: &Report, batch: OutputBatch) -> Resul
         .map_or(0, |c| c.gaussians);
     let out = args.out.display();
     let seconds = report.total_s;
-    match (&args.extract, &args.remove) {
-        (Some(name), _) => eprintln!(
-            "kept the {} Gaussians of class '{name}' in {seconds:.2} s -> {out}",
-            report.gaussians
+    let named = |c: &ClassInfo| format!("class '{}' (id {})", c.name, c.id);
+    match (selected, args.extract.is_some()) {
+        (Some(class), true) => eprintln!(
+            "kept the {} Gaussians of {} in {seconds:.2} s -> {out}",
+            report.gaussians,
+            named(class)
         ),
-        (_, Some(name)) => eprintln!(
-            "kept {} Gaussians, those of class '{name}' removed, in {seconds:.2} s -> {out}",
-            report.gaussians
+        (Some(class), false) => eprintln!(
+            "kept {} Gaussians, those of {} removed, in {seconds:.2} s -> {out}",
+            report.gaussians,
+            named(class)
         ),
-        _ => eprintln!(
+        (None, _) => eprintln!(
             "fused {} Gaussians into {} class{} ({without_class} Gaussians left without a \
              class) in {seconds:.2} s -> {out}",
             report.gaussians,

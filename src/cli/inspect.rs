@@ -360,6 +360,10 @@ fn inspect_ply(path: &Path, table: Option<&ClassTable>) -> Result<Report> {
             inst.iter().copied().filter(|&i| i >= 0).collect();
         r.add("instances", distinct.len());
     }
+    if g.is_empty() {
+        r.problems
+            .push("the scene holds no Gaussians (fuse, train and eval refuse it)".to_string());
+    }
     if let Err(e) = g.check_layout() {
         r.problems.push(format!("{e:#}"));
     }

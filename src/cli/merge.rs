@@ -108,6 +108,7 @@ pub fn fuse_shard(job: &ShardJob) -> Result<()> {
         key,
         shard: job.shard,
         views: cams.iter().map(|c| c.name.clone()).collect(),
+        data: FileDigest::of_file(job.out)?,
     };
     manifest.write(job.out)?;
     eprintln!(
@@ -213,7 +214,7 @@ pub fn run(mut args: MergeArgs) -> Result<()> {
     let g = read_scene(&scene_file)?;
     let method = Method::from_key(&key.method)
         .with_context(|| format!("the parts name an unknown method '{}'", key.method))?;
-    let scores = sum_parts(&args.parts, &key, args.chunk_gaussians)?;
+    let scores = sum_parts(&parts, &key, args.chunk_gaussians)?;
     let evidence = Evidence::from_matrix(scores, &g, key.classes.clone());
     let provenance = Provenance {
         method: method.name(),
@@ -231,13 +232,17 @@ pub fn run(mut args: MergeArgs) -> Result<()> {
 
 /// Sums the parts' integers chunk of Gaussians by chunk and converts each sum as `fuse`
 /// converts its download: only one chunk of every part is in memory at a time.
-fn sum_parts(paths: &[PathBuf], key: &FusionKey, chunk: usize) -> Result<ClassScores> {
+fn sum_parts(
+    parts: &[(PathBuf, PartManifest)],
+    key: &FusionKey,
+    chunk: usize,
+) -> Result<ClassScores> {
     let (classes, n) = (key.classes.len(), key.gaussians);
-    let mut readers = paths
+    let mut readers = parts
         .iter()
-        .map(|p| PartReader::open(p))
+        .map(|(p, _)| PartReader::open(p))
         .collect::<Result<Vec<_>>>()?;
-    for (r, path) in readers.iter().zip(paths) {
+    for (r, (path, manifest)) in readers.iter().zip(parts) {
         ensure!(
             (r.classes, r.n, r.kind) == (classes, n, key.evidence),
             "{} holds {:?} [{}, {}] but its manifest names {:?} [{classes}, {n}]",
@@ -247,6 +252,8 @@ fn sum_parts(paths: &[PathBuf], key: &FusionKey, chunk: usize) -> Result<ClassSc
             r.n,
             key.evidence
         );
+        // After the shape's checks, which name a part cut short as such.
+        manifest.check_data(path)?;
     }
     let mut scores = ClassScores::zeros(classes, n);
     for begin in (0..n).step_by(chunk) {

@@ -44,6 +44,11 @@ pub struct RenderArgs {
     /// named by a relative path write into subfolders: <out>/cam0/00001.png.
     #[arg(long)]
     out: PathBuf,
+    /// Overwrite files in --out that no earlier `render` wrote (by default refused: a
+    /// render into a scene's labels/ or images/ folder would replace its label maps or
+    /// photos with renderings).
+    #[arg(long)]
+    force: bool,
     /// Also render the semantic channels (the argmax class per pixel), or for a fused PLY
     /// without logits the class the Gaussians carry.
     #[arg(long)]
@@ -168,6 +173,56 @@ const RAW_NPY: [&str; 5] = [
     ".sem_norm.npy",
 ];
 
+/// What marks a folder as `render`'s output: its files may be rendered again.
+const RENDER_MARKER: &str = ".semsplat-render";
+
+/// The suffixes of the files each view writes with these options.
+fn view_suffixes(args: &RenderArgs) -> Vec<&'static str> {
+    let mut suffixes = vec![RGB_PNG];
+    if args.semantics {
+        suffixes.extend([LABELS_PNG, PALETTE_PNG]);
+    }
+    if args.raw {
+        let [rgb, alpha, depth, sem, sem_norm] = RAW_NPY;
+        suffixes.extend([rgb, alpha, depth]);
+        if args.semantics {
+            suffixes.extend([sem, sem_norm]);
+        }
+    }
+    suffixes
+}
+
+/// Refuses to replace files in --out that no earlier render wrote (a folder without
+/// [`RENDER_MARKER`]), unless --force: `<view>.png` is also the name of a view's label map
+/// and photo.
+fn check_overwrites_own_files(args: &RenderArgs, cams: &[Camera]) -> Result<()> {
+    if !args.force && !args.out.join(RENDER_MARKER).exists() {
+        let suffixes = view_suffixes(args);
+        let targets = cams
+            .iter()
+            .flat_map(|cam| suffixes.iter().map(move |s| format!("{}{s}", cam.name)));
+        let existing: Vec<String> = targets.filter(|f| args.out.join(f).exists()).collect();
+        if let Some(first) = existing.first() {
+            bail!(
+                "--out {} holds {} files this render would replace that no render wrote \
+                 (e.g. {first}: a label map or photo of the same name?): choose another \
+                 --out, or pass --force",
+                args.out.display(),
+                existing.len()
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Marks `out` as a render's output folder ([`RENDER_MARKER`]), before its first view.
+fn mark_as_render_output(out: &Path) -> Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("creating --out {}", out.display()))?;
+    let marker = out.join(RENDER_MARKER);
+    std::fs::write(&marker, b"files here were written by semsplat render\n")
+        .with_context(|| format!("writing {}", marker.display()))
+}
+
 /// Refuses views whose files would land on one path (a camera named `X.labels` wrote its
 /// RGB image to `X.labels.png`, camera `X`'s label map), before anything is written.
 fn check_view_files_distinct(cams: &[Camera]) -> Result<()> {
@@ -214,6 +269,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
         &args.views,
     )?;
     check_view_files_distinct(&cams)?;
+    check_overwrites_own_files(&args, &cams)?;
     if args.semantics {
         check_table_fits_logits(&scene_file, &g, table.as_ref())?;
         if table.is_none() && g.semantics.is_some() {
@@ -251,6 +307,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
         ),
     });
     let mut raster = Rasterizer::new(&gpu);
+    mark_as_render_output(&args.out)?;
     let bar = render_bar(cams.len());
     for cam in &cams {
         interrupt::check()?;

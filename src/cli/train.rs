@@ -16,9 +16,9 @@ use semsplat::dataset::{user_classes, CompactClasses, Dataset, DatasetPaths};
 use semsplat::gpu::Gpu;
 use semsplat::render::SemanticMode;
 use semsplat::scene::images::ImageDir;
-use semsplat::scene::ply::{classes_sidecar_path, read_ply};
+use semsplat::scene::ply::classes_sidecar_path;
 use semsplat::scene::scene_file::{
-    cameras_for_scene, read_scene_or_point_cloud, resolve_scene_path,
+    cameras_for_scene, read_scene, read_scene_or_point_cloud, resolve_scene_path,
 };
 use semsplat::scene::Gaussians;
 use semsplat::train::config::TrainConfig;
@@ -72,7 +72,8 @@ pub struct TrainArgs {
     #[arg(long)]
     out: PathBuf,
     /// Train the semantic logits only: geometry and colors stay as in --init (fast; a
-    /// middle point between fusion and full training).
+    /// middle point between fusion and full training). Views without a label map are left
+    /// out (they would teach nothing).
     #[arg(long)]
     semantics_only: bool,
     /// Blend softmax(logits) instead of the raw logits (Gaussian Semantics' ablation).
@@ -178,6 +179,13 @@ struct TrainReport<'a> {
 pub fn run(args: TrainArgs) -> Result<()> {
     let start = Instant::now();
     check_paths(&args)?;
+    // The logits learn from the cross-entropy alone there (the entropy term sharpens what
+    // it gives them): without it the run would write the scene it started from.
+    ensure!(
+        !(args.semantics_only && args.lambda_sem == 0.0),
+        "--semantics-only with --lambda-sem 0 trains nothing (the logits learn from the label \
+         maps' cross-entropy): give --lambda-sem > 0, or leave out --semantics-only"
+    );
     let data = load_dataset(&args)?;
     let views = train_views(&args, &data)?;
     let init = read_scene_or_point_cloud(&args.init)?;
@@ -249,7 +257,7 @@ fn logits_from_fusion(
     fused: &Path,
     classes: &CompactClasses,
 ) -> Result<Gaussians> {
-    let f = read_ply(fused)?;
+    let f = read_scene(fused)?;
     ensure!(
         f.len() == init.len(),
         "--init-semantics-from {}: its {} Gaussians are not --init's {} (fuse the scene you \
@@ -311,19 +319,29 @@ fn load_dataset(args: &TrainArgs) -> Result<Dataset> {
         train_only: args.train_only,
         format: args.label_format.format(),
     };
-    let data = open_dataset(&paths, "train appearance only")?;
+    // Appearance is frozen with --semantics-only: a view without labels would teach nothing
+    // and take iterations.
+    let skipped = match args.semantics_only {
+        true => "are left out (--semantics-only learns from label maps alone)",
+        false => "train appearance only",
+    };
+    let data = open_dataset(&paths, skipped)?;
     if data.classes.is_empty() {
         bail!("the label maps hold no class (every pixel is ignore)");
     }
     Ok(data)
 }
 
-/// Every camera with its image and, where it has a label map, its compact labels, decoded
-/// on every core (hundreds of 1080p images and maps take seconds on one); an error is the
-/// first failing view's.
+/// Every camera with its image and, where it has a label map, its compact labels (with
+/// --semantics-only the cameras with a label map alone), decoded on every core (hundreds of
+/// 1080p images and maps take seconds on one); an error is the first failing view's.
 fn train_views(args: &TrainArgs, data: &Dataset) -> Result<Vec<TrainView>> {
     let images = ImageDir::new(&args.images);
-    let view = |i: usize| -> Result<TrainView> {
+    let trained: Vec<usize> = (0..data.cameras.len())
+        .filter(|&i| !args.semantics_only || data.has_label_map(i))
+        .collect();
+    let view = |v: usize| -> Result<TrainView> {
+        let i = trained[v];
         let camera = &data.cameras[i];
         Ok(TrainView {
             camera: camera.clone(),
@@ -332,7 +350,7 @@ fn train_views(args: &TrainArgs, data: &Dataset) -> Result<Vec<TrainView>> {
         })
     };
     // On threads of the call's own: each keeps its decoder's buffer of samples until it ends.
-    parallel_map_on(usize::MAX, data.cameras.len(), view)
+    parallel_map_on(usize::MAX, trained.len(), view)
         .into_iter()
         .collect()
 }

@@ -86,6 +86,11 @@ impl Dataset {
         })
     }
 
+    /// Whether camera `view` has a label map.
+    pub fn has_label_map(&self, view: usize) -> bool {
+        self.entry_of_camera.get(view).copied().flatten().is_some()
+    }
+
     /// The label map of camera `view` as compact class indices ([`NO_LABEL`] where there is
     /// none); None when the camera has no label map.
     pub fn compact_labels(&self, view: usize) -> Result<Option<Vec<u32>>> {

@@ -409,13 +409,17 @@ pub struct PartManifest {
     pub shard: Shard,
     /// Names of the cameras whose labels this part summed.
     pub views: Vec<String>,
+    /// The part's own bytes: a part edited, or another shard's put in its place (same
+    /// shape, other sums), is refused rather than merged into a wrong result.
+    pub data: FileDigest,
 }
 
 /// `format` of every manifest.
 pub const MANIFEST_FORMAT: &str = "semsplat partial evidence";
-/// 2: the label files' contents in `labels` (1: their sizes), the cameras as their file
-/// holds them, `depth_tolerance` only for the methods that read it.
-pub const MANIFEST_VERSION: u32 = 2;
+/// 3: the part's digest (`data`). 2: the label files' contents in `labels` (1: their
+/// sizes), the cameras as their file holds them, `depth_tolerance` only for the methods
+/// that read it.
+pub const MANIFEST_VERSION: u32 = 3;
 
 /// `<part without .npy>.manifest.json`.
 pub fn manifest_path(part: &Path) -> PathBuf {
@@ -448,6 +452,25 @@ impl PartManifest {
             m.version
         );
         Ok(m)
+    }
+
+    /// Refuses a part whose bytes are not those this manifest was written for.
+    pub fn check_data(&self, part: &Path) -> Result<()> {
+        let data = FileDigest::of_file(part)?;
+        ensure!(
+            data == self.data,
+            "{} is not the part its manifest {} describes ({} bytes, FNV-1a {} vs {} bytes, \
+             {}): it changed since `fuse --shard {}` wrote it, or another part's file was put \
+             in its place",
+            part.display(),
+            manifest_path(part).display(),
+            data.bytes,
+            data.fnv1a64,
+            self.data.bytes,
+            self.data.fnv1a64,
+            self.shard
+        );
+        Ok(())
     }
 
     pub fn write(&self, part: &Path) -> Result<()> {
@@ -514,8 +537,10 @@ pub fn check_parts(parts: &[(PathBuf, PartManifest)]) -> Result<FusionKey> {
         .collect();
     ensure!(
         missing.is_empty(),
-        "missing shard(s) {} of {count}: every shard 0..{count} must be merged exactly once",
-        missing.join(", ")
+        "missing shard(s) {} of {count}: every shard 0/{count} to {}/{count} must be merged \
+         exactly once",
+        missing.join(", "),
+        count - 1
     );
     Ok(first.key.clone())
 }

@@ -624,15 +624,16 @@ pub fn with_initial_logits(
     out
 }
 
-/// Confidence given a fused class that comes without one (`class_conf` missing or not in
-/// (0, 1)).
+/// Confidence given a fused class that comes without one (`class_conf` missing, or not in
+/// [0, 1)).
 pub const FUSED_DEFAULT_CONF: f32 = 0.9;
 
 /// `g` with semantic logits over `channels` classes that start where a fusion ended: a
 /// Gaussian of compact class `c` with confidence `p` gets logit `ln(p (C - 1) / (1 - p))`
 /// for `c` and 0 for the others, so the softmax of its logits gives `c` probability `p`
-/// (capped at 0.999); a Gaussian without a class (unseen, or a class the labels lack) gets
-/// zeros, the uniform distribution.
+/// (capped at 0.999); a Gaussian without a class (unseen, or a class the labels lack), or
+/// with confidence 0 (segment consensus's class for a Gaussian no view saw, taken from its
+/// neighbours), gets zeros, the uniform distribution.
 pub fn with_logits_from_classes(
     g: &Gaussians,
     classes: &[Option<u32>],
@@ -644,8 +645,11 @@ pub fn with_logits_from_classes(
         let Some(c) = class.filter(|&c| (c as usize) < channels) else {
             continue;
         };
-        let p = conf
-            .map(|v| v[i])
+        let given = conf.map(|v| v[i]);
+        if given == Some(0.0) {
+            continue;
+        }
+        let p = given
             .filter(|p| *p > 0.0 && *p < 1.0)
             .unwrap_or(FUSED_DEFAULT_CONF)
             .clamp(1.0 / channels as f32, 0.999) as f64;
@@ -700,22 +704,22 @@ mod tests {
     #[test]
     fn logits_from_fused_classes_give_back_class_and_confidence() {
         let g = random_scene(&RandomSceneSpec {
-            n: 5,
+            n: 6,
             ..Default::default()
         });
-        let classes = [Some(2), None, Some(0), Some(7), Some(1)];
-        let conf = [0.8, 0.5, 0.0, 0.9, 1.0];
+        let classes = [Some(2), None, Some(0), Some(7), Some(1), Some(3)];
+        let conf = [0.8, 0.5, 0.0, 0.9, 1.0, -0.5];
         let out = with_logits_from_classes(&g, &classes, Some(&conf), 4);
         let s = out.semantics.expect("logits");
         let probs = |i: usize| softmax(&s.logits[i * 4..(i + 1) * 4]);
         assert!((probs(0)[2] - 0.8).abs() < 1e-5, "{:?}", probs(0));
-        // No class, or one past the channels: uniform.
-        for i in [1, 3] {
-            assert!(probs(i).iter().all(|p| (p - 0.25).abs() < 1e-6));
+        // No class, one past the channels, or a class no view gave (confidence 0): uniform.
+        for i in [1, 3, 2] {
+            assert!(probs(i).iter().all(|p| (p - 0.25).abs() < 1e-6), "{i}");
         }
-        // A confidence outside (0, 1) falls back to the default; 1.0 is no certainty.
-        assert!((probs(2)[0] - FUSED_DEFAULT_CONF as f64).abs() < 1e-5);
+        // A confidence outside [0, 1) falls back to the default; 1.0 is no certainty.
         assert!((probs(4)[1] - FUSED_DEFAULT_CONF as f64).abs() < 1e-5);
+        assert!((probs(5)[3] - FUSED_DEFAULT_CONF as f64).abs() < 1e-5);
         assert!(out.class_ids.is_none());
     }
 
