@@ -1092,7 +1092,7 @@ fn decisions_match_a_plain_transcription() {
             }
         }
         for e in 0..2 {
-            assert!((votes.split[e] - split[e]).abs() < 1e-9, "segment {s}");
+            assert!((votes.votes_for(e) - split[e]).abs() < 1e-9, "segment {s}");
         }
     }
     // Each plane is one segment (its regions never split), and its class is the truth; every
@@ -1106,7 +1106,10 @@ fn decisions_match_a_plain_transcription() {
             Some(object[g] as usize),
             "Gaussian {g}"
         );
-        assert_eq!(c.evidence.dense(g), c.segments[segment[g] as usize].split);
+        assert_eq!(
+            c.evidence.get(g),
+            c.segments[segment[g] as usize].split.as_slice()
+        );
     }
     assert_eq!(c.evidence.rows(), 3);
 }
@@ -1311,7 +1314,7 @@ fn check_report_per_class(c: &Consensus, report: &SegmentReport, names: &[String
         let gaussians: usize = of_class.iter().map(|s| s.gaussians).sum();
         assert_eq!(line.gaussians, gaussians, "{}", line.class);
         for (k, name) in names.iter().enumerate() {
-            let summed: f64 = of_class.iter().map(|s| s.split[k]).sum();
+            let summed: f64 = of_class.iter().map(|s| s.votes_for(k)).sum();
             let listed = line.votes.iter().find(|v| &v.0 == name).map(|v| v.1);
             match listed {
                 Some(v) => assert!((v - summed).abs() <= 5e-4 + 1e-9, "{}: {name}", line.class),
@@ -1326,11 +1329,12 @@ fn check_report_per_class(c: &Consensus, report: &SegmentReport, names: &[String
     );
 }
 
-/// The second-largest vote of a split.
-fn runner_up(split: &[f64]) -> f64 {
-    let mut sorted = split.to_vec();
+/// The second-largest vote of a split (of at least two classes; those it does not list
+/// hold 0).
+fn runner_up(split: &[(u32, f64)]) -> f64 {
+    let mut sorted: Vec<f64> = split.iter().map(|&(_, v)| v).collect();
     sorted.sort_by(|a, b| b.total_cmp(a));
-    sorted[1]
+    sorted.get(1).copied().unwrap_or(0.0)
 }
 
 /// Ties are never broken by class id: by the neighbours' evidence, then by the scene's
@@ -1447,7 +1451,7 @@ fn print_segment_purity(
             let split: Vec<f64> = c.segments[si]
                 .split
                 .iter()
-                .map(|v| (v * 10.0).round() / 10.0)
+                .map(|&(_, v)| (v * 10.0).round() / 10.0)
                 .collect();
             let views = c.segments[si].views;
             eprintln!(
@@ -1834,7 +1838,7 @@ fn own_views_overrule_the_segment_only_when_improbable_for_a_member() {
     let knn = nearest_neighbours(&[[0.0f32; 3]; 6], p.neighbours);
     let c = decide(&obs, &knn, vec![0; 6], 2, &p);
     assert_eq!(c.segments[0].class, Some(0));
-    assert!((c.segments[0].split[0] - 5.6).abs() < 1e-9);
+    assert!((c.segments[0].votes_for(0) - 5.6).abs() < 1e-9);
     assert_eq!(
         c.assignment.class[4],
         Some(0),
@@ -2222,7 +2226,8 @@ fn a_near_tie_goes_by_the_scenes_confusions() {
     let c = decide(&obs, &knn, segment.clone(), 3, &p);
     assert_eq!(c.segments.len(), 3, "one segment per object");
     let b = &c.segments[segment[60] as usize];
-    assert!(b.split[0] == 0.0 && b.split[1] == b.split[2] && (b.split[1] - 10.0).abs() < 1e-9);
+    let votes = |c: usize| b.votes_for(c);
+    assert!(votes(0) == 0.0 && votes(1) == votes(2) && (votes(1) - 10.0).abs() < 1e-9);
     assert!(b.near_tie && b.class == Some(1), "{b:?}");
     for g in 60..120 {
         assert_eq!(c.assignment.class[g], Some(1));

@@ -13,6 +13,7 @@
 //! carries the views' correlated mistakes, as of a wall behind a picture).
 
 use super::consensus_decide::{ConsensusParams, SegmentVotes};
+use super::shared_counts::SparseCounts;
 
 /// Per class, how the views of the segments decided as that class voted (each view's votes
 /// are shares of the segment's observations, so a row sums to the views counted), and the
@@ -45,7 +46,9 @@ impl Confusions {
         let mut votes = vec![vec![0.0; classes]; classes];
         for s in segments {
             if let Some(k) = clear_class(s, p) {
-                votes[k].iter_mut().zip(&s.split).for_each(|(t, v)| *t += v);
+                for &(l, v) in &s.split {
+                    votes[k][l as usize] += v;
+                }
             }
         }
         let prior = mirrored_prior(&votes);
@@ -66,10 +69,10 @@ impl Confusions {
     }
 
     /// ln P(split | the segment is class k): each vote an independent draw from row k.
-    fn log_likelihood(&self, k: usize, split: &[f64], prior_views: f64) -> f64 {
-        (0..split.len())
-            .filter(|&l| split[l] > 0.0)
-            .map(|l| split[l] * self.rate(k, l, prior_views).ln())
+    fn log_likelihood(&self, k: usize, split: &SparseCounts, prior_views: f64) -> f64 {
+        (split.iter())
+            .filter(|&&(_, v)| v > 0.0)
+            .map(|&(l, v)| v * self.rate(k, l as usize, prior_views).ln())
             .sum()
     }
 }
@@ -174,10 +177,9 @@ fn mirrored_prior(votes: &[Vec<f64>]) -> Vec<Vec<f64>> {
 /// region says of the small segments in it (src/fuse/consensus_region_votes.rs).
 pub(crate) fn clear_class(s: &SegmentVotes, p: &ConsensusParams) -> Option<usize> {
     let k = s.class?;
-    let total: f64 = s.split.iter().sum();
     let clear = s.gaussians >= p.min_segment
         && s.views >= p.confusion_min_views
-        && s.split[k] >= p.confusion_min_share * total
+        && s.votes_for(k) >= p.confusion_min_share * s.total()
         && tied_classes(s, p).len() < 2;
     clear.then_some(k)
 }
@@ -187,15 +189,15 @@ pub(crate) fn clear_class(s: &SegmentVotes, p: &ConsensusParams) -> Option<usize
 /// deviation of the difference a fair coin would give over those votes (none where nothing
 /// was voted).
 fn tied_classes(s: &SegmentVotes, p: &ConsensusParams) -> Vec<usize> {
-    let split = &s.split;
-    let top = split.iter().cloned().fold(0.0f64, f64::max);
+    let top = s.split.iter().map(|&(_, v)| v).fold(0.0f64, f64::max);
     let large = s.gaussians >= p.large_tie_gaussians;
     let margin = |votes: f64| match large {
         true => p.tie_margin.max(p.large_tie_z * (top + votes).sqrt()),
         false => p.tie_margin,
     };
-    (0..split.len())
-        .filter(|&c| split[c] > 0.0 && split[c] >= top - margin(split[c]))
+    (s.split.iter())
+        .filter(|&&(_, v)| v > 0.0 && v >= top - margin(v))
+        .map(|&(c, _)| c as usize)
         .collect()
 }
 
@@ -239,7 +241,10 @@ mod tests {
         SegmentVotes {
             gaussians: 50,
             views: split.iter().sum::<f64>().round() as usize,
-            split: split.to_vec(),
+            split: (split.iter().enumerate())
+                .filter(|&(_, &v)| v != 0.0)
+                .map(|(c, &v)| (c as u32, v))
+                .collect(),
             class,
             near_tie: false,
             flagged: false,
@@ -296,7 +301,7 @@ mod tests {
         let p_ab = (9.0 + 10.0 * prior[1]) / 40.0;
         let p_ac = (0.0 + 10.0 * prior[2]) / 40.0;
         let expected = 2.0 * p_aa.ln() + 3.0 * p_ab.ln() + 0.5 * p_ac.ln();
-        let got = c.log_likelihood(0, &[2.0, 3.0, 0.5], 10.0);
+        let got = c.log_likelihood(0, &[(0, 2.0), (1, 3.0), (2, 0.5)], 10.0);
         assert!((got - expected).abs() < 1e-12, "{got} against {expected}");
     }
 

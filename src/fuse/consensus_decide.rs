@@ -235,9 +235,12 @@ pub struct SegmentVotes {
     pub gaussians: usize,
     /// Views that observed any of its Gaussians.
     pub views: usize,
-    /// Per class: the views' votes, each view adding the share of the segment's observed
-    /// Gaussians it gave the class (sums to `views`).
-    pub split: Vec<f64>,
+    /// Per class the views gave it: the views' votes, each view adding the share of the
+    /// segment's observed Gaussians it gave the class (sums to `views`), as (class, votes)
+    /// in class order; the classes no view gave are not listed (a segment's views give few
+    /// of a scene's classes: one vector of every class per segment held 0.8 GB for 5,191
+    /// classes).
+    pub split: Vec<(u32, f64)>,
     pub class: Option<usize>,
     /// Its top classes were within `tie_margin` views' votes (or, being large, within
     /// `large_tie_z` standard deviations): `class` is the one the scene's confusions make
@@ -248,6 +251,18 @@ pub struct SegmentVotes {
     /// gave most of the segment's observations, as (view, class), by view; a view whose
     /// top classes tie is listed with each. Which views to check (`fuse --report`).
     pub view_classes: Vec<(u32, u32)>,
+}
+
+impl SegmentVotes {
+    /// The views' votes for `class` (0 where none gave it).
+    pub fn votes_for(&self, class: usize) -> f64 {
+        count_of(&self.split, class)
+    }
+
+    /// The votes of every class: the views that observed it.
+    pub fn total(&self) -> f64 {
+        self.split.iter().map(|&(_, v)| v).sum()
+    }
 }
 
 /// Segment consensus's result.
@@ -283,13 +298,27 @@ pub struct Consensus {
 /// Allocates nothing: it runs for most Gaussians, on every core, and under the CLI's one
 /// malloc arena each allocation of a worker thread takes the arena's lock.
 fn decisive_argmax(votes: &[f64], mass: &[f64]) -> Option<usize> {
-    let top = votes.iter().cloned().fold(0.0f64, f64::max);
+    decisive_argmax_of(votes.iter().copied().enumerate(), |c| mass[c])
+}
+
+/// [`decisive_argmax`] of votes given as (class, votes) (those not listed: none) and the
+/// mass of a class.
+fn decisive_argmax_of(
+    votes: impl Iterator<Item = (usize, f64)> + Clone,
+    mass: impl Fn(usize) -> f64,
+) -> Option<usize> {
+    let top = votes.clone().map(|(_, v)| v).fold(0.0f64, f64::max);
     if top <= 0.0 {
         return None;
     }
-    let tied = || (0..votes.len()).filter(move |&c| votes[c] == top);
-    let best = tied().map(|c| mass[c]).fold(f64::MIN, f64::max);
-    let mut by_mass = tied().filter(|&c| mass[c] == best);
+    let tied = || {
+        votes
+            .clone()
+            .filter(move |&(_, v)| v == top)
+            .map(|(c, _)| c)
+    };
+    let best = tied().map(&mass).fold(f64::MIN, f64::max);
+    let mut by_mass = tied().filter(|&c| mass(c) == best);
     match (by_mass.next(), by_mass.next()) {
         (Some(c), None) => Some(c),
         _ => None,
@@ -307,46 +336,51 @@ fn segment_votes(
     members: &Groups,
     segments: usize,
     classes: usize,
-) -> (Vec<Vec<f64>>, Vec<Vec<f64>>, Vec<usize>) {
+) -> (Vec<Vec<(u32, f64)>>, Vec<Vec<(u32, f64)>>, Vec<usize>) {
     // Runs of segments of about equal Gaussians: the segments are numbered by first
     // Gaussian, so a scene's walls come early, and in blocks of a fixed count of segments
     // they shared one block (a sixteen-thread model of a capture's votes: 46 of 65 ms one
     // block's, util::scaling).
     let sizes = (0..segments).map(|s| members.group(s).len());
     let runs = runs_of_weight(sizes, GAUSSIANS_PER_RUN);
-    // Each run's votes in one flat table, cut into the segments' vectors on this thread:
-    // under the CLI's one malloc arena every allocation a worker thread's cache of freed
-    // blocks cannot serve (new blocks, as these are) takes the arena's lock, and there are
-    // tens of thousands of segments.
+    // Each run's votes counted in one row of every class a thread reuses and kept by their
+    // nonzero classes in one list, cut into the segments' vectors on this thread: under the
+    // CLI's one malloc arena every allocation a worker thread's cache of freed blocks cannot
+    // serve (new blocks, as these are) takes the arena's lock, and there are tens of
+    // thousands of segments.
     let blocks = parallel_map(runs.len(), |r| {
-        let in_block = runs[r].clone();
-        let cells = in_block.len() * classes;
-        let (mut split, mut mass) = (vec![0.0; cells], vec![0.0; cells]);
-        let mut views = Vec::with_capacity(in_block.len());
+        let (mut split, mut mass) = (vec![0.0; classes], vec![0.0; classes]);
+        let (mut splits, mut masses) = (SparseRowList::default(), SparseRowList::default());
+        let mut views = Vec::with_capacity(runs[r].len());
         let mut sorted = Vec::new();
-        for (i, s) in in_block.enumerate() {
-            let at = i * classes..(i + 1) * classes;
-            let (split, mass) = (&mut split[at.clone()], &mut mass[at]);
+        for s in runs[r].clone() {
+            split.fill(0.0);
+            mass.fill(0.0);
             let rows = || members.group(s).iter().map(|&g| obs.row(g as usize));
             if rows().map(|row| row.len()).sum::<usize>() >= VOTES_BY_VIEW_FROM {
-                views.push(votes_counted_by_view(obs, members.group(s), split, mass));
-                continue;
+                views.push(votes_counted_by_view(
+                    obs,
+                    members.group(s),
+                    &mut split,
+                    &mut mass,
+                ));
+            } else {
+                sorted.clear();
+                for row in rows() {
+                    sorted.extend(row.map(|i| (obs.view[i] as u64) << 32 | obs.label[i] as u64));
+                }
+                sorted.sort_unstable();
+                views.push(votes_of(&sorted, &mut split, &mut mass));
             }
-            sorted.clear();
-            for row in rows() {
-                sorted.extend(row.map(|i| (obs.view[i] as u64) << 32 | obs.label[i] as u64));
-            }
-            sorted.sort_unstable();
-            views.push(votes_of(&sorted, split, mass));
+            splits.push_dense(&split);
+            masses.push_dense(&mass);
         }
-        (split, mass, views)
+        (splits, masses, views)
     });
     let (mut split, mut mass, mut views) = (Vec::new(), Vec::new(), Vec::new());
     for (block_split, block_mass, block_views) in blocks {
-        for i in 0..block_views.len() {
-            split.push(block_split[i * classes..(i + 1) * classes].to_vec());
-            mass.push(block_mass[i * classes..(i + 1) * classes].to_vec());
-        }
+        split.extend(block_split.iter().map(<[_]>::to_vec));
+        mass.extend(block_mass.iter().map(<[_]>::to_vec));
         views.extend(block_views);
     }
     (split, mass, views)
@@ -591,7 +625,7 @@ fn each_gaussian(alone: &Alone, kept: &[Option<usize>], segments: usize) -> Deci
                 decided.from_segment += 1;
                 let split = &alone.segments[s].split;
                 let evidence = &mut decided.evidence;
-                let row = *split_row[s].get_or_insert_with(|| evidence.add_row(split));
+                let row = *split_row[s].get_or_insert_with(|| evidence.add_sparse_row(split));
                 evidence.share(g, row);
             }
             None => {
@@ -651,7 +685,8 @@ fn segment_classes_kept(
             let c = deciding_class(votes, p)?;
             own.fill(0.0);
             add_own_votes(obs, g, &mut own);
-            (!contradicts(&own, c, &votes.split, p)).then_some(c)
+            let split = (votes.votes_for(c), votes.total());
+            (!contradicts(&own, c, split, p)).then_some(c)
         });
         kept.collect::<Vec<_>>()
     });
@@ -736,14 +771,15 @@ impl Alone<'_> {
         let own = &mut own[..self.classes];
         rate.fill(0.0);
         for (_, votes) in decided().filter(|&(c, _)| c == top) {
-            let views: f64 = votes.split.iter().sum();
-            rate.iter_mut()
-                .zip(&votes.split)
-                .for_each(|(r, v)| *r += v / views);
+            let views = votes.total();
+            for &(c, v) in &votes.split {
+                rate[c as usize] += v / views;
+            }
         }
         own.fill(0.0);
         add_own_votes(self.obs, g, own);
-        (!contradicts(own, top, rate, p)).then_some(top)
+        let split = (rate[top], rate.iter().sum());
+        (!contradicts(own, top, split, p)).then_some(top)
     }
 }
 
@@ -753,13 +789,13 @@ impl Alone<'_> {
 /// `contradiction_p`. Such a Gaussian was joined across an edge; a Gaussian seen by a few
 /// flickering views is not (a ceiling Gaussian seen four times as wall, in a ceiling its
 /// views call wall 40% of the time, stays ceiling).
-fn contradicts(own: &[f64], c: usize, split: &[f64], p: &ConsensusParams) -> bool {
+/// `(of_c, total)`: the segment's votes for `c` and of every class.
+fn contradicts(own: &[f64], c: usize, (of_c, total): (f64, f64), p: &ConsensusParams) -> bool {
     let views = own.iter().sum::<f64>().round() as u64;
-    let total: f64 = split.iter().sum();
     if views < p.min_own_views as u64 || total <= 0.0 {
         return false;
     }
-    let (gave_c, rate) = (own[c].round() as u64, split[c] / total);
+    let (gave_c, rate) = (own[c].round() as u64, of_c / total);
     // Most members give their segment's class at its rate or more: their tail is at least a
     // half ([`at_least_the_mean_plus_one`]), never under a test's `contradiction_p`, so its
     // sum (a logarithm and an exponential a term, over most of the scene) is skipped.
@@ -939,16 +975,20 @@ fn reverse_neighbours(knn: &[u32], k: usize, n: usize, rows: &[usize]) -> Revers
     ReverseNeighbours { offsets, from }
 }
 
+/// A segment's summary from its votes and masses by class (the same classes, in class
+/// order).
 fn segment_summary(
-    split: Vec<f64>,
-    mass: &[f64],
+    split: Vec<(u32, f64)>,
+    mass: &SparseCounts,
     gaussians: usize,
     views: usize,
     p: &ConsensusParams,
 ) -> SegmentVotes {
-    let class = decisive_argmax(&split, mass);
-    let total: f64 = split.iter().sum();
-    let runner_up = second_largest(&split).unwrap_or(0.0);
+    let votes = split.iter().map(|&(c, v)| (c as usize, v));
+    let class = decisive_argmax_of(votes.clone(), |c| count_of(mass, c));
+    let total: f64 = split.iter().map(|&(_, v)| v).sum();
+    // The classes not listed hold 0, which a runner-up of none stands for.
+    let runner_up = second_largest(votes.map(|(_, v)| v)).unwrap_or(0.0);
     SegmentVotes {
         gaussians,
         views,
@@ -967,16 +1007,17 @@ fn segment_summary(
 /// The second of `values` in descending order (the largest again where it occurs twice),
 /// without sorting a copy: a scene of fragments holds tens of thousands of segments, each
 /// summarized on one thread.
-fn second_largest(values: &[f64]) -> Option<f64> {
-    let (mut first, mut second) = (f64::NEG_INFINITY, f64::NEG_INFINITY);
-    for &x in values {
+fn second_largest(values: impl Iterator<Item = f64>) -> Option<f64> {
+    let (mut first, mut second, mut count) = (f64::NEG_INFINITY, f64::NEG_INFINITY, 0);
+    for x in values {
         if x > first {
             (first, second) = (x, first);
         } else if x > second {
             second = x;
         }
+        count += 1;
     }
-    (values.len() >= 2).then_some(second)
+    (count >= 2).then_some(second)
 }
 
 /// Adds the own votes of g's neighbours to `sum`: what breaks a tie of g's own views.
@@ -1116,7 +1157,7 @@ mod tests {
                 let mut sorted = values.clone();
                 sorted.sort_by(|a, b| b.total_cmp(a));
                 assert_eq!(
-                    second_largest(&values),
+                    second_largest(values.iter().copied()),
                     sorted.get(1).copied(),
                     "{values:?}"
                 );

@@ -146,7 +146,7 @@ mod tests {
         SegmentVotes {
             gaussians,
             views: 10,
-            split: vec![6.0, 4.0],
+            split: vec![(0, 6.0), (1, 4.0)],
             class: Some(0),
             near_tie: false,
             flagged: true,
