@@ -325,6 +325,9 @@ fn decisive_argmax_of(
     }
 }
 
+/// Per segment, a value per class its views gave, as (class, value) in class order.
+type PerSegment = Vec<Vec<(u32, f64)>>;
+
 /// Per segment: the views' votes (each view once) and the raw observation counts, and how
 /// many views observed it. Each segment's observations are gathered from its members' rows
 /// as keys `view << 32 | label` and sorted on their own, on every core: one sort of all
@@ -336,7 +339,7 @@ fn segment_votes(
     members: &Groups,
     segments: usize,
     classes: usize,
-) -> (Vec<Vec<(u32, f64)>>, Vec<Vec<(u32, f64)>>, Vec<usize>) {
+) -> (PerSegment, PerSegment, Vec<usize>) {
     // Runs of segments of about equal Gaussians: the segments are numbered by first
     // Gaussian, so a scene's walls come early, and in blocks of a fixed count of segments
     // they shared one block (a sixteen-thread model of a capture's votes: 46 of 65 ms one
