@@ -569,6 +569,14 @@ fn empty_inputs_are_errors_and_selections_name_their_class() {
     ]
     .concat());
     assert!(picked.contains("class 'ball' (id 4)"), "{picked}");
+    // A class of the table no Gaussian holds selects nothing: refused, nothing written.
+    let none = arg_in(d, "none.ply");
+    let e = fails(&[&from_fused[..], &["--extract", "ceiling", "--out", &none]].concat());
+    assert!(
+        e.contains("no Gaussian holds class 'ceiling' (id 2)"),
+        "{e}"
+    );
+    assert!(!Path::new(&none).exists());
 
     let empty = d.join("empty.ply");
     let g = read_ply(&room.join("scene.ply")).unwrap();

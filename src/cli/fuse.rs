@@ -262,6 +262,34 @@ fn find_class(table: &ClassTable, key: &str) -> Result<ClassInfo> {
     table.find(key).cloned()
 }
 
+/// Refuses an --extract or --remove that leaves no Gaussian (`selected`): an empty PLY says
+/// nothing (nothing of the class won a Gaussian, or every Gaussian is of it).
+fn check_selected_some(
+    args: &OutputArgs,
+    selected: &Gaussians,
+    class: Option<&ClassInfo>,
+) -> Result<()> {
+    let Some(class) = class.filter(|_| selected.is_empty()) else {
+        return Ok(());
+    };
+    let (name, id) = (&class.name, class.id);
+    match args.extract.is_some() {
+        true => bail!("no Gaussian holds class '{name}' (id {id}): nothing to extract, nothing written"),
+        false => bail!("every Gaussian holds class '{name}' (id {id}): removing it leaves none, nothing written"),
+    }
+}
+
+/// The class --extract or --remove names, among a fusion's classes (`table`: those its
+/// label maps use, not every class of a class table given).
+fn selected_class(args: &OutputArgs, table: &ClassTable) -> Result<Option<ClassInfo>> {
+    let name = args.extract.as_ref().or(args.remove.as_ref());
+    name.map(|name| {
+        find_class(table, name)
+            .context("--extract and --remove choose among the classes the label maps use")
+    })
+    .transpose()
+}
+
 /// Every Gaussian's class, the evidence rows where an output reads them, and the rows'
 /// class table, with the fusion statistics when it was rendered.
 pub(super) struct Evidence {
@@ -402,15 +430,7 @@ pub(super) fn write_fused(
     let segments = consensus.map(|c| c.annotate(&mut g));
     // Everything that can refuse the run, before its first file is written.
     check_assigned(args, &g)?;
-    let selected_class = args.extract.as_ref().or(args.remove.as_ref());
-    // The table of a fusion holds the classes its label maps use, not every class of a
-    // class table given.
-    let selected_class = selected_class
-        .map(|name| {
-            find_class(&table, name)
-                .context("--extract and --remove choose among the classes the label maps use")
-        })
-        .transpose()?;
+    let selected_class = selected_class(args, &table)?;
     let label_views = match &args.render_views {
         Some(_) => Some(LabelViews::open(
             cameras.context("--render-views needs --cameras")?,
@@ -450,6 +470,7 @@ pub(super) fn write_fused(
         Some(_) => select_by_class(args, selected_id, g),
         None => select_members(args, selected_id, g, &mut rows, &totals, &table)?,
     };
+    check_selected_some(args, &selected, selected_class.as_ref())?;
     let assign_s = assign_start.elapsed().as_secs_f64();
 
     write_outputs(args, &selected, &table)?;
@@ -524,6 +545,7 @@ fn select_from_fused(
         .map(|&c| (c == id) == args.output.extract.is_some())
         .collect();
     let selected = g.select(&keep);
+    check_selected_some(&args.output, &selected, Some(&class))?;
     let batch = OutputBatch::open();
     write_outputs(&args.output, &selected, table)?;
     let report = Report {
@@ -625,6 +647,8 @@ fn fuse_views(
     accumulation: Accumulation,
 ) -> Result<Evidence> {
     let data = open_labeled_views(args)?;
+    // Known before the first view: a name no map uses would fail after the whole fusion.
+    selected_class(&args.output, &data.table)?;
     let cfg = fuse_config(args, method, accumulation);
     if method.is_consensus() {
         return fuse_by_consensus(g, data, &cfg);
