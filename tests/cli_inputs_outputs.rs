@@ -600,6 +600,24 @@ fn empty_inputs_are_errors_and_selections_name_their_class() {
         "inspect calls an empty scene a problem"
     );
     assert!(String::from_utf8_lossy(&out.stdout).contains("no Gaussians"));
+    // As it calls a class table of no class, or of two classes of one colour (colour-coded
+    // maps cannot be read through it).
+    for (table, problem) in [
+        (r#"{"classes": []}"#, "lists no class"),
+        (
+            r#"[{"id": 0, "name": "a", "color": [1, 2, 3]}, {"id": 7, "name": "b", "color": [1, 2, 3]}]"#,
+            "classes 0 and 7 share the colour [1, 2, 3]",
+        ),
+    ] {
+        let path = d.join("table.json");
+        std::fs::write(&path, table).unwrap();
+        let out = common::cli::semsplat(&["inspect", &p(&path)]);
+        let report = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            !out.status.success() && report.contains(problem),
+            "{report}"
+        );
+    }
 }
 
 /// `fuse` on the room with `extra`, as owned arguments.

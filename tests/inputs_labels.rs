@@ -336,6 +336,12 @@ fn binary_masks_warn_and_ignore_id_keeps_the_object() {
     let d = open(&cameras, &labels, Some(0)).unwrap();
     assert_eq!(d.classes.user_ids(), [255]);
     assert_eq!(d.warnings.len(), 1);
+    // Its remedy names an id that is neither of the two values (not the 0 given).
+    assert!(
+        d.warnings[0].contains("(e.g. --ignore-id 1000)"),
+        "{}",
+        d.warnings[0]
+    );
 
     // An ignore id that is a class of the table is refused.
     write_class_table(

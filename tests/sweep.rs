@@ -316,7 +316,7 @@ fn sweep_refuses_bad_lists_before_any_run() {
             "whole number of pixels",
         ),
         (
-            &["--noise", "flicker", "--levels", "0,0.2,0"],
+            &["--noise", "flicker", "--levels", "0,0.2,-0"],
             "--levels names '0' twice",
         ),
         (

@@ -593,6 +593,18 @@ fn written_files_read_back_as_generated() {
     .unwrap();
     assert_eq!(again.views, scene.views);
     assert_eq!(again.gaussians, scene.gaussians);
+    // To the bit: the cameras (placed from the room's floats as read back) and the room
+    // written again (without float_roundtrip a float read back was one ULP off).
+    assert_eq!(again.cameras, scene.cameras);
+    let redone = tempfile::tempdir().unwrap();
+    write_synth(redone.path(), &again).unwrap();
+    for file in ["cameras.json", "room.json"] {
+        assert_eq!(
+            std::fs::read(redone.path().join(file)).unwrap(),
+            std::fs::read(d.join(file)).unwrap(),
+            "{file}"
+        );
+    }
 
     // Rewriting with fewer views and no noise leaves no stale files behind.
     let fewer = SynthConfig {
@@ -697,6 +709,19 @@ fn bad_configs_are_clear_errors() {
         let err = generate(&cfg).map(|_| ()).unwrap_err();
         assert!(format!("{err:#}").contains(needle), "{err:#}");
     }
+    // A large room at a fine init grid: bounded before any point is sampled (it took
+    // memory until the allocation failed).
+    let dir = tempfile::tempdir().unwrap();
+    let big = dir.path().join("big.json");
+    std::fs::write(&big, r#"{"size": [200, 200, 200]}"#).unwrap();
+    let cfg = SynthConfig {
+        room: RoomSource::File(big),
+        spacing: 1.0,
+        init_spacing: 0.01,
+        ..base.clone()
+    };
+    let err = format!("{:#}", generate(&cfg).map(|_| ()).unwrap_err());
+    assert!(err.contains("--init-spacing 0.01 m would give"), "{err}");
     let err = RoomSource::from_arg("castle").unwrap_err().to_string();
     assert!(err.contains("office, living, tiny"), "{err}");
     assert!(RoomSource::from_arg("missing_room.json")
@@ -764,7 +789,13 @@ fn cli_writes_a_room_and_rejects_bad_arguments() {
     );
     assert!(out.join("labels_noisy/train_0001.png").is_file());
     assert!(out.join("images/test_0000.png").is_file());
-    // Rerunning into an earlier output is fine; a foreign non-empty folder needs --force.
+    // Rerunning into an earlier output is fine, and removes only the files synth names (a
+    // user's own image in its folders stays); a foreign non-empty folder needs --force.
+    std::fs::copy(
+        out.join("images/test_0000.png"),
+        out.join("images/IMG_0001.png"),
+    )
+    .unwrap();
     let rerun = semsplat()
         .args(["synth", "--preset", "tiny", "--out"])
         .arg(&out)
@@ -775,6 +806,10 @@ fn cli_writes_a_room_and_rejects_bad_arguments() {
     assert!(
         !out.join("labels_noisy/train_0001.png").exists(),
         "stale noisy labels removed"
+    );
+    assert!(
+        out.join("images/IMG_0001.png").is_file(),
+        "the user's image stays"
     );
     std::fs::write(dir.path().join("notes.txt"), "mine").unwrap();
     for (args, needle) in [

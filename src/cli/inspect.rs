@@ -746,6 +746,16 @@ fn inspect_class_table(path: &Path, format: &LabelFormat) -> Result<Report> {
         .collect();
     r.add("entries", rows);
     add_ignored_class_note(&mut r, Some(&table), format);
+    if table.is_empty() {
+        r.problems.push("the table lists no class".to_string());
+    }
+    if let Some((a, b, color)) = table.shared_colour() {
+        r.problems.push(format!(
+            "classes {a} and {b} share the colour {color:?}: colour-coded label maps cannot be \
+             read through this table (fuse, train and eval refuse them), and palette previews \
+             draw both alike"
+        ));
+    }
     Ok(r)
 }
 

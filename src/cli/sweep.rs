@@ -87,7 +87,9 @@ impl NoiseKind {
 
 /// The levels in ascending order (the chart's line runs through them in that order); a
 /// level given twice would run the same work twice and be drawn twice.
-fn sorted_levels(mut levels: Vec<f64>) -> Result<Vec<f64>> {
+fn sorted_levels(levels: Vec<f64>) -> Result<Vec<f64>> {
+    // -0 is level 0 (adding +0 turns it so): compared as text it was another level, run twice.
+    let mut levels: Vec<f64> = levels.into_iter().map(|l| l + 0.0).collect();
     levels.sort_by(f64::total_cmp);
     let items: Vec<String> = levels.iter().map(f64::to_string).collect();
     refuse_repeats("--levels", &items)?;

@@ -88,7 +88,9 @@ pub struct SynthArgs {
     /// --help); writes labels_noisy/.
     #[arg(long, value_name = "SPEC")]
     noise: Option<String>,
-    /// Write into a non-empty folder that is not an earlier synth output.
+    /// Write into a non-empty folder that is not an earlier synth output (files there keep
+    /// their place unless synth writes the same name: train_NNNN.png, test_NNNN.png in
+    /// images/, labels/, instances/, labels_noisy/, vis/, and the room's files).
     #[arg(long)]
     force: bool,
     /// Skip the palette previews under vis/.

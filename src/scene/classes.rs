@@ -164,6 +164,16 @@ impl ClassTable {
         bail!("no class '{key}' in the class table (classes: {names:?})")
     }
 
+    /// The first two classes (ids, in table order) that share a colour, and the colour: a
+    /// colour-coded map cannot be read through such a table.
+    pub fn shared_colour(&self) -> Option<(u32, u32, [u8; 3])> {
+        let mut by_color = std::collections::HashMap::with_capacity(self.len());
+        (self.classes.iter()).find_map(|c| {
+            let other = by_color.insert(c.color, c.id)?;
+            Some((other, c.id, c.color))
+        })
+    }
+
     /// Checks for duplicate ids or names, empty names, and ids that collide with the
     /// 16-bit ignore value.
     pub fn validate(&self) -> Result<()> {

@@ -233,12 +233,20 @@ pub fn generate(config: &SynthConfig) -> Result<SynthScene> {
 pub fn generate_with_progress(config: &SynthConfig, progress: Progress) -> Result<SynthScene> {
     config.validate()?;
     let room = Room::build(config.room.resolve(config.seed)?)?;
-    let estimate = surface_sampling::estimated_samples(&room, config.spacing);
-    ensure!(
-        estimate <= MAX_GAUSSIANS,
-        "spacing {} m would give about {estimate:.0} Gaussians (limit {MAX_GAUSSIANS:.0}); use a larger spacing",
-        config.spacing
-    );
+    // Both grids sample every surface: each is bounded before anything is sampled (an
+    // init grid of a large room at the smallest spacing would take billions of points).
+    for (option, spacing, what) in [
+        ("--spacing", config.spacing, "Gaussians"),
+        ("--init-spacing", config.init_spacing, "init points"),
+    ] {
+        let estimate = surface_sampling::estimated_samples(&room, spacing);
+        ensure!(
+            estimate <= MAX_GAUSSIANS,
+            "{option} {spacing} m would give about {estimate:.0} {what} over the room's {:.0} m² \
+             of surfaces (limit {MAX_GAUSSIANS:.0}); use a larger {option}",
+            surface_sampling::estimated_samples(&room, 1.0)
+        );
+    }
     let root = Rng::new(config.seed);
     let view_cfg = views::ViewConfig {
         width: config.width,

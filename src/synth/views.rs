@@ -33,6 +33,19 @@ pub fn view_name(split: Split, index: usize) -> String {
     }
 }
 
+/// Whether `file` (a file name) is a view's PNG as synth names them: `train_0003.png`,
+/// `test_0012.png` (four digits or more). A rerun removes only such files: a user's own
+/// images beside them stay.
+pub fn is_view_png(file: &str) -> bool {
+    let Some(stem) = file.strip_suffix(".png") else {
+        return false;
+    };
+    let index = stem
+        .strip_prefix("train_")
+        .or_else(|| stem.strip_prefix("test_"));
+    index.is_some_and(|i| i.len() >= 4 && i.bytes().all(|b| b.is_ascii_digit()))
+}
+
 /// `cfg.train` train views, then `cfg.test` test views.
 pub fn place_cameras(room: &Room, cfg: &ViewConfig, rng: &Rng) -> Result<Vec<Camera>> {
     let targets = Targets::new(room);
@@ -158,6 +171,33 @@ fn choose_pose(room: &Room, targets: &Targets, rng: &mut Rng) -> Result<(DVec3, 
 mod tests {
     use super::*;
     use crate::synth::presets::preset;
+
+    /// Only the names synth gives views are its own.
+    #[test]
+    fn view_pngs_are_the_names_synth_gives() {
+        for ours in [
+            "train_0000.png",
+            "test_0012.png",
+            "train_12345.png",
+            &view_name(Split::Test, 3),
+        ] {
+            let name = if ours.ends_with(".png") {
+                ours.to_string()
+            } else {
+                format!("{ours}.png")
+            };
+            assert!(is_view_png(&name), "{name}");
+        }
+        for theirs in [
+            "IMG_0001.png",
+            "train_01.png",
+            "train_0001.jpg",
+            "train_000a.png",
+            "photo.png",
+        ] {
+            assert!(!is_view_png(theirs), "{theirs}");
+        }
+    }
 
     #[test]
     fn look_at_centers_the_target_with_z_up() {

@@ -15,6 +15,7 @@ use image::{ExtendedColorType, ImageEncoder};
 use serde::Serialize;
 
 use super::raycast::ViewTruth;
+use super::views::is_view_png;
 use super::{Progress, SynthScene};
 use crate::scene::cameras_json::write_semsplat_cameras;
 use crate::scene::classes::write_class_table;
@@ -35,7 +36,8 @@ pub const OUTPUT_LAYOUT: &str = "  scene.ply              ground-truth Gaussians
   synth.json             the settings of this run and the resulting counts
   images/NAME.png        ray-cast RGB (NAME = train_0000.., test_0000..)
   labels/NAME.png        true class ids (8-bit gray PNG, 255 = ignore: pixel sees nothing)
-  instances/NAME.png     true instance ids (8-bit, or 16-bit when >= 255 instances)
+  instances/NAME.png     true instance ids (8-bit gray, 255 = ignore; a view showing an id
+                         >= 255 is written 16-bit, 65535 = ignore: map by map)
   labels_noisy/NAME.png  noisy class ids for every view, with --noise (evaluate on labels/)
   labels_noisy/noise.json  spec, seed, the consistently mislabeled objects and measured rates
   vis/labels*/NAME.png   palette-colored previews of the label maps (unless --no-previews)";
@@ -236,9 +238,9 @@ fn summary(scene: &SynthScene) -> RunSummary<'_> {
 
 /// Removes what an earlier run wrote that could be read with this run's files: its cameras
 /// and summary first (a folder without them is no room, whatever else is left), then every
-/// PNG in our view folders (this run rewrites the views it has; the others were an earlier,
-/// larger run's, or noisy labels or previews this run does not produce) and an outdated
-/// noise.json.
+/// view PNG in our view folders, named as synth names views (this run rewrites the views it
+/// has; the others were an earlier, larger run's, or noisy labels or previews this run does
+/// not produce; other files, a user's, stay) and an outdated noise.json.
 fn remove_previous_run(dir: &Path, scene: &SynthScene) -> Result<()> {
     for file in [CAMERAS_FILE, SUMMARY_FILE] {
         let path = dir.join(file);
@@ -263,7 +265,8 @@ fn remove_previous_run(dir: &Path, scene: &SynthScene) -> Result<()> {
         let mut stale: Vec<PathBuf> = Vec::new();
         for entry in entries.flatten() {
             let path = entry.path();
-            if path.extension().is_some_and(|e| e == "png") && path.is_file() {
+            let ours = (path.file_name().and_then(|n| n.to_str())).is_some_and(is_view_png);
+            if ours && path.is_file() {
                 stale.push(path);
             }
         }

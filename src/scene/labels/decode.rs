@@ -412,18 +412,15 @@ fn color_lookup(h: &PngHeader, table: Option<&ClassTable>) -> Result<HashMap<[u8
             IGNORE_U8
         );
     };
-    let mut by_color = HashMap::with_capacity(table.len());
-    for c in &table.classes {
-        if let Some(other) = by_color.insert(c.color, c.id as u16) {
-            bail!(
-                "is a colour-coded map, but classes {other} and {} of the class table share the \
-                 colour {:?}: colours must be unique to read it",
-                c.id,
-                c.color
-            );
-        }
+    if let Some((a, b, color)) = table.shared_colour() {
+        bail!(
+            "is a colour-coded map, but classes {a} and {b} of the class table share the colour \
+             {color:?}: colours must be unique to read it"
+        );
     }
-    Ok(by_color)
+    Ok((table.classes.iter())
+        .map(|c| (c.color, c.id as u16))
+        .collect())
 }
 
 /// The class of a colour; black that is no class's colour is unlabeled (as semsplat's own

@@ -474,6 +474,12 @@ pub fn binary_mask_warning(
     if ignored_pixels == 0 {
         return None;
     }
+    // Neither of the two values: not the class, not the ignore id in effect.
+    let ignoring = format.ignore_id.map(u32::from);
+    let suggested = [1000, 65534, 1001]
+        .into_iter()
+        .find(|&v| v != *only && Some(v) != ignoring)
+        .expect("three candidates, two excluded at most");
     Some(format!(
         "warning: label folder {} holds only two values: class {only} and the ignore id ({}), \
          whose pixels count as unlabeled. If these are binary masks (e.g. SAM's 0/255), the \
@@ -481,7 +487,7 @@ pub fn binary_mask_warning(
          (e.g. --ignore-id {}) to keep both values as classes",
         dir.display(),
         format.describe_ignore(),
-        if *only == 0 { 65534 } else { 0 }
+        suggested
     ))
 }
 
