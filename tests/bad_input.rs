@@ -369,10 +369,14 @@ fn broken_colmap_models_are_errors() {
         "{err}"
     );
 
-    write_tmp(dir.path(), "cameras.txt", "1 PINHOLE 100 80 0 90 50 40\n");
-    write_tmp(dir.path(), "images.txt", "1 1 0 0 0 0 0 0 1 a.png\n\n");
+    // Named by the model's ids (image 7 of camera 3), not a position in a sorted list.
+    write_tmp(dir.path(), "cameras.txt", "3 PINHOLE 100 80 0 90 50 40\n");
+    write_tmp(dir.path(), "images.txt", "7 1 0 0 0 0 0 0 3 a.png\n\n");
     let err = error_of(read_colmap_model(dir.path()));
-    assert!(err.contains("fx = 0"), "{err}");
+    assert!(
+        err.contains("fx = 0") && err.contains("image 7 ('a.png') of camera 3"),
+        "{err}"
+    );
 
     write_tmp(dir.path(), "images.txt", "# no images\n");
     let err = error_of(read_colmap_model(dir.path()));

@@ -1327,6 +1327,11 @@ fn check_report_per_class(c: &Consensus, report: &SegmentReport, names: &[String
         c.segments.len(),
         "segments of at least one"
     );
+    assert_eq!(
+        report.undecided,
+        c.segments.len() - decided.len(),
+        "those per_class does not list"
+    );
 }
 
 /// The second-largest vote of a split (of at least two classes; those it does not list

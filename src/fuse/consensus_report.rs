@@ -51,6 +51,9 @@ pub struct ClassSplit {
 pub struct SegmentReport {
     /// Segments of at least `min_segment` Gaussians.
     pub segments: usize,
+    /// Of those, the ones no class was decided for (their votes tied): `per_class` lists
+    /// the others.
+    pub undecided: usize,
     /// Gaussians whose class came from their segment, those of small segments that took
     /// their neighbours' segments' class, and those no view observed that took their
     /// neighbours' class (the rest decided by their own views).
@@ -113,6 +116,9 @@ pub fn segment_report(
     SegmentReport {
         segments: (consensus.segments.iter())
             .filter(|s| s.gaussians >= min_segment)
+            .count(),
+        undecided: (consensus.segments.iter())
+            .filter(|s| s.gaussians >= min_segment && s.class.is_none())
             .count(),
         from_segment: consensus.from_segment,
         from_neighbour_segments: consensus.from_neighbour_segments,

@@ -228,7 +228,7 @@ pub fn colmap_to_cameras(cams: &[ColmapCamera], images: &[ColmapImage]) -> Resul
         };
         let rotation = rotation_from_qvec(img.qvec)
             .with_context(|| format!("image {} ('{}')", img.id, img.name))?;
-        out.push(Camera {
+        let camera = Camera {
             name: img.name.clone(), // the image path until name_by_image_paths
             width,
             height,
@@ -239,7 +239,12 @@ pub fn colmap_to_cameras(cams: &[ColmapCamera], images: &[ColmapImage]) -> Resul
             rotation,
             translation: DVec3::from_array(img.tvec),
             split: Split::Train,
-        });
+        };
+        // Named by the model's own ids: after sorting, a position in the list is neither.
+        camera
+            .validate()
+            .with_context(|| format!("image {} ('{}') of camera {}", img.id, img.name, cam.id))?;
+        out.push(camera);
     }
     if out.is_empty() {
         bail!("the model has no images");
