@@ -115,10 +115,15 @@ impl Room {
                 });
             }
         }
+        // Instance ids are 16-bit in the instance maps (65535: no instance), the room's
+        // shell (floor, walls, ceiling) among them.
         ensure!(
             instances.len() < u16::MAX as usize,
-            "too many objects ({})",
-            instances.len()
+            "too many objects ({}; with the room's {} shell instances at most {} objects: \
+             instance maps hold 16-bit ids)",
+            spec.objects.len(),
+            instances.len() - spec.objects.len(),
+            u16::MAX as usize - 1 - (instances.len() - spec.objects.len())
         );
         let confusions = ConfusionTable::new(&classes, &spec.confusions)?;
         let bounds: Vec<Aabb> = primitives[SHELL..].iter().map(|p| p.shape.aabb()).collect();
