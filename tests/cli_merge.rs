@@ -191,6 +191,20 @@ fn merge_refuses_parts_that_do_not_belong_together() {
     let err = merge(&[&a0, &a1, &a1]);
     assert!(err.contains("shard 1/2 is given twice"), "{err}");
 
+    // A class to extract that no part holds is named before the parts are summed.
+    let err = fails(&[
+        "merge",
+        &a0,
+        &a1,
+        "--scene",
+        &scene,
+        "--extract",
+        "kite",
+        "--out",
+        &out,
+    ]);
+    assert!(err.contains("no class 'kite'"), "{err}");
+
     // Another scene (here: another file) is refused by its digest.
     let err = fails(&["merge", &a0, &a1, "--scene", &cameras, "--out", &out]);
     assert!(

@@ -721,7 +721,10 @@ fn bad_configs_are_clear_errors() {
         ..base.clone()
     };
     let err = format!("{:#}", generate(&cfg).map(|_| ()).unwrap_err());
-    assert!(err.contains("--init-spacing 0.01 m would give"), "{err}");
+    assert!(
+        err.contains("--init-spacing 0.01 m would give") && err.contains("of 'wall_"),
+        "{err}"
+    );
     let err = RoomSource::from_arg("castle").unwrap_err().to_string();
     assert!(err.contains("office, living, tiny"), "{err}");
     assert!(RoomSource::from_arg("missing_room.json")

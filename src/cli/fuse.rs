@@ -281,7 +281,7 @@ fn check_selected_some(
 
 /// The class --extract or --remove names, among a fusion's classes (`table`: those its
 /// label maps use, not every class of a class table given).
-fn selected_class(args: &OutputArgs, table: &ClassTable) -> Result<Option<ClassInfo>> {
+pub(super) fn selected_class(args: &OutputArgs, table: &ClassTable) -> Result<Option<ClassInfo>> {
     let name = args.extract.as_ref().or(args.remove.as_ref());
     name.map(|name| {
         find_class(table, name)

@@ -9,7 +9,7 @@ use std::time::Instant;
 use anyhow::{ensure, Context, Result};
 use clap::Args;
 
-use super::fuse::{write_fused, Evidence, OutputArgs, Provenance};
+use super::fuse::{selected_class, write_fused, Evidence, OutputArgs, Provenance};
 use super::progress::{follow, views_bar};
 use super::Input;
 use semsplat::dataset::{load_split_cameras, Dataset};
@@ -211,6 +211,8 @@ pub fn run(mut args: MergeArgs) -> Result<()> {
             cameras.display()
         );
     }
+    // Before the parts are summed: a name no part's classes hold would fail at the end.
+    selected_class(&args.output, &key.classes)?;
     let g = read_scene(&scene_file)?;
     let method = Method::from_key(&key.method)
         .with_context(|| format!("the parts name an unknown method '{}'", key.method))?;

@@ -240,12 +240,15 @@ pub fn generate_with_progress(config: &SynthConfig, progress: Progress) -> Resul
         ("--init-spacing", config.init_spacing, "init points"),
     ] {
         let estimate = surface_sampling::estimated_samples(&room, spacing);
-        ensure!(
-            estimate <= MAX_GAUSSIANS,
-            "{option} {spacing} m would give about {estimate:.0} {what} over the room's {:.0} m² \
-             of surfaces (limit {MAX_GAUSSIANS:.0}); use a larger {option}",
-            surface_sampling::estimated_samples(&room, 1.0)
-        );
+        if estimate > MAX_GAUSSIANS {
+            let (part_of, area) = surface_sampling::largest_part(&room).unwrap_or(("", 0.0));
+            bail!(
+                "{option} {spacing} m would give about {estimate:.2e} {what} over the room's \
+                 {:.2e} m² of surfaces (limit {MAX_GAUSSIANS:.2e}; the largest part, of \
+                 '{part_of}', has {area:.2e} m²); use a larger {option}, or smaller surfaces",
+                surface_sampling::estimated_samples(&room, 1.0)
+            );
+        }
     }
     let root = Rng::new(config.seed);
     let view_cfg = views::ViewConfig {

@@ -75,6 +75,20 @@ pub fn estimated_samples(room: &Room, spacing: f64) -> f64 {
     area / (spacing * spacing)
 }
 
+/// The name of the object (instance) whose part has the largest surface, and that area:
+/// what to name when a room's surfaces are too large to sample.
+pub fn largest_part(room: &Room) -> Option<(&str, f64)> {
+    let areas = room.primitives.iter().map(|p| (p, surface_area(&p.shape)));
+    let (part, area) = areas.max_by(|a, b| a.1.total_cmp(&b.1))?;
+    let name = room
+        .instances
+        .iter()
+        .find(|i| i.id == part.instance)?
+        .name
+        .as_str();
+    Some((name, area))
+}
+
 fn surface_area(shape: &Shape) -> f64 {
     match shape {
         Shape::Quad(q) => 4.0 * q.half.x * q.half.y,
