@@ -88,13 +88,18 @@ impl Dataset {
 
     /// Whether camera `view` has a label map.
     pub fn has_label_map(&self, view: usize) -> bool {
-        self.entry_of_camera.get(view).copied().flatten().is_some()
+        self.entry_of(view).is_some()
+    }
+
+    /// The label map entry of camera `view`, if it has one.
+    fn entry_of(&self, view: usize) -> Option<usize> {
+        self.entry_of_camera.get(view).copied().flatten()
     }
 
     /// The label map of camera `view` as compact class indices ([`NO_LABEL`] where there is
     /// none); None when the camera has no label map.
     pub fn compact_labels(&self, view: usize) -> Result<Option<Vec<u32>>> {
-        match self.entry_of_camera.get(view).copied().flatten() {
+        match self.entry_of(view) {
             Some(entry) => Ok(Some(
                 self.classes
                     .compact_labels(&self.labels.load(entry)?.labels),

@@ -628,13 +628,13 @@ fn each_gaussian(alone: &Alone, kept: &[Option<usize>], segments: usize) -> Deci
                 decided.from_segment += 1;
                 let split = &alone.segments[s].split;
                 let evidence = &mut decided.evidence;
-                let row = *split_row[s].get_or_insert_with(|| evidence.add_sparse_row(split));
+                let row = *split_row[s].get_or_insert_with(|| evidence.add_row(split));
                 evidence.share(g, row);
             }
             None => {
                 let (c, counts, by_neighbours) = decided_alone.next().expect("decided alone");
                 decided.class[g] = c;
-                decided.evidence.set_sparse(g, counts);
+                decided.evidence.set(g, counts);
                 // Unobserved ones are counted where their neighbours decide them below.
                 decided.from_neighbour_segments +=
                     usize::from(by_neighbours && !obs.row(g).is_empty());
@@ -872,7 +872,7 @@ fn fill_unobserved(
         frontier.clear();
         for ((g, c), counts) in found.into_iter().zip(found_counts.iter()) {
             (class[g], pending[g]) = (Some(c), false);
-            evidence.set_sparse(g, counts);
+            evidence.set(g, counts);
             frontier.extend(listed_by.row(g).filter(|&f| pending[f]));
         }
         frontier.sort_unstable();
@@ -1148,6 +1148,7 @@ impl RowPosterior {
 mod tests {
     use super::*;
     use crate::fuse::consensus_segments::ViewEntry;
+    use crate::fuse::shared_counts::nonzero;
     use crate::util::Rng;
 
     /// The second largest is what sorting descending puts second, ties and all.
@@ -1260,6 +1261,7 @@ mod tests {
         let mut evidence = SharedCounts::zeros(classes, n);
         let draw =
             |rng: &mut Rng| -> Vec<f64> { (0..classes).map(|_| rng.below(4) as f64).collect() };
+        let draw = |rng: &mut Rng| nonzero(&draw(rng));
         let shared: Vec<u32> = (0..20).map(|_| evidence.add_row(&draw(&mut rng))).collect();
         let mut class = vec![None; n];
         for (g, class) in class.iter_mut().enumerate() {

@@ -23,6 +23,14 @@ pub fn count_of(row: &SparseCounts, class: usize) -> f64 {
     }
 }
 
+/// The nonzero counts of a row of every class, for tests that write rows out in full.
+#[cfg(test)]
+pub(crate) fn nonzero(counts: &[f64]) -> Vec<(u32, f64)> {
+    let mut row = Vec::new();
+    push_nonzero(counts, &mut row);
+    row
+}
+
 /// Appends the nonzero counts of a dense row (`counts[c]` the count of class c) to `out`.
 fn push_nonzero(counts: &[f64], out: &mut Vec<(u32, f64)>) {
     let nonzero = counts.iter().enumerate().filter(|&(_, &x)| x != 0.0);
@@ -84,18 +92,9 @@ impl SharedCounts {
         }
     }
 
-    /// Adds a row of counts (`classes` long, one per class) no Gaussian holds yet; returns
-    /// its index.
-    pub fn add_row(&mut self, counts: &[f64]) -> u32 {
-        assert_eq!(counts.len(), self.classes, "a row of counts per class");
-        let start = self.entries.len();
-        push_nonzero(counts, &mut self.entries);
-        self.spans.push((start, self.entries.len()));
-        (self.spans.len() - 1) as u32
-    }
-
-    /// Adds a row given by its nonzero counts, in class order; returns its index.
-    pub fn add_sparse_row(&mut self, row: &SparseCounts) -> u32 {
+    /// Adds a row no Gaussian holds yet, given by its nonzero counts in class order;
+    /// returns its index.
+    pub fn add_row(&mut self, row: &SparseCounts) -> u32 {
         debug_assert!(row.windows(2).all(|w| w[0].0 < w[1].0), "in class order");
         debug_assert!(row
             .iter()
@@ -111,20 +110,12 @@ impl SharedCounts {
         self.row_of[g] = row;
     }
 
-    /// Gaussian `g` holds counts of its own (all zeros: the shared row of zeros, as for
-    /// a Gaussian no view observed).
-    pub fn set(&mut self, g: usize, counts: &[f64]) {
-        self.row_of[g] = match counts.iter().all(|&c| c == 0.0) {
-            true => 0,
-            false => self.add_row(counts),
-        };
-    }
-
-    /// [`SharedCounts::set`] by the nonzero counts, in class order.
-    pub fn set_sparse(&mut self, g: usize, row: &SparseCounts) {
+    /// Gaussian `g` holds counts of its own, its nonzero ones in class order (none: the
+    /// shared row of zeros, as for a Gaussian no view observed).
+    pub fn set(&mut self, g: usize, row: &SparseCounts) {
         self.row_of[g] = match row.is_empty() {
             true => 0,
-            false => self.add_sparse_row(row),
+            false => self.add_row(row),
         };
     }
 
@@ -135,7 +126,7 @@ impl SharedCounts {
     pub fn replace_own(&mut self, g: usize, row: &SparseCounts) {
         let own = self.row_of[g] as usize;
         if own == 0 {
-            return self.set_sparse(g, row);
+            return self.set(g, row);
         }
         let (start, end) = self.spans[own];
         if row.len() <= end - start {
@@ -260,12 +251,12 @@ mod tests {
             vec![0.0, 4.0, 0.0],
         ];
         let mut counts = SharedCounts::zeros(3, vectors.len());
-        let segment = counts.add_row(&vectors[0]);
+        let segment = counts.add_row(&nonzero(&vectors[0]));
         counts.share(0, segment);
         counts.share(2, segment);
-        counts.set(1, &vectors[1]);
-        counts.set_sparse(4, &[(1, 4.0)]);
-        counts.set(3, &vectors[3]); // zeros: the shared row
+        counts.set(1, &nonzero(&vectors[1]));
+        counts.set(4, &[(1, 4.0)]);
+        counts.set(3, &nonzero(&vectors[3])); // zeros: the shared row
         assert_eq!(counts.rows(), 4);
         assert_eq!(counts.entries.len(), 5, "the nonzero counts alone");
         for (g, v) in vectors.iter().enumerate() {
