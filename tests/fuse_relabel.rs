@@ -788,7 +788,8 @@ fn rule_by_hand(
 }
 
 /// Each of the lift's classes is FlashSplat's where the Gaussian's footprint reaches
-/// `min_mass`, else its consensus class; both happen to many Gaussians.
+/// `min_mass`, else its consensus class; both happen to many Gaussians. Its evidence is
+/// the footprints' where FlashSplat decided, else the consensus counts.
 fn check_classes_follow_the_rule(
     lift: &ConsensusLift,
     rule: &RuleByHand,
@@ -810,6 +811,11 @@ fn check_classes_follow_the_rule(
             false => cons[g],
         };
         assert_eq!(lift.assignment.class[g], want, "Gaussian {g}");
+        let evidence = match f.is_some() && mass >= params.relabel.min_mass {
+            true => (0..classes).map(|c| footprints.get(c, g)).collect(),
+            false => lift.consensus.evidence.dense(g),
+        };
+        assert_eq!(lift.evidence.dense(g), evidence, "Gaussian {g}'s evidence");
         if want != cons[g] {
             moved += 1;
         } else {

@@ -92,7 +92,7 @@ pub(super) fn fuse_by_consensus(
     };
     Ok(Evidence {
         assignment: lift.assignment,
-        rows: Some(lift.evidence.into_rows()),
+        rows: Some(Box::new(lift.evidence)),
         table: data.table,
         stats: Some(lift.stats),
         consensus: Some(outputs),

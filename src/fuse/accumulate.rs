@@ -19,6 +19,7 @@ use super::method::Method;
 use super::neighbours::nearest_neighbours;
 use super::partial::{fixed_to_f64, EvidenceKind, RawEvidence};
 use super::scores::ClassScores;
+use super::shared_counts::SumsByGaussian;
 use crate::contract::params::{CenterParams, ContribParams};
 use crate::gpu::kernel_table::ids;
 use crate::gpu::kernel_table::Kernel;
@@ -567,6 +568,33 @@ pub fn accumulate(
         download_rows(gpu, pass, cfg, 0..pass.rows, dst)
     })?;
     Ok((scores, stats))
+}
+
+/// [`accumulate`] with the evidence kept per Gaussian by its nonzero sums, a row downloaded
+/// at a time: for a method's evidence over many classes, of which each Gaussian sees few
+/// (`--relabel`'s second visit of the views).
+pub fn accumulate_by_gaussian(
+    gpu: &Gpu,
+    scene: &GpuScene,
+    cams: &[Camera],
+    labels: &dyn LabelSource,
+    classes: usize,
+    cfg: &FuseConfig,
+    progress: impl FnMut(usize, usize),
+) -> Result<(SumsByGaussian<f64>, FuseStats)> {
+    let n = scene.n as usize;
+    let (mut sums, mut row) = (SumsByGaussian::new(n), vec![0.0; n]);
+    let stats = accumulate_passes(gpu, scene, cams, labels, classes, cfg, progress, |pass| {
+        for r in 0..pass.rows {
+            download_rows(gpu, pass, cfg, r..r + 1, &mut row)?;
+            let class = (pass.row_begin + r) as u32;
+            for (g, &x) in row.iter().enumerate().filter(|&(_, &x)| x != 0.0) {
+                sums.add(g, class, x);
+            }
+        }
+        Ok(())
+    })?;
+    Ok((sums, stats))
 }
 
 /// Receives the evidence rows of [`accumulate_assigned`] one at a time, in class order:

@@ -22,7 +22,7 @@ use super::consensus_segments::Observations;
 use super::consensus_surface::{GaussianShapes, SurfaceNormals};
 use super::method::Method;
 use super::neighbours::nearest_neighbours;
-use super::scores::{ClassScores, EvidenceRows};
+use super::scores::ClassScores;
 use super::shared_counts::SharedCounts;
 use crate::gpu::Gpu;
 use crate::render::GpuScene;
@@ -144,36 +144,10 @@ pub struct ConsensusLift {
     /// The segments, their vote splits and flags, and each Gaussian's entropy.
     pub consensus: Consensus,
     /// Per Gaussian, the evidence its class is the argmax of: what `--save-contrib` writes.
-    pub evidence: LiftEvidence,
+    /// The consensus counts ([`Consensus::evidence`], shared); with `--relabel`, FlashSplat's
+    /// sums over the relabeled views where they decided, else the consensus counts.
+    pub evidence: Arc<SharedCounts>,
     pub stats: FuseStats,
-}
-
-/// A consensus lift's evidence per Gaussian.
-#[derive(Clone, Debug, PartialEq)]
-pub enum LiftEvidence {
-    /// The consensus counts ([`Consensus::evidence`], shared).
-    Consensus(Arc<SharedCounts>),
-    /// `--relabel`: FlashSplat's over the relabeled views where it decided, else the
-    /// consensus counts; most Gaussians hold a column of their own.
-    Relabeled(ClassScores),
-}
-
-impl LiftEvidence {
-    /// As a matrix [classes][n].
-    pub fn into_scores(self) -> ClassScores {
-        match self {
-            LiftEvidence::Consensus(counts) => counts.to_scores(),
-            LiftEvidence::Relabeled(scores) => scores,
-        }
-    }
-
-    /// Read a class row at a time (the consensus counts never as a whole matrix).
-    pub fn into_rows(self) -> Box<dyn EvidenceRows> {
-        match self {
-            LiftEvidence::Consensus(counts) => Box::new(counts),
-            LiftEvidence::Relabeled(scores) => Box::new(scores),
-        }
-    }
 }
 
 /// Lifts the labels by `cfg.method`, one of the consensus methods ([`Method::is_consensus`]);
@@ -193,7 +167,7 @@ pub fn lift_by_consensus(
         return fuse_relabeled(input, cfg, params, progress);
     }
     let run = consensus_run(input, cfg, params, Kept::Observations, progress)?;
-    let evidence = LiftEvidence::Consensus(Arc::clone(&run.consensus.evidence));
+    let evidence = Arc::clone(&run.consensus.evidence);
     Ok(ConsensusLift {
         assignment: run.consensus.assignment.clone(),
         consensus: run.consensus,
@@ -232,5 +206,5 @@ pub fn consensus_evidence(
         classes,
     };
     let lift = lift_by_consensus(&input, cfg, &params, &mut |_, _| {})?;
-    Ok((lift.evidence.into_scores(), lift.stats))
+    Ok((lift.evidence.to_scores(), lift.stats))
 }

@@ -13,20 +13,26 @@
 //! carries the views' correlated mistakes, as of a wall behind a picture).
 
 use super::consensus_decide::{ConsensusParams, SegmentVotes};
-use super::shared_counts::SparseCounts;
+use super::shared_counts::{count_of, SparseCounts, SumsByGaussian};
 
 /// Per class, how the views of the segments decided as that class voted (each view's votes
 /// are shares of the segment's observations, so a row sums to the views counted), and the
-/// prior each row is smoothed toward.
+/// prior each row is smoothed toward ([`Confusions::prior`]). Kept by the votes given: a
+/// table of every pair of classes cost K² values, three tables of 0.22 GB each at 5,191
+/// classes, nearly all of them one value per row.
 #[derive(Clone, Debug, PartialEq)]
 struct Confusions {
-    /// `votes[k][l]`: votes for class l from the views of segments decided as class k.
-    votes: Vec<Vec<f64>>,
-    /// `prior[k][l]`: P(a view says l | the segment is k) before the row's own votes.
-    prior: Vec<Vec<f64>>,
+    /// `votes[k]`: (l, votes for class l from the views of segments decided as class k), in
+    /// class order.
+    votes: Vec<Vec<(u32, f64)>>,
     /// `totals[k]`: row k's votes summed, once (each rate read it again: the table of K²
     /// rates cost K³, 140 s of a fusion at 5,000 classes).
     totals: Vec<f64>,
+    /// `mistaken[k]`: the share of a k's views the prior expects to call it another class.
+    mistaken: Vec<f64>,
+    /// `taken_sum[k]`: [`Confusions::taken_for`] summed over every class, which the prior's
+    /// share of k's mistakes for each class is divided by.
+    taken_sum: Vec<f64>,
 }
 
 /// A class the views take for a label more often than this is one the label may be the
@@ -36,28 +42,43 @@ struct Confusions {
 pub const LOOK_ALIKE_RATE: f64 = 0.03;
 
 /// Spread over the other classes and added to every rate at which one class's views call
-/// another (`mirrored_prior`), so a confusion no clear segment showed is unlikely, not
+/// another ([`Confusions::prior`]), so a confusion no clear segment showed is unlikely, not
 /// impossible; also the least share of a row's prior the other classes get.
 const UNSEEN_CONFUSION: f64 = 0.01;
 
 impl Confusions {
     /// From the segments decided clearly ([`clear_class`]).
     fn estimate(segments: &[SegmentVotes], classes: usize, p: &ConsensusParams) -> Self {
-        let mut votes = vec![vec![0.0; classes]; classes];
+        let mut votes = SumsByGaussian::new(classes);
         for s in segments {
             if let Some(k) = clear_class(s, p) {
                 for &(l, v) in &s.split {
-                    votes[k][l as usize] += v;
+                    votes.add(k, l, v);
                 }
             }
         }
-        let prior = mirrored_prior(&votes);
-        let totals = votes.iter().map(|row| row.iter().sum()).collect();
-        Confusions {
+        let votes: Vec<Vec<(u32, f64)>> = votes.into_sorted_rows().collect();
+        let totals: Vec<f64> = votes
+            .iter()
+            .map(|row| row.iter().map(|e| e.1).sum())
+            .collect();
+        let mut c = Confusions {
             votes,
-            prior,
             totals,
-        }
+            mistaken: Vec::new(),
+            taken_sum: Vec::new(),
+        };
+        (c.mistaken, c.taken_sum) = c.mirrored_prior();
+        c
+    }
+
+    fn classes(&self) -> usize {
+        self.votes.len()
+    }
+
+    /// Votes for class l from the views of segments decided as class k.
+    fn vote(&self, k: usize, l: usize) -> f64 {
+        count_of(&self.votes[k], l)
     }
 
     /// P(a view votes l | the segment is class k): row k's votes smoothed toward its prior
@@ -65,7 +86,7 @@ impl Confusions {
     /// neither trusted nor ruled out.
     fn rate(&self, k: usize, l: usize, prior_views: f64) -> f64 {
         let total = self.totals[k] + prior_views;
-        (self.votes[k][l] + prior_views * self.prior[k][l]) / total
+        (self.vote(k, l) + prior_views * self.prior(k, l)) / total
     }
 
     /// ln P(split | the segment is class k): each vote an independent draw from row k.
@@ -74,6 +95,130 @@ impl Confusions {
             .filter(|&&(_, v)| v > 0.0)
             .map(|&(l, v)| v * self.rate(k, l as usize, prior_views).ln())
             .sum()
+    }
+
+    /// The least share of k's mistakes the prior gives each other class.
+    fn floor(&self) -> f64 {
+        UNSEEN_CONFUSION / (self.classes() - 1) as f64
+    }
+
+    /// How often the views of the l's call them k (of the l's own votes; `floor` added), for
+    /// l other than k: what k is taken for in the prior.
+    fn taken_for(&self, k: usize, l: usize) -> f64 {
+        match self.totals[l] > 0.0 {
+            true => self.vote(l, k) / self.totals[l] + self.floor(),
+            false => self.floor(),
+        }
+    }
+
+    /// The prior of row k, P(a view says l | the segment is k) before the row's own votes,
+    /// mirrored: a view of a k calls it l in proportion to how often views of the l's call
+    /// them k (look-alikes are mutual: where ceilings are called wall, walls are called
+    /// ceiling), and k for the rest (`mistaken`). So a class seen in no clear segment (the
+    /// ceiling, when its one large segment is the near tie) is expected to be called what
+    /// its look-alikes are called, and its near ties go by the votes and the other classes'
+    /// confusions. With the prior's confusions spread evenly over the other classes
+    /// instead, such a class rarely expects any one of them, and loses its close votes
+    /// against a well-seen class (office seed 3 at flicker 0.3: a ceiling of 27,006
+    /// Gaussians voted 12 : 11 went to the wall).
+    fn prior(&self, k: usize, l: usize) -> f64 {
+        self.prior_with(k, l, || self.taken_for(k, l))
+    }
+
+    /// [`Confusions::prior`] with `taken_for(k, l)` given.
+    fn prior_with(&self, k: usize, l: usize, taken_for: impl FnOnce() -> f64) -> f64 {
+        match (self.classes() < 2, l == k) {
+            (true, _) => 1.0, // nothing to be taken for
+            (false, true) => 1.0 - self.mistaken[k],
+            (false, false) => self.mistaken[k] * taken_for() / self.taken_sum[k],
+        }
+    }
+
+    /// Per class k, the share of its views the mirrored prior expects to call it another
+    /// class, and what it is taken for summed over the classes ([`Confusions::prior`]).
+    ///
+    /// The mirrored rates say which classes a k is taken for, not how often: a k is mistaken
+    /// as often as the classes it is taken for are (their rows' disagreement, weighted by
+    /// those rates; the scene's for a class with no clear segment; at least
+    /// `UNSEEN_CONFUSION`), and that share goes to them. A class with one look-alike takes
+    /// all its mistakes there, though that look-alike, having several, is taken for it
+    /// rarely (office seed 2 at flicker 0.3: the desks, labelled cabinet in 15 of their 28
+    /// views, against a cabinet labelled desk in 2 of 21; with the cabinet's rate as the
+    /// desk's share the desks stayed cabinet). The scene's disagreement alone would make a
+    /// ceiling beside often-confused walls in a room of rarely confused furniture rarely
+    /// called wall.
+    fn mirrored_prior(&self) -> (Vec<f64>, Vec<f64>) {
+        let (classes, rows) = (self.classes(), &self.totals);
+        if classes < 2 {
+            return (Vec::new(), Vec::new());
+        }
+        let own: f64 = (0..classes).map(|k| self.vote(k, k)).sum();
+        let all: f64 = rows.iter().sum();
+        let scene_mistaken = if all > 0.0 { 1.0 - own / all } else { 0.0 };
+        let mistaken: Vec<f64> = (0..classes)
+            .map(|l| match rows[l] > 0.0 {
+                true => 1.0 - self.vote(l, l) / rows[l],
+                false => scene_mistaken,
+            })
+            .collect();
+        // Row k's taken_for in full, from the votes' column k (the l's that called a k).
+        let columns = self.columns();
+        let mut taken_for = vec![0.0; classes];
+        let (mut k_mistaken, mut taken_sum) = (Vec::new(), Vec::new());
+        for (k, column) in columns.iter().enumerate() {
+            taken_for.fill(self.floor());
+            for &(l, _) in column.iter().filter(|&&(l, _)| l as usize != k) {
+                taken_for[l as usize] = self.taken_for(k, l as usize);
+            }
+            taken_for[k] = 0.0;
+            let sum: f64 = taken_for.iter().sum();
+            let mistaken_k = (0..classes)
+                .map(|l| taken_for[l] * mistaken[l] / sum)
+                .sum::<f64>()
+                .max(UNSEEN_CONFUSION);
+            k_mistaken.push(mistaken_k);
+            taken_sum.push(sum);
+        }
+        (k_mistaken, taken_sum)
+    }
+
+    /// Per class k, the classes l whose views voted for it: (l, votes), in class order.
+    fn columns(&self) -> Vec<Vec<(u32, f64)>> {
+        let mut columns = vec![Vec::new(); self.classes()];
+        for (l, row) in self.votes.iter().enumerate() {
+            for &(k, v) in row {
+                columns[k as usize].push((l as u32, v));
+            }
+        }
+        columns
+    }
+
+    /// Every rate ([`Confusions::rate`]) as [`ConfusionRates`]: per row k, the rates of the
+    /// classes its views or its look-alikes' voted for, and one for all the others (their
+    /// votes and their `taken_for` alike: none and `floor`).
+    fn rates(&self, prior_views: f64) -> ConfusionRates {
+        let columns = self.columns();
+        let mut rows = Vec::with_capacity(self.classes());
+        for (k, column) in columns.iter().enumerate() {
+            let mut named: Vec<u32> = (self.votes[k].iter().chain(column))
+                .map(|e| e.0)
+                .chain([k as u32])
+                .collect();
+            named.sort_unstable();
+            named.dedup();
+            let rates = (named.iter())
+                .map(|&l| (l, self.rate(k, l as usize, prior_views)))
+                .collect();
+            let others = match self.classes() < 2 {
+                true => 1.0,
+                false => {
+                    let prior = self.prior_with(k, usize::MAX, || self.floor());
+                    (0.0 + prior_views * prior) / (self.totals[k] + prior_views)
+                }
+            };
+            rows.push(RateRow { rates, others });
+        }
+        ConfusionRates { rows }
     }
 }
 
@@ -84,16 +229,31 @@ impl Confusions {
 /// pixels off ([`RelabelRule::max_edge_confusion`](super::consensus_relabel::RelabelRule)).
 #[derive(Clone, Debug, PartialEq)]
 pub struct ConfusionRates {
-    classes: usize,
-    /// Row-major [k][l].
-    rates: Vec<f64>,
+    /// Per class k.
+    rows: Vec<RateRow>,
+}
+
+/// One class's rates: those listed, the same one for every other label.
+#[derive(Clone, Debug, PartialEq)]
+struct RateRow {
+    /// (label, rate), in label order.
+    rates: Vec<(u32, f64)>,
+    others: f64,
 }
 
 impl ConfusionRates {
     /// From a row-major [classes][classes] table.
     pub fn from_rows(classes: usize, rates: Vec<f64>) -> Self {
         assert_eq!(rates.len(), classes * classes, "a [classes][classes] table");
-        ConfusionRates { classes, rates }
+        let row = |k: usize| RateRow {
+            rates: (0..classes)
+                .map(|l| (l as u32, rates[k * classes + l]))
+                .collect(),
+            others: 1.0, // every label listed
+        };
+        ConfusionRates {
+            rows: (0..classes).map(row).collect(),
+        }
     }
 
     /// None known: every class may be taken for every label.
@@ -104,71 +264,16 @@ impl ConfusionRates {
     /// P(a view votes `label` | the segment is `class`); 1 where either is outside the
     /// table (nothing known rules a confusion out).
     pub fn rate(&self, class: usize, label: usize) -> f64 {
-        if class < self.classes && label < self.classes {
-            self.rates[class * self.classes + label]
-        } else {
-            1.0
+        let classes = self.rows.len();
+        if class >= classes || label >= classes {
+            return 1.0;
+        }
+        let row = &self.rows[class];
+        match row.rates.binary_search_by_key(&(label as u32), |e| e.0) {
+            Ok(i) => row.rates[i].1,
+            Err(_) => row.others,
         }
     }
-}
-
-/// The prior of every row k, mirrored: a view of a k calls it l in proportion to how often
-/// views of the l's call them k (look-alikes are mutual: where ceilings are called wall,
-/// walls are called ceiling), and k for the rest (below). So a class seen in no clear
-/// segment (the ceiling, when its one large segment is the near tie) is expected to be
-/// called what its look-alikes are called, and its near ties go by the votes and the other
-/// classes' confusions. With the prior's confusions spread evenly over the other classes
-/// instead, such a class rarely expects any one of them, and loses its close votes against
-/// a well-seen class (office seed 3 at flicker 0.3: a ceiling of 27,006 Gaussians voted
-/// 12 : 11 went to the wall).
-///
-/// The mirrored rates say which classes a k is taken for, not how often: a k is mistaken as
-/// often as the classes it is taken for are (their rows' disagreement, weighted by those
-/// rates; the scene's for a class with no clear segment; at least `UNSEEN_CONFUSION`), and
-/// that share goes to them. A class with one look-alike takes all its mistakes there, though
-/// that look-alike, having several, is taken for it rarely (office seed 2 at flicker 0.3:
-/// the desks, labelled cabinet in 15 of their 28 views, against a cabinet labelled desk in 2
-/// of 21; with the cabinet's rate as the desk's share the desks stayed cabinet). The scene's
-/// disagreement alone would make a ceiling beside often-confused walls in a room of rarely
-/// confused furniture rarely called wall.
-fn mirrored_prior(votes: &[Vec<f64>]) -> Vec<Vec<f64>> {
-    let classes = votes.len();
-    let rows: Vec<f64> = votes.iter().map(|r| r.iter().sum()).collect();
-    let own: f64 = (0..classes).map(|k| votes[k][k]).sum();
-    let all: f64 = rows.iter().sum();
-    let scene_mistaken = if all > 0.0 { 1.0 - own / all } else { 0.0 };
-    let mistaken: Vec<f64> = (0..classes)
-        .map(|l| match rows[l] > 0.0 {
-            true => 1.0 - votes[l][l] / rows[l],
-            false => scene_mistaken,
-        })
-        .collect();
-    if classes < 2 {
-        return vec![vec![1.0; classes]; classes]; // nothing to be taken for
-    }
-    let floor = UNSEEN_CONFUSION / (classes - 1) as f64;
-    (0..classes)
-        .map(|k| {
-            let taken_for: Vec<f64> = (0..classes)
-                .map(|l| match l == k {
-                    true => 0.0,
-                    false if rows[l] > 0.0 => votes[l][k] / rows[l] + floor,
-                    false => floor,
-                })
-                .collect();
-            let sum: f64 = taken_for.iter().sum();
-            let k_mistaken = (0..classes)
-                .map(|l| taken_for[l] * mistaken[l] / sum)
-                .sum::<f64>()
-                .max(UNSEEN_CONFUSION);
-            (0..classes)
-                .map(|l| match l == k {
-                    true => 1.0 - k_mistaken,
-                    false => k_mistaken * taken_for[l] / sum,
-                })
-                .collect()
-        })
-        .collect()
 }
 
 /// A segment's class where its votes decide it clearly: at least `min_segment` Gaussians,
@@ -226,11 +331,7 @@ pub fn decide_near_ties(
             s.class = Some(tied[only]);
         }
     }
-    let pv = p.confusion_prior_views;
-    let rates = (0..classes * classes)
-        .map(|i| confusions.rate(i / classes, i % classes, pv))
-        .collect();
-    ConfusionRates::from_rows(classes, rates)
+    confusions.rates(p.confusion_prior_views)
 }
 
 #[cfg(test)]
@@ -274,12 +375,49 @@ mod tests {
         few.gaussians = p.min_segment - 1;
         s.push(few);
         let c = Confusions::estimate(&s, 3, &p);
-        assert_eq!(c.votes[0], vec![21.0, 9.0, 0.0]);
-        assert_eq!(c.votes[1], vec![4.5, 21.0, 4.5]);
-        assert_eq!(c.votes[2], vec![0.0, 3.0, 27.0]);
-        for row in &c.prior {
-            assert!((row.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+        let row = |k| (0..3).map(|l| c.vote(k, l)).collect::<Vec<f64>>();
+        assert_eq!(row(0), vec![21.0, 9.0, 0.0]);
+        assert_eq!(row(1), vec![4.5, 21.0, 4.5]);
+        assert_eq!(row(2), vec![0.0, 3.0, 27.0]);
+        for k in 0..3 {
+            assert!(((0..3).map(|l| c.prior(k, l)).sum::<f64>() - 1.0).abs() < 1e-12);
         }
+    }
+
+    /// The rates kept by the classes voted give every pair of classes its rate, on a scene
+    /// of many classes each confused with a few: the prior's rows sum to 1, and most rates
+    /// are the row's one for the classes not listed.
+    #[test]
+    fn rates_kept_by_the_votes_are_every_pairs_rate() {
+        let (p, classes, mut rng) = (ConsensusParams::default(), 40, crate::util::Rng::new(5));
+        let segments: Vec<SegmentVotes> = (0..300)
+            .map(|_| {
+                let k = rng.below(classes as u64) as usize;
+                let mut split = vec![0.0; classes];
+                split[k] = 8.0 + rng.below(4) as f64;
+                for _ in 0..2 {
+                    split[(k + 1 + rng.below(3) as usize) % classes] += rng.below(3) as f64;
+                }
+                segment(&split, Some(k))
+            })
+            .collect();
+        let c = Confusions::estimate(&segments, classes, &p);
+        let pv = p.confusion_prior_views;
+        let rates = c.rates(pv);
+        let mut listed = 0;
+        for k in 0..classes {
+            let prior: f64 = (0..classes).map(|l| c.prior(k, l)).sum();
+            assert!(
+                (prior - 1.0).abs() < 1e-12,
+                "row {k}'s prior sums to {prior}"
+            );
+            for l in 0..classes {
+                assert_eq!(rates.rate(k, l), c.rate(k, l, pv), "({k}, {l})");
+            }
+            listed += rates.rows[k].rates.len();
+        }
+        assert!(listed < classes * classes / 4, "{listed} rates listed");
+        assert_eq!(rates.rate(classes, 0), 1.0, "outside the table");
     }
 
     /// The likelihood against the formula written out for one case: row a of 30 views
@@ -395,10 +533,10 @@ mod tests {
         let c = Confusions::estimate(&s, 3, &p);
         let (by_cabinet, by_shelf): (f64, f64) = (3.0 / 20.0 + 0.005, 0.005);
         let mistaken = (by_cabinet * 0.3 + by_shelf * 0.15) / (by_cabinet + by_shelf);
-        assert!((c.prior[desk][desk] - (1.0 - mistaken)).abs() < 1e-12);
+        assert!((c.prior(desk, desk) - (1.0 - mistaken)).abs() < 1e-12);
         let to_cabinet = mistaken * by_cabinet / (by_cabinet + by_shelf);
-        assert!((c.prior[desk][cabinet] - to_cabinet).abs() < 1e-12);
-        assert!(c.prior[desk][cabinet] > 0.28);
+        assert!((c.prior(desk, cabinet) - to_cabinet).abs() < 1e-12);
+        assert!(c.prior(desk, cabinet) > 0.28);
         decide_near_ties(&mut s, 3, &p);
         assert_eq!((s[0].class, s[0].near_tie), (Some(desk), true));
     }

@@ -24,13 +24,13 @@
 use anyhow::{ensure, Result};
 
 use super::accumulate::{
-    accumulate, label_threads, record_contrib_walk, Accumulation, ContribWalk, FuseConfig,
-    FuseStats, LabelSource, CONTRIB_CARRY_BYTES, LABELS_AHEAD, NO_LABEL,
+    accumulate_by_gaussian, label_threads, record_contrib_walk, Accumulation, ContribWalk,
+    FuseConfig, FuseStats, LabelSource, CONTRIB_CARRY_BYTES, LABELS_AHEAD, NO_LABEL,
 };
 use super::consensus::ConsensusInput;
 use super::method::Method;
 use super::partial::fixed_to_f64;
-use super::scores::ClassScores;
+use super::shared_counts::SumsByGaussian;
 use crate::contract::TILE_SIZE;
 use crate::gpu::kernel_table::ids;
 use crate::gpu::staging::grown;
@@ -292,8 +292,8 @@ pub fn footprints_for(cfg: &FuseConfig, gpu: &Gpu) -> bool {
     cfg.accumulation == Accumulation::FixedPoint && gpu.caps().cpu_forms
 }
 
-/// FlashSplat's footprints over the relabeled views `relabeled` ([classes][n]; the rows
-/// the relabeling gives): each kept view's footprints added to the row of their region's
+/// FlashSplat's footprints over the relabeled views `relabeled`, per Gaussian by class (the
+/// `classes` the relabeling gives): each kept view's footprints added to their region's
 /// relabeled class (read from the relabeled map at the region's first pixel), the views
 /// kept as [`ViewFootprints::WalkAgain`] accumulated by FlashSplat's pass over their
 /// relabeled labels. `progress` gets (views done, views). The same sums as FlashSplat's
@@ -305,7 +305,7 @@ pub fn relabeled_footprints(
     classes: usize,
     kept: &[ViewFootprints],
     mut progress: impl FnMut(usize, usize),
-) -> Result<(ClassScores, FuseStats)> {
+) -> Result<(SumsByGaussian<f64>, FuseStats)> {
     let start = std::time::Instant::now();
     let (n, views) = (input.scene.n as usize, input.cams.len());
     ensure!(
@@ -313,7 +313,7 @@ pub fn relabeled_footprints(
         "footprints of {} views for {views}",
         kept.len()
     );
-    let mut sums = vec![0u64; classes * n];
+    let mut sums = SumsByGaussian::<u64>::new(n);
     let kept_map = |view: usize| match &kept[view] {
         ViewFootprints::Kept(f) if !f.is_empty() => relabeled.labels(view, &input.cams[view]),
         _ => Ok(None),
@@ -336,25 +336,27 @@ pub fn relabeled_footprints(
                     input.cams[view].name,
                     f.region
                 );
-                sums[class * n + f.gaussian as usize] += f.amount;
+                sums.add(f.gaussian as usize, class as u32, f.amount);
             }
             Ok(())
         },
     )?;
-    let (mut scores, mut stats) = match kept.contains(&ViewFootprints::WalkAgain) {
+    // Both exact in f64 (sums far under 2^53 units of 2^-32): the sum of the two is the
+    // conversion of the integers' sum.
+    let mut sums = sums.map(fixed_to_f64);
+    let mut stats = match kept.contains(&ViewFootprints::WalkAgain) {
         true => {
             let again = WalkedAgain { relabeled, kept };
-            flashsplat_pass(input, cfg, &again, classes, |_, _| {})?
+            let (walked, stats) = flashsplat_pass(input, cfg, &again, classes, |_, _| {})?;
+            sums.add_all(walked);
+            stats
         }
         // One pass of every row, over no view.
-        false => (
-            ClassScores::zeros(classes, n),
-            FuseStats {
-                passes: 1,
-                rows_per_pass: classes,
-                ..Default::default()
-            },
-        ),
+        false => FuseStats {
+            passes: 1,
+            rows_per_pass: classes,
+            ..Default::default()
+        },
     };
     stats.views = views;
     stats.view_s = start.elapsed().as_secs_f64();
@@ -362,30 +364,25 @@ pub fn relabeled_footprints(
         .iter()
         .filter(|k| **k == ViewFootprints::WalkAgain)
         .count();
-    for (score, &sum) in scores.data.iter_mut().zip(&sums) {
-        // Both exact in f64 (sums far under 2^53 units of 2^-32): the sum of the two is the
-        // conversion of the integers' sum.
-        *score += fixed_to_f64(sum);
-    }
     progress(views, views);
-    Ok((scores, stats))
+    Ok((sums, stats))
 }
 
-/// FlashSplat's accumulation of `labels` over the input's views ([rows][n]), with `cfg`'s
-/// other settings: the relabeled views walked again.
+/// FlashSplat's accumulation of `labels` (`rows` classes) over the input's views, per
+/// Gaussian by class, with `cfg`'s other settings: the relabeled views walked again.
 pub(crate) fn flashsplat_pass(
     input: &ConsensusInput,
     cfg: &FuseConfig,
     labels: &dyn LabelSource,
     rows: usize,
     progress: impl FnMut(usize, usize),
-) -> Result<(ClassScores, FuseStats)> {
+) -> Result<(SumsByGaussian<f64>, FuseStats)> {
     let flashsplat = FuseConfig {
         method: Method::FlashSplat,
         ..cfg.clone()
     };
     let (gpu, scene, cams) = (input.gpu, input.scene, input.cams);
-    accumulate(gpu, scene, cams, labels, rows, &flashsplat, progress)
+    accumulate_by_gaussian(gpu, scene, cams, labels, rows, &flashsplat, progress)
 }
 
 /// The relabeled views whose footprints were not kept; the others without labels.

@@ -18,14 +18,14 @@
 //! center was observed in keeps its label.
 
 use std::cmp::Reverse;
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 
 use anyhow::Result;
 use serde::Serialize;
 
 use super::accumulate::{FuseConfig, FuseStats, LabelSource, NO_LABEL};
-use super::assign::{assign_semantic_near, Assignment};
-use super::consensus::{consensus_run, ConsensusInput, ConsensusLift, Kept, LiftEvidence};
+use super::assign::{assign_counts_near, Assignment};
+use super::consensus::{consensus_run, ConsensusInput, ConsensusLift, Kept};
 use super::consensus_confusion::ConfusionRates;
 use super::consensus_decide::{posteriors, unseen_without_confidence, ConsensusParams};
 use super::consensus_footprints::{
@@ -33,7 +33,7 @@ use super::consensus_footprints::{
 };
 use super::consensus_segments::{four_neighbours, label_regions, region_edges};
 use super::regions_gpu::{RegionFinder, RegionStats};
-use super::scores::ClassScores;
+use super::shared_counts::{SharedCounts, SumsByGaussian};
 use crate::contract::RELABEL_KEEP;
 use crate::gpu::timings::KernelTotal;
 use crate::scene::Camera;
@@ -311,25 +311,32 @@ pub fn edge_depth(regions: &[u32], width: usize, cap: u32) -> Vec<u32> {
     depth
 }
 
-/// Footprints over views relabeled with an undecided channel ([`RelabeledViews::undecided`],
-/// the last of `footprints`' rows) to footprints over the classes alone: each Gaussian's
-/// mass on undecided pixels counts for its own consensus `class` (dropped where it has
-/// none). Where the relabeling could not tell which object a region's pixels show, each
-/// Gaussian rendering there is taken to show its own; left out instead, an object's
-/// Gaussians at an edge whose own side was undecided in a view see only the other side's
-/// pixels there, and take its class.
-pub fn fold_undecided(footprints: &ClassScores, class: &[Option<usize>]) -> ClassScores {
-    let classes = footprints.classes - 1;
-    let n = footprints.n;
-    let mut folded = ClassScores {
-        classes,
-        n,
-        data: footprints.data[..classes * n].to_vec(),
-    };
-    for (g, (&mass, c)) in footprints.row(classes).iter().zip(class).enumerate() {
-        if let Some(c) = *c {
-            folded.data[c * n + g] += mass;
+/// Sums over views relabeled with an undecided channel ([`RelabeledViews::undecided`], the
+/// class past the others) to sums over the classes alone: each Gaussian's mass on
+/// undecided pixels counts for its own consensus `class` (dropped where it has none).
+/// Where the relabeling could not tell which object a region's pixels show, each Gaussian
+/// rendering there is taken to show its own; left out instead, an object's Gaussians at an
+/// edge whose own side was undecided in a view see only the other side's pixels there, and
+/// take its class.
+pub fn fold_undecided(
+    sums: SumsByGaussian<f64>,
+    classes: usize,
+    class: &[Option<usize>],
+) -> SharedCounts {
+    let mut folded = SharedCounts::zeros(classes, sums.len());
+    for (g, mut row) in sums.into_sorted_rows().enumerate() {
+        // The undecided channel, past the classes, sorts last.
+        if let Some(&(_, mass)) = row.last().filter(|e| e.0 as usize == classes) {
+            row.pop();
+            if let Some(own) = class[g] {
+                match row.binary_search_by_key(&(own as u32), |e| e.0) {
+                    Ok(i) => row[i].1 += mass,
+                    Err(i) => row.insert(i, (own as u32, mass)),
+                }
+            }
         }
+        row.retain(|e| e.1 != 0.0);
+        folded.set(g, &row);
     }
     folded
 }
@@ -405,25 +412,24 @@ pub fn fuse_relabeled_by(
     };
     let second_visit = |done, _| progress(views + done, 2 * views);
     let kept = std::mem::take(&mut run.footprints);
-    let (footprints, fs_stats) = relabeled_sums(input, cfg, &relabeled, sums, &kept, second_visit)?;
+    let (sums, fs_stats) = relabeled_sums(input, cfg, &relabeled, sums, &kept, second_visit)?;
     drop(kept);
     let relabel_stats = match relabeled.finder {
         Some(finder) => finder.into_inner().unwrap_or_else(|e| e.into_inner()).stats,
         None => Default::default(),
     };
     let consensus = run.consensus;
-    let footprints = fold_undecided(&footprints, &consensus.assignment.class);
+    let footprints = fold_undecided(sums, input.classes, &consensus.assignment.class);
     let knn = run.order.neighbours_to_scene(&run.knn, params.neighbours);
-    let by_pixels = assign_semantic_near(&footprints, Some((&knn, params.neighbours)));
-    let mut evidence = consensus.evidence.to_scores();
+    let by_pixels = assign_counts_near(&footprints, Some((&knn, params.neighbours)));
+    let mut evidence = SharedCounts::clone(&consensus.evidence);
     let mut class = consensus.assignment.class.clone();
     for (g, (own, &by_footprint)) in class.iter_mut().zip(&by_pixels.class).enumerate() {
-        let mass: f64 = (0..input.classes).map(|c| footprints.get(c, g)).sum();
+        let row = footprints.get(g);
+        let mass: f64 = row.iter().map(|e| e.1).sum();
         if by_footprint.is_some() && mass >= params.relabel.min_mass {
             *own = by_footprint;
-            for c in 0..input.classes {
-                evidence.data[c * footprints.n + g] = footprints.get(c, g);
-            }
+            evidence.set(g, row);
         }
     }
     let (mut confidence, _) = posteriors(&consensus.evidence, &class, params.prior);
@@ -434,7 +440,7 @@ pub fn fuse_relabeled_by(
     Ok(ConsensusLift {
         assignment: Assignment { class, confidence },
         consensus,
-        evidence: LiftEvidence::Relabeled(evidence),
+        evidence: Arc::new(evidence),
         stats,
     })
 }
@@ -449,7 +455,7 @@ fn relabeled_sums(
     sums: RelabeledSums,
     kept: &[ViewFootprints],
     progress: impl FnMut(usize, usize),
-) -> Result<(ClassScores, FuseStats)> {
+) -> Result<(SumsByGaussian<f64>, FuseStats)> {
     let rows = input.classes + 1;
     match sums {
         RelabeledSums::FromFootprints => {

@@ -31,12 +31,10 @@ pub use accumulate::{
     NO_LABEL,
 };
 pub use assign::{
-    assign_one_vs_rest, assign_semantic, assign_semantic_near, class_totals, one_vs_rest_row,
-    Assignment, TIE_NEIGHBOURS,
+    assign_counts_near, assign_one_vs_rest, assign_semantic, assign_semantic_near, class_totals,
+    one_vs_rest_row, Assignment, TIE_NEIGHBOURS,
 };
-pub use consensus::{
-    fuse_consensus, lift_by_consensus, ConsensusInput, ConsensusLift, LiftEvidence,
-};
+pub use consensus::{fuse_consensus, lift_by_consensus, ConsensusInput, ConsensusLift};
 pub use consensus_cluster::ClusterProfile;
 pub use consensus_decide::{Clustering, Consensus, ConsensusParams, DecideProfile, SegmentVotes};
 pub use consensus_surface::GaussianShapes;
@@ -44,4 +42,4 @@ pub use method::{Method, SPELLINGS};
 pub use neighbours::nearest_neighbours;
 pub use partial::{EvidenceKind, PartManifest, RawEvidence, Shard};
 pub use scores::{ClassScores, EvidenceRows, SpilledRows};
-pub use shared_counts::SharedCounts;
+pub use shared_counts::{SharedCounts, SumsByGaussian};
