@@ -2184,6 +2184,11 @@ fn unobserved_gaussians_take_their_neighbours_class() {
     );
     assert_eq!(c.assignment.class[5], Some(1));
     assert_eq!(c.from_neighbours, 3);
+    // How each was decided covers every Gaussian once: the four observed by a segment or
+    // views, the three unobserved.
+    assert_eq!(c.unobserved, 3);
+    let observed = c.from_segment + c.from_neighbour_segments + c.from_own_views;
+    assert_eq!(observed, 4);
     // No view saw them: no posterior, whatever their neighbours gave them.
     for g in 3..6 {
         assert_eq!(c.assignment.confidence[g], 0.0);
@@ -2201,7 +2206,7 @@ fn unobserved_gaussians_take_their_neighbours_class() {
     let knn = nearest_neighbours(&means[..3], 2);
     let c = decide(&obs, &knn, vec![0, 1, 2], 2, &p);
     assert_eq!(c.assignment.class[1], None);
-    assert_eq!(c.from_neighbours, 0);
+    assert_eq!((c.from_neighbours, c.unobserved), (0, 1));
 }
 
 /// Three objects far apart, every Gaussian seen by every view. Object b (class 1) is called

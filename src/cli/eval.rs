@@ -133,6 +133,9 @@ pub fn run(args: EvalArgs) -> Result<()> {
     if let Some(table) = &table {
         segmentation.name_classes(table);
     }
+    for note in segmentation.notes(&classes, table.is_some()) {
+        eprintln!("{note}");
+    }
     let image_quality = match &args.images {
         Some(image_dir) => {
             let views: Vec<&Camera> = chosen

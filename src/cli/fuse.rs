@@ -185,24 +185,33 @@ pub struct OutputArgs {
     /// fewer Gaussians in the object.
     #[arg(long, allow_hyphen_values = true, value_parser = args::signed_unit_interval)]
     pub gamma: Option<f64>,
-    /// Output PLY: the input Gaussians with `class` (label id, -1 for Gaussians no view saw;
-    /// segment consensus gives those their neighbours' class where they agree) and
-    /// `class_conf` (the winning class's share of the evidence; `fuse`'s segment consensus:
-    /// its posterior probability with every view counted once, 0 where no view saw the
-    /// Gaussian, beside `class_entropy` and `segment`); semantics the input scene held (a trained scene's
-    /// logits) are replaced. The class table goes beside it, its extension replaced
-    /// (fused.ply: fused.classes.json). `fuse --shard` only: the partial evidence (.npy, see
-    /// --shard) instead.
+    /// Output PLY: the input Gaussians with `class` (label id, -1 for Gaussians no view saw or
+    /// whose evidence tied; segment consensus gives the Gaussians whose centers no view
+    /// observed their neighbours' class where they agree) and `class_conf` (the winning
+    /// class's share of the evidence; `fuse`'s segment consensus: its posterior probability
+    /// with every view counted once, 0 where no view observed the Gaussian's center, beside
+    /// `class_entropy`, ln(classes) there, and `segment`); semantics the input scene held
+    /// (a trained scene's logits) are replaced. The class table goes beside it, its `.ply`
+    /// replaced (fused.ply: fused.classes.json; a name without `.ply` gets `.classes.json`
+    /// added). `fuse --shard` only: the partial evidence (.npy, see --shard) instead.
     #[arg(long)]
     pub out: PathBuf,
     /// Write a JSON report: per-class counts, the assignment's time and (`fuse` of views) the
     /// views' timings, views/s and peak device memory (`fuse`'s segment consensus: also the
     /// segments, their vote splits and the flagged ones, each with where it is and which
-    /// views called it what).
+    /// views called it what; a segment is flagged where another class than its own holds
+    /// the votes of several views and a good share of all, in a segment of more than a few
+    /// Gaussians: a scene of a handful of views flags nothing; docs/robustness.md).
+    /// Class -1 in the counts: no class (no view saw the Gaussian, or its evidence tied).
     #[arg(long)]
     pub report: Option<PathBuf>,
     /// Write the evidence matrix A as float64 NumPy [classes, Gaussians], rows in the order
-    /// of FILE.classes.json written beside it.
+    /// of FILE.classes.json written beside it. Each Gaussian's class is its column's
+    /// argmax; segment consensus writes the view votes it decided from (the Gaussian's
+    /// segment's, its own views', or its neighbours' classes where no view observed it),
+    /// `--relabel` FlashSplat's weights over the relabeled views where those decided the
+    /// Gaussian, else the consensus votes: a column's values are of one kind, not every
+    /// column of the same.
     #[arg(long)]
     pub save_contrib: Option<PathBuf>,
     /// Keep only the Gaussians of this class (name, any case, or id) in --out, by FlashSplat's
@@ -972,13 +981,22 @@ fn write_report(
             report.gaussians,
             named(class)
         ),
-        (None, _) => eprintln!(
-            "fused {} Gaussians into {} class{} ({without_class} Gaussians left without a \
-             class) in {seconds:.2} s -> {out}",
-            report.gaussians,
-            report.classes,
-            if report.classes == 1 { "" } else { "es" }
-        ),
+        (None, _) => {
+            // The classes that won a Gaussian, of those the labels gave.
+            let held = (report.per_class.iter())
+                .filter(|c| c.id >= 0 && c.gaussians > 0)
+                .count();
+            let of = match held == report.classes {
+                true => String::new(),
+                false => format!(" of the labels' {}", report.classes),
+            };
+            eprintln!(
+                "fused {} Gaussians into {held}{of} class{} ({without_class} Gaussians left \
+                 without a class) in {seconds:.2} s -> {out}",
+                report.gaussians,
+                if held == 1 && of.is_empty() { "" } else { "es" }
+            )
+        }
     }
     // A flag is a finding the user acts on (an object the views disagree on, often one a
     // segmenter mislabels in most of them): say so even without --report.
@@ -1009,7 +1027,7 @@ fn per_class_counts(g: &Gaussians, table: &ClassTable) -> Vec<ClassCount> {
         .collect();
     out.push(ClassCount {
         id: -1,
-        name: "unseen".into(),
+        name: "no class (unseen, or tied)".into(),
         gaussians: ids.iter().filter(|&&i| i == -1).count(),
     });
     out

@@ -6,6 +6,7 @@ use std::collections::BTreeMap;
 use serde::Serialize;
 
 use crate::scene::classes::ClassTable;
+use crate::scene::labels::list_some;
 
 /// Counts of (true class, predicted class) over labeled pixels; a prediction of `None`
 /// (nothing rendered there) counts against the true class.
@@ -39,6 +40,38 @@ impl SegmentationScores {
     pub fn name_classes(&mut self, table: &ClassTable) {
         for c in &mut self.per_class {
             c.name = table.get(c.id).map(|info| info.name.clone());
+        }
+    }
+
+    /// What a user should know of these scores, of a scene whose Gaussians hold
+    /// `scene_classes` (-1: none): the true classes a class table given (`named`: after
+    /// [`SegmentationScores::name_classes`]) does not name, and a scene that holds none of
+    /// the true classes (every labeled pixel scored wrong: other label maps, or other ids).
+    pub fn notes(&self, scene_classes: &[i32], named: bool) -> Vec<String> {
+        let ids = |classes: &mut dyn Iterator<Item = u32>| {
+            list_some(&classes.map(|id| id.to_string()).collect::<Vec<_>>())
+        };
+        let held: std::collections::BTreeSet<u32> = (scene_classes.iter())
+            .filter_map(|&c| u32::try_from(c).ok())
+            .collect();
+        if !self.per_class.is_empty() && self.per_class.iter().all(|c| !held.contains(&c.id)) {
+            // Then no true class is the scene's, and whether a table names them is moot.
+            return vec![format!(
+                "note: no Gaussian holds a class the label maps use (theirs: {}; the scene's: \
+                 {}): every labeled pixel is scored wrong; check that the maps are of this \
+                 scene's classes",
+                ids(&mut self.per_class.iter().map(|c| c.id)),
+                ids(&mut held.iter().copied()),
+            )];
+        }
+        let unnamed = self.per_class.iter().filter(|c| c.name.is_none());
+        match named && unnamed.clone().next().is_some() {
+            true => vec![format!(
+                "note: the label maps use class ids the class table does not list: {}; they are \
+                 scored without names",
+                ids(&mut unnamed.map(|c| c.id))
+            )],
+            false => Vec::new(),
         }
     }
 }
@@ -127,6 +160,30 @@ pub fn gaussian_accuracy(pred: &[i32], truth: &[i32]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A class the table does not name makes a note, and so does a scene that holds none of
+    /// the true classes (then that one alone); no table given, a scene holding one of them
+    /// makes neither.
+    #[test]
+    fn notes_name_unnamed_classes_and_a_scene_of_other_classes() {
+        let mut c = Confusion::default();
+        c.add(&[1, 1, 2, 2], &[Some(5u32), None, Some(5), Some(5)], 255);
+        let mut scores = c.scores();
+        let table = ClassTable::from_json_str(r#"[{"id": 1, "name": "wall"}]"#).unwrap();
+        scores.name_classes(&table);
+        let notes = scores.notes(&[2, 5], true);
+        assert_eq!(notes.len(), 1, "{notes:?}");
+        assert!(notes[0].contains("does not list: 2;"), "{}", notes[0]);
+        // No true class held: that note alone.
+        let notes = scores.notes(&[-1, 5], true);
+        assert_eq!(notes.len(), 1, "{notes:?}");
+        assert!(
+            notes[0].contains("theirs: 1, 2; the scene's: 5"),
+            "{}",
+            notes[0]
+        );
+        assert!(scores.notes(&[2, 5], false).is_empty());
+    }
 
     #[test]
     fn miou_over_present_classes_with_ignore_and_misses() {

@@ -280,7 +280,11 @@ pub struct Consensus {
     pub from_segment: usize,
     /// Observed Gaussians of small segments that took their neighbours' segments' class.
     pub from_neighbour_segments: usize,
-    /// Gaussians no view observed, decided by their neighbours' classes.
+    /// Observed Gaussians decided by their own views (a tie left them without a class).
+    pub from_own_views: usize,
+    /// Gaussians no view observed: with the three above, every Gaussian.
+    pub unobserved: usize,
+    /// Of those, the ones decided by their neighbours' classes.
     pub from_neighbours: usize,
     /// Observed Gaussians of small segments whose class their neighbours' classes changed
     /// ([`ConsensusParams::smooth_rounds`]).
@@ -584,6 +588,8 @@ pub fn decide_timed(
         segments,
         from_segment: decided.from_segment,
         from_neighbour_segments: decided.from_neighbour_segments,
+        from_own_views: decided.from_own_views,
+        unobserved: decided.unobserved,
         from_neighbours,
         smoothed,
         evidence: Arc::new(decided.evidence),
@@ -599,6 +605,8 @@ struct Decided {
     evidence: SharedCounts,
     from_segment: usize,
     from_neighbour_segments: usize,
+    from_own_views: usize,
+    unobserved: usize,
 }
 
 /// Each Gaussian's class and evidence: its segment's where `kept` (the split stored once
@@ -613,6 +621,8 @@ fn each_gaussian(alone: &Alone, kept: &[Option<usize>], segments: usize) -> Deci
         evidence: SharedCounts::zeros(alone.classes, n),
         from_segment: 0,
         from_neighbour_segments: 0,
+        from_own_views: 0,
+        unobserved: 0,
     };
     let alone_ids: Vec<usize> = (0..n).filter(|&g| kept[g].is_none()).collect();
     let blocks = decide_alone(alone, &alone_ids);
@@ -636,8 +646,11 @@ fn each_gaussian(alone: &Alone, kept: &[Option<usize>], segments: usize) -> Deci
                 decided.class[g] = c;
                 decided.evidence.set(g, counts);
                 // Unobserved ones are counted where their neighbours decide them below.
-                decided.from_neighbour_segments +=
-                    usize::from(by_neighbours && !obs.row(g).is_empty());
+                match (obs.row(g).is_empty(), by_neighbours) {
+                    (true, _) => decided.unobserved += 1,
+                    (false, true) => decided.from_neighbour_segments += 1,
+                    (false, false) => decided.from_own_views += 1,
+                }
             }
         }
     }

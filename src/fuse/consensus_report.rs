@@ -55,10 +55,13 @@ pub struct SegmentReport {
     /// the others.
     pub undecided: usize,
     /// Gaussians whose class came from their segment, those of small segments that took
-    /// their neighbours' segments' class, and those no view observed that took their
-    /// neighbours' class (the rest decided by their own views).
+    /// their neighbours' segments' class, those decided by their own views (a tie left them
+    /// without a class) and those no view observed: every Gaussian; and of the last, those
+    /// that took their neighbours' class.
     pub from_segment: usize,
     pub from_neighbour_segments: usize,
+    pub from_own_views: usize,
+    pub unobserved: usize,
     pub from_neighbours: usize,
     /// Observed Gaussians of small segments whose class their neighbours' classes then
     /// changed.
@@ -122,6 +125,8 @@ pub fn segment_report(
             .count(),
         from_segment: consensus.from_segment,
         from_neighbour_segments: consensus.from_neighbour_segments,
+        from_own_views: consensus.from_own_views,
+        unobserved: consensus.unobserved,
         from_neighbours: consensus.from_neighbours,
         smoothed: consensus.smoothed,
         flagged,

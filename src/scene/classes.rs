@@ -161,7 +161,7 @@ impl ClassTable {
             return Ok(c);
         }
         let names: Vec<&str> = self.classes.iter().map(|c| c.name.as_str()).collect();
-        bail!("no class '{key}' in the class table (classes: {names:?})")
+        bail!("no class '{key}' among {names:?}")
     }
 
     /// The first two classes (ids, in table order) that share a colour, and the colour: a

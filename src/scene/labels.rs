@@ -22,8 +22,8 @@ pub use decode::{
     read_label_png_as, read_png_header, LabelFormat, PngHeader, MAX_DECODE_BYTES, MAX_LABEL_PIXELS,
 };
 pub use folder::{
-    binary_mask_warning, ignored_class_note, label_size_fit, list_label_pngs, load_label_dir,
-    LabelDir, MissingLabels, SizeFit,
+    binary_mask_warning, ignored_class_note, label_size_fit, list_label_pngs, list_some,
+    load_label_dir, LabelDir, MissingLabels, SizeFit,
 };
 
 #[derive(Clone, Debug, PartialEq, Eq)]

@@ -448,7 +448,7 @@ fn check_ids_in_table(map: &LabelMap, allowed: &[bool]) -> Result<()> {
 }
 
 /// "a, b, c, d, e and 3 more".
-fn list_some(names: &[String]) -> String {
+pub fn list_some(names: &[String]) -> String {
     let shown: Vec<&str> = names
         .iter()
         .take(LIST_IN_ERRORS)
