@@ -86,6 +86,7 @@ fn check_fused_classes(g: &Gaussians, truth: &Gaussians) {
 fn check_report_and_side_outputs(d: &Path) {
     let report = read_json(&d.join("report.json"));
     assert_eq!(report["method"], "flashsplat");
+    assert_eq!(report["accumulation"], "fixed_point");
     assert!(report["stats"]["views_per_s"].as_f64().unwrap() > 0.0);
     assert!(report["stats"]["peak_device_bytes"].as_u64().unwrap() > 0);
     assert!(d.join("A.classes.json").is_file() && d.join("palette.ply").is_file());

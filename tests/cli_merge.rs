@@ -190,6 +190,15 @@ fn merge_refuses_parts_that_do_not_belong_together() {
     assert!(err.contains("missing shard(s) 1/2"), "{err}");
     let err = merge(&[&a0, &a1, &a1]);
     assert!(err.contains("shard 1/2 is given twice"), "{err}");
+    // A part that is not there is named as such (it was blamed on its manifest).
+    let err = merge(&[&a0, &p("a9.npy")]);
+    assert!(err.contains("a9.npy: no such file"), "{err}");
+    // A part given to `fuse --contrib` is pointed to merge (not read as a matrix of sums).
+    let err = fails(&["fuse", "--scene", &scene, "--contrib", &a0, "--out", &out]);
+    assert!(
+        err.contains("part of a sharded fusion") && err.contains("merge"),
+        "{err}"
+    );
 
     // A class to extract that no part holds is named before the parts are summed.
     let err = fails(&[

@@ -241,6 +241,11 @@ fn training_starts_from_a_fusion_of_its_scene() {
     args.extend(extra.map(String::from));
     let r = run(&args);
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let said = String::from_utf8_lossy(&r.stderr);
+    assert!(
+        !said.contains("no `class_conf`"),
+        "a fused PLY has it: {said}"
+    );
     let want = read_ply(Path::new(fused)).unwrap().class_ids.unwrap();
     let got = read_ply(&out).unwrap().class_ids.unwrap();
     let classed: Vec<usize> = (0..want.len()).filter(|&i| want[i] >= 0).collect();
@@ -256,6 +261,13 @@ fn training_starts_from_a_fusion_of_its_scene() {
         classed.len(),
         "trained classes that left the fused ones"
     );
+    // A PLY of classes without confidences (a synth scene) starts at a fixed one, said so.
+    let at = args.iter().position(|a| a == fused).unwrap();
+    args[at] = scene.clone();
+    let r = run(&args);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let said = String::from_utf8_lossy(&r.stderr);
+    assert!(said.contains("no `class_conf`"), "{said}");
 
     // A PLY of other Gaussians is refused before any work, naming the option.
     let mut args = train_args(d, tmp.path().join("bad.ply").to_str().unwrap());

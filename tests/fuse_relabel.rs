@@ -1037,6 +1037,9 @@ fn fuse_cli_writes_entropy_segments_and_the_segment_report() {
         let report: serde_json::Value =
             serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
         assert_eq!(report["method"], name);
+        // Segment consensus counts views on the host: no accumulation to name.
+        let accumulation = (name != "segment-consensus").then_some("fixed_point");
+        assert_eq!(report["accumulation"].as_str(), accumulation, "{name}");
         let table_len = report["classes"].as_u64().unwrap() as f32;
         for i in 0..g.len() {
             assert!((0.0..=1.0).contains(&conf[i]), "{name}: conf {}", conf[i]);

@@ -255,7 +255,8 @@ struct ClassCount {
 #[derive(Serialize)]
 struct Report<'a> {
     method: &'a str,
-    accumulation: Accumulation,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    accumulation: Option<Accumulation>,
     gaussians: usize,
     classes: usize,
     stats: Option<FuseStats>,
@@ -350,7 +351,9 @@ fn selecting(args: &OutputArgs) -> bool {
 pub(super) struct Provenance {
     /// How the report names the method: its CLI spelling, or where the evidence came from.
     pub method: &'static str,
-    pub accumulation: Accumulation,
+    /// How the views' sums were taken; None where nothing summed them here (a saved
+    /// matrix) or the method does not read it ([`Method::reads_accumulation`]).
+    pub accumulation: Option<Accumulation>,
     pub start: Instant,
 }
 
@@ -405,7 +408,8 @@ pub fn run(mut args: FuseArgs) -> Result<()> {
             Some(_) => "saved evidence (--contrib)",
             None => method.name(),
         },
-        accumulation,
+        accumulation: (args.contrib.is_none() && method.reads_accumulation())
+            .then_some(accumulation),
         start,
     };
     write_fused(
@@ -559,7 +563,7 @@ fn select_from_fused(
     write_outputs(&args.output, &selected, table)?;
     let report = Report {
         method: "class property of a fused scene",
-        accumulation: Accumulation::FixedPoint,
+        accumulation: None,
         gaussians: selected.len(),
         classes: table.len(),
         stats: None,
@@ -625,6 +629,15 @@ fn selected_method(args: &FuseArgs) -> Result<Method> {
 
 /// A saved evidence matrix (`--contrib`) and its row table, checked against the scene.
 fn load_evidence(path: &Path, g: &Gaussians) -> Result<Evidence> {
+    // A shard's part is partial sums in integers, of part of the views.
+    let manifest = manifest_path(path);
+    ensure!(
+        !manifest.is_file(),
+        "{} is a part of a sharded fusion (its manifest {} is beside it): `semsplat merge` \
+         sums the parts into what --contrib reads (merge --save-contrib), or fuses them",
+        path.display(),
+        manifest.display()
+    );
     let scores = ClassScores::load_npy(path)?;
     let table = read_class_table(&contrib_sidecar(path)).with_context(|| {
         format!(
@@ -764,7 +777,7 @@ fn note_options_without_effect(args: &FuseArgs, method: Method) {
         ),
         (
             "--float-atomics",
-            args.float_atomics && matches!(method, Vote | VoteOcclusion | SegmentConsensus),
+            args.float_atomics && !method.reads_accumulation(),
         ),
         (
             "--mem-budget",

@@ -220,7 +220,10 @@ pub fn run(mut args: MergeArgs) -> Result<()> {
     let evidence = Evidence::from_matrix(scores, &g, key.classes.clone());
     let provenance = Provenance {
         method: method.name(),
-        accumulation: Accumulation::FixedPoint,
+        // The parts' sums are exact: fixed point, or vote counts.
+        accumulation: method
+            .reads_accumulation()
+            .then_some(Accumulation::FixedPoint),
         start,
     };
     write_fused(

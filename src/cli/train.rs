@@ -24,7 +24,7 @@ use semsplat::scene::Gaussians;
 use semsplat::train::config::TrainConfig;
 use semsplat::train::trainer::{
     classes_from_logits, with_initial_logits, with_logits_from_classes, DensifyEvent, LogitInit,
-    StageTotals, Trainer,
+    StageTotals, Trainer, FUSED_DEFAULT_CONF,
 };
 use semsplat::train::views::TrainView;
 use semsplat::util::{
@@ -99,7 +99,9 @@ pub struct TrainArgs {
     #[arg(long)]
     no_densify: bool,
     /// Start the semantic logits where a fusion of --init ended: a PLY that `semsplat fuse`
-    /// wrote for the same scene (its `class` and `class_conf` per Gaussian; any method).
+    /// wrote for the same scene (its `class` and `class_conf` per Gaussian; any method; a
+    /// PLY with `class` alone, such as a synth scene.ply, starts each class at one fixed
+    /// confidence, which a note gives).
     /// Each Gaussian's logits then give its fused class its fused confidence; unseen ones
     /// start uniform. With --semantics-only, training refines the fused labels.
     #[arg(long, value_name = "PLY")]
@@ -302,6 +304,13 @@ fn logits_from_fusion(
         );
     }
     let conf = f.class_conf.as_deref();
+    if conf.is_none() {
+        eprintln!(
+            "note: --init-semantics-from {} has no `class_conf` (not a `semsplat fuse` \
+             output?): each Gaussian's class starts at confidence {FUSED_DEFAULT_CONF}",
+            fused.display()
+        );
+    }
     Ok(with_logits_from_classes(
         init,
         &compact,

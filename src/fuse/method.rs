@@ -61,6 +61,16 @@ impl Method {
         self == Method::VoteOcclusion || self.is_consensus()
     }
 
+    /// Whether `--float-atomics` (float sums instead of fixed point) changes how the method
+    /// sums: the votes are integers, and segment consensus counts views on the host
+    /// (`--relabel`'s FlashSplat sums do read it).
+    pub fn reads_accumulation(self) -> bool {
+        !matches!(
+            self,
+            Method::Vote | Method::VoteOcclusion | Method::SegmentConsensus
+        )
+    }
+
     /// Whether the method accumulates over each view's tile lists (alpha * T per pixel and
     /// Gaussian), as the weighted vote and FlashSplat do.
     pub fn is_tiled(self) -> bool {

@@ -434,6 +434,11 @@ pub fn manifest_path(part: &Path) -> PathBuf {
 
 impl PartManifest {
     pub fn read(part: &Path) -> Result<PartManifest> {
+        ensure!(
+            part.is_file(),
+            "part {}: no such file (the parts are what `fuse --shard K/N --out PART.npy` wrote)",
+            part.display()
+        );
         let path = manifest_path(part);
         let text = std::fs::read_to_string(&path).with_context(|| {
             format!(
