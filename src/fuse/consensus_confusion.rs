@@ -85,8 +85,12 @@ impl Confusions {
     /// with the weight of `prior_views` views, so a class seen in few clear segments is
     /// neither trusted nor ruled out.
     fn rate(&self, k: usize, l: usize, prior_views: f64) -> f64 {
-        let total = self.totals[k] + prior_views;
-        (self.vote(k, l) + prior_views * self.prior(k, l)) / total
+        self.smoothed(k, self.vote(k, l), self.prior(k, l), prior_views)
+    }
+
+    /// Row k's `vote` for a class smoothed toward its `prior` ([`Confusions::rate`]).
+    fn smoothed(&self, k: usize, vote: f64, prior: f64, prior_views: f64) -> f64 {
+        (vote + prior_views * prior) / (self.totals[k] + prior_views)
     }
 
     /// ln P(split | the segment is class k): each vote an independent draw from row k.
@@ -122,16 +126,16 @@ impl Confusions {
     /// against a well-seen class (office seed 3 at flicker 0.3: a ceiling of 27,006
     /// Gaussians voted 12 : 11 went to the wall).
     fn prior(&self, k: usize, l: usize) -> f64 {
-        self.prior_with(k, l, || self.taken_for(k, l))
-    }
-
-    /// [`Confusions::prior`] with `taken_for(k, l)` given.
-    fn prior_with(&self, k: usize, l: usize, taken_for: impl FnOnce() -> f64) -> f64 {
         match (self.classes() < 2, l == k) {
             (true, _) => 1.0, // nothing to be taken for
             (false, true) => 1.0 - self.mistaken[k],
-            (false, false) => self.mistaken[k] * taken_for() / self.taken_sum[k],
+            (false, false) => self.share_of_mistakes(k, self.taken_for(k, l)),
         }
+    }
+
+    /// The prior's share of k's mistakes for a class k is `taken_for` that often.
+    fn share_of_mistakes(&self, k: usize, taken_for: f64) -> f64 {
+        self.mistaken[k] * taken_for / self.taken_sum[k]
     }
 
     /// Per class k, the share of its views the mirrored prior expects to call it another
@@ -209,11 +213,12 @@ impl Confusions {
             let rates = (named.iter())
                 .map(|&l| (l, self.rate(k, l as usize, prior_views)))
                 .collect();
+            // No vote, and taken for it no more than `floor`.
             let others = match self.classes() < 2 {
                 true => 1.0,
                 false => {
-                    let prior = self.prior_with(k, usize::MAX, || self.floor());
-                    (0.0 + prior_views * prior) / (self.totals[k] + prior_views)
+                    let prior = self.share_of_mistakes(k, self.floor());
+                    self.smoothed(k, 0.0, prior, prior_views)
                 }
             };
             rows.push(RateRow { rates, others });
