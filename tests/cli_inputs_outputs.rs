@@ -593,6 +593,14 @@ fn empty_inputs_are_errors_and_selections_name_their_class() {
         &arg_in(d, "e.ply"),
     ]);
     assert!(e.contains("holds no Gaussians"), "{e}");
+    // A fused scene named .npy would be a PLY under a NumPy name: refused, nothing written.
+    let npy = arg_in(d, "fused.npy");
+    let e = fails(&[&from_fused[..], &["--out", &npy]].concat());
+    assert!(
+        e.contains("is written as a PLY") && e.contains(".ply name"),
+        "{e}"
+    );
+    assert!(!Path::new(&npy).exists());
     assert!(!d.join("e.ply").exists());
     let out = common::cli::semsplat(&["inspect", &p(&empty)]);
     assert!(

@@ -376,6 +376,7 @@ pub fn run(mut args: FuseArgs) -> Result<()> {
             Input::File("--contrib", args.contrib.as_deref()),
             Input::File("--contrib's class table", contrib_table.as_deref()),
         ],
+        args.shard.is_none(),
     )?;
     let g = read_scene(&args.scene)?;
     // An empty scene would fuse to an empty PLY, exit 0: nearly always the wrong file.
@@ -581,7 +582,19 @@ pub(super) fn check_output_args(
     args: &OutputArgs,
     extra: &[(&str, Option<&Path>)],
     inputs: &[Input],
+    out_is_ply: bool,
 ) -> Result<()> {
+    // A PLY named .npy would load in no NumPy and look like a part to `merge`.
+    let npy = args
+        .out
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("npy"));
+    ensure!(
+        !(out_is_ply && npy),
+        "--out {} is written as a PLY (the fused scene), not a NumPy array: give it a .ply \
+         name (--save-contrib writes the evidence as .npy; fuse --shard K/N writes a part)",
+        args.out.display()
+    );
     let contrib_table = args.save_contrib.as_deref().map(contrib_sidecar);
     if args.gamma.is_some()
         && args.extract.is_none()

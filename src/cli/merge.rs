@@ -181,7 +181,7 @@ pub fn run(mut args: MergeArgs) -> Result<()> {
             Input::Cameras("--cameras", args.cameras.as_deref()),
         ])
         .collect();
-    super::fuse::check_output_args(&args.output, &[], &inputs)?;
+    super::fuse::check_output_args(&args.output, &[], &inputs, true)?;
     ensure!(
         args.chunk_gaussians > 0,
         "--chunk-gaussians must be positive"
