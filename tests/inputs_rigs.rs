@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::cli::{arg_in, ok, read_json};
+use common::cli::{arg_in, fails, ok, read_json, semsplat};
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -171,6 +171,40 @@ fn check_rig_fuses_like_flat_and_swap_changes_it(d: &Path) {
     );
 }
 
+/// A flat label folder whose one `00001.png` both rig cameras would read by its stem: fuse
+/// refuses it (it fused the one map as both views) and inspect reports it, naming both.
+fn check_flat_labels_of_a_rig_are_refused(d: &Path, cams: &[Camera]) {
+    copy(
+        &d.join(format!("room/labels/{}.png", cams[0].name)),
+        &d.join("labels_rig_flat/00001.png"),
+    );
+    let e = fails(&[
+        "fuse",
+        "--scene",
+        &arg_in(d, "room/scene.ply"),
+        "--cameras",
+        &arg_in(d, "rig"),
+        "--labels",
+        &arg_in(d, "labels_rig_flat"),
+        "--out",
+        &arg_in(d, "rig_flat.ply"),
+    ]);
+    let named = "00001.png matches two cameras by its stem, 'cam0/00001' and 'cam1/00001'";
+    assert!(e.contains(named), "{e}");
+    assert!(!d.join("rig_flat.ply").exists());
+    let inspected = semsplat(&[
+        "inspect",
+        &arg_in(d, "labels_rig_flat"),
+        "--cameras",
+        &arg_in(d, "rig"),
+    ]);
+    let report = String::from_utf8_lossy(&inspected.stdout);
+    assert!(
+        !inspected.status.success() && report.contains(named),
+        "{report}"
+    );
+}
+
 /// --render-views writes the rig views into subfolders of its folder, and they are the
 /// plain model's views.
 fn check_rig_render_views_match_flat(d: &Path) {
@@ -272,6 +306,7 @@ fn colmap_rig_fuses_with_mirrored_label_subfolders() {
     assert_eq!(names, ["cam0/00001", "cam1/00001"]);
 
     check_rig_fuses_like_flat_and_swap_changes_it(d);
+    check_flat_labels_of_a_rig_are_refused(d, &cams);
     check_rig_render_views_match_flat(d);
     check_rig_eval_reads_by_relative_path(d, &cams);
     check_rig_view_renders_by_name_inside_out(d);

@@ -14,8 +14,8 @@ use semsplat::scene::cameras_json::{read_cameras_json_kind, CameraJsonKind};
 use semsplat::scene::classes::{read_class_table, ClassTable, IGNORE_U16};
 use semsplat::scene::colmap::{find_colmap_model, ColmapFormat};
 use semsplat::scene::labels::{
-    binary_mask_warning, ignored_class_note, label_size_fit, list_label_pngs, read_label_png_as,
-    LabelFormat, LabelMap, SizeFit,
+    binary_mask_warning, ignored_class_note, label_size_fit, list_label_pngs, match_cameras,
+    read_label_png_as, LabelFormat, LabelMap, SizeFit,
 };
 use semsplat::scene::ply::{classes_sidecar_path, read_classes_sidecar};
 use semsplat::scene::scene_file::{read_scene_unchecked, resolve_scene_path, scene_format};
@@ -565,7 +565,20 @@ fn inspect_labels(
         None => default_class_table(folder).and_then(|p| read_class_table(&p).ok()),
     };
     let colors = table.or(default_table.as_ref());
-    let tally = tally_label_maps(&mut r, files, cams.as_deref(), colors, &labels.format);
+    // Each map's camera as `fuse` matches them (a map two cameras would share is a problem).
+    let keyed: BTreeMap<String, PathBuf> = files.iter().cloned().collect();
+    let names = || cams.iter().flatten().map(|c| c.name.as_str());
+    let matched = match match_cameras(&keyed, names()) {
+        Ok(matched) => matched,
+        Err(e) => {
+            r.problems.push(format!("{e:#}"));
+            Vec::new()
+        }
+    };
+    let camera_of: BTreeMap<&str, &Camera> = (matched.iter().zip(cams.iter().flatten()))
+        .filter_map(|(key, cam)| Some(((*key)?, cam)))
+        .collect();
+    let tally = tally_label_maps(&mut r, files, &camera_of, colors, &labels.format);
     r.add("label_maps", tally.read);
     let sizes: Vec<Value> = tally
         .sizes
@@ -583,15 +596,10 @@ fn inspect_labels(
         r.problems
             .push(w.trim_start_matches("warning: ").to_owned());
     }
-    if let Some(cams) = &cams {
-        let have: std::collections::HashSet<&str> = files
-            .iter()
-            .flat_map(|(key, _)| [key.as_str(), key_stem(key)])
-            .collect();
-        let missing: Vec<&str> = cams
-            .iter()
-            .map(|c| c.name.as_str())
-            .filter(|n| !have.contains(n))
+    if let (Some(cams), false) = (&cams, matched.is_empty()) {
+        let missing: Vec<&str> = (cams.iter().zip(&matched))
+            .filter(|(_, key)| key.is_none())
+            .map(|(c, _)| c.name.as_str())
             .collect();
         if !missing.is_empty() {
             let shown: Vec<&str> = missing.iter().take(5).copied().collect();
@@ -603,8 +611,11 @@ fn inspect_labels(
                 if missing.len() > 5 { ", ..." } else { "" }
             ));
         }
-        if !tally.unmatched.is_empty() {
-            r.add("maps_without_camera", tally.unmatched);
+        let unmatched: Vec<String> = (files.iter().map(|(key, _)| key.clone()))
+            .filter(|key| !camera_of.contains_key(key.as_str()))
+            .collect();
+        if !unmatched.is_empty() {
+            r.add("maps_without_camera", unmatched);
         }
     }
     Ok(r)
@@ -618,8 +629,6 @@ struct LabelTally {
     sizes: BTreeMap<(u32, u32), usize>,
     /// Maps read.
     read: usize,
-    /// Maps whose name matches no camera (only with cameras).
-    unmatched: Vec<String>,
 }
 
 /// Reads every map, noting unreadable maps and size mismatches with their camera as
@@ -627,20 +636,14 @@ struct LabelTally {
 fn tally_label_maps(
     r: &mut Report,
     files: &[(String, PathBuf)],
-    cams: Option<&[Camera]>,
+    camera_of: &BTreeMap<&str, &Camera>,
     colors: Option<&ClassTable>,
     format: &LabelFormat,
 ) -> LabelTally {
-    let by_name: BTreeMap<&str, &Camera> = cams
-        .into_iter()
-        .flatten()
-        .map(|c| (c.name.as_str(), c))
-        .collect();
     let mut tally = LabelTally {
         counts: vec![0u64; IGNORE_U16 as usize + 1],
         sizes: BTreeMap::new(),
         read: 0,
-        unmatched: Vec::new(),
     };
     for (stem, file) in files {
         let map = match read_label_png_as(file, format, colors) {
@@ -653,36 +656,21 @@ fn tally_label_maps(
         tally.read += 1;
         *tally.sizes.entry((map.width, map.height)).or_default() += 1;
         map.count_into(&mut tally.counts);
-        if cams.is_some() {
-            let camera = by_name
-                .get(stem.as_str())
-                .or_else(|| by_name.get(key_stem(stem)));
-            match camera {
-                Some(c)
-                    if label_size_fit((c.width, c.height), (map.width, map.height))
-                        == SizeFit::Mismatch =>
-                {
-                    r.problems.push(format!(
-                        "label map {} is {}x{} but camera '{}' is {}x{} (another aspect ratio)",
-                        file.display(),
-                        map.width,
-                        map.height,
-                        c.name,
-                        c.width,
-                        c.height
-                    ))
-                }
-                Some(_) => {}
-                None => tally.unmatched.push(stem.clone()),
+        if let Some(c) = camera_of.get(stem.as_str()) {
+            if label_size_fit((c.width, c.height), (map.width, map.height)) == SizeFit::Mismatch {
+                r.problems.push(format!(
+                    "label map {} is {}x{} but camera '{}' is {}x{} (another aspect ratio)",
+                    file.display(),
+                    map.width,
+                    map.height,
+                    c.name,
+                    c.width,
+                    c.height
+                ))
             }
         }
     }
     tally
-}
-
-/// The last component of a label key (`cam0/00001` -> `00001`).
-fn key_stem(key: &str) -> &str {
-    key.rsplit('/').next().unwrap_or(key)
 }
 
 /// Pixel totals, the ignored share and a row per label id present (named from `table`).

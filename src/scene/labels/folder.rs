@@ -80,18 +80,49 @@ fn stem_of(key: &str) -> &str {
     key.rsplit('/').next().unwrap_or(key)
 }
 
-/// The label file of a camera: the key equal to its name (a relative image path without
-/// extension, or a bare stem), else the one file with its stem; two such files are an error.
+/// Each camera's label map, as its key in `files` ([`list_label_pngs`]), by
+/// [`match_camera`]; None where it has none. A map that would serve two cameras is an error:
+/// a flat folder's `00000.png` matches rig cameras `cam0/00000` and `cam1/00000` by its
+/// stem, and one camera's labels would be fused as the other's.
+pub fn match_cameras<'a, 'n>(
+    files: &'a BTreeMap<String, PathBuf>,
+    names: impl Iterator<Item = &'n str>,
+) -> Result<Vec<Option<&'a str>>> {
+    let mut by_stem: HashMap<&str, Vec<&str>> = HashMap::new();
+    for key in files.keys() {
+        by_stem.entry(stem_of(key)).or_default().push(key);
+    }
+    let mut served: HashMap<&str, &str> = HashMap::new();
+    let mut matched = Vec::new();
+    for name in names {
+        let key = match_camera(files, &by_stem, name)?;
+        if let Some(key) = key {
+            if let Some(other) = served.insert(key, name) {
+                bail!(
+                    "label map {key}.png matches two cameras by its stem, '{other}' and \
+                     '{name}': mirror the images' subfolders in the label folder ({other}.png, \
+                     {name}.png) so each camera has its own map"
+                );
+            }
+        }
+        matched.push(key);
+    }
+    Ok(matched)
+}
+
+/// The label file of a camera, as its key: the key equal to its name (a relative image path
+/// without extension, or a bare stem), else the one file with its stem; two such files are
+/// an error.
 fn match_camera<'a>(
     files: &'a BTreeMap<String, PathBuf>,
     by_stem: &HashMap<&str, Vec<&'a str>>,
     name: &str,
-) -> Result<Option<&'a Path>> {
-    if let Some(path) = files.get(name) {
-        return Ok(Some(path));
+) -> Result<Option<&'a str>> {
+    if let Some((key, _)) = files.get_key_value(name) {
+        return Ok(Some(key));
     }
     match by_stem.get(stem_of(name)).map(Vec::as_slice) {
-        Some([one]) => Ok(files.get(*one).map(PathBuf::as_path)),
+        Some([one]) => Ok(Some(one)),
         Some(many) if many.len() > 1 => {
             let names: Vec<String> = many.iter().map(|k| format!("{k}.png")).collect();
             bail!(
@@ -193,17 +224,13 @@ impl LabelDir {
     ) -> Result<LabelDir> {
         check_ignore_id(format, table)?;
         let files = list_label_pngs(dir)?;
-        let mut by_stem: HashMap<&str, Vec<&str>> = HashMap::new();
-        for key in files.keys() {
-            by_stem.entry(stem_of(key)).or_default().push(key);
-        }
+        let matched = match_cameras(&files, cameras.iter().map(|c| c.name.as_str()))
+            .with_context(|| format!("label folder {}", dir.display()))?;
         let mut entries = Vec::with_capacity(cameras.len());
         let mut skipped = Vec::new();
-        for (i, cam) in cameras.iter().enumerate() {
-            match match_camera(&files, &by_stem, &cam.name)
-                .with_context(|| format!("label folder {}", dir.display()))?
-            {
-                Some(path) => entries.push(entry_for(i, cam, path)),
+        for (i, (cam, key)) in cameras.iter().zip(matched).enumerate() {
+            match key {
+                Some(key) => entries.push(entry_for(i, cam, &files[key])),
                 None => skipped.push(cam.name.clone()),
             }
         }
