@@ -143,6 +143,56 @@ fn rgb_table() -> ClassTable {
     }
 }
 
+/// A colour-coded map saved with a palette (PIL's `quantize`, an editor's indexed mode)
+/// holds the table's colours at indices of its own: with the table, each index reads as
+/// its colour's class (black: unlabeled). A palette whose colours are the table's at their
+/// own ids, or that holds a colour no class has, reads by index as before.
+#[test]
+fn palette_pngs_of_the_tables_colours_at_other_indices_read_through_the_colours() {
+    let dir = tempfile::tempdir().unwrap();
+    let table = rgb_table();
+    let colour = |id: u32| table.get(id).unwrap().color;
+    let indexed = |name: &str, palette: Vec<[u8; 3]>, pixels: &[u8]| {
+        let path = dir.path().join(name);
+        let bytes = palette.into_iter().flatten().collect();
+        write_png(
+            &path,
+            (3, 2),
+            png::ColorType::Indexed,
+            png::BitDepth::Eight,
+            Some(bytes),
+            pixels,
+        );
+        let as_ids = read_label_png(&path).unwrap().labels;
+        let through_table = (read_label_png_as(&path, &LabelFormat::default(), Some(&table)))
+            .unwrap()
+            .labels;
+        (as_ids, through_table)
+    };
+    // Quantized: building at index 0, black (no class's colour) at 1, road at 2, car at 3.
+    let quantized = vec![colour(7), [0, 0, 0], colour(0), colour(1)];
+    let (ids, classes) = indexed("quantized.png", quantized.clone(), &[0, 1, 2, 3, 3, 0]);
+    assert_eq!(
+        ids,
+        [0, 1, 2, 3, 3, 0],
+        "without a table the index is the id"
+    );
+    assert_eq!(classes, [7, IGN, 0, 1, 1, 7]);
+    // The table's colours at their own ids: the same by index and by colour.
+    let mut own = vec![[0, 0, 0]; 8];
+    (own[0], own[1], own[7]) = (colour(0), colour(1), colour(7));
+    let (ids, classes) = indexed("own.png", own, &[0, 1, 7, 7, 1, 0]);
+    assert_eq!(
+        (ids.as_slice(), classes.as_slice()),
+        (&[0, 1, 7, 7, 1, 0][..], &ids[..])
+    );
+    // A used colour no class has: a palette of its own (DAVIS), read by index.
+    let mut davis = quantized;
+    davis[2] = [200, 0, 0];
+    let (_, classes) = indexed("davis.png", davis, &[0, 2, 2, 3, 3, 0]);
+    assert_eq!(classes, [0, 2, 2, 3, 3, 0]);
+}
+
 #[test]
 fn colour_coded_maps_read_through_the_class_table() {
     let dir = tempfile::tempdir().unwrap();
