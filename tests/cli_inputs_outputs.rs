@@ -593,6 +593,30 @@ fn empty_inputs_are_errors_and_selections_name_their_class() {
         &arg_in(d, "e.ply"),
     ]);
     assert!(e.contains("holds no Gaussians"), "{e}");
+    // One labeled pixel a view: segment consensus classes every Gaussian from the one or
+    // two the views observed, and says so (it said "0 Gaussians left without a class").
+    let one_pixel = d.join("one_pixel");
+    std::fs::create_dir(&one_pixel).unwrap();
+    for map in std::fs::read_dir(room.join("labels")).unwrap() {
+        let map = map.unwrap();
+        let mut labels = image::open(map.path()).unwrap().to_luma8();
+        let centre = *labels.get_pixel(16, 12);
+        labels.pixels_mut().for_each(|px| *px = image::Luma([255]));
+        labels.put_pixel(16, 12, centre);
+        labels.save(one_pixel.join(map.file_name())).unwrap();
+    }
+    let said = ok(&[
+        "fuse",
+        "--scene",
+        &arg_in(&room, "scene.ply"),
+        "--labels",
+        &p(&one_pixel),
+        "--method",
+        "segment-consensus",
+        "--out",
+        &arg_in(d, "one_pixel.ply"),
+    ]);
+    assert!(said.contains("warning: the views observed only"), "{said}");
     // A fused scene named .npy would be a PLY under a NumPy name: refused, nothing written.
     let npy = arg_in(d, "fused.npy");
     let e = fails(&[&from_fused[..], &["--out", &npy]].concat());

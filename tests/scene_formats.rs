@@ -915,6 +915,13 @@ fn check_inspect_cameras_and_labels_against_them(dir: &Path) {
         stdout.contains("1 of 2 cameras have no label map: b"),
         "{stdout}"
     );
+    // The folder's own class table, which fuse checks the ids against, is checked too.
+    write_class_table(&labels.join("classes.json"), &ClassTable::from_ids([1])).unwrap();
+    let (ok, stdout, _) = inspect(&[labels.as_os_str()]);
+    assert!(
+        !ok && stdout.contains("label ids not in the class table: 2"),
+        "{stdout}"
+    );
 }
 
 #[test]

@@ -185,9 +185,10 @@ pub struct OutputArgs {
     /// fewer Gaussians in the object.
     #[arg(long, allow_hyphen_values = true, value_parser = args::signed_unit_interval)]
     pub gamma: Option<f64>,
-    /// Output PLY: the input Gaussians with `class` (label id, -1 for Gaussians no view saw or
-    /// whose evidence tied; segment consensus gives the Gaussians whose centers no view
-    /// observed their neighbours' class where they agree) and `class_conf` (the winning
+    /// Output PLY: the input Gaussians with `class` (label id, -1 for Gaussians no view saw,
+    /// or whose evidence tied and neither their neighbours' evidence nor the whole scene's
+    /// broke the tie; segment consensus gives the Gaussians whose centers no view observed
+    /// their neighbours' class where they agree, outward from the observed ones) and `class_conf` (the winning
     /// class's share of the evidence; `fuse`'s segment consensus: its posterior probability
     /// with every view counted once, 0 where no view observed the Gaussian's center, beside
     /// `class_entropy`, ln(classes) there, and `segment`); semantics the input scene held
@@ -1024,6 +1025,9 @@ fn write_report(
             )
         }
     }
+    if let Some(segments) = &report.segments {
+        note_unobserved(segments, report.gaussians);
+    }
     // A flag is a finding the user acts on (an object the views disagree on, often one a
     // segmenter mislabels in most of them): say so even without --report.
     let flagged = report.segments.as_ref().map_or(0, |s| s.flagged.len());
@@ -1038,6 +1042,30 @@ fn write_report(
         );
     }
     Ok(())
+}
+
+/// Segment consensus classes the Gaussians no view observed from their neighbours, outward
+/// from the observed ones: one line says how many, and where the views observed few of the
+/// scene's Gaussians (a label map of one pixel, a depth tolerance too tight, cameras that
+/// see little of the scene) a warning says the classes came from those few.
+fn note_unobserved(segments: &SegmentReport, gaussians: usize) {
+    let filled = segments.from_neighbours;
+    if filled == 0 {
+        return;
+    }
+    let observed = gaussians - segments.unobserved;
+    match observed * 2 < gaussians {
+        false => eprintln!(
+            "{filled} of them no view observed: they took their neighbours' class \
+             (`segments.from_neighbours` of --report)"
+        ),
+        true => eprintln!(
+            "warning: the views observed only {observed} of the {gaussians} Gaussians' \
+             centers; {filled} others took their classes from those, neighbour by neighbour. \
+             Check that the label maps label the scene (semsplat inspect LABELS --cameras \
+             CAMERAS), that the cameras see it, and --depth-tol"
+        ),
+    }
 }
 
 fn per_class_counts(g: &Gaussians, table: &ClassTable) -> Vec<ClassCount> {

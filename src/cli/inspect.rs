@@ -586,7 +586,8 @@ fn inspect_labels(
         .map(|(&(w, h), &n)| json!({"size": format!("{w}x{h}"), "maps": n}))
         .collect();
     r.add("sizes", sizes);
-    add_label_classes(&mut r, &tally.counts, table);
+    // Ids checked against the table fuse reads (--classes, else the folder's classes.json).
+    add_label_classes(&mut r, &tally.counts, colors);
     add_ignored_class_note(&mut r, colors, &labels.format);
     let present: Vec<u32> = (0..IGNORE_U16)
         .filter(|&id| tally.counts[id as usize] > 0)
