@@ -924,10 +924,36 @@ fn check_inspect_cameras_and_labels_against_them(dir: &Path) {
     );
 }
 
+/// Finite values no scene renders: every Gaussian transparent, a colour coefficient of
+/// 1e30 (it passed every check, and training on it diverged at once).
+fn check_inspect_flags_what_renders_nothing_or_overflows(dir: &Path) {
+    let ply = dir.join("odd.ply");
+    let mut g = random_gaussians(20, 1, 7);
+    g.opacity_logits.fill(-1000.0);
+    write_ply(&ply, &g).unwrap();
+    let (ok, stdout, _) = inspect(&[ply.as_os_str()]);
+    assert!(
+        !ok && stdout.contains("every Gaussian is transparent"),
+        "{stdout}"
+    );
+    g.opacity_logits[3] = 0.0;
+    let stride = g.sh_coeffs() * 3;
+    g.sh[5 * stride] = 1e30;
+    write_ply(&ply, &g).unwrap();
+    let (ok, stdout, _) = inspect(&[ply.as_os_str()]);
+    assert!(!ok && !stdout.contains("transparent"), "{stdout}");
+    assert!(
+        stdout.contains("1 Gaussians have a colour (SH) coefficient"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("(first: index 5)"), "{stdout}");
+}
+
 #[test]
 fn inspect_summarizes_files_and_fails_on_problems() {
     let dir = tempfile::tempdir().unwrap();
     let ply = dir.path().join("scene.ply");
+    check_inspect_flags_what_renders_nothing_or_overflows(dir.path());
     let g = check_inspect_summarizes_clean_scene(&ply);
     check_inspect_fails_on_broken_scene(&ply, g);
     check_inspect_cameras_and_labels_against_them(dir.path());

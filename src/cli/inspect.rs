@@ -370,7 +370,46 @@ fn inspect_ply(path: &Path, table: Option<&ClassTable>) -> Result<Report> {
     r.problems
         .extend(g.value_problems().iter().map(|p| p.to_string()));
     r.problems.extend(huge_gaussians(&g));
+    r.problems.extend(transparent_scene(&g));
+    r.problems.extend(huge_colours(&g));
     Ok(r)
+}
+
+/// Below this opacity a Gaussian adds nothing to any pixel (the renderers' alpha cut).
+const INVISIBLE_OPACITY: f64 = 1.0 / 255.0;
+
+/// A scene none of whose Gaussians shows: every command renders nothing of it, and their
+/// errors blame the cameras (nothing in view), where the opacities are the cause.
+fn transparent_scene(g: &Gaussians) -> Option<String> {
+    let invisible = |o: &f32| sigmoid(*o) < INVISIBLE_OPACITY;
+    (!g.is_empty() && g.opacity_logits.iter().all(invisible)).then(|| {
+        format!(
+            "every Gaussian is transparent (opacity under 1/255; the largest opacity logit, \
+             before the sigmoid, is {:.1}): nothing renders. Opacities saved after the \
+             sigmoid, or logits of another convention?",
+            g.opacity_logits
+                .iter()
+                .copied()
+                .fold(f32::NEG_INFINITY, f32::max)
+        )
+    })
+}
+
+/// A colour coefficient no trained scene holds: a corrupt or diverged model, whose renders
+/// overflow (training on it diverges at once).
+const HUGE_COLOUR: f32 = 1e6;
+
+/// Gaussians with a colour (SH) coefficient past [`HUGE_COLOUR`] in magnitude.
+fn huge_colours(g: &Gaussians) -> Option<String> {
+    let k3 = (g.sh_coeffs() * 3).max(1);
+    let huge = |c: &[f32]| c.iter().any(|v| v.abs() > HUGE_COLOUR);
+    let count = g.sh.chunks(k3).filter(|c| huge(c)).count();
+    let first = g.sh.chunks(k3).position(huge)?;
+    Some(format!(
+        "{count} Gaussians have a colour (SH) coefficient larger than {HUGE_COLOUR:e} in \
+         magnitude (first: index {first}): a corrupt or diverged model? Renders of them \
+         overflow"
+    ))
 }
 
 /// Gaussians larger than any scene ([`HUGE_SCALE_M`]): a corrupt or diverged model. Those

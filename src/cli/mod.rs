@@ -34,7 +34,8 @@ pub use run_paths::{check_outputs, Input};
 
 /// What to check when views see none of a scene (fuse, train, eval), completed by each.
 pub const FRAME_HINT: &str = "Check that the cameras and the scene share one frame and scale \
-     (a nerfstudio export's applied_transform, cameras of another reconstruction)";
+     (a nerfstudio export's applied_transform, cameras of another reconstruction), that the \
+     Gaussians are not all transparent (semsplat inspect SCENE)";
 
 /// How label maps are read, shared by every command that reads them.
 #[derive(Args, Clone, Copy, Debug, Default)]
