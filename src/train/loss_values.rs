@@ -61,6 +61,14 @@ impl LossValues {
 }
 
 impl LossValues {
+    /// The values as a sentence names them (a diverged run's error lists them).
+    pub fn listed(&self) -> String {
+        format!(
+            "L1 {:e}, SSIM {:e}, MSE {:e}, cross-entropy {:e}, entropy {:e}",
+            self.l1, self.ssim, self.mse, self.ce, self.entropy
+        )
+    }
+
     /// Whether every value is finite (a NaN or infinity means training diverged).
     pub fn is_finite(&self) -> bool {
         [self.l1, self.ssim, self.mse, self.ce, self.entropy]

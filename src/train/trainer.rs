@@ -237,8 +237,10 @@ impl Trainer {
             let values = self.losses[&key].read_values()?;
             ensure!(
                 values.is_finite(),
-                "training diverged: the loss is not finite at iteration {step} ({values:?}); \
-                 lower the learning rates or the loss weights"
+                "training diverged: the loss is not finite at iteration {step} ({}); lower the \
+                 learning rates or the loss weights (diverged in the first iterations: check the \
+                 initial scene with semsplat inspect, for colours or scales past any scene's)",
+                values.listed()
             );
             Ok(Some(values))
         } else {
