@@ -573,7 +573,19 @@ fn empty_inputs_are_errors_and_selections_name_their_class() {
     let none = arg_in(d, "none.ply");
     let e = fails(&[&from_fused[..], &["--extract", "ceiling", "--out", &none]].concat());
     assert!(
-        e.contains("no Gaussian holds class 'ceiling' (id 2)"),
+        e.contains("no Gaussian is of class 'ceiling' (id 2): nothing to extract"),
+        "{e}"
+    );
+    assert!(!Path::new(&none).exists());
+    // Selected by evidence, --gamma 1 keeps none: the reason is the bias, named.
+    let e = common::cli::fuse_synth_fails(
+        &room,
+        &["--extract", "ball", "--gamma", "1", "--out", &none],
+    );
+    assert!(
+        e.contains(
+            "no Gaussian is of class 'ball' (id 4) by FlashSplat's one-vs-rest test at --gamma 1"
+        ),
         "{e}"
     );
     assert!(!Path::new(&none).exists());

@@ -274,19 +274,31 @@ fn find_class(table: &ClassTable, key: &str) -> Result<ClassInfo> {
 }
 
 /// Refuses an --extract or --remove that leaves no Gaussian (`selected`): an empty PLY says
-/// nothing (nothing of the class won a Gaussian, or every Gaussian is of it).
+/// nothing (nothing of the class won a Gaussian, or every Gaussian is of it). `gamma`: the
+/// bias the one-vs-rest selection used, where it selected by evidence (the reason to name
+/// when it left none: `--gamma 1` keeps no Gaussian of any class).
 fn check_selected_some(
     args: &OutputArgs,
     selected: &Gaussians,
     class: Option<&ClassInfo>,
+    gamma: Option<f64>,
 ) -> Result<()> {
     let Some(class) = class.filter(|_| selected.is_empty()) else {
         return Ok(());
     };
-    let (name, id) = (&class.name, class.id);
+    let named = format!("class '{}' (id {})", class.name, class.id);
+    let by = match gamma {
+        Some(gamma) => format!(
+            " by FlashSplat's one-vs-rest test at --gamma {gamma} (a larger --gamma keeps \
+             fewer Gaussians in the class)"
+        ),
+        None => String::new(),
+    };
     match args.extract.is_some() {
-        true => bail!("no Gaussian holds class '{name}' (id {id}): nothing to extract, nothing written"),
-        false => bail!("every Gaussian holds class '{name}' (id {id}): removing it leaves none, nothing written"),
+        true => bail!("no Gaussian is of {named}{by}: nothing to extract, nothing written"),
+        false => {
+            bail!("every Gaussian is of {named}{by}: removing it leaves none, nothing written")
+        }
     }
 }
 
@@ -485,7 +497,10 @@ pub(super) fn write_fused(
         Some(_) => select_by_class(args, selected_id, g),
         None => select_members(args, selected_id, g, &mut rows, &totals, &table)?,
     };
-    check_selected_some(args, &selected, selected_class.as_ref())?;
+    let gamma = segments
+        .is_none()
+        .then(|| args.gamma.unwrap_or(DEFAULT_GAMMA));
+    check_selected_some(args, &selected, selected_class.as_ref(), gamma)?;
     let assign_s = assign_start.elapsed().as_secs_f64();
 
     write_outputs(args, &selected, &table)?;
@@ -560,7 +575,7 @@ fn select_from_fused(
         .map(|&c| (c == id) == args.output.extract.is_some())
         .collect();
     let selected = g.select(&keep);
-    check_selected_some(&args.output, &selected, Some(&class))?;
+    check_selected_some(&args.output, &selected, Some(&class), None)?;
     let batch = OutputBatch::open();
     write_outputs(&args.output, &selected, table)?;
     let report = Report {
