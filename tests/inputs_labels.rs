@@ -422,6 +422,23 @@ fn binary_masks_warn_and_ignore_id_keeps_the_object() {
         !out.status.success() && stderr.contains("70000"),
         "{stderr}"
     );
+
+    // Masks on a transparent background: no --ignore-id brings the background back, so the
+    // warning names the alpha channel instead of suggesting one (which looped).
+    for (name, object) in [("a", 1usize), ("b", 6)] {
+        let mut px = vec![0u8; 24]; // gray + alpha: transparent black
+        px[2 * object..2 * object + 2].copy_from_slice(&[255, 255]);
+        let path = labels.join(format!("{name}.png"));
+        let (color, depth) = (png::ColorType::GrayscaleAlpha, png::BitDepth::Eight);
+        write_png(&path, (4, 3), color, depth, None, &px);
+    }
+    let d = open(&cameras, &labels, Some(1000)).unwrap();
+    assert_eq!(d.classes.user_ids(), [255]);
+    let warning = d.warnings.join("\n");
+    assert!(
+        warning.contains("alpha channel") && !warning.contains("--ignore-id 1"),
+        "{warning}"
+    );
 }
 
 #[test]

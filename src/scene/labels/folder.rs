@@ -501,6 +501,17 @@ pub fn binary_mask_warning(
     if ignored_pixels == 0 {
         return None;
     }
+    if holds_alpha(dir) {
+        // Transparent pixels are unlabeled whatever --ignore-id says: suggesting one loops.
+        return Some(format!(
+            "warning: label folder {} holds only two values: class {only} and unlabeled \
+             pixels, and its maps have an alpha channel: transparent pixels (alpha 0) carry no \
+             label whatever --ignore-id says. If these are masks on a transparent background \
+             (SAM exports), the background is dropped: save them without alpha, or with an \
+             opaque background, to count it as a class",
+            dir.display()
+        ));
+    }
     // Neither of the two values: not the class, not the ignore id in effect.
     let ignoring = format.ignore_id.map(u32::from);
     let suggested = [1000, 65534, 1001]
@@ -516,6 +527,16 @@ pub fn binary_mask_warning(
         format.describe_ignore(),
         suggested
     ))
+}
+
+/// Whether the label map `path`, or the first of the folder `path`, has an alpha channel
+/// (gray+alpha or RGBA).
+fn holds_alpha(path: &Path) -> bool {
+    let first = match path.is_dir() {
+        true => list_label_pngs(path).ok().and_then(|maps| maps.into_values().next()),
+        false => Some(path.to_owned()),
+    };
+    first.is_some_and(|map| read_png_header(&map).is_ok_and(|h| matches!(h.color_type, 4 | 6)))
 }
 
 /// Loads every camera's label map (checked as in [`LabelDir::load`]) into memory, in camera
