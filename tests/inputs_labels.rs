@@ -16,7 +16,8 @@ use semsplat::scene::cameras_json::write_semsplat_cameras;
 use semsplat::scene::classes::{write_class_table, ClassInfo, ClassTable};
 use semsplat::scene::images::load_view_image;
 use semsplat::scene::labels::{
-    read_label_png, read_label_png_as, LabelDir, LabelFormat, LabelMap, MissingLabels,
+    label_size_fit, read_label_png, read_label_png_as, LabelDir, LabelFormat, LabelMap,
+    MissingLabels, SizeFit,
 };
 use semsplat::scene::ply::{read_ply, write_ply};
 use semsplat::scene::{Camera, Split};
@@ -469,6 +470,22 @@ fn labels_at_another_resolution_scale_the_intrinsics_or_are_refused() {
         e.contains("618x300") && e.contains("4946x3286") && e.contains("b.png"),
         "{e}"
     );
+    assert!(
+        e.contains("the aspect ratios differ") && e.contains("nearest neighbour"),
+        "{e}"
+    );
+    // The aspect ratio of 4946x3286 to within a pixel, but under a 32nd of it (it passed as a
+    // scaled copy), and a pixel off on each side: refused, each with its reason.
+    for ((w, h), why) in [
+        ((154, 102), "under a 32nd of the camera's side"),
+        ((4945, 3285), "a pixel off on a side is a crop or pad"),
+    ] {
+        let map = LabelMap::filled(w, h, 2);
+        semsplat::scene::labels::write_label_png(&labels.join("b.png"), &map).unwrap();
+        let e = err(open(&cameras, &labels, None));
+        assert!(e.contains(&format!("{w}x{h}")) && e.contains(why), "{e}");
+    }
+    assert_eq!(label_size_fit((4946, 3286), (155, 103)), SizeFit::Scaled);
 }
 
 #[test]

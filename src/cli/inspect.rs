@@ -15,7 +15,7 @@ use semsplat::scene::classes::{read_class_table, ClassTable, IGNORE_U16};
 use semsplat::scene::colmap::{find_colmap_model, ColmapFormat};
 use semsplat::scene::labels::{
     binary_mask_warning, ignored_class_note, label_size_fit, list_label_pngs, match_cameras,
-    read_label_png_as, LabelFormat, LabelMap, SizeFit,
+    read_label_png_as, size_mismatch_reason, LabelFormat, LabelMap, SizeFit,
 };
 use semsplat::scene::ply::{classes_sidecar_path, read_classes_sidecar};
 use semsplat::scene::scene_file::{read_scene_unchecked, resolve_scene_path, scene_format};
@@ -699,13 +699,14 @@ fn tally_label_maps(
         if let Some(c) = camera_of.get(stem.as_str()) {
             if label_size_fit((c.width, c.height), (map.width, map.height)) == SizeFit::Mismatch {
                 r.problems.push(format!(
-                    "label map {} is {}x{} but camera '{}' is {}x{} (another aspect ratio)",
+                    "label map {} is {}x{} but camera '{}' is {}x{} ({})",
                     file.display(),
                     map.width,
                     map.height,
                     c.name,
                     c.width,
-                    c.height
+                    c.height,
+                    size_mismatch_reason((c.width, c.height), (map.width, map.height))
                 ))
             }
         }

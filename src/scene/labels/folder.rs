@@ -150,9 +150,7 @@ pub fn label_size_fit(camera: (u32, u32), label: (u32, u32)) -> SizeFit {
     if camera == label {
         return SizeFit::Same;
     }
-    // No pipeline resizes by a factor that moves each side by at most a pixel: that is an
-    // off-by-one crop or pad, and scaling the camera for it would hide the mistake.
-    if camera.0.abs_diff(label.0) <= 1 && camera.1.abs_diff(label.1) <= 1 {
+    if size_mismatch(camera, label).is_some() {
         return SizeFit::Mismatch;
     }
     let (cw, ch) = (camera.0 as f64, camera.1 as f64);
@@ -164,6 +162,37 @@ pub fn label_size_fit(camera: (u32, u32), label: (u32, u32)) -> SizeFit {
     } else {
         SizeFit::Mismatch
     }
+}
+
+/// Label maps smaller than this share of their camera's side are not a scaled copy (a map
+/// of 1x1 or 3x2 for a 160x120 camera passed as one): the dataset downscales in use stop
+/// at 8 (3DGS's images_8).
+const SMALLEST_SCALE: u64 = 32;
+
+/// Why a label map of another size than its camera's is not a scaled copy of its view, in
+/// words for an error (None: it may be one, if the aspect ratio matches).
+fn size_mismatch(camera: (u32, u32), label: (u32, u32)) -> Option<&'static str> {
+    // No pipeline resizes by a factor that moves each side by at most a pixel: that is an
+    // off-by-one crop or pad, and scaling the camera for it would hide the mistake.
+    if camera.0.abs_diff(label.0) <= 1 && camera.1.abs_diff(label.1) <= 1 {
+        return Some("a pixel off on a side is a crop or pad, not a scaled copy");
+    }
+    let too_small = |l: u32, c: u32| u64::from(l) * SMALLEST_SCALE < u64::from(c);
+    if too_small(label.0, camera.0) || too_small(label.1, camera.1) {
+        return Some("under a 32nd of the camera's side, too small to be a scaled copy");
+    }
+    None
+}
+
+/// Why the label map of size `label` does not fit its camera's `camera`, and the remedy,
+/// for an error.
+pub fn size_mismatch_reason(camera: (u32, u32), label: (u32, u32)) -> String {
+    let why = size_mismatch(camera, label)
+        .unwrap_or("the aspect ratios differ, so it is not a scaled copy");
+    format!(
+        "{why}: give each view a map of its camera's size (resized with nearest neighbour, \
+         never interpolated), or cameras of the maps' size"
+    )
 }
 
 /// What to do with a camera that has no label map.
@@ -338,13 +367,13 @@ impl LabelDir {
             read_png_header(&e.path).with_context(|| format!("label map {}", e.path.display()))?;
         if (header.width, header.height) != e.size {
             bail!(
-                "label map {} is {}x{} but its camera is {}x{} (and the aspect ratios differ, so it \
-                 is not a scaled copy)",
+                "label map {} is {}x{} but its camera is {}x{} ({})",
                 e.path.display(),
                 header.width,
                 header.height,
                 e.camera_size.0,
-                e.camera_size.1
+                e.camera_size.1,
+                size_mismatch_reason(e.camera_size, (header.width, header.height))
             );
         }
         let map = read_label_png_as(&e.path, &self.format, self.table.as_ref())?;
@@ -533,7 +562,9 @@ pub fn binary_mask_warning(
 /// (gray+alpha or RGBA).
 fn holds_alpha(path: &Path) -> bool {
     let first = match path.is_dir() {
-        true => list_label_pngs(path).ok().and_then(|maps| maps.into_values().next()),
+        true => list_label_pngs(path)
+            .ok()
+            .and_then(|maps| maps.into_values().next()),
         false => Some(path.to_owned()),
     };
     first.is_some_and(|map| read_png_header(&map).is_ok_and(|h| matches!(h.color_type, 4 | 6)))
