@@ -208,6 +208,7 @@ pub fn colmap_to_cameras(cams: &[ColmapCamera], images: &[ColmapImage]) -> Resul
         }
     }
     let mut out = Vec::with_capacity(images.len());
+    let mut image_ids = Vec::with_capacity(images.len());
     for img in images {
         let (cam, [fx, fy, cx, cy]) = *intrinsics.get(&img.camera_id).ok_or_else(|| {
             anyhow!(
@@ -245,12 +246,25 @@ pub fn colmap_to_cameras(cams: &[ColmapCamera], images: &[ColmapImage]) -> Resul
             .validate()
             .with_context(|| format!("image {} ('{}') of camera {}", img.id, img.name, cam.id))?;
         out.push(camera);
+        image_ids.push(img.id);
     }
     if out.is_empty() {
         bail!("the model has no images");
     }
     name_by_image_paths(&mut out);
-    out.sort_by(|a, b| a.name.cmp(&b.name));
+    let mut named: Vec<(Camera, u32)> = out.into_iter().zip(image_ids).collect();
+    named.sort_by(|a, b| a.0.name.cmp(&b.0.name));
+    // Named by the model's image ids (validate_cameras would name positions in the list).
+    if let Some(pair) = named.windows(2).find(|w| w[0].0.name == w[1].0.name) {
+        bail!(
+            "images {} and {} share the name '{}': names (image stems, or relative image paths \
+             where stems repeat) must be unique because label maps are matched by name",
+            pair[0].1,
+            pair[1].1,
+            pair[0].0.name
+        );
+    }
+    let out: Vec<Camera> = named.into_iter().map(|(camera, _)| camera).collect();
     validate_cameras(&out)?;
     Ok(out)
 }
