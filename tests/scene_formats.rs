@@ -954,6 +954,14 @@ fn inspect_summarizes_files_and_fails_on_problems() {
     let dir = tempfile::tempdir().unwrap();
     let ply = dir.path().join("scene.ply");
     check_inspect_flags_what_renders_nothing_or_overflows(dir.path());
+    // A class list in another tool's layout is said to be neither kind inspect reads.
+    let names = dir.path().join("names.json");
+    std::fs::write(&names, r#"{"0": "floor", "1": "wall"}"#).unwrap();
+    let (ok, _, stderr) = inspect(&[names.as_os_str()]);
+    assert!(
+        !ok && stderr.contains("nor is it a class table"),
+        "{stderr}"
+    );
     let g = check_inspect_summarizes_clean_scene(&ply);
     check_inspect_fails_on_broken_scene(&ply, g);
     check_inspect_cameras_and_labels_against_them(dir.path());

@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
 use serde_json::{json, Map, Value};
 
@@ -262,7 +262,14 @@ fn inspect_path(path: &Path, labels: &LabelInputs) -> Result<Report> {
             inspect_labels(path, "label map", &[(stem, path.to_owned())], labels)
         }
         "json" if looks_like_class_table(path)? => inspect_class_table(path, &labels.format),
-        "json" | "txt" | "bin" => inspect_cameras(path),
+        // A JSON of neither kind (a class list of another tool's layout) hears of both.
+        "json" => inspect_cameras(path).map_err(|e| {
+            anyhow!(
+                "{e:#}; nor is it a class table (a list of {{\"id\", \"name\", \"color\": [r, g, \
+                 b]}}, or {{\"classes\": [...]}})"
+            )
+        }),
+        "txt" | "bin" => inspect_cameras(path),
         "npy" => bail!(
             "{} is a NumPy array (fuse's --save-contrib or --save-membership, or a --shard \
              part): {KINDS}",
