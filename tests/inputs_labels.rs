@@ -442,6 +442,33 @@ fn binary_masks_warn_and_ignore_id_keeps_the_object() {
     );
 }
 
+/// Maps resized with bilinear filtering (a 2 between every 1 and 3) warn when a fusion or
+/// training opens them, naming the id; the same maps resized with nearest neighbour do not.
+#[test]
+fn interpolated_label_maps_warn_naming_the_stepped_id() {
+    let dir = tempfile::tempdir().unwrap();
+    let cams = [camera("a", (8, 8)), camera("b", (8, 8))];
+    let (cameras, labels) = dataset_dir(dir.path(), &cams);
+    let gray_8x8 = |name: &str, row: [u8; 8]| {
+        let (color, depth) = (png::ColorType::Grayscale, png::BitDepth::Eight);
+        let path = labels.join(format!("{name}.png"));
+        write_png(&path, (8, 8), color, depth, None, &row.repeat(8));
+    };
+    gray_8x8("a", [1, 1, 1, 2, 3, 3, 3, 3]);
+    gray_8x8("b", [1, 1, 2, 2, 3, 3, 3, 3]);
+    let d = open(&cameras, &labels, None).unwrap();
+    let warning = d.warnings.join("\n");
+    assert!(
+        warning.contains("look resized with interpolation")
+            && warning.contains("id 2 between 1 and 3"),
+        "{warning}"
+    );
+    gray_8x8("a", [1, 1, 1, 1, 3, 3, 3, 3]);
+    gray_8x8("b", [1, 1, 1, 3, 3, 3, 3, 3]);
+    let d = open(&cameras, &labels, None).unwrap();
+    assert!(d.warnings.is_empty(), "{:?}", d.warnings);
+}
+
 #[test]
 fn labels_at_another_resolution_scale_the_intrinsics_or_are_refused() {
     let dir = tempfile::tempdir().unwrap();

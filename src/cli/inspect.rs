@@ -15,7 +15,7 @@ use semsplat::scene::classes::{read_class_table, ClassTable, IGNORE_U16};
 use semsplat::scene::colmap::{find_colmap_model, ColmapFormat};
 use semsplat::scene::labels::{
     binary_mask_warning, ignored_class_note, label_size_fit, list_label_pngs, match_cameras,
-    read_label_png_as, size_mismatch_reason, LabelFormat, LabelMap, SizeFit,
+    read_label_png_as, size_mismatch_reason, LabelFormat, LabelMap, SizeFit, StepTally,
 };
 use semsplat::scene::ply::{classes_sidecar_path, read_classes_sidecar};
 use semsplat::scene::scene_file::{read_scene_unchecked, resolve_scene_path, scene_format};
@@ -643,6 +643,10 @@ fn inspect_labels(
         r.problems
             .push(w.trim_start_matches("warning: ").to_owned());
     }
+    if let Some(w) = tally.steps.warning("these maps") {
+        r.problems
+            .push(w.trim_start_matches("warning: ").to_owned());
+    }
     if let (Some(cams), false) = (&cams, matched.is_empty()) {
         let missing: Vec<&str> = (cams.iter().zip(&matched))
             .filter(|(_, key)| key.is_none())
@@ -676,6 +680,8 @@ struct LabelTally {
     sizes: BTreeMap<(u32, u32), usize>,
     /// Maps read.
     read: usize,
+    /// Ids that look made by interpolation, over every map.
+    steps: StepTally,
 }
 
 /// Reads every map, noting unreadable maps and size mismatches with their camera as
@@ -691,6 +697,7 @@ fn tally_label_maps(
         counts: vec![0u64; IGNORE_U16 as usize + 1],
         sizes: BTreeMap::new(),
         read: 0,
+        steps: StepTally::default(),
     };
     for (stem, file) in files {
         let map = match read_label_png_as(file, format, colors) {
@@ -703,6 +710,7 @@ fn tally_label_maps(
         tally.read += 1;
         *tally.sizes.entry((map.width, map.height)).or_default() += 1;
         map.count_into(&mut tally.counts);
+        tally.steps.add(&map);
         if let Some(c) = camera_of.get(stem.as_str()) {
             if label_size_fit((c.width, c.height), (map.width, map.height)) == SizeFit::Mismatch {
                 r.problems.push(format!(

@@ -8,7 +8,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use anyhow::{bail, Result};
 
 use crate::scene::classes::{ClassInfo, ClassTable, IGNORE_U16};
-use crate::scene::labels::{LabelDir, LabelMap};
+use crate::scene::labels::{LabelDir, LabelMap, StepTally};
 use crate::util::parallel::parallel_map_on;
 
 /// A pixel without a label, as a compact class index (fusion's label maps and training's
@@ -147,10 +147,7 @@ const CLASS_PASS_BYTES: u64 = 1 << 30;
 
 /// The compact classes present in `dir`'s label maps, their table (names and colors from
 /// `given`, defaults otherwise) and the number of ignored pixels. Reads every map once.
-pub fn classes_in_labels(
-    dir: &LabelDir,
-    given: Option<&ClassTable>,
-) -> Result<(CompactClasses, ClassTable, u64)> {
+pub fn classes_in_labels(dir: &LabelDir, given: Option<&ClassTable>) -> Result<ClassesFound> {
     // Every map read once, on every core (hundreds of 1080p maps are seconds on one), each
     // thread's map dropped once counted, and no more maps at once than fit in
     // CLASS_PASS_BYTES. After a map fails, later ones are skipped and the first failure in
@@ -162,6 +159,9 @@ pub fn classes_in_labels(
         .unwrap_or(1);
     let at_once = (CLASS_PASS_BYTES / largest.max(1)).max(1) as usize;
     let failed_at = AtomicUsize::new(usize::MAX);
+    // Interpolated ids are looked for in four maps spread over the folder: a resize or a
+    // JPEG export treats every map alike, and the look costs several times the read.
+    let looked_at = |i: usize| i.is_multiple_of((dir.len() / 4).max(1));
     let per_map = parallel_map_on(at_once, dir.len(), |i| {
         if i > failed_at.load(Ordering::Relaxed) {
             return None;
@@ -176,15 +176,20 @@ pub fn classes_in_labels(
                 .iter()
                 .filter(|&&l| l == LabelMap::IGNORE)
                 .count();
-            (map.present_ids(), ignored as u64)
+            let mut steps = StepTally::default();
+            if looked_at(i) {
+                steps.add(&map);
+            }
+            (map.present_ids(), ignored as u64, steps)
         }))
     });
     let mut present = BTreeSet::new();
-    let mut ignored = 0u64;
+    let (mut ignored, mut steps) = (0u64, StepTally::default());
     for counted in per_map.into_iter().flatten() {
-        let (ids, ignored_pixels) = counted?;
+        let (ids, ignored_pixels, map_steps) = counted?;
         present.extend(ids);
         ignored += ignored_pixels;
+        steps.merge(map_steps);
     }
     if present.is_empty() && !dir.is_empty() {
         bail!(
@@ -196,5 +201,22 @@ pub fn classes_in_labels(
     }
     let compact = CompactClasses::from_ids(present)?;
     let table = compact.table(given.unwrap_or(&ClassTable::default()));
-    Ok((compact, table, ignored))
+    let of = format!("the label maps of {}", dir.dir().display());
+    Ok(ClassesFound {
+        compact,
+        table,
+        ignored,
+        interpolated: steps.warning(&of),
+    })
+}
+
+/// What [`classes_in_labels`] found in a label folder.
+pub struct ClassesFound {
+    pub compact: CompactClasses,
+    /// The classes present, named from the table given.
+    pub table: ClassTable,
+    /// Unlabeled pixels, over every map.
+    pub ignored: u64,
+    /// A warning where some ids look made by interpolation ([`StepTally`]).
+    pub interpolated: Option<String>,
 }

@@ -62,14 +62,16 @@ impl Dataset {
             MissingLabels::Skip,
         )?;
         labels.fit_cameras(&mut cameras);
-        let (classes, table, ignored) = classes_in_labels(&labels, given.as_ref())?;
+        let found = classes_in_labels(&labels, given.as_ref())?;
+        let (classes, table) = (found.compact, found.table);
         let mut warnings = labels.notes().to_vec();
         warnings.extend(binary_mask_warning(
             paths.labels,
             classes.user_ids(),
-            ignored,
+            found.ignored,
             &paths.format,
         ));
+        warnings.extend(found.interpolated);
         let mut entry_of_camera = vec![None; cameras.len()];
         for i in 0..labels.len() {
             if let Some(c) = labels.camera_index(i) {

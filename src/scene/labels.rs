@@ -8,6 +8,7 @@
 
 mod decode;
 mod folder;
+mod interpolated;
 
 use std::path::Path;
 
@@ -25,6 +26,7 @@ pub use folder::{
     binary_mask_warning, ignored_class_note, label_size_fit, list_label_pngs, list_some,
     load_label_dir, match_cameras, size_mismatch_reason, LabelDir, MissingLabels, SizeFit,
 };
+pub use interpolated::StepTally;
 
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct LabelMap {

@@ -1,0 +1,222 @@
+//! Label ids that look made by interpolation: a label map resized with bilinear (or bicubic)
+//! filtering, or saved as JPEG, gets ids between two classes along their edges, classes the
+//! segmenter never gave (between ids 1 and 3 a step of 2). Fused, they are phantom classes,
+//! silently: a scene with no ceiling had 121 Gaussians labeled ceiling (id 2) from maps
+//! resized 2x with bilinear filtering. Such an id lies in short runs with a lower id on one
+//! side and a higher on the other; a class's own region is not a few pixels wide between
+//! ids on either side of its own.
+
+use std::collections::BTreeMap;
+
+use super::LabelMap;
+
+/// The longest run (pixels along a row or a column) counted as a step between two ids: a
+/// 2x bilinear resize makes steps of one or two pixels, larger factors wider ones.
+const MAX_STEP: usize = 5;
+
+/// The share of crossings through steps from which maps look interpolated
+/// ([`StepTally::looks_interpolated`]).
+const STEP_SHARE: f64 = 0.2;
+
+/// How many ids a warning names.
+const SUSPECTS_NAMED: usize = 5;
+
+/// An id is named from this many pixels on steps on, and maps are judged from this many
+/// crossings through steps.
+const MIN_PIXELS: u64 = 8;
+
+/// Per label id, its pixels and those on steps, summed over the maps added.
+#[derive(Clone, Debug, Default)]
+pub struct StepTally {
+    /// id -> (pixels, pixels on a step, an example (lower, higher) pair of ids around one).
+    ids: BTreeMap<u16, (u64, u64, (u16, u16))>,
+    /// Edges between two ids at least two apart (room for an id between) crossed through a
+    /// step, and crossed directly (neither side a step).
+    crossings: Crossings,
+}
+
+/// How the edges between ids at least two apart are crossed along rows and columns.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Crossings {
+    pub through_steps: u64,
+    pub direct: u64,
+}
+
+impl StepTally {
+    /// Adds a map's ids: each pixel, and whether it lies on a step (a run of at most
+    /// [`MAX_STEP`] pixels of its id, along its row or its column, between a lower id on
+    /// one side and a higher on the other).
+    pub fn add(&mut self, map: &LabelMap) {
+        let (w, h) = (map.width as usize, map.height as usize);
+        let mut around: Vec<Option<(u16, u16)>> = vec![None; w * h];
+        let c = &mut self.crossings;
+        for y in 0..h {
+            mark_steps(&map.labels, (y * w..(y + 1) * w).collect(), &mut around, c);
+        }
+        for x in 0..w {
+            mark_steps(
+                &map.labels,
+                (0..h).map(|y| y * w + x).collect(),
+                &mut around,
+                c,
+            );
+        }
+        for (&id, pair) in map.labels.iter().zip(&around) {
+            if id == LabelMap::IGNORE {
+                continue;
+            }
+            let entry = self.ids.entry(id).or_insert((0, 0, (0, 0)));
+            entry.0 += 1;
+            if let Some(pair) = *pair {
+                entry.1 += 1;
+                entry.2 = pair;
+            }
+        }
+    }
+
+    /// How the maps added cross from id to id.
+    pub fn crossings(&self) -> Crossings {
+        self.crossings
+    }
+
+    /// Adds another tally's counts.
+    pub fn merge(&mut self, other: StepTally) {
+        self.crossings.through_steps += other.crossings.through_steps;
+        self.crossings.direct += other.crossings.direct;
+        for (id, (pixels, on_steps, pair)) in other.ids {
+            let entry = self.ids.entry(id).or_insert((0, 0, pair));
+            entry.0 += pixels;
+            entry.1 += on_steps;
+        }
+    }
+
+    /// Whether the maps look interpolated: at least [`STEP_SHARE`] of their crossings from
+    /// an id to one at least two apart go through a step (a segmenter's own maps: 0.4-5%,
+    /// rooms of thousands of random ids included; resized with bilinear filtering 97-100%,
+    /// saved as JPEG 23-90%).
+    pub fn looks_interpolated(&self) -> bool {
+        let c = self.crossings;
+        let crossed = c.through_steps + c.direct;
+        c.through_steps >= MIN_PIXELS && c.through_steps as f64 >= STEP_SHARE * crossed as f64
+    }
+
+    /// The ids most likely made by interpolation, with an example of the ids around one
+    /// of their steps, (id, lower, higher): those at least [`MIN_PIXELS`] of whose pixels
+    /// lie on steps, the largest share of their pixels first, at most [`SUSPECTS_NAMED`].
+    pub fn suspects(&self) -> Vec<(u16, u16, u16)> {
+        let mut stepped: Vec<(f64, u16, (u16, u16))> = (self.ids.iter())
+            .filter(|(_, &(_, on_steps, _))| on_steps >= MIN_PIXELS)
+            .map(|(&id, &(pixels, on_steps, pair))| (on_steps as f64 / pixels as f64, id, pair))
+            .collect();
+        stepped.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+        (stepped.into_iter().take(SUSPECTS_NAMED))
+            .map(|(_, id, (lower, higher))| (id, lower, higher))
+            .collect()
+    }
+
+    /// A warning where the maps look interpolated, naming the likeliest ids; `of` names
+    /// the maps.
+    pub fn warning(&self, of: &str) -> Option<String> {
+        if !self.looks_interpolated() {
+            return None;
+        }
+        let suspects = self.suspects();
+        let &(id, lower, higher) = suspects.first()?;
+        let ids: Vec<String> = suspects.iter().map(|s| s.0.to_string()).collect();
+        let c = self.crossings;
+        Some(format!(
+            "warning: {of} look resized with interpolation or saved as JPEG: {:.0}% of their \
+             edges between two ids pass through a step of one to {MAX_STEP} pixels of an id \
+             between them (id {id} between {lower} and {higher}), an id no segmenter gave \
+             there, which would be fused as a class of its own (most stepped: {}). Resize \
+             label maps with nearest neighbour and keep them PNG",
+            100.0 * c.through_steps as f64 / (c.through_steps + c.direct) as f64,
+            ids.join(", ")
+        ))
+    }
+}
+
+/// Marks, along one line of pixels (`line`: indices into `labels`), the pixels of each run
+/// of at most [`MAX_STEP`] that lies between a lower id and a higher one, and counts how
+/// the line crosses from id to id.
+fn mark_steps(
+    labels: &[u16],
+    line: Vec<usize>,
+    around: &mut [Option<(u16, u16)>],
+    crossings: &mut Crossings,
+) {
+    let runs: Vec<&[usize]> = line.chunk_by(|&a, &b| labels[a] == labels[b]).collect();
+    let known = |v: u16| v != LabelMap::IGNORE;
+    let mut steps = vec![false; runs.len()];
+    for i in 1..runs.len().saturating_sub(1) {
+        let (before, run, after) = (labels[runs[i - 1][0]], runs[i], labels[runs[i + 1][0]]);
+        let id = labels[run[0]];
+        let (lower, higher) = (before.min(after), before.max(after));
+        let all_known = known(id) && known(before) && known(after);
+        if run.len() <= MAX_STEP && all_known && lower < id && id < higher {
+            run.iter().for_each(|&p| around[p] = Some((lower, higher)));
+            steps[i] = true;
+            crossings.through_steps += 1;
+        }
+    }
+    for i in 1..runs.len() {
+        let (a, b) = (labels[runs[i - 1][0]], labels[runs[i][0]]);
+        if !steps[i - 1] && !steps[i] && known(a) && known(b) && a.abs_diff(b) >= 2 {
+            crossings.direct += 1;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn map(w: u32, rows: &[&[u16]]) -> LabelMap {
+        LabelMap::new(w, rows.len() as u32, rows.concat()).unwrap()
+    }
+
+    /// A bilinear 2x resize of an edge between ids 1 and 3 puts a 2 between them: the maps
+    /// look interpolated and id 2 is named. Edges crossed directly, a thin 2 between two 1s
+    /// and unlabeled pixels beside a run are no steps.
+    #[test]
+    fn steps_between_a_lower_and_a_higher_id_are_flagged() {
+        let row: &[u16] = &[1, 1, 1, 2, 3, 3, 3];
+        let mut tally = StepTally::default();
+        tally.add(&map(7, &[row; 8]));
+        assert!(tally.looks_interpolated());
+        assert_eq!(tally.suspects(), [(2, 1, 3)]);
+        let warning = tally.warning("x").unwrap();
+        assert!(warning.contains("id 2 between 1 and 3") && warning.contains("100%"));
+
+        let mut clean = StepTally::default();
+        let direct: &[u16] = &[0, 0, 0, 0, 5, 5, 5, 5, 5, 5, 9, 9, 9];
+        let thin: &[u16] = &[1, 1, 2, 1, 1, 1, 1];
+        let ignored: &[u16] = &[1, 2, LabelMap::IGNORE, 3];
+        clean.add(&map(13, &[direct; 8]));
+        clean.add(&map(7, &[thin; 8]));
+        clean.add(&map(4, &[ignored; 8]));
+        let c = clean.crossings();
+        assert_eq!((c.through_steps, c.direct), (0, 16));
+        assert!(!clean.looks_interpolated() && clean.warning("x").is_none());
+    }
+
+    /// Along columns as along rows; steps among many edges crossed directly (a fifth or
+    /// less of the crossings) are a segmenter's thin objects, not interpolation.
+    #[test]
+    fn columns_count_and_a_few_steps_among_direct_edges_do_not() {
+        let mut tally = StepTally::default();
+        let rows: Vec<Vec<u16>> = (0..9)
+            .map(|y| vec![[4, 4, 4, 5, 6, 6, 6, 6, 6][y]; 9])
+            .collect();
+        let rows: Vec<&[u16]> = rows.iter().map(Vec::as_slice).collect();
+        tally.add(&map(9, &rows));
+        assert_eq!(tally.suspects(), [(5, 4, 6)]);
+        assert!(tally.looks_interpolated());
+        // 9 steps, then 48 direct crossings (3 a row): 16% through steps.
+        let edges: &[u16] = &[0, 0, 9, 9, 0, 0, 9, 9];
+        let mut more = StepTally::default();
+        more.add(&map(8, &[edges; 16]));
+        tally.merge(more);
+        assert!(!tally.looks_interpolated());
+    }
+}
