@@ -1041,7 +1041,7 @@ fn write_report(
         }
     }
     if let Some(segments) = &report.segments {
-        note_unobserved(segments, report.gaussians);
+        note_unobserved(segments);
     }
     // A flag is a finding the user acts on (an object the views disagree on, often one a
     // segmenter mislabels in most of them): say so even without --report.
@@ -1063,16 +1063,19 @@ fn write_report(
 /// from the observed ones: one line says how many, and where the views observed few of the
 /// scene's Gaussians (a label map of one pixel, a depth tolerance too tight, cameras that
 /// see little of the scene) a warning says the classes came from those few.
-fn note_unobserved(segments: &SegmentReport, gaussians: usize) {
+fn note_unobserved(segments: &SegmentReport) {
     let filled = segments.from_neighbours;
     if filled == 0 {
         return;
     }
-    let observed = gaussians - segments.unobserved;
+    // Every Gaussian of the scene, however --extract or --remove selected from them.
+    let observed =
+        segments.from_segment + segments.from_neighbour_segments + segments.from_own_views;
+    let gaussians = observed + segments.unobserved;
     match observed * 2 < gaussians {
         false => eprintln!(
-            "{filled} of them no view observed: they took their neighbours' class \
-             (`segments.from_neighbours` of --report)"
+            "{filled} of the scene's {gaussians} Gaussians no view observed: they took their \
+             neighbours' class (`segments.from_neighbours` of --report)"
         ),
         true => eprintln!(
             "warning: the views observed only {observed} of the {gaussians} Gaussians' \
