@@ -300,8 +300,9 @@ run_ours() {
   # consensus_host: the office's views once, then its clustering and decision three times
   # on the same observations, every step timed, into bench.log): where each pass stops
   # scaling on this machine, and whether a warm repetition runs faster than the first. Its
-  # outputs hash is the development VM's (65cdd370932672fe at 1920x1080; with --clustering
-  # rounds 1180ee780834eca0) wherever the views observe the same.
+  # outputs hash is the development VM's (5009510662a647ad at 1920x1080; with --clustering
+  # rounds 26c000c973f4c7e5; since ec64ec4, which gave unseen Gaussians confidence 0: before
+  # it 65cdd370932672fe and 1180ee780834eca0) wherever the views observe the same.
   if [[ "host scaling office labels" =~ ${CASES:-.} ]] && [ -x "$bin/consensus_host" ] &&
     [ "$(left)" -gt 60 ]; then
     # On one core also the model of every thread count (util::scaling), to set beside the
