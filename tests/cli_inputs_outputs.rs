@@ -540,6 +540,22 @@ fn empty_inputs_are_errors_and_selections_name_their_class() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(printed.contains("3D accuracy"), "{printed}");
+    // Half the Gaussians at -1: eval says they draw no class (they scored as if classed).
+    let mut half = read_ply(&fused).unwrap();
+    let classes = half.class_ids.as_mut().unwrap();
+    let n = classes.len();
+    classes[..n / 2].fill(-1);
+    let unclassified = classes.iter().filter(|&&c| c == -1).count();
+    let halved = d.join("fused").join("half.ply");
+    write_ply(&halved, &half).unwrap();
+    let mut halved_eval = eval(&room.join("labels"), &[]);
+    halved_eval[2] = p(&halved); // --scene
+    let said = ok_owned(&halved_eval);
+    assert!(
+        said.contains(&format!("{unclassified} of the scene's {n} Gaussians"))
+            && said.contains("have no class (-1)"),
+        "{said}"
+    );
 
     let picked = ok_owned(&fuse_args(
         &room,
