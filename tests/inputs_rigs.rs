@@ -403,5 +403,5 @@ fn rig_names_that_leave_the_folder_are_refused() {
     let e = format!("{:#}", read_colmap_model(&model).unwrap_err());
     assert!(e.contains("share the name 'x'"), "{e}");
     // Named by the model's image ids (1 and 2 here), not by positions in a sorted list.
-    assert!(e.contains("images 1 and 2 share"), "{e}");
+    assert!(e.contains("image 1 and image 2 share"), "{e}");
 }

@@ -160,7 +160,8 @@ pub fn classes_in_labels(dir: &LabelDir, given: Option<&ClassTable>) -> Result<C
     let at_once = (CLASS_PASS_BYTES / largest.max(1)).max(1) as usize;
     let failed_at = AtomicUsize::new(usize::MAX);
     // Interpolated ids are looked for in four maps spread over the folder: a resize or a
-    // JPEG export treats every map alike, and the look costs several times the read.
+    // JPEG export treats every map alike, and the look costs about what the read does
+    // (inspect, which looks at every map: a capture's 190 1080p maps 1.1 -> 2.4 s).
     let looked_at = |i: usize| i.is_multiple_of((dir.len() / 4).max(1));
     let per_map = parallel_map_on(at_once, dir.len(), |i| {
         if i > failed_at.load(Ordering::Relaxed) {

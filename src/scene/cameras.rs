@@ -103,13 +103,21 @@ pub fn name_by_image_paths(cameras: &mut [Camera]) {
 /// Checks every camera (see [`Camera::validate`]) and that names are unique (label maps
 /// are matched by name).
 pub fn validate_cameras(cameras: &[Camera]) -> Result<()> {
+    validate_cameras_as(cameras, |i| format!("camera {i}"))
+}
+
+/// [`validate_cameras`], each camera named in errors by `named` of its index (a COLMAP
+/// model's by its image id: a position in the sorted list reads as a camera id).
+pub fn validate_cameras_as(cameras: &[Camera], named: impl Fn(usize) -> String) -> Result<()> {
     let mut seen: HashMap<&str, usize> = HashMap::with_capacity(cameras.len());
     for (i, cam) in cameras.iter().enumerate() {
-        cam.validate().with_context(|| format!("camera {i}"))?;
+        cam.validate().with_context(|| named(i))?;
         if let Some(first) = seen.insert(cam.name.as_str(), i) {
             bail!(
-                "cameras {first} and {i} share the name '{}': names (image stems, or relative image \
-                 paths where stems repeat) must be unique because label maps are matched by name",
+                "{} and {} share the name '{}': names (image stems, or relative image paths \
+                 where stems repeat) must be unique because label maps are matched by name",
+                named(first),
+                named(i),
                 cam.name
             );
         }

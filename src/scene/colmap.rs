@@ -15,7 +15,7 @@ use anyhow::{anyhow, bail, Context, Result};
 use glam::{DMat3, DQuat, DVec3};
 
 use super::camera::{Camera, Split};
-use super::cameras::{name_by_image_paths, validate_cameras};
+use super::cameras::{name_by_image_paths, validate_cameras, validate_cameras_as};
 use crate::util::{write_atomic, write_bytes_atomic};
 
 /// Longest image name we accept in a binary file (a missing NUL must not read the rest of the
@@ -254,18 +254,8 @@ pub fn colmap_to_cameras(cams: &[ColmapCamera], images: &[ColmapImage]) -> Resul
     name_by_image_paths(&mut out);
     let mut named: Vec<(Camera, u32)> = out.into_iter().zip(image_ids).collect();
     named.sort_by(|a, b| a.0.name.cmp(&b.0.name));
-    // Named by the model's image ids (validate_cameras would name positions in the list).
-    if let Some(pair) = named.windows(2).find(|w| w[0].0.name == w[1].0.name) {
-        bail!(
-            "images {} and {} share the name '{}': names (image stems, or relative image paths \
-             where stems repeat) must be unique because label maps are matched by name",
-            pair[0].1,
-            pair[1].1,
-            pair[0].0.name
-        );
-    }
-    let out: Vec<Camera> = named.into_iter().map(|(camera, _)| camera).collect();
-    validate_cameras(&out)?;
+    let (out, image_ids): (Vec<Camera>, Vec<u32>) = named.into_iter().unzip();
+    validate_cameras_as(&out, |i| format!("image {}", image_ids[i]))?;
     Ok(out)
 }
 

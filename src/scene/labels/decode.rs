@@ -309,18 +309,17 @@ fn decode_labels(
     let rows = samples.chunks(line).take(h.height as usize);
     let labels = if colored || gray_rgb_is_color_coded(n, &raw, h, table) {
         labels_by_colour(rows, h, &color_lookup(h, table)?, to_label)?
-    } else if let Some(class_of_index) = palette_classes(&palette, rows.clone(), h, table) {
-        // Each index through its colour's class, then the ignore id as for any class id.
-        let classes = labels_by_id(rows, h, |index| class_of_index[index as usize]);
-        (classes.into_iter())
-            .map(|c| {
-                if c == LabelMap::IGNORE {
-                    c
-                } else {
-                    to_label(c)
-                }
-            })
-            .collect()
+    } else if let Some(table) = table.filter(|_| !palette.is_empty()) {
+        // Read once as indices; then each through its colour's class where the palette is
+        // a colour-coded map's, else as the class id itself.
+        let indices = labels_by_id(rows, h, |index| index);
+        let class_of = palette_classes(&palette, &indices, h, table);
+        let label = |index: u16| match &class_of {
+            Some(class_of) if class_of[index as usize] == LabelMap::IGNORE => LabelMap::IGNORE,
+            Some(class_of) => to_label(class_of[index as usize]),
+            None => to_label(index),
+        };
+        indices.into_iter().map(label).collect()
     } else {
         labels_by_id(rows, h, to_label)
     };
@@ -334,34 +333,24 @@ fn decode_labels(
 /// DAVIS and the trackers write their palettes with the class at its index, and a table
 /// whose colours are that palette's reads the same either way). Read by index, such a map
 /// scored a tenth of its colours' accuracy, with no warning.
-fn palette_classes<'a>(
+fn palette_classes(
     palette: &[[u8; 3]],
-    rows: impl Iterator<Item = &'a [u8]>,
+    indices: &[u16],
     h: &PngHeader,
-    table: Option<&ClassTable>,
+    table: &ClassTable,
 ) -> Option<Vec<u16>> {
-    let table = table.filter(|t| t.shared_colour().is_none())?;
-    if palette.is_empty() {
-        return None;
-    }
+    let by_color = color_lookup(h, Some(table)).ok()?; // shared colours: read by index
     let mut used = vec![false; 1 << h.bit_depth.min(8)];
-    for index in labels_by_id(rows, h, |v| v) {
+    for &index in indices {
         *used.get_mut(index as usize)? = true;
     }
-    let by_color: HashMap<[u8; 3], u16> = (table.classes.iter())
-        .map(|c| (c.color, c.id as u16))
-        .collect();
     let mut class_of_index = vec![LabelMap::IGNORE; used.len()];
     let mut moved = false;
     for index in (0..used.len()).filter(|&i| used[i]) {
-        let color = palette.get(index)?;
-        match by_color.get(color) {
-            Some(&class) => {
-                class_of_index[index] = class;
-                moved |= class as usize != index;
-            }
-            None if *color == [0, 0, 0] => {} // unlabeled, as in colour-coded RGB maps
-            None => return None,
+        // A colour no class has, black aside (unlabeled): a palette of its own.
+        if let Some(class) = color_id(&by_color, *palette.get(index)?, 0, h).ok()? {
+            class_of_index[index] = class;
+            moved |= class as usize != index;
         }
     }
     moved.then_some(class_of_index)

@@ -6,9 +6,8 @@
 //! side and a higher on the other; a class's own region is not a few pixels wide between
 //! ids on either side of its own.
 
-use std::collections::BTreeMap;
-
 use super::LabelMap;
+use crate::scene::classes::IGNORE_U16;
 
 /// The longest run (pixels along a row or a column) counted as a step between two ids: a
 /// 2x bilinear resize makes steps of one or two pixels, larger factors wider ones.
@@ -28,8 +27,12 @@ const MIN_PIXELS: u64 = 8;
 /// Per label id, its pixels and those on steps, summed over the maps added.
 #[derive(Clone, Debug, Default)]
 pub struct StepTally {
-    /// id -> (pixels, pixels on a step, an example (lower, higher) pair of ids around one).
-    ids: BTreeMap<u16, (u64, u64, (u16, u16))>,
+    /// Per 16-bit label value (empty until a map is added; the last slot counts unlabeled
+    /// pixels, as [`LabelMap::count_into`] fills it): its pixels.
+    pixels: Vec<u64>,
+    /// Per label value: its pixels on a step, and the (lower, higher) ids around one.
+    on_steps: Vec<u64>,
+    around: Vec<(u16, u16)>,
     /// Edges between two ids at least two apart (room for an id between) crossed through a
     /// step, and crossed directly (neither side a step).
     crossings: Crossings,
@@ -42,36 +45,58 @@ pub struct Crossings {
     pub direct: u64,
 }
 
+/// The pixels on steps of a map being added (each once, though its row and its column may
+/// both find it on one), and per id the ids around its last step found.
+struct StepMarks {
+    on_step: Vec<bool>,
+    around: Vec<(u16, u16)>,
+}
+
 impl StepTally {
     /// Adds a map's ids: each pixel, and whether it lies on a step (a run of at most
     /// [`MAX_STEP`] pixels of its id, along its row or its column, between a lower id on
     /// one side and a higher on the other).
     pub fn add(&mut self, map: &LabelMap) {
+        let slots = IGNORE_U16 as usize + 1;
+        if self.pixels.is_empty() {
+            (self.pixels, self.on_steps) = (vec![0; slots], vec![0; slots]);
+            self.around = vec![(0, 0); slots];
+        }
+        map.count_into(&mut self.pixels);
         let (w, h) = (map.width as usize, map.height as usize);
-        let mut around: Vec<Option<(u16, u16)>> = vec![None; w * h];
+        let mut marks = StepMarks {
+            on_step: vec![false; w * h],
+            around: std::mem::take(&mut self.around),
+        };
         let c = &mut self.crossings;
         for y in 0..h {
-            mark_steps(&map.labels, (y * w..(y + 1) * w).collect(), &mut around, c);
+            mark_steps(
+                &map.labels,
+                Line {
+                    first: y * w,
+                    stride: 1,
+                    len: w,
+                },
+                &mut marks,
+                c,
+            );
         }
         for x in 0..w {
             mark_steps(
                 &map.labels,
-                (0..h).map(|y| y * w + x).collect(),
-                &mut around,
+                Line {
+                    first: x,
+                    stride: w,
+                    len: h,
+                },
+                &mut marks,
                 c,
             );
         }
-        for (&id, pair) in map.labels.iter().zip(&around) {
-            if id == LabelMap::IGNORE {
-                continue;
-            }
-            let entry = self.ids.entry(id).or_insert((0, 0, (0, 0)));
-            entry.0 += 1;
-            if let Some(pair) = *pair {
-                entry.1 += 1;
-                entry.2 = pair;
-            }
+        for (&id, _) in map.labels.iter().zip(&marks.on_step).filter(|(_, &on)| on) {
+            self.on_steps[id as usize] += 1;
         }
+        self.around = marks.around;
     }
 
     /// How the maps added cross from id to id.
@@ -83,10 +108,17 @@ impl StepTally {
     pub fn merge(&mut self, other: StepTally) {
         self.crossings.through_steps += other.crossings.through_steps;
         self.crossings.direct += other.crossings.direct;
-        for (id, (pixels, on_steps, pair)) in other.ids {
-            let entry = self.ids.entry(id).or_insert((0, 0, pair));
-            entry.0 += pixels;
-            entry.1 += on_steps;
+        if self.pixels.is_empty() {
+            (self.pixels, self.on_steps, self.around) =
+                (other.pixels, other.on_steps, other.around);
+            return;
+        }
+        for (id, &on_steps) in other.on_steps.iter().enumerate() {
+            self.pixels[id] += other.pixels[id];
+            self.on_steps[id] += on_steps;
+            if self.on_steps[id] == on_steps {
+                self.around[id] = other.around[id]; // an example from the tally that has one
+            }
         }
     }
 
@@ -104,13 +136,14 @@ impl StepTally {
     /// of their steps, (id, lower, higher): those at least [`MIN_PIXELS`] of whose pixels
     /// lie on steps, the largest share of their pixels first, at most [`SUSPECTS_NAMED`].
     pub fn suspects(&self) -> Vec<(u16, u16, u16)> {
-        let mut stepped: Vec<(f64, u16, (u16, u16))> = (self.ids.iter())
-            .filter(|(_, &(_, on_steps, _))| on_steps >= MIN_PIXELS)
-            .map(|(&id, &(pixels, on_steps, pair))| (on_steps as f64 / pixels as f64, id, pair))
+        let labeled = self.on_steps.len().saturating_sub(1); // not the unlabeled slot
+        let mut stepped: Vec<(f64, u16)> = (0..labeled)
+            .filter(|&id| self.on_steps[id] >= MIN_PIXELS)
+            .map(|id| (self.on_steps[id] as f64 / self.pixels[id] as f64, id as u16))
             .collect();
         stepped.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
         (stepped.into_iter().take(SUSPECTS_NAMED))
-            .map(|(_, id, (lower, higher))| (id, lower, higher))
+            .map(|(_, id)| (id, self.around[id as usize].0, self.around[id as usize].1))
             .collect()
     }
 
@@ -136,34 +169,70 @@ impl StepTally {
     }
 }
 
-/// Marks, along one line of pixels (`line`: indices into `labels`), the pixels of each run
-/// of at most [`MAX_STEP`] that lies between a lower id and a higher one, and counts how
-/// the line crosses from id to id.
-fn mark_steps(
-    labels: &[u16],
-    line: Vec<usize>,
-    around: &mut [Option<(u16, u16)>],
-    crossings: &mut Crossings,
-) {
-    let runs: Vec<&[usize]> = line.chunk_by(|&a, &b| labels[a] == labels[b]).collect();
+/// A row or a column of a map: pixel `first + k * stride` for k in 0..len.
+#[derive(Clone, Copy)]
+struct Line {
+    first: usize,
+    stride: usize,
+    len: usize,
+}
+
+/// A run of one id along a line: its id, first position on the line and length, and
+/// whether it is a step.
+#[derive(Clone, Copy)]
+struct Run {
+    id: u16,
+    at: usize,
+    len: usize,
+    step: bool,
+}
+
+/// Marks, along one line of pixels, the pixels of each run of at most [`MAX_STEP`] that
+/// lies between a lower id and a higher one, and counts how the line crosses from id to
+/// id. The runs are taken as the line is read: each is judged once the next one starts.
+fn mark_steps(labels: &[u16], line: Line, marks: &mut StepMarks, crossings: &mut Crossings) {
+    let id_at = |k: usize| labels[line.first + k * line.stride];
     let known = |v: u16| v != LabelMap::IGNORE;
-    let mut steps = vec![false; runs.len()];
-    for i in 1..runs.len().saturating_sub(1) {
-        let (before, run, after) = (labels[runs[i - 1][0]], runs[i], labels[runs[i + 1][0]]);
-        let id = labels[run[0]];
-        let (lower, higher) = (before.min(after), before.max(after));
-        let all_known = known(id) && known(before) && known(after);
-        if run.len() <= MAX_STEP && all_known && lower < id && id < higher {
-            run.iter().for_each(|&p| around[p] = Some((lower, higher)));
-            steps[i] = true;
-            crossings.through_steps += 1;
+    // The run before the last, and the last (complete once a new id starts).
+    let (mut before, mut last): (Option<Run>, Option<Run>) = (None, None);
+    let mut k = 0;
+    while k <= line.len {
+        let next = (k < line.len).then(|| id_at(k));
+        let start = k;
+        if let Some(id) = next {
+            while k < line.len && id_at(k) == id {
+                k += 1;
+            }
+        } else {
+            k += 1;
         }
-    }
-    for i in 1..runs.len() {
-        let (a, b) = (labels[runs[i - 1][0]], labels[runs[i][0]]);
-        if !steps[i - 1] && !steps[i] && known(a) && known(b) && a.abs_diff(b) >= 2 {
-            crossings.direct += 1;
+        if let Some(run) = last.as_mut() {
+            if let (Some(b), Some(after)) = (before, next) {
+                let (lower, higher) = (b.id.min(after), b.id.max(after));
+                let all_known = known(run.id) && known(b.id) && known(after);
+                if run.len <= MAX_STEP && all_known && lower < run.id && run.id < higher {
+                    run.step = true;
+                    crossings.through_steps += 1;
+                    for p in (run.at..run.at + run.len).map(|q| line.first + q * line.stride) {
+                        marks.on_step[p] = true;
+                    }
+                    marks.around[run.id as usize] = (lower, higher);
+                }
+            }
+            if let Some(b) = before {
+                let apart = known(b.id) && known(run.id) && b.id.abs_diff(run.id) >= 2;
+                if apart && !b.step && !run.step {
+                    crossings.direct += 1;
+                }
+            }
         }
+        before = last;
+        last = next.map(|id| Run {
+            id,
+            at: start,
+            len: k - start,
+            step: false,
+        });
     }
 }
 
