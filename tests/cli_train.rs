@@ -343,6 +343,10 @@ fn the_log_has_no_cross_entropy_for_views_without_labels() {
     let err = String::from_utf8_lossy(&r.stderr);
     assert!(r.status.success(), "{err}");
     assert!(err.contains("have no label map and are left out"), "{err}");
+    // ...naming them (by their cameras' names, the maps' stems).
+    let stem = |p: &std::path::PathBuf| p.file_stem().unwrap().to_string_lossy().into_owned();
+    let removed: Vec<String> = maps[1..].iter().map(stem).collect();
+    assert!(err.contains(&removed.join(", ")), "{err}");
     let rep: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
     let log = rep["log"].as_array().unwrap();
     assert!(log.iter().all(|l| l["ce"].as_f64().is_some()), "{log:?}");

@@ -921,3 +921,43 @@ fn a_table_class_at_the_default_ignore_value_is_ignored_and_said_so() {
     assert_eq!(data.classes.user_ids(), [0, 1, 255]);
     assert!(data.warnings.iter().all(|w| !w.contains("class 255")));
 }
+
+#[test]
+fn sixteen_bit_maps_with_255_apart_from_the_other_ids_warn() {
+    let dir = tempfile::tempdir().unwrap();
+    let (cameras, labels) = dataset_dir(dir.path(), &[camera("a", (4, 3))]);
+    let write16 = |px: Vec<u16>| {
+        let map = image::ImageBuffer::<image::Luma<u16>, _>::from_raw(4, 3, px).unwrap();
+        map.save(labels.join("a.png")).unwrap();
+    };
+    // Code that wrote 255 for "no label" into 16-bit maps: 255 is a class there.
+    write16(vec![0, 255, 255, 0, 0, 0, 1, 1, 0, 0, 2, 2]);
+    let d = open(&cameras, &labels, None).unwrap();
+    assert_eq!(d.classes.user_ids(), [0, 1, 2, 255]);
+    let warning = d.warnings.join("\n");
+    assert!(
+        warning.contains("255 as a class")
+            && warning.contains("every other id is 2 or less")
+            && warning.contains("--ignore-id 255"),
+        "{warning}"
+    );
+    // The remedy it names drops 255, silently.
+    let d = open(&cameras, &labels, Some(255)).unwrap();
+    assert_eq!(d.classes.user_ids(), [0, 1, 2]);
+    assert!(d.warnings.is_empty(), "{:?}", d.warnings);
+    // inspect flags the folder (exit status 1).
+    let out = semsplat(&["inspect", labels.to_str().unwrap()]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        !out.status.success() && stdout.contains("255 as a class"),
+        "{stdout}"
+    );
+    // Ids running up to 255 (a 256-class segmenter's output) are ordinary classes.
+    write16(
+        (0..12)
+            .map(|i| if i == 0 { 255 } else { 200 + i })
+            .collect(),
+    );
+    let d = open(&cameras, &labels, None).unwrap();
+    assert!(d.warnings.is_empty(), "{:?}", d.warnings);
+}

@@ -15,7 +15,9 @@ use semsplat::eval::metrics::{gaussian_accuracy, Confusion, SegmentationScores};
 use semsplat::gpu::Gpu;
 use semsplat::scene::classes::{read_class_table, ClassTable};
 use semsplat::scene::images::ImageDir;
-use semsplat::scene::labels::{binary_mask_warning, LabelDir, LabelMap};
+use semsplat::scene::labels::{
+    binary_mask_warning, list_some, stray_255_warning, LabelDir, LabelMap,
+};
 use semsplat::scene::ply::read_classes_sidecar;
 use semsplat::scene::scene_file::{cameras_for_scene, read_scene};
 use semsplat::scene::{Camera, Gaussians, Split};
@@ -113,9 +115,10 @@ pub fn run(args: EvalArgs) -> Result<()> {
     }
     if !dir.skipped().is_empty() {
         eprintln!(
-            "note: {} of {} cameras have no label map and are not scored",
+            "note: {} of {} cameras have no label map and are not scored: {}",
             dir.skipped().len(),
-            cams.len()
+            cams.len(),
+            list_some(dir.skipped())
         );
     }
     let chosen = chosen_views(&args, &cams, &dir)?;
@@ -126,8 +129,13 @@ pub fn run(args: EvalArgs) -> Result<()> {
     let gpu = Gpu::new()?;
     let (confusion, ignored) = score_views(&gpu, &g, &classes, &chosen, &cams, &dir)?;
     let mut segmentation = confusion.scores();
-    let true_ids: Vec<u32> = segmentation.per_class.iter().map(|c| c.id).collect();
-    if let Some(w) = binary_mask_warning(&args.labels, &true_ids, ignored, &format) {
+    let mut true_ids: Vec<u32> = segmentation.per_class.iter().map(|c| c.id).collect();
+    true_ids.sort_unstable();
+    let value_warnings = [
+        binary_mask_warning(&args.labels, &true_ids, ignored, &format),
+        stray_255_warning(&args.labels, &true_ids, &format, table.as_ref()),
+    ];
+    for w in value_warnings.into_iter().flatten() {
         eprintln!("{w}");
     }
     if let Some(table) = &table {

@@ -15,7 +15,8 @@ use semsplat::scene::classes::{read_class_table, ClassTable, IGNORE_U16};
 use semsplat::scene::colmap::{find_colmap_model, ColmapFormat};
 use semsplat::scene::labels::{
     binary_mask_warning, ignored_class_note, label_size_fit, list_label_pngs, match_cameras,
-    read_label_png_as, size_mismatch_reason, LabelFormat, LabelMap, SizeFit, StepTally,
+    read_label_png_as, size_mismatch_reason, stray_255_warning, LabelFormat, LabelMap, SizeFit,
+    StepTally,
 };
 use semsplat::scene::ply::{classes_sidecar_path, read_classes_sidecar};
 use semsplat::scene::scene_file::{read_scene_unchecked, resolve_scene_path, scene_format};
@@ -639,7 +640,11 @@ fn inspect_labels(
         .filter(|&id| tally.counts[id as usize] > 0)
         .collect();
     let ignored = tally.counts[LabelMap::IGNORE as usize];
-    if let Some(w) = binary_mask_warning(path, &present, ignored, &labels.format) {
+    let value_warnings = [
+        binary_mask_warning(path, &present, ignored, &labels.format),
+        stray_255_warning(path, &present, &labels.format, colors),
+    ];
+    for w in value_warnings.into_iter().flatten() {
         r.problems
             .push(w.trim_start_matches("warning: ").to_owned());
     }

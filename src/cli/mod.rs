@@ -24,7 +24,7 @@ use clap::Args;
 use semsplat::dataset::{Dataset, DatasetPaths};
 use semsplat::fuse::LabelSource;
 use semsplat::scene::classes::ClassTable;
-use semsplat::scene::labels::LabelFormat;
+use semsplat::scene::labels::{list_some, LabelFormat};
 use semsplat::scene::ply::{write_classes_sidecar, write_ply_to};
 use semsplat::scene::{Camera, Gaussians};
 use semsplat::util::interrupt;
@@ -64,8 +64,9 @@ pub fn open_dataset(paths: &DatasetPaths, skipped: &str) -> Result<Dataset> {
     }
     if !data.labels.skipped().is_empty() {
         eprintln!(
-            "note: {} views have no label map and {skipped}",
-            data.labels.skipped().len()
+            "note: {} views have no label map and {skipped}: {}",
+            data.labels.skipped().len(),
+            list_some(data.labels.skipped())
         );
     }
     Ok(data)

@@ -12,7 +12,9 @@ pub use classes::{classes_in_labels, user_classes, CompactClasses, NO_LABEL};
 use crate::fuse::LabelSource;
 use crate::scene::cameras::load_cameras;
 use crate::scene::classes::{read_class_table, ClassTable};
-use crate::scene::labels::{binary_mask_warning, LabelDir, LabelFormat, MissingLabels};
+use crate::scene::labels::{
+    binary_mask_warning, stray_255_warning, LabelDir, LabelFormat, MissingLabels,
+};
 use crate::scene::{Camera, Split};
 
 /// Where a dataset's parts are.
@@ -70,6 +72,12 @@ impl Dataset {
             classes.user_ids(),
             found.ignored,
             &paths.format,
+        ));
+        warnings.extend(stray_255_warning(
+            paths.labels,
+            classes.user_ids(),
+            &paths.format,
+            given.as_ref(),
         ));
         warnings.extend(found.interpolated);
         let mut entry_of_camera = vec![None; cameras.len()];

@@ -24,7 +24,8 @@ pub use decode::{
 };
 pub use folder::{
     binary_mask_warning, ignored_class_note, label_size_fit, list_label_pngs, list_some,
-    load_label_dir, match_cameras, size_mismatch_reason, LabelDir, MissingLabels, SizeFit,
+    load_label_dir, match_cameras, size_mismatch_reason, stray_255_warning, LabelDir,
+    MissingLabels, SizeFit,
 };
 pub use interpolated::StepTally;
 

@@ -558,6 +558,40 @@ pub fn binary_mask_warning(
     ))
 }
 
+/// The largest id below 255 that still reads as an ordinary class beside a class 255 of
+/// 16-bit maps: where every other id is below it, 255 stands apart, as an 8-bit map's
+/// no-label value carried into 16 bits would.
+const STRAY_255_BELOW: u32 = 128;
+
+/// The warning for label maps where 255 is a class far above every other id, with no class
+/// table naming it and no --ignore-id given: 16-bit maps leave only 65535 unlabeled, and
+/// maps converted from 8-bit ones (or written by code that used 255 for "no label") would
+/// fuse their unlabeled pixels as a class. `class_ids` are the ids present, ascending.
+pub fn stray_255_warning(
+    dir: &Path,
+    class_ids: &[u32],
+    format: &LabelFormat,
+    table: Option<&ClassTable>,
+) -> Option<String> {
+    let (&last, others) = class_ids.split_last()?;
+    let named = table.is_some_and(|t| t.contains(255));
+    let below = others.last().copied();
+    if last != 255 || format.ignore_id.is_some() || named || below >= Some(STRAY_255_BELOW) {
+        return None;
+    }
+    let others = match below {
+        Some(id) => format!("every other id is {id} or less"),
+        None => "it is the only id".to_owned(),
+    };
+    Some(format!(
+        "warning: label folder {} uses 255 as a class and {others}; 255 means no label only \
+         in 8-bit maps (in 16-bit maps only 65535 does). If 255 marks unlabeled pixels here, \
+         pass --ignore-id 255; if it is a class, name it in a class table (classes.json) to \
+         silence this",
+        dir.display()
+    ))
+}
+
 /// Whether the label map `path`, or the first of the folder `path`, has an alpha channel
 /// (gray+alpha or RGBA).
 fn holds_alpha(path: &Path) -> bool {
