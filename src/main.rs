@@ -41,6 +41,10 @@ enum Command {
     /// Render views of a scene on the GPU (RGB, and semantic labels with --semantics).
     Render(cli::render::RenderArgs),
     /// Score a classified scene against label maps (mIoU, pixel and 3D accuracy).
+    ///
+    /// mIoU is the mean IoU over the classes the label maps hold on the scored views: a class
+    /// the scene draws where the maps hold none is not averaged in (its pixels lower the IoU
+    /// of the classes they cover). Pixels without a label are not scored.
     Eval(cli::eval::EvalArgs),
     /// Robustness: every method's mIoU as one kind of label noise grows (chart + JSON).
     Sweep(cli::sweep::SweepArgs),

@@ -944,3 +944,18 @@ fn label_pngs_too_small_for_their_size_are_refused_from_the_header() {
     let err = error_of(read_label_png(&p));
     assert_error(&err, &p, &["16384x16384", "cannot hold that many pixels"]);
 }
+
+/// A mistyped scene without --cameras is named as missing, not as a folder without cameras.
+#[test]
+fn a_missing_scene_is_named_before_its_cameras_are_looked_for() {
+    use semsplat::scene::scene_file::cameras_for_scene;
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("nosuch.ply");
+    let err = error_of(cameras_for_scene(None, &missing));
+    assert_error(&err, &missing, &["does not exist"]);
+    assert!(!err.contains("--cameras"), "{err}");
+    // An existing scene in a folder without cameras still asks for them.
+    let scene = write_tmp(dir.path(), "scene.ply", b"ply\n");
+    let err = error_of(cameras_for_scene(None, &scene));
+    assert!(err.contains("--cameras is needed"), "{err}");
+}

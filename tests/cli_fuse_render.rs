@@ -39,6 +39,7 @@ fn fuse_writes_classes_reassigns_from_saved_evidence_and_extracts() {
     check_fused_classes(&g, &truth);
     check_report_and_side_outputs(d);
     check_per_view_agrees(d, g.class_ids.as_ref().unwrap());
+    check_passes_are_noted(d, truth.len());
     check_eval_scores(d);
     check_rendered_views_and_membership(d, truth.len());
     check_reassigned_from_saved_evidence(d, &g);
@@ -92,11 +93,31 @@ fn check_report_and_side_outputs(d: &Path) {
     assert!(d.join("A.classes.json").is_file() && d.join("palette.ply").is_file());
 }
 
+/// A budget of two class rows (vote's 4 bytes an entry) takes several passes over the views,
+/// and fuse says so before them; the same classes as in one pass.
+fn check_passes_are_noted(d: &Path, gaussians: usize) {
+    let p = |f: &str| arg_in(d, f);
+    let budget = (2 * 4 * gaussians).to_string();
+    let vote = ["--method", "vote", "--out"];
+    let err = fuse_synth(
+        d,
+        &[&vote[..], &[&p("passes.ply"), "--mem-budget", &budget]].concat(),
+    );
+    assert!(
+        err.contains("passes over the views (2 classes a pass") && err.contains("--mem-budget"),
+        "{err}"
+    );
+    let err = fuse_synth(d, &[&vote[..], &[&p("one_pass.ply")]].concat());
+    assert!(!err.contains("passes over the views"), "{err}");
+    let classes = |f: &str| read_scene(d, f).class_ids.unwrap();
+    assert_eq!(classes("passes.ply"), classes("one_pass.ply"));
+}
+
 /// The per-view variant runs end to end and says so; it agrees with plain FlashSplat's
 /// `classes` on most Gaussians of these true labels.
 fn check_per_view_agrees(d: &Path, classes: &[i32]) {
     let p = |f: &str| arg_in(d, f);
-    fuse_synth(
+    let err = fuse_synth(
         d,
         &[
             "--per-view",
@@ -105,6 +126,11 @@ fn check_per_view_agrees(d: &Path, classes: &[i32]) {
             "--report",
             &p("per_view.json"),
         ],
+    );
+    // The room's one test view is fused too, and the note says how to hold it out.
+    assert!(
+        err.contains("1 camera marked \"test\" is fused too; --train-only"),
+        "{err}"
     );
     let per_view = read_json(&d.join("per_view.json"));
     assert_eq!(per_view["method"], "flashsplat --per-view");
@@ -292,6 +318,42 @@ fn render_writes_images_labels_and_raw_arrays() {
         agree as f64 > 0.8 * truth.labels.len() as f64,
         "{agree} of {} pixels agree",
         truth.labels.len()
+    );
+
+    // A scene of classes without logits (synth's, a fused one): --raw writes every array
+    // but the semantic ones, and says so; --softmax, which blends logits, is refused.
+    let classes_only = |extra: &str| {
+        let args = [
+            "render",
+            "--scene",
+            &p("scene.ply"),
+            "--cameras",
+            &p("cameras.json"),
+        ];
+        let rest = [
+            "--views",
+            &view,
+            "--out",
+            &p("classes"),
+            "--semantics",
+            extra,
+        ];
+        semsplat(&[&args[..], &rest].concat())
+    };
+    let r = classes_only("--raw");
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(
+        r.status.success() && err.contains("no .sem and .sem_norm"),
+        "{err}"
+    );
+    let written = |suffix: &str| d.join("classes").join(format!("{view}{suffix}")).is_file();
+    assert!([".labels.png", ".rgb.npy", ".alpha.npy", ".depth.npy"].map(written) == [true; 4]);
+    assert!(!written(".sem.npy") && !written(".sem_norm.npy"));
+    let r = classes_only("--softmax");
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(
+        !r.status.success() && err.contains("--softmax blends logits"),
+        "{err}"
     );
 }
 

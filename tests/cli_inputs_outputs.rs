@@ -553,8 +553,9 @@ fn empty_inputs_are_errors_and_selections_name_their_class() {
     let said = ok_owned(&halved_eval);
     assert!(
         said.contains(&format!("{unclassified} of the scene's {n} Gaussians"))
-            && said.contains("have no class (-1)"),
-        "{said}"
+            && said.contains("have no class (-1)")
+            && !said.contains("3D accuracy counts them"),
+        "{said} (no --truth: no 3D accuracy to speak of)"
     );
 
     let picked = ok_owned(&fuse_args(
@@ -654,6 +655,24 @@ fn empty_inputs_are_errors_and_selections_name_their_class() {
     );
     assert!(!Path::new(&npy).exists());
     assert!(!d.join("e.ply").exists());
+    // ...and a shard's part (evidence, NumPy) named .ply would be an array under a PLY name.
+    let part = arg_in(d, "part.ply");
+    let scene = arg_in(&room, "scene.ply");
+    let shard = [
+        "fuse",
+        "--scene",
+        &scene,
+        "--labels",
+        &p(&one_pixel),
+        "--shard",
+        "0/2",
+    ];
+    let e = fails(&[&shard[..], &["--out", &part]].concat());
+    assert!(
+        e.contains("is a shard's part") && e.contains(".npy name"),
+        "{e}"
+    );
+    assert!(!Path::new(&part).exists());
     let out = common::cli::semsplat(&["inspect", &p(&empty)]);
     assert!(
         !out.status.success(),

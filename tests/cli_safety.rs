@@ -14,7 +14,7 @@ use std::sync::mpsc;
 use std::time::Duration;
 
 use common::cli::strings;
-use semsplat::util::{stage_atomic, write_atomic, write_bytes_atomic};
+use semsplat::util::{check_output_file, stage_atomic, write_atomic, write_bytes_atomic};
 
 fn semsplat<I, S>(args: I) -> Output
 where
@@ -299,6 +299,19 @@ fn writes_go_through_symlinks_and_never_replace_special_files() {
     }
     assert_eq!(std::fs::read(d.join("real/new.txt")).unwrap(), b"new");
     assert!(temp_files(d).is_empty() && temp_files(&d.join("real")).is_empty());
+    // ...but an output check does not create folders where a dangling link points.
+    let into_nothing = d.join("gone/sub/x.ply");
+    std::os::unix::fs::symlink(&into_nothing, d.join("far.ply")).unwrap();
+    let err = format!(
+        "{:#}",
+        check_output_file("--out", &d.join("far.ply")).unwrap_err()
+    );
+    assert!(
+        err.contains("whose folder") && err.contains("does not exist"),
+        "{err}"
+    );
+    assert!(!d.join("gone").exists());
+    check_output_file("--out", &d.join("dangling.txt")).unwrap();
 
     // A FIFO, a device, a folder and a link to a folder are refused, and stay what they were.
     let fifo = d.join("fifo");

@@ -1960,16 +1960,17 @@ fn small_segments_take_their_neighbours_segments_class() {
 /// start. A line: segments of eight at x = 0..7 and 11..18 (class 0 in all three views),
 /// and three Gaussians alone between them: 8 seen by one view as class 1 (too few of its
 /// neighbours are in decided segments, so its own view decided it), 9 and 10 by three views
-/// as class 0.
+/// as class 0 (or 10 by none).
 #[test]
 fn small_segments_are_smoothed_by_their_neighbours_classes() {
-    let decide_with = |views_of_8: u32, smooth_rounds: usize| {
+    let decide_seeing = |views_of_8: u32, smooth_rounds: usize, views_of_10: u32| {
         let per_view: Vec<Vec<(u32, u32, u32, bool)>> = (0..views_of_8.max(3))
             .map(|v| {
                 let mut list: Vec<(u32, u32, u32, bool)> = Vec::new();
                 for g in 0..19u32 {
                     let seen = match g {
                         8 => v < views_of_8,
+                        10 => v < views_of_10,
                         _ => v < 3,
                     };
                     if seen {
@@ -1998,6 +1999,7 @@ fn small_segments_are_smoothed_by_their_neighbours_classes() {
         assert_eq!(near_8, [6, 7, 9, 10]);
         c
     };
+    let decide_with = |views_of_8, smooth_rounds| decide_seeing(views_of_8, smooth_rounds, 3);
     let c = decide_with(1, 0);
     assert_eq!(c.assignment.class[8], Some(1), "its own view, not smoothed");
     assert_eq!(c.evidence.dense(8), [0.0, 1.0]);
@@ -2026,6 +2028,14 @@ fn small_segments_are_smoothed_by_their_neighbours_classes() {
     assert_eq!(c.assignment.class[8], Some(1));
     assert_eq!(c.evidence.dense(8), [0.0, 4.0]);
     assert_eq!(c.smoothed, 0);
+    // 10 seen by no view holds no evidence of its own: it does not vote (3 : 1, not 4 : 1),
+    // and takes its class from its neighbours after the smoothing, 8's new class among them.
+    let c = decide_seeing(1, 1, 0);
+    assert_eq!(c.evidence.dense(8), [3.0, 1.0]);
+    assert_eq!(c.assignment.class[8], Some(0));
+    assert_eq!(c.assignment.class[10], Some(0));
+    assert_eq!(c.evidence.dense(10), [4.0, 0.0], "neighbours 8, 9, 11, 12");
+    assert_eq!(c.from_neighbours, 1);
 }
 
 /// A Gaussian its segment does not decide reads its views through their label regions:

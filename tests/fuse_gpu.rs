@@ -752,6 +752,49 @@ fn an_error_with_views_in_flight_is_returned_and_changes_nothing_after() {
     check_validation(gpu);
 }
 
+/// Label maps that load, and a stop asked for before one view's GPU work (Ctrl-C).
+struct StopBefore(usize, Vec<Option<Vec<u32>>>);
+
+impl LabelSource for StopBefore {
+    fn labels(&self, view: usize, cam: &Camera) -> anyhow::Result<Option<Vec<u32>>> {
+        self.1.labels(view, cam)
+    }
+
+    fn before_view(&self, view: usize) -> anyhow::Result<()> {
+        anyhow::ensure!(view != self.0, "stopped before view {view}");
+        Ok(())
+    }
+}
+
+/// A stop asked for before a view ends the run there, whether or not the maps of later
+/// views were read ahead (a large scene's few views were all read before the first one's
+/// GPU work ended, and Ctrl-C, checked only as a map was read, went unheeded until every
+/// view had run).
+#[test]
+fn a_stop_before_a_view_ends_the_run_there() {
+    let gpu = gpu();
+    let g = scene(600, 15);
+    let cams: Vec<Camera> = cameras().into_iter().cycle().take(6).collect();
+    let labels = label_maps(&cams, 16);
+    let scene = GpuScene::upload(gpu, &g).unwrap();
+    let cfg = FuseConfig {
+        method: Method::FlashSplat,
+        ..Default::default()
+    };
+    let stopping = StopBefore(2, labels);
+    let mut reported = Vec::new();
+    let progress = |done: usize, _: usize| reported.push(done);
+    let err = accumulate(gpu, &scene, &cams, &stopping, CLASSES, &cfg, progress)
+        .map(|_| ())
+        .unwrap_err();
+    assert!(
+        format!("{err:#}").contains("stopped before view 2"),
+        "{err:#}"
+    );
+    assert!(reported.iter().all(|&done| done <= 2), "{reported:?}");
+    check_validation(gpu);
+}
+
 /// One view in flight, two (the default, where the device has room) or the most: the same
 /// evidence, and the run says how many it kept.
 #[test]

@@ -1040,6 +1040,12 @@ fn fuse_cli_writes_entropy_segments_and_the_segment_report() {
         // Segment consensus counts views on the host: no accumulation to name.
         let accumulation = (name != "segment-consensus").then_some("fixed_point");
         assert_eq!(report["accumulation"].as_str(), accumulation, "{name}");
+        // Their memory is measured, as the other methods' is (it read 0).
+        let stats = &report["stats"];
+        for field in ["scene_device_bytes", "peak_host_bytes"] {
+            let bytes = stats[field].as_u64().unwrap();
+            assert!(bytes > 0, "{name}: {field} {bytes}");
+        }
         let table_len = report["classes"].as_u64().unwrap() as f32;
         for i in 0..g.len() {
             assert!((0.0..=1.0).contains(&conf[i]), "{name}: conf {}", conf[i]);

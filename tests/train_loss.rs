@@ -602,6 +602,21 @@ fn entropy_covers_more_gaussians_than_its_workgroups() {
     check_validation(gpu());
 }
 
+/// Equal logits (a uniform start, at 0 or any other value) are the entropy's maximum: its
+/// gradient there is exactly 0, not rounding that Adam would scale into full steps.
+#[test]
+fn entropy_gradient_of_equal_logits_is_exactly_zero() {
+    let c = 7;
+    let logits: Vec<f32> = [0.0f32, 1.0, -3.7, 123.456]
+        .iter()
+        .flat_map(|&v| vec![v; c])
+        .collect();
+    let (got, grad) = gpu_entropy(&logits, &vec![0.0; logits.len()], c as u32, 0.5);
+    assert!(grad.iter().all(|&g| g == 0.0), "{grad:?}");
+    assert_value("entropy", got.entropy, (c as f64).ln());
+    check_validation(gpu());
+}
+
 #[test]
 fn entropy_weight_warms_up_linearly() {
     assert_eq!(entropy_weight(0.01, 0, 5000), 0.0);

@@ -3,6 +3,12 @@
 // H_i = -sum_k p_k log p_k with p = softmax(s_i), dH/ds_k = -p_k (log p_k + H_i).
 // ADDS weight * dH/ds into grad_logits (weight = lambda_H / N) and writes the partial
 // sums of H_i / N. Grid-stride over Gaussians so the partials fit a fixed slot size.
+//
+// Both are formed from d_k = s_k - max s and its mean under p, d_bar = sum_k p_k d_k:
+// H = log z - d_bar and log p_k + H = d_k - d_bar (log z cancels). Equal logits give
+// d = 0 and a gradient of exactly 0, where log p_k + H summed rounding of log z and H: a
+// few ulps that Adam, which scales each step to the gradient's own size, took as full
+// steps (a uniform start moved by lr every iteration).
 
 #include "loss_sums.glsl"
 
@@ -34,18 +40,17 @@ void main() {
             m = max(m, logits.data[base + k]);
         }
         float z = 0.0;
+        float d_bar = 0.0;
         for (uint k = 0; k < pc.channels; k++) {
-            z += exp(logits.data[base + k] - m);
+            float d = logits.data[base + k] - m;
+            z += exp(d);
+            d_bar += exp(d) * d;
         }
-        float log_z = log(z);
-        float h = 0.0;
+        d_bar /= z;
+        float h = log(z) - d_bar;
         for (uint k = 0; k < pc.channels; k++) {
-            float log_p = logits.data[base + k] - m - log_z;
-            h -= exp(log_p) * log_p;
-        }
-        for (uint k = 0; k < pc.channels; k++) {
-            float log_p = logits.data[base + k] - m - log_z;
-            grad_logits.data[base + k] -= pc.weight * exp(log_p) * (log_p + h);
+            float d = logits.data[base + k] - m;
+            grad_logits.data[base + k] -= pc.weight * (exp(d) / z) * (d - d_bar);
         }
         h_sum += h;
     }

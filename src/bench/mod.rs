@@ -15,15 +15,15 @@ use crate::gpu::timings::KernelTotal;
 use crate::gpu::{Gpu, GpuResult, Recorder};
 
 /// GPU time of `runs` submissions of `record`, each after an untimed `prepare`, from the
-/// timestamps around `record` (ns per run), and the per-kernel split of the last run.
+/// timestamps around `record` (ns per run), and each run's per-kernel split.
 pub fn time_gpu(
     gpu: &Gpu,
     runs: usize,
     mut prepare: impl FnMut(&mut Recorder) -> GpuResult<()>,
     mut record: impl FnMut(&mut Recorder) -> GpuResult<()>,
-) -> GpuResult<(Vec<f64>, Vec<KernelTotal>)> {
+) -> GpuResult<(Vec<f64>, Vec<Vec<KernelTotal>>)> {
     let mut samples = Vec::with_capacity(runs);
-    let mut kernels = Vec::new();
+    let mut kernels = Vec::with_capacity(runs);
     for _ in 0..runs {
         let mut rec = Recorder::new(gpu)?;
         prepare(&mut rec)?;
@@ -33,13 +33,13 @@ pub fn time_gpu(
         let end = rec.mark();
         let timings = rec.submit_and_wait()?;
         samples.push(timings.between(start, end).unwrap_or(f64::NAN));
-        kernels = timings.by_kernel();
+        kernels.push(timings.by_kernel());
     }
     Ok((samples, kernels))
 }
 
 /// Median GPU time (ns) of `iters` timed runs after one warm-up (pipeline creation, first
-/// touches), with the per-kernel split of the last run.
+/// touches), with the per-kernel split of the median run ([`median_run`]).
 pub fn median_gpu_time(
     gpu: &Gpu,
     iters: usize,
@@ -47,8 +47,19 @@ pub fn median_gpu_time(
     mut record: impl FnMut(&mut Recorder) -> GpuResult<()>,
 ) -> GpuResult<(f64, Vec<KernelTotal>)> {
     time_gpu(gpu, 1, &mut prepare, &mut record)?;
-    let (mut samples, kernels) = time_gpu(gpu, iters.max(1), prepare, record)?;
-    Ok((median(&mut samples), kernels))
+    let (mut samples, mut kernels) = time_gpu(gpu, iters.max(1), prepare, record)?;
+    let split = std::mem::take(&mut kernels[median_run(&samples)]);
+    Ok((median(&mut samples), split))
+}
+
+/// The run whose time is the median (of an even count, the faster of the middle two): the
+/// one whose per-kernel split is reported, so that the split adds up to a time near the
+/// median rather than to whichever run came last (a noisy machine's last of three took
+/// 364 ms where the median was 250).
+pub fn median_run(samples: &[f64]) -> usize {
+    let mut order: Vec<usize> = (0..samples.len()).collect();
+    order.sort_by(|&a, &b| samples[a].total_cmp(&samples[b]));
+    order[(samples.len().max(1) - 1) / 2]
 }
 
 /// How long untimed work runs before a timed GPU benchmark: an idle GPU takes a while to
@@ -124,4 +135,19 @@ pub fn read_scene_folder(
     let cams = crate::scene::cameras_json::read_cameras_json(&json)?;
     ensure!(!cams.is_empty(), "{} has no camera", json.display());
     Ok((g, cams))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{median, median_run};
+
+    #[test]
+    fn the_median_run_is_the_one_whose_time_is_the_median() {
+        let mut odd = [364.0, 250.0, 240.0];
+        assert_eq!(median_run(&odd), 1);
+        assert_eq!(median(&mut odd), 250.0);
+        // Of an even count, the faster of the middle two.
+        assert_eq!(median_run(&[9.0, 1.0, 5.0, 7.0]), 2);
+        assert_eq!(median_run(&[3.0]), 0);
+    }
 }

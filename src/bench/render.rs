@@ -8,7 +8,7 @@ use glam::DVec3;
 use serde::Serialize;
 
 use super::export::export_inputs;
-use super::{median, warm_up};
+use super::{median, median_run, warm_up};
 use crate::gpu::timings::KernelTotal;
 use crate::gpu::Gpu;
 use crate::render::{BandWork, GpuScene, Rasterizer, RenderOptions, SemanticMode, StageTimes};
@@ -136,8 +136,10 @@ pub fn bench_render(gpu: &Gpu, input: &BenchInput, iters: usize) -> Result<Rende
     for _ in 0..iters.max(1) {
         let run = frame()?;
         frames.push(run.stages);
-        kernels = run.timings.by_kernel();
+        kernels.push(run.timings.by_kernel());
     }
+    let totals: Vec<f64> = frames.iter().map(StageTimes::total_ms).collect();
+    let kernels = std::mem::take(&mut kernels[median_run(&totals)]);
     let med = |f: fn(&StageTimes) -> f64| median(&mut frames.iter().map(f).collect::<Vec<_>>());
     let stages = StageTimes {
         project_ms: med(|s| s.project_ms),

@@ -1,6 +1,7 @@
 //! `semsplat eval`: scores a scene whose Gaussians carry classes (a `fuse` output) against
-//! label maps: 2D mIoU and pixel accuracy (per class too) on the chosen views, and 3D
-//! per-Gaussian accuracy when a PLY with the true classes is given.
+//! label maps: 2D mIoU (over the classes the maps hold) and pixel accuracy (per class too)
+//! on the chosen views, and 3D per-Gaussian accuracy when a PLY with the true classes is
+//! given.
 
 use std::path::{Path, PathBuf};
 
@@ -23,6 +24,7 @@ use semsplat::scene::scene_file::{cameras_for_scene, read_scene};
 use semsplat::scene::{Camera, Gaussians, Split};
 use semsplat::util::{interrupt, write_bytes_atomic};
 
+use super::progress::views_bar;
 use super::{check_outputs, Input, FRAME_HINT};
 
 #[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
@@ -144,7 +146,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
     for note in segmentation.notes(&classes, table.is_some()) {
         eprintln!("{note}");
     }
-    if let Some(note) = unclassified_note(&classes) {
+    if let Some(note) = unclassified_note(&classes, args.truth.is_some()) {
         eprintln!("{note}");
     }
     let image_quality = match &args.images {
@@ -173,13 +175,17 @@ pub fn run(args: EvalArgs) -> Result<()> {
 /// Gaussians of class -1 occlude but draw no class: the pixels they cover show the classes
 /// beside and behind them, so a scene that leaves many unclassified can score as well as
 /// one that classes them (80% left at -1 scored mIoU 0.88 against its truth's 0.93).
-fn unclassified_note(classes: &[i32]) -> Option<String> {
+fn unclassified_note(classes: &[i32], truth_given: bool) -> Option<String> {
     let unclassified = classes.iter().filter(|&&c| c < 0).count();
+    let counted = match truth_given {
+        true => "; the 3D accuracy counts them wrong",
+        false => "",
+    };
     (unclassified > 0).then(|| {
         format!(
             "note: {unclassified} of the scene's {} Gaussians ({:.1}%) have no class (-1): they \
              occlude but draw no class, so the pixels they cover take the classes beside and \
-             behind them; --truth's 3D accuracy counts them wrong",
+             behind them{counted}",
             classes.len(),
             100.0 * unclassified as f64 / classes.len() as f64
         )
@@ -199,8 +205,10 @@ fn score_views(
     let mut renderer = LabelRenderer::new(gpu, g, classes)?;
     let mut confusion = Confusion::default();
     let (mut ignored, mut rendered, mut pixels) = (0u64, 0u64, 0u64);
+    let bar = views_bar(chosen.len());
     for &i in chosen {
         interrupt::check()?;
+        bar.inc(1);
         let truth = dir.load(i)?;
         pixels += truth.labels.len() as u64;
         ignored += truth
@@ -212,6 +220,7 @@ fn score_views(
         rendered += predicted.iter().filter(|p| p.is_some()).count() as u64;
         confusion.add(&truth.labels, &predicted, LabelMap::IGNORE);
     }
+    bar.finish_and_clear();
     // A score of nothing rendered says nothing of the classes.
     ensure!(
         rendered > 0,

@@ -21,8 +21,8 @@ use semsplat::fuse::consensus_report::SegmentReport;
 use semsplat::fuse::partial::manifest_path;
 use semsplat::fuse::{
     accumulate_assigned, assign_semantic_near, class_totals, nearest_neighbours, one_vs_rest_row,
-    Accumulation, AssignOnGpu, Assignment, ClassScores, Clustering, EvidenceRows, FuseConfig,
-    FuseStats, Method, Shard, SpilledRows, TieNeighbours, TIE_NEIGHBOURS,
+    rows_per_pass, Accumulation, AssignOnGpu, Assignment, ClassScores, Clustering, EvidenceRows,
+    FuseConfig, FuseStats, Method, Shard, SpilledRows, TieNeighbours, TIE_NEIGHBOURS,
 };
 use semsplat::gpu::Gpu;
 use semsplat::render::GpuScene;
@@ -31,7 +31,7 @@ use semsplat::scene::classes::{read_class_table, write_class_table, ClassInfo, C
 use semsplat::scene::labels::{write_label_png, write_palette_png, LabelMap};
 use semsplat::scene::ply::{classes_sidecar_path, read_classes_sidecar, write_ply};
 use semsplat::scene::scene_file::{cameras_for_scene, read_scene, resolve_scene_path};
-use semsplat::scene::{Camera, Gaussians};
+use semsplat::scene::{Camera, Gaussians, Split};
 use semsplat::util::npy::write_npy_rows;
 use semsplat::util::{interrupt, write_bytes_atomic, OutputBatch};
 
@@ -600,15 +600,19 @@ pub(super) fn check_output_args(
     inputs: &[Input],
     out_is_ply: bool,
 ) -> Result<()> {
-    // A PLY named .npy would load in no NumPy and look like a part to `merge`.
-    let npy = args
-        .out
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("npy"));
+    // A PLY named .npy would load in no NumPy and look like a part to `merge`; a part
+    // named .ply would look like a scene to every reader of PLYs.
+    let named = |ext: &str| (args.out.extension()).is_some_and(|e| e.eq_ignore_ascii_case(ext));
     ensure!(
-        !(out_is_ply && npy),
+        !(out_is_ply && named("npy")),
         "--out {} is written as a PLY (the fused scene), not a NumPy array: give it a .ply \
          name (--save-contrib writes the evidence as .npy; fuse --shard K/N writes a part)",
+        args.out.display()
+    );
+    ensure!(
+        out_is_ply || !named("ply"),
+        "--out {} is a shard's part, a NumPy array of evidence, not a PLY: give it a .npy \
+         name (`semsplat merge` writes the fused PLY from the parts)",
         args.out.display()
     );
     let contrib_table = args.save_contrib.as_deref().map(contrib_sidecar);
@@ -723,6 +727,7 @@ fn fuse_views(
         knn: Some(TieNeighbours::Search(&g.means, TIE_NEIGHBOURS)),
         rows: keep_rows.then_some(&mut append as &mut dyn FnMut(usize, &[f64]) -> Result<()>),
     };
+    note_passes(&gpu, &cfg, data.classes.len(), g.len())?;
     let bar = views_bar(data.cameras.len());
     let track = follow(&bar);
     let (assignment, stats) = accumulate_assigned(
@@ -748,6 +753,21 @@ fn fuse_views(
     })
 }
 
+/// Says where the evidence matrix takes more than one pass over the views: each pass runs
+/// every view again, so thousands of classes multiply the run's time.
+fn note_passes(gpu: &Gpu, cfg: &FuseConfig, classes: usize, gaussians: usize) -> Result<()> {
+    let rows = rows_per_pass(gpu, cfg, classes, gaussians)?;
+    let passes = classes.div_ceil(rows);
+    if passes > 1 {
+        eprintln!(
+            "note: the evidence of {classes} classes x {gaussians} Gaussians takes {passes} \
+             passes over the views ({rows} classes a pass, within --mem-budget or a quarter of \
+             the device's memory): a larger --mem-budget takes fewer"
+        );
+    }
+    Ok(())
+}
+
 /// The progress line's tail: the scene's size and the memory in use.
 fn memory_line(gaussians: u32, gpu: &Gpu) -> String {
     let mib = |b: u64| b >> 20;
@@ -771,7 +791,22 @@ fn open_labeled_views(args: &FuseArgs) -> Result<Dataset> {
         train_only: args.train_only,
         format: args.label_format.format(),
     };
-    open_dataset(&paths, "are skipped")
+    let data = open_dataset(&paths, "are skipped")?;
+    let held_out = (data.cameras.iter())
+        .filter(|c| c.split == Split::Test)
+        .count();
+    if held_out > 0 {
+        // Scored by `eval`'s default views, they would score what was fused from them.
+        let (cameras, are) = match held_out {
+            1 => ("camera", "is"),
+            _ => ("cameras", "are"),
+        };
+        eprintln!(
+            "note: {held_out} {cameras} marked \"test\" {are} fused too; --train-only keeps \
+             them held out for `semsplat eval`"
+        );
+    }
+    Ok(data)
 }
 
 fn fuse_config(args: &FuseArgs, method: Method, accumulation: Accumulation) -> FuseConfig {

@@ -11,7 +11,7 @@ use clap::Args;
 
 use super::fuse::{selected_class, write_fused, Evidence, OutputArgs, Provenance};
 use super::progress::{follow, views_bar};
-use super::Input;
+use super::{Input, Interruptible};
 use semsplat::dataset::{load_split_cameras, Dataset};
 use semsplat::fuse::partial::{
     cameras_digest, check_parts, manifest_path, FileDigest, Fnv64, FusionKey, PartReader,
@@ -87,10 +87,11 @@ pub fn fuse_shard(job: &ShardJob) -> Result<()> {
     let gpu = Gpu::new()?;
     let scene = GpuScene::upload_for(&gpu, job.gaussians, job.cfg.method.scene_attributes())?;
     let bar = views_bar(cams.len());
-    let labels = ShardLabels {
+    let shard_labels = ShardLabels {
         data,
         views: &views,
     };
+    let labels = Interruptible(&shard_labels);
     let (raw, stats) = accumulate_raw(
         &gpu,
         &scene,

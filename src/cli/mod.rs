@@ -85,13 +85,19 @@ pub fn write_scene_with_table(out: &Path, g: &Gaussians, table: &ClassTable) -> 
     ply.commit()
 }
 
-/// A label source that stops the run at the next view once Ctrl-C was pressed.
+/// A label source that stops the run at the next view once Ctrl-C was pressed: no map is
+/// read after it, and no view's GPU work starts.
 pub struct Interruptible<'a>(pub &'a dyn LabelSource);
 
 impl LabelSource for Interruptible<'_> {
     fn labels(&self, view: usize, cam: &Camera) -> Result<Option<Vec<u32>>> {
         interrupt::check()?;
         self.0.labels(view, cam)
+    }
+
+    fn before_view(&self, view: usize) -> Result<()> {
+        interrupt::check()?;
+        self.0.before_view(view)
     }
 }
 

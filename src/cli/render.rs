@@ -61,8 +61,9 @@ pub struct RenderArgs {
     #[arg(long, value_delimiter = ',', num_args = 1..=3, default_values_t = [0.0f32, 0.0, 0.0], value_parser = args::unit_interval::<f32>)]
     background: Vec<f32>,
     /// Also write float32 NumPy arrays per view: <view>.rgb.npy [H,W,3], .alpha.npy [H,W],
-    /// .depth.npy [H,W], and with --semantics .sem.npy [H,W,C] (blended) and
-    /// .sem_norm.npy [H,W,C] (divided by the accumulated alpha).
+    /// .depth.npy [H,W], and with --semantics of a scene with logits .sem.npy [H,W,C]
+    /// (blended) and .sem_norm.npy [H,W,C] (divided by the accumulated alpha); a fused
+    /// scene's classes are in its label images only.
     #[arg(long)]
     raw: bool,
 }
@@ -133,10 +134,17 @@ fn label_source(args: &RenderArgs, g: &Gaussians, gpu: &Gpu) -> Result<LabelSour
             args.scene.display()
         );
     };
-    if args.softmax || args.raw {
+    if args.softmax {
         bail!(
-            "{} has a class per Gaussian but no sem_* logits: --softmax and --raw's semantic \
-             arrays need logits (drop them to render the classes)",
+            "{} has a class per Gaussian but no sem_* logits: --softmax blends logits (drop \
+             it to render the classes)",
+            args.scene.display()
+        );
+    }
+    if args.raw {
+        eprintln!(
+            "note: {} has a class per Gaussian but no sem_* logits: --raw writes no .sem and \
+             .sem_norm arrays (the classes are in <view>{LABELS_PNG})",
             args.scene.display()
         );
     }
@@ -327,7 +335,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
             write_palette_png(&out(PALETTE_PNG), labels, &palette_table)?;
         }
         if args.raw {
-            write_raw(&f, &out, args.semantics)?;
+            write_raw(&f, &out, opts.semantics.is_some())?;
         }
         bar.inc(1);
     }

@@ -115,7 +115,8 @@ pub struct TrainArgs {
     /// Train on the cameras marked "train" only (semsplat cameras.json).
     #[arg(long)]
     train_only: bool,
-    /// Write the model every this many iterations to <out>.iter<N>.ply.
+    /// Write the model every this many iterations beside --out, its name's stem followed by
+    /// .iter<N>.ply (--out trained.ply: trained.iter5000.ply).
     #[arg(long, value_parser = args::at_least_one::<u32>)]
     checkpoint_every: Option<u32>,
     /// JSON report: configuration, losses over time, stage times, densification.

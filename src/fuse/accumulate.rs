@@ -107,6 +107,14 @@ impl FuseConfig {
 /// worker threads a few views ahead of the GPU (hence `Sync`).
 pub trait LabelSource: Sync {
     fn labels(&self, view: usize, cam: &Camera) -> Result<Option<Vec<u32>>>;
+
+    /// Called before each view's GPU work, on the thread that submits it; an error stops
+    /// the run there. The maps are read ahead (every map of a few views of a large scene
+    /// is read before the first view's GPU work ends), so a stop asked for in `labels`
+    /// alone would come only after the views already read.
+    fn before_view(&self, _view: usize) -> Result<()> {
+        Ok(())
+    }
 }
 
 impl LabelSource for Vec<Option<Vec<u32>>> {
@@ -881,6 +889,7 @@ fn run_pass(
         produce,
         |view, staged| {
             stats.label_wait_s += waited_since.elapsed().as_secs_f64();
+            labels.before_view(view)?;
             progress(view);
             if let Some(pixels) = staged {
                 stats.views_with_labels += usize::from(first_pass);

@@ -564,6 +564,11 @@ pub fn decide_timed(
     };
     let mut decided = each_gaussian(&alone, &kept, count);
     took.gaussians_s = laps.lap();
+    // Smoothed before the unobserved are filled: a Gaussian no view saw holds no evidence
+    // of its own (its class would be its neighbours' votes, counted again), and the fill
+    // then reads the smoothed classes.
+    let smoothed = smooth_small_segments(&mut decided.class, &mut decided.evidence, &alone);
+    took.smooth_s = laps.lap();
     let from_neighbours = fill_unobserved(
         &mut decided.class,
         &mut decided.evidence,
@@ -572,8 +577,6 @@ pub fn decide_timed(
         p.neighbours,
     );
     took.fill_s = laps.lap();
-    let smoothed = smooth_small_segments(&mut decided.class, &mut decided.evidence, &alone);
-    took.smooth_s = laps.lap();
     let (mut confidence, mut entropy) = posteriors(&decided.evidence, &decided.class, p.prior);
     let unseen: Vec<bool> = (0..obs.n).map(|g| obs.row(g).is_empty()).collect();
     unseen_without_confidence(&unseen, &mut confidence, Some(&mut entropy), classes);

@@ -398,6 +398,10 @@ impl LabelSource for WalkedAgain<'_> {
             ViewFootprints::Kept(_) => Ok(None),
         }
     }
+
+    fn before_view(&self, view: usize) -> Result<()> {
+        self.relabeled.before_view(view)
+    }
 }
 
 #[cfg(test)]

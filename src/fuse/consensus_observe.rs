@@ -80,6 +80,7 @@ pub fn observe(
         views: cams.len(),
         passes: 1,
         rows_per_pass: input.classes,
+        scene_device_bytes: input.scene.device_bytes(),
         ..Default::default()
     };
     let mut views = ObservedViews::new(cams.len(), kept);
@@ -100,6 +101,7 @@ pub fn observe(
             read,
             |view, map| {
                 stats.label_wait_s += waited_since.elapsed().as_secs_f64();
+                input.labels.before_view(view)?;
                 progress(view, cams.len());
                 while let Ok(observed) = finished.try_recv() {
                     views.store(observed?, &mut stats);

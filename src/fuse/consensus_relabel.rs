@@ -144,6 +144,10 @@ impl LabelSource for RelabeledViews<'_> {
         }
         Ok(Some(map))
     }
+
+    fn before_view(&self, view: usize) -> Result<()> {
+        self.inner.before_view(view)
+    }
 }
 
 /// Relabels `map` (one view, `width` pixels a row) from `seeds`, the (pixel, class) of the
@@ -437,6 +441,7 @@ pub fn fuse_relabeled_by(
     let mut stats = both_visits(run.stats, fs_stats, relabel_stats);
     stats.wall_s = start.elapsed().as_secs_f64();
     stats.views_per_s = stats.views as f64 / stats.wall_s.max(1e-9);
+    stats.peak_host_bytes = crate::util::memory::peak_host_bytes().unwrap_or(0);
     Ok(ConsensusLift {
         assignment: Assignment { class, confidence },
         consensus,
@@ -484,6 +489,7 @@ fn both_visits(first: FuseStats, second: FuseStats, relabel: RegionStats) -> Fus
     stats.observe.regions_gpu_ms += relabel.gpu_ms;
     (stats.clustering, stats.decision) = (first.clustering, first.decision);
     stats.peak_device_bytes = stats.peak_device_bytes.max(first.peak_device_bytes);
+    stats.scene_device_bytes = stats.scene_device_bytes.max(first.scene_device_bytes);
     stats.region_host_fallbacks = first.region_host_fallbacks + relabel.host_fallbacks;
     stats
 }

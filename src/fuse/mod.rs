@@ -26,9 +26,9 @@ pub mod scores;
 pub mod shared_counts;
 
 pub use accumulate::{
-    accumulate, accumulate_assigned, accumulate_raw, gpu_assignable, Accumulation, AssignOnGpu,
-    FuseConfig, FuseStats, LabelSource, ObserveTimes, RowSink, TieNeighbours, LANES, MAX_LANES,
-    NO_LABEL,
+    accumulate, accumulate_assigned, accumulate_raw, gpu_assignable, rows_per_pass, Accumulation,
+    AssignOnGpu, FuseConfig, FuseStats, LabelSource, ObserveTimes, RowSink, TieNeighbours, LANES,
+    MAX_LANES, NO_LABEL,
 };
 pub use assign::{
     assign_counts_near, assign_one_vs_rest, assign_semantic, assign_semantic_near, class_totals,

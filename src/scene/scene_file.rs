@@ -56,6 +56,8 @@ pub fn cameras_for_scene(cameras: Option<&Path>, scene: &Path) -> Result<PathBuf
     if let Some(path) = cameras {
         return Ok(path.to_path_buf());
     }
+    // A mistyped scene is named as such, not as a folder without cameras.
+    resolve_scene_path(scene)?;
     let Some(beside) = scene_cameras_file(scene) else {
         bail!(
             "--cameras is needed (a COLMAP model folder, an INRIA or nerfstudio camera file, or \

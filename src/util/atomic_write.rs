@@ -404,8 +404,19 @@ pub fn check_output_file(option: &str, target: &Path) -> Result<()> {
             target.display()
         );
     }
-    check_writable_folder(folder_of(&resolved))
-        .with_context(|| format!("{option} {}", target.display()))
+    // Folders are created for a path the user named, not for where a dangling link points
+    // (/nonexistent/x.ply would create /nonexistent).
+    let landing = folder_of(&resolved);
+    if resolved != target && !landing.is_dir() {
+        bail!(
+            "{option} {} is a link to {}, whose folder {} does not exist: create that folder, \
+             or name another file",
+            target.display(),
+            resolved.display(),
+            landing.display()
+        );
+    }
+    check_writable_folder(landing).with_context(|| format!("{option} {}", target.display()))
 }
 
 /// The folder a file path lies in (`.` for a bare name).
