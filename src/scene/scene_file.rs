@@ -57,7 +57,9 @@ pub fn cameras_for_scene(cameras: Option<&Path>, scene: &Path) -> Result<PathBuf
         return Ok(path.to_path_buf());
     }
     // A mistyped scene is named as such, not as a folder without cameras.
-    resolve_scene_path(scene)?;
+    if !scene.exists() {
+        bail!("scene {} does not exist", scene.display());
+    }
     let Some(beside) = scene_cameras_file(scene) else {
         bail!(
             "--cameras is needed (a COLMAP model folder, an INRIA or nerfstudio camera file, or \
