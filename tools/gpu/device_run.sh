@@ -300,9 +300,9 @@ run_ours() {
   # consensus_host: the office's views once, then its clustering and decision three times
   # on the same observations, every step timed, into bench.log): where each pass stops
   # scaling on this machine, and whether a warm repetition runs faster than the first. Its
-  # outputs hash is the development VM's (5009510662a647ad at 1920x1080; with --clustering
-  # rounds 26c000c973f4c7e5; since ec64ec4, which gave unseen Gaussians confidence 0: before
-  # it 65cdd370932672fe and 1180ee780834eca0) wherever the views observe the same.
+  # outputs hash is the development VM's (2202828ba503bf70 at 1920x1080; with --clustering
+  # rounds 1c0c633aed9c2bcc; since 4438eed, which smooths before filling the unobserved:
+  # before it 5009510662a647ad and 26c000c973f4c7e5) wherever the views observe the same.
   if [[ "host scaling office labels" =~ ${CASES:-.} ]] && [ -x "$bin/consensus_host" ] &&
     [ "$(left)" -gt 60 ]; then
     # On one core also the model of every thread count (util::scaling), to set beside the
