@@ -31,14 +31,18 @@ enum Command {
     Synth(cli::synth::SynthArgs),
     /// Lift per-view label maps onto the Gaussians (vote, FlashSplat or segment consensus; no
     /// training).
+    // Negative numbers are values (`--depth-tol -1` reaches its range check), not flags.
+    #[command(allow_negative_numbers = true)]
     Fuse(Box<cli::fuse::FuseArgs>),
     /// Sum the partial evidence of `fuse --shard K/N` runs (every shard once) and write what
     /// a single `fuse` of every view writes, bit for bit.
     Merge(Box<cli::merge::MergeArgs>),
     /// Train semantic logits jointly with geometry and appearance (Gaussian Semantics), or the
     /// logits alone with --semantics-only.
+    #[command(allow_negative_numbers = true)]
     Train(Box<cli::train::TrainArgs>),
     /// Render views of a scene on the GPU (RGB, and semantic labels with --semantics).
+    #[command(allow_negative_numbers = true)]
     Render(cli::render::RenderArgs),
     /// Score a classified scene against label maps (mIoU, pixel and 3D accuracy).
     ///

@@ -165,10 +165,21 @@ fn assert_refused_naming_option_value_and_range(
     range: &str,
     out: &Path,
 ) {
-    let mut args = strings(command);
-    // `--opt=value` so that negative numbers reach the option's own parser.
-    args.push(format!("{option}={value}"));
-    let run = semsplat(&args);
+    // `--opt=value`; fuse, train and render also take `--opt -1` as a value, not a flag.
+    let apart = ["fuse", "train", "render"].contains(&command[0]);
+    let forms = [
+        vec![format!("{option}={value}")],
+        vec![option.to_string(), value.to_string()],
+    ];
+    for form in &forms[..1 + usize::from(apart)] {
+        let mut args = strings(command);
+        args.extend(form.iter().cloned());
+        assert_refused_as(&args, option, value, range, out);
+    }
+}
+
+fn assert_refused_as(args: &[String], option: &str, value: &str, range: &str, out: &Path) {
+    let run = semsplat(args);
     let err = stderr(&run);
     assert!(!run.status.success(), "{args:?} succeeded");
     for needle in [option, range] {
