@@ -709,6 +709,15 @@ fn flashsplat_overflowing(views_in_flight: usize) -> FuseConfig {
     }
 }
 
+/// A scene of 600 Gaussians (of `seed`), `views` cameras cycling through [`cameras`], and
+/// label maps for them (of `seed + 1`): the runs with several views in flight.
+fn scene_and_views(seed: u64, views: usize) -> (Gaussians, Vec<Camera>, Vec<Option<Vec<u32>>>) {
+    let g = scene(600, seed);
+    let cams: Vec<Camera> = cameras().into_iter().cycle().take(views).collect();
+    let labels = label_maps(&cams, seed + 1);
+    (g, cams, labels)
+}
+
 /// Label maps that fail to load at one view, as a corrupt file would.
 struct FailingAt(usize, Vec<Option<Vec<u32>>>);
 
@@ -725,9 +734,7 @@ impl LabelSource for FailingAt {
 #[test]
 fn an_error_with_views_in_flight_is_returned_and_changes_nothing_after() {
     let gpu = gpu();
-    let g = scene(600, 11);
-    let cams: Vec<Camera> = cameras().into_iter().cycle().take(6).collect();
-    let labels = label_maps(&cams, 12);
+    let (g, cams, labels) = scene_and_views(11, 6);
     let cfg = flashsplat_overflowing(semsplat::fuse::LANES);
     let scene = GpuScene::upload(gpu, &g).unwrap();
     let failing = FailingAt(4, labels.clone());
@@ -773,9 +780,7 @@ impl LabelSource for StopBefore {
 #[test]
 fn a_stop_before_a_view_ends_the_run_there() {
     let gpu = gpu();
-    let g = scene(600, 15);
-    let cams: Vec<Camera> = cameras().into_iter().cycle().take(6).collect();
-    let labels = label_maps(&cams, 16);
+    let (g, cams, labels) = scene_and_views(15, 6);
     let scene = GpuScene::upload(gpu, &g).unwrap();
     let cfg = FuseConfig {
         method: Method::FlashSplat,
@@ -800,9 +805,7 @@ fn a_stop_before_a_view_ends_the_run_there() {
 #[test]
 fn views_in_flight_change_nothing_but_the_overlap() {
     let gpu = gpu();
-    let g = scene(600, 13);
-    let cams: Vec<Camera> = cameras().into_iter().cycle().take(5).collect();
-    let labels = label_maps(&cams, 14);
+    let (g, cams, labels) = scene_and_views(13, 5);
     let scene = GpuScene::upload(gpu, &g).unwrap();
     let run = |views_in_flight: usize| {
         let cfg = flashsplat_overflowing(views_in_flight);

@@ -131,8 +131,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
     let gpu = Gpu::new()?;
     let (confusion, ignored) = score_views(&gpu, &g, &classes, &chosen, &cams, &dir)?;
     let mut segmentation = confusion.scores();
-    let mut true_ids: Vec<u32> = segmentation.per_class.iter().map(|c| c.id).collect();
-    true_ids.sort_unstable();
+    let true_ids: Vec<u32> = segmentation.per_class.iter().map(|c| c.id).collect();
     let value_warnings = [
         binary_mask_warning(&args.labels, &true_ids, ignored, &format),
         stray_255_warning(&args.labels, &true_ids, &format, table.as_ref()),

@@ -20,8 +20,8 @@ use semsplat::eval::label_render::{check_ids_fit_16_bit, LabelRenderer};
 use semsplat::fuse::consensus_report::SegmentReport;
 use semsplat::fuse::partial::manifest_path;
 use semsplat::fuse::{
-    accumulate_assigned, assign_semantic_near, class_totals, nearest_neighbours, one_vs_rest_row,
-    rows_per_pass, Accumulation, AssignOnGpu, Assignment, ClassScores, Clustering, EvidenceRows,
+    accumulate_assigned, assign_semantic_near, class_totals, evidence_passes, nearest_neighbours,
+    one_vs_rest_row, Accumulation, AssignOnGpu, Assignment, ClassScores, Clustering, EvidenceRows,
     FuseConfig, FuseStats, Method, Shard, SpilledRows, TieNeighbours, TIE_NEIGHBOURS,
 };
 use semsplat::gpu::Gpu;
@@ -756,8 +756,7 @@ fn fuse_views(
 /// Says where the evidence matrix takes more than one pass over the views: each pass runs
 /// every view again, so thousands of classes multiply the run's time.
 fn note_passes(gpu: &Gpu, cfg: &FuseConfig, classes: usize, gaussians: usize) -> Result<()> {
-    let rows = rows_per_pass(gpu, cfg, classes, gaussians)?;
-    let passes = classes.div_ceil(rows);
+    let (rows, passes) = evidence_passes(gpu, cfg, classes, gaussians)?;
     if passes > 1 {
         eprintln!(
             "note: the evidence of {classes} classes x {gaussians} Gaussians takes {passes} \

@@ -206,8 +206,20 @@ fn bytes_per_entry(method: Method, acc: Accumulation) -> u64 {
     }
 }
 
+/// Rows of the evidence matrix one pass holds, and the passes over the views its `classes`
+/// rows take.
+pub fn evidence_passes(
+    gpu: &Gpu,
+    cfg: &FuseConfig,
+    classes: usize,
+    n: usize,
+) -> Result<(usize, usize)> {
+    let rows = rows_per_pass(gpu, cfg, classes, n)?;
+    Ok((rows, classes.div_ceil(rows).max(1)))
+}
+
 /// Rows of the evidence matrix one pass holds.
-pub fn rows_per_pass(gpu: &Gpu, cfg: &FuseConfig, classes: usize, n: usize) -> Result<usize> {
+fn rows_per_pass(gpu: &Gpu, cfg: &FuseConfig, classes: usize, n: usize) -> Result<usize> {
     let per_row = bytes_per_entry(cfg.method, cfg.accumulation) * n.max(1) as u64;
     let caps = gpu.caps();
     // The kernels reach the rows by address, so a pass is one allocation of at most
@@ -489,6 +501,14 @@ impl ViewGpu {
 }
 
 impl FuseStats {
+    /// A run's last figures: its wall time since `start`, `views_run` (each pass's views)
+    /// a second, and the process's peak resident memory so far.
+    pub(crate) fn finish(&mut self, start: Instant, views_run: usize) {
+        self.wall_s = start.elapsed().as_secs_f64();
+        self.views_per_s = views_run as f64 / self.wall_s.max(1e-9);
+        self.peak_host_bytes = crate::util::memory::peak_host_bytes().unwrap_or(0);
+    }
+
     fn add_gpu(&mut self, work: ViewGpu) {
         self.gpu_ms += work.ms;
         KernelTotal::add_all(&mut self.kernels, work.kernels);
@@ -814,8 +834,7 @@ fn accumulate_passes(
     let start = Instant::now();
     let n = scene.n as usize;
     check_atomics(gpu, cfg.accumulation)?;
-    let rows = rows_per_pass(gpu, cfg, classes, n)?;
-    let passes = classes.div_ceil(rows).max(1);
+    let (rows, passes) = evidence_passes(gpu, cfg, classes, n)?;
     let entry = bytes_per_entry(cfg.method, cfg.accumulation);
     let mut stats = FuseStats {
         views: cams.len(),
@@ -851,11 +870,9 @@ fn accumulate_passes(
         stats.evidence_s += evidence_start.elapsed().as_secs_f64();
     }
     progress(passes * cams.len(), passes * cams.len());
-    stats.wall_s = start.elapsed().as_secs_f64();
-    stats.views_per_s = (stats.views * passes) as f64 / stats.wall_s.max(1e-9);
+    stats.finish(start, stats.views * passes);
     stats.views_in_flight = lanes.lanes.len();
     stats.scene_device_bytes = scene.device_bytes();
-    stats.peak_host_bytes = crate::util::memory::peak_host_bytes().unwrap_or(0);
     Ok(stats)
 }
 

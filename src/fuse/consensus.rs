@@ -123,9 +123,7 @@ pub fn consensus_run(
     (consensus, stats.decision) = decide_timed(&observations, &knn, segment, input.classes, params);
     let consensus = order.consensus_to_scene(consensus);
     stats.decide_s = decide_start.elapsed().as_secs_f64();
-    stats.wall_s = start.elapsed().as_secs_f64();
-    stats.views_per_s = stats.views as f64 / stats.wall_s.max(1e-9);
-    stats.peak_host_bytes = crate::util::memory::peak_host_bytes().unwrap_or(0);
+    stats.finish(start, stats.views);
     Ok(ConsensusRun {
         consensus,
         observations,

@@ -439,9 +439,7 @@ pub fn fuse_relabeled_by(
     let (mut confidence, _) = posteriors(&consensus.evidence, &class, params.prior);
     unseen_without_confidence(&unseen, &mut confidence, None, input.classes);
     let mut stats = both_visits(run.stats, fs_stats, relabel_stats);
-    stats.wall_s = start.elapsed().as_secs_f64();
-    stats.views_per_s = stats.views as f64 / stats.wall_s.max(1e-9);
-    stats.peak_host_bytes = crate::util::memory::peak_host_bytes().unwrap_or(0);
+    stats.finish(start, stats.views);
     Ok(ConsensusLift {
         assignment: Assignment { class, confidence },
         consensus,

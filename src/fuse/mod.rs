@@ -26,7 +26,7 @@ pub mod scores;
 pub mod shared_counts;
 
 pub use accumulate::{
-    accumulate, accumulate_assigned, accumulate_raw, gpu_assignable, rows_per_pass, Accumulation,
+    accumulate, accumulate_assigned, accumulate_raw, evidence_passes, gpu_assignable, Accumulation,
     AssignOnGpu, FuseConfig, FuseStats, LabelSource, ObserveTimes, RowSink, TieNeighbours, LANES,
     MAX_LANES, NO_LABEL,
 };

@@ -566,17 +566,19 @@ const STRAY_255_BELOW: u32 = 128;
 /// The warning for label maps where 255 is a class far above every other id, with no class
 /// table naming it and no --ignore-id given: 16-bit maps leave only 65535 unlabeled, and
 /// maps converted from 8-bit ones (or written by code that used 255 for "no label") would
-/// fuse their unlabeled pixels as a class. `class_ids` are the ids present, ascending.
+/// fuse their unlabeled pixels as a class. `class_ids` are the ids present.
 pub fn stray_255_warning(
     dir: &Path,
     class_ids: &[u32],
     format: &LabelFormat,
     table: Option<&ClassTable>,
 ) -> Option<String> {
-    let (&last, others) = class_ids.split_last()?;
     let named = table.is_some_and(|t| t.contains(255));
-    let below = others.last().copied();
-    if last != 255 || format.ignore_id.is_some() || named || below >= Some(STRAY_255_BELOW) {
+    if !class_ids.contains(&255) || format.ignore_id.is_some() || named {
+        return None;
+    }
+    let below = class_ids.iter().copied().filter(|&id| id != 255).max();
+    if below.is_some_and(|id| id >= STRAY_255_BELOW) {
         return None;
     }
     let others = match below {
