@@ -693,6 +693,41 @@ fn render_and_fuse_past_one_binding_write_the_same_bytes() {
     assert!(compared >= 10, "{compared} files compared");
 }
 
+/// A label map larger than one binding (here forced by a lower limit, as an 8192x4200 map
+/// passes lavapipe's 128 MiB at 4 bytes a pixel): the methods that hold a view's pixels in
+/// one binding fail with what to do, the tiled ones fuse it.
+#[test]
+fn a_view_over_one_binding_names_the_tiled_methods() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    synth_tiny(d, 2, (320, 240));
+    let limit = ("SEMSPLAT_MAX_BINDING", (320 * 240 * 4 - 1024).to_string());
+    for (method, tiled) in [
+        (&["vote"][..], false),
+        (&["segment-consensus"], false),
+        (&["flashsplat"], true),
+        (&["vote", "--weighted"], true),
+    ] {
+        let out = d.join(format!("{}.ply", method.join("")));
+        let mut extra = vec!["--out", out.to_str().unwrap(), "--method"];
+        extra.extend(method);
+        let args = fuse_synth_args(d, &extra);
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let r = semsplat_with_env(&args, std::slice::from_ref(&limit));
+        let stderr = String::from_utf8_lossy(&r.stderr);
+        assert_eq!(r.status.success(), tiled, "{method:?}: {stderr}");
+        assert_eq!(out.exists(), tiled, "{method:?}");
+        if !tiled {
+            assert!(
+                stderr.contains("binding limit")
+                    && stderr.contains("holds a whole view's pixels in one binding")
+                    && stderr.contains("--method flashsplat"),
+                "{method:?}: {stderr}"
+            );
+        }
+    }
+}
+
 /// Every file in the folders `subs` of `whole` has the same bytes as its namesake under
 /// `limited`; returns how many files were compared.
 fn assert_same_files(whole: &Path, limited: &Path, subs: &[&str]) -> usize {

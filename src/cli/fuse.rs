@@ -24,7 +24,7 @@ use semsplat::fuse::{
     one_vs_rest_row, Accumulation, AssignOnGpu, Assignment, ClassScores, Clustering, EvidenceRows,
     FuseConfig, FuseStats, Method, Shard, SpilledRows, TieNeighbours, TIE_NEIGHBOURS,
 };
-use semsplat::gpu::Gpu;
+use semsplat::gpu::{Gpu, GpuError};
 use semsplat::render::GpuScene;
 use semsplat::scene::cameras::load_cameras;
 use semsplat::scene::classes::{read_class_table, write_class_table, ClassInfo, ClassTable};
@@ -415,7 +415,9 @@ pub fn run(mut args: FuseArgs) -> Result<()> {
     }
     let evidence = match &args.contrib {
         Some(path) => load_evidence(path, &g)?,
-        None => fuse_views(&args, &g, method, accumulation)?,
+        None => {
+            fuse_views(&args, &g, method, accumulation).map_err(|e| with_tiled_hint(e, method))?
+        }
     };
     let provenance = Provenance {
         method: match args.contrib {
@@ -751,6 +753,24 @@ fn fuse_views(
         stats: Some(stats),
         consensus: None,
     })
+}
+
+/// `e`, where it is a binding over the device's limit in a method that holds a view's
+/// pixels in one binding (vote at centers, segment consensus), with what to do: there the
+/// image's size is the cause, and the tiled methods take a view a block of tiles at a time.
+fn with_tiled_hint(e: anyhow::Error, method: Method) -> anyhow::Error {
+    let over_limit = |c: &(dyn std::error::Error + 'static)| {
+        matches!(c.downcast_ref::<GpuError>(), Some(GpuError::Limit(_)))
+    };
+    if method.is_tiled() || !e.chain().any(over_limit) {
+        return e;
+    }
+    anyhow!(
+        "{e:#}\n{} holds a whole view's pixels in one binding: downscale the label maps (and \
+         the cameras' intrinsics with them), or use `--method flashsplat` or `--method vote \
+         --weighted`, which walk a view a block of tiles at a time and take images this large",
+        method.name()
+    )
 }
 
 /// Says where the evidence matrix takes more than one pass over the views: each pass runs
