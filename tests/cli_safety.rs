@@ -732,6 +732,79 @@ fn ctrl_c_during_synth_writing_exits_at_once_without_temp_files() {
     );
 }
 
+/// A render stopped part-way says how many of its views it wrote and which, and the files
+/// there are those views' (whole, no temp file).
+#[test]
+fn ctrl_c_during_render_names_the_views_written() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (room, out) = (tmp.path().join("room"), tmp.path().join("render"));
+    let synth = semsplat(
+        [
+            "synth",
+            "--preset",
+            "tiny",
+            "--views",
+            "400",
+            "--test-views",
+            "0",
+        ]
+        .into_iter()
+        .chain(["--width", "32", "--height", "24", "--no-previews", "--out"])
+        .chain([room.to_str().unwrap()]),
+    );
+    assert!(synth.status.success(), "{}", stderr(&synth));
+    let child = Command::new(env!("CARGO_BIN_EXE_semsplat"))
+        .arg("render")
+        .args(["--scene".as_ref(), room.join("scene.ply").as_os_str()])
+        .args(["--cameras".as_ref(), room.join("cameras.json").as_os_str()])
+        .args(["--out".as_ref(), out.as_os_str()])
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let first = out.join("train_0000.png");
+    for _ in 0..300_000 {
+        if first.exists() {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    let sent = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    let run = child.wait_with_output().unwrap();
+    let err = stderr(&run);
+    assert_eq!(run.status.code(), Some(130), "{err}");
+    let done: usize = (err.split("stopped after ").nth(1))
+        .and_then(|rest| rest.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no count of views written: {err}"));
+    assert!((1..400).contains(&done), "{err}");
+    assert!(err.contains(&format!("{done} of 400 views")), "{err}");
+    let last = format!("train_{:04}", done - 1);
+    assert!(
+        err.contains(&format!("train_0000 to {last}")) || done == 1,
+        "{err}"
+    );
+    // Each written view's files, and perhaps some of the next one's (stopped mid-view).
+    let mut views: Vec<String> = (all_files(&out).iter())
+        .filter(|n| n.ends_with(".png"))
+        .map(|n| n.split('.').next().unwrap().to_string())
+        .collect();
+    views.sort();
+    views.dedup();
+    let view = |i: usize| format!("train_{i:04}");
+    let whole: Vec<String> = (0..done).map(view).collect();
+    assert!(
+        views == whole || views == (0..=done).map(view).collect::<Vec<_>>(),
+        "{views:?}: {err}"
+    );
+    for v in &whole {
+        assert!(out.join(format!("{v}.png")).exists(), "{v}.png");
+    }
+}
+
 /// A synth stopped part-way over an earlier one leaves no room to read: the earlier run's
 /// views are removed before any is written, and the cameras and summary come last (a
 /// stopped rerun left the new scene beside the old run's label maps, and fuse read them,

@@ -317,7 +317,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let mut raster = Rasterizer::new(&gpu);
     mark_as_render_output(&args.out)?;
     let bar = render_bar(cams.len());
-    for cam in &cams {
+    let mut one_view = |cam: &Camera| -> Result<()> {
         interrupt::check()?;
         bar.set_message(cam.name.clone());
         let f = raster.render(&scene, cam, &opts)?;
@@ -338,10 +338,45 @@ pub fn run(args: RenderArgs) -> Result<()> {
             write_raw(&f, &out, opts.semantics.is_some())?;
         }
         bar.inc(1);
+        Ok(())
+    };
+    for (done, cam) in cams.iter().enumerate() {
+        if let Err(e) = one_view(cam) {
+            if interrupt::is_interruption(&e) {
+                bar.finish_and_clear();
+                eprintln!("{}", partial_render_note(&args.out, &cams, done));
+            }
+            return Err(e);
+        }
     }
     bar.finish_and_clear();
     eprintln!("rendered {} views into {}", cams.len(), args.out.display());
     Ok(())
+}
+
+/// What an interrupted render leaves in `out`: the first `done` of `cams`, perhaps some of
+/// the next one's files, and beside them whatever an earlier render wrote (each file is
+/// whole: written to a temp name, renamed).
+fn partial_render_note(out: &Path, cams: &[Camera], done: usize) -> String {
+    let written = match done {
+        0 => "no view of this run".to_string(),
+        1 => format!("this run's first view ({})", cams[0].name),
+        _ => format!(
+            "this run's first {done} views ({} to {})",
+            cams[0].name,
+            cams[done - 1].name
+        ),
+    };
+    let next = match cams.get(done) {
+        Some(cam) => format!(" (and perhaps some of {}'s files)", cam.name),
+        None => String::new(),
+    };
+    format!(
+        "note: stopped after {done} of {} views: {} holds {written}{next}; files of the \
+         other views there, if any, are an earlier render's",
+        cams.len(),
+        out.display()
+    )
 }
 
 /// Labels of a fused scene's classes (user ids; ignore where no classified Gaussian shows).
