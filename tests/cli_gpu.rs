@@ -170,10 +170,19 @@ fn info_json_lists_the_selected_device() {
         "subgroup_size",
         "float_atomic_add",
         "int64_atomics",
+        "float64",
         "heaps",
     ] {
         assert!(!d[key].is_null(), "{key} missing from {d}");
     }
+    // The text form says the same of float64 (what the projection computes in).
+    let text = semsplat().arg("info").output().unwrap();
+    let text = String::from_utf8_lossy(&text.stdout);
+    let float64 = match d["float64"].as_bool().unwrap() {
+        true => "float64:           yes",
+        false => "float64:           no",
+    };
+    assert!(text.contains(float64), "{text}");
 }
 
 #[test]

@@ -76,6 +76,14 @@ fn print_device(d: &DeviceCandidate, selected: bool) {
         c.subgroup_size, c.min_subgroup_size, c.max_subgroup_size
     );
     println!("    float32 atomic add: {}", yes_no(c.float_atomic_add));
+    // Without it the projection runs in float32 (README, "Limits"): worth a line.
+    println!(
+        "    float64:           {}",
+        match c.float64 {
+            true => "yes (projection in float64)",
+            false => "no (projection in float32)",
+        }
+    );
     println!(
         "    int64 / atomics:   {} / {}",
         yes_no(c.int64),
