@@ -699,6 +699,31 @@ fn empty_inputs_are_errors_and_selections_name_their_class() {
     }
 }
 
+/// `inspect` of a file whose name says nothing reads what its first bytes say (as `fuse
+/// --scene` reads any name as PLY), and still refuses what they do not name.
+#[test]
+fn inspect_tells_a_nameless_file_by_its_first_bytes() {
+    let (tmp, room) = tiny_room();
+    let d = tmp.path();
+    let copy = |from: &Path, to: &str| {
+        std::fs::copy(from, d.join(to)).unwrap();
+        d.join(to).to_str().unwrap().to_string()
+    };
+    let scene = copy(&room.join("scene.ply"), "scene_copy");
+    let map = copy(&room.join("labels/train_0000.png"), "mask.label");
+    let notes = copy(&room.join("room.json"), "notes");
+    for (path, kind) in [(&scene, "(3DGS scene)"), (&map, "(label map)")] {
+        let out = common::cli::semsplat(&["inspect", path]);
+        let report = String::from_utf8_lossy(&out.stdout);
+        assert!(out.status.success() && report.contains(kind), "{report}");
+    }
+    let e = fails(&["inspect", &notes]);
+    assert!(
+        e.contains("cannot tell what") && e.contains("first bytes"),
+        "{e}"
+    );
+}
+
 /// `fuse` on the room with `extra`, as owned arguments.
 fn fuse_args(room: &Path, extra: &[&str]) -> Vec<String> {
     common::cli::fuse_synth_args(room, extra)

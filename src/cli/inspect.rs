@@ -35,6 +35,7 @@ PATH can be:
     consistency checks. A folder holding one class and the ignore id only (binary masks whose
     object would vanish) is a problem
   - a class table JSON
+A file whose extension names none of these is read by its first bytes (a PLY, a PNG).
 
 Problems found (NaN/Inf values, zero quaternions, unreadable or mismatched label maps, class ids
 missing from the class table, ...) are listed, and the exit status is then 1.
@@ -278,11 +279,42 @@ fn inspect_path(path: &Path, labels: &LabelInputs) -> Result<Report> {
         ),
         _ => {
             scene_format(path)?; // names the scene formats it knows of but does not read
+                                 // A name that says nothing (`scene`, `map.label`): its first bytes may.
+            match file_magic(path) {
+                Some(Magic::Ply) => return inspect_ply(path, table),
+                Some(Magic::Png) => {
+                    let name = path.file_name().unwrap_or_default().to_string_lossy();
+                    let files = [(name.into_owned(), path.to_owned())];
+                    return inspect_labels(path, "label map", &files, labels);
+                }
+                None => {}
+            }
             bail!(
-                "cannot tell what {} is from its name: {KINDS}",
+                "cannot tell what {} is from its name or its first bytes: {KINDS}",
                 path.display()
             )
         }
+    }
+}
+
+/// The formats a file's first bytes name.
+#[derive(Debug, PartialEq)]
+enum Magic {
+    Ply,
+    Png,
+}
+
+/// What `path`'s first bytes say it is, if they say (None also where it cannot be read: the
+/// error that follows names the file).
+fn file_magic(path: &Path) -> Option<Magic> {
+    use std::io::Read;
+    let mut head = [0u8; 8];
+    let mut file = std::fs::File::open(path).ok()?;
+    let read = file.read(&mut head).ok()?;
+    match &head[..read] {
+        [b'p', b'l', b'y', b'\n' | b'\r', ..] => Some(Magic::Ply),
+        [0x89, b'P', b'N', b'G', b'\r', b'\n', 0x1a, b'\n'] => Some(Magic::Png),
+        _ => None,
     }
 }
 
