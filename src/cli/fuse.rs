@@ -32,6 +32,7 @@ use semsplat::scene::labels::{write_label_png, write_palette_png, LabelMap};
 use semsplat::scene::ply::{classes_sidecar_path, read_classes_sidecar, write_ply};
 use semsplat::scene::scene_file::{cameras_for_scene, read_scene, resolve_scene_path};
 use semsplat::scene::{Camera, Gaussians, Split};
+use semsplat::util::free_space::check_free_space;
 use semsplat::util::npy::write_npy_rows;
 use semsplat::util::{interrupt, write_bytes_atomic, OutputBatch};
 
@@ -398,6 +399,14 @@ pub fn run(mut args: FuseArgs) -> Result<()> {
         "--scene {} holds no Gaussians: nothing to fuse",
         args.scene.display()
     );
+    if args.shard.is_none() {
+        // At least a PLY's every-scene properties (position, normal, colour and SH, opacity,
+        // scale, rotation) and the class and its confidence, 4 bytes each; a trained scene's
+        // logits are replaced, not kept.
+        let floats = 6 + 3 * g.sh_coeffs() + 8 + 2;
+        let at_least = (g.len() * floats * 4) as u64;
+        check_free_space("--out", &args.output.out, at_least, "the fused scene")?;
+    }
     let method = selected_method(&args)?;
     if args.contrib.is_none() {
         note_options_without_effect(&args, method);

@@ -1,6 +1,7 @@
 //! Small shared utilities.
 
 pub mod atomic_write;
+pub mod free_space;
 pub mod interrupt;
 pub mod memory;
 pub mod npy;
