@@ -7,6 +7,7 @@ use std::sync::Once;
 
 use anyhow::{anyhow, ensure, Result};
 use plotters::coord::types::RangedCoordf64;
+use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 
 use crate::util::write_bytes_atomic;
@@ -181,7 +182,8 @@ pub struct Line<'a> {
     pub band: Vec<(f64, f64)>,
 }
 
-/// A dashed reference line (a bound or a baseline the methods are read against).
+/// A reference line (a bound or a baseline the methods are read against), drawn in a
+/// dash of its own ([`REFERENCE_DASHES`]).
 pub struct Reference<'a> {
     pub label: &'a str,
     pub points: Vec<(f64, f64)>,
@@ -244,25 +246,51 @@ pub fn lines(
                 .map_err(plot_err)?;
         }
         for (i, r) in references.iter().enumerate() {
-            // Dark, distinct from the method palette: black, then greys.
-            let grey = (i * 90).min(160) as u8;
-            let color = RGBColor(grey, grey, grey).to_rgba();
+            let dash = REFERENCE_DASHES[i % REFERENCE_DASHES.len()];
+            let color = RGBColor(dash.grey, dash.grey, dash.grey).to_rgba();
+            let style = color.stroke_width(2);
+            let (size, gap) = dash.on_chart;
             chart
                 .draw_series(DashedLineSeries::new(
                     r.points.iter().copied(),
-                    12,
-                    8,
-                    color.stroke_width(2),
+                    size,
+                    gap,
+                    style,
                 ))
                 .map_err(plot_err)?
                 .label(r.label)
                 .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+                    let (size, gap) = dash.in_legend;
+                    DashedPathElement::new(vec![(x, y), (x + 20, y)], size, gap, style)
                 });
         }
         draw_legend(&mut chart, SeriesLabelPosition::LowerLeft)
     })
 }
+
+/// How a reference line is drawn: dark, apart from the methods' palette, and each in its
+/// own dash (an oracle bound and a clean-label line in two greys of one dash read as one).
+#[derive(Clone, Copy)]
+struct Dash {
+    grey: u8,
+    /// (dash, gap) in pixels along the chart's line and in the legend's 20-pixel sample.
+    on_chart: (i32, i32),
+    in_legend: (i32, i32),
+}
+
+/// The references' dashes, in order: long dashes in black, then dots in grey.
+const REFERENCE_DASHES: [Dash; 2] = [
+    Dash {
+        grey: 0,
+        on_chart: (12, 8),
+        in_legend: (7, 4),
+    },
+    Dash {
+        grey: 90,
+        on_chart: (3, 5),
+        in_legend: (2, 3),
+    },
+];
 
 /// Refuses chart data that would draw nothing or garbage: no points, non-finite values, or
 /// a band without one (min, max) per point.
