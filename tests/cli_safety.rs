@@ -675,8 +675,9 @@ fn all_files(dir: &Path) -> Vec<String> {
     names
 }
 
-/// Sends Ctrl-C (SIGINT) to `child` and checks that it stopped as interrupted (exit 130).
-fn interrupt(child: Child) {
+/// Sends Ctrl-C (SIGINT) to `child` and checks that it stopped as interrupted (exit 130);
+/// returns its stderr.
+fn interrupt(child: Child) -> String {
     let sent = Command::new("kill")
         .args(["-INT", &child.id().to_string()])
         .status()
@@ -686,6 +687,7 @@ fn interrupt(child: Child) {
     let err = stderr(&run);
     assert_eq!(run.status.code(), Some(130), "{err}");
     assert!(err.contains("interrupted"), "{err}");
+    err
 }
 
 /// A command that does not poll (synth) exits at the first Ctrl-C, mid-write, and still
@@ -768,14 +770,7 @@ fn ctrl_c_during_render_names_the_views_written() {
         }
         std::thread::sleep(Duration::from_millis(1));
     }
-    let sent = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(sent.success());
-    let run = child.wait_with_output().unwrap();
-    let err = stderr(&run);
-    assert_eq!(run.status.code(), Some(130), "{err}");
+    let err = interrupt(child);
     let done: usize = (err.split("stopped after ").nth(1))
         .and_then(|rest| rest.split(' ').next())
         .and_then(|n| n.parse().ok())
