@@ -405,7 +405,8 @@ pub fn run(mut args: FuseArgs) -> Result<()> {
         // logits are replaced, not kept.
         let floats = 6 + 3 * g.sh_coeffs() + 8 + 2;
         let at_least = (g.len() * floats * 4) as u64;
-        check_free_space("--out", &args.output.out, at_least, "the fused scene")?;
+        let what = "the fused scene (at least)";
+        check_free_space("--out", &args.output.out, at_least, what)?;
     }
     let method = selected_method(&args)?;
     if args.contrib.is_none() {

@@ -27,6 +27,7 @@ use semsplat::train::trainer::{
     StageTotals, Trainer, FUSED_DEFAULT_CONF,
 };
 use semsplat::train::views::TrainView;
+use semsplat::util::free_space::short_of_room;
 use semsplat::util::{
     check_output_file, interrupt, parallel_map_on, resolve_output_file, write_bytes_atomic,
 };
@@ -198,6 +199,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         None => with_initial_logits(&init, data.classes.len(), logits_start, args.seed),
     };
     let cfg = train_config(&args, init.len())?;
+    warn_if_short_of_room(&args, &init);
 
     let gpu = Gpu::new()?;
     let mut trainer = Trainer::new(&gpu, &init, &views, cfg.clone(), &[])?;
@@ -399,6 +401,19 @@ fn train_config(args: &TrainArgs, init_gaussians: usize) -> Result<TrainConfig> 
         );
     }
     Ok(cfg)
+}
+
+/// Warns where --out's file system has less room than the trained scene would take with
+/// as many Gaussians as --init (a guess: densification adds and prunes): a full disk is
+/// otherwise found at the write, after the whole run.
+fn warn_if_short_of_room(args: &TrainArgs, init: &Gaussians) {
+    let channels = init.semantics.as_ref().map_or(0, |s| s.channels);
+    let floats = 6 + 3 * init.sh_coeffs() + 8 + channels;
+    let about = (init.len() * floats * 4) as u64;
+    let what = "the trained scene (about, with --init's Gaussians)";
+    if let Some(short) = short_of_room("--out", &args.out, about, what) {
+        eprintln!("warning: {short}; the run may fail at its write");
+    }
 }
 
 /// Runs every iteration with a progress bar, writing checkpoints; returns the loss log.
