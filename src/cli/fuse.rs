@@ -29,7 +29,9 @@ use semsplat::render::GpuScene;
 use semsplat::scene::cameras::load_cameras;
 use semsplat::scene::classes::{read_class_table, write_class_table, ClassInfo, ClassTable};
 use semsplat::scene::labels::{write_label_png, write_palette_png, LabelMap};
-use semsplat::scene::ply::{classes_sidecar_path, read_classes_sidecar, write_ply};
+use semsplat::scene::ply::{
+    classes_sidecar_path, every_scenes_vertex_bytes, read_classes_sidecar, write_ply,
+};
 use semsplat::scene::scene_file::{cameras_for_scene, read_scene, resolve_scene_path};
 use semsplat::scene::{Camera, Gaussians, Split};
 use semsplat::util::free_space::check_free_space;
@@ -400,13 +402,11 @@ pub fn run(mut args: FuseArgs) -> Result<()> {
         args.scene.display()
     );
     if args.shard.is_none() {
-        // At least a PLY's every-scene properties (position, normal, colour and SH, opacity,
-        // scale, rotation) and the class and its confidence, 4 bytes each; a trained scene's
-        // logits are replaced, not kept.
-        let floats = 6 + 3 * g.sh_coeffs() + 8 + 2;
-        let at_least = (g.len() * floats * 4) as u64;
-        let what = "the fused scene (at least)";
-        check_free_space("--out", &args.output.out, at_least, what)?;
+        // Every scene's properties and the class and its confidence (4 bytes each); a
+        // trained scene's logits are replaced, not kept.
+        let vertex = every_scenes_vertex_bytes(g.sh_coeffs()) + 2 * 4;
+        let at_least = (g.len() * vertex) as u64;
+        check_free_space("--out", &args.output.out, at_least, "the fused scene")?;
     }
     let method = selected_method(&args)?;
     if args.contrib.is_none() {

@@ -278,8 +278,9 @@ fn inspect_path(path: &Path, labels: &LabelInputs) -> Result<Report> {
             path.display()
         ),
         _ => {
-            scene_format(path)?; // names the scene formats it knows of but does not read
-                                 // A name that says nothing (`scene`, `map.label`): its first bytes may.
+            // Names the scene formats it knows of but does not read.
+            scene_format(path)?;
+            // A name that says nothing (`scene`, `map.label`): its first bytes may.
             match file_magic(path) {
                 Some(Magic::Ply) => return inspect_ply(path, table),
                 Some(Magic::Png) => {

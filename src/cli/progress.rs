@@ -58,8 +58,8 @@ fn styled(bar: ProgressBar, template: &str) -> ProgressBar {
 }
 
 /// `bar` drawn with `template` (and `chars` for its bar, else indicatif's) on a terminal;
-/// elsewhere without the template's bar (a log
-/// line of `=>` or blocks says nothing its counts do not), as [`LogLines`].
+/// elsewhere as [`LogLines`], without the template's bar (a log line of `=>` or blocks
+/// says nothing its counts do not).
 fn drawn(bar: ProgressBar, template: &str, chars: Option<&str>) -> ProgressBar {
     if std::io::stderr().is_terminal() {
         let style = ProgressStyle::with_template(template).expect("valid template");

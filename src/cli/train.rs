@@ -16,7 +16,7 @@ use semsplat::dataset::{user_classes, CompactClasses, Dataset, DatasetPaths};
 use semsplat::gpu::Gpu;
 use semsplat::render::SemanticMode;
 use semsplat::scene::images::ImageDir;
-use semsplat::scene::ply::classes_sidecar_path;
+use semsplat::scene::ply::{classes_sidecar_path, every_scenes_vertex_bytes};
 use semsplat::scene::scene_file::{
     cameras_for_scene, read_scene, read_scene_or_point_cloud, resolve_scene_path,
 };
@@ -408,10 +408,10 @@ fn train_config(args: &TrainArgs, init_gaussians: usize) -> Result<TrainConfig> 
 /// otherwise found at the write, after the whole run.
 fn warn_if_short_of_room(args: &TrainArgs, init: &Gaussians) {
     let channels = init.semantics.as_ref().map_or(0, |s| s.channels);
-    let floats = 6 + 3 * init.sh_coeffs() + 8 + channels;
-    let about = (init.len() * floats * 4) as u64;
-    let what = "the trained scene (about, with --init's Gaussians)";
-    if let Some(short) = short_of_room("--out", &args.out, about, what) {
+    let vertex = every_scenes_vertex_bytes(init.sh_coeffs()) + 4 * channels;
+    let about = (init.len() * vertex) as u64;
+    let needs = "a trained scene of --init's Gaussians needs about";
+    if let Some(short) = short_of_room("--out", &args.out, about, needs) {
         eprintln!("warning: {short}; the run may fail at its write");
     }
 }

@@ -1069,23 +1069,32 @@ impl<'a, R: BufRead> Tokens<'a, R> {
 // ---------------------------------------------------------------------------------------
 // Writing
 
-/// The property names we write, in order (standard 3DGS first, then semantics).
+/// The floats every written scene starts with, before its higher SH bands.
+const FIRST_PROPERTIES: [&str; 9] = [
+    "x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2",
+];
+/// The floats every written scene holds after its higher SH bands.
+const LAST_PROPERTIES: [&str; 8] = [
+    "opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3",
+];
+
+/// Bytes of the properties every Gaussian of a written scene of `sh_coeffs` SH
+/// coefficients holds (each property is 4 bytes: [`property_names`]), before its optional
+/// fields (class, confidence, semantics, ...): what an output needs at least.
+pub fn every_scenes_vertex_bytes(sh_coeffs: usize) -> usize {
+    4 * (FIRST_PROPERTIES.len() + (sh_coeffs - 1) * 3 + LAST_PROPERTIES.len())
+}
+
+/// The property names we write, in order (standard 3DGS first, then semantics); each 4
+/// bytes (float or int).
 fn property_names(g: &Gaussians) -> Vec<(String, &'static str)> {
     let mut names: Vec<(String, &'static str)> = Vec::new();
     let float = |n: &str| (n.to_owned(), "float");
-    for n in [
-        "x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2",
-    ] {
-        names.push(float(n));
-    }
+    names.extend(FIRST_PROPERTIES.map(float));
     for i in 0..(g.sh_coeffs() - 1) * 3 {
         names.push(float(&format!("f_rest_{i}")));
     }
-    for n in [
-        "opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3",
-    ] {
-        names.push(float(n));
-    }
+    names.extend(LAST_PROPERTIES.map(float));
     if g.class_ids.is_some() {
         names.push(("class".into(), "int"));
     }

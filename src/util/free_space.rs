@@ -38,22 +38,23 @@ fn statvfs_available(_: &Path) -> Option<u64> {
 /// Refuses `target` (of `option`) where its file system has less than `at_least` bytes
 /// free ([`short_of_room`]); nothing where the free space cannot be told.
 pub fn check_free_space(option: &str, target: &Path, at_least: u64, what: &str) -> Result<()> {
-    match short_of_room(option, target, at_least, what) {
+    match short_of_room(option, target, at_least, &format!("{what} needs at least")) {
         Some(short) => bail!("{short}: free some space or write elsewhere"),
         None => Ok(()),
     }
 }
 
-/// What to say where `target`'s file system has less than `about` bytes free for `what`
-/// (None where it has, or where that cannot be told).
-pub fn short_of_room(option: &str, target: &Path, about: u64, what: &str) -> Option<String> {
+/// What to say where `target`'s file system has less than `about` bytes free: `needs`
+/// names what and how surely ("the fused scene needs at least"); None where it has room,
+/// or where that cannot be told.
+pub fn short_of_room(option: &str, target: &Path, about: u64, needs: &str) -> Option<String> {
     let free = free_bytes(target).filter(|&free| free < about)?;
     let (mut needed, mut has) = (human_bytes(&about), human_bytes(&free));
     if needed == has {
         (needed, has) = (format!("{about} bytes"), format!("{free} bytes"));
     }
     Some(format!(
-        "{option} {}: {what} needs {needed}, and its file system has {has} free",
+        "{option} {}: {needs} {needed}, and its file system has {has} free",
         target.display()
     ))
 }
@@ -73,11 +74,11 @@ mod tests {
             Some(free / (1 << 20))
         );
         assert!(check_free_space("--out", &below, 1, "the output").is_ok());
-        assert_eq!(short_of_room("--out", &below, 1, "the output"), None);
+        assert_eq!(short_of_room("--out", &below, 1, "the output needs"), None);
         let e = check_free_space("--out", &below, u64::MAX, "the fused scene").unwrap_err();
         let e = e.to_string();
         assert!(
-            e.contains("the fused scene needs") && e.contains("free some space"),
+            e.contains("the fused scene needs at least") && e.contains("free some space"),
             "{e}"
         );
     }
