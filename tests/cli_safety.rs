@@ -800,6 +800,37 @@ fn ctrl_c_during_render_names_the_views_written() {
     }
 }
 
+/// A render that fails part-way (here a folder where its third view's image goes, as a full
+/// disk would fail it) names the views it wrote whole, as an interrupted one does.
+#[test]
+fn a_render_failing_part_way_names_the_views_written() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (room, out) = (tmp.path().join("room"), tmp.path().join("render"));
+    synth(&room);
+    std::fs::create_dir_all(out.join("train_0002.png")).unwrap();
+    let r = semsplat(
+        [
+            "render",
+            "--scene",
+            room.join("scene.ply").to_str().unwrap(),
+        ]
+        .into_iter()
+        .chain(["--cameras", room.join("cameras.json").to_str().unwrap()])
+        .chain(["--out", out.to_str().unwrap(), "--force"]),
+    );
+    let err = stderr(&r);
+    assert!(!r.status.success(), "{err}");
+    assert!(
+        err.contains("stopped after 2 of 4 views")
+            && err.contains("train_0000 to train_0001")
+            && err.contains("train_0002.png"),
+        "{err}"
+    );
+    assert!(out.join("train_0001.png").is_file());
+    assert!(!out.join("test_0000.png").exists());
+    assert_eq!(temp_files(&out), Vec::<String>::new());
+}
+
 /// A synth stopped part-way over an earlier one leaves no room to read: the earlier run's
 /// views are removed before any is written, and the cameras and summary come last (a
 /// stopped rerun left the new scene beside the old run's label maps, and fuse read them,

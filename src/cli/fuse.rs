@@ -769,16 +769,29 @@ fn fuse_views(
 /// pixels in one binding (vote at centers, segment consensus), with what to do: there the
 /// image's size is the cause, and the tiled methods take a view a block of tiles at a time.
 fn with_tiled_hint(e: anyhow::Error, method: Method) -> anyhow::Error {
-    let over_limit = |c: &(dyn std::error::Error + 'static)| {
-        matches!(c.downcast_ref::<GpuError>(), Some(GpuError::Limit(_)))
+    let binding = |c: &(dyn std::error::Error + 'static)| {
+        matches!(
+            c.downcast_ref::<GpuError>(),
+            Some(GpuError::BindingRange { .. })
+        )
     };
-    if method.is_tiled() || !e.chain().any(over_limit) {
+    if method.is_tiled() || !e.chain().any(binding) {
         return e;
     }
+    // The chain as `{e:#}` writes it, but the binding error's generic remedy (fewer classes
+    // or Gaussians would not help a view's pixels) gives way to the one that does.
+    let chain: Vec<String> = e
+        .chain()
+        .map(|c| match c.downcast_ref::<GpuError>() {
+            Some(g) => g.fact(),
+            None => c.to_string(),
+        })
+        .collect();
     anyhow!(
-        "{e:#}\n{} holds a whole view's pixels in one binding: downscale the label maps (and \
-         the cameras' intrinsics with them), or use `--method flashsplat` or `--method vote \
+        "{}\n{} holds a whole view's pixels in one binding: downscale the label maps (and the \
+         cameras' intrinsics with them), or use `--method flashsplat` or `--method vote \
          --weighted`, which walk a view a block of tiles at a time and take images this large",
+        chain.join(": "),
         method.name()
     )
 }

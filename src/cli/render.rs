@@ -342,10 +342,9 @@ pub fn run(args: RenderArgs) -> Result<()> {
     };
     for (done, cam) in cams.iter().enumerate() {
         if let Err(e) = one_view(cam) {
-            if interrupt::is_interruption(&e) {
-                bar.finish_and_clear();
-                eprintln!("{}", partial_render_note(&args.out, &cams, done));
-            }
+            // Interrupted or failed (a full disk, a GPU error): say which views are whole.
+            bar.finish_and_clear();
+            eprintln!("{}", partial_render_note(&args.out, &cams, done));
             return Err(e);
         }
     }
@@ -354,7 +353,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
     Ok(())
 }
 
-/// What an interrupted render leaves in `out`: the first `done` of `cams`, perhaps some of
+/// What a render stopped part-way leaves in `out`: the first `done` of `cams`, perhaps some of
 /// the next one's files, and beside them whatever an earlier render wrote (each file is
 /// whole: written to a temp name, renamed).
 fn partial_render_note(out: &Path, cams: &[Camera], done: usize) -> String {

@@ -10,6 +10,7 @@ use clap::Args;
 
 use super::args;
 use super::progress::{follow, phase_bar};
+use semsplat::scene::ply::every_scenes_vertex_bytes;
 use semsplat::synth::writer::{OUTPUT_LAYOUT, ROOM_FILE, SUMMARY_FILE};
 use semsplat::synth::{
     self, NoiseSpec, RoomSource, SynthConfig, DEFAULT_HEIGHT, DEFAULT_HFOV_DEG,
@@ -17,6 +18,7 @@ use semsplat::synth::{
     DEFAULT_TRAIN_VIEWS, DEFAULT_WIDTH, HFOV_RANGE, INIT_JITTER_RANGE, INIT_SPACING_RANGE,
     MAX_SIDE, NOISE_KEYS_HELP, PRESETS, SPACING_RANGE,
 };
+use semsplat::util::free_space::check_free_space;
 
 static AFTER_HELP: LazyLock<String> = LazyLock::new(|| {
     let presets: String = PRESETS
@@ -142,6 +144,11 @@ pub fn run(args: SynthArgs) -> Result<()> {
     let scene = synth::generate_with_progress(&config, &follow(&bar))?;
     bar.finish_and_clear();
     let generated = start.elapsed();
+    // The scene alone, before its views' images (their compressed size is not known
+    // yet): a full disk found at the write would leave a stopped room.
+    let scene_bytes =
+        scene.gaussians.len() * every_scenes_vertex_bytes(scene.gaussians.sh_coeffs());
+    check_free_space("--out", &args.out, scene_bytes as u64, "the room's scene")?;
     let bar = phase_bar("writing");
     synth::write_synth_with_progress(&args.out, &scene, &follow(&bar))?;
     bar.finish_and_clear();

@@ -69,6 +69,41 @@ pub enum GpuError {
     },
     #[error("{0}")]
     Limit(String),
+    /// One buffer range larger than a descriptor may address. Kept apart from `Limit` so a
+    /// command that knows a better remedy (fuse: a tiled method) can say it instead.
+    #[error("{}: {BINDING_REMEDY}", binding_fact(.kernel, .buffer, *.bytes, *.max))]
+    BindingRange {
+        kernel: String,
+        buffer: String,
+        bytes: u64,
+        max: u64,
+    },
+}
+
+/// What helps when a binding is too large, said where the caller knows nothing better.
+pub const BINDING_REMEDY: &str = "use a smaller image, fewer classes or fewer Gaussians";
+
+impl GpuError {
+    /// A `BindingRange` error's fact alone, without the generic remedy; for any other error,
+    /// its message.
+    pub fn fact(&self) -> String {
+        match self {
+            GpuError::BindingRange {
+                kernel,
+                buffer,
+                bytes,
+                max,
+            } => binding_fact(kernel, buffer, *bytes, *max),
+            other => other.to_string(),
+        }
+    }
+}
+
+fn binding_fact(kernel: &str, buffer: &str, bytes: u64, max: u64) -> String {
+    format!(
+        "{kernel}: buffer '{buffer}' needs a {bytes}-byte binding, over the device's {max}-byte \
+         binding limit (maxStorageBufferRange)"
+    )
 }
 
 pub type GpuResult<T> = Result<T, GpuError>;

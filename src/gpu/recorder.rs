@@ -604,14 +604,12 @@ fn buffer_infos(
                 buf.size()
             );
             if range.size > max_range {
-                return Err(GpuError::Limit(format!(
-                    "{}: buffer '{}' needs a {}-byte binding, over the device's {max_range}-byte \
-                     binding limit (maxStorageBufferRange): use a smaller image, fewer classes or \
-                     fewer Gaussians",
-                    info.name,
-                    buf.name(),
-                    range.size
-                )));
+                return Err(GpuError::BindingRange {
+                    kernel: info.name.to_string(),
+                    buffer: buf.name().to_string(),
+                    bytes: range.size,
+                    max: max_range,
+                });
             }
             Ok([vk::DescriptorBufferInfo::default()
                 .buffer(buf.raw)
