@@ -462,7 +462,11 @@ fn invalid_camera_jsons_are_errors() {
             cam("").replace("\"width\": 4, \"height\": 3", "\"width\": 1048576, \"height\": 4096"),
             "32-bit pixel indices",
         ),
-        (cam("").replace("[1,0,0,0],[0,1,0,0]", "[2,0,0,0],[0,1,0,0]"), "not orthonormal"),
+        (
+            cam("").replace("[1,0,0,0],[0,1,0,0]", "[2,0,0,0],[0,1,0,0]"),
+            "not orthonormal (|R^T R - I| = 3.00e0, over the 1e-3 allowed): write the poses with \
+             more digits",
+        ),
         (cam("").replace("[1,0,0,0],[0,1,0,0]", "[-1,0,0,0],[0,1,0,0]"), "reflection"),
         (cam("").replace("[0,0,0,1]]", "[0,0,1,1]]"), "last row"),
         (cam("").replace("\"version\": 1", "\"version\": 2"), "version 2"),

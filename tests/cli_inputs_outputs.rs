@@ -724,6 +724,80 @@ fn inspect_tells_a_nameless_file_by_its_first_bytes() {
     );
 }
 
+/// JPEG label maps, a folder of them or one named .png, are named as JPEG with what to do
+/// (they had been "no PNG files", "neither a COLMAP model nor...", "not a PNG file").
+#[test]
+fn jpeg_label_maps_are_named_with_what_to_do() {
+    let (tmp, room) = tiny_room();
+    let (jpegs, renamed) = (tmp.path().join("jpegs"), tmp.path().join("renamed"));
+    std::fs::create_dir_all(&jpegs).unwrap();
+    // A JPEG's first bytes (SOI, APP0), then enough to pass for a file.
+    let jpeg: Vec<u8> = [0xff, 0xd8, 0xff, 0xe0]
+        .into_iter()
+        .chain([0; 60])
+        .collect();
+    for name in ["train_0000", "train_0001", "train_0002", "test_0000"] {
+        std::fs::write(jpegs.join(format!("{name}.jpg")), &jpeg).unwrap();
+    }
+    let out = tmp.path().join("out.ply");
+    let room_s = room.to_str().unwrap();
+    let fuse = |labels: &Path| {
+        let args = ["fuse", "--scene", room_s, "--out", out.to_str().unwrap()];
+        fails(&[&args[..], &["--labels", labels.to_str().unwrap()]].concat())
+    };
+    let must_be_png = "label maps must be PNG";
+    let e = fuse(&jpegs);
+    assert!(
+        e.contains("no PNG files but 4 JPEG files") && e.contains(must_be_png),
+        "{e}"
+    );
+    let e = fails(&["inspect", jpegs.to_str().unwrap()]);
+    assert!(
+        e.contains("holds 4 JPEG files") && e.contains(must_be_png),
+        "{e}"
+    );
+    let e = fails(&["inspect", jpegs.join("test_0000.jpg").to_str().unwrap()]);
+    assert!(
+        e.contains("is a JPEG image") && e.contains(must_be_png),
+        "{e}"
+    );
+    std::fs::create_dir_all(&renamed).unwrap();
+    for map in common::cli::label_pngs(&room) {
+        std::fs::copy(&map, renamed.join(map.file_name().unwrap())).unwrap();
+    }
+    std::fs::write(renamed.join("train_0001.png"), &jpeg).unwrap();
+    let e = fuse(&renamed);
+    assert!(
+        e.contains("train_0001.png: a JPEG file named .png") && e.contains(must_be_png),
+        "{e}"
+    );
+}
+
+/// `inspect` of a camera file it cannot read says what is wrong with it as cameras, not
+/// also that it is no class table; a scene without a class table lists its classes by id
+/// alone (no empty names).
+#[test]
+fn inspect_says_only_what_applies() {
+    let (tmp, room) = tiny_room();
+    let cams = std::fs::read_to_string(room.join("cameras.json")).unwrap();
+    let bad = tmp.path().join("val.json");
+    std::fs::write(&bad, cams.replacen("\"train\"", "\"val\"", 1)).unwrap();
+    let e = fails(&["inspect", bad.to_str().unwrap()]);
+    assert!(
+        e.contains("unknown variant") && !e.contains("class table"),
+        "{e}"
+    );
+    let bare = tmp.path().join("bare.ply");
+    std::fs::copy(room.join("scene.ply"), &bare).unwrap();
+    let out = common::cli::semsplat(&["inspect", bare.to_str().unwrap()]);
+    let report = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{report}");
+    assert!(
+        report.contains("id: 0, count:") && !report.contains("name: ,"),
+        "{report}"
+    );
+}
+
 /// `fuse` on the room with `extra`, as owned arguments.
 fn fuse_args(room: &Path, extra: &[&str]) -> Vec<String> {
     common::cli::fuse_synth_args(room, extra)

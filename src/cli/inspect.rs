@@ -14,9 +14,9 @@ use semsplat::scene::cameras_json::{read_cameras_json_kind, CameraJsonKind};
 use semsplat::scene::classes::{read_class_table, ClassTable, IGNORE_U16};
 use semsplat::scene::colmap::{find_colmap_model, ColmapFormat};
 use semsplat::scene::labels::{
-    binary_mask_warning, ignored_class_note, label_size_fit, list_label_pngs, match_cameras,
-    read_label_png_as, size_mismatch_reason, stray_255_warning, LabelFormat, LabelMap, SizeFit,
-    StepTally,
+    binary_mask_warning, ignored_class_note, jpeg_note, label_size_fit, list_label_pngs,
+    match_cameras, read_label_png_as, size_mismatch_reason, stray_255_warning, LabelFormat,
+    LabelMap, SizeFit, StepTally, JPEG_LABELS,
 };
 use semsplat::scene::ply::{classes_sidecar_path, read_classes_sidecar};
 use semsplat::scene::scene_file::{read_scene_unchecked, resolve_scene_path, scene_format};
@@ -244,9 +244,10 @@ fn inspect_path(path: &Path, labels: &LabelInputs) -> Result<Report> {
         }
         let pngs = list_label_pngs(path)?;
         if pngs.is_empty() {
+            let jpegs = jpeg_note(path).map_or(String::new(), |n| format!("; it holds {n}"));
             bail!(
                 "{} is neither a COLMAP model (cameras/images .bin or .txt, or sparse/0) nor a \
-                 folder of PNG label maps",
+                 folder of PNG label maps{jpegs}",
                 path.display()
             );
         }
@@ -263,15 +264,22 @@ fn inspect_path(path: &Path, labels: &LabelInputs) -> Result<Report> {
                 .to_owned();
             inspect_labels(path, "label map", &[(stem, path.to_owned())], labels)
         }
-        "json" if looks_like_class_table(path)? => inspect_class_table(path, &labels.format),
-        // A JSON of neither kind (a class list of another tool's layout) hears of both.
-        "json" => inspect_cameras(path).map_err(|e| {
-            anyhow!(
-                "{e:#}; nor is it a class table (a list of {{\"id\", \"name\", \"color\": [r, g, \
-                 b]}}, or {{\"classes\": [...]}})"
-            )
-        }),
+        "json" => match json_kind(path)? {
+            JsonKind::ClassTable => inspect_class_table(path, &labels.format),
+            JsonKind::Cameras => inspect_cameras(path),
+            // A JSON of neither kind (a class list of another tool's layout) hears of both.
+            JsonKind::Unknown => inspect_cameras(path).map_err(|e| {
+                anyhow!(
+                    "{e:#}; nor is it a class table (a list of {{\"id\", \"name\", \"color\": \
+                     [r, g, b]}}, or {{\"classes\": [...]}})"
+                )
+            }),
+        },
         "txt" | "bin" => inspect_cameras(path),
+        "jpg" | "jpeg" => bail!(
+            "{} is a JPEG image, which inspect does not read ({JPEG_LABELS})",
+            path.display()
+        ),
         "npy" => bail!(
             "{} is a NumPy array (fuse's --save-contrib or --save-membership, or a --shard \
              part): {KINDS}",
@@ -324,19 +332,33 @@ const KINDS: &str = "inspect reads scenes (.ply, .splat, .spz, or their folders)
                      COLMAP model, a cameras.json or transforms.json), label maps (.png or a \
                      folder of them) and class tables (.json)";
 
-fn looks_like_class_table(path: &Path) -> Result<bool> {
+/// Which of inspect's JSON layouts `path` holds, told from its top level.
+fn json_kind(path: &Path) -> Result<JsonKind> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     let Ok(value) = serde_json::from_str::<Value>(&text) else {
-        return Ok(false); // the camera reader gives the parse error
+        return Ok(JsonKind::Unknown); // the camera reader gives the parse error
     };
+    // The keys each camera layout has at its top (semsplat's, nerfstudio's or INRIA's).
+    let camera_keys = ["format", "cameras", "frames"];
     Ok(match &value {
-        Value::Object(o) => o.contains_key("classes") && !o.contains_key("format"),
-        Value::Array(items) => items
-            .first()
-            .is_some_and(|e| e.get("id").is_some() && e.get("img_name").is_none()),
-        _ => false,
+        Value::Object(o) if camera_keys.iter().any(|k| o.contains_key(*k)) => JsonKind::Cameras,
+        Value::Object(o) if o.contains_key("classes") => JsonKind::ClassTable,
+        Value::Array(items) => match items.first() {
+            Some(e) if e.get("img_name").is_some() => JsonKind::Cameras,
+            Some(e) if e.get("id").is_some() => JsonKind::ClassTable,
+            _ => JsonKind::Unknown,
+        },
+        _ => JsonKind::Unknown,
     })
+}
+
+/// What a `.json` file's top level says it holds.
+enum JsonKind {
+    ClassTable,
+    Cameras,
+    /// Neither layout: read as cameras, and the error names both.
+    Unknown,
 }
 
 // ---------------------------------------------------------------------------------------
@@ -540,15 +562,20 @@ fn add_class_counts(r: &mut Report, g: &Gaussians, ids: &[i32], table: Option<&C
     let rows: Vec<Value> = counts
         .iter()
         .map(|(&id, &count)| {
+            // No name where the scene has no class table (the label rows do the same).
             let name = match (id, table) {
-                (-1, _) => "(unseen)".to_owned(),
-                (id, Some(t)) if id >= 0 => t
-                    .get(id as u32)
-                    .map(|c| c.name.clone())
-                    .unwrap_or_else(|| "(not in table)".into()),
-                _ => String::new(),
+                (-1, _) => Some("(unseen)".to_owned()),
+                (id, Some(t)) if id >= 0 => Some(
+                    t.get(id as u32)
+                        .map_or_else(|| "(not in table)".into(), |c| c.name.clone()),
+                ),
+                _ => None,
             };
-            json!({"id": id, "name": name, "count": count, "share": count as f64 / n})
+            let mut row = json!({"id": id, "count": count, "share": count as f64 / n});
+            if let Some(name) = name {
+                row["name"] = name.into();
+            }
+            row
         })
         .collect();
     if let Some(t) = table {

@@ -165,7 +165,10 @@ impl Camera {
             .fold(0.0f64, |m, v| m.max(v.abs()));
         if err > ROTATION_TOLERANCE {
             anyhow::bail!(
-                "camera '{name}' has a rotation that is not orthonormal (|R^T R - I| = {err:.2e})"
+                "camera '{name}' has a rotation that is not orthonormal (|R^T R - I| = {err:.2e}, \
+                 over the {ROTATION_TOLERANCE:.0e} allowed): write the poses with more digits (a \
+                 rotation rounded to 3 decimals is off by about 1e-3), or replace R by the nearest \
+                 rotation (U V^T from its SVD U S V^T)"
             );
         }
         if self.rotation.determinant() < 0.0 {

@@ -4,7 +4,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{anyhow, bail, Result};
 
 use super::Camera;
 
@@ -76,7 +76,8 @@ fn images_below(dir: &Path) -> HashMap<String, Vec<PathBuf>> {
 
 /// Decodes the image at `path` for `cam`, checking its size.
 fn decode_view_image(path: &Path, cam: &Camera) -> Result<Vec<f32>> {
-    let img = image::open(path).with_context(|| format!("reading {}", path.display()))?;
+    // The decoder's message already holds its source's: as context, it would be said twice.
+    let img = image::open(path).map_err(|e| anyhow!("reading {}: {e}", path.display()))?;
     let (width, height) = (img.width(), img.height());
     if (width, height) != (cam.width, cam.height) {
         bail!(

@@ -20,10 +20,11 @@ use super::classes::{ClassTable, IGNORE_U16, IGNORE_U8};
 use crate::util::write_atomic;
 
 pub use decode::{
-    read_label_png_as, read_png_header, LabelFormat, PngHeader, MAX_DECODE_BYTES, MAX_LABEL_PIXELS,
+    read_label_png_as, read_png_header, LabelFormat, PngHeader, JPEG_LABELS, MAX_DECODE_BYTES,
+    MAX_LABEL_PIXELS,
 };
 pub use folder::{
-    binary_mask_warning, ignored_class_note, label_size_fit, list_label_pngs, list_some,
+    binary_mask_warning, ignored_class_note, jpeg_note, label_size_fit, list_label_pngs, list_some,
     load_label_dir, match_cameras, size_mismatch_reason, stray_255_warning, LabelDir,
     MissingLabels, SizeFit,
 };

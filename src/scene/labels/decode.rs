@@ -133,12 +133,20 @@ impl PngHeader {
     }
 }
 
+/// Why label maps must be PNG, and what to do, said wherever JPEG label maps are found.
+pub const JPEG_LABELS: &str = "label maps must be PNG: JPEG's lossy compression turns the ids \
+                               along every region's edge into other ids; save the segmenter's \
+                               class ids as PNG";
+
 /// Reads and checks a PNG's header (signature and IHDR) without decoding any pixel.
 pub fn read_png_header(path: &Path) -> Result<PngHeader> {
     let mut head = [0u8; 33];
     let mut file = File::open(path).context("cannot open")?;
     file.read_exact(&mut head)
         .map_err(|_| anyhow!("not a PNG file (too short)"))?;
+    if head.starts_with(&[0xff, 0xd8, 0xff]) {
+        bail!("a JPEG file named .png; {JPEG_LABELS}");
+    }
     if &head[..8] != b"\x89PNG\r\n\x1a\n" || &head[12..16] != b"IHDR" {
         bail!("not a PNG file");
     }

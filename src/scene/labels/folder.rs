@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Context, Result};
 
-use super::decode::{read_label_png_as, read_png_header, LabelFormat};
+use super::decode::{read_label_png_as, read_png_header, LabelFormat, JPEG_LABELS};
 use super::LabelMap;
 use crate::scene::camera::Camera;
 use crate::scene::classes::{ClassTable, IGNORE_U16};
@@ -27,6 +27,27 @@ pub fn list_label_pngs(dir: &Path) -> Result<BTreeMap<String, PathBuf>> {
     let mut found = BTreeMap::new();
     collect_pngs(dir, "", 0, &mut found)?;
     Ok(found)
+}
+
+/// Where `dir` (not its subfolders) holds JPEG files, how many and what to do: label maps
+/// must be PNG ([`JPEG_LABELS`]).
+pub fn jpeg_note(dir: &Path) -> Option<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .ok()?
+        .filter_map(|e| e.ok()?.file_name().into_string().ok())
+        .filter(|name| {
+            let ext = name.rsplit_once('.').map_or("", |(_, ext)| ext);
+            ext.eq_ignore_ascii_case("jpg") || ext.eq_ignore_ascii_case("jpeg")
+        })
+        .collect();
+    names.sort();
+    (!names.is_empty()).then(|| {
+        format!(
+            "{} JPEG files ({}): {JPEG_LABELS}",
+            names.len(),
+            list_some(&names)
+        )
+    })
 }
 
 fn collect_pngs(
@@ -272,7 +293,7 @@ impl LabelDir {
                 cameras.len(),
                 list_some(&skipped),
                 expected_names(&skipped),
-                found_names(&files)
+                found_names(&files, dir)
             );
         }
         let allowed = table.map(allowed_ids);
@@ -475,9 +496,12 @@ fn expected_names(missing: &[String]) -> String {
     list_some(&names[..names.len().min(3)])
 }
 
-fn found_names(files: &BTreeMap<String, PathBuf>) -> String {
+fn found_names(files: &BTreeMap<String, PathBuf>, dir: &Path) -> String {
     if files.is_empty() {
-        return "no PNG files".to_owned();
+        return match jpeg_note(dir) {
+            Some(jpegs) => format!("no PNG files but {jpegs}"),
+            None => "no PNG files".to_owned(),
+        };
     }
     let names: Vec<String> = files.keys().map(|k| format!("{k}.png")).collect();
     format!("{} PNG files: {}", names.len(), list_some(&names))
