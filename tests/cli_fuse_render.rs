@@ -99,14 +99,24 @@ fn check_passes_are_noted(d: &Path, gaussians: usize) {
     let p = |f: &str| arg_in(d, f);
     let budget = (2 * 4 * gaussians).to_string();
     let vote = ["--method", "vote", "--out"];
-    let err = fuse_synth(
-        d,
-        &[&vote[..], &[&p("passes.ply"), "--mem-budget", &budget]].concat(),
-    );
+    let report = p("passes.json");
+    let budget = ["--mem-budget", &budget, "--report", &report];
+    let err = fuse_synth(d, &[&vote[..], &[&p("passes.ply")], &budget].concat());
     assert!(
         err.contains("passes over the views (2 classes a pass") && err.contains("--mem-budget"),
         "{err}"
     );
+    // Views a second count each view once, however many passes took it.
+    let stats =
+        &serde_json::from_str::<serde_json::Value>(&std::fs::read_to_string(&report).unwrap())
+            .unwrap()["stats"];
+    let (views, wall_s) = (
+        stats["views"].as_f64().unwrap(),
+        stats["wall_s"].as_f64().unwrap(),
+    );
+    assert!(stats["passes"].as_u64().unwrap() > 1, "{stats}");
+    let per_s = stats["views_per_s"].as_f64().unwrap();
+    assert!((per_s * wall_s - views).abs() < 0.01 * views, "{stats}");
     let err = fuse_synth(d, &[&vote[..], &[&p("one_pass.ply")]].concat());
     assert!(!err.contains("passes over the views"), "{err}");
     let classes = |f: &str| read_scene(d, f).class_ids.unwrap();

@@ -803,6 +803,37 @@ fn fuse_args(room: &Path, extra: &[&str]) -> Vec<String> {
     common::cli::fuse_synth_args(room, extra)
 }
 
+/// `fuse --render-views` keeps off files no render wrote, as `render` does, before any
+/// output is written; its own folder it renders into again.
+#[test]
+fn fuse_render_views_keeps_off_files_it_did_not_write() {
+    let (tmp, room) = tiny_room();
+    let (views, out) = (tmp.path().join("views"), tmp.path().join("fused.ply"));
+    std::fs::create_dir_all(&views).unwrap();
+    let mine = views.join("train_0000.labels.png");
+    std::fs::write(&mine, b"my own file").unwrap();
+    let fuse = fuse_args(
+        &room,
+        &[
+            "--out",
+            out.to_str().unwrap(),
+            "--render-views",
+            views.to_str().unwrap(),
+        ],
+    );
+    let e = common::cli::fails_owned(&fuse);
+    assert!(
+        e.contains("--render-views") && e.contains("train_0000.labels.png"),
+        "{e}"
+    );
+    assert_eq!(std::fs::read(&mine).unwrap(), b"my own file");
+    assert!(!out.exists());
+    std::fs::remove_file(&mine).unwrap();
+    common::cli::ok_owned(&fuse);
+    assert!(mine.is_file());
+    common::cli::ok_owned(&fuse);
+}
+
 /// `render` never replaces files it did not write (a view's label map and photo share its
 /// name) unless forced; its own output folder renders again.
 #[test]

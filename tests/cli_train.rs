@@ -261,6 +261,28 @@ fn training_starts_from_a_fusion_of_its_scene() {
         classed.len(),
         "trained classes that left the fused ones"
     );
+    // Segment consensus gives the Gaussians no view saw their neighbours' class at
+    // confidence 0: they keep it too (they had started uniform and ended unclassed).
+    let consensus = tmp.path().join("consensus.ply");
+    let consensus = consensus.to_str().unwrap();
+    fuse_synth(
+        Path::new(d),
+        &["--out", consensus, "--method", "segment-consensus"],
+    );
+    let f = read_ply(Path::new(consensus)).unwrap();
+    let (want, conf) = (f.class_ids.unwrap(), f.class_conf.unwrap());
+    let filled = (0..want.len())
+        .filter(|&i| want[i] >= 0 && conf[i] == 0.0)
+        .count();
+    assert!(filled > 0, "no Gaussian took its neighbours' class");
+    let at = args.iter().position(|a| a == fused).unwrap();
+    args[at] = consensus.to_string();
+    let r = run(&args);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let got = read_ply(&out).unwrap().class_ids.unwrap();
+    let left = (0..want.len()).filter(|&i| want[i] >= 0 && got[i] != want[i]);
+    assert_eq!(left.count(), 0, "of {filled} filled from neighbours");
+    args[at] = fused.to_string();
     // A PLY of classes without confidences (a synth scene) starts at a fixed one, said so.
     let at = args.iter().position(|a| a == fused).unwrap();
     args[at] = scene.clone();

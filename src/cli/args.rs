@@ -10,7 +10,11 @@ fn finite<T: FromStr + Copy + Into<f64>>(s: &str) -> Result<T, String> {
     let v: T = s
         .trim()
         .parse()
-        .map_err(|_| format!("'{s}' is not a number"))?;
+        .map_err(|_| match s.trim().parse::<f64>() {
+            // A number the option's type cannot hold (a width of 99999999999 pixels).
+            Ok(x) if x.is_finite() => format!("'{s}' is out of range"),
+            _ => format!("'{s}' is not a number"),
+        })?;
     if !v.into().is_finite() {
         return Err(format!("must be a finite number, got {s}"));
     }
@@ -57,15 +61,36 @@ pub fn signed_unit_interval(s: &str) -> Result<f64, String> {
 }
 
 /// A count that must be at least 1 (iterations, views, pixels, repetitions).
-pub fn at_least_one<T: FromStr + Copy + TryInto<u64>>(s: &str) -> Result<T, String> {
+pub fn at_least_one<T: Count>(s: &str) -> Result<T, String> {
     let v: T = s
         .trim()
         .parse()
-        .map_err(|_| format!("'{s}' is not a whole number >= 1"))?;
+        .map_err(|_| match s.trim().parse::<u128>() {
+            Ok(_) => format!("'{s}' is more than this option takes (at most {})", T::MAX),
+            Err(_) => format!("'{s}' is not a whole number >= 1"),
+        })?;
     match v.try_into() {
         Ok(n) if n >= 1 => Ok(v),
         _ => Err(format!("must be a whole number >= 1, got {s}")),
     }
+}
+
+/// The unsigned types counts are parsed as, and the most each holds (for the error of a
+/// count past it).
+pub trait Count: FromStr + Copy + TryInto<u64> {
+    const MAX: u64;
+}
+
+impl Count for u32 {
+    const MAX: u64 = u32::MAX as u64;
+}
+
+impl Count for u64 {
+    const MAX: u64 = u64::MAX;
+}
+
+impl Count for usize {
+    const MAX: u64 = usize::MAX as u64;
 }
 
 /// A size in bytes with an optional K/M/G/T suffix (binary units): 512M, 2G, 1.5T; at least
@@ -113,6 +138,11 @@ mod tests {
         assert!(at_least_one::<u32>("0").unwrap_err().contains(">= 1"));
         assert!(at_least_one::<usize>("-3").is_err());
         assert_eq!(at_least_one::<usize>("3"), Ok(3));
+        // Whole numbers past the type: too large, with the most it takes.
+        let e = at_least_one::<u32>("4294967296").unwrap_err();
+        assert!(e.contains("at most 4294967295"), "{e}");
+        let e = within::<u32>("99999999999", 1.0, 16384.0, "1..=16384 pixels").unwrap_err();
+        assert!(e.contains("out of range; allowed: 1..=16384"), "{e}");
         for bad in ["0", "0.1", "inf", "nan", "-2G", "1e30G", "lots"] {
             assert!(bytes(bad).is_err(), "{bad}");
         }

@@ -171,7 +171,8 @@ impl InputArgs {
 
 #[derive(Args)]
 pub struct CommonArgs {
-    /// Timed repetitions (after a warm-up); the median is reported.
+    /// Timed repetitions (after a warm-up); the median is reported (`bench train`: the
+    /// iteration's wall time; its stages' GPU times are means over the iterations).
     #[arg(long, default_value_t = 5, value_parser = args::at_least_one::<usize>)]
     iters: usize,
     /// Seed of the random input.
@@ -476,11 +477,11 @@ fn print_train(r: &TrainBench) {
         "full"
     };
     println!(
-        "train ({what}): {} Gaussians, {}x{}, C = {} on {} (median of {} iterations)",
+        "train ({what}): {} Gaussians, {}x{}, C = {} on {} ({} iterations)",
         r.gaussians, i.width, i.height, i.channels, r.device, r.iters
     );
-    println!("  iteration  {:>10.3} ms (wall)", r.iter_ms);
-    println!("  forward    {:>10.3} ms (GPU)", r.forward_ms);
+    println!("  iteration  {:>10.3} ms (wall, median)", r.iter_ms);
+    println!("  forward    {:>10.3} ms (GPU, mean)", r.forward_ms);
     println!("  losses     {:>10.3} ms", r.loss_ms);
     println!("  backward   {:>10.3} ms", r.backward_ms);
     println!("  optimizer  {:>10.3} ms", r.optimizer_ms);

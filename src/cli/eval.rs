@@ -177,7 +177,10 @@ pub fn run(args: EvalArgs) -> Result<()> {
 fn unclassified_note(classes: &[i32], truth_given: bool) -> Option<String> {
     let unclassified = classes.iter().filter(|&&c| c < 0).count();
     let counted = match truth_given {
-        true => "; the 3D accuracy counts them wrong",
+        true => {
+            "; the 3D accuracy counts them wrong where --truth gives them a class (it \
+                 scores only the Gaussians --truth classes)"
+        }
         false => "",
     };
     (unclassified > 0).then(|| {
@@ -276,7 +279,10 @@ fn truth_accuracy(path: &Path, classes: &[i32]) -> Result<f64> {
     };
     if t.len() != classes.len() {
         bail!(
-            "{} has {} Gaussians, the scene {}",
+            "--truth {} has {} Gaussians, --scene {}: the truth must hold the scene's own \
+             Gaussians in their order (the synth scene.ply a fusion of it was made from); a \
+             trained scene has others (densified, pruned), so score it by its views alone, \
+             without --truth",
             path.display(),
             t.len(),
             classes.len()

@@ -11,6 +11,7 @@ use super::args;
 use super::fuse_consensus::{fuse_by_consensus, ConsensusOutputs};
 use super::merge::ShardJob;
 use super::progress::{follow, views_bar};
+use super::render::{check_overwrites_own_files, mark_as_render_output, LABELS_PNG, PALETTE_PNG};
 use super::{
     check_outputs, open_dataset, write_scene_with_table, Input, Interruptible, FRAME_HINT,
 };
@@ -233,6 +234,8 @@ pub struct OutputArgs {
     /// Render label and palette PNGs of every view from the fused scene into DIR
     /// (<view>.labels.png with label ids, 255/65535 where nothing is drawn; <view>.palette.png;
     /// rig views named by a relative path go into subfolders: DIR/cam0/00001.labels.png).
+    /// The whole scene's classes, before --extract or --remove select. Files of those names
+    /// that no render wrote are refused, as `render` refuses them.
     #[arg(long)]
     pub render_views: Option<PathBuf>,
     /// Write the multi-instance membership S of FlashSplat's Listing 1.1 (with --gamma) as a
@@ -471,9 +474,10 @@ pub(super) fn write_fused(
     check_assigned(args, &g)?;
     let selected_class = selected_class(args, &table)?;
     let label_views = match &args.render_views {
-        Some(_) => Some(LabelViews::open(
+        Some(dir) => Some(LabelViews::open(
             cameras.context("--render-views needs --cameras")?,
             &g,
+            dir,
         )?),
         None => None,
     };
@@ -975,8 +979,10 @@ struct LabelViews {
 }
 
 impl LabelViews {
-    fn open(cameras: &Path, g: &Gaussians) -> Result<LabelViews> {
+    fn open(cameras: &Path, g: &Gaussians, dir: &Path) -> Result<LabelViews> {
         let cams = load_cameras(cameras)?;
+        let suffixes = [LABELS_PNG, PALETTE_PNG];
+        check_overwrites_own_files(("--render-views", dir), None, &cams, &suffixes)?;
         let ids = g.class_ids.as_deref().expect("classes assigned");
         check_ids_fit_16_bit(ids.iter().map(|&id| i64::from(id)))?;
         Ok(LabelViews {
@@ -989,6 +995,7 @@ impl LabelViews {
     fn render(self, dir: &Path, g: &Gaussians, table: &ClassTable) -> Result<()> {
         let ids = g.class_ids.as_deref().expect("classes assigned");
         let mut renderer = LabelRenderer::new(&self.gpu, g, ids)?;
+        mark_as_render_output(dir)?;
         for cam in &self.cams {
             interrupt::check()?;
             let labels: Vec<u16> = renderer
@@ -997,8 +1004,9 @@ impl LabelViews {
                 .map(|l| l.unwrap_or(LabelMap::IGNORE))
                 .collect();
             let map = LabelMap::new(cam.width, cam.height, labels)?;
-            write_label_png(&dir.join(format!("{}.labels.png", cam.name)), &map)?;
-            write_palette_png(&dir.join(format!("{}.palette.png", cam.name)), &map, table)?;
+            let file = |suffix: &str| dir.join(format!("{}{suffix}", cam.name));
+            write_label_png(&file(LABELS_PNG), &map)?;
+            write_palette_png(&file(PALETTE_PNG), &map, table)?;
         }
         Ok(())
     }

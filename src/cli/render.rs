@@ -171,8 +171,8 @@ fn check_table_fits_logits(scene: &Path, g: &Gaussians, table: Option<&ClassTabl
 
 /// What a view's files append to its camera's name.
 const RGB_PNG: &str = ".png";
-const LABELS_PNG: &str = ".labels.png";
-const PALETTE_PNG: &str = ".palette.png";
+pub(super) const LABELS_PNG: &str = ".labels.png";
+pub(super) const PALETTE_PNG: &str = ".palette.png";
 const RAW_NPY: [&str; 5] = [
     ".rgb.npy",
     ".alpha.npy",
@@ -200,31 +200,36 @@ fn view_suffixes(args: &RenderArgs) -> Vec<&'static str> {
     suffixes
 }
 
-/// Refuses to replace files in --out that no earlier render wrote (a folder without
-/// [`RENDER_MARKER`]), unless --force: `<view>.png` is also the name of a view's label map
-/// and photo.
-fn check_overwrites_own_files(args: &RenderArgs, cams: &[Camera]) -> Result<()> {
-    if !args.force && !args.out.join(RENDER_MARKER).exists() {
-        let suffixes = view_suffixes(args);
-        let targets = cams
-            .iter()
-            .flat_map(|cam| suffixes.iter().map(move |s| format!("{}{s}", cam.name)));
-        let existing: Vec<String> = targets.filter(|f| args.out.join(f).exists()).collect();
-        if let Some(first) = existing.first() {
-            bail!(
-                "--out {} holds {} files this render would replace that no render wrote \
-                 (e.g. {first}: a label map or photo of the same name?): choose another \
-                 --out, or pass --force",
-                args.out.display(),
-                existing.len()
-            );
-        }
+/// Refuses to replace files in `out` (of `option`) that no earlier render wrote (a folder
+/// without [`RENDER_MARKER`]), unless forced: `<view>.png` is also the name of a view's
+/// label map and photo. `force`: None where the command has no --force (fuse's and merge's
+/// --render-views).
+pub(super) fn check_overwrites_own_files(
+    (option, out): (&str, &Path),
+    force: Option<bool>,
+    cams: &[Camera],
+    suffixes: &[&str],
+) -> Result<()> {
+    if force == Some(true) || out.join(RENDER_MARKER).exists() {
+        return Ok(());
+    }
+    let targets =
+        (cams.iter()).flat_map(|cam| suffixes.iter().map(move |s| format!("{}{s}", cam.name)));
+    let existing: Vec<String> = targets.filter(|f| out.join(f).exists()).collect();
+    if let Some(first) = existing.first() {
+        let or_force = force.map_or("", |_| ", or pass --force");
+        bail!(
+            "{option} {} holds {} files these views would replace that no render wrote (e.g. \
+             {first}: a label map or photo of the same name?): choose another {option}{or_force}",
+            out.display(),
+            existing.len()
+        );
     }
     Ok(())
 }
 
 /// Marks `out` as a render's output folder ([`RENDER_MARKER`]), before its first view.
-fn mark_as_render_output(out: &Path) -> Result<()> {
+pub(super) fn mark_as_render_output(out: &Path) -> Result<()> {
     std::fs::create_dir_all(out).with_context(|| format!("creating --out {}", out.display()))?;
     let marker = out.join(RENDER_MARKER);
     std::fs::write(&marker, b"files here were written by semsplat render\n")
@@ -277,7 +282,8 @@ pub fn run(args: RenderArgs) -> Result<()> {
         &args.views,
     )?;
     check_view_files_distinct(&cams)?;
-    check_overwrites_own_files(&args, &cams)?;
+    let out = ("--out", args.out.as_path());
+    check_overwrites_own_files(out, Some(args.force), &cams, &view_suffixes(&args))?;
     if args.semantics {
         check_table_fits_logits(&scene_file, &g, table.as_ref())?;
         if table.is_none() && g.semantics.is_some() {

@@ -104,7 +104,9 @@ pub struct TrainArgs {
     /// PLY with `class` alone, such as a synth scene.ply, starts each class at one fixed
     /// confidence, which a note gives).
     /// Each Gaussian's logits then give its fused class its fused confidence; unseen ones
-    /// start uniform. With --semantics-only, training refines the fused labels.
+    /// start uniform, and a class at confidence 0 (segment consensus's Gaussians no view
+    /// saw, which took their neighbours' class) with a slight lean to it (twice each other
+    /// class's probability). With --semantics-only, training refines the fused labels.
     #[arg(long, value_name = "PLY")]
     init_semantics_from: Option<PathBuf>,
     /// Class table (JSON: id, name, color). Default: classes.json beside or inside the
@@ -123,8 +125,9 @@ pub struct TrainArgs {
     /// JSON report: configuration, losses over time, stage times, densification.
     #[arg(long)]
     report: Option<PathBuf>,
-    /// Seed of every random choice (initial logits, view order, densification): with the
-    /// same inputs and seed, training writes the same bytes on the same device and driver
+    /// Seed of every random choice (initial logits, view order, densification). The same
+    /// inputs and seed give the same bytes only with --deterministic (the default float
+    /// atomics add gradients in the order the GPU runs them)
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// Sum gradients as order-independent 64-bit fixed point, so the same inputs and seed
@@ -218,7 +221,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
     let log = train_loop(&args, &data, &mut trainer)?;
     let out = trainer.finish()?;
     let per_iter = per_iteration(&out.times);
-    let g = write_trained(&args.out, out.gaussians, &out.seen, &data)?;
+    let g = write_trained(&args.out, out.gaussians, &out.seen, &args, &data)?;
 
     let seconds = start.elapsed().as_secs_f64();
     eprintln!(
@@ -445,7 +448,7 @@ fn train_loop(args: &TrainArgs, data: &Dataset, trainer: &mut Trainer) -> Result
             if it.is_multiple_of(k) && it < args.iters {
                 let seen = trainer.seen_by_views()?;
                 let path = checkpoint_path(&args.out, it);
-                write_trained(&path, trainer.gaussians()?, &seen, data)?;
+                write_trained(&path, trainer.gaussians()?, &seen, args, data)?;
             }
         }
     }
@@ -454,15 +457,24 @@ fn train_loop(args: &TrainArgs, data: &Dataset, trainer: &mut Trainer) -> Result
 }
 
 /// Writes a trained model, as `--out` and its checkpoints are written: each Gaussian's class
-/// from its logits (none where no view sees it) and the class table beside it, so `render
-/// --semantics` and `eval` read a checkpoint as they read the final scene.
+/// from its logits and the class table beside it, so `render --semantics` and `eval` read a
+/// checkpoint as they read the final scene. A Gaussian no view sees has no class, except
+/// with --init-semantics-from: its logits are then the fusion's (or a clone's of one), not
+/// a random start, and its fused class stands (segment consensus gives its hidden Gaussians
+/// their neighbours' class: 657 of a tiny room's 24k lost theirs).
 fn write_trained(
     path: &Path,
     mut g: Gaussians,
     seen: &[bool],
+    args: &TrainArgs,
     data: &Dataset,
 ) -> Result<Gaussians> {
-    let (classes, conf) = classes_from_logits(&g, seen);
+    let every = vec![true; g.len()];
+    let classed = match args.init_semantics_from {
+        Some(_) => &every,
+        None => seen,
+    };
+    let (classes, conf) = classes_from_logits(&g, classed);
     g.class_ids = Some(user_classes(
         data.classes.user_ids(),
         classes.iter().map(|c| c.map(|c| c as usize)),

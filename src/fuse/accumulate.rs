@@ -163,6 +163,8 @@ pub struct FuseStats {
     pub clustering: ClusterProfile,
     /// Consensus methods: `decide_s` split.
     pub decision: DecideProfile,
+    /// Views a second: each view once, however many passes over the views the evidence
+    /// took (`passes`).
     pub views_per_s: f64,
     pub peak_device_bytes: u64,
     /// Device memory of the scene as this method uploaded it (only what it reads).
@@ -501,11 +503,11 @@ impl ViewGpu {
 }
 
 impl FuseStats {
-    /// A run's last figures: its wall time since `start`, `views_run` (each pass's views)
-    /// a second, and the process's peak resident memory so far.
-    pub(crate) fn finish(&mut self, start: Instant, views_run: usize) {
+    /// A run's last figures: its wall time since `start`, `views` a second, and the
+    /// process's peak resident memory so far.
+    pub(crate) fn finish(&mut self, start: Instant, views: usize) {
         self.wall_s = start.elapsed().as_secs_f64();
-        self.views_per_s = views_run as f64 / self.wall_s.max(1e-9);
+        self.views_per_s = views as f64 / self.wall_s.max(1e-9);
         self.peak_host_bytes = crate::util::memory::peak_host_bytes().unwrap_or(0);
     }
 
@@ -870,7 +872,9 @@ fn accumulate_passes(
         stats.evidence_s += evidence_start.elapsed().as_secs_f64();
     }
     progress(passes * cams.len(), passes * cams.len());
-    stats.finish(start, stats.views * passes);
+    // The views a second a user reads: each view once, however many passes took it (the
+    // passes' throughput is `bench fuse`'s, which divides views x passes).
+    stats.finish(start, stats.views);
     stats.views_in_flight = lanes.lanes.len();
     stats.scene_device_bytes = scene.device_bytes();
     Ok(stats)

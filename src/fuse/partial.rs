@@ -186,12 +186,18 @@ impl PartReader {
                 match t.size_field() {
                     8 => EvidenceKind::FixedU64,
                     4 => EvidenceKind::CountU32,
-                    _ => bail!("{}: expected uint64 or uint32 data", path.display()),
+                    _ => bail!(
+                        "{}: expected uint64 or uint32 data, got {}",
+                        path.display(),
+                        t
+                    ),
                 }
             }
             other => bail!(
-                "{}: expected uint64 or uint32, got {other:?}",
-                path.display()
+                "{}: expected uint64 or uint32 data (a `fuse --shard` part as written), got {} \
+                 (a part saved again with another dtype?)",
+                path.display(),
+                other.descr()
             ),
         };
         let (classes, n) = (shape[0] as usize, shape[1] as usize);

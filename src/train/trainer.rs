@@ -633,9 +633,12 @@ pub const FUSED_DEFAULT_CONF: f32 = 0.9;
 /// `g` with semantic logits over `channels` classes that start where a fusion ended: a
 /// Gaussian of compact class `c` with confidence `p` gets logit `ln(p (C - 1) / (1 - p))`
 /// for `c` and 0 for the others, so the softmax of its logits gives `c` probability `p`
-/// (capped at 0.999); a Gaussian without a class (unseen, or a class the labels lack), or
-/// with confidence 0 (segment consensus's class for a Gaussian no view saw, taken from its
-/// neighbours), gets zeros, the uniform distribution.
+/// (capped at 0.999); a Gaussian without a class (unseen, or a class the labels lack) gets
+/// zeros, the uniform distribution. Confidence 0 with a class (segment consensus's class
+/// for a Gaussian no view saw, taken from its neighbours) is a class without evidence: it
+/// starts with a lean to it, ln 2 (twice each other class's probability), so that training
+/// keeps it where no view says otherwise (uniform, such Gaussians ended without a class:
+/// 2,076 of a tiny room's 24k, held-out mIoU 0.917 -> 0.864 before any training).
 pub fn with_logits_from_classes(
     g: &Gaussians,
     classes: &[Option<u32>],
@@ -649,6 +652,7 @@ pub fn with_logits_from_classes(
         };
         let given = conf.map(|v| v[i]);
         if given == Some(0.0) {
+            logits[i * channels + c as usize] = std::f32::consts::LN_2;
             continue;
         }
         let p = given
@@ -715,10 +719,12 @@ mod tests {
         let s = out.semantics.expect("logits");
         let probs = |i: usize| softmax(&s.logits[i * 4..(i + 1) * 4]);
         assert!((probs(0)[2] - 0.8).abs() < 1e-5, "{:?}", probs(0));
-        // No class, one past the channels, or a class no view gave (confidence 0): uniform.
-        for i in [1, 3, 2] {
+        // No class, or one past the channels: uniform.
+        for i in [1, 3] {
             assert!(probs(i).iter().all(|p| (p - 0.25).abs() < 1e-6), "{i}");
         }
+        // A class no view gave (confidence 0): twice as likely as each other class.
+        assert!((probs(2)[0] - 0.4).abs() < 1e-6 && (probs(2)[1] - 0.2).abs() < 1e-6);
         // A confidence outside [0, 1) falls back to the default; 1.0 is no certainty.
         assert!((probs(4)[1] - FUSED_DEFAULT_CONF as f64).abs() < 1e-5);
         assert!((probs(5)[3] - FUSED_DEFAULT_CONF as f64).abs() < 1e-5);
