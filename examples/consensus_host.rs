@@ -37,6 +37,7 @@ use semsplat::fuse::consensus_cluster::cluster_segments_timed;
 use semsplat::fuse::consensus_decide::{decide_timed, Consensus};
 use semsplat::fuse::consensus_order::SpatialOrder;
 use semsplat::fuse::consensus_segments::Observations;
+use semsplat::fuse::consensus_split::split_near_ties;
 use semsplat::fuse::consensus_surface::SurfaceNormals;
 use semsplat::fuse::{Clustering, ConsensusParams, FuseConfig, GaussianShapes, Method};
 use semsplat::scene::labels::LabelFormat;
@@ -186,7 +187,14 @@ fn main() -> Result<()> {
     for _ in 0..args.repeats {
         let (((segment, clustering), cluster_model), cluster_costs) = costs(|| {
             timed(args.model_threads, || {
-                cluster_segments_timed(&run.observations, &run.knn, &surfaces, &params)
+                let (clustered, mut done) =
+                    cluster_segments_timed(&run.observations, &run.knn, &surfaces, &params);
+                let split_start = std::time::Instant::now();
+                let segment;
+                (segment, done.split) =
+                    split_near_ties(&run.observations, clustered, run.classes, &params);
+                done.split_s = split_start.elapsed().as_secs_f64();
+                (segment, done)
             })
         });
         let (((consensus, decision), decide_model), decide_costs) = costs(|| {

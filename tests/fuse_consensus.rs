@@ -10,7 +10,7 @@ use semsplat::contract::{MEDIAN_T, NO_NEIGHBOUR, OPAQUE_T};
 use semsplat::dataset::CompactClasses;
 use semsplat::fuse::consensus::{observe, Kept, ViewsObserved};
 use semsplat::fuse::consensus_cluster::{
-    cluster_segments, cluster_segments_sweeping_from, cluster_segments_timed,
+    cluster_segments, cluster_segments_sweeping_from, cluster_segments_timed, Clustered,
 };
 use semsplat::fuse::consensus_decide::{
     at_least_the_mean_plus_one, binomial_at_most, decide, Consensus,
@@ -18,6 +18,7 @@ use semsplat::fuse::consensus_decide::{
 use semsplat::fuse::consensus_order::SpatialOrder;
 use semsplat::fuse::consensus_report::{segment_report, SegmentReport};
 use semsplat::fuse::consensus_segments::{co_occurrence, label_regions, Observations};
+use semsplat::fuse::consensus_split::split_near_ties;
 use semsplat::fuse::consensus_surface::SurfaceNormals;
 use semsplat::fuse::{
     assign_semantic, assign_semantic_near, fuse_consensus, nearest_neighbours, ClassScores,
@@ -471,7 +472,7 @@ fn assert_same_partition(segment: &[u32], label: &[usize]) {
 fn clustering_matches_a_plain_transcription_under_heavy_noise() {
     let default = ConsensusParams::default();
     let mut region_refusals: BTreeMap<(u32, bool), usize> = BTreeMap::new();
-    let (mut attached, mut most_rounds) = (0, 0);
+    let (mut attached, mut most_rounds, mut halved) = (0, 0, 0);
     let runs = (1..=12).flat_map(|s| [(s, 0), (s, 4), (s, default.premerge_views)]);
     let clusterings = [Clustering::Order, Clustering::Rounds];
     for ((seed, premerge_views), clustering) in runs.flat_map(|r| clusterings.map(|c| (r, c))) {
@@ -484,9 +485,14 @@ fn clustering_matches_a_plain_transcription_under_heavy_noise() {
         let knn = nearest_neighbours(&means, p.neighbours);
         let normals = random_normals(means.len(), seed);
         let surfaces = SurfaceNormals::from_normals(normals.clone(), p.crease_degrees);
-        let (label, refused, outright) = cluster_by_hand(&obs, &knn, &normals, &p);
-        let (segment, done) = cluster_segments_timed(&obs, &knn, &surfaces, &p);
-        assert_same_partition(&segment, &label);
+        let (label, refused, outright, joins) =
+            cluster_with_joins_by_hand(&obs, &knn, &normals, &p);
+        let (clustered, done) = cluster_segments_timed(&obs, &knn, &surfaces, &p);
+        assert_same_partition(&clustered.segment, &label);
+        // The halves a near tie would be split along (consensus_split.rs).
+        let halves = last_halves_by_hand(&label, &joins);
+        assert_eq!(clustered.last_half, halves, "seed {seed}");
+        halved += halves.iter().filter(|&&h| h).count();
         // What the clustering says it did, against the transcription's segments.
         // Without outright joins every Gaussian starts alone.
         assert_eq!(done.pieces == obs.n, outright == 0, "seed {seed}: {done:?}");
@@ -544,6 +550,7 @@ fn clustering_matches_a_plain_transcription_under_heavy_noise() {
         attached > 0 && most_rounds >= 3,
         "{attached} in at most {most_rounds} rounds"
     );
+    assert!(halved > 0, "no segment's last half compared");
 }
 
 /// Whether Gaussians g and h lie along one surface: not both with a normal (a flat one; the
@@ -621,6 +628,21 @@ fn cluster_by_hand(
     normals: &[[f32; 3]],
     p: &ConsensusParams,
 ) -> (Vec<usize>, [usize; 2], usize) {
+    let (label, refused, outright, _) = cluster_with_joins_by_hand(obs, knn, normals, p);
+    (label, refused, outright)
+}
+
+/// One ordered join of the transcription: the segment that stays, the Gaussians of the one
+/// it took in.
+type JoinByHand = (usize, Vec<usize>);
+
+/// [`cluster_by_hand`], and its ordered joins in order.
+fn cluster_with_joins_by_hand(
+    obs: &Observations,
+    knn: &[u32],
+    normals: &[[f32; 3]],
+    p: &ConsensusParams,
+) -> (Vec<usize>, [usize; 2], usize, Vec<JoinByHand>) {
     let n = obs.n;
     let k = p.neighbours;
     let pairs: BTreeSet<(usize, usize)> = (0..n)
@@ -641,12 +663,29 @@ fn cluster_by_hand(
         normals,
         p,
     };
+    let mut joins = Vec::new();
     if p.clustering == Clustering::Rounds {
-        join_in_order_by_hand(&scene, &mut label, 2, &mut refused);
+        join_in_order_by_hand(&scene, &mut label, 2, (&mut refused, &mut joins));
         attach_by_hand(&scene, &mut label);
     }
-    join_in_order_by_hand(&scene, &mut label, 1, &mut refused);
-    (label, refused, outright)
+    join_in_order_by_hand(&scene, &mut label, 1, (&mut refused, &mut joins));
+    (label, refused, outright, joins)
+}
+
+/// Per Gaussian, whether it lies in the last part of at least a tenth of its segment that
+/// an ordered join took into the segment as it ends (the segment that stayed in that join
+/// is the final one), from the transcription's labels and joins.
+fn last_halves_by_hand(label: &[usize], joins: &[JoinByHand]) -> Vec<bool> {
+    let size = |s: usize| label.iter().filter(|&&l| l == s).count();
+    let mut half = vec![false; label.len()];
+    for s in label.iter().collect::<BTreeSet<_>>() {
+        let last =
+            (joins.iter()).rfind(|(stayed, took)| stayed == s && 10 * took.len() >= size(*s));
+        if let Some((_, took)) = last {
+            took.iter().for_each(|&g| half[g] = true);
+        }
+    }
+    half
 }
 
 /// What the transcription's joins read besides the labels: the observations, the neighbour
@@ -713,7 +752,7 @@ fn join_in_order_by_hand(
     scene: &SceneByHand,
     label: &mut [usize],
     min_size: usize,
-    refused: &mut [usize; 2],
+    (refused, joins): (&mut [usize; 2], &mut Vec<JoinByHand>),
 ) {
     let (obs, p) = (scene.obs, scene.p);
     let mut dropped: HashMap<(usize, usize), ([u32; 5], u32)> = HashMap::new();
@@ -729,9 +768,11 @@ fn join_in_order_by_hand(
         let Some((&(lo, hi), &e, class)) = best else {
             return;
         };
-        let (allowed, joins) = may_join_by_hand(obs, label, &e, (lo, hi), p);
-        if joins {
-            label.iter_mut().filter(|l| **l == hi).for_each(|l| *l = lo);
+        let (allowed, joins_here) = may_join_by_hand(obs, label, &e, (lo, hi), p);
+        if joins_here {
+            let took: Vec<usize> = (0..label.len()).filter(|&g| label[g] == hi).collect();
+            took.iter().for_each(|&g| label[g] = lo);
+            joins.push((lo, took));
         } else {
             dropped.insert((lo, hi), (e, class));
             refused[allowed as usize] += 1;
@@ -2260,4 +2301,50 @@ fn a_near_tie_goes_by_the_scenes_confusions() {
         others.map(|s| (s.class, s.near_tie)),
         [(Some(0), false), (Some(2), false)]
     );
+}
+
+/// Observations of one segment in two halves (Gaussians 0-7 the rest, 8-7+`last` its last
+/// half) and a third segment of four Gaussians: per view, the Gaussians of one half, all
+/// given one class (`rest` and `last_views`: the class each view gives that half).
+fn halves_seen(rest: &[u32], last_views: &[u32], last: usize) -> (Observations, Clustered) {
+    let n = 8 + last + 4;
+    let half = |range: std::ops::Range<usize>, class: u32| -> Vec<(u32, u32, u32, bool)> {
+        range.map(|g| (g as u32, class, 0, false)).collect()
+    };
+    let mut views: Vec<Vec<(u32, u32, u32, bool)>> = Vec::new();
+    views.extend(rest.iter().map(|&c| half(0..8, c)));
+    views.extend(last_views.iter().map(|&c| half(8..8 + last, c)));
+    views.push(half(8 + last..n, 2));
+    let segment = (0..n).map(|g| u32::from(g >= 8 + last)).collect();
+    let last_half = (0..n).map(|g| (8..8 + last).contains(&g)).collect();
+    let clustered = Clustered { segment, last_half };
+    (Observations::from_views(n, &views), clustered)
+}
+
+/// A near tie whose halves its views decide clearly for different classes is split along
+/// its last join, the segments numbered by first Gaussian again; a clear segment, halves
+/// that are near ties or a half under `min_segment` Gaussians are left whole. The votes by hand:
+/// each view gives its half's class once.
+#[test]
+fn near_ties_split_along_their_last_join_where_the_halves_differ() {
+    let p = ConsensusParams::default();
+    // Rest 0:5 1:1, last 1:4 0:1: the whole 0:6 1:5, within one view (tie_margin 1).
+    let (rest, last) = ([0, 0, 0, 0, 0, 1], [1, 1, 1, 1, 0]);
+    let (obs, clustered) = halves_seen(&rest, &last, 8);
+    let (segment, split) = split_near_ties(&obs, clustered, 3, &p);
+    let expected: Vec<u32> = (0..20).map(|g| (g / 8).min(2) as u32).collect();
+    assert_eq!((segment, split), (expected, 1));
+    // Two more views give the rest 0: the whole 0:8 1:5 is clear, and stays whole.
+    let (obs, clustered) = halves_seen(&[rest.as_slice(), &[0, 0]].concat(), &last, 8);
+    let whole = clustered.segment.clone();
+    assert_eq!(split_near_ties(&obs, clustered, 3, &p), (whole, 0));
+    // Halves that are near ties themselves (rest 0:3 1:2, last 0:2 1:3; the whole 5:5).
+    let (obs, clustered) = halves_seen(&[0, 0, 0, 1, 1], &[0, 0, 1, 1, 1], 8);
+    let whole = clustered.segment.clone();
+    assert_eq!(split_near_ties(&obs, clustered, 3, &p), (whole, 0));
+    // A last half of 3 Gaussians, under min_segment (4).
+    assert_eq!(p.min_segment, 4);
+    let (obs, clustered) = halves_seen(&rest, &last, 3);
+    let whole = clustered.segment.clone();
+    assert_eq!(split_near_ties(&obs, clustered, 3, &p), (whole, 0));
 }

@@ -19,6 +19,7 @@ pub use super::consensus_observe::{observe, Kept, ViewsObserved};
 use super::consensus_order::SpatialOrder;
 use super::consensus_relabel::fuse_relabeled;
 use super::consensus_segments::Observations;
+use super::consensus_split::split_near_ties;
 use super::consensus_surface::{GaussianShapes, SurfaceNormals};
 use super::method::Method;
 use super::neighbours::nearest_neighbours;
@@ -114,9 +115,14 @@ pub fn consensus_run(
     stats.view_s = views_start.elapsed().as_secs_f64();
     let (knn, surfaces) = found.unwrap_or_else(|panic| std::panic::resume_unwind(panic));
     let neighbours_s = views_start.elapsed().as_secs_f64() - stats.view_s;
-    let segment;
-    (segment, stats.clustering) = cluster_segments_timed(&observations, &knn, &surfaces, params);
+    let clustered;
+    (clustered, stats.clustering) = cluster_segments_timed(&observations, &knn, &surfaces, params);
     (stats.clustering.order_s, stats.clustering.neighbours_s) = (order_s, neighbours_s);
+    let split_start = std::time::Instant::now();
+    let segment;
+    (segment, stats.clustering.split) =
+        split_near_ties(&observations, clustered, input.classes, params);
+    stats.clustering.split_s = split_start.elapsed().as_secs_f64();
     stats.segments_s = views_start.elapsed().as_secs_f64() - stats.view_s;
     let decide_start = std::time::Instant::now();
     let consensus;

@@ -579,7 +579,7 @@ pub fn cluster_segments(
     surfaces: &SurfaceNormals,
     p: &ConsensusParams,
 ) -> Vec<u32> {
-    cluster_segments_timed(obs, knn, surfaces, p).0
+    cluster_segments_timed(obs, knn, surfaces, p).0.segment
 }
 
 /// [`cluster_segments`], and where its time went.
@@ -588,7 +588,7 @@ pub fn cluster_segments_timed(
     knn: &[u32],
     surfaces: &SurfaceNormals,
     p: &ConsensusParams,
-) -> (Vec<u32>, ClusterProfile) {
+) -> (Clustered, ClusterProfile) {
     cluster(obs, knn, surfaces, p, SWEEP_FROM)
 }
 
@@ -631,6 +631,11 @@ pub struct ClusterProfile {
     pub attached: usize,
     pub attach_rounds: usize,
     pub segments: usize,
+    /// Near ties split along their last join after the clustering
+    /// ([`super::consensus_split`]; not in `segments`), and the time that took (not in
+    /// `joins_s`).
+    pub split: usize,
+    pub split_s: f64,
     /// The ordered joins' queue: candidates taken from it (most of them stale: a segment
     /// joined another since, or the evidence changed), those tested ([`may_join`]), and
     /// those a join queued again.
@@ -655,7 +660,7 @@ pub fn cluster_segments_sweeping_from(
     p: &ConsensusParams,
     sweep_from: usize,
 ) -> Vec<u32> {
-    cluster(obs, knn, surfaces, p, sweep_from).0
+    cluster(obs, knn, surfaces, p, sweep_from).0.segment
 }
 
 /// The clustering, its heap swept from `sweep_from` candidates on, and what it did.
@@ -665,7 +670,7 @@ fn cluster(
     surfaces: &SurfaceNormals,
     p: &ConsensusParams,
     sweep_from: usize,
-) -> (Vec<u32>, ClusterProfile) {
+) -> (Clustered, ClusterProfile) {
     let mut done = ClusterProfile::default();
     let mut laps = Laps::start();
     let pairs = neighbour_pairs(obs, knn, surfaces, p.neighbours);
@@ -685,9 +690,20 @@ fn cluster(
     done.candidates += queue.sorted.len();
     join_in_order(&mut graph, &mut queue, p, &mut done, Among::All);
     let roots = graph.segment_of_gaussians();
+    let last_half = graph.last_halves();
     done.joins_s = laps.lap() + done.pieces_joins_s;
     done.segments = done.pieces - done.joins;
-    (renumber(&roots), done)
+    let segment = renumber(&roots);
+    (Clustered { segment, last_half }, done)
+}
+
+/// The clustering's segments, and per Gaussian whether it lies in its segment's last
+/// joined half ([`SegmentGraph::last_halves`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Clustered {
+    /// Segment per Gaussian, numbered by first Gaussian.
+    pub segment: Vec<u32>,
+    pub last_half: Vec<bool>,
 }
 
 /// Which segments the ordered joins take candidates between.
@@ -1130,7 +1146,20 @@ struct SegmentGraph<'a> {
     size: Vec<u32>,
     /// The pieces that name a segment (`parent` of themselves).
     segments: SegmentSet,
+    /// Per piece, when the ordered joins joined it into its `parent` (the count of joins
+    /// before), or [`NOT_JOINED`]: what [`SegmentGraph::last_halves`] reads.
+    joined_at: Vec<u32>,
+    joins: u32,
 }
+
+/// [`SegmentGraph::joined_at`] of a piece no ordered join took (a segment's root, or a
+/// single Gaussian attached in rounds).
+const NOT_JOINED: u32 = u32::MAX;
+
+/// The part of a segment that joined it last and is a half: at least this share of the
+/// segment's Gaussians, so that the fragments joined after it (edges, slivers) do not
+/// hide the join that made it ([`SegmentGraph::last_halves`]).
+const HALF_SHARE: u32 = 10;
 
 impl<'a> SegmentGraph<'a> {
     /// The graph after the outright joins ([`premerge`]): its segments are those pieces and
@@ -1159,6 +1188,8 @@ impl<'a> SegmentGraph<'a> {
             parent: (0..count as u32).collect(),
             size,
             segments: SegmentSet::all(count),
+            joined_at: vec![NOT_JOINED; count],
+            joins: 0,
         }
     }
 
@@ -1177,6 +1208,52 @@ impl<'a> SegmentGraph<'a> {
     fn dominant(&self, s: u32) -> Dominant<'_> {
         let first = self.pieces.first[s as usize] as usize;
         self.regions.of(s).dominant(first, self.obs)
+    }
+
+    /// Per Gaussian, whether it lies in the half of its segment that joined the rest last:
+    /// of the parts the ordered joins joined into the segment's root, the last one that
+    /// holds at least 1/[`HALF_SHARE`] of its Gaussians (none: no Gaussian of it is).
+    /// What a near tie may be split along ([`super::consensus_split`]).
+    fn last_halves(&self) -> Vec<bool> {
+        let n = self.parent.len();
+        // Per piece, its root and the part directly under the root it lies in; resolved
+        // as in `segment_of_gaussians` (a joined piece's parent is lower, an attached
+        // Gaussian's resolved after).
+        let (mut root, mut part): (Vec<u32>, Vec<u32>) = ((0..n as u32).collect(), vec![0; n]);
+        let mut attached = Vec::new();
+        let resolve = |s: usize, root: &mut [u32], part: &mut [u32]| {
+            let parent = self.parent[s] as usize;
+            root[s] = root[parent];
+            part[s] = if parent == root[s] as usize {
+                s as u32
+            } else {
+                part[parent]
+            };
+        };
+        for s in 0..n {
+            match self.parent[s] as usize {
+                parent if parent == s => part[s] = s as u32,
+                parent if parent < s => resolve(s, &mut root, &mut part),
+                _ => attached.push(s),
+            }
+        }
+        for s in attached {
+            resolve(s, &mut root, &mut part);
+        }
+        // Per root, its last part of at least the share (the join count, the part).
+        let mut last = vec![(NOT_JOINED, NOT_JOINED); n];
+        for s in (0..n).filter(|&s| part[s] == s as u32 && root[s] != s as u32) {
+            let r = root[s] as usize;
+            let at = self.joined_at[s];
+            let half = HALF_SHARE * self.size[s] >= self.size[r];
+            if at != NOT_JOINED && half && (last[r].0 == NOT_JOINED || at > last[r].0) {
+                last[r] = (at, s as u32);
+            }
+        }
+        map_in_blocks(self.pieces.of_gaussian.len(), 1 << 16, |g| {
+            let piece = self.pieces.of_gaussian[g] as usize;
+            last[root[piece] as usize].1 == part[piece]
+        })
     }
 
     /// Each Gaussian's segment, named by its lowest Gaussian.
@@ -1207,6 +1284,8 @@ impl<'a> SegmentGraph<'a> {
     fn join(&mut self, a: u32, b: u32, changed: &mut Vec<(u32, PairEvidence)>) {
         let (ai, bi) = (a as usize, b as usize);
         self.parent[bi] = a;
+        self.joined_at[bi] = self.joins;
+        self.joins += 1;
         self.segments.remove(b);
         let size_before = self.size[ai];
         self.size[ai] += self.size[bi];

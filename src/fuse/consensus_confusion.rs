@@ -298,7 +298,7 @@ pub(crate) fn clear_class(s: &SegmentVotes, p: &ConsensusParams) -> Option<usize
 /// least `large_tie_gaussians` also within `large_tie_z` sqrt(top + theirs), the standard
 /// deviation of the difference a fair coin would give over those votes (none where nothing
 /// was voted).
-fn tied_classes(s: &SegmentVotes, p: &ConsensusParams) -> Vec<usize> {
+pub(crate) fn tied_classes(s: &SegmentVotes, p: &ConsensusParams) -> Vec<usize> {
     let top = s.split.iter().map(|&(_, v)| v).fold(0.0f64, f64::max);
     let large = s.gaussians >= p.large_tie_gaussians;
     let margin = |votes: f64| match large {

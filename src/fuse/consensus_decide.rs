@@ -338,7 +338,7 @@ type PerSegment = Vec<Vec<(u32, f64)>>;
 /// (segment, view, label) took most of the decision's time on a million Gaussians, and
 /// gathering every observation into its segment's place on one thread was a serial pass
 /// over tens of millions.
-fn segment_votes(
+pub(crate) fn segment_votes(
     obs: &Observations,
     members: &Groups,
     segments: usize,
@@ -402,7 +402,7 @@ const VOTES_BY_VIEW_FROM: usize = 4096;
 /// [`votes_of`] of the observations of `members`, counted per (view, class) first: the same
 /// sums, added in the same order (views ascending, within a view classes ascending, a
 /// class's share once per observation), so the same bits.
-fn votes_counted_by_view(
+pub(crate) fn votes_counted_by_view(
     obs: &Observations,
     members: &[u32],
     split: &mut [f64],
@@ -996,7 +996,7 @@ fn reverse_neighbours(knn: &[u32], k: usize, n: usize, rows: &[usize]) -> Revers
 
 /// A segment's summary from its votes and masses by class (the same classes, in class
 /// order).
-fn segment_summary(
+pub(crate) fn segment_summary(
     split: Vec<(u32, f64)>,
     mass: &SparseCounts,
     gaussians: usize,

@@ -17,6 +17,7 @@ pub mod consensus_region_votes;
 pub mod consensus_relabel;
 pub mod consensus_report;
 pub mod consensus_segments;
+pub mod consensus_split;
 pub mod consensus_surface;
 pub mod method;
 pub mod neighbours;

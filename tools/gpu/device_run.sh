@@ -300,9 +300,11 @@ run_ours() {
   # consensus_host: the office's views once, then its clustering and decision three times
   # on the same observations, every step timed, into bench.log): where each pass stops
   # scaling on this machine, and whether a warm repetition runs faster than the first. Its
-  # outputs hash is the development VM's (2202828ba503bf70 at 1920x1080; with --clustering
-  # rounds 1c0c633aed9c2bcc; since 4438eed, which smooths before filling the unobserved:
-  # before it 5009510662a647ad and 26c000c973f4c7e5) wherever the views observe the same.
+  # outputs hash is the development VM's (52669e31a74a32f7 at 1920x1080; with --clustering
+  # rounds 1c0c633aed9c2bcc; since the near ties split along their last join, two of them
+  # in the office with the ordered joins: before it 2202828ba503bf70, and before 4438eed,
+  # which smooths before filling the unobserved, 5009510662a647ad and 26c000c973f4c7e5)
+  # wherever the views observe the same.
   if [[ "host scaling office labels" =~ ${CASES:-.} ]] && [ -x "$bin/consensus_host" ] &&
     [ "$(left)" -gt 60 ]; then
     # On one core also the model of every thread count (util::scaling), to set beside the
