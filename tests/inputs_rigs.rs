@@ -206,11 +206,12 @@ fn check_flat_labels_of_a_rig_are_refused(d: &Path, cams: &[Camera]) {
 }
 
 /// --render-views writes the rig views into subfolders of its folder, and they are the
-/// plain model's views.
+/// plain model's views; beside them the mark of a render's folder, as `render` writes it.
 fn check_rig_render_views_match_flat(d: &Path) {
     assert_eq!(
         files_under(&d.join("views_rig")),
         [
+            ".semsplat-render",
             "cam0/00001.labels.png",
             "cam0/00001.palette.png",
             "cam1/00001.labels.png",
