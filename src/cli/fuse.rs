@@ -48,8 +48,9 @@ enum MethodArg {
     /// FlashSplat: optimal assignment from every pixel's alpha*T contributions.
     Flashsplat,
     /// Segment consensus: 3D segments from co-occurrence in connected label regions, one
-    /// vote per view and segment (robust to per-view label flicker; near ties go to the
-    /// class the scene's own label confusions make likeliest). Also writes each
+    /// vote per view and segment (robust to per-view label flicker; a near tie whose two
+    /// last-joined halves their views decide clearly apart is split, other near ties go to
+    /// the class the scene's own label confusions make likeliest). Also writes each
     /// Gaussian's `class_entropy` and `segment`, and with --report the segments whose views
     /// disagree (docs/robustness.md).
     SegmentConsensus,
