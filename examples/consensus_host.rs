@@ -189,11 +189,13 @@ fn main() -> Result<()> {
             timed(args.model_threads, || {
                 let (clustered, mut done) =
                     cluster_segments_timed(&run.observations, &run.knn, &surfaces, &params);
-                let split_start = std::time::Instant::now();
-                let segment;
-                (segment, done.split) =
-                    split_near_ties(&run.observations, clustered, run.classes, &params);
-                done.split_s = split_start.elapsed().as_secs_f64();
+                let segment = split_near_ties(
+                    &run.observations,
+                    clustered,
+                    run.classes,
+                    &params,
+                    &mut done,
+                );
                 (segment, done)
             })
         });

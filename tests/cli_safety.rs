@@ -31,24 +31,37 @@ fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
-/// A tiny synth room (4 views of 32x24) in `dir`.
-fn synth(dir: &Path) {
-    let o = semsplat([
+/// `synth` of the tiny room into `out`: `views` train and `test` held-out views of
+/// `width` x `height`, without previews.
+fn tiny_synth_args(views: u32, test: u32, (width, height): (u32, u32), out: &Path) -> Vec<String> {
+    let counts = [views, test, width, height].map(|n| n.to_string());
+    let [views, test, width, height] = counts.each_ref().map(String::as_str);
+    [
         "synth",
         "--preset",
         "tiny",
         "--views",
-        "3",
+        views,
         "--test-views",
-        "1",
+        test,
+    ]
+    .into_iter()
+    .chain([
         "--width",
-        "32",
+        width,
         "--height",
-        "24",
+        height,
         "--no-previews",
         "--out",
-        dir.to_str().unwrap(),
-    ]);
+    ])
+    .map(String::from)
+    .chain([out.to_str().unwrap().to_string()])
+    .collect()
+}
+
+/// A tiny synth room (4 views of 32x24) in `dir`.
+fn synth(dir: &Path) {
+    let o = semsplat(tiny_synth_args(3, 1, (32, 24), dir));
     assert!(o.status.success(), "{}", stderr(&o));
 }
 
@@ -697,17 +710,7 @@ fn ctrl_c_during_synth_writing_exits_at_once_without_temp_files() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("room");
     let mut child = Command::new(env!("CARGO_BIN_EXE_semsplat"))
-        .args([
-            "synth",
-            "--preset",
-            "tiny",
-            "--views",
-            "400",
-            "--test-views",
-            "1",
-        ])
-        .args(["--width", "64", "--height", "48", "--no-previews", "--out"])
-        .arg(&out)
+        .args(tiny_synth_args(400, 1, (64, 48), &out))
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
@@ -740,20 +743,7 @@ fn ctrl_c_during_synth_writing_exits_at_once_without_temp_files() {
 fn ctrl_c_during_render_names_the_views_written() {
     let tmp = tempfile::tempdir().unwrap();
     let (room, out) = (tmp.path().join("room"), tmp.path().join("render"));
-    let synth = semsplat(
-        [
-            "synth",
-            "--preset",
-            "tiny",
-            "--views",
-            "400",
-            "--test-views",
-            "0",
-        ]
-        .into_iter()
-        .chain(["--width", "32", "--height", "24", "--no-previews", "--out"])
-        .chain([room.to_str().unwrap()]),
-    );
+    let synth = semsplat(tiny_synth_args(400, 0, (32, 24), &room));
     assert!(synth.status.success(), "{}", stderr(&synth));
     let child = Command::new(env!("CARGO_BIN_EXE_semsplat"))
         .arg("render")
@@ -839,20 +829,8 @@ fn a_render_failing_part_way_names_the_views_written() {
 fn a_synth_stopped_part_way_leaves_no_mixed_room() {
     let tmp = tempfile::tempdir().unwrap();
     let synth_seed = |out: &Path, seed: &str| {
-        semsplat(
-            [
-                "synth",
-                "--preset",
-                "tiny",
-                "--views",
-                "6",
-                "--test-views",
-                "1",
-            ]
-            .into_iter()
-            .chain(["--width", "64", "--height", "48", "--no-previews"])
-            .chain(["--seed", seed, "--out", out.to_str().unwrap()]),
-        )
+        let args = tiny_synth_args(6, 1, (64, 48), out);
+        semsplat(args.into_iter().chain(["--seed".into(), seed.into()]))
     };
     let (room, reference) = (tmp.path().join("room"), tmp.path().join("reference"));
     assert!(synth_seed(&room, "0").status.success());

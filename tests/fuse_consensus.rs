@@ -10,7 +10,8 @@ use semsplat::contract::{MEDIAN_T, NO_NEIGHBOUR, OPAQUE_T};
 use semsplat::dataset::CompactClasses;
 use semsplat::fuse::consensus::{observe, Kept, ViewsObserved};
 use semsplat::fuse::consensus_cluster::{
-    cluster_segments, cluster_segments_sweeping_from, cluster_segments_timed, Clustered,
+    cluster_segments, cluster_segments_sweeping_from, cluster_segments_timed, ClusterProfile,
+    Clustered,
 };
 use semsplat::fuse::consensus_decide::{
     at_least_the_mean_plus_one, binomial_at_most, decide, Consensus,
@@ -2328,23 +2329,25 @@ fn halves_seen(rest: &[u32], last_views: &[u32], last: usize) -> (Observations, 
 #[test]
 fn near_ties_split_along_their_last_join_where_the_halves_differ() {
     let p = ConsensusParams::default();
+    // The segments after the split, and how many the profile says were split.
+    let split = |(obs, clustered): (Observations, Clustered)| {
+        let mut done = ClusterProfile::default();
+        let segment = split_near_ties(&obs, clustered, 3, &p, &mut done);
+        (segment, done.split)
+    };
+    let stays_whole = |seen: (Observations, Clustered)| {
+        let whole = seen.1.segment.clone();
+        assert_eq!(split(seen), (whole, 0));
+    };
     // Rest 0:5 1:1, last 1:4 0:1: the whole 0:6 1:5, within one view (tie_margin 1).
     let (rest, last) = ([0, 0, 0, 0, 0, 1], [1, 1, 1, 1, 0]);
-    let (obs, clustered) = halves_seen(&rest, &last, 8);
-    let (segment, split) = split_near_ties(&obs, clustered, 3, &p);
     let expected: Vec<u32> = (0..20).map(|g| (g / 8).min(2) as u32).collect();
-    assert_eq!((segment, split), (expected, 1));
+    assert_eq!(split(halves_seen(&rest, &last, 8)), (expected, 1));
     // Two more views give the rest 0: the whole 0:8 1:5 is clear, and stays whole.
-    let (obs, clustered) = halves_seen(&[rest.as_slice(), &[0, 0]].concat(), &last, 8);
-    let whole = clustered.segment.clone();
-    assert_eq!(split_near_ties(&obs, clustered, 3, &p), (whole, 0));
+    stays_whole(halves_seen(&[rest.as_slice(), &[0, 0]].concat(), &last, 8));
     // Halves that are near ties themselves (rest 0:3 1:2, last 0:2 1:3; the whole 5:5).
-    let (obs, clustered) = halves_seen(&[0, 0, 0, 1, 1], &[0, 0, 1, 1, 1], 8);
-    let whole = clustered.segment.clone();
-    assert_eq!(split_near_ties(&obs, clustered, 3, &p), (whole, 0));
+    stays_whole(halves_seen(&[0, 0, 0, 1, 1], &[0, 0, 1, 1, 1], 8));
     // A last half of 3 Gaussians, under min_segment (4).
     assert_eq!(p.min_segment, 4);
-    let (obs, clustered) = halves_seen(&rest, &last, 3);
-    let whole = clustered.segment.clone();
-    assert_eq!(split_near_ties(&obs, clustered, 3, &p), (whole, 0));
+    stays_whole(halves_seen(&rest, &last, 3));
 }

@@ -16,7 +16,7 @@ use semsplat::scene::colmap::{find_colmap_model, ColmapFormat};
 use semsplat::scene::labels::{
     binary_mask_warning, ignored_class_note, jpeg_note, label_size_fit, list_label_pngs,
     match_cameras, read_label_png_as, size_mismatch_reason, stray_255_warning, LabelFormat,
-    LabelMap, SizeFit, StepTally, JPEG_LABELS,
+    LabelMap, SizeFit, StepTally, JPEG_LABELS, PNG_SIGNATURE,
 };
 use semsplat::scene::ply::{classes_sidecar_path, read_classes_sidecar};
 use semsplat::scene::scene_file::{read_scene_unchecked, resolve_scene_path, scene_format};
@@ -322,7 +322,7 @@ fn file_magic(path: &Path) -> Option<Magic> {
     let read = file.read(&mut head).ok()?;
     match &head[..read] {
         [b'p', b'l', b'y', b'\n' | b'\r', ..] => Some(Magic::Ply),
-        [0x89, b'P', b'N', b'G', b'\r', b'\n', 0x1a, b'\n'] => Some(Magic::Png),
+        head if head == PNG_SIGNATURE => Some(Magic::Png),
         _ => None,
     }
 }

@@ -118,11 +118,13 @@ pub fn consensus_run(
     let clustered;
     (clustered, stats.clustering) = cluster_segments_timed(&observations, &knn, &surfaces, params);
     (stats.clustering.order_s, stats.clustering.neighbours_s) = (order_s, neighbours_s);
-    let split_start = std::time::Instant::now();
-    let segment;
-    (segment, stats.clustering.split) =
-        split_near_ties(&observations, clustered, input.classes, params);
-    stats.clustering.split_s = split_start.elapsed().as_secs_f64();
+    let segment = split_near_ties(
+        &observations,
+        clustered,
+        input.classes,
+        params,
+        &mut stats.clustering,
+    );
     stats.segments_s = views_start.elapsed().as_secs_f64() - stats.view_s;
     let decide_start = std::time::Instant::now();
     let consensus;

@@ -689,8 +689,9 @@ fn cluster(
     let mut queue = Queue::new(&graph, p, sweep_from, Among::All);
     done.candidates += queue.sorted.len();
     join_in_order(&mut graph, &mut queue, p, &mut done, Among::All);
-    let roots = graph.segment_of_gaussians();
-    let last_half = graph.last_halves();
+    let (root, part) = graph.roots_and_parts();
+    let roots = graph.segment_of_gaussians(&root);
+    let last_half = graph.last_halves(&root, &part);
     done.joins_s = laps.lap() + done.pieces_joins_s;
     done.segments = done.pieces - done.joins;
     let segment = renumber(&roots);
@@ -1210,24 +1211,20 @@ impl<'a> SegmentGraph<'a> {
         self.regions.of(s).dominant(first, self.obs)
     }
 
-    /// Per Gaussian, whether it lies in the half of its segment that joined the rest last:
-    /// of the parts the ordered joins joined into the segment's root, the last one that
-    /// holds at least 1/[`HALF_SHARE`] of its Gaussians (none: no Gaussian of it is).
-    /// What a near tie may be split along ([`super::consensus_split`]).
-    fn last_halves(&self) -> Vec<bool> {
+    /// Per piece, its segment's root, and the part directly under the root that it lies in
+    /// (itself for a root). A joined piece's parent is lower, so pieces resolve in order,
+    /// except a single Gaussian attached to a segment ([`attach::attach_single_gaussians`]):
+    /// that segment's root, not its own, is resolved after.
+    fn roots_and_parts(&self) -> (Vec<u32>, Vec<u32>) {
         let n = self.parent.len();
-        // Per piece, its root and the part directly under the root it lies in; resolved
-        // as in `segment_of_gaussians` (a joined piece's parent is lower, an attached
-        // Gaussian's resolved after).
         let (mut root, mut part): (Vec<u32>, Vec<u32>) = ((0..n as u32).collect(), vec![0; n]);
         let mut attached = Vec::new();
         let resolve = |s: usize, root: &mut [u32], part: &mut [u32]| {
             let parent = self.parent[s] as usize;
             root[s] = root[parent];
-            part[s] = if parent == root[s] as usize {
-                s as u32
-            } else {
-                part[parent]
+            part[s] = match parent == root[s] as usize {
+                true => s as u32,
+                false => part[parent],
             };
         };
         for s in 0..n {
@@ -1238,8 +1235,18 @@ impl<'a> SegmentGraph<'a> {
             }
         }
         for s in attached {
-            resolve(s, &mut root, &mut part);
+            resolve(s, &mut root, &mut part); // a segment of pieces: resolved above
         }
+        (root, part)
+    }
+
+    /// Per Gaussian, whether it lies in the half of its segment that joined the rest last:
+    /// of the parts the ordered joins joined into the segment's root, the last one that
+    /// holds at least 1/[`HALF_SHARE`] of its Gaussians (none: no Gaussian of it is).
+    /// What a near tie may be split along ([`super::consensus_split`]). `root`, `part`:
+    /// [`SegmentGraph::roots_and_parts`].
+    fn last_halves(&self, root: &[u32], part: &[u32]) -> Vec<bool> {
+        let n = self.parent.len();
         // Per root, its last part of at least the share (the join count, the part).
         let mut last = vec![(NOT_JOINED, NOT_JOINED); n];
         for s in (0..n).filter(|&s| part[s] == s as u32 && root[s] != s as u32) {
@@ -1256,22 +1263,9 @@ impl<'a> SegmentGraph<'a> {
         })
     }
 
-    /// Each Gaussian's segment, named by its lowest Gaussian.
-    fn segment_of_gaussians(&self) -> Vec<u32> {
-        // A piece's parent is lower, except a single Gaussian's attached to a segment
-        // ([`attach::attach_single_gaussians`]): that segment's root, not its own, is resolved after.
-        let mut root: Vec<u32> = (0..self.parent.len() as u32).collect();
-        let mut attached = Vec::new();
-        for s in 0..root.len() {
-            let parent = self.parent[s] as usize;
-            match parent <= s {
-                true => root[s] = root[parent],
-                false => attached.push(s),
-            }
-        }
-        for s in attached {
-            root[s] = root[self.parent[s] as usize]; // a segment of pieces: resolved above
-        }
+    /// Each Gaussian's segment, named by its lowest Gaussian (`root`: per piece, its
+    /// segment's root piece).
+    fn segment_of_gaussians(&self, root: &[u32]) -> Vec<u32> {
         let of_piece = |piece: u32| self.pieces.first[root[piece as usize] as usize];
         map_in_blocks(self.pieces.of_gaussian.len(), 1 << 16, |g| {
             of_piece(self.pieces.of_gaussian[g])

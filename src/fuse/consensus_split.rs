@@ -13,7 +13,7 @@
 //! is no better evidence than the whole (docs/robustness-log.md, "Near ties split along
 //! their last join").
 
-use super::consensus_cluster::{renumber, Clustered};
+use super::consensus_cluster::{renumber, ClusterProfile, Clustered};
 use super::consensus_confusion::tied_classes;
 use super::consensus_decide::{
     segment_summary, segment_votes, votes_counted_by_view, ConsensusParams, SegmentVotes,
@@ -21,13 +21,16 @@ use super::consensus_decide::{
 use super::consensus_segments::{Groups, Observations};
 
 /// The segments with each near tie whose halves decide different classes split in two,
-/// numbered by first Gaussian again; and how many were split.
+/// numbered by first Gaussian again; how many were split and the time it took go into the
+/// clustering's profile (`split`, `split_s`).
 pub fn split_near_ties(
     obs: &Observations,
     clustered: Clustered,
     classes: usize,
     p: &ConsensusParams,
-) -> (Vec<u32>, usize) {
+    done: &mut ClusterProfile,
+) -> Vec<u32> {
+    let start = std::time::Instant::now();
     let Clustered { segment, last_half } = clustered;
     let count = segment.iter().map(|&s| s as usize + 1).max().unwrap_or(0);
     // The segments both of whose halves hold `min_segment` Gaussians: few, so only their
@@ -73,10 +76,9 @@ pub fn split_near_ties(
     let halves_apart: Vec<[&[u32]; 2]> = (split_apart.iter())
         .map(|&i| [halves.group(2 * i), halves.group(2 * i + 1)])
         .collect();
-    (
-        renumbered_with_halves(&segment, &halves_apart),
-        split_apart.len(),
-    )
+    let segment = renumbered_with_halves(&segment, &halves_apart);
+    (done.split, done.split_s) = (split_apart.len(), start.elapsed().as_secs_f64());
+    segment
 }
 
 /// Every segment named by its first Gaussian, each of `apart`'s halves (a split segment's

@@ -21,7 +21,7 @@ use crate::util::write_atomic;
 
 pub use decode::{
     read_label_png_as, read_png_header, LabelFormat, PngHeader, JPEG_LABELS, MAX_DECODE_BYTES,
-    MAX_LABEL_PIXELS,
+    MAX_LABEL_PIXELS, PNG_SIGNATURE,
 };
 pub use folder::{
     binary_mask_warning, ignored_class_note, jpeg_note, label_size_fit, list_label_pngs, list_some,

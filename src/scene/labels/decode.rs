@@ -133,6 +133,9 @@ impl PngHeader {
     }
 }
 
+/// The eight bytes every PNG file starts with.
+pub const PNG_SIGNATURE: [u8; 8] = *b"\x89PNG\r\n\x1a\n";
+
 /// Why label maps must be PNG, and what to do, said wherever JPEG label maps are found.
 pub const JPEG_LABELS: &str = "label maps must be PNG: JPEG's lossy compression turns the ids \
                                along every region's edge into other ids; save the segmenter's \
@@ -147,7 +150,7 @@ pub fn read_png_header(path: &Path) -> Result<PngHeader> {
     if head.starts_with(&[0xff, 0xd8, 0xff]) {
         bail!("a JPEG file named .png; {JPEG_LABELS}");
     }
-    if &head[..8] != b"\x89PNG\r\n\x1a\n" || &head[12..16] != b"IHDR" {
+    if head[..8] != PNG_SIGNATURE || &head[12..16] != b"IHDR" {
         bail!("not a PNG file");
     }
     let be32 = |i: usize| u32::from_be_bytes([head[i], head[i + 1], head[i + 2], head[i + 3]]);
