@@ -15,7 +15,7 @@ mod cli;
     long_about = "Lift 2D semantic labels into 3D Gaussian Splatting scenes on a Vulkan compute \
                   backend. Runs on any Vulkan 1.3 device; without a GPU, install lavapipe with \
                   tools/setup.sh. Select a device with SEMSPLAT_DEVICE=<index or name substring>. \
-                  Ctrl-C stops a run cleanly: no partial output, exit status 130."
+                  Ctrl-C stops a run cleanly: no half-written file, exit status 130."
 )]
 struct Cli {
     #[command(subcommand)]

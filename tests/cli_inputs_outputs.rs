@@ -869,3 +869,141 @@ fn render_keeps_off_files_it_did_not_write() {
     ok_owned(&render(&labels, &["--force"]));
     assert_ne!(std::fs::read(&map).unwrap(), before, "forced");
 }
+
+/// A folder a render wrote into holds the user's files beside the render's: only the files
+/// a render wrote there are replaced again without --force (a render of one view once made
+/// every file of the folder replaceable).
+#[test]
+fn a_render_folder_keeps_off_the_files_no_render_wrote() {
+    let (_tmp, room) = tiny_room();
+    let labels = room.join("labels");
+    let render = |view: &str, extra: &[&str]| -> Vec<String> {
+        let args = ["render", "--scene", room.to_str().unwrap(), "--semantics"];
+        let out = ["--out", labels.to_str().unwrap(), "--views", view];
+        let all = [&args[..], &out, extra].concat();
+        all.iter().map(|a| a.to_string()).collect()
+    };
+    ok_owned(&render("train_0000", &["--force"]));
+    let map = labels.join("train_0001.png");
+    let before = std::fs::read(&map).unwrap();
+    let e = fails_owned(&render("train_0001", &[]));
+    assert!(e.contains("train_0001.png") && e.contains("--force"), "{e}");
+    assert_eq!(
+        std::fs::read(&map).unwrap(),
+        before,
+        "the label map is untouched"
+    );
+    ok_owned(&render("train_0000", &[]));
+}
+
+/// Views without a label map cost a fusion nothing: its views a second are those with one
+/// over its time; `eval` names only the cameras of --views it cannot score.
+#[test]
+fn unlabeled_views_count_in_neither_the_rate_nor_evals_note() {
+    let (tmp, room) = tiny_room();
+    let labels = tmp.path().join("some_labels");
+    std::fs::create_dir_all(&labels).unwrap();
+    for name in ["train_0000.png", "train_0002.png"] {
+        std::fs::copy(room.join("labels").join(name), labels.join(name)).unwrap();
+    }
+    let (out, report) = (arg_in(tmp.path(), "f.ply"), arg_in(tmp.path(), "f.json"));
+    let (scene, cameras) = (arg_in(&room, "scene.ply"), arg_in(&room, "cameras.json"));
+    let inputs = ["fuse", "--scene", &scene, "--cameras", &cameras];
+    let outputs = ["--out", &out, "--report", &report];
+    ok(&[
+        &inputs[..],
+        &["--labels", labels.to_str().unwrap()],
+        &outputs,
+    ]
+    .concat());
+    let stats = &common::cli::read_json(Path::new(&report))["stats"];
+    let number = |key: &str| stats[key].as_f64().unwrap();
+    let labeled = number("views_with_labels");
+    assert_eq!((number("views"), labeled), (4.0, 2.0), "{stats}");
+    let seconds = number("views_per_s") * number("wall_s");
+    assert!((seconds - labeled).abs() < 0.01 * labeled, "{stats}");
+    // The held-out view's map, alone: the train views lacking one are not eval's business.
+    let test_labels = tmp.path().join("test_labels");
+    std::fs::create_dir_all(&test_labels).unwrap();
+    let map = "test_0000.png";
+    std::fs::copy(room.join("labels").join(map), test_labels.join(map)).unwrap();
+    let eval = |labels: &Path, views: &str| {
+        let args = [
+            "eval",
+            "--scene",
+            &out,
+            "--cameras",
+            &cameras,
+            "--views",
+            views,
+        ];
+        ok(&[&args[..], &["--labels", labels.to_str().unwrap()]].concat())
+    };
+    let said = eval(&test_labels, "test");
+    assert!(!said.contains("have no label map"), "{said}");
+    let said = eval(&labels, "train");
+    assert!(
+        said.contains("1 of the 3 cameras of --views train") && said.contains("train_0001"),
+        "{said}"
+    );
+    assert!(!said.contains("test_0000"), "{said}");
+}
+
+/// What a file is, said where it is not what a command reads: a PNG or a cut PLY given as
+/// a scene, a room description or run summary given as cameras (no class table either),
+/// a shard's manifest to `inspect`, whose --json says even of a file it cannot read.
+#[test]
+fn readers_say_what_a_file_is() {
+    let (tmp, room) = tiny_room();
+    let p = |f: &str| arg_in(&room, f);
+    let labels = p("labels");
+    let fuse = |scene: &str, cameras: &str| {
+        let out = arg_in(tmp.path(), "f.ply");
+        let args = [
+            "fuse",
+            "--scene",
+            scene,
+            "--cameras",
+            cameras,
+            "--labels",
+            &labels,
+        ];
+        fails(&[&args[..], &["--out", &out]].concat())
+    };
+    let png = p("images/train_0000.png");
+    let as_ply = arg_in(tmp.path(), "image.ply");
+    std::fs::copy(&png, &as_ply).unwrap();
+    let err = fuse(&as_ply, &p("cameras.json"));
+    assert!(err.contains("not a PLY file: a PNG image"), "{err}");
+    let cut = arg_in(tmp.path(), "cut.ply");
+    let scene = std::fs::read(room.join("scene.ply")).unwrap();
+    std::fs::write(&cut, &scene[..100]).unwrap();
+    let err = fuse(&cut, &p("cameras.json"));
+    assert!(err.contains("ends before its end_header"), "{err}");
+    for not_cameras in ["room.json", "synth.json"] {
+        let err = fuse(&p("scene.ply"), &p(not_cameras));
+        assert!(
+            err.contains("unrecognized camera JSON"),
+            "{not_cameras}: {err}"
+        );
+        assert!(
+            !err.contains("this is a class table"),
+            "{not_cameras}: {err}"
+        );
+    }
+    let err = fuse(&p("scene.ply"), &p("classes.json"));
+    assert!(err.contains("this is a class table"), "{err}");
+    let out = common::cli::semsplat(&["inspect", "--json", &cut]);
+    assert!(!out.status.success());
+    let said: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(said["kind"], "unreadable");
+    assert!(
+        said["problems"][0].as_str().unwrap().contains("end_header"),
+        "{said}"
+    );
+    let part = arg_in(tmp.path(), "part.npy");
+    fuse_synth(&room, &["--shard", "0/2", "--out", &part]);
+    let manifest = arg_in(tmp.path(), "part.manifest.json");
+    let err = fails(&["inspect", &manifest]);
+    assert!(err.contains("manifest of a `fuse --shard` part"), "{err}");
+}

@@ -190,6 +190,16 @@ fn merge_refuses_parts_that_do_not_belong_together() {
     assert!(err.contains("missing shard(s) 1/2"), "{err}");
     let err = merge(&[&a0, &a1, &a1]);
     assert!(err.contains("shard 1/2 is given twice"), "{err}");
+    // Part 0 copied under shard 1's index (its manifest edited): its views twice, shard
+    // 1's in none.
+    let copy = p("c1.npy");
+    std::fs::copy(&a0, &copy).unwrap();
+    let manifest = std::fs::read_to_string(d.join("a0.manifest.json")).unwrap();
+    let edited = manifest.replacen("\"index\": 0", "\"index\": 1", 1);
+    assert_ne!(edited, manifest);
+    std::fs::write(d.join("c1.manifest.json"), edited).unwrap();
+    let err = merge(&[&a0, &copy]);
+    assert!(err.contains("is in two parts"), "{err}");
     // A part that is not there is named as such (it was blamed on its manifest).
     let err = merge(&[&a0, &p("a9.npy")]);
     assert!(err.contains("a9.npy: no such file"), "{err}");

@@ -939,3 +939,26 @@ fn ctrl_c_during_fuse_leaves_neither_output_nor_scratch_file() {
     let left = all_files(&out_dir);
     assert!(left.is_empty(), "left behind: {left:?}");
 }
+
+/// A rerun of synth that fails part-way (a folder where a view's file goes) says that the
+/// folder no longer holds the earlier room, rather than leaving the user to find out.
+#[test]
+fn a_synth_rerun_that_fails_says_the_earlier_room_is_gone() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("room");
+    synth(&out);
+    let view = out.join("images").join("train_0001.png");
+    std::fs::remove_file(&view).unwrap();
+    std::fs::create_dir(&view).unwrap();
+    let o = semsplat(tiny_synth_args(3, 1, (32, 24), &out));
+    let err = stderr(&o);
+    assert!(!o.status.success(), "{err}");
+    assert!(
+        err.contains("no longer holds the earlier run's room") && err.contains("is a folder"),
+        "{err}"
+    );
+    assert!(
+        !out.join("cameras.json").exists(),
+        "no room is readable there"
+    );
+}

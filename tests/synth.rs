@@ -87,6 +87,7 @@ fn same_seed_same_bytes_different_seed_different_bytes() {
         "classes.json",
         "room.json",
         "instances.json",
+        "instances/classes.json",
         "images/train_0000.png",
         "labels/test_0000.png",
         "labels_noisy/train_0002.png",

@@ -37,6 +37,22 @@ enum Views {
     All,
 }
 
+impl Views {
+    /// Whether a camera of `split` is one of these views.
+    fn holds(self, split: Split) -> bool {
+        self == Views::All || (self == Views::Test) == (split == Split::Test)
+    }
+
+    /// The value as --views takes it.
+    fn name(self) -> &'static str {
+        match self {
+            Views::Test => "test",
+            Views::Train => "train",
+            Views::All => "all",
+        }
+    }
+}
+
 #[derive(Args)]
 pub struct EvalArgs {
     /// A PLY whose Gaussians carry `class` (as `fuse` and `train` write it). The labels are
@@ -112,17 +128,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
         table.as_ref(),
         &format,
     )?;
-    for note in dir.notes() {
-        eprintln!("{note}");
-    }
-    if !dir.skipped().is_empty() {
-        eprintln!(
-            "note: {} of {} cameras have no label map and are not scored: {}",
-            dir.skipped().len(),
-            cams.len(),
-            list_some(dir.skipped())
-        );
-    }
+    note_label_folder(&dir, &cams, args.views);
     let chosen = chosen_views(&args, &cams, &dir)?;
     let gaussian_accuracy = match &args.truth {
         Some(path) => Some(truth_accuracy(path, &classes)?),
@@ -136,17 +142,16 @@ pub fn run(args: EvalArgs) -> Result<()> {
         binary_mask_warning(&args.labels, &true_ids, ignored, &format),
         stray_255_warning(&args.labels, &true_ids, &format, table.as_ref()),
     ];
-    for w in value_warnings.into_iter().flatten() {
-        eprintln!("{w}");
-    }
     if let Some(table) = &table {
         segmentation.name_classes(table);
     }
-    for note in segmentation.notes(&classes, table.is_some()) {
-        eprintln!("{note}");
-    }
-    if let Some(note) = unclassified_note(&classes, args.truth.is_some()) {
-        eprintln!("{note}");
+    let notes = segmentation.notes(&classes, table.is_some()).into_iter();
+    let unclassified = unclassified_note(&classes, args.truth.is_some());
+    for line in (value_warnings.into_iter().flatten())
+        .chain(notes)
+        .chain(unclassified)
+    {
+        eprintln!("{line}");
     }
     let image_quality = match &args.images {
         Some(image_dir) => {
@@ -169,6 +174,27 @@ pub fn run(args: EvalArgs) -> Result<()> {
         write_bytes_atomic(path, serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
     Ok(())
+}
+
+/// The label folder's notes, and the cameras of --views it has no map for (not scored).
+fn note_label_folder(dir: &LabelDir, cams: &[Camera], views: Views) {
+    for note in dir.notes() {
+        eprintln!("{note}");
+    }
+    let of_views: Vec<&Camera> = cams.iter().filter(|c| views.holds(c.split)).collect();
+    let skipped: Vec<String> = (dir.skipped().iter())
+        .filter(|name| of_views.iter().any(|c| &c.name == *name))
+        .cloned()
+        .collect();
+    if !skipped.is_empty() {
+        eprintln!(
+            "note: {} of the {} cameras of --views {} have no label map and are not scored: {}",
+            skipped.len(),
+            of_views.len(),
+            views.name(),
+            list_some(&skipped)
+        );
+    }
 }
 
 /// Gaussians of class -1 occlude but draw no class: the pixels they cover show the classes
@@ -255,10 +281,7 @@ fn eval_class_table(args: &EvalArgs) -> Result<Option<ClassTable>> {
 /// The label map entries of the views `--views` selects (at least one).
 fn chosen_views(args: &EvalArgs, cams: &[Camera], dir: &LabelDir) -> Result<Vec<usize>> {
     let chosen: Vec<usize> = (0..dir.len())
-        .filter(|&i| {
-            let split = chosen_camera(cams, dir, i).split;
-            args.views == Views::All || (args.views == Views::Test) == (split == Split::Test)
-        })
+        .filter(|&i| args.views.holds(chosen_camera(cams, dir, i).split))
         .collect();
     if chosen.is_empty() {
         bail!("no labeled view matches --views (cameras without splits are all train views; try --views all)");

@@ -11,7 +11,7 @@ use super::args;
 use super::fuse_consensus::{fuse_by_consensus, ConsensusOutputs};
 use super::merge::ShardJob;
 use super::progress::{follow, views_bar};
-use super::render::{check_overwrites_own_files, mark_as_render_output, LABELS_PNG, PALETTE_PNG};
+use super::render::{RenderedFiles, LABELS_PNG, PALETTE_PNG};
 use super::{
     check_outputs, open_dataset, write_scene_with_table, Input, Interruptible, FRAME_HINT,
 };
@@ -617,8 +617,9 @@ pub(super) fn check_output_args(
     inputs: &[Input],
     out_is_ply: bool,
 ) -> Result<()> {
-    // A PLY named .npy would load in no NumPy and look like a part to `merge`; a part
-    // named .ply would look like a scene to every reader of PLYs.
+    // A PLY named .npy would load in no NumPy and look like a part to `merge`, one named
+    // .png like a label map or photo (and replace it); a part named .ply would look like a
+    // scene to every reader of PLYs.
     let named = |ext: &str| (args.out.extension()).is_some_and(|e| e.eq_ignore_ascii_case(ext));
     ensure!(
         !(out_is_ply && named("npy")),
@@ -626,6 +627,14 @@ pub(super) fn check_output_args(
          name (--save-contrib writes the evidence as .npy; fuse --shard K/N writes a part)",
         args.out.display()
     );
+    if let (true, Some(ext)) = (out_is_ply && !named("ply"), args.out.extension()) {
+        bail!(
+            "--out {} is written as a PLY (the fused scene), not a .{} file: give it a .ply \
+             name",
+            args.out.display(),
+            ext.to_string_lossy()
+        );
+    }
     ensure!(
         out_is_ply || !named("ply"),
         "--out {} is a shard's part, a NumPy array of evidence, not a PLY: give it a .npy \
@@ -972,6 +981,9 @@ fn save_membership(
     })
 }
 
+/// What `--render-views` writes for each view.
+const VIEW_FILES: [&str; 2] = [LABELS_PNG, PALETTE_PNG];
+
 /// `--render-views`' cameras and device, opened before a fusion writes its first file (a
 /// camera file that does not parse, or no device, must not leave the other outputs behind).
 struct LabelViews {
@@ -982,8 +994,7 @@ struct LabelViews {
 impl LabelViews {
     fn open(cameras: &Path, g: &Gaussians, dir: &Path) -> Result<LabelViews> {
         let cams = load_cameras(cameras)?;
-        let suffixes = [LABELS_PNG, PALETTE_PNG];
-        check_overwrites_own_files(("--render-views", dir), None, &cams, &suffixes)?;
+        RenderedFiles::of(dir)?.check_overwrites("--render-views", None, &cams, &VIEW_FILES)?;
         let ids = g.class_ids.as_deref().expect("classes assigned");
         check_ids_fit_16_bit(ids.iter().map(|&id| i64::from(id)))?;
         Ok(LabelViews {
@@ -996,7 +1007,8 @@ impl LabelViews {
     fn render(self, dir: &Path, g: &Gaussians, table: &ClassTable) -> Result<()> {
         let ids = g.class_ids.as_deref().expect("classes assigned");
         let mut renderer = LabelRenderer::new(&self.gpu, g, ids)?;
-        mark_as_render_output(dir)?;
+        let mut rendered = RenderedFiles::of(dir)?;
+        rendered.start()?;
         for cam in &self.cams {
             interrupt::check()?;
             let labels: Vec<u16> = renderer
@@ -1008,6 +1020,7 @@ impl LabelViews {
             let file = |suffix: &str| dir.join(format!("{}{suffix}", cam.name));
             write_label_png(&file(LABELS_PNG), &map)?;
             write_palette_png(&file(PALETTE_PNG), &map, table)?;
+            rendered.add(cam, &VIEW_FILES)?;
         }
         Ok(())
     }
@@ -1160,8 +1173,9 @@ fn note_unobserved(segments: &SegmentReport) {
     let gaussians = observed + segments.unobserved;
     match observed * 2 < gaussians {
         false => eprintln!(
-            "{filled} of the scene's {gaussians} Gaussians no view observed: they took their \
-             neighbours' class (`segments.from_neighbours` of --report)"
+            "{} of the scene's {gaussians} Gaussians no view observed: {filled} of them took \
+             their neighbours' class (`segments.from_neighbours` of --report)",
+            segments.unobserved
         ),
         true => eprintln!(
             "warning: the views observed only {observed} of the {gaussians} Gaussians' \

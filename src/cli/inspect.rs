@@ -9,6 +9,7 @@ use clap::Args;
 use serde_json::{json, Map, Value};
 
 use semsplat::dataset::default_class_table;
+use semsplat::fuse::partial::MANIFEST_FORMAT;
 use semsplat::scene::cameras::load_cameras;
 use semsplat::scene::cameras_json::{read_cameras_json_kind, CameraJsonKind};
 use semsplat::scene::classes::{read_class_table, ClassTable, IGNORE_U16};
@@ -203,7 +204,17 @@ pub fn run(args: InspectArgs) -> Result<()> {
         cameras: args.cameras.as_deref(),
         format: args.label_format.format(),
     };
-    let report = inspect_path(path, &labels)?;
+    let report = match inspect_path(path, &labels) {
+        Ok(report) => report,
+        // What --json's reader parses says so too: a file that could not be read.
+        Err(e) if args.json => {
+            let mut unreadable = Report::new("unreadable", path);
+            unreadable.problems.push(format!("{e:#}"));
+            print_stdout(&(serde_json::to_string_pretty(&unreadable.to_json())? + "\n"))?;
+            return Err(e);
+        }
+        Err(e) => return Err(e),
+    };
     if args.json {
         print_stdout(&(serde_json::to_string_pretty(&report.to_json())? + "\n"))?;
     } else {
@@ -266,7 +277,12 @@ fn inspect_path(path: &Path, labels: &LabelInputs) -> Result<Report> {
         }
         "json" => match json_kind(path)? {
             JsonKind::ClassTable => inspect_class_table(path, &labels.format),
-            JsonKind::Cameras => inspect_cameras(path),
+            JsonKind::Cameras | JsonKind::Unparsable => inspect_cameras(path),
+            JsonKind::ShardManifest => bail!(
+                "{} is the manifest of a `fuse --shard` part (what the part was fused from), \
+                 which `semsplat merge` reads beside its part: {KINDS}",
+                path.display()
+            ),
             // A JSON of neither kind (a class list of another tool's layout) hears of both.
             JsonKind::Unknown => inspect_cameras(path).map_err(|e| {
                 anyhow!(
@@ -337,18 +353,19 @@ fn json_kind(path: &Path) -> Result<JsonKind> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     let Ok(value) = serde_json::from_str::<Value>(&text) else {
-        return Ok(JsonKind::Unknown); // the camera reader gives the parse error
+        return Ok(JsonKind::Unparsable); // the camera reader gives the parse error
     };
+    if value.get("format").and_then(Value::as_str) == Some(MANIFEST_FORMAT) {
+        return Ok(JsonKind::ShardManifest);
+    }
     // The keys each camera layout has at its top (semsplat's, nerfstudio's or INRIA's).
     let camera_keys = ["format", "cameras", "frames"];
     Ok(match &value {
         Value::Object(o) if camera_keys.iter().any(|k| o.contains_key(*k)) => JsonKind::Cameras,
-        Value::Object(o) if o.contains_key("classes") => JsonKind::ClassTable,
-        Value::Array(items) => match items.first() {
-            Some(e) if e.get("img_name").is_some() => JsonKind::Cameras,
-            Some(e) if e.get("id").is_some() => JsonKind::ClassTable,
-            _ => JsonKind::Unknown,
-        },
+        Value::Array(items) if items.first().is_some_and(|e| e.get("img_name").is_some()) => {
+            JsonKind::Cameras
+        }
+        v if ClassTable::json_has_shape(v) => JsonKind::ClassTable,
         _ => JsonKind::Unknown,
     })
 }
@@ -359,6 +376,10 @@ enum JsonKind {
     Cameras,
     /// Neither layout: read as cameras, and the error names both.
     Unknown,
+    /// No JSON: read as cameras, whose reader says where it breaks.
+    Unparsable,
+    /// The manifest beside a `fuse --shard` part.
+    ShardManifest,
 }
 
 // ---------------------------------------------------------------------------------------
@@ -485,11 +506,15 @@ fn huge_gaussians(g: &Gaussians) -> Option<String> {
         .filter(|&s| (s as f64).exp() > HUGE_SCALE_M)
         .collect();
     let max = huge.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+    let largest = match max.is_finite() {
+        true => format!("e^{max:.1} m"),
+        false => "of infinite scale".to_owned(),
+    };
     (!huge.is_empty()).then(|| {
         format!(
-            "{} Gaussians are larger than {HUGE_SCALE_M:e} m (the largest e^{max:.1} m): a \
-             corrupt or diverged model? Past float32's range a Gaussian is culled, below it \
-             it covers whole views",
+            "{} Gaussian(s) larger than {HUGE_SCALE_M:e} m (the largest {largest}): a corrupt \
+             or diverged model? Past float32's range a Gaussian is culled, below it it covers \
+             whole views",
             huge.len()
         )
     })
@@ -713,28 +738,39 @@ fn inspect_labels(
             .push(w.trim_start_matches("warning: ").to_owned());
     }
     if let (Some(cams), false) = (&cams, matched.is_empty()) {
-        let missing: Vec<&str> = (cams.iter().zip(&matched))
-            .filter(|(_, key)| key.is_none())
-            .map(|(c, _)| c.name.as_str())
-            .collect();
-        if !missing.is_empty() {
-            let shown: Vec<&str> = missing.iter().take(5).copied().collect();
-            r.problems.push(format!(
-                "{} of {} cameras have no label map: {}{}",
-                missing.len(),
-                cams.len(),
-                shown.join(", "),
-                if missing.len() > 5 { ", ..." } else { "" }
-            ));
-        }
-        let unmatched: Vec<String> = (files.iter().map(|(key, _)| key.clone()))
-            .filter(|key| !camera_of.contains_key(key.as_str()))
-            .collect();
-        if !unmatched.is_empty() {
-            r.add("maps_without_camera", unmatched);
-        }
+        add_unmatched(&mut r, files, cams, &matched, &camera_of);
     }
     Ok(r)
+}
+
+/// The cameras without a label map (a problem) and the maps without a camera.
+fn add_unmatched(
+    r: &mut Report,
+    files: &[(String, PathBuf)],
+    cams: &[Camera],
+    matched: &[Option<&str>],
+    camera_of: &BTreeMap<&str, &Camera>,
+) {
+    let missing: Vec<&str> = (cams.iter().zip(matched))
+        .filter(|(_, key)| key.is_none())
+        .map(|(c, _)| c.name.as_str())
+        .collect();
+    if !missing.is_empty() {
+        let shown: Vec<&str> = missing.iter().take(5).copied().collect();
+        r.problems.push(format!(
+            "{} of {} cameras have no label map: {}{}",
+            missing.len(),
+            cams.len(),
+            shown.join(", "),
+            if missing.len() > 5 { ", ..." } else { "" }
+        ));
+    }
+    let unmatched: Vec<String> = (files.iter().map(|(key, _)| key.clone()))
+        .filter(|key| !camera_of.contains_key(key.as_str()))
+        .collect();
+    if !unmatched.is_empty() {
+        r.add("maps_without_camera", unmatched);
+    }
 }
 
 /// What the label maps of a folder hold, summed over the maps.

@@ -1,7 +1,7 @@
 //! `semsplat render`: renders views of a scene on the GPU and writes images (and, with
 //! --raw, float arrays for comparison with other tools).
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, ensure, Context, Result};
@@ -181,8 +181,10 @@ const RAW_NPY: [&str; 5] = [
     ".sem_norm.npy",
 ];
 
-/// What marks a folder as `render`'s output: its files may be rendered again.
+/// The file in an output folder listing the files `render` (or `fuse --render-views`) wrote
+/// there, one name a line below its first: only those are replaced without --force.
 const RENDER_MARKER: &str = ".semsplat-render";
+const RENDER_MARKER_HEADER: &str = "files here were written by semsplat render";
 
 /// The suffixes of the files each view writes with these options.
 fn view_suffixes(args: &RenderArgs) -> Vec<&'static str> {
@@ -200,40 +202,89 @@ fn view_suffixes(args: &RenderArgs) -> Vec<&'static str> {
     suffixes
 }
 
-/// Refuses to replace files in `out` (of `option`) that no earlier render wrote (a folder
-/// without [`RENDER_MARKER`]), unless forced: `<view>.png` is also the name of a view's
-/// label map and photo. `force`: None where the command has no --force (fuse's and merge's
-/// --render-views).
-pub(super) fn check_overwrites_own_files(
-    (option, out): (&str, &Path),
-    force: Option<bool>,
-    cams: &[Camera],
-    suffixes: &[&str],
-) -> Result<()> {
-    if force == Some(true) || out.join(RENDER_MARKER).exists() {
-        return Ok(());
-    }
-    let targets =
-        (cams.iter()).flat_map(|cam| suffixes.iter().map(move |s| format!("{}{s}", cam.name)));
-    let existing: Vec<String> = targets.filter(|f| out.join(f).exists()).collect();
-    if let Some(first) = existing.first() {
-        let or_force = force.map_or("", |_| ", or pass --force");
-        bail!(
-            "{option} {} holds {} files these views would replace that no render wrote (e.g. \
-             {first}: a label map or photo of the same name?): choose another {option}{or_force}",
-            out.display(),
-            existing.len()
-        );
-    }
-    Ok(())
+/// The files renders wrote into a folder, as its [`RENDER_MARKER`] lists them.
+pub(super) struct RenderedFiles {
+    marker: PathBuf,
+    listed: HashSet<String>,
 }
 
-/// Marks `out` as a render's output folder ([`RENDER_MARKER`]), before its first view.
-pub(super) fn mark_as_render_output(out: &Path) -> Result<()> {
-    std::fs::create_dir_all(out).with_context(|| format!("creating --out {}", out.display()))?;
-    let marker = out.join(RENDER_MARKER);
-    std::fs::write(&marker, b"files here were written by semsplat render\n")
-        .with_context(|| format!("writing {}", marker.display()))
+impl RenderedFiles {
+    /// The list of `out` (empty where no render wrote there).
+    pub(super) fn of(out: &Path) -> Result<RenderedFiles> {
+        let marker = out.join(RENDER_MARKER);
+        let listed = match std::fs::read_to_string(&marker) {
+            Ok(text) => text.lines().skip(1).map(str::to_owned).collect(),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => HashSet::new(),
+            Err(e) => return Err(e).with_context(|| format!("reading {}", marker.display())),
+        };
+        Ok(RenderedFiles { marker, listed })
+    }
+
+    /// Refuses to replace files in the folder (of `option`) that no earlier render wrote,
+    /// unless forced: `<view>.png` is also the name of a view's label map and photo.
+    /// `force`: None where the command has no --force (fuse's and merge's --render-views).
+    pub(super) fn check_overwrites(
+        &self,
+        option: &str,
+        force: Option<bool>,
+        cams: &[Camera],
+        suffixes: &[&str],
+    ) -> Result<()> {
+        if force == Some(true) {
+            return Ok(());
+        }
+        let out = self.marker.parent().expect("the marker is in its folder");
+        let targets =
+            (cams.iter()).flat_map(|cam| suffixes.iter().map(move |s| format!("{}{s}", cam.name)));
+        let existing: Vec<String> = targets
+            .filter(|f| !self.listed.contains(f) && out.join(f).exists())
+            .collect();
+        if let Some(first) = existing.first() {
+            let or_force = force.map_or("", |_| ", or pass --force");
+            bail!(
+                "{option} {} holds {} files these views would replace that no render wrote \
+                 (e.g. {first}: a label map or photo of the same name?): choose another \
+                 {option}{or_force}",
+                out.display(),
+                existing.len()
+            );
+        }
+        Ok(())
+    }
+
+    /// Creates the folder and its list, before the first view is written (a list there is
+    /// kept).
+    pub(super) fn start(&self) -> Result<()> {
+        let out = self.marker.parent().expect("the marker is in its folder");
+        std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+        if !self.marker.exists() {
+            let header = format!("{RENDER_MARKER_HEADER}\n");
+            std::fs::write(&self.marker, header)
+                .with_context(|| format!("writing {}", self.marker.display()))?;
+        }
+        Ok(())
+    }
+
+    /// Lists a view's files once they are written (a file listed is one a render may
+    /// replace: listed after its write, a stop between the two leaves it refused, not a
+    /// file of the user's open to replacement).
+    pub(super) fn add(&mut self, cam: &Camera, suffixes: &[&str]) -> Result<()> {
+        let names = suffixes.iter().map(|s| format!("{}{s}", cam.name));
+        let new: Vec<String> = names.filter(|f| !self.listed.contains(f)).collect();
+        if new.is_empty() {
+            return Ok(());
+        }
+        let mut lines = new.join("\n");
+        lines.push('\n');
+        let mut file = std::fs::OpenOptions::new()
+            .append(true)
+            .open(&self.marker)
+            .with_context(|| format!("opening {}", self.marker.display()))?;
+        std::io::Write::write_all(&mut file, lines.as_bytes())
+            .with_context(|| format!("writing {}", self.marker.display()))?;
+        self.listed.extend(new);
+        Ok(())
+    }
 }
 
 /// Refuses views whose files would land on one path (a camera named `X.labels` wrote its
@@ -282,20 +333,11 @@ pub fn run(args: RenderArgs) -> Result<()> {
         &args.views,
     )?;
     check_view_files_distinct(&cams)?;
-    let out = ("--out", args.out.as_path());
-    check_overwrites_own_files(out, Some(args.force), &cams, &view_suffixes(&args))?;
+    let suffixes = view_suffixes(&args);
+    let mut rendered = RenderedFiles::of(&args.out)?;
+    rendered.check_overwrites("--out", Some(args.force), &cams, &suffixes)?;
     if args.semantics {
-        check_table_fits_logits(&scene_file, &g, table.as_ref())?;
-        if table.is_none() && g.semantics.is_some() {
-            // Without the table the channels have no ids: a trained scene's `class` may
-            // hold others (4711), and its label images would silently disagree with them.
-            eprintln!(
-                "note: {} has no class table ({}): label images hold the logits' channel \
-                 indices 0..C-1, not class ids",
-                scene_file.display(),
-                classes_sidecar_path(&scene_file).display()
-            );
-        }
+        check_semantics_table(&scene_file, &g, table.as_ref())?;
     }
     let gpu = Gpu::new()?;
     let mut labels_from = label_source(&args, &g, &gpu)?;
@@ -310,18 +352,9 @@ pub fn run(args: RenderArgs) -> Result<()> {
         semantics: matches!(labels_from, LabelSource::Logits).then_some(mode),
         ..Default::default()
     };
-    let palette_table = table.clone().unwrap_or_else(|| match &g.semantics {
-        Some(s) => ClassTable::from_ids(0..s.channels as u32),
-        None => ClassTable::from_ids(
-            g.class_ids
-                .iter()
-                .flatten()
-                .filter(|&&c| c >= 0)
-                .map(|&c| c as u32),
-        ),
-    });
+    let palette_table = table.clone().unwrap_or_else(|| ids_without_table(&g));
     let mut raster = Rasterizer::new(&gpu);
-    mark_as_render_output(&args.out)?;
+    rendered.start()?;
     let bar = render_bar(cams.len());
     let mut one_view = |cam: &Camera| -> Result<()> {
         interrupt::check()?;
@@ -343,6 +376,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
         if args.raw {
             write_raw(&f, &out, opts.semantics.is_some())?;
         }
+        rendered.add(cam, &suffixes)?;
         bar.inc(1);
         Ok(())
     };
@@ -355,8 +389,49 @@ pub fn run(args: RenderArgs) -> Result<()> {
         }
     }
     bar.finish_and_clear();
-    eprintln!("rendered {} views into {}", cams.len(), args.out.display());
+    let views = if cams.len() == 1 { "view" } else { "views" };
+    eprintln!(
+        "rendered {} {views} into {}",
+        cams.len(),
+        args.out.display()
+    );
     Ok(())
+}
+
+/// `--semantics`: the class table must fit the logits; without one, label images hold
+/// channel indices, which is said.
+fn check_semantics_table(
+    scene_file: &Path,
+    g: &Gaussians,
+    table: Option<&ClassTable>,
+) -> Result<()> {
+    check_table_fits_logits(scene_file, g, table)?;
+    if table.is_none() && g.semantics.is_some() {
+        // Without the table the channels have no ids: a trained scene's `class` may
+        // hold others (4711), and its label images would silently disagree with them.
+        eprintln!(
+            "note: {} has no class table ({}): label images hold the logits' channel \
+             indices 0..C-1, not class ids",
+            scene_file.display(),
+            classes_sidecar_path(scene_file).display()
+        );
+    }
+    Ok(())
+}
+
+/// The palette's classes where the scene has no class table: its logits' channels, else
+/// the class ids it holds.
+fn ids_without_table(g: &Gaussians) -> ClassTable {
+    match &g.semantics {
+        Some(s) => ClassTable::from_ids(0..s.channels as u32),
+        None => ClassTable::from_ids(
+            g.class_ids
+                .iter()
+                .flatten()
+                .filter(|&&c| c >= 0)
+                .map(|&c| c as u32),
+        ),
+    }
 }
 
 /// What a render stopped part-way leaves in `out`: the first `done` of `cams`, perhaps some of

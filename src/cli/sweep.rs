@@ -246,7 +246,9 @@ struct SweepReport {
     runs: Vec<RunResult>,
 }
 
-pub fn run(args: SweepArgs) -> Result<()> {
+/// The sweep's levels (sorted), rooms and seeds, each list's default where it was not
+/// given; repeats and unknown rooms refused before the first run.
+fn sweep_lists(args: &SweepArgs) -> Result<(Vec<f64>, Vec<String>, Vec<u64>)> {
     let levels = if args.levels.is_empty() {
         args.noise.default_levels()
     } else {
@@ -269,8 +271,13 @@ pub fn run(args: SweepArgs) -> Result<()> {
         &seeds.iter().map(u64::to_string).collect::<Vec<_>>(),
     )?;
     for preset in &presets {
-        RoomSource::from_arg(preset)?; // every room named before the first run
+        RoomSource::from_arg(preset)?;
     }
+    Ok((levels, presets, seeds))
+}
+
+pub fn run(args: SweepArgs) -> Result<()> {
+    let (levels, presets, seeds) = sweep_lists(&args)?;
     let base = base_noise(&args)?;
     let specs = (levels.iter())
         .map(|&level| Ok((level, args.noise.at(&base, level)?)))
@@ -378,12 +385,10 @@ fn print_summary(report: &SweepReport) {
     };
     for (m, b) in breaks {
         match b {
-            // Half of nothing is nothing: a method that classified nothing there (fuse
-            // refuses such a run) has no break to find.
+            // Half of nothing is nothing: a method whose held-out views matched nothing
+            // there (no labeled pixel right, or no class rendered) has no break to find.
             _ if clean_miou(m) == 0.0 => {
-                println!(
-                    "{m}: {reference} is 0 (it classified no Gaussian there): no break to find"
-                )
+                println!("{m}: {reference} is 0 (no labeled pixel of the held-out views right): no break to find")
             }
             Some(l) => println!("{m}: below half of {reference} at {key}={l}"),
             None => println!("{m}: never below half of {reference} in this range"),

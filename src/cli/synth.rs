@@ -72,9 +72,10 @@ pub struct SynthArgs {
     #[arg(long, default_value_t = DEFAULT_HFOV_DEG,
           value_parser = |s: &str| in_range(s, HFOV_RANGE, "degrees"))]
     fov: f64,
-    /// Gaussian spacing on surfaces in meters (density ~ 1/spacing^2; only surfaces some
-    /// view sees get Gaussians: office ~150k at 0.03 with the default views, 41k at 0.03 and
-    /// ~1M at 0.0053 with one view).
+    /// Gaussian spacing on surfaces in meters, 0.002..=1 (density ~ 1/spacing^2; only
+    /// surfaces some view sees get Gaussians, held-out views included: office ~150k at 0.03
+    /// with the default views, 41k at 0.03 and ~1M at 0.0053 with one view and
+    /// --test-views 0).
     #[arg(long, default_value_t = DEFAULT_SPACING,
           value_parser = |s: &str| in_range(s, SPACING_RANGE, "m"))]
     spacing: f64,
@@ -99,7 +100,8 @@ pub struct SynthArgs {
     #[arg(long)]
     no_previews: bool,
     /// Keep Gaussians on surfaces no camera sees (by default they are left out, as 3DGS
-    /// training would prune them).
+    /// training would prune them; a surface only held-out views see keeps its Gaussians, so
+    /// that those views show a room, not holes).
     #[arg(long)]
     keep_hidden: bool,
 }
@@ -182,6 +184,16 @@ pub fn run(args: SynthArgs) -> Result<()> {
                 c.wrong_class_name,
                 c.views_wrong,
                 c.views_visible
+            );
+        }
+        let asked = &noisy.report.requested;
+        let picked = noisy.report.consistent.len();
+        if asked.consistent > 0.0 && picked < asked.consistent_objects {
+            eprintln!(
+                "warning: consistent={} picked {picked} of the {} objects asked for: the room \
+                 has no more objects that a train view sees and that have a look-alike class \
+                 (walls, floor and ceiling are never picked)",
+                asked.consistent, asked.consistent_objects
             );
         }
     }

@@ -503,11 +503,12 @@ impl ViewGpu {
 }
 
 impl FuseStats {
-    /// A run's last figures: its wall time since `start`, `views` a second, and the
-    /// process's peak resident memory so far.
-    pub(crate) fn finish(&mut self, start: Instant, views: usize) {
+    /// A run's last figures: its wall time since `start`, the views with a label map a
+    /// second (each once, however many passes took it; views without one cost no work),
+    /// and the process's peak resident memory so far.
+    pub(crate) fn finish(&mut self, start: Instant) {
         self.wall_s = start.elapsed().as_secs_f64();
-        self.views_per_s = views as f64 / self.wall_s.max(1e-9);
+        self.views_per_s = self.views_with_labels as f64 / self.wall_s.max(1e-9);
         self.peak_host_bytes = crate::util::memory::peak_host_bytes().unwrap_or(0);
     }
 
@@ -872,9 +873,8 @@ fn accumulate_passes(
         stats.evidence_s += evidence_start.elapsed().as_secs_f64();
     }
     progress(passes * cams.len(), passes * cams.len());
-    // The views a second a user reads: each view once, however many passes took it (the
-    // passes' throughput is `bench fuse`'s, which divides views x passes).
-    stats.finish(start, stats.views);
+    // The passes' throughput is `bench fuse`'s, which divides views x passes.
+    stats.finish(start);
     stats.views_in_flight = lanes.lanes.len();
     stats.scene_device_bytes = scene.device_bytes();
     Ok(stats)

@@ -131,7 +131,7 @@ pub fn consensus_run(
     (consensus, stats.decision) = decide_timed(&observations, &knn, segment, input.classes, params);
     let consensus = order.consensus_to_scene(consensus);
     stats.decide_s = decide_start.elapsed().as_secs_f64();
-    stats.finish(start, stats.views);
+    stats.finish(start);
     Ok(ConsensusRun {
         consensus,
         observations,

@@ -852,8 +852,9 @@ pub fn binomial_at_most(k: u64, n: u64, rate: f64) -> f64 {
 
 /// Gaussians no view observed (their centers hidden in every view) take the class most of
 /// their decided neighbours hold, in rounds outward from the observed ones; those neighbour
-/// counts are their evidence. A tie, or no decided neighbour, leaves one undecided. Returns
-/// how many were decided so.
+/// counts are their evidence. A tie, or no decided neighbour, leaves one the class its
+/// neighbours' segments gave it ([`Alone::decide`]), if any. Returns how many of them end
+/// with a class: all by their neighbours, one way or the other.
 fn fill_unobserved(
     class: &mut [Option<usize>],
     evidence: &mut SharedCounts,
@@ -867,8 +868,8 @@ fn fill_unobserved(
     // decide next round (only they can change; a scene seen by few views has most
     // Gaussians pending and needs many rounds). Only the pending ones' lists are read: a
     // scene seen well has few.
+    let unobserved = frontier.clone();
     let listed_by = reverse_neighbours(knn, k, obs.n, &frontier);
-    let mut decided = 0;
     while !frontier.is_empty() {
         // Decided from the classes as they stood at the round's start.
         // Their counts by nonzero class: a round may decide most of a scene.
@@ -884,7 +885,6 @@ fn fill_unobserved(
                 Some((g, c))
             })
             .collect();
-        decided += found.len();
         frontier.clear();
         for ((g, c), counts) in found.into_iter().zip(found_counts.iter()) {
             (class[g], pending[g]) = (Some(c), false);
@@ -895,7 +895,7 @@ fn fill_unobserved(
         frontier.dedup();
         frontier.retain(|&f| pending[f]);
     }
-    decided
+    unobserved.iter().filter(|&&g| class[g].is_some()).count()
 }
 
 /// [`ConsensusParams::smooth_rounds`]: each round decides every observed Gaussian of a
@@ -1194,6 +1194,23 @@ mod tests {
         assert_eq!(decisive_argmax(&[0.0, 0.0], &[1.0, 2.0]), None);
         assert_eq!(decisive_argmax(&[], &[]), None);
         assert_eq!(decisive_argmax(&[0.0, 0.5], &[0.0, 0.0]), Some(1));
+    }
+
+    /// The fill counts every unobserved Gaussian that ends with a class: those it decides,
+    /// and one its tie leaves with the class its neighbours' segments gave it; the one its
+    /// tie leaves without a class is not counted.
+    #[test]
+    fn the_fill_counts_the_unobserved_that_end_with_a_class() {
+        // 0 and 1 observed as classes 0 and 1; 2, 3 and 4 unobserved, each listing 0 and
+        // 1 as its neighbours (a tie), 4 listing 0 twice.
+        let per_view = vec![vec![(0u32, 0u32, 0u32, false), (1, 1, 1, false)]];
+        let obs = Observations::from_views(5, &per_view);
+        let knn: Vec<u32> = vec![1, 2, 0, 2, 0, 1, 0, 1, 0, 0];
+        let mut class = vec![Some(0), Some(1), None, Some(1), None];
+        let mut evidence = SharedCounts::zeros(2, 5);
+        let filled = fill_unobserved(&mut class, &mut evidence, &obs, &knn, 2);
+        assert_eq!(class, [Some(0), Some(1), None, Some(1), Some(0)]);
+        assert_eq!(filled, 2, "3 kept its class on the tie, 4 was decided");
     }
 
     /// The reverse of some rows of a neighbour table lists, per Gaussian, exactly those of

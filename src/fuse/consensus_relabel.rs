@@ -439,7 +439,7 @@ pub fn fuse_relabeled_by(
     let (mut confidence, _) = posteriors(&consensus.evidence, &class, params.prior);
     unseen_without_confidence(&unseen, &mut confidence, None, input.classes);
     let mut stats = both_visits(run.stats, fs_stats, relabel_stats);
-    stats.finish(start, stats.views);
+    stats.finish(start);
     Ok(ConsensusLift {
         assignment: Assignment { class, confidence },
         consensus,

@@ -553,7 +553,32 @@ pub fn check_parts(parts: &[(PathBuf, PartManifest)]) -> Result<FusionKey> {
         missing.join(", "),
         count - 1
     );
+    check_views_once(parts, first.key.label_files)?;
     Ok(first.key.clone())
+}
+
+/// Every labeled view in exactly one part (a part copied under another shard's index
+/// holds its views twice, and other views in none).
+fn check_views_once(parts: &[(PathBuf, PartManifest)], labeled: usize) -> Result<()> {
+    let mut part_of: std::collections::HashMap<&str, &Path> = std::collections::HashMap::new();
+    for (path, m) in parts {
+        for view in &m.views {
+            if let Some(other) = part_of.insert(view, path) {
+                bail!(
+                    "view {view} is in two parts, {} and {}: a part copied, or its manifest's \
+                     shard edited; fuse that shard again",
+                    other.display(),
+                    path.display()
+                );
+            }
+        }
+    }
+    ensure!(
+        part_of.len() == labeled,
+        "the parts hold {} views, the labels {labeled}: fuse every shard again",
+        part_of.len()
+    );
+    Ok(())
 }
 
 #[cfg(test)]

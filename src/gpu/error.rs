@@ -9,7 +9,7 @@ pub const SETUP_HINT: &str =
 
 /// What to change when a buffer does not fit: said by every allocation error.
 pub const TOO_LARGE_HINT: &str =
-    "the input is too large for this device: use smaller images, fewer Gaussians, or fewer classes per pass (fuse --mem-budget)";
+    "the input is too large for this device: use smaller images or fewer Gaussians (fuse: or fewer classes per pass, --mem-budget)";
 
 /// A byte count for people: 1536 -> "1.5 KiB".
 pub fn human_bytes(bytes: &u64) -> String {

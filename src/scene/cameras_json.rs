@@ -17,6 +17,7 @@ use serde_json::Value;
 
 use super::camera::{Camera, Split};
 use super::cameras::{name_by_image_paths, validate_cameras};
+use super::classes::ClassTable;
 use crate::util::write_atomic;
 
 /// The `format` value of semsplat camera files.
@@ -100,7 +101,9 @@ pub fn parse_cameras_json(bytes: &[u8]) -> Result<(CameraJsonKind, Vec<Camera>)>
                 CameraJsonKind::Nerfstudio,
                 super::nerfstudio::parse_transforms(obj)?,
             ),
-            None if obj.contains_key("classes") => bail!("this is a class table, not cameras"),
+            None if ClassTable::json_has_shape(&value) => {
+                bail!("this is a class table, not cameras")
+            }
             None => bail!(
                 "unrecognized camera JSON: expected a list (INRIA cameras.json) or an object \
                  with \"format\": \"{SEMSPLAT_CAMERAS_FORMAT}\""

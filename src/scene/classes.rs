@@ -86,6 +86,21 @@ impl ClassTable {
         ClassTable { classes }
     }
 
+    /// Whether parsed JSON has a class table's shape: a list of objects with an `id`, or an
+    /// object whose `classes` is one (synth's `room.json` lists classes by name alone, a
+    /// report counts them: neither is a table).
+    pub fn json_has_shape(value: &serde_json::Value) -> bool {
+        let entries = match value {
+            serde_json::Value::Array(v) => v,
+            serde_json::Value::Object(o) => match o.get("classes") {
+                Some(serde_json::Value::Array(v)) => v,
+                _ => return false,
+            },
+            _ => return false,
+        };
+        !entries.is_empty() && entries.iter().all(|e| e.get("id").is_some())
+    }
+
     /// Parses a class table from JSON: a list of `{id, name, color}` or `{"classes": [...]}`.
     /// Missing names become `class_<id>`, missing colors come from [`default_color`]. An
     /// entry that does not parse is named in the error by its index and text.

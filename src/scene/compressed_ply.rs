@@ -27,7 +27,7 @@ pub(crate) fn is_compressed(header: &Header) -> bool {
         .elements
         .iter()
         .find(|e| e.name == "vertex")
-        .is_some_and(|v| v.props.iter().any(|p| p.name() == "packed_position"));
+        .is_some_and(|v| v.props.iter().any(|p| p.name() == PACKED_WORDS[0]));
     has_chunk && packed
 }
 
@@ -65,29 +65,22 @@ fn logit(p: f64) -> f32 {
     (p / (1.0 - p)).ln() as f32
 }
 
-/// Decodes the columns of a compressed PLY.
-pub(crate) fn decode(cols: &Columns) -> Result<Gaussians> {
-    let packed: Vec<&[f64]> = [
-        "packed_position",
-        "packed_rotation",
-        "packed_scale",
-        "packed_color",
-    ]
-    .iter()
-    .map(|p| cols.get("vertex", p))
-    .collect::<Result<_>>()?;
-    let n = packed[0].len();
-    // The words are uint32 bit fields: a value that is not one (a float property holding
-    // -5, 3.7 or NaN) must not be cast into some other word.
-    for (name, col) in [
-        "packed_position",
-        "packed_rotation",
-        "packed_scale",
-        "packed_color",
-    ]
-    .iter()
-    .zip(&packed)
-    {
+/// The vertex element's packed words, in the order `decode` reads them.
+const PACKED_WORDS: [&str; 4] = [
+    "packed_position",
+    "packed_rotation",
+    "packed_scale",
+    "packed_color",
+];
+
+/// The vertex element's packed columns ([`PACKED_WORDS`]), each value checked to be a
+/// word: they are uint32 bit fields, and a value that is not one (a float property holding
+/// -5, 3.7 or NaN) must not be cast into some other word.
+fn packed_columns(cols: &Columns) -> Result<Vec<&[f64]>> {
+    let packed: Vec<&[f64]> = (PACKED_WORDS.iter())
+        .map(|p| cols.get("vertex", p))
+        .collect::<Result<_>>()?;
+    for (name, col) in PACKED_WORDS.iter().zip(&packed) {
         if let Some(i) = col
             .iter()
             .position(|&v| !(v >= 0.0 && v <= u32::MAX as f64 && v.fract() == 0.0))
@@ -98,6 +91,13 @@ pub(crate) fn decode(cols: &Columns) -> Result<Gaussians> {
             );
         }
     }
+    Ok(packed)
+}
+
+/// Decodes the columns of a compressed PLY.
+pub(crate) fn decode(cols: &Columns) -> Result<Gaussians> {
+    let packed = packed_columns(cols)?;
+    let n = packed[0].len();
     let chunk = |p: &str| cols.get("chunk", p);
     let bounds = |prefix: &str, axes: [&str; 3]| -> Result<Vec<(&[f64], &[f64])>> {
         axes.iter()

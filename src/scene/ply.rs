@@ -152,8 +152,8 @@ impl<R: BufRead> HeaderLines<'_, R> {
             .take((MAX_HEADER_BYTES - self.len) as u64 + 1)
             .read_until(b'\n', &mut self.line)?;
         self.len += n;
-        if n == 0 {
-            bail!("truncated header (no end_header line)");
+        if n == 0 || (self.line.last() != Some(&b'\n') && self.len <= MAX_HEADER_BYTES) {
+            bail!("truncated header: the file ends before its end_header line");
         }
         if self.len > MAX_HEADER_BYTES {
             bail!("header is longer than {MAX_HEADER_BYTES} bytes");
@@ -170,7 +170,14 @@ fn parse_header(r: &mut impl BufRead) -> Result<Header> {
         len: 0,
         line: Vec::new(),
     };
-    let magic = lines.next_line()?;
+    let magic = match lines.next_line() {
+        Ok(magic) => magic,
+        Err(e) => match lines.line.as_slice() {
+            [0x89, b'P', b'N', b'G', ..] => bail!("not a PLY file: a PNG image"),
+            [0xff, 0xd8, 0xff, ..] => bail!("not a PLY file: a JPEG image"),
+            _ => return Err(e),
+        },
+    };
     if magic.trim() != "ply" {
         bail!("not a PLY file (first line is not 'ply')");
     }

@@ -123,8 +123,19 @@ fn parse_spz_header(b: &[u8]) -> Result<SpzHeader> {
     })
 }
 
-/// Reads a Niantic `.spz` file's (gzip-compressed) bytes.
-pub fn parse_spz(compressed: &[u8]) -> Result<Gaussians> {
+/// The byte lengths of an `.spz` file's attribute streams: positions, alphas, colours,
+/// scales, rotations, SH (the order load-spz.cc reads them).
+fn spz_stream_sizes(h: &SpzHeader) -> [usize; 6] {
+    let n = h.count;
+    let rest = sh_coeffs_for_degree(h.sh_degree) - 1;
+    let rot_bytes = if h.version >= 3 { 4 } else { 3 };
+    [9 * n, n, 3 * n, 3 * n, rot_bytes * n, 3 * rest * n]
+}
+
+/// Inflates a Niantic `.spz` file's (gzip-compressed) bytes: its header, and the stream
+/// (header included) holding exactly the splats it declares (or more, where extensions
+/// follow).
+fn inflate_spz(compressed: &[u8]) -> Result<(SpzHeader, Vec<u8>)> {
     match compressed {
         [] => bail!("the .spz file is empty"),
         // Versions 4 and later store their header uncompressed ("NGSP", then the version).
@@ -145,11 +156,7 @@ pub fn parse_spz(compressed: &[u8]) -> Result<Gaussians> {
     (&mut gz).take(16).read_to_end(&mut raw).map_err(corrupt)?;
     let h = parse_spz_header(&raw)?;
     let n = h.count;
-    let rest = sh_coeffs_for_degree(h.sh_degree) - 1;
-    let rot_bytes = if h.version >= 3 { 4 } else { 3 };
-    // positions, alphas, colours, scales, rotations, SH: the order load-spz.cc reads them.
-    let sizes = [9 * n, n, 3 * n, 3 * n, rot_bytes * n, 3 * rest * n];
-    let need: usize = 16 + sizes.iter().sum::<usize>();
+    let need: usize = 16 + spz_stream_sizes(&h).iter().sum::<usize>();
     ensure!(
         need as u64 <= MAX_SPZ_BYTES,
         "the .spz header claims {n} splats ({need} bytes of data), more than the \
@@ -171,6 +178,14 @@ pub fn parse_spz(compressed: &[u8]) -> Result<Gaussians> {
         "data continues past the .spz header's {n} splats (and the header announces no \
          extensions): the count is wrong, or the file holds more than it declares"
     );
+    Ok((h, raw))
+}
+
+/// Reads a Niantic `.spz` file's (gzip-compressed) bytes.
+pub fn parse_spz(compressed: &[u8]) -> Result<Gaussians> {
+    let (h, raw) = inflate_spz(compressed)?;
+    let (n, sizes) = (h.count, spz_stream_sizes(&h));
+    let rest = sh_coeffs_for_degree(h.sh_degree) - 1;
     let mut at = 16;
     let mut next = |len: usize| {
         let s = &raw[at..at + len];

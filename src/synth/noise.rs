@@ -329,7 +329,7 @@ fn choose_consistent(
         let options = room.confusions.for_class(inst.class_id as usize);
         let wrong_class = options[rng.below(options.len() as u64) as usize];
         let mut views = visible_views(id);
-        let wrong = (spec.consistent * views.len() as f64).round() as usize;
+        let wrong = wrong_view_count(spec.consistent, views.len());
         // Partial Fisher-Yates: the first `wrong` entries become a uniform random subset.
         for k in 0..wrong.min(views.len()) {
             let j = k + rng.below((views.len() - k) as u64) as usize;
@@ -358,6 +358,20 @@ fn choose_consistent(
         });
     }
     chosen
+}
+
+/// How many of an object's `views` `consistent=rate` mislabels: the nearest whole number,
+/// on the rate's side of half (0.6 of 4 views is 3, not a tie of 2: above half is the
+/// majority-wrong case; 0.4 of 2 is none, not a tie) and at least one where that stays
+/// below half (0.1 of 4 is 1: a rate above 0 mislabels).
+fn wrong_view_count(rate: f64, views: usize) -> usize {
+    let nearest = (rate * views as f64).round() as usize;
+    let (over_half, under_half) = (views / 2 + 1, views.div_ceil(2).saturating_sub(1));
+    match rate {
+        r if r > 0.5 => nearest.max(over_half).min(views),
+        r if r < 0.5 && r > 0.0 => nearest.clamp(1.min(under_half), under_half),
+        _ => nearest,
+    }
 }
 
 /// Smooth value noise in [-1, 1] on a lattice of `cell` pixels.
@@ -481,6 +495,30 @@ fn drop_blobs(labels: &mut [u16], width: u32, height: u32, m: f64, rng: &mut Rng
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The count keeps to the rate's side of half, and a rate above 0 mislabels a view where
+    /// one stays below half.
+    #[test]
+    fn wrong_view_counts_keep_the_rates_side_of_half() {
+        for (rate, views, wrong) in [
+            (0.6, 4, 3),
+            (0.51, 4, 3),
+            (0.6, 60, 36),
+            (0.6, 5, 3),
+            (1.0, 4, 4),
+            (0.5, 4, 2),
+            (0.5, 5, 3),
+            (0.4, 2, 0),
+            (0.4, 3, 1),
+            (0.1, 4, 1),
+            (0.1, 1, 0),
+            (0.3, 60, 18),
+            (0.0, 10, 0),
+            (0.9, 1, 1),
+        ] {
+            assert_eq!(wrong_view_count(rate, views), wrong, "{rate} of {views}");
+        }
+    }
 
     #[test]
     fn boundary_warp_only_changes_pixels_near_edges() {

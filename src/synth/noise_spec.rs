@@ -15,7 +15,8 @@ pub const NOISE_KEYS_HELP: &str = "  flicker=P             each (view, object) p
   boundary=K            object edges move by up to K pixels (a smooth random warp per view;
                         only pixels within K px of an edge change), whole number 0..=64
   consistent=Q          pick objects that are visible in many views and give each the same wrong
-                        (look-alike) class in a fraction Q of the views that see it; Q > 0.5 is the
+                        (look-alike) class in a fraction Q of the train views that see it (whole
+                        views, on Q's side of half: 0.6 of 4 views is 3); Q > 0.5 is the
                         majority-wrong case; recorded in labels_noisy/noise.json
   consistent_objects=N  how many objects `consistent` picks (default 1)
   salt=S                a fraction S of pixels gets a random different class

@@ -17,8 +17,9 @@ use serde::Serialize;
 use super::raycast::ViewTruth;
 use super::views::is_view_png;
 use super::{Progress, SynthScene};
+use crate::dataset::CLASS_TABLE_FILE;
 use crate::scene::cameras_json::write_semsplat_cameras;
-use crate::scene::classes::write_class_table;
+use crate::scene::classes::{default_color, write_class_table, ClassInfo, ClassTable};
 use crate::scene::labels::{write_label_png, write_palette_png, LabelMap};
 use crate::scene::ply::{write_classes_sidecar, write_ply};
 use crate::scene::scene_file::{CAMERAS_FILE, SCENE_FILE};
@@ -38,6 +39,7 @@ pub const OUTPUT_LAYOUT: &str = "  scene.ply              ground-truth Gaussians
   labels/NAME.png        true class ids (8-bit gray PNG, 255 = ignore: pixel sees nothing)
   instances/NAME.png     true instance ids (8-bit gray, 255 = ignore; a view showing an id
                          >= 255 is written 16-bit, 65535 = ignore: map by map)
+  instances/classes.json the instances as a class table (id, name, color), read with the maps
   labels_noisy/NAME.png  noisy class ids for every view, with --noise (evaluate on labels/)
   labels_noisy/noise.json  spec, seed, the consistently mislabeled objects and measured rates
   vis/labels*/NAME.png   palette-colored previews of the label maps (unless --no-previews)";
@@ -98,13 +100,27 @@ pub fn write_synth(dir: &Path, scene: &SynthScene) -> Result<()> {
 pub fn write_synth_with_progress(dir: &Path, scene: &SynthScene, progress: Progress) -> Result<()> {
     std::fs::create_dir_all(dir)
         .with_context(|| format!("creating output folder {}", dir.display()))?;
-    remove_previous_run(dir, scene)?;
+    let held_a_room = dir.join(CAMERAS_FILE).is_file();
+    let written = remove_previous_run(dir, scene).and_then(|()| write_run(dir, scene, progress));
+    written.map_err(|e| match held_a_room && !dir.join(CAMERAS_FILE).is_file() {
+        true => e.context(format!(
+            "{} no longer holds the earlier run's room: its cameras and views were removed \
+             before this run's were written (a folder never mixes two runs); run synth again \
+             once the cause is fixed",
+            dir.display()
+        )),
+        false => e,
+    })
+}
+
+/// This run's files, into a folder the earlier run's views were removed from.
+fn write_run(dir: &Path, scene: &SynthScene, progress: Progress) -> Result<()> {
     let room = &scene.room;
     write_json(&dir.join(ROOM_FILE), &room.spec)?;
     write_ply(&dir.join(SCENE_FILE), &scene.gaussians)?;
     write_classes_sidecar(&dir.join(SCENE_FILE), &room.classes)?;
     write_ply(&dir.join("init.ply"), &scene.init_points)?;
-    write_class_table(&dir.join(crate::dataset::CLASS_TABLE_FILE), &room.classes)?;
+    write_class_table(&dir.join(CLASS_TABLE_FILE), &room.classes)?;
     let instances: Vec<InstanceEntry> = room
         .instances
         .iter()
@@ -117,6 +133,21 @@ pub fn write_synth_with_progress(dir: &Path, scene: &SynthScene, progress: Progr
         })
         .collect();
     write_json(&dir.join("instances.json"), &instances)?;
+    // The instance maps' own table, inside their folder where `fuse`, `eval` and `inspect`
+    // look first (the class table beside the folder would name instance ids as classes).
+    let instance_table = ClassTable {
+        classes: (room.instances.iter())
+            .map(|i| ClassInfo {
+                id: i.id,
+                name: i.name.clone(),
+                color: default_color(i.id),
+            })
+            .collect(),
+    };
+    let instance_dir = dir.join("instances");
+    std::fs::create_dir_all(&instance_dir)
+        .with_context(|| format!("creating {}", instance_dir.display()))?;
+    write_class_table(&instance_dir.join(CLASS_TABLE_FILE), &instance_table)?;
     if let Some(noisy) = &scene.noisy {
         write_json(&dir.join("labels_noisy").join("noise.json"), &noisy.report)?;
     }
@@ -273,7 +304,7 @@ fn remove_previous_run(dir: &Path, scene: &SynthScene) -> Result<()> {
         stale.sort();
         for path in stale {
             std::fs::remove_file(&path)
-                .with_context(|| format!("removing stale {}", path.display()))?;
+                .with_context(|| format!("removing the earlier run's {}", path.display()))?;
         }
     }
     let noise_json = dir.join("labels_noisy").join("noise.json");

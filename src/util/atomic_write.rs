@@ -65,7 +65,7 @@ pub fn resolve_output_file(target: &Path) -> Result<PathBuf> {
     // (/proc/self/fd/1 -> "pipe:[...]") that read_link cannot follow.
     match fs::metadata(target) {
         Ok(meta) if meta.is_dir() => {
-            bail!("{} is a folder; name a file to write", target.display())
+            bail!("{} is a folder where this file is to be written: name another file, or move the folder away", target.display())
         }
         Ok(meta) if !meta.is_file() => bail!(
             "{} is not a regular file (a device, FIFO or socket); refusing to replace it: name \
@@ -95,7 +95,7 @@ pub fn resolve_output_file(target: &Path) -> Result<PathBuf> {
             return Ok(path);
         } else if kind.is_dir() {
             bail!(
-                "{} is a folder; name a file to write",
+                "{} is a folder where this file is to be written: name another file, or move the folder away",
                 describe(target, &path)
             );
         } else {

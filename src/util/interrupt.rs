@@ -24,7 +24,7 @@ static TEMP_FILES: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 
 /// The error a run stopped by a signal returns (main maps it to [`EXIT_CODE`]).
 #[derive(Debug, thiserror::Error)]
-#[error("interrupted (Ctrl-C or a termination signal): stopped before finishing; no partial file was left")]
+#[error("interrupted (Ctrl-C or a termination signal): stopped before finishing; no file was left half-written")]
 pub struct Interrupted;
 
 /// Whether `e` (or any error in its chain) is [`Interrupted`].
