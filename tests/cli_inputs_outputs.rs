@@ -494,6 +494,28 @@ fn render_and_inspect_say_what_would_mislead() {
         report.contains("every pixel is the ignore value"),
         "{report}"
     );
+
+    // A scene whose class table lacks a class its Gaussians carry (the floor, 0).
+    let odd = tmp.path().join("odd.ply");
+    std::fs::copy(room.join("scene.ply"), &odd).unwrap();
+    let mut table = common::cli::read_json(&room.join("scene.classes.json"));
+    let classes = table["classes"].as_array_mut().unwrap();
+    classes.retain(|c| c["id"] != 0);
+    std::fs::write(tmp.path().join("odd.classes.json"), table.to_string()).unwrap();
+    let said = ok_owned(&render_semantics(&odd, &["--views", "train_0000"]));
+    assert!(said.contains("does not list: 0;"), "{said}");
+
+    // Cameras whose values parse but are no capture's.
+    let mut cams = common::cli::read_json(Path::new(&cameras));
+    cams["cameras"][0]["cx"] = serde_json::json!(-1e9);
+    let odd_cameras = tmp.path().join("odd_cameras.json");
+    std::fs::write(&odd_cameras, cams.to_string()).unwrap();
+    let out = common::cli::semsplat(&["inspect", odd_cameras.to_str().unwrap()]);
+    let report = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        !out.status.success() && report.contains("principal point"),
+        "{report}"
+    );
 }
 
 /// Runs whose result would mean nothing are errors (a scene of no Gaussians, label maps

@@ -627,14 +627,6 @@ pub(super) fn check_output_args(
          name (--save-contrib writes the evidence as .npy; fuse --shard K/N writes a part)",
         args.out.display()
     );
-    if let (true, Some(ext)) = (out_is_ply && !named("ply"), args.out.extension()) {
-        bail!(
-            "--out {} is written as a PLY (the fused scene), not a .{} file: give it a .ply \
-             name",
-            args.out.display(),
-            ext.to_string_lossy()
-        );
-    }
     ensure!(
         out_is_ply || !named("ply"),
         "--out {} is a shard's part, a NumPy array of evidence, not a PLY: give it a .npy \
@@ -665,7 +657,17 @@ pub(super) fn check_output_args(
         &[&files[..], extra].concat(),
         &[("--render-views", args.render_views.as_deref())],
         inputs,
-    )
+    )?;
+    // After the inputs: an --out that is one is refused as that, whatever its name.
+    if let (true, Some(ext)) = (out_is_ply && !named("ply"), args.out.extension()) {
+        bail!(
+            "--out {} is written as a PLY (the fused scene), not a .{} file: give it a .ply \
+             name",
+            args.out.display(),
+            ext.to_string_lossy()
+        );
+    }
+    Ok(())
 }
 
 /// The method `--method` and its variant flags name.

@@ -673,6 +673,48 @@ fn summarize_cameras(r: &mut Report, cams: &[Camera]) {
     r.add("centers", json!({"x": axis(0), "y": axis(1), "z": axis(2)}));
     let first: Vec<&str> = cams.iter().take(3).map(|c| c.name.as_str()).collect();
     r.add("first_names", first);
+    r.problems.extend(camera_problems(cams));
+}
+
+/// Camera centers farther than this from the origin: no capture spans a thousand
+/// kilometers; a pose in another unit or a corrupt one.
+const FAR_CAMERA_M: f64 = 1e6;
+
+/// Cameras whose values parse but cannot be a capture's: a principal point more than an
+/// image's side outside the image (intrinsics of another resolution, or in another unit),
+/// a center farther than [`FAR_CAMERA_M`].
+fn camera_problems(cams: &[Camera]) -> Vec<String> {
+    let off = |c: f64, side: u32| c < -(side as f64) || c > 2.0 * side as f64;
+    let off_image: Vec<&Camera> = (cams.iter())
+        .filter(|c| off(c.cx, c.width) || off(c.cy, c.height))
+        .collect();
+    let far: Vec<&Camera> = (cams.iter())
+        .filter(|c| c.center().length() > FAR_CAMERA_M)
+        .collect();
+    let mut problems = Vec::new();
+    if let Some(c) = off_image.first() {
+        problems.push(format!(
+            "{} camera(s) have their principal point more than an image side outside the \
+             image (e.g. {}: cx {:.6e}, cy {:.6e} for {}x{}): intrinsics of another \
+             resolution, or in another unit?",
+            off_image.len(),
+            c.name,
+            c.cx,
+            c.cy,
+            c.width,
+            c.height
+        ));
+    }
+    if let Some(c) = far.first() {
+        problems.push(format!(
+            "{} camera(s) are farther than {FAR_CAMERA_M:e} m from the origin (e.g. {}, at \
+             {:.3e} m): poses in another unit, or corrupt?",
+            far.len(),
+            c.name,
+            c.center().length()
+        ));
+    }
+    problems
 }
 
 // ---------------------------------------------------------------------------------------

@@ -399,13 +399,33 @@ pub fn run(args: RenderArgs) -> Result<()> {
 }
 
 /// `--semantics`: the class table must fit the logits; without one, label images hold
-/// channel indices, which is said.
+/// channel indices, and class ids the table lacks are drawn in colours of their own, which
+/// is said.
 fn check_semantics_table(
     scene_file: &Path,
     g: &Gaussians,
     table: Option<&ClassTable>,
 ) -> Result<()> {
     check_table_fits_logits(scene_file, g, table)?;
+    if let (Some(table), None, Some(ids)) = (table, &g.semantics, &g.class_ids) {
+        let mut missing: Vec<i32> = (ids.iter())
+            .filter(|&&id| id >= 0 && !table.contains(id as u32))
+            .copied()
+            .collect();
+        missing.sort_unstable();
+        missing.dedup();
+        if !missing.is_empty() {
+            let shown: Vec<String> = missing.iter().take(8).map(i32::to_string).collect();
+            eprintln!(
+                "note: {} holds class ids its class table ({}) does not list: {}{}; their \
+                 pixels get colours of their own in the palette images",
+                scene_file.display(),
+                classes_sidecar_path(scene_file).display(),
+                shown.join(", "),
+                if missing.len() > 8 { ", ..." } else { "" }
+            );
+        }
+    }
     if table.is_none() && g.semantics.is_some() {
         // Without the table the channels have no ids: a trained scene's `class` may
         // hold others (4711), and its label images would silently disagree with them.

@@ -87,18 +87,20 @@ impl ClassTable {
     }
 
     /// Whether parsed JSON has a class table's shape: a list of objects with an `id`, or an
-    /// object whose `classes` is one (synth's `room.json` lists classes by name alone, a
-    /// report counts them: neither is a table).
+    /// object whose `classes` is one (perhaps empty: a table that lists no class, which
+    /// the reader refuses as such); synth's `room.json` lists classes by name alone, a
+    /// report counts them: neither is a table.
     pub fn json_has_shape(value: &serde_json::Value) -> bool {
-        let entries = match value {
-            serde_json::Value::Array(v) => v,
+        let with_ids =
+            |entries: &[serde_json::Value]| entries.iter().all(|e| e.get("id").is_some());
+        match value {
+            serde_json::Value::Array(v) => !v.is_empty() && with_ids(v),
             serde_json::Value::Object(o) => match o.get("classes") {
-                Some(serde_json::Value::Array(v)) => v,
-                _ => return false,
+                Some(serde_json::Value::Array(v)) => with_ids(v),
+                _ => false,
             },
-            _ => return false,
-        };
-        !entries.is_empty() && entries.iter().all(|e| e.get("id").is_some())
+            _ => false,
+        }
     }
 
     /// Parses a class table from JSON: a list of `{id, name, color}` or `{"classes": [...]}`.

@@ -149,6 +149,16 @@ impl ShapeSpec {
         }
     }
 
+    /// Where the primitive is centered.
+    fn center(&self) -> DVec3 {
+        match *self {
+            ShapeSpec::Box { center, .. }
+            | ShapeSpec::Cylinder { center, .. }
+            | ShapeSpec::Sphere { center, .. }
+            | ShapeSpec::Quad { center, .. } => DVec3::from_array(center),
+        }
+    }
+
     /// The validated primitive.
     pub fn to_shape(&self) -> Result<Shape> {
         let vec = |name: &str, a: [f64; 3]| -> Result<DVec3> {
@@ -271,6 +281,17 @@ impl RoomSpec {
                 part.shape
                     .to_shape()
                     .with_context(|| format!("{}: part {j}", what()))?;
+                // The cameras stand inside the room: a part centered outside it is seen by
+                // none (or through a wall) and its class would be listed but never shown.
+                let center = part.shape.center();
+                let slack = DVec3::splat(ROOM_SLACK_M);
+                ensure!(
+                    center.cmpge(-slack).all() && center.cmple(size + slack).all(),
+                    "{}: part {j} is centered at {:?}, outside the room (0..{:?} m on x, y, z)",
+                    what(),
+                    center.to_array(),
+                    self.size
+                );
                 validate_material(&part.material)
                     .with_context(|| format!("{}: part {j}", what()))?;
             }
@@ -288,6 +309,10 @@ impl RoomSpec {
         Ok(())
     }
 }
+
+/// How far outside the room's box a part's center may lie (a frame or sill set into a
+/// wall).
+const ROOM_SLACK_M: f64 = 0.1;
 
 /// Instance names of the shell, in instance-id order.
 pub const STRUCTURE_NAMES: [&str; 6] = [
@@ -342,6 +367,12 @@ mod tests {
         })];
         assert!(spec.validate().is_err());
         spec.objects[0].parts = vec![part(ShapeSpec::sphere(DVec3::ONE, 0.2))];
+        spec.validate().unwrap();
+        // Centered outside the room (a sill set 5 cm into a wall is in).
+        for (center, inside) in [([100.0, 1.0, 1.0], false), ([1.0, -0.05, 1.0], true)] {
+            spec.objects[0].parts = vec![part(ShapeSpec::sphere(DVec3::from_array(center), 0.2))];
+            assert_eq!(spec.validate().is_ok(), inside, "{center:?}");
+        }
         spec.objects[0].name = "floor".into();
         assert!(spec.validate().is_err());
         spec.size = [0.0, 3.0, 2.0];
