@@ -919,7 +919,8 @@ fn a_render_folder_keeps_off_the_files_no_render_wrote() {
 }
 
 /// Views without a label map cost a fusion nothing: its views a second are those with one
-/// over its time; `eval` names only the cameras of --views it cannot score.
+/// over its time, and a held-out camera without one is not said to be fused; a map named
+/// for no camera is named; `eval` names only the cameras of --views it cannot score.
 #[test]
 fn unlabeled_views_count_in_neither_the_rate_nor_evals_note() {
     let (tmp, room) = tiny_room();
@@ -928,16 +929,20 @@ fn unlabeled_views_count_in_neither_the_rate_nor_evals_note() {
     for name in ["train_0000.png", "train_0002.png"] {
         std::fs::copy(room.join("labels").join(name), labels.join(name)).unwrap();
     }
+    let misnamed = labels.join("train_0001_label.png");
+    std::fs::copy(room.join("labels").join("train_0001.png"), &misnamed).unwrap();
     let (out, report) = (arg_in(tmp.path(), "f.ply"), arg_in(tmp.path(), "f.json"));
     let (scene, cameras) = (arg_in(&room, "scene.ply"), arg_in(&room, "cameras.json"));
     let inputs = ["fuse", "--scene", &scene, "--cameras", &cameras];
     let outputs = ["--out", &out, "--report", &report];
-    ok(&[
-        &inputs[..],
-        &["--labels", labels.to_str().unwrap()],
-        &outputs,
-    ]
-    .concat());
+    let labels_arg = ["--labels", labels.to_str().unwrap()];
+    let said = ok(&[&inputs[..], &labels_arg, &outputs].concat());
+    assert!(!said.contains("marked \"test\""), "{said}");
+    assert!(
+        said.contains("1 label map(s)") && said.contains("train_0001_label"),
+        "{said}"
+    );
+    std::fs::remove_file(&misnamed).unwrap();
     let stats = &common::cli::read_json(Path::new(&report))["stats"];
     let number = |key: &str| stats[key].as_f64().unwrap();
     let labeled = number("views_with_labels");

@@ -95,6 +95,11 @@ fn sweep_over_seeds_reports_spread_oracle_and_named_classes() {
         let methods = level["methods"].as_array().unwrap();
         assert_eq!(methods.len(), 2, "vote and the oracle");
         assert_eq!(methods[1]["method"], ORACLE_NAME);
+        // Each under the name --methods takes too.
+        assert_eq!(
+            (&methods[0]["key"], &methods[1]["key"]),
+            (&"vote".into(), &"oracle".into())
+        );
         for (k, m) in methods.iter().enumerate() {
             for metric in ["miou", "gaussian_accuracy"] {
                 let per_run: Vec<f64> = runs

@@ -217,7 +217,8 @@ pub struct OutputArgs {
     /// segment's, its own views', or its neighbours' classes where no view observed it),
     /// `--relabel` FlashSplat's weights over the relabeled views where those decided the
     /// Gaussian, else the consensus votes: a column's values are of one kind, not every
-    /// column of the same.
+    /// column of the same; where a segment's votes are a near tie the scene's class
+    /// confusions decide it, which may be the column's second class.
     #[arg(long)]
     pub save_contrib: Option<PathBuf>,
     /// Keep only the Gaussians of this class (name, any case, or id) in --out, by FlashSplat's
@@ -840,7 +841,12 @@ fn memory_line(gaussians: u32, gpu: &Gpu) -> String {
 /// The cameras, label maps and class table of --cameras, --labels and --classes.
 fn open_labeled_views(args: &FuseArgs) -> Result<Dataset> {
     let (Some(cameras), Some(labels)) = (&args.cameras, &args.labels) else {
-        bail!("--cameras and --labels are needed (or --contrib to reassign from a saved matrix)");
+        let missing = match (&args.cameras, &args.labels) {
+            (None, None) => "--cameras and --labels are",
+            (None, Some(_)) => "--cameras is",
+            _ => "--labels is",
+        };
+        bail!("{missing} needed (or --contrib to reassign from a saved matrix)");
     };
     let paths = DatasetPaths {
         cameras,
@@ -850,8 +856,9 @@ fn open_labeled_views(args: &FuseArgs) -> Result<Dataset> {
         format: args.label_format.format(),
     };
     let data = open_dataset(&paths, "are skipped")?;
-    let held_out = (data.cameras.iter())
-        .filter(|c| c.split == Split::Test)
+    // Those with a label map: the others are skipped, not fused.
+    let held_out = (data.cameras.iter().enumerate())
+        .filter(|&(view, c)| c.split == Split::Test && data.has_label_map(view))
         .count();
     if held_out > 0 {
         // Scored by `eval`'s default views, they would score what was fused from them.

@@ -64,7 +64,7 @@ impl NoiseKind {
             ensure!(
                 level >= 0.0 && level.fract() == 0.0,
                 "--levels '{level}' for --noise boundary: a boundary warp is a whole number of \
-                 pixels (0, 2, 4, ...)"
+                 pixels (0, 1, 2, 4, ...)"
             );
             format!("boundary={}", level as u32)
         } else {
@@ -159,6 +159,8 @@ impl SweepArgs {
 #[derive(Serialize)]
 struct MethodLevel {
     method: String,
+    /// The name `--methods` takes ("oracle" for the oracle).
+    key: &'static str,
     /// Held-out views.
     miou: f64,
     gaussian_accuracy: f64,
@@ -207,6 +209,8 @@ impl Spread {
 #[derive(Serialize)]
 struct MethodSpread {
     method: String,
+    /// The name `--methods` takes ("oracle" for the oracle).
+    key: &'static str,
     miou: Spread,
     gaussian_accuracy: Spread,
 }
@@ -434,6 +438,7 @@ fn run_level(
     }
     let figures = |r: &semsplat::experiment::MethodScore| MethodLevel {
         method: r.method.to_string(),
+        key: r.key,
         miou: r.miou,
         gaussian_accuracy: r.gaussian_accuracy,
         per_class: r.per_class.clone(),
@@ -464,6 +469,7 @@ fn summarize(runs: &[RunResult]) -> Vec<LevelSummary> {
             let methods = (0..=first[l].methods.len())
                 .map(|k| MethodSpread {
                     method: at(k).next().map(|m| m.method.clone()).unwrap_or_default(),
+                    key: at(k).next().map_or("", |m| m.key),
                     miou: Spread::of(at(k).map(|m| m.miou)),
                     gaussian_accuracy: Spread::of(at(k).map(|m| m.gaussian_accuracy)),
                 })
@@ -606,6 +612,7 @@ mod tests {
         };
         let methods = mious.iter().enumerate().map(|(k, &v)| MethodSpread {
             method: format!("m{k}"),
+            key: "",
             miou: spread(v),
             gaussian_accuracy: spread(v),
         });

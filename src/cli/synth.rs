@@ -32,7 +32,8 @@ static AFTER_HELP: LazyLock<String> = LazyLock::new(|| {
          \"material\": {{\"color\": [200, 80, 40], \"pattern\": \"wood\", \"scale\": 0.1}}}}]}}]}}\n             \
          shapes: box {{center, size, yaw_deg}}, cylinder {{center, radius, height, axis}},\n             \
          sphere {{center, radius}}, quad {{center, half_u, half_v}}; patterns: plain, noise,\n             \
-         checker, stripes, wood. World: z up, floor at z = 0, room spans [0, size] meters.\n\n\
+         checker, stripes, wood. World: z up, floor at z = 0, room spans [0, size] meters\n             \
+         (each part centered inside it). DIR  a synth output folder: its room.json.\n\n\
          Ground truth: RGB, class and instance maps are exact ray casts of the analytic primitives\n\
          (one ray per pixel center, Lambertian shading with a fixed light, so SH degree 0 suffices).\n\
          Cameras: --views train and --test-views held-out views at 0.8-1.8 m, looking at objects.\n\n\

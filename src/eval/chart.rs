@@ -40,6 +40,27 @@ fn plot_err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
 
 type Canvas<'a> = DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>;
 
+/// A chart's caption size, where it fits.
+const CAPTION_SIZE: f64 = 28.0;
+
+/// The font size up to `largest` at which `text` spans at most `width` pixels on `area` (a
+/// long title, a panel's method name): smaller, not cut at the edges.
+pub(crate) fn fitting_size<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    text: &str,
+    largest: f64,
+    width: u32,
+) -> f64 {
+    let mut size = largest;
+    while size > 8.0 {
+        match area.estimate_text_size(text, &("sans-serif", size).into_text_style(area)) {
+            Ok((w, _)) if w > width => size -= 1.0,
+            _ => break,
+        }
+    }
+    size
+}
+
 /// Draws on a white CHART_SIZE canvas and saves it as PNG.
 fn draw_png(path: &Path, draw: impl FnOnce(&Canvas) -> Result<()>) -> Result<()> {
     register_fonts();
@@ -84,7 +105,13 @@ pub fn speed_vs_accuracy(
         // Room on the right for the slowest point's label (drawn rightwards from it).
         let (x0, x1) = (tmin / 2.0, tmax * 6.0);
         let mut chart = ChartBuilder::on(root)
-            .caption(title, ("sans-serif", 28))
+            .caption(
+                title,
+                (
+                    "sans-serif",
+                    fitting_size(root, title, CAPTION_SIZE, root.dim_in_pixel().0 - 40),
+                ),
+            )
             .margin(20)
             .x_label_area_size(55)
             .y_label_area_size(70)
@@ -211,7 +238,13 @@ pub fn lines(
         let xmax = all().map(|p| p.0).fold(f64::NEG_INFINITY, f64::max);
         let pad = ((xmax - xmin) * 0.05).max(1e-3);
         let mut chart = ChartBuilder::on(root)
-            .caption(title, ("sans-serif", 28))
+            .caption(
+                title,
+                (
+                    "sans-serif",
+                    fitting_size(root, title, CAPTION_SIZE, root.dim_in_pixel().0 - 40),
+                ),
+            )
             .margin(20)
             .x_label_area_size(55)
             .y_label_area_size(70)

@@ -34,9 +34,10 @@ pub fn write_strip(path: &Path, w: u32, h: u32, panels: &[(&str, Vec<u8>)]) -> R
         let root = BitMapBackend::with_buffer(&mut buf, (total_w, total_h)).into_drawing_area();
         for (k, (title, _)) in panels.iter().enumerate() {
             let x0 = (GAP + k as u32 * (w + GAP)) as i32;
+            let size = super::chart::fitting_size(&root, title, 20.0, w);
             root.draw_text(
                 title,
-                &("sans-serif", 20).into_font().color(&BLACK),
+                &("sans-serif", size).into_font().color(&BLACK),
                 (x0, 7),
             )
             .map_err(|e| anyhow!("drawing strip: {e:?}"))?;

@@ -66,6 +66,7 @@ pub fn score_instance_oracle(gpu: &Gpu, s: &SynthScene) -> Result<MethodScore> {
     let truth = s.gaussians.class_ids.clone().unwrap_or_default();
     Ok(MethodScore {
         method: ORACLE_NAME,
+        key: "oracle",
         seconds: 0.0,
         miou: seg.miou,
         pixel_accuracy: seg.pixel_accuracy,

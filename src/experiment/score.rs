@@ -29,7 +29,10 @@ use crate::train::views::TrainView;
 
 #[derive(Clone, Debug, Serialize)]
 pub struct MethodScore {
+    /// The name in tables and charts ("vote --occlusion").
     pub method: &'static str,
+    /// The name `--methods` takes ("vote-occlusion"; the oracle: "oracle").
+    pub key: &'static str,
     /// Wall time of lifting (upload, all views, assignment).
     pub seconds: f64,
     /// 2D, on the held-out views: mean IoU over the classes present there.
@@ -188,6 +191,7 @@ pub fn score_methods(
         };
         out.push(MethodScore {
             method: lifter.name(),
+            key: lifter.key(),
             seconds,
             miou: seg.miou,
             pixel_accuracy: seg.pixel_accuracy,

@@ -333,7 +333,13 @@ pub fn decide_near_ties(
         let at_best: Vec<usize> = (0..tied.len()).filter(|&i| likelihood[i] == best).collect();
         s.near_tie = true;
         if let [only] = at_best[..] {
-            s.class = Some(tied[only]);
+            // Against the votes only toward a class some clear segment showed: a class
+            // the views gave no clear segment has a row of prior alone, no evidence to
+            // outweigh the votes with.
+            let against_votes = s.class.is_some_and(|c| c != tied[only]);
+            if !against_votes || confusions.totals[tied[only]] > 0.0 {
+                s.class = Some(tied[only]);
+            }
         }
     }
     confusions.rates(p.confusion_prior_views)
@@ -446,6 +452,35 @@ mod tests {
         let expected = 2.0 * p_aa.ln() + 3.0 * p_ab.ln() + 0.5 * p_ac.ln();
         let got = c.log_likelihood(0, &[(0, 2.0), (1, 3.0), (2, 0.5)], 10.0);
         assert!((got - expected).abs() < 1e-12, "{got} against {expected}");
+    }
+
+    /// A wall (0) voted 5 : 4 against the ceiling (1), a class no clear segment shows (the
+    /// room has none; its views call walls ceiling now and then): the walls' mistakes
+    /// spread over three classes and the ceiling's row, prior alone, puts all of its on
+    /// the wall, so the likelihood favours the ceiling; the votes stand. Toward a class a
+    /// clear segment shows, the same near tie goes by the likelihood.
+    #[test]
+    fn a_near_tie_goes_against_the_votes_only_toward_a_class_seen_clearly() {
+        let p = ConsensusParams::default();
+        let mut s = vec![segment(&[5.0, 4.0, 0.0, 0.0], Some(0))];
+        for _ in 0..3 {
+            s.push(segment(&[6.0, 1.0, 1.5, 1.5], Some(0)));
+            s.push(segment(&[1.0, 0.0, 9.0, 0.0], Some(2)));
+            s.push(segment(&[1.0, 0.0, 0.0, 9.0], Some(3)));
+        }
+        let c = Confusions::estimate(&s, 4, &p);
+        let likelihood = |k| c.log_likelihood(k, &s[0].split, p.confusion_prior_views);
+        assert!(
+            likelihood(1) > likelihood(0),
+            "the prior favours the ceiling"
+        );
+        decide_near_ties(&mut s, 4, &p);
+        assert_eq!(s[0].class, Some(0));
+        assert!(s[0].near_tie);
+        // A ceiling segment seen clearly: the row is evidence, and the tie goes by it.
+        let mut s = scene(&[5.0, 5.0, 0.0], Some(1));
+        decide_near_ties(&mut s, 3, &p);
+        assert_eq!(s[0].class, Some(0), "b's votes lose to a's confusions");
     }
 
     /// A 5 : 5 split between a and b, no vote for c: a (taken for b in 30% of views) is

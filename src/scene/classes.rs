@@ -149,13 +149,16 @@ impl ClassTable {
         let by_id = key.trim().parse::<u32>().ok().and_then(|id| self.get(id));
         if let Some(c) = self.by_name(key) {
             if let Some(other) = by_id.filter(|o| o.id != c.id) {
+                // Its name picks the other class, unless that name is a number too.
+                let remedy = match other.name.trim().parse::<u32>() {
+                    Err(_) => format!("give '{}' for class {}, or rename", other.name, other.id),
+                    Ok(_) => "rename".to_owned(),
+                };
                 bail!(
-                    "class '{key}' is the name of class {} and the id of class '{}': give \
-                     '{}' for class {}, or rename class {}",
+                    "class '{key}' is the name of class {} and the id of class '{}': {remedy} \
+                     class {} (the class table's names that are numbers shadow ids)",
                     c.id,
                     other.name,
-                    other.name,
-                    other.id,
                     c.id
                 );
             }
@@ -310,7 +313,16 @@ mod tests {
             err.contains("name of class 3") && err.contains("id of class 'vase'"),
             "{err}"
         );
+        assert!(err.contains("give 'vase' for class 1000"), "{err}");
         assert_eq!(t.find("vase").unwrap().id, 1000);
+        // Names that are ids both ways: renaming is the way out, not the other number.
+        let t = table(&[(1, "4"), (4, "1")]);
+        let err = t.find("4").unwrap_err().to_string();
+        assert!(
+            err.contains(": rename class 1") && !err.contains("give"),
+            "{err}"
+        );
+        assert!(t.find("vase").is_err());
         assert!(t.find("sofa").is_err());
     }
 }

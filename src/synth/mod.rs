@@ -66,6 +66,11 @@ impl RoomSource {
         if path.is_file() {
             return Ok(RoomSource::File(path));
         }
+        // A synth output folder: its room.
+        let room_file = path.join(writer::ROOM_FILE);
+        if path.is_dir() && room_file.is_file() {
+            return Ok(RoomSource::File(room_file));
+        }
         if arg.ends_with(".json") {
             bail!("room file '{arg}' does not exist");
         }

@@ -242,7 +242,16 @@ impl RoomSpec {
     pub fn load(path: &Path) -> Result<Self> {
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("reading room file {}", path.display()))?;
-        serde_json::from_str(&text).with_context(|| format!("parsing room file {}", path.display()))
+        let value: serde_json::Value = serde_json::from_str(&text)
+            .with_context(|| format!("parsing room file {}", path.display()))?;
+        ensure!(
+            value.is_object(),
+            "room file {} is not a room: a room is a JSON object with \"size\" and \
+             \"objects\" (as the room.json of any synth output)",
+            path.display()
+        );
+        serde_json::from_value(value)
+            .with_context(|| format!("parsing room file {}", path.display()))
     }
 
     pub fn size(&self) -> DVec3 {

@@ -278,12 +278,27 @@ impl LabelDir {
             .with_context(|| format!("label folder {}", dir.display()))?;
         let mut entries = Vec::with_capacity(cameras.len());
         let mut skipped = Vec::new();
-        for (i, (cam, key)) in cameras.iter().zip(matched).enumerate() {
+        for (i, (cam, key)) in cameras.iter().zip(&matched).enumerate() {
             match key {
-                Some(key) => entries.push(entry_for(i, cam, &files[key])),
+                Some(key) => entries.push(entry_for(i, cam, &files[*key])),
                 None => skipped.push(cam.name.clone()),
             }
         }
+        // Cameras without a map beside maps without a camera: likely a naming mistake.
+        let unread: Vec<String> = (files.keys())
+            .filter(|key| !matched.contains(&Some(key.as_str())))
+            .cloned()
+            .collect();
+        let unread_note = (!skipped.is_empty() && !unread.is_empty()).then(|| {
+            format!(
+                "note: {} label map(s) in {} match no camera and are not read: {} (a camera's \
+                 map is <image name>.png, e.g. {})",
+                unread.len(),
+                dir.display(),
+                list_some(&unread),
+                expected_names(&skipped)
+            )
+        });
         if (missing == MissingLabels::Error && !skipped.is_empty()) || entries.is_empty() {
             bail!(
                 "label folder {} has no label map for {} of {} cameras: {} (expected <image name>.png, \
@@ -303,6 +318,7 @@ impl LabelDir {
             .filter(|_| entries.iter().any(|e| holds_8_bit_ids(&e.path)));
         let notes = (scaled_note(&entries, cameras).into_iter())
             .chain(ignored)
+            .chain(unread_note)
             .collect();
         Ok(LabelDir {
             dir: dir.to_owned(),
