@@ -344,15 +344,15 @@ pub fn decide_near_ties(
 
 /// Of a large segment's near-tie margin, the share within which a class no clear segment
 /// showed may take the segment against its votes.
-const PRIOR_ONLY_MARGIN_SHARE: f64 = 0.5;
+const PRIOR_ONLY_MARGIN_SHARE: f64 = 2.0 / 3.0;
 
 /// Whether a near tie may go to `k` against the segment's votes where `k`'s confusions are
 /// prior alone (no clear segment showed it): where `k` is within one view's vote of the
-/// votes' class, or within half a large segment's margin (half a standard deviation of a
-/// coin flip's difference). A prior is enough to decide what is nearly a coin flip (desks
-/// voted desk 13 : cabinet 15, the desks' one segment the near tie), not a lean of a whole
-/// standard deviation (a wall of a room without a ceiling, voted wall 6 : ceiling 3, had
-/// gone to the ceiling).
+/// votes' class, or within two thirds of a large segment's margin (of a standard deviation
+/// of a coin flip's difference). A prior is enough to decide what is nearly a coin flip
+/// (desks voted desk 13 : cabinet 15, 0.38 of one, the desks' one segment the near tie;
+/// 5 : 7, 0.58), not a lean of a whole standard deviation (a wall of a room without a
+/// ceiling, voted wall 6 : ceiling 3, had gone to the ceiling; 5 : 3, 0.71).
 fn prior_may_decide(s: &SegmentVotes, k: usize, p: &ConsensusParams) -> bool {
     let Some(voted) = s.class.filter(|&c| c != k) else {
         return true; // not against the votes

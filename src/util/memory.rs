@@ -76,9 +76,11 @@ mod tests {
     #[test]
     fn peak_grows_with_a_touched_allocation() {
         let before = super::peak_host_bytes().unwrap();
-        let block = vec![1u8; 64 << 20];
+        // Twice what the peak must grow by: the peak so far may stand above the memory in
+        // use now (another test's freed buffers), by less than the test process ever holds.
+        let block = vec![1u8; 128 << 20];
         let after = super::peak_host_bytes().unwrap();
         assert!(block.iter().all(|&b| b == 1));
-        assert!(after >= before + (60 << 20), "{before} -> {after}");
+        assert!(after >= before + (64 << 20), "{before} -> {after}");
     }
 }
