@@ -14,7 +14,7 @@ use semsplat::gpu::Gpu;
 use semsplat::render::{GpuScene, Rasterizer, RenderOptions, RenderedFrame, SemanticMode};
 use semsplat::scene::cameras::load_cameras;
 use semsplat::scene::classes::ClassTable;
-use semsplat::scene::labels::{write_label_png, write_palette_png, LabelMap};
+use semsplat::scene::labels::{list_some, write_label_png, write_palette_png, LabelMap};
 use semsplat::scene::ply::{classes_sidecar_path, read_classes_sidecar};
 use semsplat::scene::scene_file::{cameras_for_scene, read_scene, resolve_scene_path};
 use semsplat::scene::{Camera, Gaussians};
@@ -204,7 +204,7 @@ fn view_suffixes(args: &RenderArgs) -> Vec<&'static str> {
 
 /// The files renders wrote into a folder, as its [`RENDER_MARKER`] lists them.
 pub(super) struct RenderedFiles {
-    marker: PathBuf,
+    folder: PathBuf,
     listed: HashSet<String>,
 }
 
@@ -217,7 +217,12 @@ impl RenderedFiles {
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => HashSet::new(),
             Err(e) => return Err(e).with_context(|| format!("reading {}", marker.display())),
         };
-        Ok(RenderedFiles { marker, listed })
+        let folder = out.to_owned();
+        Ok(RenderedFiles { folder, listed })
+    }
+
+    fn marker(&self) -> PathBuf {
+        self.folder.join(RENDER_MARKER)
     }
 
     /// Refuses to replace files in the folder (of `option`) that no earlier render wrote,
@@ -233,7 +238,7 @@ impl RenderedFiles {
         if force == Some(true) {
             return Ok(());
         }
-        let out = self.marker.parent().expect("the marker is in its folder");
+        let out = &self.folder;
         let targets =
             (cams.iter()).flat_map(|cam| suffixes.iter().map(move |s| format!("{}{s}", cam.name)));
         let existing: Vec<String> = targets
@@ -255,12 +260,12 @@ impl RenderedFiles {
     /// Creates the folder and its list, before the first view is written (a list there is
     /// kept).
     pub(super) fn start(&self) -> Result<()> {
-        let out = self.marker.parent().expect("the marker is in its folder");
+        let (out, marker) = (&self.folder, self.marker());
         std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-        if !self.marker.exists() {
+        if !marker.exists() {
             let header = format!("{RENDER_MARKER_HEADER}\n");
-            std::fs::write(&self.marker, header)
-                .with_context(|| format!("writing {}", self.marker.display()))?;
+            std::fs::write(&marker, header)
+                .with_context(|| format!("writing {}", marker.display()))?;
         }
         Ok(())
     }
@@ -276,12 +281,13 @@ impl RenderedFiles {
         }
         let mut lines = new.join("\n");
         lines.push('\n');
+        let marker = self.marker();
         let mut file = std::fs::OpenOptions::new()
             .append(true)
-            .open(&self.marker)
-            .with_context(|| format!("opening {}", self.marker.display()))?;
+            .open(&marker)
+            .with_context(|| format!("opening {}", marker.display()))?;
         std::io::Write::write_all(&mut file, lines.as_bytes())
-            .with_context(|| format!("writing {}", self.marker.display()))?;
+            .with_context(|| format!("writing {}", marker.display()))?;
         self.listed.extend(new);
         Ok(())
     }
@@ -415,14 +421,13 @@ fn check_semantics_table(
         missing.sort_unstable();
         missing.dedup();
         if !missing.is_empty() {
-            let shown: Vec<String> = missing.iter().take(8).map(i32::to_string).collect();
+            let missing: Vec<String> = missing.iter().map(i32::to_string).collect();
             eprintln!(
-                "note: {} holds class ids its class table ({}) does not list: {}{}; their \
+                "note: {} holds class ids its class table ({}) does not list: {}; their \
                  pixels get colours of their own in the palette images",
                 scene_file.display(),
                 classes_sidecar_path(scene_file).display(),
-                shown.join(", "),
-                if missing.len() > 8 { ", ..." } else { "" }
+                list_some(&missing)
             );
         }
     }

@@ -43,6 +43,9 @@ type Canvas<'a> = DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>;
 /// A chart's caption size, where it fits.
 const CAPTION_SIZE: f64 = 28.0;
 
+/// Pixels around a chart, the caption's included.
+const CHART_MARGIN: u32 = 20;
+
 /// The font size up to `largest` at which `text` spans at most `width` pixels on `area` (a
 /// long title, a panel's method name): smaller, not cut at the edges.
 pub(crate) fn fitting_size<DB: DrawingBackend>(
@@ -59,6 +62,13 @@ pub(crate) fn fitting_size<DB: DrawingBackend>(
         }
     }
     size
+}
+
+/// A caption's font: [`CAPTION_SIZE`], or smaller where the title would not fit between
+/// the margins.
+fn caption_font(root: &Canvas, title: &str) -> (&'static str, f64) {
+    let width = root.dim_in_pixel().0 - 2 * CHART_MARGIN;
+    ("sans-serif", fitting_size(root, title, CAPTION_SIZE, width))
 }
 
 /// Draws on a white CHART_SIZE canvas and saves it as PNG.
@@ -105,14 +115,8 @@ pub fn speed_vs_accuracy(
         // Room on the right for the slowest point's label (drawn rightwards from it).
         let (x0, x1) = (tmin / 2.0, tmax * 6.0);
         let mut chart = ChartBuilder::on(root)
-            .caption(
-                title,
-                (
-                    "sans-serif",
-                    fitting_size(root, title, CAPTION_SIZE, root.dim_in_pixel().0 - 40),
-                ),
-            )
-            .margin(20)
+            .caption(title, caption_font(root, title))
+            .margin(CHART_MARGIN)
             .x_label_area_size(55)
             .y_label_area_size(70)
             .build_cartesian_2d((x0..x1).log_scale(), 0.0f64..1.0f64)
@@ -238,14 +242,8 @@ pub fn lines(
         let xmax = all().map(|p| p.0).fold(f64::NEG_INFINITY, f64::max);
         let pad = ((xmax - xmin) * 0.05).max(1e-3);
         let mut chart = ChartBuilder::on(root)
-            .caption(
-                title,
-                (
-                    "sans-serif",
-                    fitting_size(root, title, CAPTION_SIZE, root.dim_in_pixel().0 - 40),
-                ),
-            )
-            .margin(20)
+            .caption(title, caption_font(root, title))
+            .margin(CHART_MARGIN)
             .x_label_area_size(55)
             .y_label_area_size(70)
             .build_cartesian_2d((xmin - pad)..(xmax + pad), 0.0f64..1.0f64)

@@ -868,7 +868,6 @@ fn fill_unobserved(
     // decide next round (only they can change; a scene seen by few views has most
     // Gaussians pending and needs many rounds). Only the pending ones' lists are read: a
     // scene seen well has few.
-    let unobserved = frontier.clone();
     let listed_by = reverse_neighbours(knn, k, obs.n, &frontier);
     while !frontier.is_empty() {
         // Decided from the classes as they stood at the round's start.
@@ -895,7 +894,9 @@ fn fill_unobserved(
         frontier.dedup();
         frontier.retain(|&f| pending[f]);
     }
-    unobserved.iter().filter(|&&g| class[g].is_some()).count()
+    (0..obs.n)
+        .filter(|&g| obs.row(g).is_empty() && class[g].is_some())
+        .count()
 }
 
 /// [`ConsensusParams::smooth_rounds`]: each round decides every observed Gaussian of a

@@ -20,8 +20,8 @@ use super::classes::{ClassTable, IGNORE_U16, IGNORE_U8};
 use crate::util::write_atomic;
 
 pub use decode::{
-    read_label_png_as, read_png_header, LabelFormat, PngHeader, JPEG_LABELS, MAX_DECODE_BYTES,
-    MAX_LABEL_PIXELS, PNG_SIGNATURE,
+    read_label_png_as, read_png_header, LabelFormat, PngHeader, JPEG_LABELS, JPEG_MAGIC,
+    MAX_DECODE_BYTES, MAX_LABEL_PIXELS, PNG_SIGNATURE,
 };
 pub use folder::{
     binary_mask_warning, ignored_class_note, jpeg_note, label_size_fit, list_label_pngs, list_some,

@@ -20,6 +20,7 @@ use anyhow::{anyhow, bail, Context, Result};
 
 use super::classes::{read_class_table, write_class_table, ClassTable};
 use super::gaussians::{sh_coeffs_for_degree, Gaussians, SemanticLogits};
+use super::labels::{JPEG_MAGIC, PNG_SIGNATURE};
 use crate::util::write_atomic;
 
 /// A header longer than this is not a 3DGS PLY (and must not be read into memory whole).
@@ -172,11 +173,12 @@ fn parse_header(r: &mut impl BufRead) -> Result<Header> {
     };
     let magic = match lines.next_line() {
         Ok(magic) => magic,
-        Err(e) => match lines.line.as_slice() {
-            [0x89, b'P', b'N', b'G', ..] => bail!("not a PLY file: a PNG image"),
-            [0xff, 0xd8, 0xff, ..] => bail!("not a PLY file: a JPEG image"),
-            _ => return Err(e),
-        },
+        // The first line of an image: the PNG signature up to its line feed.
+        Err(_) if lines.line.starts_with(&PNG_SIGNATURE[..6]) => {
+            bail!("not a PLY file: a PNG image")
+        }
+        Err(_) if lines.line.starts_with(&JPEG_MAGIC) => bail!("not a PLY file: a JPEG image"),
+        Err(e) => return Err(e),
     };
     if magic.trim() != "ply" {
         bail!("not a PLY file (first line is not 'ply')");

@@ -136,6 +136,9 @@ impl PngHeader {
 /// The eight bytes every PNG file starts with.
 pub const PNG_SIGNATURE: [u8; 8] = *b"\x89PNG\r\n\x1a\n";
 
+/// The three bytes every JPEG file starts with (start of image, then a marker).
+pub const JPEG_MAGIC: [u8; 3] = [0xff, 0xd8, 0xff];
+
 /// Why label maps must be PNG, and what to do, said wherever JPEG label maps are found.
 pub const JPEG_LABELS: &str = "label maps must be PNG: JPEG's lossy compression turns the ids \
                                along every region's edge into other ids; save the segmenter's \
@@ -147,7 +150,7 @@ pub fn read_png_header(path: &Path) -> Result<PngHeader> {
     let mut file = File::open(path).context("cannot open")?;
     file.read_exact(&mut head)
         .map_err(|_| anyhow!("not a PNG file (too short)"))?;
-    if head.starts_with(&[0xff, 0xd8, 0xff]) {
+    if head.starts_with(&JPEG_MAGIC) {
         bail!("a JPEG file named .png; {JPEG_LABELS}");
     }
     if head[..8] != PNG_SIGNATURE || &head[12..16] != b"IHDR" {

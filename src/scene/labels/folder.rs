@@ -3,7 +3,7 @@
 //! when it is unique; label maps at another resolution than their cameras (images_2/4/8,
 //! INRIA `-r`) scale the intrinsics when the aspect ratio matches.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Context, Result};
@@ -285,20 +285,9 @@ impl LabelDir {
             }
         }
         // Cameras without a map beside maps without a camera: likely a naming mistake.
-        let unread: Vec<String> = (files.keys())
-            .filter(|key| !matched.contains(&Some(key.as_str())))
-            .cloned()
-            .collect();
-        let unread_note = (!skipped.is_empty() && !unread.is_empty()).then(|| {
-            format!(
-                "note: {} label map(s) in {} match no camera and are not read: {} (a camera's \
-                 map is <image name>.png, e.g. {})",
-                unread.len(),
-                dir.display(),
-                list_some(&unread),
-                expected_names(&skipped)
-            )
-        });
+        let unread_note = (!skipped.is_empty())
+            .then(|| unread_maps_note(dir, &files, &matched, &skipped))
+            .flatten();
         if (missing == MissingLabels::Error && !skipped.is_empty()) || entries.is_empty() {
             bail!(
                 "label folder {} has no label map for {} of {} cameras: {} (expected <image name>.png, \
@@ -541,6 +530,31 @@ fn check_ids_in_table(map: &LabelMap, allowed: &[bool]) -> Result<()> {
         "{pixels} pixels use class ids that are not in the class table: {}",
         list_some(&names)
     )
+}
+
+/// The label maps of `files` no camera matched, where some cameras have none: a naming
+/// mistake, said with the names the cameras expect.
+fn unread_maps_note(
+    dir: &Path,
+    files: &BTreeMap<String, PathBuf>,
+    matched: &[Option<&str>],
+    skipped: &[String],
+) -> Option<String> {
+    let read: HashSet<&str> = matched.iter().flatten().copied().collect();
+    let unread: Vec<String> = (files.keys())
+        .filter(|key| !read.contains(key.as_str()))
+        .cloned()
+        .collect();
+    (!unread.is_empty()).then(|| {
+        format!(
+            "note: {} label map(s) in {} match no camera and are not read: {} (a camera's \
+             map is <image name>.png, e.g. {})",
+            unread.len(),
+            dir.display(),
+            list_some(&unread),
+            expected_names(skipped)
+        )
+    })
 }
 
 /// "a, b, c, d, e and 3 more".
