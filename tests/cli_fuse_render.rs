@@ -822,4 +822,23 @@ fn options_without_effect_are_noted() {
     let occlusion = ["--method", "vote", "--occlusion", "--depth-tol", "0.2"];
     let err = fuse_synth(d, &[&occlusion[..], &["--out", &out]].concat());
     assert!(!err.contains("no effect"), "{err}");
+
+    // Three small views leave many Gaussians' centers unseen: a vote says why they have no
+    // class and which methods classify them; FlashSplat classifies them, and says nothing.
+    let weighted = ["--method", "vote", "--weighted", "--out", &out];
+    let err = fuse_synth(d, &weighted);
+    let left: usize = (err.split(" Gaussians left without a class").next())
+        .and_then(|head| head.rsplit('(').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no count of Gaussians without a class: {err}"));
+    assert!(
+        err.contains(&format!("note: {left} of the "))
+            && err.contains(
+                "vote --weighted classifies only Gaussians whose centers fall on labeled pixels \
+             and are visible there"
+            ),
+        "{err}"
+    );
+    let err = fuse_synth(d, &["--method", "flashsplat", "--out", &out]);
+    assert!(!err.contains("have no class"), "{err}");
 }

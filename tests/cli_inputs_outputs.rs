@@ -608,6 +608,18 @@ fn empty_inputs_are_errors_and_selections_name_their_class() {
     ]
     .concat());
     assert!(picked.contains("class 'ball' (id 4)"), "{picked}");
+    assert!(!picked.contains("no effect"), "{picked}");
+    // Options of how views are fused read nothing here: likely --labels was forgotten.
+    let picked = ok(&[
+        &from_fused[..],
+        &["--extract", "ball", "--method", "vote", "--train-only"],
+        &["--out", &arg_in(d, "f2.ply")],
+    ]
+    .concat());
+    assert!(
+        picked.contains("note: --method, --train-only have no effect: without --labels"),
+        "{picked}"
+    );
     // A class of the table no Gaussian holds selects nothing: refused, nothing written.
     let none = arg_in(d, "none.ply");
     let e = fails(&[&from_fused[..], &["--extract", "ceiling", "--out", &none]].concat());

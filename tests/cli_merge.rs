@@ -353,3 +353,26 @@ fn merge_knows_label_contents_and_the_cameras_file_of_scaled_views() {
     let err = fails(&["merge", &a0, &a1, "--scene", &scene, "--out", &p("n.ply")]);
     assert!(err.contains("labels"), "{err}");
 }
+
+/// `merge --help` describes what merge writes: the options it shares with `fuse` do not
+/// speak of segment consensus, shards or a fused scene's class, which merge never has.
+#[test]
+fn merge_help_speaks_only_of_what_merge_writes() {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_semsplat"))
+        .args(["merge", "--help"])
+        .output()
+        .unwrap();
+    let help = String::from_utf8_lossy(&out.stdout);
+    for fuse_only in [
+        "segment consensus",
+        "`fuse --shard` only",
+        "without --labels",
+        "`segment`",
+    ] {
+        assert!(!help.contains(fuse_only), "'{fuse_only}' in: {help}");
+    }
+    assert!(
+        help.contains("--out <OUT>") && help.contains("class_conf"),
+        "{help}"
+    );
+}

@@ -41,7 +41,7 @@ use semsplat::util::{interrupt, write_bytes_atomic, OutputBatch};
 
 /// The base methods of `--method`; their variant flags (`--occlusion`, `--weighted`,
 /// `--per-view`) pick the [`Method`] from `semsplat::fuse::SPELLINGS`.
-#[derive(Clone, Copy, ValueEnum)]
+#[derive(Clone, Copy, PartialEq, ValueEnum)]
 enum MethodArg {
     /// Majority vote of the Gaussian centers projected into each view (Semantic Fusion).
     Vote,
@@ -414,8 +414,11 @@ pub fn run(mut args: FuseArgs) -> Result<()> {
         check_free_space("--out", &args.output.out, at_least, "the fused scene")?;
     }
     let method = selected_method(&args)?;
-    if args.contrib.is_none() {
-        note_options_without_effect(&args, method);
+    let fused_table = fused_scene_table(&args, &g)?;
+    match (&fused_table, &args.contrib) {
+        (Some(_), _) => note_fusion_options_unread(&args),
+        (None, None) => note_options_without_effect(&args, method),
+        (None, Some(_)) => {}
     }
     let accumulation = if args.float_atomics {
         Accumulation::Float
@@ -425,7 +428,7 @@ pub fn run(mut args: FuseArgs) -> Result<()> {
     if let Some(shard) = args.shard {
         return fuse_shard(&args, &g, method, shard);
     }
-    if let Some(table) = fused_scene_table(&args, &g)? {
+    if let Some(table) = fused_table {
         return select_from_fused(&args, g, &table, start);
     }
     let evidence = match &args.contrib {
@@ -926,6 +929,36 @@ fn note_options_without_effect(args: &FuseArgs, method: Method) {
     }
 }
 
+/// Selecting from a fused scene's class reads no views: a note for each option of how
+/// views are fused that was given (likely --labels was meant, and forgotten).
+fn note_fusion_options_unread(args: &FuseArgs) {
+    let given = [
+        ("--method", args.method != MethodArg::Flashsplat),
+        ("--occlusion", args.occlusion),
+        ("--weighted", args.weighted),
+        ("--per-view", args.per_view),
+        ("--relabel", args.relabel),
+        ("--clustering", args.clustering != Clustering::Order),
+        ("--depth-tol", args.depth_tol.is_some()),
+        ("--behind-tol", args.behind_tol.is_some()),
+        ("--float-atomics", args.float_atomics),
+        ("--train-only", args.train_only),
+        ("--mem-budget", args.mem_budget.is_some()),
+        ("--ignore-id", args.label_format.ignore_id.is_some()),
+    ];
+    let given: Vec<&str> = (given.iter())
+        .filter_map(|&(option, given)| given.then_some(option))
+        .collect();
+    if !given.is_empty() {
+        eprintln!(
+            "note: {} {} no effect: without --labels (or --contrib) fuse selects by the fused \
+             scene's `class`, fusing nothing; give --labels to fuse again",
+            given.join(", "),
+            if given.len() == 1 { "has" } else { "have" }
+        );
+    }
+}
+
 /// `--shard K/N`: the shard's partial evidence and its manifest (see `super::merge`).
 fn fuse_shard(args: &FuseArgs, g: &Gaussians, method: Method, shard: Shard) -> Result<()> {
     let data = open_labeled_views(args)?;
@@ -1018,7 +1051,7 @@ impl LabelViews {
         let mut renderer = LabelRenderer::new(&self.gpu, g, ids)?;
         let mut rendered = RenderedFiles::of(dir)?;
         rendered.start()?;
-        for cam in &self.cams {
+        let mut one_view = |cam: &Camera| -> Result<()> {
             interrupt::check()?;
             let labels: Vec<u16> = renderer
                 .render(cam)?
@@ -1029,9 +1062,13 @@ impl LabelViews {
             let file = |suffix: &str| dir.join(format!("{}{suffix}", cam.name));
             write_label_png(&file(LABELS_PNG), &map)?;
             write_palette_png(&file(PALETTE_PNG), &map, table)?;
-            rendered.add(cam, &VIEW_FILES)?;
+            rendered.add(cam, &VIEW_FILES)
+        };
+        let stopped = self.cams.iter().try_for_each(&mut one_view);
+        if stopped.is_err() {
+            rendered.remove_if_unwritten();
         }
-        Ok(())
+        stopped
     }
 }
 
@@ -1151,6 +1188,7 @@ fn write_report(
     if let Some(segments) = &report.segments {
         note_unobserved(segments);
     }
+    note_votes_unclassified(report.method, without_class, report.gaussians);
     // A flag is a finding the user acts on (an object the views disagree on, often one a
     // segmenter mislabels in most of them): say so even without --report.
     let flagged = report.segments.as_ref().map_or(0, |s| s.flagged.len());
@@ -1165,6 +1203,27 @@ fn write_report(
         );
     }
     Ok(())
+}
+
+/// A vote classifies only the Gaussians whose centers the views show (--occlusion and
+/// --weighted: visibly), which in a dense scene may leave many without a class: where it
+/// left more than a twentieth, a note names the methods that classify those.
+fn note_votes_unclassified(method: &str, without_class: usize, gaussians: usize) {
+    if !method.starts_with("vote") || without_class * 20 <= gaussians {
+        return;
+    }
+    let visible = if method == "vote" {
+        ""
+    } else {
+        " and are visible there"
+    };
+    eprintln!(
+        "note: {without_class} of the {gaussians} Gaussians ({:.0}%) have no class: {method} \
+         classifies only Gaussians whose centers fall on labeled pixels{visible}; flashsplat \
+         classifies every Gaussian a view renders, segment-consensus also hidden ones, from \
+         their neighbours",
+        100.0 * without_class as f64 / gaussians as f64
+    );
 }
 
 /// Segment consensus classes the Gaussians no view observed from their neighbours, outward

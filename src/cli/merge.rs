@@ -30,7 +30,34 @@ use semsplat::scene::{Camera, Gaussians};
 /// for fixed point).
 const CHUNK_GAUSSIANS: usize = 1 << 20;
 
+/// `merge`'s own help for the output options it shares with `fuse`, whose text speaks of
+/// what only `fuse` does (segment consensus, shards, a fused scene's class): the parts are
+/// always vote counts or FlashSplat's evidence.
+const OUT_HELP: &str = "Output PLY: the input Gaussians with `class` (label id, -1 for \
+    Gaussians no view saw, or whose evidence tied and neither their neighbours' evidence nor \
+    the whole scene's broke the tie) and `class_conf` (the winning class's share of the \
+    evidence); semantics the input scene held (a trained scene's logits) are replaced. The \
+    class table goes beside it, its `.ply` replaced (fused.ply: fused.classes.json)";
+const REPORT_HELP: &str = "Write a JSON report: the method and accumulation the parts were \
+    fused with, per-class counts (class -1: no class, as in --out) and the assignment's time";
+const SAVE_CONTRIB_HELP: &str = "Write the merged evidence matrix A as float64 NumPy \
+    [classes, Gaussians], rows in the order of FILE.classes.json written beside it (what \
+    `fuse --save-contrib` of every view writes; `fuse --contrib` reads it). Each Gaussian's \
+    class is its column's argmax";
+const EXTRACT_HELP: &str = "Keep only the Gaussians of this class (name, any case, or id) in \
+    --out, by FlashSplat's one-vs-rest assignment with --gamma (which may keep Gaussians whose \
+    own class is another)";
+const REMOVE_HELP: &str = "Drop the Gaussians of this class (name, any case, or id) from \
+    --out (as --extract selects them)";
+
 #[derive(Args)]
+#[command(
+    mut_arg("out", |a| a.help(OUT_HELP)),
+    mut_arg("report", |a| a.help(REPORT_HELP)),
+    mut_arg("save_contrib", |a| a.help(SAVE_CONTRIB_HELP)),
+    mut_arg("extract", |a| a.help(EXTRACT_HELP)),
+    mut_arg("remove", |a| a.help(REMOVE_HELP)),
+)]
 pub struct MergeArgs {
     /// Partial evidence of `fuse --shard K/N`, one per shard 0..N-1 in any order, each with
     /// its <part>.manifest.json beside it.

@@ -18,6 +18,7 @@ use semsplat::scene::labels::{list_some, write_label_png, write_palette_png, Lab
 use semsplat::scene::ply::{classes_sidecar_path, read_classes_sidecar};
 use semsplat::scene::scene_file::{cameras_for_scene, read_scene, resolve_scene_path};
 use semsplat::scene::{Camera, Gaussians};
+use semsplat::util::free_space::check_free_space;
 use semsplat::util::npy::write_npy_f32;
 use semsplat::util::{interrupt, write_bytes_atomic};
 
@@ -206,6 +207,15 @@ fn view_suffixes(args: &RenderArgs) -> Vec<&'static str> {
 pub(super) struct RenderedFiles {
     folder: PathBuf,
     listed: HashSet<String>,
+    /// What [`RenderedFiles::start`] created, the folder and its list: a stop before the
+    /// first view's files removes them again rather than leave an empty folder behind.
+    created: Created,
+}
+
+#[derive(Clone, Copy, Default)]
+struct Created {
+    folder: bool,
+    list: bool,
 }
 
 impl RenderedFiles {
@@ -218,7 +228,12 @@ impl RenderedFiles {
             Err(e) => return Err(e).with_context(|| format!("reading {}", marker.display())),
         };
         let folder = out.to_owned();
-        Ok(RenderedFiles { folder, listed })
+        let created = Created::default();
+        Ok(RenderedFiles {
+            folder,
+            listed,
+            created,
+        })
     }
 
     fn marker(&self) -> PathBuf {
@@ -259,15 +274,30 @@ impl RenderedFiles {
 
     /// Creates the folder and its list, before the first view is written (a list there is
     /// kept).
-    pub(super) fn start(&self) -> Result<()> {
+    pub(super) fn start(&mut self) -> Result<()> {
         let (out, marker) = (&self.folder, self.marker());
+        self.created.folder = !out.exists();
         std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-        if !marker.exists() {
+        self.created.list = !marker.exists();
+        if self.created.list {
             let header = format!("{RENDER_MARKER_HEADER}\n");
             std::fs::write(&marker, header)
                 .with_context(|| format!("writing {}", marker.display()))?;
         }
         Ok(())
+    }
+
+    /// After a stop before any view was listed: removes the list [`RenderedFiles::start`]
+    /// created, and the folder it created if nothing else is in it (a first view's files
+    /// begun keep it). Returns whether the folder is gone.
+    pub(super) fn remove_if_unwritten(&self) -> bool {
+        // A list found at the start names earlier renders' files: kept, and its folder.
+        if !self.created.list || !self.listed.is_empty() {
+            return false;
+        }
+        let _ = std::fs::remove_file(self.marker());
+        // remove_dir removes only an empty folder.
+        self.created.folder && std::fs::remove_dir(&self.folder).is_ok()
     }
 
     /// Lists a view's files once they are written (a file listed is one a render may
@@ -345,6 +375,12 @@ pub fn run(args: RenderArgs) -> Result<()> {
     if args.semantics {
         check_semantics_table(&scene_file, &g, table.as_ref())?;
     }
+    if args.raw {
+        let channels = (args.semantics && g.semantics.is_some())
+            .then(|| g.semantics.as_ref().map_or(0, |s| s.channels));
+        let at_least = raw_bytes(&cams, channels).saturating_sub(replaced_bytes(&args.out, &cams));
+        check_free_space("--out", &args.out, at_least, "--raw's arrays")?;
+    }
     let gpu = Gpu::new()?;
     let mut labels_from = label_source(&args, &g, &gpu)?;
     let scene = GpuScene::upload(&gpu, &g)?;
@@ -390,7 +426,9 @@ pub fn run(args: RenderArgs) -> Result<()> {
         if let Err(e) = one_view(cam) {
             // Interrupted or failed (a full disk, a GPU error): say which views are whole.
             bar.finish_and_clear();
-            eprintln!("{}", partial_render_note(&args.out, &cams, done));
+            if !rendered.remove_if_unwritten() {
+                eprintln!("{}", partial_render_note(&args.out, &cams, done));
+            }
             return Err(e);
         }
     }
@@ -494,6 +532,26 @@ fn class_label_map(r: &mut LabelRenderer, cam: &Camera) -> Result<LabelMap> {
     LabelMap::new(cam.width, cam.height, labels)
 }
 
+/// The bytes of every view's --raw arrays (float32, each with its NumPy header, at most
+/// 128 bytes): RGB, alpha and depth, and with `semantic_channels` the two semantic arrays.
+/// Exact to the headers, unlike the PNGs' compressed sizes, which are not known before.
+fn raw_bytes(cams: &[Camera], semantic_channels: Option<usize>) -> u64 {
+    let per_pixel = 3 + 1 + 1 + 2 * semantic_channels.unwrap_or(0) as u64;
+    let arrays = 3 + 2 * u64::from(semantic_channels.is_some());
+    (cams.iter())
+        .map(|c| u64::from(c.width) * u64::from(c.height) * per_pixel * 4 + arrays * 128)
+        .sum()
+}
+
+/// The bytes of the --raw arrays of `cams` already in `out`, which the render replaces.
+fn replaced_bytes(out: &Path, cams: &[Camera]) -> u64 {
+    let files = (cams.iter()).flat_map(|c| RAW_NPY.map(|s| out.join(format!("{}{s}", c.name))));
+    files
+        .filter_map(|f| std::fs::metadata(f).ok())
+        .map(|m| m.len())
+        .sum()
+}
+
 fn write_raw(f: &RenderedFrame, out: &dyn Fn(&str) -> PathBuf, semantics: bool) -> Result<()> {
     let (h, w, c) = (f.height as u64, f.width as u64, f.channels as u64);
     let [rgb, alpha, depth, sem, sem_norm] = RAW_NPY;
@@ -505,4 +563,81 @@ fn write_raw(f: &RenderedFrame, out: &dyn Fn(&str) -> PathBuf, semantics: bool) 
         write_npy_f32(&out(sem_norm), &[h, w, c], &f.sem_norm)?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// --raw's bytes, as the free-space check counts them, are the arrays' files' sizes
+    /// within their headers' padding.
+    #[test]
+    fn raw_bytes_are_the_arrays_sizes() {
+        let tmp = tempfile::tempdir().unwrap();
+        let (eye, up) = (glam::DVec3::new(0.0, 0.0, -1.0), glam::DVec3::Y);
+        let cam = |name, w, h| Camera::look_at(name, eye, glam::DVec3::ZERO, up, w, h, 60.0);
+        let cams = [cam("a", 7, 5), cam("b", 16, 9)];
+        for channels in [None, Some(3)] {
+            let mut written = 0;
+            for c in &cams {
+                let (h, w) = (u64::from(c.height), u64::from(c.width));
+                let mut shapes = vec![vec![h, w, 3], vec![h, w], vec![h, w]];
+                if let Some(k) = channels {
+                    shapes.extend([vec![h, w, k as u64], vec![h, w, k as u64]]);
+                }
+                for (i, shape) in shapes.iter().enumerate() {
+                    let path = tmp.path().join(format!("{}{}", c.name, RAW_NPY[i]));
+                    let values = vec![0.0f32; shape.iter().product::<u64>() as usize];
+                    write_npy_f32(&path, shape, &values).unwrap();
+                    written += std::fs::metadata(&path).unwrap().len();
+                }
+            }
+            assert_eq!(replaced_bytes(tmp.path(), &cams), written);
+            let counted = raw_bytes(&cams, channels);
+            let arrays = 2 * (3 + 2 * u64::from(channels.is_some()));
+            assert!(
+                counted >= written && counted - written < arrays * 128,
+                "{counted} {written}"
+            );
+            for f in std::fs::read_dir(tmp.path()).unwrap() {
+                std::fs::remove_file(f.unwrap().path()).unwrap();
+            }
+        }
+    }
+
+    /// A render stopped before its first view leaves neither the folder it created nor a
+    /// list in a folder that was there; one stopped later keeps both.
+    #[test]
+    fn a_render_stopped_before_its_first_view_leaves_nothing() {
+        let tmp = tempfile::tempdir().unwrap();
+        let new = tmp.path().join("new");
+        let mut rendered = RenderedFiles::of(&new).unwrap();
+        rendered.start().unwrap();
+        assert!(new.join(RENDER_MARKER).is_file());
+        assert!(rendered.remove_if_unwritten());
+        assert!(!new.exists());
+
+        let there = tmp.path().join("there");
+        std::fs::create_dir(&there).unwrap();
+        let mut rendered = RenderedFiles::of(&there).unwrap();
+        rendered.start().unwrap();
+        assert!(!rendered.remove_if_unwritten());
+        assert!(there.is_dir() && !there.join(RENDER_MARKER).exists());
+
+        // A first view's file begun (not yet listed) keeps the folder, and its list goes.
+        let mut rendered = RenderedFiles::of(&new).unwrap();
+        rendered.start().unwrap();
+        std::fs::write(new.join("v.png"), b"").unwrap();
+        assert!(!rendered.remove_if_unwritten());
+        assert!(new.join("v.png").is_file() && !new.join(RENDER_MARKER).exists());
+
+        // A view listed: everything kept.
+        let (eye, up) = (glam::DVec3::new(0.0, 0.0, -1.0), glam::DVec3::Y);
+        let cam = Camera::look_at("w", eye, glam::DVec3::ZERO, up, 8, 8, 60.0);
+        let mut rendered = RenderedFiles::of(&there).unwrap();
+        rendered.start().unwrap();
+        rendered.add(&cam, &[RGB_PNG]).unwrap();
+        assert!(!rendered.remove_if_unwritten());
+        assert!(there.join(RENDER_MARKER).is_file());
+    }
 }

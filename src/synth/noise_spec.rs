@@ -136,27 +136,37 @@ impl FromStr for NoiseSpec {
 }
 
 /// The canonical spec: non-default keys in a fixed order (`none` when noise-free).
+/// A rate as text that parses back to it, in scientific notation where plain decimals
+/// would run to hundreds of digits (`1e-300`).
+fn short_rate(rate: f64) -> String {
+    if rate != 0.0 && !(1e-4..1e6).contains(&rate.abs()) {
+        format!("{rate:e}")
+    } else {
+        rate.to_string()
+    }
+}
+
 impl fmt::Display for NoiseSpec {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let mut items = Vec::new();
         let d = NoiseSpec::default();
         if self.flicker != d.flicker {
-            items.push(format!("flicker={}", self.flicker));
+            items.push(format!("flicker={}", short_rate(self.flicker)));
         }
         if self.boundary != d.boundary {
             items.push(format!("boundary={}", self.boundary));
         }
         if self.consistent != d.consistent {
-            items.push(format!("consistent={}", self.consistent));
+            items.push(format!("consistent={}", short_rate(self.consistent)));
         }
         if self.consistent_objects != d.consistent_objects {
             items.push(format!("consistent_objects={}", self.consistent_objects));
         }
         if self.salt != d.salt {
-            items.push(format!("salt={}", self.salt));
+            items.push(format!("salt={}", short_rate(self.salt)));
         }
         if self.missing != d.missing {
-            items.push(format!("missing={}", self.missing));
+            items.push(format!("missing={}", short_rate(self.missing)));
         }
         if let Some(seed) = self.seed {
             items.push(format!("seed={seed}"));
@@ -191,6 +201,10 @@ mod tests {
         assert_eq!(s.to_string().parse::<NoiseSpec>().unwrap(), s);
         assert_eq!("none".parse::<NoiseSpec>().unwrap(), NoiseSpec::default());
         assert_eq!(NoiseSpec::default().to_string(), "none");
+        // Tiny rates are written short, and still read back exactly.
+        let tiny: NoiseSpec = "flicker=1e-300,salt=0.000012345".parse().unwrap();
+        assert_eq!(tiny.to_string(), "flicker=1e-300,salt=1.2345e-5");
+        assert_eq!(tiny.to_string().parse::<NoiseSpec>().unwrap(), tiny);
     }
 
     #[test]
