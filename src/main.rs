@@ -15,7 +15,8 @@ mod cli;
     long_about = "Lift 2D semantic labels into 3D Gaussian Splatting scenes on a Vulkan compute \
                   backend. Runs on any Vulkan 1.3 device; without a GPU, install lavapipe with \
                   tools/setup.sh. Select a device with SEMSPLAT_DEVICE=<index or name substring>. \
-                  Ctrl-C stops a run cleanly: no half-written file, exit status 130."
+                  Ctrl-C stops a run cleanly: no half-written file, exit status 130 \
+                  (143 for SIGTERM)."
 )]
 struct Cli {
     #[command(subcommand)]
@@ -101,7 +102,7 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) if interrupt::is_interruption(&e) => {
             eprintln!("error: {}", interrupt::Interrupted);
-            ExitCode::from(interrupt::EXIT_CODE)
+            ExitCode::from(interrupt::exit_code())
         }
         Err(e) => {
             eprintln!("error: {e:#}");
