@@ -123,22 +123,8 @@ pub fn observe(
                 Ok(())
             },
         );
-        stats.views_in_flight = running.feeds.len().max(1);
         drop(done);
-        for regions in running.finish() {
-            stats.gpu_ms += regions.gpu_ms;
-            stats.observe.regions_gpu_ms += regions.gpu_ms;
-            stats.region_host_fallbacks += regions.host_fallbacks;
-        }
-        // A lane's own error stands before the feed's (which may be only that it stopped).
-        let failed = finished.into_iter().find_map(|observed| match observed {
-            Ok(observed) => {
-                views.store(observed, &mut stats);
-                None
-            }
-            Err(e) => Some(e),
-        });
-        failed.map_or(fed, Err)
+        finish_lanes(running, finished, &mut views, &mut stats).and(fed)
     })?;
     stats.label_read_s += read_time.seconds();
     progress(cams.len(), cams.len());
@@ -151,6 +137,27 @@ pub fn observe(
         footprints: views.footprints,
         stats,
     })
+}
+
+/// Waits for the lanes and stores the views they observed last; their regions' GPU time
+/// goes into `stats`. A lane's own error is returned (it stands before the feed's, which
+/// may be only that it stopped).
+fn finish_lanes(
+    running: Running,
+    finished: mpsc::Receiver<Result<ObservedView>>,
+    views: &mut ObservedViews,
+    stats: &mut FuseStats,
+) -> Result<()> {
+    stats.views_in_flight = running.feeds.len().max(1);
+    for regions in running.finish() {
+        stats.gpu_ms += regions.gpu_ms;
+        stats.observe.regions_gpu_ms += regions.gpu_ms;
+        stats.region_host_fallbacks += regions.host_fallbacks;
+    }
+    for observed in finished {
+        views.store(observed?, stats);
+    }
+    Ok(())
 }
 
 /// A view's label map and, where the footprints are kept, its connected label regions
