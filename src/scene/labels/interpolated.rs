@@ -17,6 +17,12 @@ const MAX_STEP: usize = 5;
 /// ([`StepTally::looks_interpolated`]).
 const STEP_SHARE: f64 = 0.2;
 
+/// The share of short runs between two ids at least two apart that lie between them, from
+/// which maps look interpolated: chance is about a third (runs of ids that have nothing to
+/// do with their sides: blocks of random ids 0.33-0.37, a segmenter's maps 0.25-0.43), a
+/// resize or JPEG makes most of them ids between (0.66-1.0).
+const BETWEEN_SHARE: f64 = 0.5;
+
 /// How many ids a warning names.
 const SUSPECTS_NAMED: usize = 5;
 
@@ -43,6 +49,9 @@ pub struct StepTally {
 pub struct Crossings {
     pub through_steps: u64,
     pub direct: u64,
+    /// Runs of at most [`MAX_STEP`] between two ids at least two apart (room for an id
+    /// between): steps, and runs of an id outside the two.
+    pub short_between_apart: u64,
 }
 
 /// The pixels on steps of a map being added (each once, though its row and its column may
@@ -108,6 +117,7 @@ impl StepTally {
     pub fn merge(&mut self, other: StepTally) {
         self.crossings.through_steps += other.crossings.through_steps;
         self.crossings.direct += other.crossings.direct;
+        self.crossings.short_between_apart += other.crossings.short_between_apart;
         if self.pixels.is_empty() {
             (self.pixels, self.on_steps, self.around) =
                 (other.pixels, other.on_steps, other.around);
@@ -125,11 +135,16 @@ impl StepTally {
     /// Whether the maps look interpolated: at least [`STEP_SHARE`] of their crossings from
     /// an id to one at least two apart go through a step (a segmenter's own maps: 0.1-5.2%,
     /// rooms of thousands of random ids included; resized with bilinear filtering 99.7-100%,
-    /// saved as JPEG 23-90%).
+    /// saved as JPEG 23-90%), and the steps are more than chance makes of short runs
+    /// ([`BETWEEN_SHARE`]): in maps of small blocks of random ids (2 to 5 pixels) 39-44% of
+    /// the crossings go through a block whose id happens to lie between its sides'.
     pub fn looks_interpolated(&self) -> bool {
         let c = self.crossings;
         let crossed = c.through_steps + c.direct;
-        c.through_steps >= MIN_PIXELS && c.through_steps as f64 >= STEP_SHARE * crossed as f64
+        let steps = c.through_steps as f64;
+        c.through_steps >= MIN_PIXELS
+            && steps >= STEP_SHARE * crossed as f64
+            && steps >= BETWEEN_SHARE * c.short_between_apart as f64
     }
 
     /// The ids most likely made by interpolation, with an example of the ids around one
@@ -210,6 +225,9 @@ fn mark_steps(labels: &[u16], line: Line, marks: &mut StepMarks, crossings: &mut
             if let (Some(b), Some(after)) = (before, next) {
                 let (lower, higher) = (b.id.min(after), b.id.max(after));
                 let all_known = known(run.id) && known(b.id) && known(after);
+                if run.len <= MAX_STEP && all_known && higher - lower >= 2 {
+                    crossings.short_between_apart += 1;
+                }
                 if run.len <= MAX_STEP && all_known && lower < run.id && run.id < higher {
                     run.step = true;
                     crossings.through_steps += 1;
@@ -287,5 +305,39 @@ mod tests {
         more.add(&map(8, &[edges; 16]));
         tally.merge(more);
         assert!(!tally.looks_interpolated());
+    }
+
+    /// Blocks of random ids a few pixels wide cross through many runs between their
+    /// sides' ids, as many as chance gives: no warning. Resized 2x with a step between
+    /// every two blocks of ids at least two apart, they warn.
+    #[test]
+    fn blocks_of_random_ids_are_not_interpolation() {
+        let mut rng = crate::util::rng::Rng::new(5);
+        let (blocks, side) = (40, 3);
+        let ids: Vec<u16> = (0..blocks * blocks)
+            .map(|_| rng.below(1000) as u16)
+            .collect();
+        let pixel = |x: usize, y: usize| ids[(y / side) * blocks + x / side];
+        let w = blocks * side;
+        let labels: Vec<u16> = (0..w * w).map(|p| pixel(p % w, p / w)).collect();
+        let mut tally = StepTally::default();
+        tally.add(&LabelMap::new(w as u32, w as u32, labels).unwrap());
+        let c = tally.crossings();
+        assert!(c.through_steps as f64 >= STEP_SHARE * (c.through_steps + c.direct) as f64);
+        assert!(!tally.looks_interpolated() && tally.warning("x").is_none());
+
+        // Each block's right column the mean of its id and the next block's.
+        let resized: Vec<u16> = (0..w * w)
+            .map(|p| {
+                let (x, y) = (p % w, p / w);
+                match x % side == side - 1 && x + 1 < w {
+                    true => ((u32::from(pixel(x, y)) + u32::from(pixel(x + 1, y))) / 2) as u16,
+                    false => pixel(x, y),
+                }
+            })
+            .collect();
+        let mut tally = StepTally::default();
+        tally.add(&LabelMap::new(w as u32, w as u32, resized).unwrap());
+        assert!(tally.looks_interpolated());
     }
 }
