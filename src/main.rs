@@ -78,10 +78,41 @@ impl Command {
     }
 }
 
+impl Command {
+    /// Whether the command's results are the files it writes, its standard output a
+    /// summary: a closed or full standard output must not stop it before the files
+    /// (`sweep ... | head`); the others end quietly on a closed pipe, as shell tools do.
+    fn results_are_files(&self) -> bool {
+        matches!(self, Command::Sweep(_) | Command::Demo(_))
+    }
+}
+
+/// A standard output that cannot be written (`info --json > /dev/full`) ends the run with
+/// an error, not a panic's backtrace: `println!` panics with this message, which the hook
+/// turns into `error: ...` and exit status 1.
+fn report_stdout_failures_as_errors() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let message = (info.payload().downcast_ref::<String>())
+            .map(String::as_str)
+            .or_else(|| info.payload().downcast_ref::<&str>().copied())
+            .unwrap_or("");
+        if let Some(cause) = message.strip_prefix("failed printing to stdout: ") {
+            eprintln!("error: writing standard output: {cause}");
+            interrupt::remove_temp_files();
+            std::process::exit(1);
+        }
+        default(info);
+    }));
+}
+
 fn main() -> ExitCode {
     semsplat::util::memory::configure_malloc();
-    interrupt::end_quietly_on_closed_stdout();
     let cli = Cli::parse();
+    if !cli.command.results_are_files() {
+        interrupt::end_quietly_on_closed_stdout();
+    }
+    report_stdout_failures_as_errors();
     if let Err(e) = interrupt::install_handler(cli.command.polls_for_interrupt()) {
         eprintln!("warning: {e:#}; Ctrl-C may leave temp files behind");
     }

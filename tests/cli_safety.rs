@@ -106,6 +106,64 @@ fn a_closed_stdout_ends_the_process_quietly() {
     );
 }
 
+/// A standard output that cannot be written (a full disk): a command whose output is its
+/// result fails with a plain error, no panic; `sweep`, whose results are its files, says
+/// so and writes them, as it does when `| head` closes its pipe.
+#[test]
+fn a_full_stdout_is_an_error_and_sweeps_still_write_their_files() {
+    let full = || std::fs::File::create("/dev/full").unwrap();
+    let info = Command::new(env!("CARGO_BIN_EXE_semsplat"))
+        .args(["info", "--json"])
+        .stdout(full())
+        .output()
+        .unwrap();
+    let err = stderr(&info);
+    assert_eq!(info.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("error: writing standard output") && !err.contains("panicked"),
+        "{err}"
+    );
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("sweep");
+    for stdout in ["full", "closed"] {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_semsplat"))
+            .args([
+                "sweep", "--noise", "salt", "--levels", "0,0.1", "--preset", "tiny",
+            ])
+            .args([
+                "--views",
+                "2",
+                "--test-views",
+                "1",
+                "--width",
+                "32",
+                "--height",
+                "24",
+            ])
+            .args(["--methods", "vote", "--out", out.to_str().unwrap()])
+            .stdout(match stdout {
+                "full" => Stdio::from(full()),
+                _ => Stdio::piped(),
+            })
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        drop(child.stdout.take());
+        let run = child.wait_with_output().unwrap();
+        let err = stderr(&run);
+        assert!(run.status.success(), "{stdout}: {err}");
+        assert!(
+            err.contains("note: writing standard output"),
+            "{stdout}: {err}"
+        );
+        assert!(
+            out.join("robustness_salt.json").is_file(),
+            "{stdout}: {err}"
+        );
+        std::fs::remove_dir_all(&out).unwrap();
+    }
+}
+
 // ---------------------------------------------------------------------------------------
 // Numeric options
 

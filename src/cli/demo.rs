@@ -118,9 +118,10 @@ pub fn run(args: DemoArgs) -> Result<()> {
     print_scores(&scores);
 
     let input_image_quality = held_out_quality(&gpu, &s, &s.gaussians)?;
-    println!(
+    outln!(
         "input scene, held out: PSNR {:.2} dB, SSIM {:.4}",
-        input_image_quality.psnr, input_image_quality.ssim
+        input_image_quality.psnr,
+        input_image_quality.ssim
     );
     let report = DemoReport {
         preset: &args.preset,
@@ -167,12 +168,18 @@ fn print_scores(scores: &[MethodScore]) {
         .max()
         .unwrap_or(0)
         .max(24);
-    println!(
+    outln!(
         "{:<name$} {:>9} {:>8} {:>10} {:>10} {:>10} {:>10}",
-        "method", "seconds", "mIoU", "pixel acc", "3D acc", "memory", "PSNR"
+        "method",
+        "seconds",
+        "mIoU",
+        "pixel acc",
+        "3D acc",
+        "memory",
+        "PSNR"
     );
     for r in scores {
-        println!(
+        outln!(
             "{:<name$} {:>9.2} {:>8.3} {:>10.3} {:>10.3} {:>7.0} MiB {:>10}",
             r.method,
             r.seconds,

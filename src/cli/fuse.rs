@@ -187,7 +187,8 @@ const DEFAULT_GAMMA: f64 = 0.0;
 pub struct OutputArgs {
     /// Background bias of the one-vs-rest assignment used by --extract, --remove and
     /// --save-membership, in [-1, 1] (FlashSplat's Listing 1.1; default 0): larger keeps
-    /// fewer Gaussians in the object.
+    /// fewer Gaussians in the object. Gaussians no view saw are in no object at any gamma
+    /// (the listing puts them in every one below 0).
     #[arg(long, allow_hyphen_values = true, value_parser = args::signed_unit_interval)]
     pub gamma: Option<f64>,
     /// Output PLY: the input Gaussians with `class` (label id, -1 for Gaussians no view saw,
@@ -1050,7 +1051,7 @@ impl LabelViews {
         let ids = g.class_ids.as_deref().expect("classes assigned");
         let mut renderer = LabelRenderer::new(&self.gpu, g, ids)?;
         let mut rendered = RenderedFiles::of(dir)?;
-        rendered.start()?;
+        rendered.start_batched();
         let mut one_view = |cam: &Camera| -> Result<()> {
             interrupt::check()?;
             let labels: Vec<u16> = renderer
@@ -1064,11 +1065,9 @@ impl LabelViews {
             write_palette_png(&file(PALETTE_PNG), &map, table)?;
             rendered.add(cam, &VIEW_FILES)
         };
-        let stopped = self.cams.iter().try_for_each(&mut one_view);
-        if stopped.is_err() {
-            rendered.remove_if_unwritten();
-        }
-        stopped
+        // On an error the batch's files go, and the folders made for them.
+        self.cams.iter().try_for_each(&mut one_view)?;
+        rendered.write_batched()
     }
 }
 

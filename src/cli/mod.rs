@@ -1,5 +1,14 @@
 //! One module per subcommand, and what several of them share.
 
+/// `println!` for the commands whose results are files (`sweep`, `demo`): a standard
+/// output that cannot be written (a pipe closed by `head`, a full disk) is said once on
+/// stderr and the run goes on to write its files ([`print_line`]).
+macro_rules! outln {
+    ($($arg:tt)*) => {
+        $crate::cli::print_line(format_args!($($arg)*))
+    };
+}
+
 pub mod args;
 pub mod bench;
 pub mod demo;
@@ -149,5 +158,17 @@ mod tests {
         write_scene_with_table(&out, &scene(3, 1), &ClassTable::from_ids([1])).unwrap();
         assert_eq!(read_ply(&out).unwrap().len(), 3);
         assert_eq!(files(), 2);
+    }
+}
+
+/// Writes one line to standard output; where it fails, says so once on stderr (the
+/// command's files are its results, and are still written).
+pub fn print_line(line: std::fmt::Arguments) {
+    use std::io::Write;
+    static SAID: std::sync::Once = std::sync::Once::new();
+    if let Err(e) = writeln!(std::io::stdout(), "{line}") {
+        SAID.call_once(|| {
+            eprintln!("note: writing standard output: {e}; the results still go to the files")
+        });
     }
 }

@@ -210,6 +210,9 @@ pub(super) struct RenderedFiles {
     /// What [`RenderedFiles::start`] created, the folder and its list: a stop before the
     /// first view's files removes them again rather than leave an empty folder behind.
     created: Created,
+    /// Whether the files go through an [`semsplat::util::OutputBatch`] (fuse's
+    /// --render-views): the list is then written with them, when the batch commits.
+    batched: bool,
 }
 
 #[derive(Clone, Copy, Default)]
@@ -233,6 +236,7 @@ impl RenderedFiles {
             folder,
             listed,
             created,
+            batched: false,
         })
     }
 
@@ -287,10 +291,35 @@ impl RenderedFiles {
         Ok(())
     }
 
-    /// After a stop before any view was listed: removes the list [`RenderedFiles::start`]
-    /// created, and the folder it created if nothing else is in it (a first view's files
-    /// begun keep it). Returns whether the folder is gone.
-    pub(super) fn remove_if_unwritten(&self) -> bool {
+    /// For files written in an [`semsplat::util::OutputBatch`]: the list is written by
+    /// [`RenderedFiles::write_batched`], in the batch (which creates the folder with the
+    /// first file, and removes it again if it ends uncommitted).
+    pub(super) fn start_batched(&mut self) {
+        self.batched = true;
+    }
+
+    /// The whole list, written in the output batch beside the files it names (a stop
+    /// before the batch commits leaves neither).
+    pub(super) fn write_batched(&self) -> Result<()> {
+        let mut names: Vec<&str> = self.listed.iter().map(String::as_str).collect();
+        names.sort_unstable();
+        let text = format!("{RENDER_MARKER_HEADER}\n{}\n", names.join("\n"));
+        write_bytes_atomic(&self.marker(), text.as_bytes())
+    }
+
+    /// After a stop: lists the files of the view under way (`partial`) that were written
+    /// (each whole: written to a temp file and renamed), so a rerun may replace them; then,
+    /// where no view's file was written, removes the list [`RenderedFiles::start`] created,
+    /// and the folder it created. Returns whether the folder is gone.
+    pub(super) fn stop(&mut self, partial: Option<&Camera>, suffixes: &[&str]) -> bool {
+        if let Some(cam) = partial {
+            let written: Vec<&str> = (suffixes.iter().copied())
+                .filter(|s| self.folder.join(format!("{}{s}", cam.name)).is_file())
+                .collect();
+            if !written.is_empty() && self.add(cam, &written).is_err() {
+                return false;
+            }
+        }
         // A list found at the start names earlier renders' files: kept, and its folder.
         if !self.created.list || !self.listed.is_empty() {
             return false;
@@ -306,7 +335,8 @@ impl RenderedFiles {
     pub(super) fn add(&mut self, cam: &Camera, suffixes: &[&str]) -> Result<()> {
         let names = suffixes.iter().map(|s| format!("{}{s}", cam.name));
         let new: Vec<String> = names.filter(|f| !self.listed.contains(f)).collect();
-        if new.is_empty() {
+        if new.is_empty() || self.batched {
+            self.listed.extend(new);
             return Ok(());
         }
         let mut lines = new.join("\n");
@@ -426,7 +456,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
         if let Err(e) = one_view(cam) {
             // Interrupted or failed (a full disk, a GPU error): say which views are whole.
             bar.finish_and_clear();
-            if !rendered.remove_if_unwritten() {
+            if !rendered.stop(cams.get(done), &suffixes) {
                 eprintln!("{}", partial_render_note(&args.out, &cams, done));
             }
             return Err(e);
@@ -614,30 +644,55 @@ mod tests {
         let mut rendered = RenderedFiles::of(&new).unwrap();
         rendered.start().unwrap();
         assert!(new.join(RENDER_MARKER).is_file());
-        assert!(rendered.remove_if_unwritten());
+        assert!(rendered.stop(None, &[RGB_PNG]));
         assert!(!new.exists());
 
         let there = tmp.path().join("there");
         std::fs::create_dir(&there).unwrap();
         let mut rendered = RenderedFiles::of(&there).unwrap();
         rendered.start().unwrap();
-        assert!(!rendered.remove_if_unwritten());
+        assert!(!rendered.stop(None, &[RGB_PNG]));
         assert!(there.is_dir() && !there.join(RENDER_MARKER).exists());
 
-        // A first view's file begun (not yet listed) keeps the folder, and its list goes.
-        let mut rendered = RenderedFiles::of(&new).unwrap();
-        rendered.start().unwrap();
-        std::fs::write(new.join("v.png"), b"").unwrap();
-        assert!(!rendered.remove_if_unwritten());
-        assert!(new.join("v.png").is_file() && !new.join(RENDER_MARKER).exists());
-
-        // A view listed: everything kept.
+        // The first view's image written, its label map not yet: the image is listed, so a
+        // rerun replaces it.
         let (eye, up) = (glam::DVec3::new(0.0, 0.0, -1.0), glam::DVec3::Y);
         let cam = Camera::look_at("w", eye, glam::DVec3::ZERO, up, 8, 8, 60.0);
+        let mut rendered = RenderedFiles::of(&new).unwrap();
+        rendered.start().unwrap();
+        std::fs::write(new.join("w.png"), b"").unwrap();
+        assert!(!rendered.stop(Some(&cam), &[RGB_PNG, LABELS_PNG]));
+        let again = RenderedFiles::of(&new).unwrap();
+        assert!(again.listed.contains("w.png") && !again.listed.contains("w.labels.png"));
+        assert!(again
+            .check_overwrites("--out", Some(false), &[cam.clone()], &[RGB_PNG, LABELS_PNG])
+            .is_ok());
+
+        // A view listed: everything kept.
         let mut rendered = RenderedFiles::of(&there).unwrap();
         rendered.start().unwrap();
         rendered.add(&cam, &[RGB_PNG]).unwrap();
-        assert!(!rendered.remove_if_unwritten());
+        assert!(!rendered.stop(None, &[RGB_PNG]));
         assert!(there.join(RENDER_MARKER).is_file());
+
+        // Batched (fuse --render-views): the list is written with the files, in the
+        // batch; a batch dropped uncommitted removes both, and the folders made for them.
+        let batched = tmp.path().join("batched");
+        for commit in [false, true] {
+            let batch = semsplat::util::OutputBatch::open();
+            let mut rendered = RenderedFiles::of(&batched).unwrap();
+            rendered.start_batched();
+            write_bytes_atomic(&batched.join("rig/w.labels.png"), b"").unwrap();
+            rendered.add(&cam, &[LABELS_PNG]).unwrap();
+            rendered.write_batched().unwrap();
+            assert!(!batched.join(RENDER_MARKER).exists());
+            match commit {
+                false => drop(batch),
+                true => batch.commit().unwrap(),
+            }
+            assert_eq!(batched.exists(), commit);
+        }
+        let listed = RenderedFiles::of(&batched).unwrap().listed;
+        assert_eq!(listed, HashSet::from(["w.labels.png".to_string()]));
     }
 }

@@ -363,19 +363,26 @@ fn base_noise(args: &SweepArgs) -> Result<NoiseSpec> {
 fn print_summary(report: &SweepReport) {
     let key = report.noise;
     if report.runs.len() > 1 {
-        println!("mean (min-max) over {} runs:", report.runs.len());
+        outln!("mean (min-max) over {} runs:", report.runs.len());
         for l in &report.levels {
             for m in &l.methods {
                 let (a, g) = (m.miou, m.gaussian_accuracy);
-                println!(
+                outln!(
                     "{key}={:<6} {:<28} mIoU {:.4} ({:.4}-{:.4})  3D acc {:.4} ({:.4}-{:.4})",
-                    l.level, m.method, a.mean, a.min, a.max, g.mean, g.min, g.max
+                    l.level,
+                    m.method,
+                    a.mean,
+                    a.min,
+                    a.max,
+                    g.mean,
+                    g.min,
+                    g.max
                 );
             }
         }
     }
     let Some(breaks) = &report.breaks_at else {
-        println!("no level 0 among the levels: add 0 to --levels to see where each method falls below half of its mIoU there");
+        outln!("no level 0 among the levels: add 0 to --levels to see where each method falls below half of its mIoU there");
         return;
     };
     let reference = match &report.base_noise {
@@ -392,10 +399,10 @@ fn print_summary(report: &SweepReport) {
             // Half of nothing is nothing: a method whose held-out views matched nothing
             // there (no labeled pixel right, or no class rendered) has no break to find.
             _ if clean_miou(m) == 0.0 => {
-                println!("{m}: {reference} is 0 (no labeled pixel of the held-out views right): no break to find")
+                outln!("{m}: {reference} is 0 (no labeled pixel of the held-out views right): no break to find")
             }
-            Some(l) => println!("{m}: below half of {reference} at {key}={l}"),
-            None => println!("{m}: never below half of {reference} in this range"),
+            Some(l) => outln!("{m}: below half of {reference} at {key}={l}"),
+            None => outln!("{m}: never below half of {reference} in this range"),
         }
     }
 }
@@ -431,9 +438,11 @@ fn run_level(
     )?;
     let oracle = score_instance_oracle(gpu, &s)?;
     for r in scores.iter().chain([&oracle]) {
-        println!(
+        outln!(
             "{preset:<8} seed {seed:<4} {spec:<16} {:<28} mIoU {:.4}  3D acc {:.4}",
-            r.method, r.miou, r.gaussian_accuracy
+            r.method,
+            r.miou,
+            r.gaussian_accuracy
         );
     }
     let figures = |r: &semsplat::experiment::MethodScore| MethodLevel {

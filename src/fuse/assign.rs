@@ -177,11 +177,16 @@ fn add_row(totals: &mut [f64], row: &[f64]) {
 }
 
 /// One class's row of Listing 1.1 ([`assign_one_vs_rest`]), from its evidence `row` and
-/// every Gaussian's [`class_totals`].
+/// every Gaussian's [`class_totals`]. A Gaussian no view gave evidence is of no class at
+/// any --gamma (the listing's test, 0 > 0 + gamma, would put it in every class at any
+/// negative gamma, however small: a step at 0).
 pub fn one_vs_rest_row(row: &[f64], totals: &[f64], gamma: f64) -> Vec<bool> {
     row.iter()
         .zip(totals)
         .map(|(&obj, &total)| {
+            if total == 0.0 {
+                return false;
+            }
             let rest = total - obj;
             // F.normalize(p=1) divides by max(|rest| + |obj|, 1e-12).
             let norm = (rest.abs() + obj.abs()).max(1e-12);
@@ -193,6 +198,20 @@ pub fn one_vs_rest_row(row: &[f64], totals: &[f64], gamma: f64) -> Vec<bool> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A Gaussian without evidence is of no class at any gamma; one with evidence is a
+    /// member by the listing's test on either side of 0.
+    #[test]
+    fn no_evidence_is_no_membership_at_negative_gamma() {
+        let (row, totals) = ([0.0, 0.0, 2.0, 1.0], [0.0, 3.0, 2.0, 2.0]);
+        for gamma in [-1.0, -1e-12, 0.0, 1e-12] {
+            let members = one_vs_rest_row(&row, &totals, gamma);
+            assert!(!members[0], "gamma {gamma}");
+            assert!(!members[1], "gamma {gamma}"); // 0 > 1 + gamma only below -1
+            assert!(members[2], "gamma {gamma}");
+            assert_eq!(members[3], gamma < 0.0, "gamma {gamma}");
+        }
+    }
     use crate::fuse::shared_counts::nonzero;
     use crate::util::Rng;
 

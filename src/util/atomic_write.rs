@@ -141,6 +141,10 @@ thread_local! {
     /// The staged files of the thread's open [`OutputBatch`], in the order committed.
     static BATCH: std::cell::RefCell<Option<Vec<StagedFile>>> =
         const { std::cell::RefCell::new(None) };
+    /// The folders the open batch's files created (the first that did not exist of each
+    /// file's parents): a batch dropped uncommitted removes those its files leave empty.
+    static BATCH_FOLDERS: std::cell::RefCell<Vec<PathBuf>> =
+        const { std::cell::RefCell::new(Vec::new()) };
 }
 
 /// One run's outputs, landed together: while a batch is open, every output committed
@@ -173,12 +177,43 @@ impl OutputBatch {
 
 impl Drop for OutputBatch {
     fn drop(&mut self) {
+        let folders = BATCH_FOLDERS.take();
         drop(take_batch()); // each staged file removes its temp file
+        for folder in folders.iter().rev() {
+            remove_empty_folders(folder);
+        }
     }
 }
 
 fn take_batch() -> Vec<StagedFile> {
+    BATCH_FOLDERS.with_borrow_mut(Vec::clear);
     BATCH.with_borrow_mut(Option::take).unwrap_or_default()
+}
+
+/// Creates `parent` and the folders above it that are missing; while a batch is open, the
+/// first of them is noted for the batch to remove if it ends uncommitted.
+fn create_parent(parent: &Path) -> std::io::Result<()> {
+    let missing = (parent.ancestors())
+        .take_while(|a| !a.as_os_str().is_empty() && !a.exists())
+        .last()
+        .map(Path::to_path_buf);
+    fs::create_dir_all(parent)?;
+    if let Some(first) = missing.filter(|_| BATCH.with_borrow(Option::is_some)) {
+        BATCH_FOLDERS.with_borrow_mut(|folders| folders.push(first));
+    }
+    Ok(())
+}
+
+/// Removes `folder` and the folders in it, where they hold no file.
+fn remove_empty_folders(folder: &Path) {
+    if let Ok(entries) = fs::read_dir(folder) {
+        for entry in entries.flatten() {
+            if entry.file_type().is_ok_and(|t| t.is_dir()) {
+                remove_empty_folders(&entry.path());
+            }
+        }
+    }
+    let _ = fs::remove_dir(folder); // only an empty one goes
 }
 
 impl StagedFile {
@@ -227,7 +262,7 @@ where
     let staged = (|| -> Result<StagedFile> {
         let target = resolve_output_file(target)?;
         if let Some(parent) = target.parent().filter(|p| !p.as_os_str().is_empty()) {
-            fs::create_dir_all(parent)
+            create_parent(parent)
                 .with_context(|| format!("creating directory {}", parent.display()))?;
         }
         remove_stale_temps(&target);

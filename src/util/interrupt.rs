@@ -1,5 +1,6 @@
 //! Ctrl-C (SIGINT), SIGTERM and SIGHUP: the long loops stop cleanly, and no partial output
-//! or temp file is left behind. A closed standard output (SIGPIPE) ends the process quietly.
+//! or temp file is left behind. A closed standard output (SIGPIPE) ends the process quietly
+//! (but for `sweep` and `demo`, whose results are files: they go on and write them).
 //!
 //! The handler sets a flag that the commands' loops poll ([`check`]); a cooperative command
 //! then returns [`Interrupted`] and exits with [`EXIT_CODE`]. [`write_atomic`] refuses to
@@ -167,6 +168,13 @@ pub fn check() -> Result<(), Interrupted> {
 /// the handler from cleaning up).
 pub(crate) fn temp_files() -> MutexGuard<'static, Vec<PathBuf>> {
     TEMP_FILES.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+/// Removes every temp file in flight (before an exit that skips their owners' cleanup).
+pub fn remove_temp_files() {
+    for tmp in temp_files().drain(..) {
+        let _ = std::fs::remove_file(tmp);
+    }
 }
 
 /// Runs on the signals thread, not in signal context, so locking and file removal are safe.
