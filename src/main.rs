@@ -29,6 +29,8 @@ enum Command {
     /// speed and accuracy (table, report.json, speed_vs_accuracy.png, strip.png).
     Demo(cli::demo::DemoArgs),
     /// Generate a procedural benchmark room with exact ground truth and label noise.
+    // Negative numbers are values (`--levels -0.1` reaches its range check).
+    #[command(allow_negative_numbers = true)]
     Synth(cli::synth::SynthArgs),
     /// Lift per-view label maps onto the Gaussians (vote, FlashSplat or segment consensus; no
     /// training).
@@ -52,6 +54,8 @@ enum Command {
     /// of the classes they cover). Pixels without a label are not scored.
     Eval(cli::eval::EvalArgs),
     /// Robustness: every method's mIoU as one kind of label noise grows (chart + JSON).
+    // Negative numbers are values (`--levels -0.1` reaches its range check).
+    #[command(allow_negative_numbers = true)]
     Sweep(cli::sweep::SweepArgs),
     /// Summarize a PLY scene, a camera model or a label folder, and report problems.
     Inspect(cli::inspect::InspectArgs),

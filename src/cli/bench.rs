@@ -72,7 +72,9 @@ pub struct FuseArgs {
     /// case for segment consensus's clustering, where a segmenter's regions follow the
     /// objects. The views take the maps' size (--width and --height are not used) and the
     /// classes are those the maps hold (--classes is not used).
-    #[arg(long, value_name = "DIR", requires = "scene")]
+    // Conflicting with --n and --preset too: clap does not hold `requires` to an option
+    // that conflicts with one given (`--n 2000 --labels DIR` passed, its labels unread).
+    #[arg(long, value_name = "DIR", requires = "scene", conflicts_with_all = ["preset", "n"])]
     labels: Option<PathBuf>,
     /// Image size of every view.
     #[arg(long, default_value_t = 640)]
@@ -280,7 +282,7 @@ fn print_fuse(r: &FuseBench) {
         println!("{}", row.trim_end());
     }
     println!(
-        "goal (issue #5): accumulation <= {:.1}x the forward render (GPU time and wall time)",
+        "goal: accumulation <= {:.1}x the forward render (GPU time and wall time)",
         r.goal_ratio
     );
     println!(

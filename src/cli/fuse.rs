@@ -509,9 +509,12 @@ pub(super) fn write_fused(
             args.gamma.unwrap_or(DEFAULT_GAMMA),
         )?;
     }
+    // The report's assign_s is the assignment's and selection's: not the views' render.
+    let render_start = Instant::now();
     if let (Some(dir), Some(views)) = (&args.render_views, label_views) {
         views.render(dir, &g, &table)?;
     }
+    let render_s = render_start.elapsed().as_secs_f64();
     // The consensus decides per segment, which its evidence rows do not hold: it selects by
     // the classes it decided; the evidence methods by FlashSplat's one-vs-rest.
     let selected_id = selected_class.as_ref().map(|c| c.id);
@@ -523,7 +526,7 @@ pub(super) fn write_fused(
         .is_none()
         .then(|| args.gamma.unwrap_or(DEFAULT_GAMMA));
     check_selected_some(args, &selected, selected_class.as_ref(), gamma)?;
-    let assign_s = assign_start.elapsed().as_secs_f64();
+    let assign_s = assign_start.elapsed().as_secs_f64() - render_s;
 
     write_outputs(args, &selected, &table)?;
     let report = Report {

@@ -110,6 +110,18 @@ impl LabelSource for Interruptible<'_> {
     }
 }
 
+/// Writes one line to standard output; where it fails, says so once on stderr (the
+/// command's files are its results, and are still written).
+pub fn print_line(line: std::fmt::Arguments) {
+    use std::io::Write;
+    static SAID: std::sync::Once = std::sync::Once::new();
+    if let Err(e) = writeln!(std::io::stdout(), "{line}") {
+        SAID.call_once(|| {
+            eprintln!("note: writing standard output: {e}; the results still go to the files")
+        });
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use semsplat::scene::classes::{read_class_table, ClassTable};
@@ -158,17 +170,5 @@ mod tests {
         write_scene_with_table(&out, &scene(3, 1), &ClassTable::from_ids([1])).unwrap();
         assert_eq!(read_ply(&out).unwrap().len(), 3);
         assert_eq!(files(), 2);
-    }
-}
-
-/// Writes one line to standard output; where it fails, says so once on stderr (the
-/// command's files are its results, and are still written).
-pub fn print_line(line: std::fmt::Arguments) {
-    use std::io::Write;
-    static SAID: std::sync::Once = std::sync::Once::new();
-    if let Err(e) = writeln!(std::io::stdout(), "{line}") {
-        SAID.call_once(|| {
-            eprintln!("note: writing standard output: {e}; the results still go to the files")
-        });
     }
 }

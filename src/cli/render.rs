@@ -77,7 +77,21 @@ fn select_views(cams: Vec<Camera>, wanted: &[String]) -> Result<Vec<Camera>> {
         .iter()
         .filter(|w| !cams.iter().any(|c| &c.name == *w))
         .collect();
-    if !missing.is_empty() {
+    if let Some(&first) = missing.first() {
+        // A rig's cameras are named by their image's path where stems repeat.
+        let stem_of = |c: &&Camera| c.name.rsplit('/').next() == Some(first.as_str());
+        let by_stem: Vec<&str> = cams
+            .iter()
+            .filter(stem_of)
+            .map(|c| c.name.as_str())
+            .collect();
+        if by_stem.len() > 1 {
+            bail!(
+                "--views {first}: several cameras have images of that name ({}): name one by \
+                 its path",
+                by_stem.join(", ")
+            );
+        }
         let known: Vec<&str> = cams.iter().take(10).map(|c| c.name.as_str()).collect();
         bail!("no camera named {missing:?} (cameras include {known:?})");
     }
@@ -599,6 +613,23 @@ fn write_raw(f: &RenderedFrame, out: &dyn Fn(&str) -> PathBuf, semantics: bool) 
 mod tests {
     use super::*;
 
+    /// A stem that names several rig cameras is said to be ambiguous, naming them.
+    #[test]
+    fn a_stem_shared_by_rig_cameras_names_them() {
+        let (eye, up) = (glam::DVec3::new(0.0, 0.0, -1.0), glam::DVec3::Y);
+        let cam = |name| Camera::look_at(name, eye, glam::DVec3::ZERO, up, 8, 8, 60.0);
+        let cams = vec![cam("cam0/00003"), cam("cam1/00003"), cam("00004")];
+        let e = select_views(cams.clone(), &["00003".into()])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("cam0/00003, cam1/00003") && e.contains("by its path"),
+            "{e}"
+        );
+        let picked = select_views(cams, &["cam1/00003".into()]).unwrap();
+        assert_eq!(picked.len(), 1);
+    }
+
     /// --raw's bytes, as the free-space check counts them, are the arrays' files' sizes
     /// within their headers' padding.
     #[test]
@@ -665,7 +696,12 @@ mod tests {
         let again = RenderedFiles::of(&new).unwrap();
         assert!(again.listed.contains("w.png") && !again.listed.contains("w.labels.png"));
         assert!(again
-            .check_overwrites("--out", Some(false), &[cam.clone()], &[RGB_PNG, LABELS_PNG])
+            .check_overwrites(
+                "--out",
+                Some(false),
+                std::slice::from_ref(&cam),
+                &[RGB_PNG, LABELS_PNG]
+            )
             .is_ok());
 
         // A view listed: everything kept.

@@ -189,5 +189,9 @@ fn on_signal() {
         // Exits holding the lock: no writer can create or rename a file after this point.
         std::process::exit(i32::from(exit_code()));
     }
-    eprintln!("interrupting: stopping after the current step (press Ctrl-C again to stop at once)");
+    let again = match FIRST_SIGNAL.load(Ordering::SeqCst) {
+        2 | 0 => "press Ctrl-C again", // SIGINT (2), or none known
+        _ => "send the signal again, or press Ctrl-C,",
+    };
+    eprintln!("interrupting: stopping after the current step ({again} to stop at once)");
 }
