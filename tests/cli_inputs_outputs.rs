@@ -954,6 +954,17 @@ fn unlabeled_views_count_in_neither_the_rate_nor_evals_note() {
         said.contains("1 label map(s)") && said.contains("train_0001_label"),
         "{said}"
     );
+    // With --train-only a held-out camera's map is held out, not a map of no camera.
+    let test_map = labels.join("test_0000.png");
+    std::fs::copy(room.join("labels/test_0000.png"), &test_map).unwrap();
+    let train_out = arg_in(tmp.path(), "train_only.ply");
+    let train_only = ["--train-only", "--out", &train_out];
+    let said = ok(&[&inputs[..], &labels_arg, &train_only].concat());
+    assert!(
+        said.contains("1 label map(s)") && !said.contains("test_0000,"),
+        "{said}"
+    );
+    std::fs::remove_file(&test_map).unwrap();
     std::fs::remove_file(&misnamed).unwrap();
     let stats = &common::cli::read_json(Path::new(&report))["stats"];
     let number = |key: &str| stats[key].as_f64().unwrap();

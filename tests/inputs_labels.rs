@@ -563,6 +563,20 @@ fn rig_subfolders_match_by_relative_path_then_unique_stem() {
         e.contains("frame_9.png") && e.contains("cam0/00001.png"),
         "{e}"
     );
+    // A camera named by a bare stem (its image cam0/00002) with a stray map of that stem
+    // at the top beside the mirrored one: both could be its own, refused naming both
+    // (the top one had been read, silently).
+    gray(&root.join("00002.png"), 9);
+    let e = err(LabelDir::open(
+        root,
+        &[camera("00002", (4, 3))],
+        None,
+        MissingLabels::Skip,
+    ));
+    assert!(
+        e.contains("00002.png, cam0/00002.png") && e.contains("mirrors the image's path"),
+        "{e}"
+    );
 }
 
 /// A PNG whose header claims `w` x `h` 8-bit gray, followed by a token IDAT: tiny on disk.

@@ -50,7 +50,17 @@ impl Dataset {
     /// Loads the cameras, matches the label folder to them (checking ids against the class
     /// table when there is one) and reads every map once to find the classes present.
     pub fn open(paths: &DatasetPaths) -> Result<Dataset> {
-        let mut cameras = load_split_cameras(paths.cameras, paths.train_only)?;
+        let mut cameras = load_cameras(paths.cameras)?;
+        let held_out: Vec<String> = match paths.train_only {
+            true => (cameras.iter())
+                .filter(|c| c.split != Split::Train)
+                .map(|c| c.name.clone())
+                .collect(),
+            false => Vec::new(),
+        };
+        if paths.train_only {
+            keep_train_cameras(&mut cameras, paths.cameras)?;
+        }
         let table_path = paths
             .class_table
             .map(Path::to_path_buf)
@@ -59,6 +69,7 @@ impl Dataset {
         let labels = LabelDir::open_as(
             paths.labels,
             &cameras,
+            &held_out,
             given.as_ref(),
             &paths.format,
             MissingLabels::Skip,
@@ -129,12 +140,18 @@ impl LabelSource for Dataset {
 pub fn load_split_cameras(path: &Path, train_only: bool) -> Result<Vec<Camera>> {
     let mut cameras = load_cameras(path)?;
     if train_only {
-        cameras.retain(|c| c.split == Split::Train);
-        if cameras.is_empty() {
-            bail!("{} has no train cameras", path.display());
-        }
+        keep_train_cameras(&mut cameras, path)?;
     }
     Ok(cameras)
+}
+
+/// Keeps the cameras marked "train" (of the cameras file `path`): an error if none is.
+fn keep_train_cameras(cameras: &mut Vec<Camera>, path: &Path) -> Result<()> {
+    cameras.retain(|c| c.split == Split::Train);
+    if cameras.is_empty() {
+        bail!("{} has no train cameras", path.display());
+    }
+    Ok(())
 }
 
 /// Cameras (scaled to their label maps' size when those are resized copies) and the label
@@ -147,8 +164,8 @@ pub fn open_truth_views(
     format: &LabelFormat,
 ) -> Result<(Vec<Camera>, LabelDir)> {
     let mut cameras = load_cameras(cameras)?;
-    let labels =
-        LabelDir::open_as(labels, &cameras, table, format, MissingLabels::Skip)?.without_id_check();
+    let labels = LabelDir::open_as(labels, &cameras, &[], table, format, MissingLabels::Skip)?
+        .without_id_check();
     labels.fit_cameras(&mut cameras);
     Ok((cameras, labels))
 }

@@ -139,10 +139,25 @@ fn match_camera<'a>(
     by_stem: &HashMap<&str, Vec<&'a str>>,
     name: &str,
 ) -> Result<Option<&'a str>> {
+    let same_stem = by_stem.get(stem_of(name)).map(Vec::as_slice);
     if let Some((key, _)) = files.get_key_value(name) {
-        return Ok(Some(key));
+        // A camera named by a bare stem (its rig's stems are unique) whose image lies in
+        // a subfolder: a map there is as much its own as one at the top.
+        let bare = !name.contains('/');
+        match same_stem {
+            Some(many) if bare && many.len() > 1 => {
+                let names: Vec<String> = many.iter().map(|k| format!("{k}.png")).collect();
+                bail!(
+                    "camera '{name}' matches several label maps: {}; keep the one that mirrors \
+                     the image's path (cam0/00001.png for images/cam0/00001.jpg) and remove \
+                     the others",
+                    list_some(&names)
+                )
+            }
+            _ => return Ok(Some(key)),
+        }
     }
-    match by_stem.get(stem_of(name)).map(Vec::as_slice) {
+    match same_stem {
         Some([one]) => Ok(Some(one)),
         Some(many) if many.len() > 1 => {
             let names: Vec<String> = many.iter().map(|k| format!("{k}.png")).collect();
@@ -259,15 +274,18 @@ impl LabelDir {
         table: Option<&ClassTable>,
         missing: MissingLabels,
     ) -> Result<LabelDir> {
-        Self::open_as(dir, cameras, table, &LabelFormat::default(), missing)
+        Self::open_as(dir, cameras, &[], table, &LabelFormat::default(), missing)
     }
 
     /// Matches the label folder to every camera (see the module doc) and reads each matched
     /// map's PNG header for its size. With a class table, every loaded map is checked to use
     /// only the table's ids (and ignore), and colour-coded maps are read through its colours.
+    /// `held_out`: the names of cameras left out (`--train-only`'s test cameras), whose maps
+    /// are not said to match no camera.
     pub fn open_as(
         dir: &Path,
         cameras: &[Camera],
+        held_out: &[String],
         table: Option<&ClassTable>,
         format: &LabelFormat,
         missing: MissingLabels,
@@ -286,7 +304,7 @@ impl LabelDir {
         }
         // Cameras without a map beside maps without a camera: likely a naming mistake.
         let unread_note = (!skipped.is_empty())
-            .then(|| unread_maps_note(dir, &files, &matched, &skipped))
+            .then(|| unread_maps_note(dir, &files, &matched, held_out, &skipped))
             .flatten();
         if (missing == MissingLabels::Error && !skipped.is_empty()) || entries.is_empty() {
             bail!(
@@ -538,9 +556,11 @@ fn unread_maps_note(
     dir: &Path,
     files: &BTreeMap<String, PathBuf>,
     matched: &[Option<&str>],
+    held_out: &[String],
     skipped: &[String],
 ) -> Option<String> {
-    let read: HashSet<&str> = matched.iter().flatten().copied().collect();
+    let held_out = match_cameras(files, held_out.iter().map(String::as_str)).ok()?;
+    let read: HashSet<&str> = matched.iter().chain(&held_out).flatten().copied().collect();
     let unread: Vec<String> = (files.keys())
         .filter(|key| !read.contains(key.as_str()))
         .cloned()
