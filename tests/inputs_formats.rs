@@ -925,6 +925,26 @@ fn nerfstudio_transforms_convert_the_opengl_pose() {
         let err = format!("{:#}", load_cameras(&path).unwrap_err());
         assert!(err.contains(expect) && err.contains("undistort"), "{err}");
     }
+
+    // nerfstudio's split lists: a frame test_filenames (or val_filenames) names is held
+    // out, written with or without "./" and the extension; a list naming no frame is
+    // refused rather than holding nothing out.
+    let split = |list: &str| json.replacen("\"frames\"", &format!("{list}, \"frames\""), 1);
+    std::fs::write(
+        &path,
+        split(r#""test_filenames": ["./images/frame_00002"]"#),
+    )
+    .unwrap();
+    let splits: Vec<Split> = (load_cameras(&path).unwrap().iter())
+        .map(|c| c.split)
+        .collect();
+    assert_eq!(splits, [Split::Train, Split::Test]);
+    std::fs::write(&path, split(r#""val_filenames": ["frame_00002.png"]"#)).unwrap();
+    let err = format!("{:#}", load_cameras(&path).unwrap_err());
+    assert!(
+        err.contains("'val_filenames' names 1 files, none a frame's"),
+        "{err}"
+    );
 }
 
 // ---------------------------------------------------------------------------------------

@@ -151,9 +151,45 @@ pub fn parse_transforms(top: &Map<String, Value>) -> Result<Vec<Camera>> {
     if frames.is_empty() {
         bail!("the transforms.json lists no frames");
     }
-    frames
-        .iter()
-        .enumerate()
+    let mut cameras: Vec<Camera> = (frames.iter().enumerate())
         .map(|(i, v)| parse_frame(i, v, top))
-        .collect()
+        .collect::<Result<_>>()?;
+    mark_held_out(&mut cameras, top)?;
+    Ok(cameras)
+}
+
+/// nerfstudio's split lists: the frames `test_filenames` or `val_filenames` names are held
+/// out (marked "test", as `--train-only` and `eval` read them); every other frame trains.
+/// A list that names no frame is refused (its paths written otherwise than the frames').
+fn mark_held_out(cameras: &mut [Camera], top: &Map<String, Value>) -> Result<()> {
+    // "./images/a.png", "images/a.png" and "images/a" name one frame.
+    let plain = |path: &str| -> String {
+        let path = path.trim_start_matches("./");
+        let cut = path.rfind('.').filter(|&dot| !path[dot..].contains('/'));
+        cut.map_or(path, |dot| &path[..dot]).to_owned()
+    };
+    for list in ["test_filenames", "val_filenames"] {
+        let Some(names) = top.get(list) else { continue };
+        let names = (names.as_array())
+            .and_then(|a| a.iter().map(Value::as_str).collect::<Option<Vec<&str>>>())
+            .ok_or_else(|| anyhow!("transforms.json: '{list}' is not a list of paths"))?;
+        let held: std::collections::HashSet<String> = names.iter().map(|n| plain(n)).collect();
+        let mut marked = 0;
+        for cam in cameras
+            .iter_mut()
+            .filter(|c| held.contains(&plain(&c.name)))
+        {
+            cam.split = Split::Test;
+            marked += 1;
+        }
+        if marked == 0 && !held.is_empty() {
+            bail!(
+                "transforms.json: '{list}' names {} files, none a frame's file_path (e.g. {}): \
+                 write them as the frames do",
+                held.len(),
+                names[0]
+            );
+        }
+    }
+    Ok(())
 }
