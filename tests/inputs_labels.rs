@@ -975,3 +975,90 @@ fn sixteen_bit_maps_with_255_apart_from_the_other_ids_warn() {
     let d = open(&cameras, &labels, None).unwrap();
     assert!(d.warnings.is_empty(), "{:?}", d.warnings);
 }
+
+/// Colour-coded true maps are decoded through the label folder's own table, not the fused
+/// scene's sidecar, which holds only the classes its fusion's maps used: a class only the
+/// held-out view shows is scored and named (its colour had been refused as no class's).
+#[test]
+fn eval_decodes_colours_with_the_label_folders_table() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    common::cli::synth_tiny(&d.join("room"), 4, (48, 36));
+    let table = semsplat::scene::classes::read_class_table(&d.join("room/classes.json")).unwrap();
+    let colour = |id: u16| {
+        table
+            .classes
+            .iter()
+            .find(|c| u32::from(id) == c.id)
+            .unwrap()
+            .color
+    };
+    // The test view's most common class but the wall, unlabeled (black) in the train views.
+    let test_map = read_label_png(&d.join("room/labels/test_0000.png")).unwrap();
+    let held = (0..table.len() as u16)
+        .filter(|&id| table.contains(u32::from(id)) && id != 1)
+        .max_by_key(|&id| test_map.labels.iter().filter(|&&l| l == id).count())
+        .unwrap();
+    for entry in std::fs::read_dir(d.join("room/labels")).unwrap() {
+        let path = entry.unwrap().path();
+        let name = path.file_name().unwrap().to_str().unwrap().to_owned();
+        if !name.ends_with(".png") {
+            continue;
+        }
+        let map = read_label_png(&path).unwrap();
+        let train = name.starts_with("train");
+        let rgb: Vec<u8> = (map.labels.iter())
+            .flat_map(|&id| match id == held && train || id == IGN {
+                true => [0, 0, 0],
+                false => colour(id),
+            })
+            .collect();
+        let (color, depth) = (png::ColorType::Rgb, png::BitDepth::Eight);
+        write_png(
+            &d.join("rgb").join(&name),
+            (48, 36),
+            color,
+            depth,
+            None,
+            &rgb,
+        );
+    }
+    std::fs::copy(d.join("room/classes.json"), d.join("rgb/classes.json")).unwrap();
+    let (scene, cameras) = (arg_in(d, "room/scene.ply"), arg_in(d, "room/cameras.json"));
+    let labels = arg_in(d, "rgb");
+    let fused = arg_in(d, "fused.ply");
+    let inputs = ["--cameras", &cameras, "--labels", &labels];
+    ok(&[
+        &["fuse", "--scene", &scene, "--train-only"],
+        &inputs[..],
+        &["--out", &fused],
+    ]
+    .concat());
+    let sidecar =
+        ClassTable::from_json_str(&std::fs::read_to_string(d.join("fused.classes.json")).unwrap())
+            .unwrap();
+    assert!(
+        !sidecar.contains(u32::from(held)),
+        "the fusion saw class {held}"
+    );
+    let json = arg_in(d, "eval.json");
+    ok(&[
+        &["eval", "--scene", &fused],
+        &inputs[..],
+        &["--json", &json],
+    ]
+    .concat());
+    let eval = read_json(&d.join("eval.json"));
+    let name = &table
+        .classes
+        .iter()
+        .find(|c| c.id == u32::from(held))
+        .unwrap()
+        .name;
+    let scored = eval["per_class"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|c| c["name"] == **name);
+    assert!(scored, "{eval}");
+}

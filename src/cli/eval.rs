@@ -70,8 +70,8 @@ pub struct EvalArgs {
     #[arg(long)]
     labels: PathBuf,
     /// Class table (JSON: id, name, color) naming the classes in the per-class IoU and giving
-    /// the colours of colour-coded maps. Default: <scene>.classes.json (written by `fuse`),
-    /// else classes.json in or beside the label folder.
+    /// the colours of colour-coded maps. Default: classes.json in or beside the label
+    /// folder, else <scene>.classes.json (written by `fuse`).
     #[arg(long, value_name = "FILE")]
     classes: Option<PathBuf>,
     #[command(flatten)]
@@ -265,17 +265,17 @@ fn score_views(
     Ok((confusion, ignored))
 }
 
-/// `--classes`, else the scene's sidecar, else classes.json in or beside the label folder.
+/// `--classes`, else classes.json in or beside the label folder (the table of the maps
+/// scored: a fused scene's sidecar holds only the classes its fusion's maps used, and a
+/// class only the held-out views show has no colour there), else the scene's sidecar.
 fn eval_class_table(args: &EvalArgs) -> Result<Option<ClassTable>> {
     if let Some(path) = &args.classes {
         return read_class_table(path).map(Some);
     }
-    if let Some(table) = read_classes_sidecar(&args.scene)? {
-        return Ok(Some(table));
+    if let Some(path) = default_class_table(&args.labels) {
+        return read_class_table(&path).map(Some);
     }
-    default_class_table(&args.labels)
-        .map(|p| read_class_table(&p))
-        .transpose()
+    read_classes_sidecar(&args.scene)
 }
 
 /// The label map entries of the views `--views` selects (at least one).
