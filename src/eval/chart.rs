@@ -92,6 +92,9 @@ pub struct SpeedPoint<'a> {
     pub score: f64,
 }
 
+/// Radius in pixels of a point's dot in the speed chart.
+const DOT_RADIUS: i32 = 7;
+
 /// Scatter of `score` (y, 0..1) against wall time (x, log scale), each point labelled.
 pub fn speed_vs_accuracy(
     path: &Path,
@@ -129,27 +132,42 @@ pub fn speed_vs_accuracy(
             .label_style(("sans-serif", 16))
             .draw()
             .map_err(plot_err)?;
-        // Labels placed so far: (left, top, right) in pixels.
+        // Labels placed so far: (left, top, right) in pixels; every point's dot, which no
+        // other point's label may cover.
         let mut placed: Vec<(i32, i32, i32)> = Vec::new();
+        let dots: Vec<(i32, i32)> = (points.iter())
+            .map(|p| chart.backend_coord(&(p.seconds, p.score)))
+            .collect();
         for (i, p) in points.iter().enumerate() {
             let color = Palette99::pick(i).to_rgba();
             chart
                 .draw_series(std::iter::once(Circle::new(
                     (p.seconds, p.score),
-                    7,
+                    DOT_RADIUS,
                     color.filled(),
                 )))
                 .map_err(plot_err)?
                 .label(format!("{} ({:.3}, {:.2} s)", p.label, p.score, p.seconds))
                 .legend(move |(x, y)| Circle::new((x, y), 6, color.filled()));
-            let y = label_height(&chart, &placed, p);
+            let others: Vec<(i32, i32)> = (dots.iter().enumerate())
+                .filter(|&(j, _)| j != i)
+                .map(|(_, &d)| d)
+                .collect();
+            let y = label_height(&chart, &placed, &others, p);
             let (px, py) = chart.backend_coord(&(p.seconds, y));
             placed.push((px, py, px + label_width(p.label)));
+            // A label moved off its dot's line keeps to it by a leader, and takes its colour.
+            if (y - p.score).abs() > 0.06 {
+                let leader = [(p.seconds, p.score), (p.seconds, y)];
+                (chart.draw_series(std::iter::once(PathElement::new(leader, color))))
+                    .map_err(plot_err)?;
+            }
+            let font = ("sans-serif", 16).into_font().color(&color.mix(1.0));
             chart
                 .draw_series(std::iter::once(Text::new(
                     p.label.to_string(),
                     (p.seconds, y),
-                    ("sans-serif", 16),
+                    font,
                 )))
                 .map_err(plot_err)?;
         }
@@ -157,7 +175,6 @@ pub fn speed_vs_accuracy(
     })
 }
 
-/// Pixel width of a label in the 16-pixel font (about half the height per character).
 /// The series legend both charts draw, at `position`.
 fn draw_legend<'a, DB: DrawingBackend + 'a, CT: plotters::coord::CoordTranslate>(
     chart: &mut ChartContext<'a, DB, CT>,
@@ -174,6 +191,7 @@ fn draw_legend<'a, DB: DrawingBackend + 'a, CT: plotters::coord::CoordTranslate>
     Ok(())
 }
 
+/// Pixel width of a label in the 16-pixel font (about half the height per character).
 fn label_width(label: &str) -> i32 {
     label.chars().count() as i32 * 9
 }
@@ -183,6 +201,7 @@ fn label_width(label: &str) -> i32 {
 fn label_height<DB: DrawingBackend>(
     chart: &ChartContext<DB, Cartesian2d<LogCoord<f64>, RangedCoordf64>>,
     placed: &[(i32, i32, i32)],
+    dots: &[(i32, i32)],
     p: &SpeedPoint,
 ) -> f64 {
     const LINE: f64 = 0.045;
@@ -193,9 +212,12 @@ fn label_height<DB: DrawingBackend>(
     let free = |y: f64| {
         let (x, top) = chart.backend_coord(&(p.seconds, y));
         let right = x + label_width(p.label);
-        placed
-            .iter()
-            .all(|&(l, t, r)| right <= l || x >= r || (top - t).abs() >= 18)
+        let r = DOT_RADIUS;
+        let clear_of_dot = |&(dx, dy): &(i32, i32)| {
+            dx + r <= x || dx - r >= right || dy + r <= top || dy - r >= top + 16
+        };
+        (placed.iter()).all(|&(l, t, r)| right <= l || x >= r || (top - t).abs() >= 18)
+            && dots.iter().all(clear_of_dot)
     };
     candidates
         .filter(|y| (0.02..=0.97).contains(y))
