@@ -1056,4 +1056,18 @@ fn readers_say_what_a_file_is() {
     let manifest = arg_in(tmp.path(), "part.manifest.json");
     let err = fails(&["inspect", &manifest]);
     assert!(err.contains("manifest of a `fuse --shard` part"), "{err}");
+    // semsplat's own summaries are named as JSON inspect does not read, by their keys.
+    let err = fails(&["inspect", &p("synth.json")]);
+    assert!(
+        err.contains("JSON of no kind inspect reads") && err.contains("generator"),
+        "{err}"
+    );
+    // --json answers for a path that does not exist too.
+    let missing = arg_in(tmp.path(), "missing.ply");
+    let out = common::cli::semsplat(&["inspect", "--json", &missing]);
+    let said: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(
+        !out.status.success() && said["kind"] == "unreadable",
+        "{said}"
+    );
 }

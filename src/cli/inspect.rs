@@ -195,16 +195,17 @@ fn print_stdout(text: &str) -> Result<()> {
 
 pub fn run(args: InspectArgs) -> Result<()> {
     let path = args.path.as_path();
-    if !path.exists() {
-        bail!("{} does not exist", path.display());
-    }
     let table = args.classes.as_deref().map(read_class_table).transpose()?;
     let labels = LabelInputs {
         table: table.as_ref(),
         cameras: args.cameras.as_deref(),
         format: args.label_format.format(),
     };
-    let report = match inspect_path(path, &labels) {
+    let inspected = match path.exists() {
+        true => inspect_path(path, &labels),
+        false => Err(anyhow!("{} does not exist", path.display())),
+    };
+    let report = match inspected {
         Ok(report) => report,
         // What --json's reader parses says so too: a file that could not be read.
         Err(e) if args.json => {
@@ -282,6 +283,16 @@ fn inspect_path(path: &Path, labels: &LabelInputs) -> Result<Report> {
                 "{} is the manifest of a `fuse --shard` part (what the part was fused from), \
                  which `semsplat merge` reads beside its part: {KINDS}",
                 path.display()
+            ),
+            JsonKind::Other(keys) => bail!(
+                "{} is JSON of no kind inspect reads (its top-level keys: {}): neither cameras \
+                 (an INRIA list, nerfstudio's \"frames\", semsplat's \"format\": \
+                 \"semsplat-cameras\") nor a class table (a list of {{\"id\", \"name\", \
+                 \"color\"}}, or {{\"classes\": [...]}}); semsplat's own summaries and reports \
+                 (synth.json, room.json, --report and --json outputs) are plain JSON to read \
+                 as they are",
+                path.display(),
+                semsplat::scene::labels::list_some(&keys)
             ),
             // A JSON of neither kind (a class list of another tool's layout) hears of both.
             JsonKind::Unknown => inspect_cameras(path).map_err(|e| {
@@ -366,6 +377,7 @@ fn json_kind(path: &Path) -> Result<JsonKind> {
             JsonKind::Cameras
         }
         v if ClassTable::json_has_shape(v) => JsonKind::ClassTable,
+        Value::Object(o) => JsonKind::Other(o.keys().cloned().collect()),
         _ => JsonKind::Unknown,
     })
 }
@@ -376,6 +388,8 @@ enum JsonKind {
     Cameras,
     /// Neither layout: read as cameras, and the error names both.
     Unknown,
+    /// An object of neither layout (a run's summary or report): its top-level keys.
+    Other(Vec<String>),
     /// No JSON: read as cameras, whose reader says where it breaks.
     Unparsable,
     /// The manifest beside a `fuse --shard` part.

@@ -174,7 +174,7 @@ pub fn run(args: SynthArgs) -> Result<()> {
     if let Some(noisy) = &scene.noisy {
         let m = &noisy.report.measured;
         println!(
-            "noise {} (seed {}): flicker {:.3}, salt {:.4}, missing {:.4}, boundary {:.4} of pixels",
+            "noise {} (seed {}): flicker {:.3} of (view, object) pairs; salt {:.4}, missing {:.4}, boundary {:.4} of pixels",
             noisy.report.spec, noisy.report.seed, m.flicker.rate, m.salt.rate, m.missing.rate, m.boundary.rate
         );
         for c in &noisy.report.consistent {
