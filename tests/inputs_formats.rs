@@ -1156,6 +1156,22 @@ fn fused_scene_renders_its_classes_and_selects_without_refusing() {
         s(&d.join("m.npy")),
     ]);
     assert!(err.contains("--save-membership"), "{err}");
+    // --render-views is refused so too, without sending the user after --cameras first.
+    let err = fails(&[
+        "fuse",
+        "--scene",
+        s(&fused),
+        "--extract",
+        "wall",
+        "--out",
+        s(&d.join("x.ply")),
+        "--render-views",
+        s(&d.join("v")),
+    ]);
+    assert!(
+        err.contains("--render-views need --labels or --contrib"),
+        "{err}"
+    );
 }
 
 /// INRIA's input.ply seeds Gaussians as `create_from_pcd` does: scale = sqrt of the mean

@@ -381,7 +381,10 @@ pub(super) struct Provenance {
 
 pub fn run(mut args: FuseArgs) -> Result<()> {
     let start = Instant::now();
-    if args.cameras.is_none() && (args.labels.is_some() || args.output.render_views.is_some()) {
+    // --render-views needs cameras only where there is something to fuse (from a fused
+    // scene's class it is refused for another reason, said first).
+    let renders_fused = args.contrib.is_some() && args.output.render_views.is_some();
+    if args.cameras.is_none() && (args.labels.is_some() || renders_fused) {
         args.cameras = Some(cameras_for_scene(None, &args.scene)?);
     }
     let contrib_table = args.contrib.as_deref().map(contrib_sidecar);
