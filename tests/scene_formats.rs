@@ -959,7 +959,7 @@ fn inspect_summarizes_files_and_fails_on_problems() {
     std::fs::write(&names, r#"{"0": "floor", "1": "wall"}"#).unwrap();
     let (ok, _, stderr) = inspect(&[names.as_os_str()]);
     assert!(
-        !ok && stderr.contains("nor is it a class table"),
+        !ok && stderr.contains("neither cameras") && stderr.contains("nor a class table"),
         "{stderr}"
     );
     let g = check_inspect_summarizes_clean_scene(&ply);
