@@ -1143,35 +1143,29 @@ fn fused_scene_renders_its_classes_and_selects_without_refusing() {
 
     let ids = g.class_ids.clone().unwrap();
     check_extract_and_remove_select_by_class_name(d, &fused, &ids);
-    // Outputs that need the evidence matrix are refused in this mode, not skipped.
-    let err = fails(&[
-        "fuse",
-        "--scene",
-        s(&fused),
-        "--extract",
-        "wall",
-        "--out",
-        s(&d.join("x.ply")),
-        "--save-membership",
-        s(&d.join("m.npy")),
-    ]);
-    assert!(err.contains("--save-membership"), "{err}");
-    // --render-views is refused so too, without sending the user after --cameras first.
-    let err = fails(&[
-        "fuse",
-        "--scene",
-        s(&fused),
-        "--extract",
-        "wall",
-        "--out",
-        s(&d.join("x.ply")),
-        "--render-views",
-        s(&d.join("v")),
-    ]);
-    assert!(
-        err.contains("--render-views need --labels or --contrib"),
-        "{err}"
-    );
+    // Outputs that need the evidence matrix are refused in this mode, not skipped;
+    // --render-views without sending the user after --cameras first.
+    let (membership, views) = (d.join("m.npy"), d.join("v"));
+    for (option, path) in [
+        ("--save-membership", &membership),
+        ("--render-views", &views),
+    ] {
+        let err = fails(&[
+            "fuse",
+            "--scene",
+            s(&fused),
+            "--extract",
+            "wall",
+            "--out",
+            s(&d.join("x.ply")),
+            option,
+            s(path),
+        ]);
+        assert!(
+            err.contains("need --labels or --contrib"),
+            "{option}: {err}"
+        );
+    }
 }
 
 /// INRIA's input.ply seeds Gaussians as `create_from_pcd` does: scale = sqrt of the mean
