@@ -102,9 +102,7 @@ fn report_stdout_failures_as_errors() {
             .or_else(|| info.payload().downcast_ref::<&str>().copied())
             .unwrap_or("");
         if let Some(cause) = message.strip_prefix("failed printing to stdout: ") {
-            eprintln!("error: writing standard output: {cause}");
-            interrupt::remove_temp_files();
-            std::process::exit(1);
+            interrupt::exit_removing_temp_files(&format!("writing standard output: {cause}"), 1);
         }
         default(info);
     }));

@@ -420,8 +420,9 @@ pub fn run(args: RenderArgs) -> Result<()> {
         check_semantics_table(&scene_file, &g, table.as_ref())?;
     }
     if args.raw {
-        let channels = (args.semantics && g.semantics.is_some())
-            .then(|| g.semantics.as_ref().map_or(0, |s| s.channels));
+        let channels = (g.semantics.as_ref())
+            .filter(|_| args.semantics)
+            .map(|s| s.channels);
         let at_least = raw_bytes(&cams, channels).saturating_sub(replaced_bytes(&args.out, &cams));
         check_free_space("--out", &args.out, at_least, "--raw's arrays")?;
     }
@@ -613,12 +614,20 @@ fn write_raw(f: &RenderedFrame, out: &dyn Fn(&str) -> PathBuf, semantics: bool) 
 mod tests {
     use super::*;
 
+    /// A camera of `w` x `h` pixels (where it looks does not matter here).
+    fn cam(name: &str, w: u32, h: u32) -> Camera {
+        let (eye, up) = (glam::DVec3::new(0.0, 0.0, -1.0), glam::DVec3::Y);
+        Camera::look_at(name, eye, glam::DVec3::ZERO, up, w, h, 60.0)
+    }
+
     /// A stem that names several rig cameras is said to be ambiguous, naming them.
     #[test]
     fn a_stem_shared_by_rig_cameras_names_them() {
-        let (eye, up) = (glam::DVec3::new(0.0, 0.0, -1.0), glam::DVec3::Y);
-        let cam = |name| Camera::look_at(name, eye, glam::DVec3::ZERO, up, 8, 8, 60.0);
-        let cams = vec![cam("cam0/00003"), cam("cam1/00003"), cam("00004")];
+        let cams = vec![
+            cam("cam0/00003", 8, 8),
+            cam("cam1/00003", 8, 8),
+            cam("00004", 8, 8),
+        ];
         let e = select_views(cams.clone(), &["00003".into()])
             .unwrap_err()
             .to_string();
@@ -635,8 +644,6 @@ mod tests {
     #[test]
     fn raw_bytes_are_the_arrays_sizes() {
         let tmp = tempfile::tempdir().unwrap();
-        let (eye, up) = (glam::DVec3::new(0.0, 0.0, -1.0), glam::DVec3::Y);
-        let cam = |name, w, h| Camera::look_at(name, eye, glam::DVec3::ZERO, up, w, h, 60.0);
         let cams = [cam("a", 7, 5), cam("b", 16, 9)];
         for channels in [None, Some(3)] {
             let mut written = 0;
@@ -687,8 +694,7 @@ mod tests {
 
         // The first view's image written, its label map not yet: the image is listed, so a
         // rerun replaces it.
-        let (eye, up) = (glam::DVec3::new(0.0, 0.0, -1.0), glam::DVec3::Y);
-        let cam = Camera::look_at("w", eye, glam::DVec3::ZERO, up, 8, 8, 60.0);
+        let cam = cam("w", 8, 8);
         let mut rendered = RenderedFiles::of(&new).unwrap();
         rendered.start().unwrap();
         std::fs::write(new.join("w.png"), b"").unwrap();

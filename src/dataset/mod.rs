@@ -51,14 +51,11 @@ impl Dataset {
     /// table when there is one) and reads every map once to find the classes present.
     pub fn open(paths: &DatasetPaths) -> Result<Dataset> {
         let mut cameras = load_cameras(paths.cameras)?;
-        let held_out: Vec<String> = match paths.train_only {
-            true => (cameras.iter())
-                .filter(|c| c.split != Split::Train)
-                .map(|c| c.name.clone())
-                .collect(),
-            false => Vec::new(),
-        };
+        // --train-only's test cameras: their maps are held out, not maps of no camera.
+        let mut held_out = Vec::new();
         if paths.train_only {
+            let test = cameras.iter().filter(|c| c.split != Split::Train);
+            held_out = test.map(|c| c.name.clone()).collect();
             keep_train_cameras(&mut cameras, paths.cameras)?;
         }
         let table_path = paths

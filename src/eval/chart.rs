@@ -162,7 +162,7 @@ pub fn speed_vs_accuracy(
                 (chart.draw_series(std::iter::once(PathElement::new(leader, color))))
                     .map_err(plot_err)?;
             }
-            let font = ("sans-serif", 16).into_font().color(&color.mix(1.0));
+            let font = ("sans-serif", 16).into_font().color(&color);
             chart
                 .draw_series(std::iter::once(Text::new(
                     p.label.to_string(),

@@ -170,25 +170,30 @@ pub(crate) fn temp_files() -> MutexGuard<'static, Vec<PathBuf>> {
     TEMP_FILES.lock().unwrap_or_else(|p| p.into_inner())
 }
 
-/// Removes every temp file in flight (before an exit that skips their owners' cleanup).
-pub fn remove_temp_files() {
-    for tmp in temp_files().drain(..) {
+/// Removes every temp file in flight and exits with `code` (an exit that skips their
+/// owners' cleanup), after saying `error`.
+pub fn exit_removing_temp_files(error: &str, code: u8) -> ! {
+    remove_and_exit(temp_files(), error, code)
+}
+
+/// Exits holding the registry's lock (`temps`): no writer can create or rename a file
+/// after its temp files are removed.
+fn remove_and_exit(mut temps: MutexGuard<'static, Vec<PathBuf>>, error: &str, code: u8) -> ! {
+    for tmp in temps.drain(..) {
         let _ = std::fs::remove_file(tmp);
     }
+    eprintln!("error: {error}");
+    std::process::exit(i32::from(code));
 }
 
 /// Runs on the signals thread, not in signal context, so locking and file removal are safe.
 fn on_signal() {
-    let mut temps = temp_files();
+    let temps = temp_files();
     let again = INTERRUPTED.swap(true, Ordering::SeqCst);
     if again || !COOPERATIVE.load(Ordering::SeqCst) {
-        for tmp in temps.drain(..) {
-            let _ = std::fs::remove_file(tmp);
-        }
-        eprintln!("error: {Interrupted}");
-        // Exits holding the lock: no writer can create or rename a file after this point.
-        std::process::exit(i32::from(exit_code()));
+        remove_and_exit(temps, &Interrupted.to_string(), exit_code());
     }
+    drop(temps);
     let again = match FIRST_SIGNAL.load(Ordering::SeqCst) {
         2 | 0 => "press Ctrl-C again", // SIGINT (2), or none known
         _ => "send the signal again, or press Ctrl-C,",
