@@ -159,6 +159,61 @@ fn semantics_only_keeps_the_geometry() {
     assert_eq!(g.opacity_logits, scene.opacity_logits);
 }
 
+/// `--semantics-only` without `--images`: the logits learn from the label maps alone, so
+/// they come out bit for bit as with the images (deterministic accumulation; the photometric
+/// loss reaches no logit), and the log's photometric values are null, not zeros.
+#[test]
+fn semantics_only_trains_without_images() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path().join("room");
+    synth_tiny(&d, 4, (48, 36));
+    let d = d.to_str().unwrap();
+    let train = |out: &str, images: bool| {
+        let out = tmp.path().join(out);
+        let report = out.with_extension("json");
+        let mut args = train_args(d, out.to_str().unwrap());
+        args[8] = format!("{d}/scene.ply");
+        if !images {
+            args.drain(1..3);
+        }
+        args.extend(["--iters", "12", "--semantics-only", "--deterministic"].map(String::from));
+        args.extend(["--report".into(), report.to_str().unwrap().into()]);
+        let r = run(&args);
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+        let rep: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+        (
+            read_ply(&out).unwrap(),
+            rep["log"].as_array().unwrap().clone(),
+        )
+    };
+    let (with, with_log) = train("with.ply", true);
+    let (without, without_log) = train("without.ply", false);
+    let logits = |g: &Gaussians| g.semantics.as_ref().unwrap().logits.clone();
+    assert_eq!(logits(&with), logits(&without));
+    assert_eq!(with.class_ids, without.class_ids);
+    let last = |log: &[serde_json::Value]| log.last().unwrap().clone();
+    assert!(last(&with_log)["psnr"].as_f64().unwrap() > 5.0);
+    for key in ["l1", "ssim", "psnr"] {
+        assert!(
+            last(&without_log)[key].is_null(),
+            "{key}: {}",
+            last(&without_log)[key]
+        );
+    }
+    assert_eq!(last(&with_log)["ce"], last(&without_log)["ce"]);
+    assert!(last(&without_log)["ce"].as_f64().unwrap() > 0.0);
+
+    // Training the geometry and colours needs the images.
+    let mut args = train_args(d, tmp.path().join("never.ply").to_str().unwrap());
+    args.drain(1..3);
+    let r = run(&args);
+    assert!(!r.status.success());
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(err.contains("--images"), "{err}");
+    assert!(!tmp.path().join("never.ply").exists());
+}
+
 #[test]
 fn bad_input_gives_a_clear_error_and_no_output() {
     let tmp = tempfile::tempdir().unwrap();

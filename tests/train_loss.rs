@@ -465,6 +465,57 @@ fn gpu_ce(
     (loss.read_values().unwrap(), gpu.read(&v_sem_norm).unwrap())
 }
 
+/// [`gpu_ce`] through [`ImageLoss::semantic`]'s `record_semantic`: no target image.
+fn gpu_ce_alone(sem: &[f32], labels: &[u32], w: u32, h: u32, c: u32) -> (LossValues, Vec<f32>) {
+    let gpu = gpu();
+    let loss = ImageLoss::semantic(gpu, w, h, c).unwrap();
+    let sem_norm = gpu.buffer_from("sem_norm", sem).unwrap();
+    let labels = gpu.buffer_from("labels", labels).unwrap();
+    let v_sem_norm = zeros(gpu, "v_sem_norm", sem.len());
+    let mut rec = Recorder::new(gpu).unwrap();
+    let term = SemanticTerm {
+        sem_norm: &sem_norm,
+        labels: &labels,
+        mode: SemanticMode::RawLogits,
+        lambda: 0.7,
+        v_sem_norm: &v_sem_norm,
+    };
+    loss.record_semantic(&mut rec, &term).unwrap();
+    rec.submit_and_wait().unwrap();
+    (loss.read_values().unwrap(), gpu.read(&v_sem_norm).unwrap())
+}
+
+/// The semantic term recorded alone (`train --semantics-only` without images) gives the
+/// cross-entropy and its gradient of the full record, bit for bit, and zeros for the
+/// photometric values it leaves out; a photometric record on its scratch is refused.
+#[test]
+fn the_semantic_term_alone_matches_the_full_record() {
+    let (w, h, c) = (29u32, 19u32, 5u32);
+    let (sem, labels) = semantic_case(
+        w as usize,
+        h as usize,
+        c as usize,
+        SemanticMode::RawLogits,
+        3,
+    );
+    let (full, full_grad) = gpu_ce(&sem, &labels, w, h, c, SemanticMode::RawLogits, 0.7);
+    let (alone, alone_grad) = gpu_ce_alone(&sem, &labels, w, h, c);
+    assert_eq!(alone.ce.to_bits(), full.ce.to_bits());
+    assert_eq!(alone.labeled_pixels, full.labeled_pixels);
+    assert_eq!(alone_grad, full_grad);
+    assert_eq!((alone.l1, alone.ssim, alone.mse), (0.0, 0.0, 0.0));
+    // The full record's all-zero render against itself: a perfect SSIM, not the 0 above.
+    assert!(full.ssim > 0.99, "{}", full.ssim);
+
+    let gpu = gpu();
+    let loss = ImageLoss::semantic(gpu, w, h, c).unwrap();
+    let rgb = zeros(gpu, "rgb", (w * h * 3) as usize);
+    let mut rec = Recorder::new(gpu).unwrap();
+    let err = loss.record(&mut rec, &rgb, &rgb, &rgb, None).unwrap_err();
+    assert!(err.to_string().contains("semantic term alone"), "{err}");
+    assert!(ImageLoss::semantic(gpu, w, h, 0).is_err());
+}
+
 fn check_ce(mode: SemanticMode, seed: u64) {
     let (w, h, c) = (29, 19, 7);
     let (sem, labels) = semantic_case(w, h, c, mode, seed);

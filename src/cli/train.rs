@@ -36,8 +36,11 @@ use semsplat::util::{
 pub struct TrainArgs {
     /// Folder of RGB images (PNG or JPEG, the extension in any case) named like the cameras
     /// (<image name>.png); an image with alpha is composited over black, 3DGS's default.
-    #[arg(long)]
-    images: PathBuf,
+    /// Optional with --semantics-only, whose frozen colours learn nothing from them: given,
+    /// the log's L1, SSIM and PSNR compare the scene's renders with them (a check of the
+    /// cameras); left out, those read null and no image is read.
+    #[arg(long, required_unless_present = "semantics_only")]
+    images: Option<PathBuf>,
     /// Folder of label PNGs (gray or palette class ids, or colour-coded through the class
     /// table; see --ignore-id and docs/label-maps.md) named like the cameras. Views without
     /// a label map train appearance only.
@@ -157,13 +160,33 @@ fn logit_init(args: &TrainArgs) -> LogitInit {
 struct LogLine {
     iteration: u32,
     gaussians: u32,
-    l1: f32,
-    ssim: f32,
-    psnr: f32,
+    /// The photometric values: None (null) without --images.
+    l1: Option<f32>,
+    ssim: Option<f32>,
+    psnr: Option<f32>,
     /// None (null) on a view without labels: it has no cross-entropy, and a 0 would read
     /// as a perfect one.
     ce: Option<f32>,
     entropy: f32,
+}
+
+impl LogLine {
+    /// The progress bar's message: "-" for a value the line lacks.
+    fn summary(&self) -> String {
+        let shown =
+            |v: Option<f32>, digits: usize| v.map_or("-".into(), |v| format!("{v:.digits$}"));
+        let ce = shown(self.ce, 3);
+        let h = self.entropy;
+        match self.l1 {
+            Some(l1) => format!(
+                "L1 {l1:.4} SSIM {} CE {ce} H {h:.3} PSNR {} dB, {} Gaussians",
+                shown(self.ssim, 3),
+                shown(self.psnr, 2),
+                self.gaussians
+            ),
+            None => format!("CE {ce} H {h:.3}, {} Gaussians", self.gaussians),
+        }
+    }
 }
 
 #[derive(Serialize)]
@@ -351,7 +374,7 @@ fn load_dataset(args: &TrainArgs) -> Result<Dataset> {
 /// --semantics-only the cameras with a label map alone), decoded on every core (hundreds of
 /// 1080p images and maps take seconds on one); an error is the first failing view's.
 fn train_views(args: &TrainArgs, data: &Dataset) -> Result<Vec<TrainView>> {
-    let images = ImageDir::new(&args.images);
+    let images = args.images.as_deref().map(ImageDir::new);
     let trained: Vec<usize> = (0..data.cameras.len())
         .filter(|&i| !args.semantics_only || data.has_label_map(i))
         .collect();
@@ -360,7 +383,10 @@ fn train_views(args: &TrainArgs, data: &Dataset) -> Result<Vec<TrainView>> {
         let camera = &data.cameras[i];
         Ok(TrainView {
             camera: camera.clone(),
-            rgb: images.load(camera)?,
+            rgb: match &images {
+                Some(images) => images.load(camera)?,
+                None => Vec::new(),
+            },
             labels: data.compact_labels(i)?.unwrap_or_default(),
         })
     };
@@ -426,20 +452,17 @@ fn train_loop(args: &TrainArgs, data: &Dataset, trainer: &mut Trainer) -> Result
     for _ in 0..args.iters {
         interrupt::check()?;
         if let Some(l) = trainer.step()? {
+            let photometric = args.images.is_some();
             let line = LogLine {
                 iteration: trainer.iteration(),
                 gaussians: trainer.gaussian_count(),
-                l1: l.l1,
-                ssim: l.ssim,
-                psnr: l.psnr(),
+                l1: photometric.then_some(l.l1),
+                ssim: photometric.then_some(l.ssim),
+                psnr: photometric.then_some(l.psnr()),
                 ce: (l.labeled_pixels > 0).then_some(l.ce),
                 entropy: l.entropy,
             };
-            let ce = line.ce.map_or("-".to_string(), |ce| format!("{ce:.3}"));
-            bar.set_message(format!(
-                "L1 {:.4} SSIM {:.3} CE {ce} H {:.3} PSNR {:.2} dB, {} Gaussians",
-                line.l1, line.ssim, line.entropy, line.psnr, line.gaussians
-            ));
+            bar.set_message(line.summary());
             log.push(line);
         }
         bar.inc(1);
@@ -516,7 +539,7 @@ fn check_paths(args: &TrainArgs) -> Result<()> {
         ],
         &[],
         &[
-            Input::Tree("--images", Some(&args.images)),
+            Input::Tree("--images", args.images.as_deref()),
             Input::Labels("--labels", Some(&args.labels)),
             Input::Cameras("--cameras", args.cameras.as_deref()),
             Input::Scene("--init", Some(&args.init)),

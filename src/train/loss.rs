@@ -84,11 +84,31 @@ pub struct ImageLoss {
     pub(crate) stride: u32,
     /// [SLOTS] the means (loss_values.rs: SLOT_*).
     pub(crate) values: Buffer,
+    /// Made for the photometric term ([`ImageLoss::new`]); else the semantic term alone
+    /// ([`ImageLoss::semantic`]), without the SSIM's per-pixel planes.
+    photometric: bool,
 }
 
 impl ImageLoss {
     /// Scratch for W x H views with `channels` semantic classes (0: RGB only).
     pub fn new(gpu: &Gpu, width: u32, height: u32, channels: u32) -> Result<ImageLoss> {
+        Self::with_terms(gpu, width, height, channels, true)
+    }
+
+    /// Scratch for [`ImageLoss::record_semantic`] alone: without the SSIM's planes (60
+    /// bytes a pixel), which a run that never reads a target image would not use.
+    pub fn semantic(gpu: &Gpu, width: u32, height: u32, channels: u32) -> Result<ImageLoss> {
+        ensure!(channels > 0, "a semantic loss needs at least one class");
+        Self::with_terms(gpu, width, height, channels, false)
+    }
+
+    fn with_terms(
+        gpu: &Gpu,
+        width: u32,
+        height: u32,
+        channels: u32,
+        photometric: bool,
+    ) -> Result<ImageLoss> {
         ensure!(
             width > 0 && height > 0,
             "loss image must not be empty ({width}x{height})"
@@ -102,7 +122,10 @@ impl ImageLoss {
             "loss image {width}x{height} is too large for one dispatch"
         );
         // The kernels reach the per-pixel arrays by address: one allocation bounds them.
-        let moment_bytes = MOMENT_PLANES * pixels * 3 * 4;
+        let planes_bytes = |planes: u64| match photometric {
+            true => planes * pixels * 3 * 4,
+            false => 4,
+        };
         // loss_cross_entropy runs three loops over the channels per pixel.
         ensure!(
             3 * channels as u64 + 3 <= LOOP_BUDGET,
@@ -112,8 +135,8 @@ impl ImageLoss {
         let stride = tiles
             .max(pixel_groups as u32)
             .max(super::loss_entropy::ENTROPY_GROUPS);
-        let moments = gpu.buffer("loss-moments", moment_bytes)?;
-        let moment_grads = gpu.buffer("loss-moment-grads", GRAD_PLANES * pixels * 3 * 4)?;
+        let moments = gpu.buffer("loss-moments", planes_bytes(MOMENT_PLANES))?;
+        let moment_grads = gpu.buffer("loss-moment-grads", planes_bytes(GRAD_PLANES))?;
         let partials = gpu.buffer("loss-partials", SLOTS as u64 * stride as u64 * 4)?;
         let count_partials = gpu.buffer(
             "loss-count-partials",
@@ -132,6 +155,7 @@ impl ImageLoss {
             count_partials,
             stride,
             values,
+            photometric,
         })
     }
 
@@ -166,21 +190,42 @@ impl ImageLoss {
         v_rgb: &Buffer,
         semantics: Option<&SemanticTerm<'_>>,
     ) -> Result<()> {
+        ensure!(
+            self.photometric,
+            "this ImageLoss was made for the semantic term alone (ImageLoss::semantic)"
+        );
         self.check_rgb(rgb, target, v_rgb)?;
+        let images = RgbImages { rgb, target, v_rgb };
+        self.record_terms(rec, Some(&images), semantics)
+    }
+
+    /// Records the semantic term alone, as [`ImageLoss::record`] does beside the
+    /// photometric one, for views without a target image (`train --semantics-only`, whose
+    /// frozen colours the photometric loss could not change). The L1, SSIM and MSE values
+    /// read 0; nothing writes a `v_rgb`.
+    pub fn record_semantic(&self, rec: &mut Recorder, semantics: &SemanticTerm<'_>) -> Result<()> {
+        self.record_terms(rec, None, Some(semantics))
+    }
+
+    /// Four phases between barriers, each pairing an SSIM kernel (with `images`) with the
+    /// semantic or reduction work that does not depend on it.
+    fn record_terms(
+        &self,
+        rec: &mut Recorder,
+        images: Option<&RgbImages<'_>>,
+        semantics: Option<&SemanticTerm<'_>>,
+    ) -> Result<()> {
         if let Some(s) = semantics {
             self.check_semantics(s)?;
         }
-        let images = RgbImages { rgb, target, v_rgb };
-        // Four phases between barriers, each pairing an SSIM kernel with the semantic or
-        // reduction work that does not depend on it.
         rec.barrier();
-        self.record_count_and_blur(rec, &images, semantics)?;
+        self.record_count_and_blur(rec, images, semantics)?;
         rec.barrier();
-        self.record_ssim_forward(rec, &images, semantics)?;
+        self.record_ssim_forward(rec, images, semantics)?;
         rec.barrier();
-        self.record_ce_and_blur_grads(rec, semantics)?;
+        self.record_ce_and_blur_grads(rec, images.is_some(), semantics)?;
         rec.barrier();
-        self.record_rgb_backward_and_sums(rec, &images, semantics)?;
+        self.record_rgb_backward_and_sums(rec, images, semantics)?;
         rec.barrier();
         Ok(())
     }
@@ -219,7 +264,7 @@ impl ImageLoss {
     fn record_count_and_blur(
         &self,
         rec: &mut Recorder,
-        images: &RgbImages<'_>,
+        images: Option<&RgbImages<'_>>,
         semantics: Option<&SemanticTerm<'_>>,
     ) -> Result<()> {
         match semantics {
@@ -237,6 +282,13 @@ impl ImageLoss {
             // The count and the CE are adjacent slots.
             None => rec.fill(&self.values, SLOT_LABELED as u64 * 4, 8, 0),
         }
+        // L1, SSIM and SE are adjacent slots.
+        const _: () = assert!(SLOT_SE == SLOT_L1 + 2);
+        let Some(images) = images else {
+            // Here, a phase before the reductions that write the other slots.
+            rec.fill(&self.values, SLOT_L1 as u64 * 4, 3 * 4, 0);
+            return Ok(());
+        };
         rec.dispatch(
             ids::TRAIN_SSIM_BLUR_INPUTS,
             &[],
@@ -257,7 +309,7 @@ impl ImageLoss {
     fn record_ssim_forward(
         &self,
         rec: &mut Recorder,
-        images: &RgbImages<'_>,
+        images: Option<&RgbImages<'_>>,
         semantics: Option<&SemanticTerm<'_>>,
     ) -> Result<()> {
         if semantics.is_some() {
@@ -269,6 +321,9 @@ impl ImageLoss {
                 self.pixel_groups(),
             )?;
         }
+        let Some(images) = images else {
+            return Ok(());
+        };
         let count = self.rgb_count();
         rec.dispatch(
             ids::TRAIN_SSIM_FORWARD,
@@ -294,6 +349,7 @@ impl ImageLoss {
     fn record_ce_and_blur_grads(
         &self,
         rec: &mut Recorder,
+        photometric: bool,
         semantics: Option<&SemanticTerm<'_>>,
     ) -> Result<()> {
         if let Some(s) = semantics {
@@ -316,6 +372,9 @@ impl ImageLoss {
                 [self.pixel_groups(), 1, 1],
             )?;
         }
+        if !photometric {
+            return Ok(());
+        }
         rec.dispatch(
             ids::TRAIN_SSIM_BLUR_GRADS,
             &[],
@@ -335,9 +394,15 @@ impl ImageLoss {
     fn record_rgb_backward_and_sums(
         &self,
         rec: &mut Recorder,
-        images: &RgbImages<'_>,
+        images: Option<&RgbImages<'_>>,
         semantics: Option<&SemanticTerm<'_>>,
     ) -> Result<()> {
+        if semantics.is_some() {
+            self.record_reduce(rec, SLOT_CE, 1, self.pixel_groups())?;
+        }
+        let Some(images) = images else {
+            return Ok(());
+        };
         rec.dispatch(
             ids::TRAIN_SSIM_BACKWARD,
             &[],
@@ -352,14 +417,8 @@ impl ImageLoss {
             },
             self.tiles(),
         )?;
-        // L1, SSIM and SE are adjacent slots.
-        const _: () = assert!(SLOT_SE == SLOT_L1 + 2);
         let tiles = self.tiles();
-        self.record_reduce(rec, SLOT_L1, 3, tiles[0] * tiles[1])?;
-        if semantics.is_some() {
-            self.record_reduce(rec, SLOT_CE, 1, self.pixel_groups())?;
-        }
-        Ok(())
+        self.record_reduce(rec, SLOT_L1, 3, tiles[0] * tiles[1])
     }
 
     fn check_semantics(&self, s: &SemanticTerm<'_>) -> Result<()> {

@@ -112,6 +112,25 @@ pub fn scene_extent(cams: &[Camera]) -> f64 {
     1.1 * radius.max(1e-3)
 }
 
+/// Whether the views have target images: every one (true), or, with `semantics_only`,
+/// none (false); a mix is refused.
+fn check_target_images(views: &[TrainView], semantics_only: bool) -> Result<bool> {
+    let without = views.iter().filter(|v| v.rgb.is_empty()).count();
+    match without {
+        0 => Ok(true),
+        n if n == views.len() && semantics_only => Ok(false),
+        n if n == views.len() => bail!(
+            "the views have no target images: training geometry and colours needs them \
+             (--semantics-only alone trains without)"
+        ),
+        n => bail!(
+            "{n} of {} views have no target image: give every view one, or none \
+             (--semantics-only)",
+            views.len()
+        ),
+    }
+}
+
 impl Trainer {
     /// Prepares a run: `init` must carry semantic logits with `channels` classes (see
     /// [`with_initial_logits`]); `riders` are per-Gaussian values carried unchanged through
@@ -134,6 +153,7 @@ impl Trainer {
         for r in riders {
             ensure!(r.len() == init.len(), "a rider has the wrong length");
         }
+        let photometric = check_target_images(views, cfg.semantics_only)?;
         let scene = GpuScene::upload(gpu, init)?;
         let accumulation = Accumulation::choose(gpu, cfg.deterministic);
         let mut grads = SceneGrads::new(gpu, &scene, accumulation)?;
@@ -167,7 +187,9 @@ impl Trainer {
             rasterizer: Rasterizer::new(gpu),
             losses: HashMap::new(),
             views: device_views,
-            v_rgb: gpu.buffer("v_rgb", max_pixels * 12)?,
+            // The semantic-only backward reads no v_rgb: without target images it stays a
+            // placeholder.
+            v_rgb: gpu.buffer("v_rgb", if photometric { max_pixels * 12 } else { 4 })?,
             v_alpha,
             v_sem_norm: gpu.buffer("v_sem_norm", max_pixels * channels.max(1) as u64 * 4)?,
             densifier: Densifier::new(gpu),
@@ -272,7 +294,11 @@ impl Trainer {
     fn prepare_view(&mut self, cam: &Camera) -> Result<(u32, u32)> {
         let key = (cam.width, cam.height);
         if !self.losses.contains_key(&key) {
-            let loss = ImageLoss::new(&self.gpu, cam.width, cam.height, self.scene.channels)?;
+            let (w, h, channels) = (cam.width, cam.height, self.scene.channels);
+            let loss = match self.views[0].rgb {
+                Some(_) => ImageLoss::new(&self.gpu, w, h, channels)?,
+                None => ImageLoss::semantic(&self.gpu, w, h, channels)?,
+            };
             self.losses.insert(key, loss);
         }
         let windows = self.rasterizer.windows_for(self.scene.n);
@@ -318,8 +344,13 @@ impl Trainer {
                     lambda: lambda_sem,
                     v_sem_norm,
                 };
-                let semantics = (channels > 0).then_some(&term);
-                loss.record(rec, tiles.rgb(), &view.rgb, v_rgb, semantics)?;
+                match &view.rgb {
+                    Some(target) => {
+                        let semantics = (channels > 0).then_some(&term);
+                        loss.record(rec, tiles.rgb(), target, v_rgb, semantics)?
+                    }
+                    None => loss.record_semantic(rec, &term)?,
+                }
                 marks[1] = rec.mark();
                 let upstream = PixelGrads {
                     rgb: v_rgb,

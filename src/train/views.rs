@@ -12,7 +12,8 @@ use crate::scene::Camera;
 #[derive(Clone, Debug)]
 pub struct TrainView {
     pub camera: Camera,
-    /// [H, W, 3] in [0, 1].
+    /// [H, W, 3] in [0, 1]; empty without a target image (`--semantics-only` alone trains
+    /// without one: the frozen colours would learn nothing from it).
     pub rgb: Vec<f32>,
     /// [H, W] compact class per pixel, [`IGNORE_LABEL`] where there is none; empty when the
     /// view has no label map (it then trains appearance only).
@@ -22,7 +23,8 @@ pub struct TrainView {
 /// One view on the device.
 pub(crate) struct DeviceView {
     pub camera: Camera,
-    pub rgb: Buffer,
+    /// None without a target image.
+    pub rgb: Option<Buffer>,
     pub labels: Buffer,
     /// The view has a label map (else it trains appearance only).
     pub labeled: bool,
@@ -33,7 +35,7 @@ impl TrainView {
         let c = &self.camera;
         let pixels = c.width as usize * c.height as usize;
         ensure!(
-            self.rgb.len() == pixels * 3,
+            self.rgb.is_empty() || self.rgb.len() == pixels * 3,
             "view {}: the image has {} values, {}x{}x3 expected",
             c.name,
             self.rgb.len(),
@@ -65,7 +67,10 @@ impl TrainView {
         };
         Ok(DeviceView {
             camera: c.clone(),
-            rgb: gpu.buffer_from("target_rgb", &self.rgb)?,
+            rgb: match self.rgb.is_empty() {
+                true => None,
+                false => Some(gpu.buffer_from("target_rgb", &self.rgb)?),
+            },
             labels: gpu.buffer_from("target_labels", &labels)?,
             labeled: !self.labels.is_empty(),
         })
