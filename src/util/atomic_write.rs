@@ -165,13 +165,21 @@ impl OutputBatch {
         OutputBatch(())
     }
 
-    /// Renames every output the batch holds onto its target, in order.
+    /// Renames every output the batch holds onto its target, in order, holding the temp
+    /// files' registry throughout: a signal arriving mid-way waits for the last rename (a
+    /// few milliseconds for a thousand files), so the batch lands whole, or, interrupted
+    /// before, not at all. A rename that fails leaves those before it in place.
     pub fn commit(self) -> Result<()> {
-        let staged = take_batch();
+        let mut staged = take_batch();
         std::mem::forget(self);
-        staged
-            .into_iter()
-            .try_for_each(StagedFile::rename_into_place)
+        let mut temps = interrupt::temp_files();
+        let outcome = match (interrupt::is_interrupted(), staged.first()) {
+            (true, Some(first)) => Err(first.interrupted()),
+            _ => (staged.iter_mut()).try_for_each(|file| file.rename_holding(&mut temps)),
+        };
+        // Before `staged` drops: each file left removes its temp file under the lock.
+        drop(temps);
+        outcome
     }
 }
 
@@ -229,17 +237,25 @@ impl StagedFile {
     }
 
     fn rename_into_place(mut self) -> Result<()> {
-        {
-            let mut temps = interrupt::temp_files();
-            if !interrupt::is_interrupted() {
-                fs::rename(&self.tmp, &self.target)
-                    .with_context(|| format!("renaming into {}", self.target.display()))?;
-                temps.retain(|t| t != &self.tmp);
-                self.committed = true;
-                return Ok(());
-            }
+        let mut temps = interrupt::temp_files();
+        if interrupt::is_interrupted() {
+            return Err(self.interrupted());
         }
-        Err(interrupt::Interrupted).with_context(|| format!("writing {}", self.target.display()))
+        self.rename_holding(&mut temps)
+    }
+
+    /// The rename, with the temp files' registry (`temps`) locked by the caller.
+    fn rename_holding(&mut self, temps: &mut Vec<PathBuf>) -> Result<()> {
+        fs::rename(&self.tmp, &self.target)
+            .with_context(|| format!("renaming into {}", self.target.display()))?;
+        temps.retain(|t| t != &self.tmp);
+        self.committed = true;
+        Ok(())
+    }
+
+    fn interrupted(&self) -> anyhow::Error {
+        anyhow::Error::from(interrupt::Interrupted)
+            .context(format!("writing {}", self.target.display()))
     }
 }
 
@@ -555,6 +571,32 @@ mod tests {
             b"alone",
             "no batch open: at once"
         );
+    }
+
+    /// A rename that fails mid-commit (its target became a folder meanwhile) errors naming
+    /// it, keeps the outputs renamed before it, and removes the temp files after it (under
+    /// the registry's lock the commit held: no deadlock).
+    #[test]
+    fn a_failed_rename_mid_commit_removes_the_rest() {
+        let tmp = tempfile::tempdir().unwrap();
+        let [first, blocked, last] = ["a.npy", "b.ply", "c.json"].map(|n| tmp.path().join(n));
+        let batch = OutputBatch::open();
+        for path in [&first, &blocked, &last] {
+            write_bytes_atomic(path, b"new").unwrap();
+        }
+        std::fs::create_dir(&blocked).unwrap();
+        std::fs::write(blocked.join("inside"), "x").unwrap();
+        let err = format!("{:#}", batch.commit().unwrap_err());
+        assert!(err.contains("b.ply"), "{err}");
+        assert_eq!(std::fs::read(&first).unwrap(), b"new");
+        assert!(!last.exists());
+        let mut names: Vec<String> = (std::fs::read_dir(tmp.path()).unwrap())
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        assert_eq!(names, ["a.npy", "b.ply"], "no temp file left");
+        let registered = crate::util::interrupt::temp_files();
+        assert!(!registered.iter().any(|t| t.starts_with(tmp.path())));
     }
 
     #[test]
