@@ -220,26 +220,32 @@ fn main() -> Result<()> {
             println!("  {clustering:?}\n  {decision:?}");
         }
         if args.model_threads {
-            for (step, model) in [("clustering", cluster_model), ("decision", decide_model)] {
-                let modeled = THREADS.iter().zip(model.modeled_s);
-                let each = modeled.map(|(t, s)| format!("{t}: {s:.3}"));
-                println!(
-                    "  {step} modeled (threads: s) {}; {} parallel calls, {:.3} s of it",
-                    each.collect::<Vec<_>>().join(", "),
-                    model.calls,
-                    model.calls_s
-                );
-                for place in &model.by_place {
-                    let [one, _, _, eight, sixteen, _] = place.scheduled_s;
-                    println!(
-                        "    {} ({} calls): {:.4} s measured; modeled 1: {one:.4}, 8: {eight:.4}, 16: {sixteen:.4}; longest item {:.4}",
-                        place.place, place.calls, place.calls_s, place.longest_item_s
-                    );
-                }
-            }
+            print_models(cluster_model, decide_model);
         }
     }
     Ok(())
+}
+
+/// The clustering's and the decision's times modeled on 1 to 32 threads (`--model-threads`),
+/// and per place in the source that makes parallel calls its time and longest item.
+fn print_models(cluster_model: Scaling, decide_model: Scaling) {
+    for (step, model) in [("clustering", cluster_model), ("decision", decide_model)] {
+        let modeled = THREADS.iter().zip(model.modeled_s);
+        let each = modeled.map(|(t, s)| format!("{t}: {s:.3}"));
+        println!(
+            "  {step} modeled (threads: s) {}; {} parallel calls, {:.3} s of it",
+            each.collect::<Vec<_>>().join(", "),
+            model.calls,
+            model.calls_s
+        );
+        for place in &model.by_place {
+            let [one, _, _, eight, sixteen, _] = place.scheduled_s;
+            println!(
+                "    {} ({} calls): {:.4} s measured; modeled 1: {one:.4}, 8: {eight:.4}, 16: {sixteen:.4}; longest item {:.4}",
+                place.place, place.calls, place.calls_s, place.longest_item_s
+            );
+        }
+    }
 }
 
 /// `work`'s output and wall time; with `model`, every parallel item timed too

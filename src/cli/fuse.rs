@@ -459,6 +459,31 @@ pub fn run(mut args: FuseArgs) -> Result<()> {
     )
 }
 
+/// Writes the evidence (--save-contrib, with its class table) and membership
+/// (--save-membership) matrices; returns each Gaussian's evidence over every class where
+/// one-vs-rest needs it (--save-membership, --extract, --remove), else nothing.
+fn write_matrices(
+    args: &OutputArgs,
+    rows: &mut Option<Box<dyn EvidenceRows>>,
+    table: &ClassTable,
+) -> Result<Vec<f64>> {
+    if let Some(path) = &args.save_contrib {
+        kept(rows)?.save_npy(path)?;
+        write_class_table(&contrib_sidecar(path), table)?;
+    }
+    // One read of the rows for the totals, once.
+    let one_vs_rest = args.save_membership.is_some() || selecting(args);
+    let totals = match one_vs_rest {
+        true => class_totals(kept(rows)?)?,
+        false => Vec::new(),
+    };
+    if let Some(path) = &args.save_membership {
+        let gamma = args.gamma.unwrap_or(DEFAULT_GAMMA);
+        save_membership(path, kept(rows)?, &totals, gamma)?;
+    }
+    Ok(totals)
+}
+
 /// Assigns every Gaussian from the evidence and writes every output `args` asks for: the
 /// labelled PLY and its class table, the palette PLY, --extract/--remove, the evidence and
 /// membership matrices, label renders and the report. `fuse` and `merge` both end here.
@@ -493,25 +518,7 @@ pub(super) fn write_fused(
     // Every file from here lands with the others or none does (a failed PLY left the
     // membership matrix written before it beside the last run's PLY).
     let batch = OutputBatch::open();
-    if let Some(path) = &args.save_contrib {
-        kept(&mut rows)?.save_npy(path)?;
-        write_class_table(&contrib_sidecar(path), &table)?;
-    }
-    // One-vs-rest (--save-membership, --extract, --remove) divides by each Gaussian's
-    // evidence over every class: one more read of the rows, once.
-    let one_vs_rest = args.save_membership.is_some() || selecting(args);
-    let totals = match one_vs_rest {
-        true => class_totals(kept(&mut rows)?)?,
-        false => Vec::new(),
-    };
-    if let Some(path) = &args.save_membership {
-        save_membership(
-            path,
-            kept(&mut rows)?,
-            &totals,
-            args.gamma.unwrap_or(DEFAULT_GAMMA),
-        )?;
-    }
+    let totals = write_matrices(args, &mut rows, &table)?;
     // The report's assign_s is the assignment's and selection's: not the views' render.
     let render_start = Instant::now();
     if let (Some(dir), Some(views)) = (&args.render_views, label_views) {

@@ -238,6 +238,59 @@ struct LabelInputs<'a> {
     format: LabelFormat,
 }
 
+/// A folder: a COLMAP model, a scene folder or INRIA run (its scene), or label maps.
+fn inspect_folder(path: &Path, labels: &LabelInputs) -> Result<Report> {
+    if find_colmap_model(path).is_ok() {
+        return inspect_cameras(path);
+    }
+    // A scene folder (synth's) or an INRIA run holds label PNGs in subfolders too
+    // (images, labels): its scene is what the folder is.
+    if let Ok(scene) = resolve_scene_path(path) {
+        return inspect_ply(&scene, labels.table);
+    }
+    let pngs = list_label_pngs(path)?;
+    if pngs.is_empty() {
+        let jpegs = jpeg_note(path).map_or(String::new(), |n| format!("; it holds {n}"));
+        bail!(
+            "{} is neither a COLMAP model (cameras/images .bin or .txt, or sparse/0) nor a \
+             folder of PNG label maps{jpegs}",
+            path.display()
+        );
+    }
+    let files: Vec<(String, PathBuf)> = pngs.into_iter().collect();
+    inspect_labels(path, "label folder", &files, labels)
+}
+
+/// A JSON file: cameras or a class table, or a message naming what it is instead.
+fn inspect_json(path: &Path, format: &LabelFormat) -> Result<Report> {
+    match json_kind(path)? {
+        JsonKind::ClassTable => inspect_class_table(path, format),
+        JsonKind::Cameras | JsonKind::Unparsable => inspect_cameras(path),
+        JsonKind::ShardManifest => bail!(
+            "{} is the manifest of a `fuse --shard` part (what the part was fused from), \
+             which `semsplat merge` reads beside its part: {KINDS}",
+            path.display()
+        ),
+        JsonKind::Other(keys) => bail!(
+            "{} is JSON of no kind inspect reads (its top-level keys: {}): neither cameras \
+             (an INRIA list, nerfstudio's \"frames\", semsplat's \"format\": \
+             \"semsplat-cameras\") nor a class table (a list of {{\"id\", \"name\", \
+             \"color\"}}, or {{\"classes\": [...]}}); semsplat's own summaries and reports \
+             (synth.json, room.json, --report and --json outputs) are plain JSON to read \
+             as they are",
+            path.display(),
+            semsplat::scene::labels::list_some(&keys)
+        ),
+        // A JSON of neither kind (a class list of another tool's layout) hears of both.
+        JsonKind::Unknown => inspect_cameras(path).map_err(|e| {
+            anyhow!(
+                "{e:#}; nor is it a class table (a list of {{\"id\", \"name\", \"color\": \
+                 [r, g, b]}}, or {{\"classes\": [...]}})"
+            )
+        }),
+    }
+}
+
 fn inspect_path(path: &Path, labels: &LabelInputs) -> Result<Report> {
     let table = labels.table;
     let ext = path
@@ -246,25 +299,7 @@ fn inspect_path(path: &Path, labels: &LabelInputs) -> Result<Report> {
         .map(str::to_ascii_lowercase)
         .unwrap_or_default();
     if path.is_dir() {
-        if find_colmap_model(path).is_ok() {
-            return inspect_cameras(path);
-        }
-        // A scene folder (synth's) or an INRIA run holds label PNGs in subfolders too
-        // (images, labels): its scene is what the folder is.
-        if let Ok(scene) = resolve_scene_path(path) {
-            return inspect_ply(&scene, table);
-        }
-        let pngs = list_label_pngs(path)?;
-        if pngs.is_empty() {
-            let jpegs = jpeg_note(path).map_or(String::new(), |n| format!("; it holds {n}"));
-            bail!(
-                "{} is neither a COLMAP model (cameras/images .bin or .txt, or sparse/0) nor a \
-                 folder of PNG label maps{jpegs}",
-                path.display()
-            );
-        }
-        let files: Vec<(String, PathBuf)> = pngs.into_iter().collect();
-        return inspect_labels(path, "label folder", &files, labels);
+        return inspect_folder(path, labels);
     }
     match ext.as_str() {
         "ply" | "splat" | "spz" => inspect_ply(path, table),
@@ -276,32 +311,7 @@ fn inspect_path(path: &Path, labels: &LabelInputs) -> Result<Report> {
                 .to_owned();
             inspect_labels(path, "label map", &[(stem, path.to_owned())], labels)
         }
-        "json" => match json_kind(path)? {
-            JsonKind::ClassTable => inspect_class_table(path, &labels.format),
-            JsonKind::Cameras | JsonKind::Unparsable => inspect_cameras(path),
-            JsonKind::ShardManifest => bail!(
-                "{} is the manifest of a `fuse --shard` part (what the part was fused from), \
-                 which `semsplat merge` reads beside its part: {KINDS}",
-                path.display()
-            ),
-            JsonKind::Other(keys) => bail!(
-                "{} is JSON of no kind inspect reads (its top-level keys: {}): neither cameras \
-                 (an INRIA list, nerfstudio's \"frames\", semsplat's \"format\": \
-                 \"semsplat-cameras\") nor a class table (a list of {{\"id\", \"name\", \
-                 \"color\"}}, or {{\"classes\": [...]}}); semsplat's own summaries and reports \
-                 (synth.json, room.json, --report and --json outputs) are plain JSON to read \
-                 as they are",
-                path.display(),
-                semsplat::scene::labels::list_some(&keys)
-            ),
-            // A JSON of neither kind (a class list of another tool's layout) hears of both.
-            JsonKind::Unknown => inspect_cameras(path).map_err(|e| {
-                anyhow!(
-                    "{e:#}; nor is it a class table (a list of {{\"id\", \"name\", \"color\": \
-                     [r, g, b]}}, or {{\"classes\": [...]}})"
-                )
-            }),
-        },
+        "json" => inspect_json(path, &labels.format),
         "txt" | "bin" => inspect_cameras(path),
         "jpg" | "jpeg" => bail!(
             "{} is a JPEG image, which inspect does not read ({JPEG_LABELS})",

@@ -390,7 +390,9 @@ fn check_view_files_distinct(cams: &[Camera]) -> Result<()> {
     Ok(())
 }
 
-pub fn run(args: RenderArgs) -> Result<()> {
+/// The flags and paths that need no file read: --background's values, --out against the
+/// inputs.
+fn check_render_args(args: &RenderArgs) -> Result<()> {
     if args.background.len() != 3 {
         bail!(
             "--background takes three values (red, green, blue in [0, 1]), got {:?}",
@@ -404,7 +406,20 @@ pub fn run(args: RenderArgs) -> Result<()> {
             Input::Scene("--scene", Some(&args.scene)),
             Input::Cameras("--cameras", args.cameras.as_deref()),
         ],
-    )?;
+    )
+}
+
+/// --raw: room on --out's file system for every view's arrays, less the files they replace.
+fn check_raw_room(args: &RenderArgs, g: &Gaussians, cams: &[Camera]) -> Result<()> {
+    let channels = (g.semantics.as_ref())
+        .filter(|_| args.semantics)
+        .map(|s| s.channels);
+    let at_least = raw_bytes(cams, channels).saturating_sub(replaced_bytes(&args.out, cams));
+    check_free_space("--out", &args.out, at_least, "--raw's arrays")
+}
+
+pub fn run(args: RenderArgs) -> Result<()> {
+    check_render_args(&args)?;
     let scene_file = resolve_scene_path(&args.scene)?;
     let g = read_scene(&scene_file)?;
     let table = read_classes_sidecar(&scene_file)?;
@@ -420,11 +435,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
         check_semantics_table(&scene_file, &g, table.as_ref())?;
     }
     if args.raw {
-        let channels = (g.semantics.as_ref())
-            .filter(|_| args.semantics)
-            .map(|s| s.channels);
-        let at_least = raw_bytes(&cams, channels).saturating_sub(replaced_bytes(&args.out, &cams));
-        check_free_space("--out", &args.out, at_least, "--raw's arrays")?;
+        check_raw_room(&args, &g, &cams)?;
     }
     let gpu = Gpu::new()?;
     let mut labels_from = label_source(&args, &g, &gpu)?;

@@ -13,7 +13,7 @@ use super::progress::{follow, phase_bar};
 use semsplat::scene::ply::every_scenes_vertex_bytes;
 use semsplat::synth::writer::{OUTPUT_LAYOUT, ROOM_FILE, SUMMARY_FILE};
 use semsplat::synth::{
-    self, NoiseSpec, RoomSource, SynthConfig, DEFAULT_HEIGHT, DEFAULT_HFOV_DEG,
+    self, NoiseReport, NoiseSpec, RoomSource, SynthConfig, DEFAULT_HEIGHT, DEFAULT_HFOV_DEG,
     DEFAULT_INIT_JITTER, DEFAULT_INIT_SPACING, DEFAULT_SPACING, DEFAULT_TEST_VIEWS,
     DEFAULT_TRAIN_VIEWS, DEFAULT_WIDTH, HFOV_RANGE, INIT_JITTER_RANGE, INIT_SPACING_RANGE,
     MAX_SIDE, NOISE_KEYS_HELP, PRESETS, SPACING_RANGE,
@@ -172,33 +172,35 @@ pub fn run(args: SynthArgs) -> Result<()> {
         generated.as_secs_f64(),
     );
     if let Some(noisy) = &scene.noisy {
-        let m = &noisy.report.measured;
-        println!(
-            "noise {} (seed {}): flicker {:.3} of (view, object) pairs; salt {:.4}, missing {:.4}, boundary {:.4} of pixels",
-            noisy.report.spec, noisy.report.seed, m.flicker.rate, m.salt.rate, m.missing.rate, m.boundary.rate
-        );
-        for c in &noisy.report.consistent {
-            println!(
-                "  consistent: {} ({}) labeled {} in {} of {} views",
-                c.instance_name,
-                c.true_class_name,
-                c.wrong_class_name,
-                c.views_wrong,
-                c.views_visible
-            );
-        }
-        let asked = &noisy.report.requested;
-        let picked = noisy.report.consistent.len();
-        if asked.consistent > 0.0 && picked < asked.consistent_objects {
-            eprintln!(
-                "warning: consistent={} picked {picked} of the {} objects asked for: the room \
-                 has no more objects that a train view sees and that have a look-alike class \
-                 (walls, floor and ceiling are never picked)",
-                asked.consistent, asked.consistent_objects
-            );
-        }
+        print_noise(&noisy.report);
     }
     Ok(())
+}
+
+/// The noise's measured rates, the objects labeled consistently wrong, and a warning where
+/// fewer were picked than asked for.
+fn print_noise(report: &NoiseReport) {
+    let m = &report.measured;
+    println!(
+        "noise {} (seed {}): flicker {:.3} of (view, object) pairs; salt {:.4}, missing {:.4}, boundary {:.4} of pixels",
+        report.spec, report.seed, m.flicker.rate, m.salt.rate, m.missing.rate, m.boundary.rate
+    );
+    for c in &report.consistent {
+        println!(
+            "  consistent: {} ({}) labeled {} in {} of {} views",
+            c.instance_name, c.true_class_name, c.wrong_class_name, c.views_wrong, c.views_visible
+        );
+    }
+    let asked = &report.requested;
+    let picked = report.consistent.len();
+    if asked.consistent > 0.0 && picked < asked.consistent_objects {
+        eprintln!(
+            "warning: consistent={} picked {picked} of the {} objects asked for: the room \
+             has no more objects that a train view sees and that have a look-alike class \
+             (walls, floor and ceiling are never picked)",
+            asked.consistent, asked.consistent_objects
+        );
+    }
 }
 
 /// Refuses to scatter files into a folder holding something else, unless forced.
