@@ -365,3 +365,50 @@ fn bench_fuse_rejects_bad_input() {
         assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
     }
 }
+
+/// `bench train --json`: one entry per kernel over the iteration's two submissions (the
+/// loss's reduction runs in both: three sums, then the entropy's), finite stage times, and
+/// `--semantics-only` runs the semantic backward and Adam on the logits alone.
+#[test]
+fn bench_train_json_lists_each_kernel_once() {
+    let bench = |extra: &[&str]| -> serde_json::Value {
+        let mut args = vec!["bench", "train", "--n", "3000", "--width", "64", "--height"];
+        args.extend(["48", "--channels", "3", "--iters", "1", "--json"]);
+        args.extend(extra);
+        let out = semsplat().args(&args).output().unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        serde_json::from_slice(&out.stdout).unwrap()
+    };
+    for (v, semantics_only) in [(bench(&[]), false), (bench(&["--semantics-only"]), true)] {
+        assert_eq!(v["semantics_only"], semantics_only);
+        for key in [
+            "iter_ms",
+            "forward_ms",
+            "loss_ms",
+            "backward_ms",
+            "optimizer_ms",
+        ] {
+            let ms = v[key].as_f64().unwrap_or_else(|| panic!("{key} in {v}"));
+            assert!(ms.is_finite() && ms > 0.0, "{key} = {ms}");
+        }
+        let kernels = v["kernels"].as_array().unwrap();
+        let dispatches = |name: &str| {
+            let of = kernels.iter().filter(|k| k["kernel"] == name);
+            let counts: Vec<u64> = of.map(|k| k["dispatches"].as_u64().unwrap()).collect();
+            assert!(counts.len() <= 1, "{name} listed {} times", counts.len());
+            counts.first().copied().unwrap_or(0)
+        };
+        assert_eq!(dispatches("train/loss_reduce"), 4);
+        assert_eq!(dispatches("train/entropy"), 1);
+        let (adam, project_backward) = match semantics_only {
+            true => (1, 0),
+            false => (6, 1),
+        };
+        assert_eq!(dispatches("train/adam"), adam);
+        assert_eq!(dispatches("raster/project_backward"), project_backward);
+    }
+}

@@ -222,8 +222,8 @@ impl Trainer {
         self.times
     }
 
-    /// GPU time per kernel of the last iteration's two submissions (a kernel in both
-    /// appears twice).
+    /// GPU time per kernel of the last iteration's two submissions (a kernel in both, the
+    /// loss's reduction, is one entry of both's dispatches).
     pub fn last_kernels(&self) -> &[KernelTotal] {
         &self.last_kernels
     }
@@ -410,7 +410,7 @@ impl Trainer {
         let timings = rec.submit_and_wait()?;
         self.times.backward_ms += timings.between(m0, m1).unwrap_or(0.0) * 1e-6;
         self.times.optimizer_ms += timings.between(m1, m2).unwrap_or(0.0) * 1e-6;
-        self.last_kernels.extend(timings.by_kernel());
+        timings.add_to(&mut self.last_kernels);
         Ok(())
     }
 
