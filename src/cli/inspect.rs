@@ -424,7 +424,9 @@ fn range(values: impl Iterator<Item = f64>) -> Value {
     if n == 0 {
         return Value::Null;
     }
-    json!({"min": lo, "max": hi, "mean": sum / n as f64})
+    // The sum's rounding can put the mean of equal values an ulp outside them.
+    let mean = (sum / n as f64).clamp(lo, hi);
+    json!({"min": lo, "max": hi, "mean": mean})
 }
 
 fn inspect_ply(path: &Path, table: Option<&ClassTable>) -> Result<Report> {
@@ -975,5 +977,18 @@ fn inspect_class_table(path: &Path, format: &LabelFormat) -> Result<Report> {
 fn add_ignored_class_note(r: &mut Report, table: Option<&ClassTable>, format: &LabelFormat) {
     if let Some(note) = table.and_then(|t| ignored_class_note(format, t)) {
         r.add("note", note.trim_start_matches("note: "));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    /// Ten values of 0.1 sum to 0.9999999999999999: their mean is still their value, not an
+    /// ulp below the minimum.
+    #[test]
+    fn the_mean_of_equal_values_is_their_value() {
+        assert!([0.1f64; 10].iter().sum::<f64>() / 10.0 < 0.1);
+        let r = super::range(std::iter::repeat_n(0.1, 10));
+        assert_eq!(r["mean"].as_f64(), Some(0.1));
+        assert_eq!(r["min"].as_f64(), Some(0.1));
     }
 }
