@@ -533,6 +533,12 @@ fn bench_render_times_a_scene_folder_from_its_first_camera() {
     );
     let err = fails(&["bench", "render", "--scene", folder, "--n", "5"]);
     assert!(err.contains("--n"), "{err}");
+    // A scene without its cameras beside it: named as that, for every bench of a scene.
+    std::fs::remove_file(d.join("cameras.json")).unwrap();
+    for bench in ["render", "train", "fuse"] {
+        let err = fails(&["bench", bench, "--scene", folder, "--iters", "1"]);
+        assert!(err.contains("no cameras.json beside the scene"), "{bench}: {err}");
+    }
 }
 
 /// `bench fuse --scene` times a folder's scene on its first `--views` cameras, scaled to the

@@ -116,7 +116,9 @@ pub fn time_cpu<T, R>(
 pub fn read_scene_folder(
     dir: &std::path::Path,
 ) -> anyhow::Result<(crate::scene::Gaussians, Vec<crate::scene::Camera>)> {
-    use crate::scene::scene_file::{read_scene, resolve_scene_path, CAMERAS_FILE};
+    use crate::scene::scene_file::{
+        read_scene, resolve_scene_path, scene_cameras_file, CAMERAS_FILE,
+    };
     use anyhow::ensure;
     let scene = resolve_scene_path(dir)?;
     let g = read_scene(&scene)?;
@@ -126,12 +128,15 @@ pub fn read_scene_folder(
         "{} has 2^32 Gaussians or more",
         scene.display()
     );
-    let folder = if dir.is_dir() {
-        dir
-    } else {
-        scene.parent().unwrap_or(dir)
+    // Where `fuse` and `render` find a scene's own cameras (an INRIA run's beside its
+    // point_cloud folder too).
+    let Some(json) = scene_cameras_file(dir) else {
+        anyhow::bail!(
+            "--scene {}: no {CAMERAS_FILE} beside the scene; bench times a scene on its own \
+             cameras, as a synth room, an INRIA run or `bench --export`'s folder holds them",
+            dir.display()
+        );
     };
-    let json = folder.join(CAMERAS_FILE);
     let cams = crate::scene::cameras_json::read_cameras_json(&json)?;
     ensure!(!cams.is_empty(), "{} has no camera", json.display());
     Ok((g, cams))
