@@ -537,7 +537,10 @@ fn bench_render_times_a_scene_folder_from_its_first_camera() {
     std::fs::remove_file(d.join("cameras.json")).unwrap();
     for bench in ["render", "train", "fuse"] {
         let err = fails(&["bench", bench, "--scene", folder, "--iters", "1"]);
-        assert!(err.contains("no cameras.json beside the scene"), "{bench}: {err}");
+        assert!(
+            err.contains("no cameras.json beside the scene"),
+            "{bench}: {err}"
+        );
     }
 }
 

@@ -7,6 +7,7 @@ use common::cli::{fuse_synth, semsplat, synth_tiny};
 use std::path::Path;
 use std::process::Output;
 
+use semsplat::scene::labels::{read_label_png, write_label_png, LabelMap};
 use semsplat::scene::ply::read_ply;
 use semsplat::scene::Gaussians;
 
@@ -259,7 +260,36 @@ fn bad_input_gives_a_clear_error_and_no_output() {
     assert!(!r.status.success());
     let err = String::from_utf8_lossy(&r.stderr);
     assert!(
-        err.contains("is 10x10, but camera") && err.contains("must have one size"),
+        err.contains("is 10x10, but camera") && err.contains("the size its cameras file gives"),
+        "{err}"
+    );
+    image::RgbImage::new(48, 36).save(&first).unwrap();
+
+    // Label maps that are a half-size copy scale their cameras to 24x18: a full-size image
+    // is then at odds with its label map, and the message says so.
+    for entry in std::fs::read_dir(d.join("labels")).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "png") {
+            let full = read_label_png(&path).unwrap();
+            let half = LabelMap {
+                width: full.width / 2,
+                height: full.height / 2,
+                labels: (0..full.height / 2)
+                    .flat_map(|y| (0..full.width / 2).map(move |x| (x, y)))
+                    .map(|(x, y)| full.labels[(2 * y * full.width + 2 * x) as usize])
+                    .collect(),
+            };
+            write_label_png(&path, &half).unwrap();
+        }
+    }
+    let r = run(&args);
+    assert!(!r.status.success());
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(
+        err.contains("is 48x36, but camera")
+            && err.contains("renders at 24x18, its label map's size")
+            && err.contains("its cameras file gives 48x36")
+            && err.contains("must have one size"),
         "{err}"
     );
 

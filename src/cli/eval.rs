@@ -159,7 +159,11 @@ pub fn run(args: EvalArgs) -> Result<()> {
                 .iter()
                 .map(|&i| chosen_camera(&cams, &dir, i))
                 .collect();
-            Some(rendered_quality(&gpu, &g, image_dir, &views)?)
+            let scaled = (dir.scaled_cameras())
+                .map(|(i, size)| (cams[i].name.clone(), size))
+                .collect();
+            let images = ImageDir::new(image_dir).with_scaled_cameras(scaled);
+            Some(rendered_quality(&gpu, &g, &images, &views)?)
         }
         None => None,
     };
@@ -318,13 +322,12 @@ fn truth_accuracy(path: &Path, classes: &[i32]) -> Result<f64> {
 fn rendered_quality(
     gpu: &Gpu,
     g: &Gaussians,
-    image_dir: &Path,
+    image_dir: &ImageDir,
     views: &[&Camera],
 ) -> Result<ImageQuality> {
-    let dir = ImageDir::new(image_dir);
     let images = views
         .iter()
-        .map(|cam| dir.load(cam))
+        .map(|cam| image_dir.load(cam))
         .collect::<Result<Vec<_>>>()?;
     let pairs: Vec<(&Camera, &[f32])> = views
         .iter()

@@ -374,7 +374,8 @@ fn load_dataset(args: &TrainArgs) -> Result<Dataset> {
 /// --semantics-only the cameras with a label map alone), decoded on every core (hundreds of
 /// 1080p images and maps take seconds on one); an error is the first failing view's.
 fn train_views(args: &TrainArgs, data: &Dataset) -> Result<Vec<TrainView>> {
-    let images = args.images.as_deref().map(ImageDir::new);
+    let images = (args.images.as_deref())
+        .map(|dir| ImageDir::new(dir).with_scaled_cameras(data.scaled_cameras()));
     let trained: Vec<usize> = (0..data.cameras.len())
         .filter(|&i| !args.semantics_only || data.has_label_map(i))
         .collect();

@@ -21,6 +21,9 @@ pub struct ImageDir {
     dir: PathBuf,
     /// Every image below `dir` by stem, listed once on the first name not found directly.
     by_stem: OnceLock<HashMap<String, Vec<PathBuf>>>,
+    /// The cameras scaled to their label maps' size, by name, with the size their cameras
+    /// file gives: an image of another size names the right culprit.
+    scaled: HashMap<String, (u32, u32)>,
 }
 
 impl ImageDir {
@@ -28,7 +31,14 @@ impl ImageDir {
         ImageDir {
             dir: dir.to_path_buf(),
             by_stem: OnceLock::new(),
+            scaled: HashMap::new(),
         }
+    }
+
+    /// The cameras a label folder scaled to its maps' size (`Dataset::scaled_cameras`).
+    pub fn with_scaled_cameras(mut self, scaled: HashMap<String, (u32, u32)>) -> ImageDir {
+        self.scaled = scaled;
+        self
     }
 
     /// The camera's image as [H, W, 3] floats in [0, 1]. Two images of one name (`x.png`
@@ -36,7 +46,7 @@ impl ImageDir {
     /// be a guess.
     pub fn load(&self, cam: &Camera) -> Result<Vec<f32>> {
         let path = self.path_of(&cam.name)?;
-        decode_view_image(&path, cam)
+        decode_view_image(&path, cam, self.scaled.get(&cam.name).copied())
     }
 
     fn path_of(&self, name: &str) -> Result<PathBuf> {
@@ -74,19 +84,31 @@ fn images_below(dir: &Path) -> HashMap<String, Vec<PathBuf>> {
     by_stem
 }
 
-/// Decodes the image at `path` for `cam`, checking its size.
-fn decode_view_image(path: &Path, cam: &Camera) -> Result<Vec<f32>> {
+/// Decodes the image at `path` for `cam`, checking its size; `scaled_from`: the size its
+/// cameras file gives, where the label maps scaled the camera to theirs.
+fn decode_view_image(
+    path: &Path,
+    cam: &Camera,
+    scaled_from: Option<(u32, u32)>,
+) -> Result<Vec<f32>> {
     // The decoder's message already holds its source's: as context, it would be said twice.
     let img = image::open(path).map_err(|e| anyhow!("reading {}: {e}", path.display()))?;
     let (width, height) = (img.width(), img.height());
     if (width, height) != (cam.width, cam.height) {
+        let (name, w, h) = (&cam.name, cam.width, cam.height);
+        let (source, rule) = match scaled_from {
+            Some((fw, fh)) => (
+                format!("its label map's size (the label maps are a resized copy; its cameras file gives {fw}x{fh})"),
+                "images and label maps must have one size",
+            ),
+            None => (
+                "the size its cameras file gives".to_string(),
+                "an image must have its camera's size (resized images need cameras of their size)",
+            ),
+        };
         bail!(
-            "{} is {width}x{height}, but camera {} renders at {}x{} (its label map's size, \
-             where the label maps are a resized copy): images and label maps must have one size",
-            path.display(),
-            cam.name,
-            cam.width,
-            cam.height
+            "{} is {width}x{height}, but camera {name} renders at {w}x{h}, {source}: {rule}",
+            path.display()
         );
     }
     if !img.color().has_alpha() {

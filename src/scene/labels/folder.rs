@@ -486,6 +486,14 @@ fn entry_for(camera: usize, cam: &Camera, path: &Path) -> LabelEntry {
     }
 }
 
+impl LabelDir {
+    /// The cameras scaled to their maps' size: index, and the size the cameras file gave.
+    pub fn scaled_cameras(&self) -> impl Iterator<Item = (usize, (u32, u32))> + '_ {
+        let scaled = self.entries.iter().filter(|e| e.size != e.camera_size);
+        scaled.map(|e| (e.camera, e.camera_size))
+    }
+}
+
 /// One line saying how many cameras were scaled to their label size, with an example.
 fn scaled_note(entries: &[LabelEntry], cameras: &[Camera]) -> Option<String> {
     let scaled: Vec<&LabelEntry> = entries.iter().filter(|e| e.size != e.camera_size).collect();
