@@ -16,6 +16,15 @@ fn train_args(d: &str, out: &str) -> Vec<String> {
     common::cli::train_args(d, &format!("{d}/init.ply"), out)
 }
 
+/// A tiny synth room of four views at 48x36 in a temp folder, and the room's path.
+fn tiny_room() -> (tempfile::TempDir, String) {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path().join("room");
+    synth_tiny(&d, 4, (48, 36));
+    let d = d.to_str().unwrap().to_string();
+    (tmp, d)
+}
+
 fn run(args: &[String]) -> Output {
     let refs: Vec<&str> = args.iter().map(String::as_str).collect();
     semsplat(&refs)
@@ -109,10 +118,8 @@ fn check_train_report(report: &Path, init: &Gaussians) {
 
 #[test]
 fn train_writes_classes_logits_checkpoints_and_a_report() {
-    let tmp = tempfile::tempdir().unwrap();
-    let d = tmp.path().join("room");
-    synth_tiny(&d, 4, (48, 36));
-    let d = d.to_str().unwrap();
+    let (tmp, d) = tiny_room();
+    let d = d.as_str();
     let out = tmp.path().join("trained.ply");
     let report = tmp.path().join("train.json");
     train_30_iterations(d, &out, &report);
@@ -137,10 +144,8 @@ fn train_writes_classes_logits_checkpoints_and_a_report() {
 
 #[test]
 fn semantics_only_keeps_the_geometry() {
-    let tmp = tempfile::tempdir().unwrap();
-    let d = tmp.path().join("room");
-    synth_tiny(&d, 4, (48, 36));
-    let d = d.to_str().unwrap();
+    let (tmp, d) = tiny_room();
+    let d = d.as_str();
     let out = tmp.path().join("sem.ply");
     let mut args = train_args(d, out.to_str().unwrap());
     args[8] = format!("{d}/scene.ply");
@@ -165,10 +170,8 @@ fn semantics_only_keeps_the_geometry() {
 /// loss reaches no logit), and the log's photometric values are null, not zeros.
 #[test]
 fn semantics_only_trains_without_images() {
-    let tmp = tempfile::tempdir().unwrap();
-    let d = tmp.path().join("room");
-    synth_tiny(&d, 4, (48, 36));
-    let d = d.to_str().unwrap();
+    let (tmp, d) = tiny_room();
+    let d = d.as_str();
     let train = |out: &str, images: bool| {
         let out = tmp.path().join(out);
         let report = out.with_extension("json");
@@ -301,10 +304,8 @@ fn training_starts_from_a_fusion_of_its_scene() {
     // Fuse the room's scene, then train its logits from the fused classes: after one
     // semantics-only step with a tiny learning rate the classes are still the fused ones
     // (where the fusion gave one), so the logits started there and not from random values.
-    let tmp = tempfile::tempdir().unwrap();
-    let d = tmp.path().join("room");
-    synth_tiny(&d, 4, (48, 36));
-    let d = d.to_str().unwrap();
+    let (tmp, d) = tiny_room();
+    let d = d.as_str();
     let fused = tmp.path().join("fused.ply");
     let fused = fused.to_str().unwrap();
     fuse_synth(Path::new(d), &["--out", fused]);
@@ -391,10 +392,8 @@ fn training_starts_from_a_fusion_of_its_scene() {
 /// must not see that (the same bytes as a run without checkpoints, under --deterministic).
 #[test]
 fn checkpoints_do_not_change_the_training() {
-    let tmp = tempfile::tempdir().unwrap();
-    let d = tmp.path().join("room");
-    synth_tiny(&d, 4, (48, 36));
-    let d = d.to_str().unwrap();
+    let (tmp, d) = tiny_room();
+    let d = d.as_str();
     let trained = |name: &str, extra: &[&str]| {
         let out = tmp.path().join(name);
         let mut args = train_args(d, out.to_str().unwrap());
