@@ -22,6 +22,7 @@ use semsplat::render::rasterizer::SplitSizes;
 use semsplat::render::GpuScene;
 use semsplat::synth::{generate, RoomSource, SynthConfig, SynthScene};
 use semsplat::util::Rng;
+use std::collections::BTreeMap;
 use std::sync::Mutex;
 
 /// A pixel's depth written plainly: the city-block distance to the nearest edge pixel of
@@ -51,48 +52,43 @@ fn relabel_by_hand(
     rates: &ConfusionRates,
 ) -> Vec<u32> {
     let regions = flood_regions(map, w);
-    let count = regions
-        .iter()
-        .filter(|&&r| r != NO_LABEL)
-        .max()
-        .map_or(0, |&r| r + 1);
-    // (region, depth, class, pixel) of every seed on a labeled pixel.
-    let placed: Vec<(u32, u32, u32, usize)> = seeds
-        .iter()
-        .map(|&(p, c)| {
-            let depth = depth_by_hand(&regions, w, p as usize, rule.depth);
-            (regions[p as usize], depth, c, p as usize)
-        })
-        .collect();
-    let mut out = map.to_vec();
-    for r in 0..count {
-        let in_region: Vec<(u32, u32, usize)> = placed
-            .iter()
-            .filter(|s| s.0 == r)
-            .map(|s| (s.1, s.2, s.3))
-            .collect();
-        let Some(deepest) = in_region.iter().map(|s| s.0).max() else {
-            continue;
-        };
-        let counted: Vec<(u32, u32, usize)> =
-            in_region.into_iter().filter(|s| s.0 == deepest).collect();
-        let new = region_class_by_hand(map, w, &regions, r, &counted, rule, rates);
-        for p in 0..map.len() {
-            if regions[p] == r {
-                out[p] = new;
-            }
-        }
+    // Each region's edge pixels, listed once: a seed's depth is its distance to the
+    // nearest (as `depth_by_hand` finds scanning every pixel).
+    let mut edges: BTreeMap<u32, Vec<usize>> = BTreeMap::new();
+    for q in (0..map.len()).filter(|&q| regions[q] != NO_LABEL && on_edge(&regions, w, q)) {
+        edges.entry(regions[q]).or_default().push(q);
     }
-    out
+    let depth = |p: usize| {
+        let manhattan = |q: &usize| ((p % w).abs_diff(q % w) + (p / w).abs_diff(q / w)) as u32;
+        let edge = edges.get(&regions[p]).map_or(&[][..], Vec::as_slice);
+        edge.iter().map(manhattan).fold(rule.depth, u32::min)
+    };
+    // (depth, class, pixel) of every seed on a labeled pixel, by region, in seed order.
+    let mut in_region: BTreeMap<u32, Vec<(u32, u32, usize)>> = BTreeMap::new();
+    for &(p, c) in seeds.iter().filter(|s| regions[s.0 as usize] != NO_LABEL) {
+        let p = p as usize;
+        in_region
+            .entry(regions[p])
+            .or_default()
+            .push((depth(p), c, p));
+    }
+    let mut new_class: BTreeMap<u32, u32> = BTreeMap::new();
+    for (&r, placed) in &in_region {
+        let deepest = placed.iter().map(|s| s.0).max().expect("a seed");
+        let counted: Vec<(u32, u32, usize)> =
+            placed.iter().copied().filter(|s| s.0 == deepest).collect();
+        new_class.insert(r, region_class_by_hand(map, w, &counted, rule, rates));
+    }
+    (0..map.len())
+        .map(|p| *new_class.get(&regions[p]).unwrap_or(&map[p]))
+        .collect()
 }
 
-/// The class region `r` of `map` (`regions` its flood fill) takes by the rule, from its
-/// counted seeds (depth, class, pixel): the deepest ones.
+/// The class a region of `map` takes by the rule, from its counted seeds (depth, class,
+/// pixel): the deepest ones.
 fn region_class_by_hand(
     map: &[u32],
     w: usize,
-    regions: &[u32],
-    r: u32,
     counted: &[(u32, u32, usize)],
     rule: &RelabelRule,
     rates: &ConfusionRates,
@@ -103,13 +99,17 @@ fn region_class_by_hand(
         .map(|s| s.1)
         .max_by_key(|&c| votes(c))
         .unwrap();
-    let own = map[(0..map.len()).find(|&p| regions[p] == r).unwrap()];
-    // Seeds of another class than `own` lying near a pixel of their class.
+    // The region's label: a seed's pixel's, as every pixel of the region has it.
+    let own = map[counted[0].2];
+    // Seeds of another class than `own` lying near a pixel of their class: the pixels in
+    // the square of side 2 near + 1 around it, within `near` city-block.
     let near = |c: u32, p: usize| {
-        (0..map.len()).any(|q| {
-            let distance = (p % w).abs_diff(q % w) + (p / w).abs_diff(q / w);
-            map[q] == c && distance <= rule.near as usize
-        })
+        let (h, reach) = (map.len() / w, rule.near as usize);
+        let (x, y) = (p % w, p / w);
+        let xs = x.saturating_sub(reach)..(x + reach + 1).min(w);
+        let ys = y.saturating_sub(reach)..(y + reach + 1).min(h);
+        ys.flat_map(|qy| xs.clone().map(move |qx| (qx, qy)))
+            .any(|(qx, qy)| map[qy * w + qx] == c && x.abs_diff(qx) + y.abs_diff(qy) <= reach)
     };
     let near_seeds = counted
         .iter()
