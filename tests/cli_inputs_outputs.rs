@@ -713,13 +713,17 @@ fn empty_inputs_are_errors_and_selections_name_their_class() {
         "inspect calls an empty scene a problem"
     );
     assert!(String::from_utf8_lossy(&out.stdout).contains("no Gaussians"));
-    // As it calls a class table of no class, or of two classes of one colour (colour-coded
-    // maps cannot be read through it).
+    // As it calls a class table of no class, of two classes of one colour (colour-coded
+    // maps cannot be read through it), or of two names one in another case.
     for (table, problem) in [
         (r#"{"classes": []}"#, "lists no class"),
         (
             r#"[{"id": 0, "name": "a", "color": [1, 2, 3]}, {"id": 7, "name": "b", "color": [1, 2, 3]}]"#,
             "classes 0 and 7 share the colour [1, 2, 3]",
+        ),
+        (
+            r#"[{"id": 1, "name": "Wall", "color": [1, 2, 3]}, {"id": 7, "name": "wall", "color": [4, 5, 6]}]"#,
+            "classes 1 'Wall' and 7 'wall' differ only in case",
         ),
     ] {
         let path = d.join("table.json");

@@ -969,6 +969,13 @@ fn inspect_class_table(path: &Path, format: &LabelFormat) -> Result<Report> {
              draw both alike"
         ));
     }
+    if let Some((a, b)) = table.names_alike_but_case() {
+        r.problems.push(format!(
+            "classes {} '{}' and {} '{}' differ only in case: a name given in another case \
+             (--extract, --remove) matches both and is refused; give the exact name or the id",
+            a.id, a.name, b.id, b.name
+        ));
+    }
     Ok(r)
 }
 

@@ -184,6 +184,16 @@ impl ClassTable {
         bail!("no class '{key}' among {names:?}")
     }
 
+    /// The first two classes (in table order) whose names differ only in case: a name given
+    /// in a third case matches both, and [`ClassTable::find`] refuses it.
+    pub fn names_alike_but_case(&self) -> Option<(&ClassInfo, &ClassInfo)> {
+        let mut by_folded = std::collections::HashMap::with_capacity(self.len());
+        (self.classes.iter()).find_map(|c| {
+            let other = by_folded.insert(c.name.to_lowercase(), c)?;
+            Some((other, c))
+        })
+    }
+
     /// The first two classes (ids, in table order) that share a colour, and the colour: a
     /// colour-coded map cannot be read through such a table.
     pub fn shared_colour(&self) -> Option<(u32, u32, [u8; 3])> {
