@@ -366,9 +366,14 @@ fn bench_fuse_rejects_bad_input() {
     }
 }
 
+fn kernels_of(v: &serde_json::Value) -> Vec<serde_json::Value> {
+    v["kernels"].as_array().unwrap().clone()
+}
+
 /// `bench train --json`: one entry per kernel over the iteration's two submissions (the
 /// loss's reduction runs in both: three sums, then the entropy's), finite stage times, and
-/// `--semantics-only` runs the semantic backward and Adam on the logits alone.
+/// `--semantics-only` runs the semantic backward and Adam on the logits alone, with
+/// `--without-images` no SSIM; `--without-images` alone is refused.
 #[test]
 fn bench_train_json_lists_each_kernel_once() {
     let bench = |extra: &[&str]| -> serde_json::Value {
@@ -383,8 +388,18 @@ fn bench_train_json_lists_each_kernel_once() {
         );
         serde_json::from_slice(&out.stdout).unwrap()
     };
-    for (v, semantics_only) in [(bench(&[]), false), (bench(&["--semantics-only"]), true)] {
+    let runs = [
+        (bench(&[]), false),
+        (bench(&["--semantics-only"]), true),
+        (bench(&["--semantics-only", "--without-images"]), true),
+    ];
+    for (v, semantics_only) in runs {
         assert_eq!(v["semantics_only"], semantics_only);
+        // Without a target image the loss has no SSIM, and its reductions lose the
+        // photometric sums (three before the entropy's, then one).
+        let images = v["images"].as_bool().unwrap();
+        let ssim = |k: &serde_json::Value| k["kernel"].as_str().unwrap().contains("ssim");
+        assert_eq!(kernels_of(&v).iter().any(ssim), images, "{v}");
         for key in [
             "iter_ms",
             "forward_ms",
@@ -395,14 +410,14 @@ fn bench_train_json_lists_each_kernel_once() {
             let ms = v[key].as_f64().unwrap_or_else(|| panic!("{key} in {v}"));
             assert!(ms.is_finite() && ms > 0.0, "{key} = {ms}");
         }
-        let kernels = v["kernels"].as_array().unwrap();
+        let kernels = kernels_of(&v);
         let dispatches = |name: &str| {
             let of = kernels.iter().filter(|k| k["kernel"] == name);
             let counts: Vec<u64> = of.map(|k| k["dispatches"].as_u64().unwrap()).collect();
             assert!(counts.len() <= 1, "{name} listed {} times", counts.len());
             counts.first().copied().unwrap_or(0)
         };
-        assert_eq!(dispatches("train/loss_reduce"), 4);
+        assert_eq!(dispatches("train/loss_reduce"), if images { 4 } else { 3 });
         assert_eq!(dispatches("train/entropy"), 1);
         let (adam, project_backward) = match semantics_only {
             true => (1, 0),
@@ -411,4 +426,10 @@ fn bench_train_json_lists_each_kernel_once() {
         assert_eq!(dispatches("train/adam"), adam);
         assert_eq!(dispatches("raster/project_backward"), project_backward);
     }
+    let out = semsplat()
+        .args(["bench", "train", "--n", "100", "--without-images"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--semantics-only"));
 }

@@ -28,6 +28,9 @@ pub struct TrainBench {
     pub input: BenchInput,
     pub gaussians: usize,
     pub semantics_only: bool,
+    /// Whether the view has a target image (false: the semantic loss alone, as `train
+    /// --semantics-only` without --images).
+    pub images: bool,
     pub iters: u32,
     pub device: String,
     /// Median wall time of one iteration (both submissions and their waits).
@@ -44,16 +47,21 @@ pub struct TrainBench {
     pub kernels: Vec<KernelTotal>,
 }
 
-/// Runs `iters` timed iterations (after a short warm-up) without densification.
+/// Runs `iters` timed iterations (after a short warm-up) without densification; without
+/// `images` (`semantics_only` only) the view has no target image.
 pub fn bench_train(
     gpu: &Gpu,
     input: &BenchInput,
     iters: u32,
     semantics_only: bool,
+    images: bool,
 ) -> Result<TrainBench> {
     ensure!(iters > 0, "--iters must be at least 1");
     let (g, cam) = input.load()?;
-    let view = target_view(&cam, input.channels, input.seed)?;
+    let mut view = target_view(&cam, input.channels, input.seed)?;
+    if !images {
+        view.rgb = Vec::new();
+    }
     let mut cfg = TrainConfig::new(WARMUP_ITERS + iters);
     cfg.semantics_only = semantics_only;
     cfg.densify = None;
@@ -79,6 +87,7 @@ pub fn bench_train(
         input: input.with_size_of(&cam),
         gaussians: g.len(),
         semantics_only,
+        images,
         iters,
         device: gpu.caps().name.clone(),
         iter_ms: median(&mut walls),

@@ -129,6 +129,11 @@ pub struct TrainArgs {
     /// --semantics-only`.
     #[arg(long)]
     semantics_only: bool,
+    /// With --semantics-only: no target image, the loss records the semantic term alone,
+    /// as `train --semantics-only` without --images (without this flag it times the
+    /// photometric loss too, as with --images).
+    #[arg(long, requires = "semantics_only")]
+    without_images: bool,
     #[command(flatten)]
     common: CommonArgs,
 }
@@ -467,16 +472,16 @@ fn run_fuse(gpu: &Gpu, a: FuseArgs) -> Result<()> {
 fn run_train(gpu: &Gpu, a: TrainArgs) -> Result<()> {
     let input = a.input.input(a.common.seed);
     let iters = u32::try_from(a.common.iters).unwrap_or(u32::MAX);
-    let r = bench_train(gpu, &input, iters, a.semantics_only)?;
+    let r = bench_train(gpu, &input, iters, a.semantics_only, !a.without_images)?;
     emit(a.common.json, &r, || print_train(&r))
 }
 
 fn print_train(r: &TrainBench) {
     let i = &r.input;
-    let what = if r.semantics_only {
-        "semantics only"
-    } else {
-        "full"
+    let what = match (r.semantics_only, r.images) {
+        (false, _) => "full",
+        (true, true) => "semantics only",
+        (true, false) => "semantics only, no target image",
     };
     println!(
         "train ({what}): {} Gaussians, {}x{}, C = {} on {} ({} iterations)",
