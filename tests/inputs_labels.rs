@@ -541,24 +541,17 @@ fn rig_subfolders_match_by_relative_path_then_unique_stem() {
     let firsts: Vec<u16> = dir_labels.iter().map(|r| r.unwrap().1.labels[0]).collect();
     assert_eq!(firsts, [1, 2, 3]);
 
+    // The error of opening the folder for one 4x3 camera named `name`.
+    let open_for =
+        |name: &str, missing| err(LabelDir::open(root, &[camera(name, (4, 3))], None, missing));
     // A bare stem matching two subfolders is ambiguous.
-    let e = err(LabelDir::open(
-        root,
-        &[camera("00001", (4, 3))],
-        None,
-        MissingLabels::Error,
-    ));
+    let e = open_for("00001", MissingLabels::Error);
     assert!(
         e.contains("cam0/00001.png") && e.contains("cam1/00001.png") && e.contains("several"),
         "{e}"
     );
     // Nothing matches: the error lists expected and found names.
-    let e = err(LabelDir::open(
-        root,
-        &[camera("frame_9", (4, 3))],
-        None,
-        MissingLabels::Skip,
-    ));
+    let e = open_for("frame_9", MissingLabels::Skip);
     assert!(
         e.contains("frame_9.png") && e.contains("cam0/00001.png"),
         "{e}"
@@ -567,12 +560,7 @@ fn rig_subfolders_match_by_relative_path_then_unique_stem() {
     // at the top beside the mirrored one: both could be its own, refused naming both
     // (the top one had been read, silently).
     gray(&root.join("00002.png"), 9);
-    let e = err(LabelDir::open(
-        root,
-        &[camera("00002", (4, 3))],
-        None,
-        MissingLabels::Skip,
-    ));
+    let e = open_for("00002", MissingLabels::Skip);
     assert!(
         e.contains("00002.png, cam0/00002.png") && e.contains("mirrors the image's path"),
         "{e}"

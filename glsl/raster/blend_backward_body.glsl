@@ -57,9 +57,13 @@ layout(set = 0, binding = 1) readonly buffer IdsBuf { uint data[]; } isect_ids;
 layout(set = 0, binding = 7) readonly buffer FinalTBuf { float data[]; } final_t;
 layout(set = 0, binding = 8) readonly buffer LastBuf { uint data[]; } last_entry;
 layout(set = 0, binding = 9) readonly buffer CountBuf { uint data[]; } n_contrib;
+#ifndef SEM_ONLY
+// What only the alpha, colour and screen-space gradients read: declared for those variants
+// alone, so the semantic-only ones bind nothing they never read.
 layout(set = 0, binding = 10) readonly buffer SemNormBuf { float data[]; } sem_norm;
 layout(set = 0, binding = 11) readonly buffer VRgbBuf { float data[]; } v_rgb;
 layout(set = 0, binding = 12) readonly buffer VAlphaBuf { float data[]; } v_alpha;
+#endif
 layout(set = 0, binding = 13) readonly buffer VSemNormBuf { float data[]; } v_sem_norm;
 layout(set = 0, binding = 14) buffer CarryBuf { float data[]; } carry;
 

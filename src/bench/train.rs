@@ -58,10 +58,7 @@ pub fn bench_train(
 ) -> Result<TrainBench> {
     ensure!(iters > 0, "--iters must be at least 1");
     let (g, cam) = input.load()?;
-    let mut view = target_view(&cam, input.channels, input.seed)?;
-    if !images {
-        view.rgb = Vec::new();
-    }
+    let view = target_view(&cam, input.channels, input.seed, images)?;
     let mut cfg = TrainConfig::new(WARMUP_ITERS + iters);
     cfg.semantics_only = semantics_only;
     cfg.densify = None;
@@ -99,12 +96,18 @@ pub fn bench_train(
     })
 }
 
-/// A training target for `cam`: a noisy gray image and, with classes, block label maps as
-/// `bench fuse` draws them.
-fn target_view(cam: &crate::scene::Camera, channels: usize, seed: u64) -> Result<TrainView> {
+/// A training target for `cam`: a noisy gray image (with `image`) and, with classes, block
+/// label maps as `bench fuse` draws them.
+fn target_view(
+    cam: &crate::scene::Camera,
+    channels: usize,
+    seed: u64,
+    image: bool,
+) -> Result<TrainView> {
     let pixels = cam.width as usize * cam.height as usize;
     let mut rng = Rng::new(seed ^ 0x7a29e7);
-    let rgb = (0..pixels * 3)
+    let values = if image { pixels * 3 } else { 0 };
+    let rgb = (0..values)
         .map(|_| (0.5 + 0.1 * rng.normal()).clamp(0.0, 1.0) as f32)
         .collect();
     let labels = if channels > 0 {

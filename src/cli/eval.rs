@@ -159,9 +159,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
                 .iter()
                 .map(|&i| chosen_camera(&cams, &dir, i))
                 .collect();
-            let scaled = (dir.scaled_cameras())
-                .map(|(i, size)| (cams[i].name.clone(), size))
-                .collect();
+            let scaled = dir.scaled_cameras(&cams);
             let images = ImageDir::new(image_dir).with_scaled_cameras(scaled);
             Some(rendered_quality(&gpu, &g, &images, &views)?)
         }

@@ -374,8 +374,9 @@ fn load_dataset(args: &TrainArgs) -> Result<Dataset> {
 /// --semantics-only the cameras with a label map alone), decoded on every core (hundreds of
 /// 1080p images and maps take seconds on one); an error is the first failing view's.
 fn train_views(args: &TrainArgs, data: &Dataset) -> Result<Vec<TrainView>> {
-    let images = (args.images.as_deref())
-        .map(|dir| ImageDir::new(dir).with_scaled_cameras(data.scaled_cameras()));
+    let images = (args.images.as_deref()).map(|dir| {
+        ImageDir::new(dir).with_scaled_cameras(data.labels.scaled_cameras(&data.cameras))
+    });
     let trained: Vec<usize> = (0..data.cameras.len())
         .filter(|&i| !args.semantics_only || data.has_label_map(i))
         .collect();
@@ -450,10 +451,10 @@ fn warn_if_short_of_room(args: &TrainArgs, init: &Gaussians) {
 fn train_loop(args: &TrainArgs, data: &Dataset, trainer: &mut Trainer) -> Result<Vec<LogLine>> {
     let bar = iterations_bar(args.iters);
     let mut log = Vec::new();
+    let photometric = args.images.is_some();
     for _ in 0..args.iters {
         interrupt::check()?;
         if let Some(l) = trainer.step()? {
-            let photometric = args.images.is_some();
             let line = LogLine {
                 iteration: trainer.iteration(),
                 gaussians: trainer.gaussian_count(),

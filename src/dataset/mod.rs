@@ -3,7 +3,6 @@
 
 pub mod classes;
 
-use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Result};
@@ -103,15 +102,6 @@ impl Dataset {
             entry_of_camera,
             warnings,
         })
-    }
-
-    /// The cameras scaled to their label maps' size, by name, with the size their cameras
-    /// file gives (for [`crate::scene::images::ImageDir::with_scaled_cameras`]).
-    pub fn scaled_cameras(&self) -> HashMap<String, (u32, u32)> {
-        let scaled = self.labels.scaled_cameras();
-        scaled
-            .map(|(i, size)| (self.cameras[i].name.clone(), size))
-            .collect()
     }
 
     /// Whether camera `view` has a label map.

@@ -433,9 +433,6 @@ impl TileLists<'_> {
         // Bands of tile rows whose per-pixel buffers each fit one binding (the widest:
         // the carried state, the semantic channels or RGB).
         let (sem_bytes, carry_bytes) = (f.channels as u64 * 4, carry_bytes_per_pixel(f.windows));
-        // The semantic-only variants read no colour gradient (a trainer without target
-        // images keeps a placeholder), though some still declare its binding.
-        let rgb_bytes = if grads.semantics_only { 0 } else { RGB_BYTES };
         let bands = f.bands(RGB_BYTES.max(sem_bytes).max(carry_bytes))?;
         let windows = self.pass_windows(rec, &bands)?;
         for chunk in 0..f.sem_chunks() {
@@ -464,7 +461,7 @@ impl TileLists<'_> {
                     // the semantic-only variant).
                     let optional = [
                         ("sem_norm", px(sem_norm, sem_bytes)),
-                        ("v_rgb", px(upstream.rgb, rgb_bytes)),
+                        ("v_rgb", px(upstream.rgb, RGB_BYTES)),
                         ("v_alpha", px(upstream.alpha, 4)),
                         ("fixed_params", BufferRange::whole(&grads.fixed.params)),
                         ("fixed_status", BufferRange::whole(&grads.fixed.status)),

@@ -35,7 +35,7 @@ impl ImageDir {
         }
     }
 
-    /// The cameras a label folder scaled to its maps' size (`Dataset::scaled_cameras`).
+    /// The cameras a label folder scaled to its maps' size (`LabelDir::scaled_cameras`).
     pub fn with_scaled_cameras(mut self, scaled: HashMap<String, (u32, u32)>) -> ImageDir {
         self.scaled = scaled;
         self

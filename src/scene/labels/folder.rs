@@ -487,10 +487,14 @@ fn entry_for(camera: usize, cam: &Camera, path: &Path) -> LabelEntry {
 }
 
 impl LabelDir {
-    /// The cameras scaled to their maps' size: index, and the size the cameras file gave.
-    pub fn scaled_cameras(&self) -> impl Iterator<Item = (usize, (u32, u32))> + '_ {
+    /// The cameras (of `cameras`, those the folder was opened with) scaled to their maps'
+    /// size, by name, with the size their cameras file gives (for
+    /// [`crate::scene::images::ImageDir::with_scaled_cameras`]).
+    pub fn scaled_cameras(&self, cameras: &[Camera]) -> HashMap<String, (u32, u32)> {
         let scaled = self.entries.iter().filter(|e| e.size != e.camera_size);
-        scaled.map(|e| (e.camera, e.camera_size))
+        scaled
+            .map(|e| (cameras[e.camera].name.clone(), e.camera_size))
+            .collect()
     }
 }
 
